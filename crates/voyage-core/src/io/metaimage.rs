@@ -1,0 +1,5 @@
+//! metaimage (being written).
+use std::path::Path;
+use super::Loaded;
+use crate::{Error, Result};
+pub fn load(path: &Path) -> Result<Loaded> { Err(Error::format(path, "metaimage not yet supported")) }

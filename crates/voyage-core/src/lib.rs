@@ -1,0 +1,14 @@
+//! voyage-core: the virtual colonoscopy pipeline, free of GPU and GUI dependencies.
+//!
+//! Data moves one way: `io` loads a CT into a [`Volume<i16>`] of Hounsfield units with its
+//! geometry; later stages (segmentation, distance fields, centerline, cells, surface,
+//! navigation) take values and return values. `phantom` makes synthetic scans with ground
+//! truth for tests and benchmarks.
+
+pub mod error;
+pub mod io;
+pub mod phantom;
+pub mod volume;
+
+pub use error::{Error, Result};
+pub use volume::{Geometry, Volume};

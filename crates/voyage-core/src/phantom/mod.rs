@@ -1,0 +1,1 @@
+//! Synthetic phantoms with ground truth (in progress).

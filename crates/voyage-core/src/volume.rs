@@ -1,0 +1,302 @@
+//! The volume model: a dense 3D grid of voxels with its place in the patient.
+//!
+//! Storage is x fastest: `index = i + nx * (j + ny * k)`. Geometry follows DICOM: `origin`
+//! is the patient position (LPS, mm) of voxel (0,0,0); the columns of `direction` are the
+//! unit vectors, in LPS, of the i, j and k axes. Inside the pipeline everything is in
+//! *volume-local millimetres* (x = i·sx, y = j·sy, z = k·sz); patient coordinates appear
+//! only at the edges (loading, exports, read-outs).
+
+use glam::{DMat3, DVec3};
+
+use crate::{Error, Result};
+
+/// Refuse volumes larger than this many voxels: 2^31 voxels of i16 is 4 GiB, far beyond any
+/// CT colonography scan, and a header asking for more is corrupt or hostile.
+pub const MAX_VOXELS: u64 = 1 << 31;
+/// Refuse any single dimension larger than this.
+pub const MAX_DIM: u64 = 1 << 16;
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Geometry {
+    pub dims: [usize; 3],
+    /// Voxel size in mm along i, j, k. Always finite and > 0.
+    pub spacing: [f64; 3],
+    /// Patient position (LPS, mm) of the centre of voxel (0,0,0).
+    pub origin: [f64; 3],
+    /// Columns are the LPS unit vectors of the i, j, k axes (row-major storage: `direction[r][c]`).
+    pub direction: [[f64; 3]; 3],
+}
+
+impl Geometry {
+    /// Axis-aligned geometry with the identity direction (i→L, j→P, k→S).
+    pub fn new(dims: [usize; 3], spacing: [f64; 3], origin: [f64; 3]) -> Result<Self> {
+        let g = Geometry { dims, spacing, origin, direction: IDENTITY };
+        g.validate()?;
+        Ok(g)
+    }
+
+    /// Checks dimensions (non-zero, not absurd) and spacing (finite, positive).
+    pub fn validate(&self) -> Result<()> {
+        check_dims(self.dims.map(|d| d as u64))?;
+        if self.spacing.iter().any(|s| !s.is_finite() || *s <= 0.0) {
+            return Err(Error::invalid(format!("voxel spacing {:?} mm is not positive and finite", self.spacing)));
+        }
+        if self.origin.iter().any(|o| !o.is_finite()) {
+            return Err(Error::invalid(format!("origin {:?} is not finite", self.origin)));
+        }
+        let d = self.direction_mat();
+        if !d.is_finite() || (d.determinant().abs() - 1.0).abs() > 1e-3 {
+            return Err(Error::invalid(format!("direction matrix {:?} is not a rotation", self.direction)));
+        }
+        Ok(())
+    }
+
+    pub fn len(&self) -> usize {
+        self.dims[0] * self.dims[1] * self.dims[2]
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    #[inline]
+    pub fn index(&self, i: usize, j: usize, k: usize) -> usize {
+        i + self.dims[0] * (j + self.dims[1] * k)
+    }
+
+    /// Inverse of [`Geometry::index`].
+    #[inline]
+    pub fn ijk(&self, index: usize) -> [usize; 3] {
+        let nx = self.dims[0];
+        let ny = self.dims[1];
+        [index % nx, (index / nx) % ny, index / (nx * ny)]
+    }
+
+    pub fn direction_mat(&self) -> DMat3 {
+        let d = &self.direction;
+        DMat3::from_cols(
+            DVec3::new(d[0][0], d[1][0], d[2][0]),
+            DVec3::new(d[0][1], d[1][1], d[2][1]),
+            DVec3::new(d[0][2], d[1][2], d[2][2]),
+        )
+    }
+
+    pub fn set_direction_mat(&mut self, m: DMat3) {
+        for c in 0..3 {
+            let col = m.col(c);
+            self.direction[0][c] = col.x;
+            self.direction[1][c] = col.y;
+            self.direction[2][c] = col.z;
+        }
+    }
+
+    pub fn spacing_vec(&self) -> DVec3 {
+        DVec3::from_array(self.spacing)
+    }
+
+    /// Continuous voxel index → volume-local millimetres.
+    #[inline]
+    pub fn index_to_local(&self, ijk: DVec3) -> DVec3 {
+        ijk * self.spacing_vec()
+    }
+
+    /// Volume-local millimetres → continuous voxel index.
+    #[inline]
+    pub fn local_to_index(&self, mm: DVec3) -> DVec3 {
+        mm / self.spacing_vec()
+    }
+
+    /// Volume-local millimetres → patient LPS millimetres.
+    pub fn local_to_patient(&self, mm: DVec3) -> DVec3 {
+        DVec3::from_array(self.origin) + self.direction_mat() * mm
+    }
+
+    /// Patient LPS millimetres → volume-local millimetres.
+    pub fn patient_to_local(&self, lps: DVec3) -> DVec3 {
+        self.direction_mat().transpose() * (lps - DVec3::from_array(self.origin))
+    }
+
+    pub fn index_to_patient(&self, ijk: DVec3) -> DVec3 {
+        self.local_to_patient(self.index_to_local(ijk))
+    }
+
+    pub fn patient_to_index(&self, lps: DVec3) -> DVec3 {
+        self.local_to_index(self.patient_to_local(lps))
+    }
+
+    /// Size of the volume in mm (from first to last voxel centre, plus one voxel).
+    pub fn extent_mm(&self) -> DVec3 {
+        DVec3::new(self.dims[0] as f64, self.dims[1] as f64, self.dims[2] as f64) * self.spacing_vec()
+    }
+
+    /// Whether the continuous index lies inside the grid of voxel centres.
+    pub fn contains_index(&self, ijk: DVec3) -> bool {
+        (0..3).all(|a| ijk[a] >= 0.0 && ijk[a] <= (self.dims[a] - 1) as f64)
+    }
+
+    /// A short orientation code such as "LPS" or "RAS": for each voxel axis, the patient
+    /// direction it points to most.
+    pub fn orientation_code(&self) -> String {
+        let m = self.direction_mat();
+        (0..3)
+            .map(|c| {
+                let v = m.col(c);
+                let a = v.abs();
+                let (axis, sign) = if a.x >= a.y && a.x >= a.z {
+                    (0, v.x)
+                } else if a.y >= a.z {
+                    (1, v.y)
+                } else {
+                    (2, v.z)
+                };
+                let (pos, neg) = [('L', 'R'), ('P', 'A'), ('S', 'I')][axis];
+                if sign >= 0.0 { pos } else { neg }
+            })
+            .collect()
+    }
+}
+
+pub const IDENTITY: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+
+/// Validates header dimensions before anything is allocated.
+pub fn check_dims(dims: [u64; 3]) -> Result<()> {
+    if dims.iter().any(|&d| d == 0) {
+        return Err(Error::invalid(format!("dimensions {dims:?} contain zero")));
+    }
+    if dims.iter().any(|&d| d > MAX_DIM) {
+        return Err(Error::invalid(format!("dimensions {dims:?} exceed the limit of {MAX_DIM} per axis")));
+    }
+    let n = dims[0].saturating_mul(dims[1]).saturating_mul(dims[2]);
+    if n > MAX_VOXELS {
+        return Err(Error::invalid(format!("dimensions {dims:?} give {n} voxels, over the limit of {MAX_VOXELS}")));
+    }
+    Ok(())
+}
+
+/// A dense voxel grid with geometry.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Volume<T> {
+    geom: Geometry,
+    data: Vec<T>,
+}
+
+impl<T: Copy> Volume<T> {
+    pub fn from_vec(geom: Geometry, data: Vec<T>) -> Result<Self> {
+        geom.validate()?;
+        if data.len() != geom.len() {
+            return Err(Error::invalid(format!(
+                "volume of dims {:?} needs {} voxels, got {}",
+                geom.dims,
+                geom.len(),
+                data.len()
+            )));
+        }
+        Ok(Volume { geom, data })
+    }
+
+    pub fn filled(geom: Geometry, value: T) -> Result<Self> {
+        geom.validate()?;
+        let n = geom.len();
+        Ok(Volume { geom, data: vec![value; n] })
+    }
+
+    pub fn geometry(&self) -> &Geometry {
+        &self.geom
+    }
+    pub fn geometry_mut(&mut self) -> &mut Geometry {
+        &mut self.geom
+    }
+    pub fn dims(&self) -> [usize; 3] {
+        self.geom.dims
+    }
+    pub fn spacing(&self) -> [f64; 3] {
+        self.geom.spacing
+    }
+    pub fn data(&self) -> &[T] {
+        &self.data
+    }
+    pub fn data_mut(&mut self) -> &mut [T] {
+        &mut self.data
+    }
+    pub fn into_data(self) -> Vec<T> {
+        self.data
+    }
+    #[inline]
+    pub fn get(&self, i: usize, j: usize, k: usize) -> T {
+        self.data[self.geom.index(i, j, k)]
+    }
+    #[inline]
+    pub fn set(&mut self, i: usize, j: usize, k: usize, v: T) {
+        let idx = self.geom.index(i, j, k);
+        self.data[idx] = v;
+    }
+    /// Same geometry, values mapped voxel by voxel.
+    pub fn map<U: Copy>(&self, f: impl Fn(T) -> U) -> Volume<U> {
+        Volume { geom: self.geom.clone(), data: self.data.iter().map(|&v| f(v)).collect() }
+    }
+    /// One axial slice (fixed k), x fastest.
+    pub fn slice_k(&self, k: usize) -> &[T] {
+        let n = self.geom.dims[0] * self.geom.dims[1];
+        &self.data[k * n..(k + 1) * n]
+    }
+}
+
+impl<T: Copy + PartialOrd> Volume<T> {
+    /// (min, max) of all voxels.
+    pub fn min_max(&self) -> (T, T) {
+        let mut lo = self.data[0];
+        let mut hi = self.data[0];
+        for &v in &self.data {
+            if v < lo {
+                lo = v;
+            }
+            if v > hi {
+                hi = v;
+            }
+        }
+        (lo, hi)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn index_round_trip() {
+        let g = Geometry::new([5, 7, 3], [0.8, 0.8, 1.25], [10.0, -20.0, 30.0]).unwrap();
+        for idx in [0, 1, 34, 104] {
+            let [i, j, k] = g.ijk(idx);
+            assert_eq!(g.index(i, j, k), idx);
+        }
+    }
+
+    #[test]
+    fn patient_round_trip_with_rotation() {
+        let mut g = Geometry::new([4, 4, 4], [0.5, 0.7, 2.0], [1.0, 2.0, 3.0]).unwrap();
+        // A 90° turn about z: i → P, j → R.
+        g.direction = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
+        let p = g.index_to_patient(DVec3::new(1.0, 2.0, 3.0));
+        assert!((p - DVec3::new(1.0 - 1.4, 2.0 + 0.5, 3.0 + 6.0)).length() < 1e-12);
+        let back = g.patient_to_index(p);
+        assert!((back - DVec3::new(1.0, 2.0, 3.0)).length() < 1e-12);
+        assert_eq!(g.orientation_code(), "PRS");
+    }
+
+    #[test]
+    fn absurd_dims_refused() {
+        assert!(check_dims([100_000, 100_000, 100_000]).is_err());
+        assert!(check_dims([512, 512, 0]).is_err());
+        assert!(check_dims([512, 512, 400]).is_ok());
+        assert!(Geometry::new([2, 2, 2], [0.0, 1.0, 1.0], [0.0; 3]).is_err());
+    }
+
+    #[test]
+    fn from_vec_checks_length() {
+        let g = Geometry::new([2, 2, 2], [1.0; 3], [0.0; 3]).unwrap();
+        assert!(Volume::from_vec(g.clone(), vec![0i16; 7]).is_err());
+        let v = Volume::from_vec(g, (0..8).collect::<Vec<i16>>()).unwrap();
+        assert_eq!(v.get(1, 1, 1), 7);
+        assert_eq!(v.min_max(), (0, 7));
+    }
+}
