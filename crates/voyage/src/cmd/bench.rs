@@ -1,0 +1,212 @@
+//! `voyage bench ...`: speed, measured against the reference libraries in the same run.
+//!
+//! Timings are medians of several repeats after one warm-up, with the page cache warm for
+//! both sides, so that the comparison is of decoding work, not of the disk.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, Subcommand};
+use serde::Serialize;
+use voyage_core::io::{self, LoadOptions};
+use voyage_core::phantom::{self, ColonOptions};
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    #[command(subcommand)]
+    what: BenchWhat,
+}
+
+#[derive(Subcommand, Debug)]
+enum BenchWhat {
+    /// Loading: the colon phantom as a 400-slice uncompressed DICOM series and as .nii.gz,
+    /// against pydicom+numpy and nibabel.
+    Load(LoadBench),
+}
+
+#[derive(Args, Debug)]
+struct LoadBench {
+    /// Working folder for the phantom files (kept, reused when already there).
+    #[arg(long, default_value = "target/bench-load")]
+    dir: PathBuf,
+    /// Use the small phantom (quick check of the command itself).
+    #[arg(long)]
+    small: bool,
+    /// Timed repeats per loader (after one warm-up).
+    #[arg(long, default_value_t = 5)]
+    repeats: usize,
+    /// Worker threads for voyage (the targets are for one core).
+    #[arg(long, default_value_t = 1)]
+    threads: usize,
+    /// Python with numpy, pydicom and nibabel (default: bench/.venv from bench/setup.sh).
+    #[arg(long)]
+    python: Option<PathBuf>,
+    /// Print one JSON object.
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn run(a: &BenchArgs) -> Result<()> {
+    match &a.what {
+        BenchWhat::Load(l) => load(l),
+    }
+}
+
+#[derive(Serialize)]
+struct LoadRow {
+    what: &'static str,
+    megabytes: f64,
+    voyage_ms: f64,
+    voyage_mb_s: f64,
+    reference: &'static str,
+    reference_ms: Option<f64>,
+    /// reference time / voyage time: how many times faster voyage is.
+    speedup: Option<f64>,
+    target_speedup: f64,
+}
+
+fn load(a: &LoadBench) -> Result<()> {
+    rayon::ThreadPoolBuilder::new().num_threads(a.threads).build_global().ok();
+    let (series, nii) = prepare_load_files(&a.dir, a.small)?;
+    let opts = LoadOptions::default();
+    let mb = |v: &voyage_core::Volume<i16>| (v.data().len() * 2) as f64 / 1e6;
+
+    let probe = io::load(&series, &opts)?;
+    let megabytes = mb(&probe.volume);
+    drop(probe);
+    let dicom_ms = median_ms(a.repeats, || io::load(&series, &opts).map(drop))?;
+    let nii_ms = median_ms(a.repeats, || io::load(&nii, &opts).map(drop))?;
+
+    let reference = run_reference(a, &series, &nii);
+    let (ref_dicom, ref_nii) = match &reference {
+        Ok(r) => (Some(r.0), Some(r.1)),
+        Err(e) => {
+            eprintln!("reference not run: {e:#}");
+            (None, None)
+        }
+    };
+    let rows = vec![
+        row("DICOM series (uncompressed)", megabytes, dicom_ms, "pydicom+numpy", ref_dicom, 3.0),
+        row("NIfTI .nii.gz", megabytes, nii_ms, "nibabel", ref_nii, 1.0),
+    ];
+    if a.json {
+        let out = serde_json::json!({"bench": "load", "threads": a.threads, "repeats": a.repeats, "rows": rows});
+        println!("{}", serde_json::to_string_pretty(&out)?);
+    } else {
+        print_load_table(&rows, a.threads);
+    }
+    Ok(())
+}
+
+fn row(what: &'static str, megabytes: f64, ms: f64, reference: &'static str, ref_ms: Option<f64>, target: f64) -> LoadRow {
+    LoadRow {
+        what,
+        megabytes,
+        voyage_ms: ms,
+        voyage_mb_s: megabytes / (ms / 1e3),
+        reference,
+        reference_ms: ref_ms,
+        speedup: ref_ms.map(|r| r / ms),
+        target_speedup: target,
+    }
+}
+
+fn print_load_table(rows: &[LoadRow], threads: usize) {
+    println!("load benchmark ({threads} thread(s), median of repeats, warm cache)");
+    println!("{:<30} {:>8} {:>10} {:>10} {:>16} {:>12} {:>9} {:>7}", "input", "MB", "voyage ms", "MB/s", "reference", "ref ms", "speedup", "target");
+    for r in rows {
+        let opt = |v: Option<f64>, p: usize| v.map(|x| format!("{x:.p$}")).unwrap_or_else(|| "-".into());
+        println!(
+            "{:<30} {:>8.1} {:>10.1} {:>10.0} {:>16} {:>12} {:>8}× {:>6.0}×",
+            r.what,
+            r.megabytes,
+            r.voyage_ms,
+            r.voyage_mb_s,
+            r.reference,
+            opt(r.reference_ms, 1),
+            opt(r.speedup, 2),
+            r.target_speedup
+        );
+    }
+}
+
+/// Writes (once) the colon phantom as a DICOM series and as .nii.gz into `dir`.
+fn prepare_load_files(dir: &Path, small: bool) -> Result<(PathBuf, PathBuf)> {
+    let tag = if small { "small" } else { "full" };
+    let series = dir.join(format!("colon-{tag}-series"));
+    let nii = dir.join(format!("colon-{tag}.nii.gz"));
+    let stamp = dir.join(format!("colon-{tag}.done"));
+    if stamp.exists() && series.is_dir() && nii.is_file() {
+        return Ok((series, nii));
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create folder", dir.display()))?;
+    eprintln!("making the colon phantom ({tag}) in {} ...", dir.display());
+    let p = phantom::colon(&ColonOptions { small, ..ColonOptions::default() })?;
+    if series.exists() {
+        std::fs::remove_dir_all(&series).with_context(|| format!("{}: cannot clear", series.display()))?;
+    }
+    io::dicom_write::write_series(&series, &p.ct)?;
+    io::nifti::save(&nii, &p.ct)?;
+    std::fs::write(&stamp, b"").with_context(|| format!("{}: cannot write", stamp.display()))?;
+    Ok((series, nii))
+}
+
+/// Median wall time of `repeats` runs after one warm-up.
+fn median_ms(repeats: usize, mut f: impl FnMut() -> voyage_core::Result<()>) -> Result<f64> {
+    f()?;
+    let mut times = Vec::with_capacity(repeats.max(1));
+    for _ in 0..repeats.max(1) {
+        let t = Instant::now();
+        f()?;
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    Ok(median(&mut times))
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+const LOAD_REFERENCE_PY: &str = include_str!("../../../../bench/load_reference.py");
+
+/// Runs bench/load_reference.py; returns the median (DICOM ms, NIfTI ms).
+fn run_reference(a: &LoadBench, series: &Path, nii: &Path) -> Result<(f64, f64)> {
+    let python = find_python(a.python.as_deref())?;
+    let script = a.dir.join("load_reference.py");
+    std::fs::write(&script, LOAD_REFERENCE_PY).with_context(|| format!("{}: cannot write", script.display()))?;
+    // One more repeat than ours: the reference's first run is its warm-up.
+    let out = Command::new(&python)
+        .arg(&script)
+        .arg(series)
+        .arg(nii)
+        .arg((a.repeats + 1).to_string())
+        .output()
+        .with_context(|| format!("cannot run {}", python.display()))?;
+    if !out.status.success() {
+        bail!("{} failed: {}", script.display(), String::from_utf8_lossy(&out.stderr).trim());
+    }
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).context("reference printed no JSON")?;
+    let med = |key: &str| -> Result<f64> {
+        let mut t: Vec<f64> = v[key].as_array().context("bad reference JSON")?.iter().skip(1).filter_map(|x| x.as_f64()).map(|s| s * 1e3).collect();
+        if t.is_empty() {
+            bail!("reference gave no timings for {key}");
+        }
+        Ok(median(&mut t))
+    };
+    Ok((med("dicom_s")?, med("nifti_s")?))
+}
+
+/// The reference Python: the one given, else bench/.venv (made by bench/setup.sh).
+pub fn find_python(given: Option<&Path>) -> Result<PathBuf> {
+    if let Some(p) = given {
+        return Ok(p.to_path_buf());
+    }
+    let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../bench/.venv/bin/python");
+    if venv.exists() {
+        return Ok(venv);
+    }
+    bail!("no reference Python: run `bash bench/setup.sh` (makes bench/.venv) or pass --python")
+}

@@ -1,0 +1,114 @@
+//! `voyage info PATH`: what a CT is, without patient identity.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use clap::Args;
+use serde::Serialize;
+use voyage_core::io::{self, LoadOptions, Loaded};
+
+#[derive(Args, Debug)]
+pub struct InfoArgs {
+    /// A DICOM folder or file, NIfTI (.nii, .nii.gz), MetaImage (.mha, .mhd) or NRRD file.
+    pub path: PathBuf,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+    /// DICOM: which SeriesInstanceUID to load when the folder holds several.
+    #[arg(long)]
+    pub series: Option<String>,
+}
+
+/// Everything `info` reports. Patient name and ID are never part of it.
+#[derive(Serialize)]
+pub struct Info {
+    pub path: String,
+    pub format: Option<io::Format>,
+    pub dims: [usize; 3],
+    pub spacing_mm: [f64; 3],
+    pub origin_lps_mm: [f64; 3],
+    pub direction: [[f64; 3]; 3],
+    pub orientation: String,
+    pub extent_mm: [f64; 3],
+    pub hu_min: i16,
+    pub hu_max: i16,
+    pub megabytes: f64,
+    #[serde(flatten)]
+    pub meta: io::Meta,
+}
+
+impl Info {
+    pub fn new(path: &std::path::Path, loaded: &Loaded) -> Info {
+        let g = loaded.volume.geometry();
+        let (lo, hi) = loaded.volume.min_max();
+        Info {
+            path: path.display().to_string(),
+            format: loaded.meta.format,
+            dims: g.dims,
+            spacing_mm: g.spacing,
+            origin_lps_mm: g.origin,
+            direction: g.direction,
+            orientation: g.orientation_code(),
+            extent_mm: g.extent_mm().to_array(),
+            hu_min: lo,
+            hu_max: hi,
+            megabytes: (g.len() * 2) as f64 / 1e6,
+            meta: loaded.meta.clone(),
+        }
+    }
+
+    pub fn print_text(&self) {
+        let m = &self.meta;
+        println!("{}", self.path);
+        println!("  format       {}", self.format.map(|f| format!("{f:?}")).unwrap_or("?".into()));
+        if let Some(modality) = &m.modality {
+            println!("  modality     {modality}");
+        }
+        if let Some(uid) = &m.series_uid {
+            println!("  series       {uid}");
+        }
+        if let Some(d) = &m.series_description {
+            println!("  description  {d}");
+        }
+        if !m.transfer_syntaxes.is_empty() {
+            println!("  transfer     {}", m.transfer_syntaxes.join(", "));
+        }
+        if m.files > 1 {
+            println!("  files        {}", m.files);
+        }
+        let [nx, ny, nz] = self.dims;
+        let [sx, sy, sz] = self.spacing_mm;
+        let [ex, ey, ez] = self.extent_mm;
+        println!("  dims         {nx} × {ny} × {nz}  ({:.1} MB as i16)", self.megabytes);
+        println!("  spacing      {sx:.4} × {sy:.4} × {sz:.4} mm");
+        println!("  extent       {ex:.1} × {ey:.1} × {ez:.1} mm");
+        let axes: Vec<char> = self.orientation.chars().collect();
+        println!("  orientation  {} (i→{}, j→{}, k→{})", self.orientation, axes[0], axes[1], axes[2]);
+        let [ox, oy, oz] = self.origin_lps_mm;
+        println!("  origin       ({ox:.2}, {oy:.2}, {oz:.2}) mm LPS");
+        println!("  HU range     {} .. {}", self.hu_min, self.hu_max);
+        for s in &m.other_series {
+            println!(
+                "  other series {} ({} slices{})",
+                s.uid,
+                s.slices,
+                s.description.as_ref().map(|d| format!(", {d}")).unwrap_or_default()
+            );
+        }
+        for n in &m.notes {
+            println!("  note         {n}");
+        }
+    }
+}
+
+pub fn run(a: &InfoArgs) -> Result<()> {
+    let opts = LoadOptions { series_uid: a.series.clone() };
+    let loaded = io::load(&a.path, &opts)?;
+    let info = Info::new(&a.path, &loaded);
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&info)?);
+    } else {
+        info.print_text();
+    }
+    Ok(())
+}

@@ -1,0 +1,44 @@
+//! The subcommands.
+
+mod bench;
+mod info;
+mod phantom;
+
+use std::path::PathBuf;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser, Debug)]
+#[command(name = "voyage", version, about = "Interactive virtual colonoscopy (Hong et al., Virtual Voyage, 1997)")]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Describe a CT volume: dims, spacing, orientation, HU range, series (never patient name or ID).
+    Info(info::InfoArgs),
+    /// Make a synthetic phantom with ground truth (the paper's pipe, or a full colon).
+    Phantom(phantom::PhantomArgs),
+    /// Make the colon phantom in ./voyage-demo and describe it (the default job).
+    Demo {
+        /// Folder to write the phantom into.
+        #[arg(long, default_value = "voyage-demo")]
+        out: PathBuf,
+        /// Make the small (≈128³) phantom instead of the full-size one.
+        #[arg(long)]
+        small: bool,
+    },
+    /// Benchmarks against reference libraries.
+    Bench(bench::BenchArgs),
+}
+
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Info(a) => info::run(&a),
+        Command::Phantom(a) => phantom::run(&a),
+        Command::Demo { out, small } => phantom::demo(&out, small),
+        Command::Bench(a) => bench::run(&a),
+    }
+}

@@ -1,0 +1,146 @@
+//! `voyage phantom` and `voyage demo`: synthetic scans with ground truth.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use clap::{Args, ValueEnum};
+use voyage_core::io::{self, atomic::write_atomic, LoadOptions};
+use voyage_core::phantom::{self, ColonOptions, Phantom};
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum Kind {
+    /// The paper's looped pipe in a water tank with polyps of 7, 5 and 3 mm (512×512×107).
+    Pipe,
+    /// A synthetic colon at a real scan's size (≈512×512×400) with folds and polyps.
+    Colon,
+}
+
+#[derive(Args, Debug)]
+pub struct PhantomArgs {
+    pub kind: Kind,
+    /// The CT, as NIfTI (.nii or .nii.gz), MetaImage (.mha) or NRRD (.nrrd).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Ground truth JSON (centerline, polyps, source/target ...). The lumen mask is written
+    /// beside it as NAME.lumen.nii.gz unless --mask says where.
+    #[arg(long)]
+    pub truth: Option<PathBuf>,
+    /// Ground-truth lumen mask (NIfTI, 1 = colon air).
+    #[arg(long)]
+    pub mask: Option<PathBuf>,
+    /// Also write the CT as a DICOM series into this folder (one file per slice).
+    #[arg(long)]
+    pub dicom: Option<PathBuf>,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Colon only: a ≈128³ version for fast tests.
+    #[arg(long)]
+    pub small: bool,
+    /// Colon only: pools of tagged fluid with flat air–fluid levels.
+    #[arg(long)]
+    pub tagged_fluid: bool,
+    /// Colon only: a collapsed stretch that splits the gas in two.
+    #[arg(long)]
+    pub collapsed: bool,
+    /// Colon only: leave out the small-bowel gas pockets.
+    #[arg(long)]
+    pub no_small_bowel_gas: bool,
+    /// Colon only: leave out the lung bases in the top slices.
+    #[arg(long)]
+    pub no_lungs: bool,
+    /// Noise standard deviation in HU.
+    #[arg(long, default_value_t = 20.0)]
+    pub noise: f64,
+}
+
+pub fn run(a: &PhantomArgs) -> Result<()> {
+    let t = Instant::now();
+    let p = make(a)?;
+    eprintln!("made {:?} phantom in {:.2} s", a.kind, t.elapsed().as_secs_f64());
+    write_outputs(&p, &a.out, a.truth.as_deref(), a.mask.as_deref(), a.dicom.as_deref())
+}
+
+fn make(a: &PhantomArgs) -> Result<Phantom> {
+    Ok(match a.kind {
+        Kind::Pipe => phantom::pipe(a.seed)?,
+        Kind::Colon => phantom::colon(&ColonOptions {
+            seed: a.seed,
+            small: a.small,
+            tagged_fluid: a.tagged_fluid,
+            collapsed_segment: a.collapsed,
+            small_bowel_gas: !a.no_small_bowel_gas,
+            lung_bases: !a.no_lungs,
+            noise_hu: a.noise,
+        })?,
+    })
+}
+
+/// Writes the CT (any writable format, by extension), the truth JSON with its lumen mask,
+/// and optionally a DICOM series. Every file is written atomically.
+pub fn write_outputs(p: &Phantom, out: &Path, truth: Option<&Path>, mask: Option<&Path>, dicom: Option<&Path>) -> Result<()> {
+    save_volume(out, &p.ct)?;
+    eprintln!("wrote {}", out.display());
+    let mask = mask.map(Path::to_path_buf).or_else(|| truth.map(mask_beside));
+    if let Some(mask) = &mask {
+        io::nifti::save(mask, &p.lumen)?;
+        eprintln!("wrote {}", mask.display());
+    }
+    if let Some(truth) = truth {
+        let json = truth_json(p, mask.as_deref())?;
+        write_atomic(truth, |w| w.write_all(json.as_bytes()))?;
+        eprintln!("wrote {}", truth.display());
+    }
+    if let Some(dir) = dicom {
+        io::dicom_write::write_series(dir, &p.ct)?;
+        eprintln!("wrote {} DICOM slices to {}", p.ct.dims()[2], dir.display());
+    }
+    Ok(())
+}
+
+fn save_volume(path: &Path, v: &voyage_core::Volume<i16>) -> Result<()> {
+    match io::detect_format(path).ok() {
+        Some(io::Format::MetaImage) => io::metaimage::save(path, v)?,
+        Some(io::Format::Nrrd) => io::nrrd::save(path, v)?,
+        Some(io::Format::Nifti) => io::nifti::save(path, v)?,
+        _ => anyhow::bail!("{}: give the output a .nii.gz, .nii, .mha or .nrrd name", path.display()),
+    }
+    Ok(())
+}
+
+/// `colon.json` → `colon.lumen.nii.gz`, beside it.
+fn mask_beside(truth: &Path) -> PathBuf {
+    let stem = truth.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "truth".into());
+    truth.with_file_name(format!("{stem}.lumen.nii.gz"))
+}
+
+/// The truth as JSON, with the mask's file name (relative to the JSON) added.
+fn truth_json(p: &Phantom, mask: Option<&Path>) -> Result<String> {
+    let mut v: serde_json::Value = serde_json::from_str(&p.truth.to_json())?;
+    if let (Some(m), Some(obj)) = (mask, v.as_object_mut()) {
+        let name = m.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        obj.insert("lumen_mask".into(), name.into());
+    }
+    Ok(serde_json::to_string_pretty(&v)? + "\n")
+}
+
+/// The default job until navigation exists: make the colon phantom, write it, read it back
+/// through the loader and describe it.
+pub fn demo(out: &Path, small: bool) -> Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create folder", out.display()))?;
+    let t = Instant::now();
+    let p = phantom::colon(&ColonOptions { small, ..ColonOptions::default() })?;
+    eprintln!(
+        "made the colon phantom in {:.2} s: centerline {:.0} mm, {} polyps, {} folds",
+        t.elapsed().as_secs_f64(),
+        p.truth.centerline_length_mm,
+        p.truth.polyps.len(),
+        p.truth.folds
+    );
+    let ct = out.join("colon.nii.gz");
+    write_outputs(&p, &ct, Some(&out.join("colon.json")), None, None)?;
+    let loaded = io::load(&ct, &LoadOptions::default())?;
+    super::info::Info::new(&ct, &loaded).print_text();
+    Ok(())
+}

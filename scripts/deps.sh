@@ -1,0 +1,18 @@
+#!/usr/bin/env bash
+# Installs what voyage needs from Debian beyond Rust itself:
+#   cmake, g++  — build the CharLS (JPEG-LS) decoder.
+# Idempotent; skips apt when everything is already there. Needs root (or sudo) for apt.
+set -euo pipefail
+need=()
+command -v cmake >/dev/null 2>&1 || need+=(cmake)
+command -v g++ >/dev/null 2>&1 || need+=(g++)
+command -v pkg-config >/dev/null 2>&1 || need+=(pkg-config)
+if [ ${#need[@]} -eq 0 ]; then
+  exit 0
+fi
+sudo=""
+[ "$(id -u)" -eq 0 ] || sudo="sudo"
+export DEBIAN_FRONTEND=noninteractive
+$sudo apt-get update -qq
+$sudo apt-get install -y -qq --no-install-recommends "${need[@]}" >/dev/null
+echo "installed: ${need[*]}"
