@@ -5,7 +5,9 @@
 //! navigation) take values and return values. `phantom` makes synthetic scans with ground
 //! truth for tests and benchmarks.
 
+pub mod distance;
 pub mod error;
+pub mod field;
 pub mod io;
 pub mod phantom;
 pub mod volume;

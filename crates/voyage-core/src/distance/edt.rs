@@ -1,0 +1,272 @@
+//! Ds: exact Euclidean distance transform with anisotropic spacing.
+//!
+//! Felzenszwalb & Huttenlocher's separable lower envelope of parabolas, one pass per axis
+//! (x, then y, then z), over the lumen's bounding box only. Values are squared millimetres
+//! until the last pass.
+//!
+//! **What counts as wall.** Every voxel that is not lumen, and everything beyond the volume's
+//! border: the scan does not say what lies outside its field of view, and the camera must not
+//! fly there. Ds of a lumen voxel is the distance in mm from its centre to the centre of the
+//! nearest non-lumen voxel (or to the first voxel centre beyond the border).
+
+use rayon::prelude::*;
+
+use crate::field::{bounding_box, crop, BoxGrid, Field};
+use crate::{Error, Result, Volume};
+
+/// Ds over the lumen's bounding box (grown by one voxel): distance in mm to the nearest wall
+/// for lumen voxels (mask ≠ 0), 0 elsewhere.
+pub fn distance_to_wall(mask: &Volume<u8>) -> Result<Field<f32>> {
+    let grid = bounding_box(mask, 1, |v| v != 0).ok_or_else(|| Error::invalid("the lumen mask is empty"))?;
+    let inside = crop(mask, &grid);
+    let sp = mask.spacing();
+    let mut f: Vec<f32> = inside.iter().map(|&m| if m != 0 { f32::INFINITY } else { 0.0 }).collect();
+    pass_x(&mut f, &grid, sp[0]);
+    pass_y(&mut f, &grid, sp[1]);
+    pass_z(&mut f, &grid, sp[2]);
+    f.par_iter_mut().zip(inside.par_iter()).for_each(|(d, &m)| *d = if m != 0 { d.sqrt() } else { 0.0 });
+    Ok(Field { grid, geometry: mask.geometry().clone(), data: f })
+}
+
+/// Scratch space for one 1D transform: the column with a zero (wall) at each end, the
+/// envelope's parabola sites `v` and boundaries `z`.
+struct Scratch {
+    col: Vec<f64>,
+    out: Vec<f64>,
+    v: Vec<usize>,
+    z: Vec<f64>,
+}
+
+impl Scratch {
+    fn new(n: usize) -> Self {
+        Scratch { col: vec![0.0; n + 2], out: vec![0.0; n + 2], v: vec![0; n + 2], z: vec![0.0; n + 3] }
+    }
+}
+
+/// 1D squared distance transform of `s.col[..n+2]` (sites at positions −1..=n, in units of
+/// `h` mm; the two end sites are wall) into `s.out`. Infinite entries are not sites.
+fn transform_1d(s: &mut Scratch, n: usize, h: f64) {
+    let m = n + 2;
+    let pos = |q: usize| (q as f64 - 1.0) * h;
+    let (col, v, z) = (&s.col, &mut s.v, &mut s.z);
+    let mut k = 0usize;
+    v[0] = 0;
+    z[0] = f64::NEG_INFINITY;
+    z[1] = f64::INFINITY;
+    for q in 1..m {
+        let fq = col[q];
+        if !fq.is_finite() {
+            continue;
+        }
+        let pq = pos(q);
+        // z[0] = −∞, so the envelope never loses its first (wall) parabola.
+        let mut sct;
+        loop {
+            let r = v[k];
+            let pr = pos(r);
+            sct = ((fq + pq * pq) - (col[r] + pr * pr)) / (2.0 * (pq - pr));
+            if sct > z[k] {
+                break;
+            }
+            k -= 1;
+        }
+        k += 1;
+        v[k] = q;
+        z[k] = sct;
+        z[k + 1] = f64::INFINITY;
+    }
+    let mut k = 0usize;
+    for q in 1..=n {
+        let pq = pos(q);
+        while z[k + 1] < pq {
+            k += 1;
+        }
+        let r = v[k];
+        let d = pq - pos(r);
+        s.out[q] = d * d + col[r];
+    }
+}
+
+fn load_column(s: &mut Scratch, values: impl Iterator<Item = f32>, n: usize) {
+    s.col[0] = 0.0;
+    s.col[n + 1] = 0.0;
+    for (dst, x) in s.col[1..=n].iter_mut().zip(values) {
+        *dst = x as f64;
+    }
+}
+
+/// First pass, along x: rows are contiguous.
+fn pass_x(f: &mut [f32], grid: &BoxGrid, h: f64) {
+    let n = grid.dims[0];
+    f.par_chunks_mut(n).for_each_init(
+        || Scratch::new(n),
+        |s, row| {
+            if row.iter().all(|&x| x == 0.0) {
+                return;
+            }
+            load_column(s, row.iter().copied(), n);
+            transform_1d(s, n, h);
+            for (dst, &x) in row.iter_mut().zip(&s.out[1..=n]) {
+                *dst = x as f32;
+            }
+        },
+    );
+}
+
+/// Second pass, along y: each z-slab is independent and fits in cache.
+fn pass_y(f: &mut [f32], grid: &BoxGrid, h: f64) {
+    let [nx, ny, _] = grid.dims;
+    f.par_chunks_mut(nx * ny).for_each_init(
+        || Scratch::new(ny),
+        |s, slab| {
+            for i in 0..nx {
+                if (0..ny).all(|j| slab[i + nx * j] == 0.0) {
+                    continue;
+                }
+                load_column(s, (0..ny).map(|j| slab[i + nx * j]), ny);
+                transform_1d(s, ny, h);
+                for j in 0..ny {
+                    slab[i + nx * j] = s.out[j + 1] as f32;
+                }
+            }
+        },
+    );
+}
+
+/// Third pass, along z: columns are strided by a whole slab, so each task takes one y-row
+/// of columns; the rows of different tasks never overlap.
+fn pass_z(f: &mut [f32], grid: &BoxGrid, h: f64) {
+    let [nx, ny, nz] = grid.dims;
+    let plane = nx * ny;
+    let shared = SharedSlice::new(f);
+    (0..ny).into_par_iter().for_each_init(
+        || Scratch::new(nz),
+        |s, j| {
+            for i in 0..nx {
+                let at = |k: usize| i + nx * j + plane * k;
+                // SAFETY: task j reads and writes only indices with this j, which no other
+                // task touches; `at` stays below nx*ny*nz = len.
+                let get = |k: usize| unsafe { shared.get(at(k)) };
+                if (0..nz).all(|k| get(k) == 0.0) {
+                    continue;
+                }
+                load_column(s, (0..nz).map(get), nz);
+                transform_1d(s, nz, h);
+                for k in 0..nz {
+                    unsafe { shared.set(at(k), s.out[k + 1] as f32) };
+                }
+            }
+        },
+    );
+}
+
+/// A slice that parallel tasks write at disjoint indices.
+struct SharedSlice<T> {
+    ptr: *mut T,
+    len: usize,
+}
+unsafe impl<T: Send> Sync for SharedSlice<T> {}
+unsafe impl<T: Send> Send for SharedSlice<T> {}
+
+impl<T: Copy> SharedSlice<T> {
+    fn new(s: &mut [T]) -> Self {
+        SharedSlice { ptr: s.as_mut_ptr(), len: s.len() }
+    }
+    /// SAFETY: `i < len`, and no other task writes index `i` concurrently.
+    unsafe fn get(&self, i: usize) -> T {
+        debug_assert!(i < self.len);
+        unsafe { *self.ptr.add(i) }
+    }
+    /// SAFETY: `i < len`, and no other task reads or writes index `i` concurrently.
+    unsafe fn set(&self, i: usize, v: T) {
+        debug_assert!(i < self.len);
+        unsafe { *self.ptr.add(i) = v }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Geometry;
+
+    /// Brute force: nearest wall voxel centre, the border counting as wall one voxel out.
+    fn brute(mask: &Volume<u8>) -> Vec<f64> {
+        let [nx, ny, nz] = mask.dims();
+        let s = mask.spacing();
+        let g = mask.geometry();
+        let mut walls = Vec::new();
+        for k in -1..=nz as i64 {
+            for j in -1..=ny as i64 {
+                for i in -1..=nx as i64 {
+                    let inside = i >= 0 && j >= 0 && k >= 0 && i < nx as i64 && j < ny as i64 && k < nz as i64;
+                    if !inside || mask.get(i as usize, j as usize, k as usize) == 0 {
+                        walls.push([i as f64 * s[0], j as f64 * s[1], k as f64 * s[2]]);
+                    }
+                }
+            }
+        }
+        (0..g.len())
+            .map(|idx| {
+                let [i, j, k] = g.ijk(idx);
+                if mask.data()[idx] == 0 {
+                    return 0.0;
+                }
+                let p = [i as f64 * s[0], j as f64 * s[1], k as f64 * s[2]];
+                walls
+                    .iter()
+                    .map(|w| ((p[0] - w[0]).powi(2) + (p[1] - w[1]).powi(2) + (p[2] - w[2]).powi(2)).sqrt())
+                    .fold(f64::INFINITY, f64::min)
+            })
+            .collect()
+    }
+
+    fn random_mask(dims: [usize; 3], spacing: [f64; 3], seed: u64, fill: f64) -> Volume<u8> {
+        let g = Geometry::new(dims, spacing, [0.0; 3]).unwrap();
+        let mut x = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        let data = (0..g.len())
+            .map(|_| {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                ((x % 1000) as f64 / 1000.0 < fill) as u8
+            })
+            .collect();
+        Volume::from_vec(g, data).unwrap()
+    }
+
+    #[test]
+    fn matches_brute_force_anisotropic() {
+        for (seed, fill) in [(1, 0.9), (2, 0.97), (3, 0.6), (4, 1.0)] {
+            let m = random_mask([13, 11, 9], [0.82, 0.7, 1.25], seed, fill);
+            let ds = distance_to_wall(&m).unwrap().to_volume(0.0).unwrap();
+            let want = brute(&m);
+            for (idx, (&got, &w)) in ds.data().iter().zip(&want).enumerate() {
+                assert!((got as f64 - w).abs() < 1e-4, "seed {seed} voxel {idx}: {got} vs {w}");
+            }
+        }
+    }
+
+    #[test]
+    fn ball_centre_distance_is_radius() {
+        let g = Geometry::new([41, 41, 33], [0.5, 0.5, 0.8], [0.0; 3]).unwrap();
+        let c = [10.0, 10.0, 12.8];
+        let r = 7.0;
+        let data = (0..g.len())
+            .map(|idx| {
+                let [i, j, k] = g.ijk(idx);
+                let p = [i as f64 * 0.5, j as f64 * 0.5, k as f64 * 0.8];
+                (((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2) + (p[2] - c[2]).powi(2)).sqrt() < r) as u8
+            })
+            .collect();
+        let m = Volume::from_vec(g, data).unwrap();
+        let ds = distance_to_wall(&m).unwrap();
+        let centre = ds.get_global([20, 20, 16], -1.0);
+        assert!((centre as f64 - r).abs() < 0.5, "centre Ds {centre}");
+    }
+
+    #[test]
+    fn empty_mask_is_an_error() {
+        let g = Geometry::new([4, 4, 4], [1.0; 3], [0.0; 3]).unwrap();
+        assert!(distance_to_wall(&Volume::filled(g, 0u8).unwrap()).is_err());
+    }
+}

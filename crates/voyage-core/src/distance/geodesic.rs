@@ -1,0 +1,270 @@
+//! Dt: single-source shortest-path distance through the lumen (paper §3.2, "single-source
+//! shortest path algorithm"), over 26-neighbours with edge lengths in mm.
+//!
+//! Dial's bucket queue instead of a binary heap: with bucket width equal to the shortest edge
+//! (the smallest voxel spacing), no voxel can improve another in the same bucket, so buckets
+//! may be emptied in any order and the result is the exact Dijkstra distance. Each voxel costs
+//! a push and a pop into a `Vec`, not a heap's log n.
+
+use crate::field::{BoxGrid, Field};
+use crate::{Error, Result, Volume};
+
+/// Dt and what the search learned on the way.
+#[derive(Clone, Debug)]
+pub struct Geodesic {
+    /// Distance in mm from the source through lumen voxels; +∞ where unreachable or not lumen.
+    pub dist: Field<f32>,
+    /// The reachable voxel farthest from the source (volume voxel index).
+    pub farthest: [usize; 3],
+    pub max_mm: f32,
+    /// Number of lumen voxels reached.
+    pub reached: usize,
+}
+
+/// Shortest-path distances from `source` (a lumen voxel) to every lumen voxel of `mask`
+/// inside `grid`.
+pub fn geodesic_distance(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3]) -> Result<Geodesic> {
+    let pad = Padded::new(mask, grid);
+    let src = pad.index_of_global(source).filter(|&i| pad.inside[i] != 0).ok_or_else(|| {
+        Error::invalid(format!("the source voxel {source:?} is not in the lumen"))
+    })?;
+    let (dist, farthest, max_mm, reached) = dial(&pad, src, mask.spacing());
+    Ok(Geodesic {
+        dist: Field { grid: grid.clone(), geometry: mask.geometry().clone(), data: pad.unpad(&dist) },
+        farthest: pad.global_of_index(farthest),
+        max_mm,
+        reached,
+    })
+}
+
+/// The box's mask with one layer of zeros around it, so that the 26 neighbours of every lumen
+/// voxel are valid indices even where the box touches the volume's border.
+struct Padded {
+    grid: BoxGrid,
+    dims: [usize; 3],
+    inside: Vec<u8>,
+}
+
+impl Padded {
+    fn new(mask: &Volume<u8>, grid: &BoxGrid) -> Self {
+        let dims = grid.dims.map(|d| d + 2);
+        let mut inside = vec![0u8; dims[0] * dims[1] * dims[2]];
+        let g = mask.geometry();
+        for k in 0..grid.dims[2] {
+            for j in 0..grid.dims[1] {
+                let src = g.index(grid.lo[0], grid.lo[1] + j, grid.lo[2] + k);
+                let dst = 1 + dims[0] * (j + 1 + dims[1] * (k + 1));
+                for (d, &m) in inside[dst..dst + grid.dims[0]].iter_mut().zip(&mask.data()[src..src + grid.dims[0]]) {
+                    *d = (m != 0) as u8;
+                }
+            }
+        }
+        Padded { grid: grid.clone(), dims, inside }
+    }
+
+    fn index_of_global(&self, g: [usize; 3]) -> Option<usize> {
+        let l = self.grid.index_of_global(g).map(|i| self.grid.ijk(i))?;
+        Some(l[0] + 1 + self.dims[0] * (l[1] + 1 + self.dims[1] * (l[2] + 1)))
+    }
+
+    fn global_of_index(&self, idx: usize) -> [usize; 3] {
+        let [nx, ny, _] = self.dims;
+        let p = [idx % nx, (idx / nx) % ny, idx / (nx * ny)];
+        [0, 1, 2].map(|a| p[a] - 1 + self.grid.lo[a])
+    }
+
+    /// 26 neighbour offsets and their lengths in mm.
+    fn neighbours(&self, spacing: [f64; 3]) -> Vec<(isize, f32)> {
+        let (nx, ny) = (self.dims[0] as isize, self.dims[1] as isize);
+        let mut out = Vec::with_capacity(26);
+        for dk in -1isize..=1 {
+            for dj in -1isize..=1 {
+                for di in -1isize..=1 {
+                    if di == 0 && dj == 0 && dk == 0 {
+                        continue;
+                    }
+                    let len = ((di as f64 * spacing[0]).powi(2) + (dj as f64 * spacing[1]).powi(2) + (dk as f64 * spacing[2]).powi(2)).sqrt();
+                    out.push((di + nx * (dj + ny * dk), len as f32));
+                }
+            }
+        }
+        out
+    }
+
+    /// Copies a padded-layout field back to the box layout.
+    fn unpad(&self, v: &[f32]) -> Vec<f32> {
+        let [bx, by, bz] = self.grid.dims;
+        let mut out = Vec::with_capacity(self.grid.len());
+        for k in 0..bz {
+            for j in 0..by {
+                let s = 1 + self.dims[0] * (j + 1 + self.dims[1] * (k + 1));
+                out.extend_from_slice(&v[s..s + bx]);
+            }
+        }
+        out
+    }
+}
+
+/// Dial's algorithm over the padded grid. Returns (dist, farthest index, its distance, reached).
+fn dial(pad: &Padded, src: usize, spacing: [f64; 3]) -> (Vec<f32>, usize, f32, usize) {
+    let nbrs = pad.neighbours(spacing);
+    let width = spacing.iter().cloned().fold(f64::INFINITY, f64::min) as f32;
+    let longest = nbrs.iter().map(|n| n.1).fold(0.0, f32::max);
+    // Buckets in a ring: a relaxation never reaches more than `longest` beyond the current one.
+    let ring = (longest / width).ceil() as usize + 2;
+    let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); ring];
+    let mut dist = vec![f32::INFINITY; pad.inside.len()];
+    let mut done = vec![false; pad.inside.len()];
+    dist[src] = 0.0;
+    buckets[0].push(src as u32);
+    let mut pending = 1usize;
+    let mut current = 0usize;
+    let (mut far, mut far_d, mut reached) = (src, 0.0f32, 0usize);
+    let mut work = Vec::new();
+    while pending > 0 {
+        let slot = current % ring;
+        while !buckets[slot].is_empty() {
+            std::mem::swap(&mut work, &mut buckets[slot]);
+            pending -= work.len();
+            for &u in &work {
+                let u = u as usize;
+                if done[u] {
+                    continue;
+                }
+                done[u] = true;
+                reached += 1;
+                let du = dist[u];
+                if du > far_d {
+                    far_d = du;
+                    far = u;
+                }
+                for &(off, len) in &nbrs {
+                    let v = (u as isize + off) as usize;
+                    if pad.inside[v] == 0 || done[v] {
+                        continue;
+                    }
+                    let dv = du + len;
+                    if dv < dist[v] {
+                        dist[v] = dv;
+                        // Rounding can put dv a hair below the next bucket: never file it earlier
+                        // than the one being emptied.
+                        let b = ((dv / width) as usize).max(current);
+                        buckets[b % ring].push(v as u32);
+                        pending += 1;
+                    }
+                }
+            }
+            work.clear();
+        }
+        current += 1;
+    }
+    (dist, far, far_d, reached)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::field::bounding_box;
+    use crate::Geometry;
+    use std::cmp::Reverse;
+    use std::collections::BinaryHeap;
+
+    /// Textbook Dijkstra with a binary heap in f64, over the whole volume.
+    fn reference(mask: &Volume<u8>, src: [usize; 3]) -> Vec<f64> {
+        let g = mask.geometry();
+        let [nx, ny, nz] = g.dims;
+        let s = g.spacing;
+        let mut d = vec![f64::INFINITY; g.len()];
+        let mut heap = BinaryHeap::new();
+        let si = g.index(src[0], src[1], src[2]);
+        d[si] = 0.0;
+        heap.push(Reverse((0u64, si)));
+        while let Some(Reverse((dk, u))) = heap.pop() {
+            let du = f64::from_bits(dk);
+            if du > d[u] {
+                continue;
+            }
+            let [i, j, k] = g.ijk(u);
+            for dk in -1i64..=1 {
+                for dj in -1i64..=1 {
+                    for di in -1i64..=1 {
+                        let (a, b, c) = (i as i64 + di, j as i64 + dj, k as i64 + dk);
+                        if (di, dj, dk) == (0, 0, 0) || a < 0 || b < 0 || c < 0 || a >= nx as i64 || b >= ny as i64 || c >= nz as i64 {
+                            continue;
+                        }
+                        let v = g.index(a as usize, b as usize, c as usize);
+                        if mask.data()[v] == 0 {
+                            continue;
+                        }
+                        let len = ((di as f64 * s[0]).powi(2) + (dj as f64 * s[1]).powi(2) + (dk as f64 * s[2]).powi(2)).sqrt();
+                        if du + len < d[v] {
+                            d[v] = du + len;
+                            heap.push(Reverse(((du + len).to_bits(), v)));
+                        }
+                    }
+                }
+            }
+        }
+        d
+    }
+
+    fn maze(dims: [usize; 3], spacing: [f64; 3], seed: u64) -> Volume<u8> {
+        let g = Geometry::new(dims, spacing, [0.0; 3]).unwrap();
+        let mut x = seed | 1;
+        let data = (0..g.len())
+            .map(|_| {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                (x % 100 < 70) as u8
+            })
+            .collect();
+        Volume::from_vec(g, data).unwrap()
+    }
+
+    #[test]
+    fn matches_reference_dijkstra() {
+        for seed in [3u64, 5, 8] {
+            let mut m = maze([24, 19, 15], [0.82, 0.82, 1.25], seed);
+            m.set(0, 0, 0, 1); // touches the volume border: padding must hold
+            let grid = bounding_box(&m, 1, |v| v != 0).unwrap();
+            let geo = geodesic_distance(&m, &grid, [0, 0, 0]).unwrap();
+            let want = reference(&m, [0, 0, 0]);
+            let got = geo.dist.to_volume(f32::INFINITY).unwrap();
+            let mut reached = 0;
+            for (idx, (&a, &b)) in got.data().iter().zip(&want).enumerate() {
+                if b.is_infinite() {
+                    assert!(a.is_infinite(), "seed {seed} voxel {idx}: reached {a}, reference unreachable");
+                } else {
+                    reached += 1;
+                    assert!((a as f64 - b).abs() <= 1e-5 * b + 1e-4, "seed {seed} voxel {idx}: {a} vs {b}");
+                }
+            }
+            assert_eq!(geo.reached, reached);
+            let far = want.iter().cloned().filter(|d| d.is_finite()).fold(0.0, f64::max);
+            assert!((geo.max_mm as f64 - far).abs() < 1e-3);
+        }
+    }
+
+    #[test]
+    fn straight_tube_distance_is_length() {
+        let g = Geometry::new([60, 5, 5], [0.7, 1.0, 1.0], [0.0; 3]).unwrap();
+        let mut m = Volume::filled(g, 0u8).unwrap();
+        for i in 0..60 {
+            m.set(i, 2, 2, 1);
+        }
+        let grid = bounding_box(&m, 1, |v| v != 0).unwrap();
+        let geo = geodesic_distance(&m, &grid, [0, 2, 2]).unwrap();
+        assert_eq!(geo.farthest, [59, 2, 2]);
+        assert!((geo.max_mm - 59.0 * 0.7).abs() < 1e-3);
+    }
+
+    #[test]
+    fn source_outside_lumen_is_an_error() {
+        let g = Geometry::new([4, 4, 4], [1.0; 3], [0.0; 3]).unwrap();
+        let mut m = Volume::filled(g, 0u8).unwrap();
+        m.set(1, 1, 1, 1);
+        let grid = bounding_box(&m, 1, |v| v != 0).unwrap();
+        assert!(geodesic_distance(&m, &grid, [2, 2, 2]).is_err());
+    }
+}

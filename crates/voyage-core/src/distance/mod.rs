@@ -1,0 +1,8 @@
+//! Distance fields over the lumen (paper §3.2): Ds, the Euclidean distance to the colon wall,
+//! and Dt, the geodesic distance to the target (or source) through the lumen.
+
+pub mod edt;
+pub mod geodesic;
+
+pub use edt::distance_to_wall;
+pub use geodesic::{geodesic_distance, Geodesic};

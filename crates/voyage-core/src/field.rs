@@ -1,0 +1,123 @@
+//! Fields restricted to a box of the volume: the distance fields and the potential live only
+//! around the lumen, so they are stored over the lumen's bounding box (plus a margin), not over
+//! the whole CT — a 512×512×400 scan would otherwise cost 400 MB per f32 field.
+
+use crate::{Geometry, Result, Volume};
+
+/// An axis-aligned box of voxels inside a volume: `lo` is its first voxel, `dims` its size.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct BoxGrid {
+    pub lo: [usize; 3],
+    pub dims: [usize; 3],
+}
+
+impl BoxGrid {
+    pub fn len(&self) -> usize {
+        self.dims[0] * self.dims[1] * self.dims[2]
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Index inside the box of box-local voxel (i, j, k).
+    #[inline]
+    pub fn index(&self, i: usize, j: usize, k: usize) -> usize {
+        i + self.dims[0] * (j + self.dims[1] * k)
+    }
+    /// Box-local (i, j, k) of a box index.
+    #[inline]
+    pub fn ijk(&self, index: usize) -> [usize; 3] {
+        let nx = self.dims[0];
+        let ny = self.dims[1];
+        [index % nx, (index / nx) % ny, index / (nx * ny)]
+    }
+    /// Box index of a volume voxel, or None when it lies outside the box.
+    #[inline]
+    pub fn index_of_global(&self, g: [usize; 3]) -> Option<usize> {
+        let mut l = [0usize; 3];
+        for a in 0..3 {
+            l[a] = g[a].checked_sub(self.lo[a])?;
+            if l[a] >= self.dims[a] {
+                return None;
+            }
+        }
+        Some(self.index(l[0], l[1], l[2]))
+    }
+    /// Volume voxel of a box index.
+    #[inline]
+    pub fn global_of_index(&self, index: usize) -> [usize; 3] {
+        let [i, j, k] = self.ijk(index);
+        [i + self.lo[0], j + self.lo[1], k + self.lo[2]]
+    }
+}
+
+/// The bounding box of the voxels where `pred` holds, grown by `margin` voxels and clipped to
+/// the volume. None when no voxel matches.
+pub fn bounding_box<T: Copy>(vol: &Volume<T>, margin: usize, pred: impl Fn(T) -> bool) -> Option<BoxGrid> {
+    let [nx, ny, nz] = vol.dims();
+    let mut lo = [usize::MAX; 3];
+    let mut hi = [0usize; 3];
+    for k in 0..nz {
+        let slice = vol.slice_k(k);
+        for j in 0..ny {
+            let row = &slice[j * nx..(j + 1) * nx];
+            let Some(first) = row.iter().position(|&v| pred(v)) else { continue };
+            let last = row.iter().rposition(|&v| pred(v)).unwrap_or(first);
+            lo = [lo[0].min(first), lo[1].min(j), lo[2].min(k)];
+            hi = [hi[0].max(last), hi[1].max(j), hi[2].max(k)];
+        }
+    }
+    if lo[0] == usize::MAX {
+        return None;
+    }
+    let dims = vol.dims();
+    let lo_m = [0, 1, 2].map(|a| lo[a].saturating_sub(margin));
+    let hi_m = [0, 1, 2].map(|a| (hi[a] + margin).min(dims[a] - 1));
+    Some(BoxGrid { lo: lo_m, dims: [0, 1, 2].map(|a| hi_m[a] - lo_m[a] + 1) })
+}
+
+/// Values over a [`BoxGrid`] of a volume with the given geometry.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Field<T> {
+    pub grid: BoxGrid,
+    pub geometry: Geometry,
+    pub data: Vec<T>,
+}
+
+impl<T: Copy> Field<T> {
+    pub fn filled(grid: BoxGrid, geometry: Geometry, v: T) -> Self {
+        let n = grid.len();
+        Field { grid, geometry, data: vec![v; n] }
+    }
+    /// Value at a volume voxel; `outside` when the voxel is not in the box.
+    #[inline]
+    pub fn get_global(&self, g: [usize; 3], outside: T) -> T {
+        self.grid.index_of_global(g).map_or(outside, |i| self.data[i])
+    }
+    /// The field spread over the whole volume, `outside` beyond the box (for exports).
+    pub fn to_volume(&self, outside: T) -> Result<Volume<T>> {
+        let mut v = Volume::filled(self.geometry.clone(), outside)?;
+        let [bx, by, bz] = self.grid.dims;
+        let g = self.geometry.clone();
+        for k in 0..bz {
+            for j in 0..by {
+                let src = &self.data[self.grid.index(0, j, k)..][..bx];
+                let start = g.index(self.grid.lo[0], j + self.grid.lo[1], k + self.grid.lo[2]);
+                v.data_mut()[start..start + bx].copy_from_slice(src);
+            }
+        }
+        Ok(v)
+    }
+}
+
+/// The part of a volume inside a box, as a flat vector in box order.
+pub fn crop<T: Copy>(vol: &Volume<T>, grid: &BoxGrid) -> Vec<T> {
+    let mut out = Vec::with_capacity(grid.len());
+    let [bx, by, bz] = grid.dims;
+    for k in 0..bz {
+        for j in 0..by {
+            let start = vol.geometry().index(grid.lo[0], j + grid.lo[1], k + grid.lo[2]);
+            out.extend_from_slice(&vol.data()[start..start + bx]);
+        }
+    }
+    out
+}
