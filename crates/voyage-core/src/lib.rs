@@ -10,6 +10,7 @@ pub mod error;
 pub mod field;
 pub mod io;
 pub mod phantom;
+pub mod segment;
 pub mod volume;
 
 pub use error::{Error, Result};

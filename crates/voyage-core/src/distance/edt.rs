@@ -95,20 +95,44 @@ fn load_column(s: &mut Scratch, values: impl Iterator<Item = f32>, n: usize) {
     }
 }
 
+/// Transforms one column (`get`/`set` address its n entries) run by run.
+///
+/// A wall entry (0) stays 0 in every pass, and for an entry between two walls no parabola
+/// beyond either wall can win: it is farther away and no lower than the wall's own. So each
+/// run of non-zero entries is transformed on its own, bounded by its two walls (the volume's
+/// border counting as wall), and the work is proportional to the lumen, not to the box.
+fn transform_column(s: &mut Scratch, n: usize, h: f64, get: impl Fn(usize) -> f32, mut set: impl FnMut(usize, f32)) {
+    let mut q = 0;
+    while q < n {
+        if get(q) == 0.0 {
+            q += 1;
+            continue;
+        }
+        let start = q;
+        while q < n && get(q) != 0.0 {
+            q += 1;
+        }
+        let len = q - start;
+        load_column(s, (start..q).map(&get), len);
+        transform_1d(s, len, h);
+        for t in 0..len {
+            set(start + t, s.out[t + 1] as f32);
+        }
+    }
+}
+
 /// First pass, along x: rows are contiguous.
 fn pass_x(f: &mut [f32], grid: &BoxGrid, h: f64) {
     let n = grid.dims[0];
     f.par_chunks_mut(n).for_each_init(
-        || Scratch::new(n),
-        |s, row| {
+        || (Scratch::new(n), vec![0.0f32; n]),
+        |(s, col), row| {
             if row.iter().all(|&x| x == 0.0) {
                 return;
             }
-            load_column(s, row.iter().copied(), n);
-            transform_1d(s, n, h);
-            for (dst, &x) in row.iter_mut().zip(&s.out[1..=n]) {
-                *dst = x as f32;
-            }
+            col.copy_from_slice(row);
+            let c: &[f32] = col;
+            transform_column(s, n, h, |q| c[q], |q, v| row[q] = v);
         },
     );
 }
@@ -117,16 +141,17 @@ fn pass_x(f: &mut [f32], grid: &BoxGrid, h: f64) {
 fn pass_y(f: &mut [f32], grid: &BoxGrid, h: f64) {
     let [nx, ny, _] = grid.dims;
     f.par_chunks_mut(nx * ny).for_each_init(
-        || Scratch::new(ny),
-        |s, slab| {
+        || (Scratch::new(ny), vec![0.0f32; ny]),
+        |(s, col), slab| {
             for i in 0..nx {
-                if (0..ny).all(|j| slab[i + nx * j] == 0.0) {
-                    continue;
-                }
-                load_column(s, (0..ny).map(|j| slab[i + nx * j]), ny);
-                transform_1d(s, ny, h);
+                let mut any = false;
                 for j in 0..ny {
-                    slab[i + nx * j] = s.out[j + 1] as f32;
+                    col[j] = slab[i + nx * j];
+                    any |= col[j] != 0.0;
+                }
+                if any {
+                    let c: &[f32] = col;
+                    transform_column(s, ny, h, |j| c[j], |j, v| slab[i + nx * j] = v);
                 }
             }
         },
@@ -140,20 +165,20 @@ fn pass_z(f: &mut [f32], grid: &BoxGrid, h: f64) {
     let plane = nx * ny;
     let shared = SharedSlice::new(f);
     (0..ny).into_par_iter().for_each_init(
-        || Scratch::new(nz),
-        |s, j| {
+        || (Scratch::new(nz), vec![0.0f32; nz]),
+        |(s, col), j| {
             for i in 0..nx {
                 let at = |k: usize| i + nx * j + plane * k;
-                // SAFETY: task j reads and writes only indices with this j, which no other
-                // task touches; `at` stays below nx*ny*nz = len.
-                let get = |k: usize| unsafe { shared.get(at(k)) };
-                if (0..nz).all(|k| get(k) == 0.0) {
-                    continue;
-                }
-                load_column(s, (0..nz).map(get), nz);
-                transform_1d(s, nz, h);
+                let mut any = false;
                 for k in 0..nz {
-                    unsafe { shared.set(at(k), s.out[k + 1] as f32) };
+                    // SAFETY: task j reads and writes only indices with this j, which no other
+                    // task touches; `at` stays below nx*ny*nz = len.
+                    col[k] = unsafe { shared.get(at(k)) };
+                    any |= col[k] != 0.0;
+                }
+                if any {
+                    let c: &[f32] = col;
+                    transform_column(s, nz, h, |k| c[k], |k, v| unsafe { shared.set(at(k), v) });
                 }
             }
         },

@@ -1,0 +1,519 @@
+//! Segmentation of the colon's air (paper §3.2: "the voxels inside the colon are easily
+//! extracted with a region growing method").
+//!
+//! Everything works on *runs*: maximal stretches of air along x in one row. A CT of
+//! 512×512×400 voxels holds a few hundred thousand air runs, so connected components,
+//! outside-air removal and region growing cost a pass over the HU values plus work on the runs.
+//!
+//! 1. Threshold: air is HU < `air_hu` (−500, midway between air and soft tissue, where the
+//!    partial-volume boundary lies).
+//! 2. Outside air: in each axial slice, air connected (4-neighbours) to the slice's border lies
+//!    outside the body. Slice by slice and not in 3D, because a rectal tube carries air from
+//!    the colon out of the body: in 3D the colon would leak into the outside air.
+//! 3. Components: the remaining air, 6-connected in 3D (diagonal contact through a thin wall
+//!    does not join two loops of the colon).
+//! 4. Lungs: large components whose air is not dark enough to be gas (lung parenchyma lies
+//!    around −850 HU, bowel gas at −1000).
+//! 5. The colon: the component holding the seed when one is given (region growing from it),
+//!    else the largest remaining component.
+//!
+//! A lumen mask (0/1 labels from another segmenter) skips steps 1, 2 and 4.
+
+use glam::DVec3;
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::{Error, Result, Volume};
+
+#[derive(Clone, Debug)]
+pub struct SegmentOptions {
+    /// Air is HU below this.
+    pub air_hu: i16,
+    /// A point in the colon's air (volume-local mm). None: automatic.
+    pub seed_mm: Option<DVec3>,
+    /// Treat the input as a lumen mask (non-zero = lumen). None: detect (values only 0 and 1).
+    pub mask: Option<bool>,
+    /// Components smaller than this (ml) are not reported one by one.
+    pub min_report_ml: f64,
+}
+
+impl Default for SegmentOptions {
+    fn default() -> Self {
+        SegmentOptions { air_hu: -500, seed_mm: None, mask: None, min_report_ml: 0.5 }
+    }
+}
+
+/// What a gas component is taken to be.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ComponentKind {
+    Colon,
+    Lung,
+    Other,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Component {
+    pub voxels: usize,
+    pub volume_ml: f64,
+    /// Mean position, volume-local mm.
+    pub centroid_mm: [f64; 3],
+    pub bbox_lo: [usize; 3],
+    pub bbox_hi: [usize; 3],
+    /// Mean HU (None for mask input).
+    pub mean_hu: Option<f64>,
+    /// Fraction of voxels darker than −950 HU: bowel gas is mostly that dark, lung is not.
+    pub dark_fraction: Option<f64>,
+    pub kind: ComponentKind,
+}
+
+#[derive(Clone, Debug)]
+pub struct Segmentation {
+    /// 1 = colon lumen.
+    pub lumen: Volume<u8>,
+    pub lumen_voxels: usize,
+    /// Internal gas components, largest first (those above `min_report_ml`).
+    pub components: Vec<Component>,
+    /// Smaller components not listed one by one.
+    pub small_components: usize,
+    /// Whether the input was taken as a mask.
+    pub from_mask: bool,
+    /// Voxel of air (from the seed, or the colon's lowest voxel) the colon was grown from.
+    pub seed_voxel: [usize; 3],
+}
+
+/// One stretch of lumen candidates along x: voxels x0..x1 of row (j, k).
+#[derive(Clone, Copy, Debug)]
+struct Run {
+    x0: u32,
+    x1: u32,
+}
+
+/// All runs, row by row: the runs of row r = j + ny*k are `runs[row_start[r]..row_start[r+1]]`.
+struct Runs {
+    runs: Vec<Run>,
+    row_start: Vec<u32>,
+    /// Per run: sum of HU and count of voxels below −950 (zero for masks).
+    hu_sum: Vec<i64>,
+    dark: Vec<u32>,
+    ny: usize,
+}
+
+impl Runs {
+    fn row(&self, j: usize, k: usize) -> std::ops::Range<usize> {
+        let r = j + self.ny * k;
+        self.row_start[r] as usize..self.row_start[r + 1] as usize
+    }
+}
+
+/// Segments the colon lumen from a CT (or takes it from a mask).
+pub fn segment(vol: &Volume<i16>, opts: &SegmentOptions) -> Result<Segmentation> {
+    let from_mask = opts.mask.unwrap_or_else(|| is_mask(vol));
+    let runs = if from_mask { extract_runs(vol, |v| v != 0, false) } else { extract_runs(vol, |v| v < opts.air_hu, true) };
+    let inside = if from_mask { vec![true; runs.runs.len()] } else { inside_body(&runs, vol.dims()) };
+    let mut labels = UnionFind::new(runs.runs.len());
+    connect_3d(&runs, &inside, vol.dims(), &mut labels);
+    let (mut comps, run_comp) = component_stats(&runs, &inside, vol, &mut labels, from_mask);
+    classify_lungs(&mut comps, from_mask);
+    let colon = choose_colon(&comps, &runs, &run_comp, vol, opts)?;
+    comps[colon].kind = ComponentKind::Colon;
+    let lumen = rasterize(&runs, &run_comp, colon, vol)?;
+    let seed_voxel = match opts.seed_mm {
+        Some(mm) => voxel_of(vol, mm)?,
+        None => lowest_voxel(&runs, &run_comp, colon, vol.dims()),
+    };
+    let lumen_voxels = comps[colon].voxels;
+    let (components, small) = report(comps, colon, opts.min_report_ml);
+    Ok(Segmentation { lumen, lumen_voxels, components, small_components: small, from_mask, seed_voxel })
+}
+
+/// A volume holding only 0 and 1 is a mask, not a CT.
+pub fn is_mask(vol: &Volume<i16>) -> bool {
+    vol.data().par_iter().all(|&v| v == 0 || v == 1) && vol.data().contains(&1)
+}
+
+fn extract_runs(vol: &Volume<i16>, is_air: impl Fn(i16) -> bool + Sync, stats: bool) -> Runs {
+    let [nx, ny, nz] = vol.dims();
+    // One task per slice; concatenated in slice order so the result is thread-independent.
+    let per_slice: Vec<(Vec<Run>, Vec<u32>, Vec<i64>, Vec<u32>)> = (0..nz)
+        .into_par_iter()
+        .map(|k| {
+            let slice = vol.slice_k(k);
+            let (mut runs, mut counts, mut sums, mut darks) = (Vec::new(), Vec::with_capacity(ny), Vec::new(), Vec::new());
+            for j in 0..ny {
+                let row = &slice[j * nx..(j + 1) * nx];
+                let before = runs.len();
+                let mut i = 0;
+                while i < nx {
+                    if !is_air(row[i]) {
+                        i += 1;
+                        continue;
+                    }
+                    let x0 = i;
+                    while i < nx && is_air(row[i]) {
+                        i += 1;
+                    }
+                    runs.push(Run { x0: x0 as u32, x1: i as u32 });
+                    if stats {
+                        let seg = &row[x0..i];
+                        sums.push(seg.iter().map(|&v| v as i64).sum());
+                        darks.push(seg.iter().filter(|&&v| v < -950).count() as u32);
+                    } else {
+                        sums.push(0);
+                        darks.push(0);
+                    }
+                }
+                counts.push((runs.len() - before) as u32);
+            }
+            (runs, counts, sums, darks)
+        })
+        .collect();
+    let total: usize = per_slice.iter().map(|s| s.0.len()).sum();
+    let mut out = Runs { runs: Vec::with_capacity(total), row_start: Vec::with_capacity(ny * nz + 1), hu_sum: Vec::with_capacity(total), dark: Vec::with_capacity(total), ny };
+    out.row_start.push(0);
+    for (runs, counts, sums, darks) in per_slice {
+        for c in counts {
+            let last = *out.row_start.last().unwrap_or(&0);
+            out.row_start.push(last + c);
+        }
+        out.runs.extend(runs);
+        out.hu_sum.extend(sums);
+        out.dark.extend(darks);
+    }
+    out
+}
+
+/// Calls `f(a, b)` for every pair of runs, one in row `ra` and one in row `rb`, that share an x.
+fn for_overlaps(runs: &Runs, ra: std::ops::Range<usize>, rb: std::ops::Range<usize>, mut f: impl FnMut(usize, usize)) {
+    let (mut a, mut b) = (ra.start, rb.start);
+    while a < ra.end && b < rb.end {
+        let (p, q) = (runs.runs[a], runs.runs[b]);
+        if p.x0 < q.x1 && q.x0 < p.x1 {
+            f(a, b);
+        }
+        if p.x1 < q.x1 {
+            a += 1;
+        } else {
+            b += 1;
+        }
+    }
+}
+
+/// Step 2: per slice, runs 4-connected to the slice's border are outside air.
+fn inside_body(runs: &Runs, dims: [usize; 3]) -> Vec<bool> {
+    let [nx, ny, nz] = dims;
+    let per_slice: Vec<Vec<bool>> = (0..nz)
+        .into_par_iter()
+        .map(|k| {
+            let first = runs.row(0, k).start;
+            let last = runs.row(ny - 1, k).end;
+            let mut uf = UnionFind::new(last - first);
+            for j in 1..ny {
+                for_overlaps(runs, runs.row(j - 1, k), runs.row(j, k), |a, b| uf.union(a - first, b - first));
+            }
+            let mut outside = vec![false; last - first];
+            for j in 0..ny {
+                for r in runs.row(j, k) {
+                    let run = runs.runs[r];
+                    if j == 0 || j == ny - 1 || run.x0 == 0 || run.x1 as usize == nx {
+                        let root = uf.find(r - first);
+                        outside[root] = true;
+                    }
+                }
+            }
+            (0..last - first).map(|r| !outside[uf.find(r)]).collect()
+        })
+        .collect();
+    per_slice.into_iter().flatten().collect()
+}
+
+/// Step 3: 6-connected components of the inside runs.
+fn connect_3d(runs: &Runs, inside: &[bool], dims: [usize; 3], uf: &mut UnionFind) {
+    let [_, ny, nz] = dims;
+    for k in 0..nz {
+        for j in 0..ny {
+            let here = runs.row(j, k);
+            if here.is_empty() {
+                continue;
+            }
+            if j > 0 {
+                for_overlaps(runs, runs.row(j - 1, k), here.clone(), |a, b| {
+                    if inside[a] && inside[b] {
+                        uf.union(a, b)
+                    }
+                });
+            }
+            if k > 0 {
+                for_overlaps(runs, runs.row(j, k - 1), here.clone(), |a, b| {
+                    if inside[a] && inside[b] {
+                        uf.union(a, b)
+                    }
+                });
+            }
+        }
+    }
+}
+
+/// Per component statistics; returns the components and, per run, its component (or MAX).
+fn component_stats(runs: &Runs, inside: &[bool], vol: &Volume<i16>, uf: &mut UnionFind, from_mask: bool) -> (Vec<Component>, Vec<u32>) {
+    let [_, ny, nz] = vol.dims();
+    let sp = vol.spacing();
+    let mut comp_of_root = vec![u32::MAX; runs.runs.len()];
+    let mut run_comp = vec![u32::MAX; runs.runs.len()];
+    #[derive(Default, Clone)]
+    struct Acc {
+        n: usize,
+        sum: [f64; 3],
+        lo: [usize; 3],
+        hi: [usize; 3],
+        hu: i64,
+        dark: u64,
+    }
+    let mut acc: Vec<Acc> = Vec::new();
+    for k in 0..nz {
+        for j in 0..ny {
+            for r in runs.row(j, k) {
+                if !inside[r] {
+                    continue;
+                }
+                let root = uf.find(r);
+                if comp_of_root[root] == u32::MAX {
+                    comp_of_root[root] = acc.len() as u32;
+                    acc.push(Acc { lo: [usize::MAX; 3], ..Default::default() });
+                }
+                let c = comp_of_root[root];
+                run_comp[r] = c;
+                let a = &mut acc[c as usize];
+                let run = runs.runs[r];
+                let len = (run.x1 - run.x0) as usize;
+                a.n += len;
+                a.sum[0] += (run.x0 as f64 + run.x1 as f64 - 1.0) * 0.5 * len as f64;
+                a.sum[1] += (j * len) as f64;
+                a.sum[2] += (k * len) as f64;
+                a.lo = [a.lo[0].min(run.x0 as usize), a.lo[1].min(j), a.lo[2].min(k)];
+                a.hi = [a.hi[0].max(run.x1 as usize - 1), a.hi[1].max(j), a.hi[2].max(k)];
+                a.hu += runs.hu_sum[r];
+                a.dark += runs.dark[r] as u64;
+            }
+        }
+    }
+    let voxel_ml = sp[0] * sp[1] * sp[2] / 1000.0;
+    let comps = acc
+        .into_iter()
+        .map(|a| {
+            let n = a.n as f64;
+            Component {
+                voxels: a.n,
+                volume_ml: n * voxel_ml,
+                centroid_mm: [a.sum[0] / n * sp[0], a.sum[1] / n * sp[1], a.sum[2] / n * sp[2]],
+                bbox_lo: a.lo,
+                bbox_hi: a.hi,
+                mean_hu: (!from_mask).then(|| a.hu as f64 / n),
+                dark_fraction: (!from_mask).then(|| a.dark as f64 / n),
+                kind: ComponentKind::Other,
+            }
+        })
+        .collect();
+    (comps, run_comp)
+}
+
+/// Step 4: lung parenchyma is air mixed with tissue; bowel gas is nearly pure air.
+fn classify_lungs(comps: &mut [Component], from_mask: bool) {
+    if from_mask {
+        return;
+    }
+    for c in comps.iter_mut() {
+        if c.volume_ml > 1.0 && c.dark_fraction.unwrap_or(1.0) < 0.3 {
+            c.kind = ComponentKind::Lung;
+        }
+    }
+}
+
+/// Step 5: the seed's component, or the largest component that is not lung.
+fn choose_colon(comps: &[Component], runs: &Runs, run_comp: &[u32], vol: &Volume<i16>, opts: &SegmentOptions) -> Result<usize> {
+    if let Some(mm) = opts.seed_mm {
+        let [i, j, k] = voxel_of(vol, mm)?;
+        let row = runs.row(j, k);
+        let hit = row.clone().find(|&r| runs.runs[r].x0 as usize <= i && i < runs.runs[r].x1 as usize);
+        return match hit.map(|r| run_comp[r]) {
+            Some(c) if c != u32::MAX && comps[c as usize].kind != ComponentKind::Lung => Ok(c as usize),
+            Some(c) if c != u32::MAX => Err(Error::invalid(format!("the seed {mm} mm lies in a lung, not in the colon"))),
+            Some(_) => Err(Error::invalid(format!("the seed {mm} mm lies in air outside the body"))),
+            None => Err(Error::invalid(format!(
+                "the seed {mm} mm is not in air (HU {} ≥ {})",
+                vol.get(i, j, k),
+                opts.air_hu
+            ))),
+        };
+    }
+    comps
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| c.kind != ComponentKind::Lung)
+        .max_by_key(|(_, c)| c.voxels)
+        .map(|(i, _)| i)
+        .ok_or_else(|| Error::invalid("no gas inside the body: no colon lumen found (is this an insufflated CT colonography?)"))
+}
+
+fn voxel_of(vol: &Volume<i16>, mm: DVec3) -> Result<[usize; 3]> {
+    let ijk = vol.geometry().local_to_index(mm).round();
+    if !vol.geometry().contains_index(ijk) {
+        return Err(Error::invalid(format!("the seed {mm} mm lies outside the volume")));
+    }
+    Ok([ijk.x as usize, ijk.y as usize, ijk.z as usize])
+}
+
+fn rasterize(runs: &Runs, run_comp: &[u32], colon: usize, vol: &Volume<i16>) -> Result<Volume<u8>> {
+    let [nx, ny, _] = vol.dims();
+    let mut lumen = Volume::filled(vol.geometry().clone(), 0u8)?;
+    lumen.data_mut().par_chunks_mut(nx * ny).enumerate().for_each(|(k, slab)| {
+        for j in 0..ny {
+            for r in runs.row(j, k) {
+                if run_comp[r] == colon as u32 {
+                    let run = runs.runs[r];
+                    slab[j * nx + run.x0 as usize..j * nx + run.x1 as usize].fill(1);
+                }
+            }
+        }
+    });
+    Ok(lumen)
+}
+
+/// The colon voxel lowest in k (first slice), middle of its first run: used as the seed when
+/// none was given.
+fn lowest_voxel(runs: &Runs, run_comp: &[u32], colon: usize, dims: [usize; 3]) -> [usize; 3] {
+    let [_, ny, nz] = dims;
+    for k in 0..nz {
+        for j in 0..ny {
+            for r in runs.row(j, k) {
+                if run_comp[r] == colon as u32 {
+                    let run = runs.runs[r];
+                    return [((run.x0 + run.x1) / 2) as usize, j, k];
+                }
+            }
+        }
+    }
+    [0, 0, 0]
+}
+
+/// Largest first, the colon marked; tiny components are only counted.
+fn report(comps: Vec<Component>, colon: usize, min_ml: f64) -> (Vec<Component>, usize) {
+    let mut listed: Vec<Component> = Vec::new();
+    let mut small = 0;
+    for (i, c) in comps.into_iter().enumerate() {
+        if i == colon || c.volume_ml >= min_ml {
+            listed.push(c);
+        } else {
+            small += 1;
+        }
+    }
+    listed.sort_by(|a, b| b.voxels.cmp(&a.voxels));
+    (listed, small)
+}
+
+/// Union-find over run indices, with path halving and union by size.
+struct UnionFind {
+    parent: Vec<u32>,
+    size: Vec<u32>,
+}
+
+impl UnionFind {
+    fn new(n: usize) -> Self {
+        UnionFind { parent: (0..n as u32).collect(), size: vec![1; n] }
+    }
+    fn find(&mut self, mut x: usize) -> usize {
+        while self.parent[x] as usize != x {
+            let p = self.parent[x] as usize;
+            self.parent[x] = self.parent[p];
+            x = p;
+        }
+        x
+    }
+    fn union(&mut self, a: usize, b: usize) {
+        let (mut ra, mut rb) = (self.find(a), self.find(b));
+        if ra == rb {
+            return;
+        }
+        if self.size[ra] < self.size[rb] {
+            std::mem::swap(&mut ra, &mut rb);
+        }
+        self.parent[rb] = ra as u32;
+        self.size[ra] += self.size[rb];
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Geometry;
+
+    /// A body of tissue (40 HU) in outside air, with a big gas tube, a small gas pocket, and
+    /// a "lung" of −850 HU.
+    fn toy() -> Volume<i16> {
+        let g = Geometry::new([60, 50, 40], [1.0, 1.0, 1.5], [0.0; 3]).unwrap();
+        let mut v = Volume::filled(g, -1000i16).unwrap();
+        for k in 0..40 {
+            for j in 0..50 {
+                for i in 0..60 {
+                    let body = ((i as f64 - 30.0) / 27.0).powi(2) + ((j as f64 - 25.0) / 22.0).powi(2) < 1.0;
+                    if !body {
+                        continue;
+                    }
+                    let tube = (i as f64 - 20.0).powi(2) + (j as f64 - 25.0).powi(2) < 36.0 && (3..37).contains(&k);
+                    let pocket = (i as f64 - 40.0).powi(2) + (j as f64 - 20.0).powi(2) + (k as f64 - 10.0).powi(2) < 6.0;
+                    let lung = (i as f64 - 40.0).powi(2) + (j as f64 - 30.0).powi(2) < 30.0 && k >= 30;
+                    let hu = if tube || pocket { -1000 } else if lung { -850 } else { 40 };
+                    v.set(i, j, k, hu);
+                }
+            }
+        }
+        v
+    }
+
+    #[test]
+    fn finds_the_tube_not_the_pocket_lung_or_outside() {
+        let v = toy();
+        let s = segment(&v, &SegmentOptions::default()).unwrap();
+        assert!(!s.from_mask);
+        assert_eq!(s.lumen.get(20, 25, 20), 1);
+        assert_eq!(s.lumen.get(40, 20, 10), 0, "small pocket taken");
+        assert_eq!(s.lumen.get(40, 30, 35), 0, "lung taken");
+        assert_eq!(s.lumen.get(0, 0, 0), 0, "outside air taken");
+        assert_eq!(s.lumen_voxels, s.lumen.data().iter().filter(|&&m| m == 1).count());
+        assert!(s.components.iter().any(|c| c.kind == ComponentKind::Lung));
+        assert_eq!(s.components[0].kind, ComponentKind::Colon);
+        assert_eq!(s.seed_voxel[2], 3, "automatic seed at the lowest slice of the colon");
+    }
+
+    #[test]
+    fn seed_picks_its_component_and_bad_seeds_fail() {
+        let v = toy();
+        let seeded = SegmentOptions { seed_mm: Some(DVec3::new(40.0, 20.0, 15.0)), ..Default::default() };
+        let s = segment(&v, &seeded).unwrap();
+        assert_eq!(s.lumen.get(40, 20, 10), 1);
+        assert_eq!(s.lumen.get(20, 25, 20), 0);
+        let in_tissue = SegmentOptions { seed_mm: Some(DVec3::new(30.0, 10.0, 30.0)), ..Default::default() };
+        assert!(segment(&v, &in_tissue).unwrap_err().to_string().contains("not in air"));
+        let outside = SegmentOptions { seed_mm: Some(DVec3::new(0.0, 0.0, 0.0)), ..Default::default() };
+        assert!(segment(&v, &outside).unwrap_err().to_string().contains("outside the body"));
+        let beyond = SegmentOptions { seed_mm: Some(DVec3::new(500.0, 0.0, 0.0)), ..Default::default() };
+        assert!(segment(&v, &beyond).is_err());
+    }
+
+    #[test]
+    fn mask_input_is_detected_and_used() {
+        let v = toy();
+        let s = segment(&v, &SegmentOptions::default()).unwrap();
+        let mask = s.lumen.map(|m| m as i16);
+        let again = segment(&mask, &SegmentOptions::default()).unwrap();
+        assert!(again.from_mask);
+        assert_eq!(again.lumen, s.lumen);
+    }
+
+    #[test]
+    fn no_gas_is_an_error() {
+        let g = Geometry::new([10, 10, 10], [1.0; 3], [0.0; 3]).unwrap();
+        let v = Volume::filled(g, 40i16).unwrap();
+        assert!(segment(&v, &SegmentOptions::default()).unwrap_err().to_string().contains("no colon"));
+    }
+}
