@@ -121,3 +121,29 @@ pub fn crop<T: Copy>(vol: &Volume<T>, grid: &BoxGrid) -> Vec<T> {
     }
     out
 }
+
+impl Field<f32> {
+    /// Trilinear interpolation at a volume-local position (mm); corners outside the box
+    /// count as `outside`.
+    pub fn sample(&self, mm: glam::DVec3, outside: f32) -> f32 {
+        let p = self.geometry.local_to_index(mm);
+        let base = p.floor();
+        let t = p - base;
+        let mut acc = 0.0f64;
+        for c in 0..8 {
+            let o = [(c & 1) as f64, ((c >> 1) & 1) as f64, ((c >> 2) & 1) as f64];
+            let w = (if o[0] > 0.0 { t.x } else { 1.0 - t.x }) * (if o[1] > 0.0 { t.y } else { 1.0 - t.y }) * (if o[2] > 0.0 { t.z } else { 1.0 - t.z });
+            if w == 0.0 {
+                continue;
+            }
+            let g = [base.x + o[0], base.y + o[1], base.z + o[2]];
+            let v = if g.iter().all(|&x| x >= 0.0) {
+                self.get_global([g[0] as usize, g[1] as usize, g[2] as usize], outside)
+            } else {
+                outside
+            };
+            acc += w * v as f64;
+        }
+        acc as f32
+    }
+}

@@ -39,14 +39,14 @@ pub fn geodesic_distance(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3]) 
 
 /// The box's mask with one layer of zeros around it, so that the 26 neighbours of every lumen
 /// voxel are valid indices even where the box touches the volume's border.
-struct Padded {
-    grid: BoxGrid,
-    dims: [usize; 3],
-    inside: Vec<u8>,
+pub(crate) struct Padded {
+    pub(crate) grid: BoxGrid,
+    pub(crate) dims: [usize; 3],
+    pub(crate) inside: Vec<u8>,
 }
 
 impl Padded {
-    fn new(mask: &Volume<u8>, grid: &BoxGrid) -> Self {
+    pub(crate) fn new(mask: &Volume<u8>, grid: &BoxGrid) -> Self {
         let dims = grid.dims.map(|d| d + 2);
         let mut inside = vec![0u8; dims[0] * dims[1] * dims[2]];
         let g = mask.geometry();
@@ -62,19 +62,19 @@ impl Padded {
         Padded { grid: grid.clone(), dims, inside }
     }
 
-    fn index_of_global(&self, g: [usize; 3]) -> Option<usize> {
+    pub(crate) fn index_of_global(&self, g: [usize; 3]) -> Option<usize> {
         let l = self.grid.index_of_global(g).map(|i| self.grid.ijk(i))?;
         Some(l[0] + 1 + self.dims[0] * (l[1] + 1 + self.dims[1] * (l[2] + 1)))
     }
 
-    fn global_of_index(&self, idx: usize) -> [usize; 3] {
+    pub(crate) fn global_of_index(&self, idx: usize) -> [usize; 3] {
         let [nx, ny, _] = self.dims;
         let p = [idx % nx, (idx / nx) % ny, idx / (nx * ny)];
         [0, 1, 2].map(|a| p[a] - 1 + self.grid.lo[a])
     }
 
     /// 26 neighbour offsets and their lengths in mm.
-    fn neighbours(&self, spacing: [f64; 3]) -> Vec<(isize, f32)> {
+    pub(crate) fn neighbours(&self, spacing: [f64; 3]) -> Vec<(isize, f32)> {
         let (nx, ny) = (self.dims[0] as isize, self.dims[1] as isize);
         let mut out = Vec::with_capacity(26);
         for dk in -1isize..=1 {
@@ -91,8 +91,22 @@ impl Padded {
         out
     }
 
+    /// Copies a box-layout field into the padded layout (`fill` in the padding).
+    pub(crate) fn pad(&self, v: &[f32], fill: f32) -> Vec<f32> {
+        let [bx, by, bz] = self.grid.dims;
+        let mut out = vec![fill; self.inside.len()];
+        for k in 0..bz {
+            for j in 0..by {
+                let d = 1 + self.dims[0] * (j + 1 + self.dims[1] * (k + 1));
+                let s = self.grid.index(0, j, k);
+                out[d..d + bx].copy_from_slice(&v[s..s + bx]);
+            }
+        }
+        out
+    }
+
     /// Copies a padded-layout field back to the box layout.
-    fn unpad(&self, v: &[f32]) -> Vec<f32> {
+    pub(crate) fn unpad(&self, v: &[f32]) -> Vec<f32> {
         let [bx, by, bz] = self.grid.dims;
         let mut out = Vec::with_capacity(self.grid.len());
         for k in 0..bz {

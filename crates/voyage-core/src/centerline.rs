@@ -1,0 +1,243 @@
+//! The centerline (paper §4.2): the minimum-cost path from source to target with voxel cost
+//! Dmax − Ds, so that the path keeps to the middle of the lumen; then centred, smoothed and
+//! resampled every millimetre. Every point stays inside the lumen.
+
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
+use glam::DVec3;
+use serde::Serialize;
+
+use crate::distance::geodesic::Padded;
+use crate::field::Field;
+use crate::{Error, Result, Volume};
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Centerline {
+    /// Points in volume-local mm, source → target, about `step_mm` apart.
+    pub points_mm: Vec<[f64; 3]>,
+    /// Arc length from the source at each point (mm).
+    pub arc_mm: Vec<f64>,
+    /// Ds at each point: the local lumen radius (mm).
+    pub radius_mm: Vec<f64>,
+    pub length_mm: f64,
+}
+
+#[derive(Clone, Debug)]
+pub struct CenterlineOptions {
+    /// Spacing of the output points (mm).
+    pub step_mm: f64,
+    /// Half-width of the smoothing window (mm).
+    pub smooth_mm: f64,
+    /// Centring iterations (each moves points up the Ds ridge across the path).
+    pub centre_iterations: usize,
+}
+
+impl Default for CenterlineOptions {
+    fn default() -> Self {
+        CenterlineOptions { step_mm: 1.0, smooth_mm: 4.0, centre_iterations: 6 }
+    }
+}
+
+/// The centerline from `source` to `target` (volume voxels in the lumen).
+pub fn centerline(mask: &Volume<u8>, ds: &Field<f32>, source: [usize; 3], target: [usize; 3], opts: &CenterlineOptions) -> Result<Centerline> {
+    let voxels = min_cost_path(mask, ds, source, target)?;
+    let sp = mask.geometry().spacing_vec();
+    let raw: Vec<DVec3> = voxels.iter().map(|v| DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64) * sp).collect();
+    let mut pts = resample(&raw, opts.step_mm);
+    for _ in 0..opts.centre_iterations {
+        pts = centre(&pts, ds);
+        pts = smooth(&pts, (opts.smooth_mm / opts.step_mm).round() as usize, ds);
+        pts = resample(&pts, opts.step_mm);
+    }
+    Ok(finish(pts, ds))
+}
+
+/// Paper §4.2: Dijkstra over 26-neighbours, an edge into voxel v costing its length times
+/// (Dmax − Ds(v)) (plus a little of the length itself, so that where Ds = Dmax the path
+/// still takes the short way). A binary heap keyed on the f32 bits of the cost.
+fn min_cost_path(mask: &Volume<u8>, ds: &Field<f32>, source: [usize; 3], target: [usize; 3]) -> Result<Vec<[usize; 3]>> {
+    let pad = Padded::new(mask, &ds.grid);
+    let (src, dst) = match (pad.index_of_global(source), pad.index_of_global(target)) {
+        (Some(s), Some(t)) if pad.inside[s] != 0 && pad.inside[t] != 0 => (s, t),
+        _ => return Err(Error::invalid("the centerline's source or target is not in the lumen")),
+    };
+    let dmax = ds.data.iter().cloned().fold(0.0f32, f32::max);
+    let cost: Vec<f32> = pad.pad(&ds.data, 0.0).into_iter().map(|d| dmax - d + 0.05 * dmax).collect();
+    let nbrs = pad.neighbours(mask.spacing());
+    let n = pad.inside.len();
+    let mut dist = vec![f32::INFINITY; n];
+    let mut prev = vec![u32::MAX; n];
+    let mut heap = BinaryHeap::new();
+    dist[src] = 0.0;
+    heap.push(Reverse(((0.0f32).to_bits() as u64) << 32 | src as u64));
+    while let Some(Reverse(key)) = heap.pop() {
+        let u = (key & 0xFFFF_FFFF) as usize;
+        let du = f32::from_bits((key >> 32) as u32);
+        if du > dist[u] {
+            continue;
+        }
+        if u == dst {
+            break;
+        }
+        for &(off, len) in &nbrs {
+            let v = (u as isize + off) as usize;
+            if pad.inside[v] == 0 {
+                continue;
+            }
+            let dv = du + len * cost[v];
+            if dv < dist[v] {
+                dist[v] = dv;
+                prev[v] = u as u32;
+                // Non-negative f32 bits order like the floats.
+                heap.push(Reverse(((dv.to_bits() as u64) << 32) | v as u64));
+            }
+        }
+    }
+    if dist[dst].is_infinite() {
+        return Err(Error::invalid("the target cannot be reached from the source through the lumen"));
+    }
+    let mut path = vec![pad.global_of_index(dst)];
+    let mut u = dst;
+    while u != src {
+        u = prev[u] as usize;
+        path.push(pad.global_of_index(u));
+    }
+    path.reverse();
+    Ok(path)
+}
+
+/// Points every `step` mm along the polyline (first and last kept).
+fn resample(pts: &[DVec3], step: f64) -> Vec<DVec3> {
+    if pts.len() < 2 {
+        return pts.to_vec();
+    }
+    let mut out = vec![pts[0]];
+    let mut carried = 0.0;
+    for w in pts.windows(2) {
+        let seg = w[1] - w[0];
+        let len = seg.length();
+        if len == 0.0 {
+            continue;
+        }
+        let mut t = step - carried;
+        while t <= len {
+            out.push(w[0] + seg * (t / len));
+            t += step;
+        }
+        carried = len - (t - step);
+    }
+    if out.last().is_some_and(|l| l.distance(pts[pts.len() - 1]) > 1e-9) {
+        out.push(pts[pts.len() - 1]);
+    }
+    out
+}
+
+/// Moves each inner point up the gradient of Ds, across the path only (along-path motion
+/// would bunch the points), by at most half a millimetre.
+fn centre(pts: &[DVec3], ds: &Field<f32>) -> Vec<DVec3> {
+    let h = 0.5;
+    let mut out = pts.to_vec();
+    for i in 1..pts.len().saturating_sub(1) {
+        let t = (pts[i + 1] - pts[i - 1]).normalize_or_zero();
+        let p = pts[i];
+        let grad = DVec3::new(
+            ds.sample(p + DVec3::X * h, 0.0) as f64 - ds.sample(p - DVec3::X * h, 0.0) as f64,
+            ds.sample(p + DVec3::Y * h, 0.0) as f64 - ds.sample(p - DVec3::Y * h, 0.0) as f64,
+            ds.sample(p + DVec3::Z * h, 0.0) as f64 - ds.sample(p - DVec3::Z * h, 0.0) as f64,
+        ) / (2.0 * h);
+        let across = grad - t * grad.dot(t);
+        let step = across.clamp_length_max(0.5);
+        let q = p + step;
+        if ds.sample(q, 0.0) > ds.sample(p, 0.0) {
+            out[i] = q;
+        }
+    }
+    out
+}
+
+/// Moving average over ±`half` points, ends fixed; a point whose average would leave the
+/// lumen (Ds below half its own) keeps its place.
+fn smooth(pts: &[DVec3], half: usize, ds: &Field<f32>) -> Vec<DVec3> {
+    let n = pts.len();
+    let mut out = pts.to_vec();
+    for i in 1..n.saturating_sub(1) {
+        let w = half.min(i).min(n - 1 - i);
+        let sum: DVec3 = pts[i - w..=i + w].iter().copied().sum();
+        let q = sum / (2 * w + 1) as f64;
+        if ds.sample(q, 0.0) >= 0.5 * ds.sample(pts[i], 0.0) {
+            out[i] = q;
+        }
+    }
+    out
+}
+
+fn finish(pts: Vec<DVec3>, ds: &Field<f32>) -> Centerline {
+    let mut arc = Vec::with_capacity(pts.len());
+    let mut s = 0.0;
+    for (i, p) in pts.iter().enumerate() {
+        if i > 0 {
+            s += p.distance(pts[i - 1]);
+        }
+        arc.push(s);
+    }
+    let radius = pts.iter().map(|&p| ds.sample(p, 0.0) as f64).collect();
+    Centerline { points_mm: pts.iter().map(|p| p.to_array()).collect(), arc_mm: arc, radius_mm: radius, length_mm: s }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::distance::distance_to_wall;
+    use crate::Geometry;
+
+    /// A torus-like bent tube (a half ring of radius 30 mm, tube radius 6 mm).
+    fn bent_tube() -> (Volume<u8>, DVec3, f64) {
+        let g = Geometry::new([90, 50, 20], [0.8, 0.8, 1.0], [0.0; 3]).unwrap();
+        let c = DVec3::new(36.0, 4.0, 10.0);
+        let data = (0..g.len())
+            .map(|idx| {
+                let [i, j, k] = g.ijk(idx);
+                let p = DVec3::new(i as f64 * 0.8, j as f64 * 0.8, k as f64);
+                let d = p - c;
+                let ring = (d.x * d.x + d.y * d.y).sqrt();
+                (d.y >= 0.0 && ((ring - 30.0).powi(2) + d.z * d.z).sqrt() < 6.0) as u8
+            })
+            .collect();
+        (Volume::from_vec(g, data).unwrap(), c, 30.0)
+    }
+
+    #[test]
+    fn follows_the_middle_of_a_bent_tube() {
+        let (m, c, r) = bent_tube();
+        let ds = distance_to_wall(&m).unwrap();
+        // Ends: the two open ends of the half ring at y ≈ 4 mm.
+        let src = [((c.x - r) / 0.8).round() as usize, 6, 10];
+        let dst = [((c.x + r) / 0.8).round() as usize, 6, 10];
+        let cl = centerline(&m, &ds, src, dst, &CenterlineOptions::default()).unwrap();
+        let mut err = 0.0;
+        for p in &cl.points_mm {
+            let p = DVec3::from_array(*p);
+            let ijk = (p / m.geometry().spacing_vec()).round();
+            assert_eq!(m.get(ijk.x as usize, ijk.y as usize, ijk.z as usize), 1, "point {p} outside the lumen");
+            let d = p - c;
+            err += (((d.x * d.x + d.y * d.y).sqrt() - r).powi(2) + d.z * d.z).sqrt();
+        }
+        let mean = err / cl.points_mm.len() as f64;
+        assert!(mean < 1.0, "mean distance to the true axis {mean} mm");
+        assert!((cl.length_mm - std::f64::consts::PI * r).abs() < 8.0, "length {}", cl.length_mm);
+        assert!(cl.arc_mm.windows(2).all(|w| w[1] > w[0]));
+    }
+
+    #[test]
+    fn unreachable_target_is_an_error() {
+        let g = Geometry::new([20, 5, 5], [1.0; 3], [0.0; 3]).unwrap();
+        let mut m = Volume::filled(g, 0u8).unwrap();
+        for i in (1..8).chain(11..19) {
+            m.set(i, 2, 2, 1);
+        }
+        let ds = distance_to_wall(&m).unwrap();
+        let e = centerline(&m, &ds, [1, 2, 2], [18, 2, 2], &CenterlineOptions::default()).unwrap_err();
+        assert!(e.to_string().contains("cannot be reached"), "{e}");
+    }
+}
