@@ -12,6 +12,7 @@ pub mod field;
 pub mod io;
 pub mod phantom;
 pub mod segment;
+pub mod surface;
 pub mod volume;
 
 pub use error::{Error, Result};

@@ -1,0 +1,415 @@
+//! The colon's surface: marching cubes at the air/wall boundary, no simplification (paper
+//! §4.1: "a small polyp on the surface may be faded out").
+//!
+//! The scalar is `s = iso − HU` for lumen voxels and `min(iso − HU, −1)` for every other voxel,
+//! so the surface wraps exactly the segmented lumen (no other gas, no outside air), while its
+//! sub-voxel position still comes from the CT. Beyond the volume's border counts as wall, so the
+//! surface is always closed. Normals are the gradient of `s` (of the CT, where it is the CT),
+//! pointing into the lumen, where the camera is.
+//!
+//! The case table is not typed in: it is derived when first used from one rule per cube
+//! face — on a face with two diagonal inside corners, each inside corner is cut off on its
+//! own. Both cubes sharing a face see the same face, so the surface is watertight.
+
+use std::sync::OnceLock;
+
+use glam::Vec3;
+
+use crate::field::BoxGrid;
+use crate::{Result, Volume};
+
+/// A triangle mesh in volume-local mm.
+#[derive(Clone, Debug, Default)]
+pub struct Mesh {
+    pub positions: Vec<[f32; 3]>,
+    pub normals: Vec<[f32; 3]>,
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl Mesh {
+    pub fn is_empty(&self) -> bool {
+        self.triangles.is_empty()
+    }
+}
+
+/// The surface and, per triangle, the lumen voxel (volume index) of the cube it came from,
+/// which decides its cell.
+#[derive(Clone, Debug, Default)]
+pub struct Surface {
+    pub mesh: Mesh,
+    pub owner_voxel: Vec<u32>,
+}
+
+/// Marching cubes over `grid` (which must hold the whole lumen, e.g. its bounding box grown
+/// by one voxel). `ct`: HU with `iso` as threshold; None: the mask alone, at 0.5.
+pub fn extract_surface(lumen: &Volume<u8>, ct: Option<&Volume<i16>>, grid: &BoxGrid, iso: f32) -> Result<Surface> {
+    let s = Scalar::new(lumen, ct, grid, iso);
+    let sp = lumen.spacing();
+    let spacing = Vec3::new(sp[0] as f32, sp[1] as f32, sp[2] as f32);
+    Ok(march(&s, spacing, lumen.dims()))
+}
+
+/// The scalar over the box plus one layer of wall all round (padded layout).
+struct Scalar {
+    /// Padded dims.
+    dims: [usize; 3],
+    /// Volume voxel of padded (1,1,1).
+    lo: [usize; 3],
+    s: Vec<f32>,
+}
+
+impl Scalar {
+    fn new(lumen: &Volume<u8>, ct: Option<&Volume<i16>>, grid: &BoxGrid, iso: f32) -> Scalar {
+        let dims = grid.dims.map(|d| d + 2);
+        let mut s = vec![-1.0f32; dims[0] * dims[1] * dims[2]];
+        let g = lumen.geometry();
+        for k in 0..grid.dims[2] {
+            for j in 0..grid.dims[1] {
+                let src = g.index(grid.lo[0], grid.lo[1] + j, grid.lo[2] + k);
+                let dst = 1 + dims[0] * (j + 1 + dims[1] * (k + 1));
+                let m = &lumen.data()[src..src + grid.dims[0]];
+                let out = &mut s[dst..dst + grid.dims[0]];
+                match ct {
+                    Some(ct) => {
+                        let hu = &ct.data()[src..src + grid.dims[0]];
+                        for ((o, &m), &h) in out.iter_mut().zip(m).zip(hu) {
+                            let v = iso - h as f32;
+                            *o = if m != 0 { v.max(0.5) } else { v.min(-1.0) };
+                        }
+                    }
+                    None => {
+                        for (o, &m) in out.iter_mut().zip(m) {
+                            *o = if m != 0 { 0.5 } else { -0.5 };
+                        }
+                    }
+                }
+            }
+        }
+        Scalar { dims, lo: grid.lo, s }
+    }
+
+    #[inline]
+    fn idx(&self, i: usize, j: usize, k: usize) -> usize {
+        i + self.dims[0] * (j + self.dims[1] * k)
+    }
+
+    /// Central-difference gradient at padded voxel (i, j, k), one-sided at the padding.
+    fn gradient(&self, i: usize, j: usize, k: usize, spacing: Vec3) -> Vec3 {
+        let d = |a: usize, lo: usize, hi: usize, f: &dyn Fn(usize) -> f32| -> f32 {
+            let (l, h) = (a.saturating_sub(1).max(lo), (a + 1).min(hi));
+            if h == l { 0.0 } else { (f(h) - f(l)) / (h - l) as f32 }
+        };
+        let [nx, ny, nz] = self.dims;
+        Vec3::new(
+            d(i, 0, nx - 1, &|a| self.s[self.idx(a, j, k)]) / spacing.x,
+            d(j, 0, ny - 1, &|a| self.s[self.idx(i, a, k)]) / spacing.y,
+            d(k, 0, nz - 1, &|a| self.s[self.idx(i, j, a)]) / spacing.z,
+        )
+    }
+}
+
+/// Cube corner `c` (bits x, y, z) as an offset.
+const fn corner(c: usize) -> [usize; 3] {
+    [c & 1, (c >> 1) & 1, (c >> 2) & 1]
+}
+
+/// The 12 cube edges as corner pairs; edges 0–3 run along x, 4–7 along y, 8–11 along z.
+const EDGES: [(usize, usize); 12] = [(0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0, 4), (1, 5), (2, 6), (3, 7)];
+
+fn edge_of(a: usize, b: usize) -> usize {
+    EDGES.iter().position(|&(p, q)| (p, q) == (a.min(b), a.max(b))).expect("corners share an edge")
+}
+
+/// Triangles (as cube edges) for each of the 256 inside/outside patterns.
+fn case_table() -> &'static [Vec<[u8; 3]>; 256] {
+    static TABLE: OnceLock<[Vec<[u8; 3]>; 256]> = OnceLock::new();
+    TABLE.get_or_init(|| std::array::from_fn(triangulate_case))
+}
+
+/// The six faces, corners in counter-clockwise order seen from outside the cube.
+fn faces() -> [[usize; 4]; 6] {
+    let mut out = [[0; 4]; 6];
+    for (f, slot) in out.iter_mut().enumerate() {
+        let (axis, side) = (f / 2, f % 2);
+        let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+        let at = |a: usize, b: usize| (side << axis) | (a << u) | (b << v);
+        // Square order (0,0) (1,0) (1,1) (0,1) in the (u, v) plane; u × v = +axis, so this is
+        // counter-clockwise seen from +axis: keep it for the far side, reverse for the near.
+        let mut q = [at(0, 0), at(1, 0), at(1, 1), at(0, 1)];
+        if side == 0 {
+            q.reverse();
+        }
+        *slot = q;
+    }
+    out
+}
+
+/// Derives the triangles of one case: per face, segments from each entry crossing to the
+/// next exit crossing (cutting off inside corners one run at a time); chained across faces
+/// into closed polygons; fanned into triangles.
+fn triangulate_case(case: usize) -> Vec<[u8; 3]> {
+    let inside = |c: usize| case >> c & 1 == 1;
+    let mut next = [usize::MAX; 12];
+    for face in faces() {
+        let mut crossings = Vec::new(); // (edge, is_entry)
+        for t in 0..4 {
+            let (a, b) = (face[t], face[(t + 1) % 4]);
+            if inside(a) != inside(b) {
+                crossings.push((edge_of(a, b), inside(b)));
+            }
+        }
+        for (p, &(e, is_entry)) in crossings.iter().enumerate() {
+            if !is_entry {
+                let (prev, _) = crossings[(p + crossings.len() - 1) % crossings.len()];
+                next[prev] = e;
+            }
+        }
+    }
+    let mut seen = [false; 12];
+    let mut tris = Vec::new();
+    for start in 0..12 {
+        if next[start] == usize::MAX || seen[start] {
+            continue;
+        }
+        let mut poly = Vec::new();
+        let mut e = start;
+        while !seen[e] {
+            seen[e] = true;
+            poly.push(e as u8);
+            e = next[e];
+        }
+        for t in 1..poly.len() - 1 {
+            // Reversed fan: with segments entry → exit, this winding puts the normal on the
+            // inside (lumen) side; `normals_point_inside` checks it.
+            tris.push([poly[0], poly[t + 1], poly[t]]);
+        }
+    }
+    tris
+}
+
+/// Vertex ids of the edges of one plane of cubes: x- and y-edges on a z-plane, z-edges
+/// between two planes.
+struct EdgeCache {
+    nx: usize,
+    x: Vec<u32>,
+    y: Vec<u32>,
+}
+
+impl EdgeCache {
+    fn new(nx: usize, ny: usize) -> Self {
+        EdgeCache { nx, x: vec![u32::MAX; nx * ny], y: vec![u32::MAX; nx * ny] }
+    }
+    fn clear(&mut self) {
+        self.x.fill(u32::MAX);
+        self.y.fill(u32::MAX);
+    }
+}
+
+fn march(s: &Scalar, spacing: Vec3, vol_dims: [usize; 3]) -> Surface {
+    let table = case_table();
+    let [nx, ny, nz] = s.dims;
+    let mut out = Surface::default();
+    let mut lower = EdgeCache::new(nx, ny);
+    let mut upper = EdgeCache::new(nx, ny);
+    let mut zed = vec![u32::MAX; nx * ny];
+    let plane = nx * ny;
+    let inside: Vec<u8> = s.s.iter().map(|&v| (v > 0.0) as u8).collect();
+    // A cube layer k needs nothing unless a lumen voxel lies in plane k or k+1.
+    let plane_has: Vec<bool> = (0..nz).map(|k| inside[k * plane..(k + 1) * plane].contains(&1)).collect();
+    for k in 0..nz - 1 {
+        if !(plane_has[k] || plane_has[k + 1]) {
+            std::mem::swap(&mut lower, &mut upper);
+            upper.clear();
+            continue;
+        }
+        zed.fill(u32::MAX);
+        for j in 0..ny - 1 {
+            for i in 0..nx - 1 {
+                let base = s.idx(i, j, k);
+                let mut case = 0usize;
+                for c in 0..8 {
+                    let [a, b, d] = corner(c);
+                    case |= (inside[base + a + nx * b + plane * d] as usize) << c;
+                }
+                if case == 0 || case == 255 {
+                    continue;
+                }
+                let tris = &table[case];
+                let mut vid = [u32::MAX; 12];
+                for tri in tris {
+                    for &e in tri {
+                        let e = e as usize;
+                        if vid[e] == u32::MAX {
+                            vid[e] = edge_vertex(s, spacing, [i, j, k], e, &mut lower, &mut upper, &mut zed, &mut out.mesh);
+                        }
+                    }
+                }
+                let owner = owner_voxel(s, [i, j, k], vol_dims);
+                for tri in tris {
+                    out.mesh.triangles.push([vid[tri[0] as usize], vid[tri[1] as usize], vid[tri[2] as usize]]);
+                    out.owner_voxel.push(owner);
+                }
+            }
+        }
+        std::mem::swap(&mut lower, &mut upper);
+        upper.clear();
+    }
+    out
+}
+
+/// The cube's deepest lumen corner, as a volume voxel index.
+fn owner_voxel(s: &Scalar, c: [usize; 3], vol_dims: [usize; 3]) -> u32 {
+    let mut best = (f32::NEG_INFINITY, [0usize; 3]);
+    for k in 0..8 {
+        let [a, b, d] = corner(k);
+        let p = [c[0] + a, c[1] + b, c[2] + d];
+        let v = s.s[s.idx(p[0], p[1], p[2])];
+        if v > best.0 {
+            best = (v, p);
+        }
+    }
+    // Padded → volume: the deepest corner is lumen, so never in the padding.
+    let g = [0, 1, 2].map(|a| best.1[a] - 1 + s.lo[a]);
+    (g[0] + vol_dims[0] * (g[1] + vol_dims[1] * g[2])) as u32
+}
+
+/// The vertex on cube edge `e` of the cube at padded `c`, made once and shared.
+#[allow(clippy::too_many_arguments)]
+fn edge_vertex(s: &Scalar, spacing: Vec3, c: [usize; 3], e: usize, lower: &mut EdgeCache, upper: &mut EdgeCache, zed: &mut [u32], mesh: &mut Mesh) -> u32 {
+    let (a, b) = EDGES[e];
+    let pa = corner(a).map(|o| o);
+    let pb = corner(b);
+    let ga = [c[0] + pa[0], c[1] + pa[1], c[2] + pa[2]];
+    let gb = [c[0] + pb[0], c[1] + pb[1], c[2] + pb[2]];
+    let nx = lower.nx;
+    let slot = ga[0] + nx * ga[1];
+    let cache: &mut u32 = match e {
+        0..=3 => if ga[2] == c[2] { &mut lower.x[slot] } else { &mut upper.x[slot] },
+        4..=7 => if ga[2] == c[2] { &mut lower.y[slot] } else { &mut upper.y[slot] },
+        _ => &mut zed[slot],
+    };
+    if *cache != u32::MAX {
+        return *cache;
+    }
+    let va = s.s[s.idx(ga[0], ga[1], ga[2])];
+    let vb = s.s[s.idx(gb[0], gb[1], gb[2])];
+    let t = (va / (va - vb)).clamp(0.0, 1.0);
+    let fa = Vec3::new(ga[0] as f32, ga[1] as f32, ga[2] as f32);
+    let fb = Vec3::new(gb[0] as f32, gb[1] as f32, gb[2] as f32);
+    // Padded index 1 is volume index lo; positions in volume-local mm.
+    let lo = Vec3::new(s.lo[0] as f32, s.lo[1] as f32, s.lo[2] as f32) - Vec3::ONE;
+    let p = (fa + (fb - fa) * t + lo) * spacing;
+    let n = s.gradient(ga[0], ga[1], ga[2], spacing) * (1.0 - t) + s.gradient(gb[0], gb[1], gb[2], spacing) * t;
+    let id = mesh.positions.len() as u32;
+    mesh.positions.push(p.to_array());
+    mesh.normals.push(n.normalize_or_zero().to_array());
+    *cache = id;
+    id
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::field::bounding_box;
+    use crate::Geometry;
+    use std::collections::HashMap;
+
+    fn ball(dims: [usize; 3], sp: [f64; 3], c: [f64; 3], r: f64) -> Volume<u8> {
+        let g = Geometry::new(dims, sp, [0.0; 3]).unwrap();
+        let data = (0..g.len())
+            .map(|idx| {
+                let [i, j, k] = g.ijk(idx);
+                let p = [i as f64 * sp[0] - c[0], j as f64 * sp[1] - c[1], k as f64 * sp[2] - c[2]];
+                ((p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() < r) as u8
+            })
+            .collect();
+        Volume::from_vec(g, data).unwrap()
+    }
+
+    /// A CT that matches the ball: −1000 inside, 40 outside, linear across one voxel.
+    fn ball_ct(m: &Volume<u8>, c: [f64; 3], r: f64) -> Volume<i16> {
+        let g = m.geometry().clone();
+        let sp = g.spacing;
+        let data = (0..g.len())
+            .map(|idx| {
+                let [i, j, k] = g.ijk(idx);
+                let p = [i as f64 * sp[0] - c[0], j as f64 * sp[1] - c[1], k as f64 * sp[2] - c[2]];
+                let d = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() - r; // signed, mm
+                let t = (d / sp[0] + 0.5).clamp(0.0, 1.0);
+                (-1000.0 + 1040.0 * t).round() as i16
+            })
+            .collect();
+        Volume::from_vec(g, data).unwrap()
+    }
+
+    #[test]
+    fn every_case_gives_closed_polygons() {
+        for case in 1..255 {
+            let tris = &case_table()[case];
+            assert!(!tris.is_empty(), "case {case}");
+            // Every crossed edge appears in the triangulation.
+            for (e, &(a, b)) in EDGES.iter().enumerate() {
+                let crossed = (case >> a & 1) != (case >> b & 1);
+                let used = tris.iter().any(|t| t.contains(&(e as u8)));
+                assert_eq!(crossed, used, "case {case} edge {e}");
+            }
+        }
+        assert!(case_table()[0].is_empty() && case_table()[255].is_empty());
+    }
+
+    #[test]
+    fn ball_surface_is_watertight_inward_and_on_the_sphere() {
+        let (c, r) = ([12.0, 11.0, 13.0], 8.0);
+        let m = ball([32, 30, 26], [0.8, 0.8, 1.1], c, r);
+        let ct = ball_ct(&m, c, r);
+        let grid = bounding_box(&m, 1, |v| v != 0).unwrap();
+        for ct in [None, Some(&ct)] {
+            let s = extract_surface(&m, ct, &grid, -500.0).unwrap();
+            let mesh = &s.mesh;
+            assert!(mesh.triangles.len() > 500);
+            // Watertight and consistently wound: each directed edge once, its reverse once.
+            let mut edges: HashMap<(u32, u32), i32> = HashMap::new();
+            for t in &mesh.triangles {
+                for e in 0..3 {
+                    *edges.entry((t[e], t[(e + 1) % 3])).or_default() += 1;
+                }
+            }
+            for (&(a, b), &n) in &edges {
+                assert_eq!(n, 1, "directed edge repeated");
+                assert_eq!(edges.get(&(b, a)), Some(&1), "edge without its twin: not closed");
+            }
+            let centre = Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32);
+            let mut max_err = 0.0f32;
+            for t in &mesh.triangles {
+                let [a, b, d] = t.map(|v| Vec3::from_array(mesh.positions[v as usize]));
+                let face_n = (b - a).cross(d - a);
+                let to_centre = centre - (a + b + d) / 3.0;
+                assert!(face_n.dot(to_centre) > 0.0, "triangle faces away from the lumen");
+            }
+            for (p, n) in mesh.positions.iter().zip(&mesh.normals) {
+                let p = Vec3::from_array(*p);
+                max_err = max_err.max(((p - centre).length() - r as f32).abs());
+                assert!(Vec3::from_array(*n).dot(centre - p) > 0.0, "normal points out of the lumen");
+            }
+            let bound = if ct.is_some() { 0.5 } else { 1.2 };
+            assert!(max_err < bound, "surface off the sphere by {max_err} mm");
+            // Owners are lumen voxels.
+            assert!(s.owner_voxel.iter().all(|&v| m.data()[v as usize] == 1));
+        }
+    }
+
+    #[test]
+    fn lumen_at_the_volume_border_is_closed() {
+        let g = Geometry::new([6, 6, 6], [1.0; 3], [0.0; 3]).unwrap();
+        let m = Volume::filled(g, 1u8).unwrap();
+        let grid = bounding_box(&m, 1, |v| v != 0).unwrap();
+        let s = extract_surface(&m, None, &grid, 0.0).unwrap();
+        let mut edges: HashMap<(u32, u32), i32> = HashMap::new();
+        for t in &s.mesh.triangles {
+            for e in 0..3 {
+                *edges.entry((t[e], t[(e + 1) % 3])).or_default() += 1;
+            }
+        }
+        assert!(edges.keys().all(|&(a, b)| edges.contains_key(&(b, a))));
+    }
+}
