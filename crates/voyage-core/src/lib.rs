@@ -5,6 +5,7 @@
 //! navigation) take values and return values. `phantom` makes synthetic scans with ground
 //! truth for tests and benchmarks.
 
+pub mod cells;
 pub mod centerline;
 pub mod distance;
 pub mod error;

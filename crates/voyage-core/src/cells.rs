@@ -1,0 +1,440 @@
+//! Cells and portals (paper §4.2): the lumen cut into a chain of cells along the centerline,
+//! each lumen voxel in exactly one cell, each triangle in exactly one cell, and between
+//! consecutive cells a portal.
+//!
+//! The paper cuts with planes perpendicular to the centerline. A plane, though, also cuts
+//! any other loop of the colon it meets (the sigmoid folds back on itself), and two planes a
+//! few mm apart cross inside a bend. Here the cuts are level sets of Dt from the source, the
+//! geodesic distance through the lumen: they run across the lumen like the paper's planes,
+//! but cannot touch another loop, since there the distance is wholly different. And they give
+//! the guarantee that visibility relies on: on 26-neighbours Dt changes by at most one voxel
+//! diagonal, so when consecutive cuts are farther apart than that, a cell touches only the
+//! cells before and after it, and every line of sight from cell a to cell b > a crosses the
+//! portals a, a+1, ..., b−1 in order.
+//!
+//! A portal is stored as the convex hull, in the plane across the centerline, of the voxels
+//! on the boundary between its two cells, with a thickness that covers the boundary's depth
+//! out of that plane: its projection on screen bounds that of the real boundary.
+
+use glam::DVec3;
+use serde::Serialize;
+
+use crate::centerline::Centerline;
+use crate::field::Field;
+use crate::surface::Surface;
+use crate::{Error, Result, Volume};
+
+#[derive(Clone, Debug)]
+pub struct CellOptions {
+    /// Cut when this much centerline has passed since the last cut (mm)...
+    pub max_length_mm: f64,
+    /// ...or when the cell holds this many triangles,
+    pub max_triangles: usize,
+    /// but never closer than this to the last cut (mm).
+    pub min_length_mm: f64,
+}
+
+impl Default for CellOptions {
+    fn default() -> Self {
+        CellOptions { max_length_mm: 20.0, max_triangles: 20_000, min_length_mm: 6.0 }
+    }
+}
+
+/// The boundary between cells `c` and `c + 1`.
+#[derive(Clone, Debug, Serialize)]
+pub struct Portal {
+    /// Dt from the source at which the cut lies (mm).
+    pub level_mm: f64,
+    /// Index of the centerline point nearest the cut.
+    pub centerline_index: usize,
+    /// Centre and normal (pointing toward the target) of the portal's plane, volume-local mm.
+    pub centre_mm: [f64; 3],
+    pub normal: [f64; 3],
+    /// Convex outline in the plane, volume-local mm, counter-clockwise about `normal`.
+    pub polygon_mm: Vec<[f64; 3]>,
+    /// Half-thickness (mm): the boundary lies within ±this of the plane, inside the outline.
+    pub half_thickness_mm: f64,
+}
+
+impl Portal {
+    /// The outline moved ±half-thickness along the normal: a prism that holds the boundary,
+    /// so the screen bounds of these points bound those of the boundary.
+    pub fn bounding_points(&self) -> Vec<DVec3> {
+        let n = DVec3::from_array(self.normal) * self.half_thickness_mm;
+        self.polygon_mm.iter().flat_map(|p| [DVec3::from_array(*p) + n, DVec3::from_array(*p) - n]).collect()
+    }
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Cell {
+    /// Triangles of the surface in this cell.
+    pub triangles: Vec<u32>,
+    pub voxels: usize,
+    /// Centerline points from `span.0` to `span.1` (inclusive) lie in this cell's stretch.
+    pub centerline_span: (usize, usize),
+    /// The portals toward the source and toward the target (indices into `Cells::portals`).
+    pub portal_back: Option<usize>,
+    pub portal_front: Option<usize>,
+}
+
+#[derive(Clone, Debug)]
+pub struct Cells {
+    pub cells: Vec<Cell>,
+    /// `portals[c]` lies between `cells[c]` and `cells[c + 1]`.
+    pub portals: Vec<Portal>,
+    /// Per box voxel of the Dt field: its cell, or `u16::MAX` outside the lumen.
+    pub voxel_cell: Field<u16>,
+    /// Per triangle: its cell.
+    pub triangle_cell: Vec<u16>,
+}
+
+impl Cells {
+    /// The cell of a volume voxel (None outside the lumen).
+    pub fn cell_of_voxel(&self, v: [usize; 3]) -> Option<usize> {
+        let c = self.voxel_cell.get_global(v, u16::MAX);
+        (c != u16::MAX).then_some(c as usize)
+    }
+
+    /// The cell holding a volume-local point: that of the nearest lumen voxel among the 8
+    /// around it (a camera may sit between voxel centres, inside the surface).
+    pub fn cell_of_point(&self, mm: DVec3) -> Option<usize> {
+        let g = &self.voxel_cell.geometry;
+        let p = g.local_to_index(mm);
+        let base = p.floor();
+        let mut best: Option<(f64, usize)> = None;
+        for c in 0..8 {
+            let o = DVec3::new((c & 1) as f64, ((c >> 1) & 1) as f64, ((c >> 2) & 1) as f64);
+            let q = base + o;
+            if q.min_element() < 0.0 {
+                continue;
+            }
+            if let Some(cell) = self.cell_of_voxel([q.x as usize, q.y as usize, q.z as usize]) {
+                let d = (q - p).length_squared();
+                if best.is_none_or(|b| d < b.0) {
+                    best = Some((d, cell));
+                }
+            }
+        }
+        best.map(|b| b.1)
+    }
+}
+
+/// Splits the lumen into cells. `dt_source`: Dt from the source (box layout, +∞ outside).
+pub fn build_cells(lumen: &Volume<u8>, dt_source: &Field<f32>, centerline: &Centerline, surface: &Surface, opts: &CellOptions) -> Result<Cells> {
+    if centerline.points_mm.len() < 2 {
+        return Err(Error::invalid("the centerline has fewer than two points"));
+    }
+    let cl_dt = centerline_levels(dt_source, centerline);
+    let tri_dt: Vec<f32> = surface.owner_voxel.iter().map(|&v| dt_source.get_global(lumen.geometry().ijk(v as usize), f32::INFINITY)).collect();
+    let min_len = opts.min_length_mm.max(2.0 * diagonal(lumen.spacing()));
+    let levels = choose_levels(&cl_dt, &centerline.arc_mm, &tri_dt, opts, min_len);
+    let voxel_cell = label_voxels(dt_source, &levels);
+    let triangle_cell: Vec<u16> = tri_dt.iter().map(|&d| cell_of_level(&levels, d)).collect();
+    let ncells = levels.len() + 1;
+    let mut cells: Vec<Cell> = (0..ncells)
+        .map(|c| Cell { triangles: Vec::new(), voxels: 0, centerline_span: (0, 0), portal_back: c.checked_sub(1), portal_front: (c + 1 < ncells).then_some(c) })
+        .collect();
+    for (t, &c) in triangle_cell.iter().enumerate() {
+        cells[c as usize].triangles.push(t as u32);
+    }
+    for &c in &voxel_cell.data {
+        if c != u16::MAX {
+            cells[c as usize].voxels += 1;
+        }
+    }
+    set_spans(&mut cells, &cl_dt, &levels);
+    let portals = levels
+        .iter()
+        .enumerate()
+        .map(|(c, &level)| make_portal(&voxel_cell, c as u16, level, centerline, &cl_dt, lumen.spacing()))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(Cells { cells, portals, voxel_cell, triangle_cell })
+}
+
+fn diagonal(sp: [f64; 3]) -> f64 {
+    (sp[0] * sp[0] + sp[1] * sp[1] + sp[2] * sp[2]).sqrt()
+}
+
+/// Dt at each centerline point, made non-decreasing (the centerline runs away from the source).
+fn centerline_levels(dt: &Field<f32>, cl: &Centerline) -> Vec<f64> {
+    let mut out = Vec::with_capacity(cl.points_mm.len());
+    let mut last = 0.0f64;
+    for p in &cl.points_mm {
+        let p = DVec3::from_array(*p);
+        let ijk = dt.geometry.local_to_index(p).round();
+        let d = dt.get_global([ijk.x as usize, ijk.y as usize, ijk.z as usize], f32::INFINITY) as f64;
+        let d = if d.is_finite() { d } else { last };
+        last = last.max(d);
+        out.push(last);
+    }
+    out
+}
+
+/// Cut levels (in Dt): walk the centerline, cutting when the stretch since the last cut is
+/// long enough or holds enough triangles, keeping cuts `min_len` apart in Dt.
+fn choose_levels(cl_dt: &[f64], arc: &[f64], tri_dt: &[f32], opts: &CellOptions, min_len: f64) -> Vec<f64> {
+    let mut sorted: Vec<f32> = tri_dt.iter().copied().filter(|d| d.is_finite()).collect();
+    sorted.sort_by(f32::total_cmp);
+    let tris_below = |level: f64| sorted.partition_point(|&d| (d as f64) < level);
+    let end = *cl_dt.last().unwrap_or(&0.0);
+    let mut levels = Vec::new();
+    let (mut last_level, mut last_arc) = (0.0f64, 0.0f64);
+    for (i, &level) in cl_dt.iter().enumerate() {
+        if level - last_level < min_len || end - level < min_len {
+            continue;
+        }
+        let long = arc[i] - last_arc >= opts.max_length_mm;
+        let full = tris_below(level) - tris_below(last_level) >= opts.max_triangles;
+        if long || full {
+            levels.push(level);
+            last_level = level;
+            last_arc = arc[i];
+        }
+    }
+    levels
+}
+
+fn cell_of_level(levels: &[f64], d: f32) -> u16 {
+    levels.partition_point(|&l| l <= d as f64) as u16
+}
+
+fn label_voxels(dt: &Field<f32>, levels: &[f64]) -> Field<u16> {
+    Field {
+        grid: dt.grid.clone(),
+        geometry: dt.geometry.clone(),
+        data: dt.data.iter().map(|&d| if d.is_finite() { cell_of_level(levels, d) } else { u16::MAX }).collect(),
+    }
+}
+
+fn set_spans(cells: &mut [Cell], cl_dt: &[f64], levels: &[f64]) {
+    for (i, &d) in cl_dt.iter().enumerate() {
+        let c = cell_of_level(levels, d as f32) as usize;
+        let span = &mut cells[c].centerline_span;
+        if span.1 == 0 && span.0 == 0 && i > 0 {
+            *span = (i, i);
+        }
+        span.1 = i;
+    }
+}
+
+/// The portal between cells `c` and `c + 1`: boundary voxels (in either cell, 26-adjacent to
+/// the other) projected on the plane across the centerline at the cut; their convex hull,
+/// grown by half a voxel diagonal; the thickness their spread out of the plane.
+fn make_portal(cells: &Field<u16>, c: u16, level: f64, cl: &Centerline, cl_dt: &[f64], sp: [f64; 3]) -> Result<Portal> {
+    let at = cl_dt.partition_point(|&d| d < level).min(cl.points_mm.len() - 1);
+    let centre = DVec3::from_array(cl.points_mm[at]);
+    let a = DVec3::from_array(cl.points_mm[at.saturating_sub(2)]);
+    let b = DVec3::from_array(cl.points_mm[(at + 2).min(cl.points_mm.len() - 1)]);
+    let normal = (b - a).normalize_or(DVec3::Z);
+    let pts = boundary_points(cells, c, sp);
+    if pts.is_empty() {
+        return Err(Error::invalid(format!("cells {c} and {} do not touch", c + 1)));
+    }
+    let (u, v) = plane_axes(normal);
+    let half = 0.5 * diagonal(sp);
+    let mut depth = 0.0f64;
+    let flat: Vec<(f64, f64)> = pts
+        .iter()
+        .map(|&p| {
+            let d = p - centre;
+            depth = depth.max(d.dot(normal).abs());
+            (d.dot(u), d.dot(v))
+        })
+        .collect();
+    let hull = convex_hull(flat);
+    let polygon_mm = grow(&hull, half).into_iter().map(|(x, y)| (centre + u * x + v * y).to_array()).collect();
+    Ok(Portal { level_mm: level, centerline_index: at, centre_mm: centre.to_array(), normal: normal.to_array(), polygon_mm, half_thickness_mm: depth + half })
+}
+
+/// Centres (volume-local mm) of voxels of cell `c` or `c+1` that touch the other cell.
+fn boundary_points(cells: &Field<u16>, c: u16, sp: [f64; 3]) -> Vec<DVec3> {
+    let [nx, ny, nz] = cells.grid.dims;
+    let lo = cells.grid.lo;
+    let mut out = Vec::new();
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                let me = cells.data[cells.grid.index(i, j, k)];
+                if me != c && me != c + 1 {
+                    continue;
+                }
+                let other = if me == c { c + 1 } else { c };
+                if touches(cells, [i, j, k], other) {
+                    out.push(DVec3::new(((i + lo[0]) as f64) * sp[0], ((j + lo[1]) as f64) * sp[1], ((k + lo[2]) as f64) * sp[2]));
+                }
+            }
+        }
+    }
+    out
+}
+
+fn touches(cells: &Field<u16>, p: [usize; 3], other: u16) -> bool {
+    let d = cells.grid.dims;
+    for dk in -1i64..=1 {
+        for dj in -1i64..=1 {
+            for di in -1i64..=1 {
+                let q = [p[0] as i64 + di, p[1] as i64 + dj, p[2] as i64 + dk];
+                if q.iter().zip(&d).any(|(&x, &n)| x < 0 || x >= n as i64) {
+                    continue;
+                }
+                if cells.data[cells.grid.index(q[0] as usize, q[1] as usize, q[2] as usize)] == other {
+                    return true;
+                }
+            }
+        }
+    }
+    false
+}
+
+/// Two unit vectors spanning the plane with this normal, (u, v, normal) right-handed.
+fn plane_axes(n: DVec3) -> (DVec3, DVec3) {
+    let helper = if n.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
+    let u = n.cross(helper).normalize();
+    (u, n.cross(u))
+}
+
+/// Andrew's monotone chain; counter-clockwise.
+fn convex_hull(mut pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
+    pts.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    pts.dedup();
+    if pts.len() < 3 {
+        return pts;
+    }
+    let cross = |o: (f64, f64), a: (f64, f64), b: (f64, f64)| (a.0 - o.0) * (b.1 - o.1) - (a.1 - o.1) * (b.0 - o.0);
+    let mut hull: Vec<(f64, f64)> = Vec::with_capacity(2 * pts.len());
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &(f64, f64)>> = if pass == 0 { Box::new(pts.iter()) } else { Box::new(pts.iter().rev()) };
+        for &p in iter {
+            while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0 {
+                hull.pop();
+            }
+            hull.push(p);
+        }
+        hull.pop();
+    }
+    hull
+}
+
+/// Moves each hull vertex outward by `r` along its bisector (enough that every point within
+/// `r` of the hull lies inside the grown polygon).
+fn grow(hull: &[(f64, f64)], r: f64) -> Vec<(f64, f64)> {
+    let n = hull.len();
+    if n < 3 {
+        // Degenerate boundary: a square of side 2r around each point.
+        let corners = hull.iter().flat_map(|&(x, y)| [(x - r, y - r), (x + r, y - r), (x + r, y + r), (x - r, y + r)]).collect();
+        return convex_hull(corners);
+    }
+    (0..n)
+        .map(|i| {
+            let (p, a, b) = (hull[i], hull[(i + n - 1) % n], hull[(i + 1) % n]);
+            let e1 = norm((p.0 - a.0, p.1 - a.1));
+            let e2 = norm((b.0 - p.0, b.1 - p.1));
+            // Outward normals of the two edges (hull is counter-clockwise).
+            let n1 = (e1.1, -e1.0);
+            let n2 = (e2.1, -e2.0);
+            let bis = norm((n1.0 + n2.0, n1.1 + n2.1));
+            let cos = (bis.0 * n1.0 + bis.1 * n1.1).max(0.2);
+            (p.0 + bis.0 * r / cos, p.1 + bis.1 * r / cos)
+        })
+        .collect()
+}
+
+fn norm(v: (f64, f64)) -> (f64, f64) {
+    let l = (v.0 * v.0 + v.1 * v.1).sqrt();
+    if l == 0.0 { (0.0, 0.0) } else { (v.0 / l, v.1 / l) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::centerline::{centerline, CenterlineOptions};
+    use crate::distance::{distance_to_wall, geodesic_distance};
+    use crate::field::bounding_box;
+    use crate::surface::extract_surface;
+    use crate::Geometry;
+
+    /// A U-shaped tube whose two legs run side by side 4 mm apart (wall between), as where the
+    /// sigmoid folds back: a plane cut across one leg would also cut the other.
+    fn u_tube() -> Volume<u8> {
+        let g = Geometry::new([70, 40, 24], [1.0, 1.0, 1.0], [0.0; 3]).unwrap();
+        let data = (0..g.len())
+            .map(|idx| {
+                let [i, j, k] = g.ijk(idx);
+                let (x, y, z) = (i as f64, j as f64, k as f64);
+                let r = 5.0;
+                let leg1 = ((y - 10.0).powi(2) + (z - 12.0).powi(2)).sqrt() < r && (5.0..=55.0).contains(&x);
+                let leg2 = ((y - 24.0).powi(2) + (z - 12.0).powi(2)).sqrt() < r && (5.0..=55.0).contains(&x);
+                let bend = x > 55.0 && (((x - 55.0).powi(2) + (y - 17.0).powi(2)).sqrt() - 7.0).hypot(z - 12.0) < r;
+                (leg1 || leg2 || bend) as u8
+            })
+            .collect();
+        Volume::from_vec(g, data).unwrap()
+    }
+
+    #[test]
+    fn cells_partition_the_lumen_and_touch_only_neighbours() {
+        let m = u_tube();
+        let grid = bounding_box(&m, 1, |v| v != 0).unwrap();
+        let ds = distance_to_wall(&m).unwrap();
+        let (src, dst) = ([6, 10, 12], [6, 24, 12]);
+        let dt = geodesic_distance(&m, &grid, src).unwrap();
+        let cl = centerline(&m, &ds, src, dst, &CenterlineOptions::default()).unwrap();
+        let surf = extract_surface(&m, None, &grid, 0.0).unwrap();
+        let opts = CellOptions { max_length_mm: 12.0, ..Default::default() };
+        let cells = build_cells(&m, &dt.dist, &cl, &surf, &opts).unwrap();
+        let n = cells.cells.len();
+        assert!(n >= 6, "only {n} cells");
+        assert_eq!(cells.portals.len(), n - 1);
+        // Every lumen voxel in exactly one cell; every triangle in one cell.
+        let lumen = m.data().iter().filter(|&&v| v != 0).count();
+        assert_eq!(cells.cells.iter().map(|c| c.voxels).sum::<usize>(), lumen);
+        assert_eq!(cells.cells.iter().map(|c| c.triangles.len()).sum::<usize>(), surf.mesh.triangles.len());
+        // Cells touch only their neighbours in the chain.
+        let f = &cells.voxel_cell;
+        let [nx, ny, nz] = f.grid.dims;
+        for k in 0..nz {
+            for j in 0..ny {
+                for i in 0..nx {
+                    let a = f.data[f.grid.index(i, j, k)];
+                    if a == u16::MAX {
+                        continue;
+                    }
+                    for (di, dj, dk) in [(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 1), (1, -1, 1), (-1, 1, 1), (1, 1, 0), (1, -1, 0)] {
+                        let q = [i as i64 + di, j as i64 + dj, k as i64 + dk];
+                        if q.iter().zip(&f.grid.dims).any(|(&x, &n)| x < 0 || x >= n as i64) {
+                            continue;
+                        }
+                        let b = f.data[f.grid.index(q[0] as usize, q[1] as usize, q[2] as usize)];
+                        if b != u16::MAX {
+                            assert!((a as i32 - b as i32).abs() <= 1, "cells {a} and {b} touch");
+                        }
+                    }
+                }
+            }
+        }
+        // The two legs lie side by side: a cell of one leg holds no voxel of the other.
+        for cell in 0..n as u16 {
+            let mut legs = [false; 2];
+            for (idx, &c) in f.data.iter().enumerate() {
+                if c == cell {
+                    let [i, j, _] = f.grid.global_of_index(idx);
+                    if i < 50 {
+                        legs[(j > 17) as usize] = true;
+                    }
+                }
+            }
+            assert!(!(legs[0] && legs[1]), "cell {cell} spans both legs");
+        }
+        // Portals: roughly the tube's cross-section (radius 5 mm), across the centerline.
+        for p in &cells.portals {
+            let c = DVec3::from_array(p.centre_mm);
+            let far = p.polygon_mm.iter().map(|q| DVec3::from_array(*q).distance(c)).fold(0.0, f64::max);
+            assert!((4.0..10.0).contains(&far), "portal outline radius {far}");
+            assert!(p.polygon_mm.len() >= 4);
+        }
+        // Cell lookup of a point on the centerline agrees with the voxel labels.
+        let p = DVec3::from_array(cl.points_mm[cl.points_mm.len() / 2]);
+        assert!(cells.cell_of_point(p).is_some());
+    }
+}
