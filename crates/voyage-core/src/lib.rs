@@ -8,10 +8,12 @@
 pub mod cells;
 pub mod centerline;
 pub mod distance;
+pub mod endpoints;
 pub mod error;
 pub mod field;
 pub mod io;
 pub mod phantom;
+pub mod prep;
 pub mod segment;
 pub mod surface;
 pub mod volume;

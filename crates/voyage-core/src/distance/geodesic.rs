@@ -25,16 +25,19 @@ pub struct Geodesic {
 /// inside `grid`.
 pub fn geodesic_distance(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3]) -> Result<Geodesic> {
     let pad = Padded::new(mask, grid);
-    let src = pad.index_of_global(source).filter(|&i| pad.inside[i] != 0).ok_or_else(|| {
-        Error::invalid(format!("the source voxel {source:?} is not in the lumen"))
-    })?;
-    let (dist, farthest, max_mm, reached) = dial(&pad, src, mask.spacing());
-    Ok(Geodesic {
-        dist: Field { grid: grid.clone(), geometry: mask.geometry().clone(), data: pad.unpad(&dist) },
-        farthest: pad.global_of_index(farthest),
-        max_mm,
-        reached,
-    })
+    let src = pad.lumen_index(source)?;
+    let r = dial(&pad, &[(src, 0)], mask.spacing(), None, false);
+    Ok(pad.geodesic(mask, r))
+}
+
+/// What a search over the padded grid found.
+pub(crate) struct Search {
+    pub(crate) dist: Vec<f32>,
+    /// Per voxel, the label of the source it was reached from (when asked for).
+    pub(crate) label: Vec<u32>,
+    pub(crate) far: usize,
+    pub(crate) far_d: f32,
+    pub(crate) reached: usize,
 }
 
 /// The box's mask with one layer of zeros around it, so that the 26 neighbours of every lumen
@@ -60,6 +63,22 @@ impl Padded {
             }
         }
         Padded { grid: grid.clone(), dims, inside }
+    }
+
+    /// Padded index of a volume voxel that must be lumen.
+    pub(crate) fn lumen_index(&self, v: [usize; 3]) -> Result<usize> {
+        self.index_of_global(v)
+            .filter(|&i| self.inside[i] != 0)
+            .ok_or_else(|| Error::invalid(format!("the voxel {v:?} is not in the lumen")))
+    }
+
+    pub(crate) fn geodesic(&self, mask: &Volume<u8>, r: Search) -> Geodesic {
+        Geodesic {
+            dist: Field { grid: self.grid.clone(), geometry: mask.geometry().clone(), data: self.unpad(&r.dist) },
+            farthest: self.global_of_index(r.far),
+            max_mm: r.far_d,
+            reached: r.reached,
+        }
     }
 
     pub(crate) fn index_of_global(&self, g: [usize; 3]) -> Option<usize> {
@@ -119,21 +138,43 @@ impl Padded {
     }
 }
 
-/// Dial's algorithm over the padded grid. Returns (dist, farthest index, its distance, reached).
-fn dial(pad: &Padded, src: usize, spacing: [f64; 3]) -> (Vec<f32>, usize, f32, usize) {
+/// Dial's algorithm over the padded grid from several sources (padded index, label).
+///
+/// With `weight` (padded layout, ≥ some w_min > 0 on lumen voxels) an edge u–v costs its
+/// length times (w(u) + w(v)) / 2; the bucket width is then the shortest edge times w_min,
+/// which keeps the buckets exact. With `labels`, each voxel records the label of the source
+/// whose search reached it first (a geodesic Voronoi partition).
+pub(crate) fn dial(pad: &Padded, sources: &[(usize, u32)], spacing: [f64; 3], weight: Option<&[f32]>, labels: bool) -> Search {
     let nbrs = pad.neighbours(spacing);
-    let width = spacing.iter().cloned().fold(f64::INFINITY, f64::min) as f32;
+    let (w_min, w_max) = match weight {
+        Some(w) => w.iter().zip(&pad.inside).filter(|(_, m)| **m != 0).fold((f32::INFINITY, 0.0f32), |(lo, hi), (&x, _)| (lo.min(x), hi.max(x))),
+        None => (1.0, 1.0),
+    };
+    let shortest = nbrs.iter().map(|n| n.1).fold(f32::INFINITY, f32::min);
     let longest = nbrs.iter().map(|n| n.1).fold(0.0, f32::max);
-    // Buckets in a ring: a relaxation never reaches more than `longest` beyond the current one.
-    let ring = (longest / width).ceil() as usize + 2;
+    let width = shortest * w_min.max(1e-6);
+    // Buckets in a ring: a relaxation never reaches more than the costliest edge beyond the
+    // current bucket.
+    let ring = (longest * w_max / width).ceil() as usize + 2;
     let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); ring];
-    let mut dist = vec![f32::INFINITY; pad.inside.len()];
-    let mut done = vec![false; pad.inside.len()];
-    dist[src] = 0.0;
-    buckets[0].push(src as u32);
-    let mut pending = 1usize;
+    let n = pad.inside.len();
+    let mut dist = vec![f32::INFINITY; n];
+    // 0 wall, 1 lumen not yet settled, 2 settled: one byte read per neighbour.
+    let mut state = pad.inside.clone();
+    let mut label = if labels { vec![u32::MAX; n] } else { Vec::new() };
+    let mut pending = 0usize;
+    for &(s, l) in sources {
+        if dist[s] > 0.0 {
+            dist[s] = 0.0;
+            buckets[0].push(s as u32);
+            pending += 1;
+            if labels {
+                label[s] = l;
+            }
+        }
+    }
     let mut current = 0usize;
-    let (mut far, mut far_d, mut reached) = (src, 0.0f32, 0usize);
+    let (mut far, mut far_d, mut reached) = (sources.first().map_or(0, |s| s.0), 0.0f32, 0usize);
     let mut work = Vec::new();
     while pending > 0 {
         let slot = current % ring;
@@ -142,24 +183,31 @@ fn dial(pad: &Padded, src: usize, spacing: [f64; 3]) -> (Vec<f32>, usize, f32, u
             pending -= work.len();
             for &u in &work {
                 let u = u as usize;
-                if done[u] {
+                if state[u] == 2 {
                     continue;
                 }
-                done[u] = true;
+                state[u] = 2;
                 reached += 1;
                 let du = dist[u];
                 if du > far_d {
                     far_d = du;
                     far = u;
                 }
+                let wu = weight.map_or(1.0, |w| w[u]);
                 for &(off, len) in &nbrs {
                     let v = (u as isize + off) as usize;
-                    if pad.inside[v] == 0 || done[v] {
+                    if state[v] != 1 {
                         continue;
                     }
-                    let dv = du + len;
+                    let dv = match weight {
+                        Some(w) => du + len * 0.5 * (wu + w[v]),
+                        None => du + len,
+                    };
                     if dv < dist[v] {
                         dist[v] = dv;
+                        if labels {
+                            label[v] = label[u];
+                        }
                         // Rounding can put dv a hair below the next bucket: never file it earlier
                         // than the one being emptied.
                         let b = ((dv / width) as usize).max(current);
@@ -172,7 +220,7 @@ fn dial(pad: &Padded, src: usize, spacing: [f64; 3]) -> (Vec<f32>, usize, f32, u
         }
         current += 1;
     }
-    (dist, far, far_d, reached)
+    Search { dist, label, far, far_d, reached }
 }
 
 #[cfg(test)]

@@ -1,0 +1,139 @@
+//! Preprocessing: from a CT (or a lumen mask) to a [`Study`], everything navigation and
+//! rendering need. The paper's preprocessing took "a few hours"; this takes well under a
+//! second after loading.
+
+use std::time::Instant;
+
+use glam::DVec3;
+use serde::Serialize;
+
+use crate::cells::{build_cells, CellOptions, Cells};
+use crate::centerline::{Centerline, CenterlineOptions};
+use crate::distance::distance_to_wall;
+use crate::endpoints::{find_endpoints, EndpointOptions};
+use crate::field::Field;
+use crate::segment::{segment, SegmentOptions, Segmentation};
+use crate::surface::{extract_surface, Surface};
+use crate::{Result, Volume};
+
+#[derive(Clone, Debug, Default)]
+pub struct PrepOptions {
+    pub segment: SegmentOptions,
+    pub endpoints: EndpointOptions,
+    pub centerline: CenterlineOptions,
+    pub cells: CellOptions,
+}
+
+/// The stages, in order, for progress reports.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Stage {
+    Segment,
+    Ds,
+    Dt,
+    Centerline,
+    Surface,
+    Cells,
+}
+
+impl Stage {
+    pub const ALL: [Stage; 6] = [Stage::Segment, Stage::Ds, Stage::Dt, Stage::Centerline, Stage::Surface, Stage::Cells];
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Segment => "segment",
+            Stage::Ds => "ds",
+            Stage::Dt => "dt",
+            Stage::Centerline => "centerline",
+            Stage::Surface => "surface",
+            Stage::Cells => "cells",
+        }
+    }
+}
+
+/// Wall time per stage, in ms.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Timings {
+    pub segment: f64,
+    pub ds: f64,
+    pub dt: f64,
+    pub centerline: f64,
+    pub surface: f64,
+    pub cells: f64,
+    pub total_after_load: f64,
+}
+
+/// Everything preprocessing produces. Geometry in volume-local mm.
+#[derive(Clone, Debug)]
+pub struct Study {
+    /// The input: HU, or a mask's labels.
+    pub ct: Volume<i16>,
+    pub segmentation: Segmentation,
+    /// Ds: distance to the wall (mm), over the lumen's box.
+    pub ds: Field<f32>,
+    /// Dt to the target (fly forward) and to the source (fly backward), mm; +∞ outside.
+    pub dt_target: Field<f32>,
+    pub dt_source: Field<f32>,
+    pub source: [usize; 3],
+    pub target: [usize; 3],
+    pub centerline: Centerline,
+    pub surface: Surface,
+    pub cells: Cells,
+    pub timings: Timings,
+}
+
+impl Study {
+    pub fn source_mm(&self) -> DVec3 {
+        self.ct.geometry().index_to_local(DVec3::new(self.source[0] as f64, self.source[1] as f64, self.source[2] as f64))
+    }
+    pub fn target_mm(&self) -> DVec3 {
+        self.ct.geometry().index_to_local(DVec3::new(self.target[0] as f64, self.target[1] as f64, self.target[2] as f64))
+    }
+}
+
+/// Runs every stage. `progress` hears of each stage as it starts.
+pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Stage)) -> Result<Study> {
+    let start = Instant::now();
+    let mut t = Timings::default();
+    let mut clock = Instant::now();
+    let mut lap = |slot: &mut f64| {
+        *slot = clock.elapsed().as_secs_f64() * 1e3;
+        clock = Instant::now();
+    };
+
+    progress(Stage::Segment);
+    let seg = segment(&ct, &opts.segment)?;
+    lap(&mut t.segment);
+
+    progress(Stage::Ds);
+    let ds = distance_to_wall(&seg.lumen)?;
+    lap(&mut t.ds);
+
+    progress(Stage::Dt);
+    let ends = find_endpoints(&seg.lumen, &ds, seg.seed_voxel, &opts.endpoints, &opts.centerline)?;
+    lap(&mut t.dt);
+    let cl = ends.centerline;
+
+    progress(Stage::Surface);
+    let iso = if seg.from_mask { None } else { Some(&ct) };
+    let surface = extract_surface(&seg.lumen, iso, &ds.grid, opts.segment.air_hu as f32)?;
+    lap(&mut t.surface);
+
+    progress(Stage::Cells);
+    let cells = build_cells(&seg.lumen, &ends.to_source.dist, &cl, &surface, &opts.cells)?;
+    lap(&mut t.cells);
+
+    t.total_after_load = start.elapsed().as_secs_f64() * 1e3;
+    Ok(Study {
+        ct,
+        segmentation: seg,
+        ds,
+        dt_target: ends.to_target.dist,
+        dt_source: ends.to_source.dist,
+        source: ends.source,
+        target: ends.target,
+        centerline: cl,
+        surface,
+        cells,
+        timings: t,
+    })
+}
