@@ -53,9 +53,12 @@ pub fn load(path: &Path) -> Result<Loaded> {
         let data_path = data_path(path, data_file)?;
         let (mut dr, data_len) = open_data(path, &data_path)?;
         let offset = h.data_offset(path, data_len, expected)?;
-        h.avail(data_len).check(&data_path, offset, expected)?;
-        dr.seek(SeekFrom::Start(offset)).map_err(|e| Error::io(&data_path, e))?;
-        h.decode(&data_path, &mut dr, n, ty, endian)?
+        (|| {
+            h.avail(data_len).check(&data_path, offset, expected)?;
+            dr.seek(SeekFrom::Start(offset)).map_err(|e| Error::io(&data_path, e))?;
+            h.decode(&data_path, &mut dr, n, ty, endian)
+        })()
+        .map_err(shared::in_data_file(path, &data_path))?
     };
     notes.extend(decoded.notes());
     let volume = Volume::from_vec(geom, decoded.voxels).map_err(at(path))?;
@@ -87,7 +90,11 @@ impl Header {
     fn read(path: &Path, lines: &mut shared::HeaderLines) -> Result<Header> {
         let mut h = Header::default();
         let mut any = false;
-        while let Some(line) = lines.next_line()? {
+        let not_text = |e: Error| match e {
+            Error::Format { msg, .. } => Error::format(path, format!("not a MetaImage file: {msg}")),
+            other => other,
+        };
+        while let Some(line) = lines.next_line().map_err(not_text)? {
             let line = line.trim();
             if line.is_empty() {
                 continue;

@@ -655,6 +655,18 @@ pub(crate) mod shared {
         Ok(g)
     }
 
+    /// Re-labels an error about a separate data file so that the one-line message names
+    /// the header the user opened as well as the data file.
+    pub fn in_data_file<'a>(header: &'a Path, data: &'a Path) -> impl Fn(Error) -> Error + 'a {
+        move |e| {
+            let msg = match e {
+                Error::Format { msg, .. } | Error::Invalid(msg) => msg,
+                Error::Io { source, .. } => source.to_string(),
+            };
+            Error::format(header, format!("data file {}: {msg}", data.display()))
+        }
+    }
+
     pub fn is_gzip(bytes: &[u8]) -> bool {
         bytes.starts_with(&[0x1f, 0x8b])
     }
