@@ -211,13 +211,14 @@ impl Header {
         let limit = self.compressed_size.unwrap_or(u64::MAX);
         let mut limited = r.take(limit);
         let head = limited.fill_buf().map_err(|e| Error::io(path, e))?;
-        if shared::is_gzip(head) {
-            let mut d = flate2::bufread::MultiGzDecoder::new(limited);
-            shared::read_voxels(path, &mut d, n, ty, endian, None)
+        let mut d: Box<dyn Read> = if shared::is_gzip(head) {
+            Box::new(flate2::bufread::MultiGzDecoder::new(limited))
         } else {
-            let mut d = flate2::bufread::ZlibDecoder::new(limited);
-            shared::read_voxels(path, &mut d, n, ty, endian, None)
-        }
+            Box::new(flate2::bufread::ZlibDecoder::new(limited))
+        };
+        let decoded = shared::read_voxels(path, &mut d, n, ty, endian, None)?;
+        shared::finish_compressed(path, &mut d)?;
+        Ok(decoded)
     }
 }
 
@@ -286,7 +287,7 @@ pub fn save(path: &Path, vol: &Volume<i16>) -> Result<()> {
         let header = header_text(vol, &raw_name, None);
         super::atomic::write_atomic(path, |w| w.write_all(header.as_bytes()))
     } else {
-        let mut enc = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::new(1));
+        let mut enc = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::new(super::nifti::GZIP_LEVEL));
         write_le(&mut enc, vol.data()).map_err(|e| Error::io(path, e))?;
         let data = enc.finish().map_err(|e| Error::io(path, e))?;
         let header = header_text(vol, "LOCAL", Some(data.len()));

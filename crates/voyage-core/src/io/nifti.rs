@@ -73,6 +73,9 @@ fn load_from(path: &Path, r: &mut dyn Read, avail: shared::Avail) -> Result<Load
     avail.check(path, offset, expected)?;
     shared::skip(r, offset - HEADER_LEN as u64).map_err(|e| shared::read_error(path, e))?.check(path, offset)?;
     let decoded = shared::read_voxels(path, r, n, ty, h.endian, h.rescale())?;
+    if let shared::Avail::AtMost(_) = avail {
+        shared::finish_compressed(path, r)?;
+    }
     notes.extend(decoded.notes());
     let volume = Volume::from_vec(geom, decoded.voxels).map_err(at(path))?;
     let meta = Meta { format: Some(Format::Nifti), files: 1, notes, ..Meta::default() };
@@ -402,9 +405,11 @@ nifti_voxel!(i32, 8, 4);
 nifti_voxel!(f32, 16, 4);
 nifti_voxel!(u16, 512, 2);
 
-/// Gzip level for .nii.gz: level 1 is several times faster than the default 6 and, on CT
-/// and masks, only a few percent larger; these files are written often (masks, results).
-const GZIP_LEVEL: u32 = 1;
+/// Deflate level of every compressed file voyage writes. Measured with zlib-rs on one
+/// core: a 512×512×400 CT-like i16 volume takes 0.55 s at level 1, 0.85 s at 2, 1.05 s at
+/// 3, 2.1 s at 6; level 1 (zlib-rs's "quick" strategy) makes files 1.3–1.6× larger than
+/// level 2, while 3 and 6 gain under 2% more. Masks take < 0.1 s at any of these levels.
+pub(crate) const GZIP_LEVEL: u32 = 2;
 
 /// Saves a volume as NIfTI-1: gzip-compressed when the name ends in ".gz". Writes both the
 /// sform and the qform (code 1, scanner) in RAS, units mm, atomically.
@@ -768,6 +773,23 @@ pub(crate) mod shared {
             }
         }
         Ok(Skipped { wanted: n, got: n - left })
+    }
+
+    /// Reads a compressed stream to its end after the voxels, so that the decoder checks
+    /// the trailer's CRC-32 (gzip) or Adler-32 (zlib): without this, damaged data that still
+    /// inflates would load silently. A stream cut inside its trailer is refused; trailing
+    /// bytes after the stream are ignored, up to a bound.
+    pub fn finish_compressed(path: &Path, r: &mut dyn Read) -> Result<()> {
+        const MAX_TRAILING: u64 = 1 << 26;
+        let drained = std::io::copy(&mut r.take(MAX_TRAILING), &mut std::io::sink());
+        match drained {
+            Ok(_) => Ok(()),
+            Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => Err(Error::format(
+                path,
+                "truncated: the compressed data ends before its checksum (the voxels cannot be verified)",
+            )),
+            Err(e) => Err(read_error(path, e)),
+        }
     }
 
     /// Bytes decoded per step: a multiple of every element size, small enough for cache.

@@ -257,7 +257,9 @@ impl Header {
                 Avail::AtMost(shared::max_inflated_len(left)).check(path, offset, expected)?;
                 let mut d = flate2::bufread::MultiGzDecoder::new(r);
                 shared::skip(&mut d, offset).map_err(|e| shared::read_error(path, e))?.check(path, offset)?;
-                shared::read_voxels(path, &mut d, n, ty, endian, None)
+                let decoded = shared::read_voxels(path, &mut d, n, ty, endian, None)?;
+                shared::finish_compressed(path, &mut d)?;
+                Ok(decoded)
             }
         }
     }
@@ -384,7 +386,7 @@ fn header_text(g: &Geometry, data_file: Option<&str>) -> String {
 
 /// Voxels as little-endian bytes through a fast gzip encoder.
 fn write_gzip(w: &mut dyn Write, data: &[i16]) -> std::io::Result<()> {
-    let mut enc = flate2::write::GzEncoder::new(w, flate2::Compression::new(1));
+    let mut enc = flate2::write::GzEncoder::new(w, flate2::Compression::new(super::nifti::GZIP_LEVEL));
     let mut buf = Vec::with_capacity(1 << 20);
     for chunk in data.chunks(1 << 19) {
         buf.clear();
