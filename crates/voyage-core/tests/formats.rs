@@ -589,7 +589,8 @@ fn garbage_empty_and_missing_files() {
             (seed >> 56) as u8
         })
         .collect();
-    for (name, msg) in [("junk.nii", "not a NIfTI-1 file"), ("junk.mha", "MetaImage"), ("junk.nrrd", "not a NRRD file")] {
+    for (name, msg) in [("junk.nii", "not a NIfTI-1 file"), ("junk.mha", "MetaImage"), ("junk.nrrd", "not a NRRD file")]
+    {
         let p = dir.join(name);
         std::fs::write(&p, &garbage).unwrap();
         assert_err_names(&p, msg);
@@ -601,7 +602,9 @@ fn garbage_empty_and_missing_files() {
     }
     // Compressed files damaged in the middle: refused (by the CRC or the inflater), even
     // when the damaged stream still inflates to the right length.
-    for (name, save) in [("damaged.nii.gz", nifti::save_i16 as Saver), ("damaged.mha", metaimage::save), ("damaged.nrrd", nrrd::save)] {
+    for (name, save) in
+        [("damaged.nii.gz", nifti::save_i16 as Saver), ("damaged.mha", metaimage::save), ("damaged.nrrd", nrrd::save)]
+    {
         let p = dir.join(name);
         save(&p, &synthetic(TURNED_FLIPPED)).unwrap();
         let original = std::fs::read(&p).unwrap();
@@ -616,7 +619,8 @@ fn garbage_empty_and_missing_files() {
     }
 
     let mhd = dir.join("orphan.mhd");
-    std::fs::write(&mhd, "NDims = 3\nDimSize = 2 2 2\nElementType = MET_SHORT\nElementDataFile = orphan.raw\n").unwrap();
+    std::fs::write(&mhd, "NDims = 3\nDimSize = 2 2 2\nElementType = MET_SHORT\nElementDataFile = orphan.raw\n")
+        .unwrap();
     assert_err_names(&mhd, "orphan.raw");
     let nhdr = dir.join("orphan.nhdr");
     std::fs::write(&nhdr, "NRRD0004\ntype: short\ndimension: 3\nsizes: 2 2 2\nencoding: raw\ndata file: gone.raw\n")

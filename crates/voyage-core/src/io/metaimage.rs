@@ -204,7 +204,14 @@ impl Header {
     }
 
     /// Decodes the voxels from `r`, decompressing when `CompressedData` says so.
-    fn decode(&self, path: &Path, r: &mut dyn BufRead, n: usize, ty: Scalar, endian: Endian) -> Result<shared::Decoded> {
+    fn decode(
+        &self,
+        path: &Path,
+        r: &mut dyn BufRead,
+        n: usize,
+        ty: Scalar,
+        endian: Endian,
+    ) -> Result<shared::Decoded> {
         if !self.compressed {
             return shared::read_voxels(path, r, n, ty, endian, None);
         }

@@ -12,7 +12,11 @@
 //!   RAS and the origin at 0 (the NIfTI "method 1", as nifti1_io and ITK read it). A sheared
 //!   sform falls back to the qform when there is one, else it is an error.
 //! - NIfTI's world is RAS+; voyage's is LPS: the x and y rows of the affine are negated.
+//! - `pixdim[1..=3]` must be positive and finite even when the sform gives the geometry:
+//!   a header with bad voxel sizes is taken as corrupt.
 //! - Spatial units: metres and microns are converted to mm; "unknown" is taken as mm.
+//! - Gzip streams are read to their end so the CRC-32 is checked: damaged data that still
+//!   inflates is refused rather than loaded.
 //! - Values: `scl_slope`/`scl_inter` are applied when the slope is finite and non-zero (a
 //!   non-finite intercept counts as 0, as nibabel does); results are rounded and saturated
 //!   to `i16`. NaN voxels become -1024 (air) and the count goes into `Meta::notes`, as does
@@ -194,9 +198,7 @@ impl Header {
             512 => Scalar::U16,
             768 => Scalar::U32,
             other => {
-                return Err(format!(
-                    "datatype {other} is not supported (u8, i8, i16, u16, i32, u32, f32, f64 are)"
-                ));
+                return Err(format!("datatype {other} is not supported (u8, i8, i16, u16, i32, u32, f32, f64 are)"));
             }
         })
     }
@@ -273,7 +275,8 @@ impl Header {
         if !origin.is_finite() {
             return Err(format!("origin {origin:?} is not finite"));
         }
-        let mut geom = Geometry { dims, spacing: spacing.to_array(), origin: origin.to_array(), direction: [[0.0; 3]; 3] };
+        let mut geom =
+            Geometry { dims, spacing: spacing.to_array(), origin: origin.to_array(), direction: [[0.0; 3]; 3] };
         geom.set_direction_mat(direction);
         geom.validate().map_err(|e| e.to_string())?;
         Ok((geom, notes))
@@ -623,9 +626,9 @@ pub(crate) mod shared {
             while buf.last().is_some_and(|&c| c == b'\n' || c == b'\r') {
                 buf.pop();
             }
-            String::from_utf8(buf)
-                .map(Some)
-                .map_err(|_| Error::format(self.path, format!("header line ending at byte {} is not text", self.consumed)))
+            String::from_utf8(buf).map(Some).map_err(|_| {
+                Error::format(self.path, format!("header line ending at byte {} is not text", self.consumed))
+            })
         }
     }
 
@@ -644,9 +647,8 @@ pub(crate) mod shared {
 
     /// Checks header dims and returns them with the voxel count.
     pub fn dims3(path: &Path, d: &[u64]) -> Result<([usize; 3], usize)> {
-        let d: [u64; 3] = d
-            .try_into()
-            .map_err(|_| Error::format(path, format!("expected 3 dimensions, found {}", d.len())))?;
+        let d: [u64; 3] =
+            d.try_into().map_err(|_| Error::format(path, format!("expected 3 dimensions, found {}", d.len())))?;
         check_dims(d).map_err(super::at(path))?;
         let dims = d.map(|v| v as usize);
         Ok((dims, dims[0] * dims[1] * dims[2]))
@@ -809,9 +811,7 @@ pub(crate) mod shared {
             .checked_mul(ty.size())
             .ok_or_else(|| Error::format(path, format!("{n} voxels of {} bytes overflow", ty.size())))?;
         let mut voxels = Vec::new();
-        voxels
-            .try_reserve_exact(n)
-            .map_err(|_| Error::format(path, format!("cannot allocate {n} voxels")))?;
+        voxels.try_reserve_exact(n).map_err(|_| Error::format(path, format!("cannot allocate {n} voxels")))?;
         let mut out = Decoded { voxels, nan: 0, clamped: 0 };
         let mut buf = vec![0u8; CHUNK.min(expected)];
         let mut done = 0usize;
@@ -828,11 +828,7 @@ pub(crate) mod shared {
     }
 
     /// Elements of `N` bytes, decoded in the file's byte order.
-    fn samples<const N: usize, T>(
-        bytes: &[u8],
-        big: bool,
-        from_le: impl Fn([u8; N]) -> T,
-    ) -> impl Iterator<Item = T> {
+    fn samples<const N: usize, T>(bytes: &[u8], big: bool, from_le: impl Fn([u8; N]) -> T) -> impl Iterator<Item = T> {
         bytes.as_chunks::<N>().0.iter().map(move |c| {
             let mut c = *c;
             if big {

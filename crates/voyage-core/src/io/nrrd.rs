@@ -115,7 +115,9 @@ impl Header {
     fn read(path: &Path, lines: &mut shared::HeaderLines) -> Result<Header> {
         match lines.next_line() {
             Ok(Some(magic)) if magic.starts_with("NRRD") => {}
-            Ok(_) | Err(Error::Format { .. }) => return Err(Error::format(path, "not a NRRD file (no \"NRRD\" magic)")),
+            Ok(_) | Err(Error::Format { .. }) => {
+                return Err(Error::format(path, "not a NRRD file (no \"NRRD\" magic)"));
+            }
             Err(e) => return Err(e),
         }
         let mut h = Header::default();
@@ -157,9 +159,8 @@ impl Header {
             }
             "space directions" => {
                 let v = vectors(field, value)?;
-                let axes: [DVec3; 3] = v
-                    .try_into()
-                    .map_err(|_| format!("space directions: expected 3 vectors in \"{value}\""))?;
+                let axes: [DVec3; 3] =
+                    v.try_into().map_err(|_| format!("space directions: expected 3 vectors in \"{value}\""))?;
                 self.directions = Some(axes);
             }
             "space origin" => {
@@ -331,10 +332,9 @@ fn open_data(header: &Path, data: &Path) -> Result<(BufReader<std::fs::File>, u6
     let opened = std::fs::File::open(data).and_then(|f| f.metadata().map(|m| (f, m.len())));
     match opened {
         Ok((f, len)) => Ok((BufReader::with_capacity(1 << 16, f), len)),
-        Err(e) => Err(Error::format(
-            header,
-            format!("cannot open the data file {} named by data file: {e}", data.display()),
-        )),
+        Err(e) => {
+            Err(Error::format(header, format!("cannot open the data file {} named by data file: {e}", data.display())))
+        }
     }
 }
 
