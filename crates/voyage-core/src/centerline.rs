@@ -67,7 +67,7 @@ pub fn refine(voxels: &[[usize; 3]], mask: &Volume<u8>, ds: &Field<f32>, opts: &
 /// cost plus the length; a high power (Bitter et al. 2001 use 16) makes narrow places so dear
 /// that the path never takes a short cut where two loops of the colon touch, as they do in
 /// real scans, while in the middle of the lumen it is nearly the plain length.
-pub(crate) fn cost_weight(pad: &Padded, ds: &Field<f32>, opts: &CenterlineOptions) -> Vec<f32> {
+pub fn cost_weight(pad: &Padded, ds: &Field<f32>, opts: &CenterlineOptions) -> Vec<f32> {
     let dmax = ds.data.iter().cloned().fold(0.0f32, f32::max).max(1e-3);
     let k = opts.penalty_scale as f32;
     let p = opts.penalty_power as i32;

@@ -2,9 +2,9 @@
 //! fields of paper Eq. 2 (distance to the target for flying forward, to the source for flying
 //! back); and the centerline between them (paper §4.2).
 //!
-//! The automatic target is the lumen's farthest point from the seed (the rectum's lowest
-//! voxel), the automatic source the farthest point from the target: the colon's two ends.
-//! "Farthest" is measured with the centerline's cost (a path that keeps to the middle), not
+//! The automatic source is the rectum: the candidate nearest the seed (the colon's lowest
+//! voxel, where the rectal tube enters). The automatic target is the cecum, the colon's other
+//! end: the candidate farthest from the source. Near and far are measured with the centerline's cost (a path that keeps to the middle), not
 //! with plain length: in real scans loops of the colon touch, and the plain shortest path
 //! would cut through the contact and find the wrong ends. Only voxels at least a quarter of
 //! the widest radius from the wall are candidates, so an end is never a crevice by the wall.
@@ -50,21 +50,23 @@ pub fn find_endpoints(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], opt
     let wide = candidates(&pad, ds, opts.min_width);
     let given_source = opts.source_mm.map(|p| lumen_voxel(lumen, p, "source")).transpose()?;
     let given_target = opts.target_mm.map(|p| lumen_voxel(lumen, p, "target")).transpose()?;
+    let source = match given_source {
+        Some(s) => s,
+        None => {
+            let from_seed = dial(&pad, &[(pad.lumen_index(seed)?, 0)], sp, Some(&weight), false);
+            pad.global_of_index(nearest(&from_seed.dist, &wide))
+        }
+    };
+    let s = pad.lumen_index(source)?;
     let target = match given_target {
         Some(t) => t,
         None => {
-            let from = pad.lumen_index(given_source.unwrap_or(seed))?;
-            let s = dial(&pad, &[(from, 0)], sp, Some(&weight), false);
-            pad.global_of_index(farthest(&s.dist, &wide))
+            let from_source = dial(&pad, &[(s, 0)], sp, Some(&weight), false);
+            pad.global_of_index(farthest(&from_source.dist, &wide))
         }
     };
     let t = pad.lumen_index(target)?;
     let from_target = dial(&pad, &[(t, 0)], sp, Some(&weight), false);
-    let source = match given_source {
-        Some(s) => s,
-        None => pad.global_of_index(farthest(&from_target.dist, &wide)),
-    };
-    let s = pad.lumen_index(source)?;
     if !from_target.dist[s].is_finite() {
         return Err(Error::invalid(format!(
             "the target {} mm cannot be reached from the source {} mm through the lumen",
@@ -84,6 +86,17 @@ fn candidates(pad: &Padded, ds: &Field<f32>, min_width: f64) -> Vec<bool> {
     let dmax = ds.data.iter().cloned().fold(0.0f32, f32::max);
     let floor = (min_width as f32 * dmax).min(dmax);
     pad.pad(&ds.data, 0.0).into_iter().map(|d| d > 0.0 && d >= floor).collect()
+}
+
+/// The reachable candidate with the smallest distance.
+fn nearest(dist: &[f32], wide: &[bool]) -> usize {
+    let mut best = (f32::INFINITY, 0usize);
+    for (i, (&d, &w)) in dist.iter().zip(wide).enumerate() {
+        if w && d < best.0 {
+            best = (d, i);
+        }
+    }
+    best.1
 }
 
 /// The reachable candidate with the largest distance.

@@ -31,25 +31,25 @@ pub fn geodesic_distance(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3]) 
 }
 
 /// What a search over the padded grid found.
-pub(crate) struct Search {
-    pub(crate) dist: Vec<f32>,
+pub struct Search {
+    pub dist: Vec<f32>,
     /// Per voxel, the label of the source it was reached from (when asked for).
     pub(crate) label: Vec<u32>,
-    pub(crate) far: usize,
-    pub(crate) far_d: f32,
+    pub far: usize,
+    pub far_d: f32,
     pub(crate) reached: usize,
 }
 
 /// The box's mask with one layer of zeros around it, so that the 26 neighbours of every lumen
 /// voxel are valid indices even where the box touches the volume's border.
-pub(crate) struct Padded {
+pub struct Padded {
     pub(crate) grid: BoxGrid,
     pub(crate) dims: [usize; 3],
     pub(crate) inside: Vec<u8>,
 }
 
 impl Padded {
-    pub(crate) fn new(mask: &Volume<u8>, grid: &BoxGrid) -> Self {
+    pub fn new(mask: &Volume<u8>, grid: &BoxGrid) -> Self {
         let dims = grid.dims.map(|d| d + 2);
         let mut inside = vec![0u8; dims[0] * dims[1] * dims[2]];
         let g = mask.geometry();
@@ -66,13 +66,13 @@ impl Padded {
     }
 
     /// Padded index of a volume voxel that must be lumen.
-    pub(crate) fn lumen_index(&self, v: [usize; 3]) -> Result<usize> {
+    pub fn lumen_index(&self, v: [usize; 3]) -> Result<usize> {
         self.index_of_global(v)
             .filter(|&i| self.inside[i] != 0)
             .ok_or_else(|| Error::invalid(format!("the voxel {v:?} is not in the lumen")))
     }
 
-    pub(crate) fn geodesic(&self, mask: &Volume<u8>, r: Search) -> Geodesic {
+    pub fn geodesic(&self, mask: &Volume<u8>, r: Search) -> Geodesic {
         Geodesic {
             dist: Field { grid: self.grid.clone(), geometry: mask.geometry().clone(), data: self.unpad(&r.dist) },
             farthest: self.global_of_index(r.far),
@@ -81,19 +81,19 @@ impl Padded {
         }
     }
 
-    pub(crate) fn index_of_global(&self, g: [usize; 3]) -> Option<usize> {
+    pub fn index_of_global(&self, g: [usize; 3]) -> Option<usize> {
         let l = self.grid.index_of_global(g).map(|i| self.grid.ijk(i))?;
         Some(l[0] + 1 + self.dims[0] * (l[1] + 1 + self.dims[1] * (l[2] + 1)))
     }
 
-    pub(crate) fn global_of_index(&self, idx: usize) -> [usize; 3] {
+    pub fn global_of_index(&self, idx: usize) -> [usize; 3] {
         let [nx, ny, _] = self.dims;
         let p = [idx % nx, (idx / nx) % ny, idx / (nx * ny)];
         [0, 1, 2].map(|a| p[a] - 1 + self.grid.lo[a])
     }
 
     /// 26 neighbour offsets and their lengths in mm.
-    pub(crate) fn neighbours(&self, spacing: [f64; 3]) -> Vec<(isize, f32)> {
+    pub fn neighbours(&self, spacing: [f64; 3]) -> Vec<(isize, f32)> {
         let (nx, ny) = (self.dims[0] as isize, self.dims[1] as isize);
         let mut out = Vec::with_capacity(26);
         for dk in -1isize..=1 {
@@ -111,7 +111,7 @@ impl Padded {
     }
 
     /// Copies a box-layout field into the padded layout (`fill` in the padding).
-    pub(crate) fn pad(&self, v: &[f32], fill: f32) -> Vec<f32> {
+    pub fn pad(&self, v: &[f32], fill: f32) -> Vec<f32> {
         let [bx, by, bz] = self.grid.dims;
         let mut out = vec![fill; self.inside.len()];
         for k in 0..bz {
@@ -125,7 +125,7 @@ impl Padded {
     }
 
     /// Copies a padded-layout field back to the box layout.
-    pub(crate) fn unpad(&self, v: &[f32]) -> Vec<f32> {
+    pub fn unpad(&self, v: &[f32]) -> Vec<f32> {
         let [bx, by, bz] = self.grid.dims;
         let mut out = Vec::with_capacity(self.grid.len());
         for k in 0..bz {
@@ -144,7 +144,7 @@ impl Padded {
 /// length times (w(u) + w(v)) / 2; the bucket width is then the shortest edge times w_min,
 /// which keeps the buckets exact. With `labels`, each voxel records the label of the source
 /// whose search reached it first (a geodesic Voronoi partition).
-pub(crate) fn dial(pad: &Padded, sources: &[(usize, u32)], spacing: [f64; 3], weight: Option<&[f32]>, labels: bool) -> Search {
+pub fn dial(pad: &Padded, sources: &[(usize, u32)], spacing: [f64; 3], weight: Option<&[f32]>, labels: bool) -> Search {
     let nbrs = pad.neighbours(spacing);
     let (w_min, w_max) = match weight {
         Some(w) => w.iter().zip(&pad.inside).filter(|(_, m)| **m != 0).fold((f32::INFINITY, 0.0f32), |(lo, hi), (&x, _)| (lo.min(x), hi.max(x))),
