@@ -143,10 +143,12 @@ pub fn build_cells(lumen: &Volume<u8>, dt_source: &Field<f32>, centerline: &Cent
         }
     }
     set_spans(&mut cells, &cl_dt, &levels);
+    let boundaries = boundary_points(&voxel_cell, levels.len(), lumen.spacing())?;
     let portals = levels
         .iter()
+        .zip(boundaries)
         .enumerate()
-        .map(|(c, &level)| make_portal(&voxel_cell, c as u16, level, centerline, &cl_dt, lumen.spacing()))
+        .map(|(c, (&level, pts))| make_portal(pts, c, level, centerline, &cl_dt, lumen.spacing()))
         .collect::<Result<Vec<_>>>()?;
     Ok(Cells { cells, portals, voxel_cell, triangle_cell })
 }
@@ -220,13 +222,12 @@ fn set_spans(cells: &mut [Cell], cl_dt: &[f64], levels: &[f64]) {
 /// The portal between cells `c` and `c + 1`: boundary voxels (in either cell, 26-adjacent to
 /// the other) projected on the plane across the centerline at the cut; their convex hull,
 /// grown by half a voxel diagonal; the thickness their spread out of the plane.
-fn make_portal(cells: &Field<u16>, c: u16, level: f64, cl: &Centerline, cl_dt: &[f64], sp: [f64; 3]) -> Result<Portal> {
+fn make_portal(pts: Vec<DVec3>, c: usize, level: f64, cl: &Centerline, cl_dt: &[f64], sp: [f64; 3]) -> Result<Portal> {
     let at = cl_dt.partition_point(|&d| d < level).min(cl.points_mm.len() - 1);
     let centre = DVec3::from_array(cl.points_mm[at]);
     let a = DVec3::from_array(cl.points_mm[at.saturating_sub(2)]);
     let b = DVec3::from_array(cl.points_mm[(at + 2).min(cl.points_mm.len() - 1)]);
     let normal = (b - a).normalize_or(DVec3::Z);
-    let pts = boundary_points(cells, c, sp);
     if pts.is_empty() {
         return Err(Error::invalid(format!("cells {c} and {} do not touch", c + 1)));
     }
@@ -246,44 +247,53 @@ fn make_portal(cells: &Field<u16>, c: u16, level: f64, cl: &Centerline, cl_dt: &
     Ok(Portal { level_mm: level, centerline_index: at, centre_mm: centre.to_array(), normal: normal.to_array(), polygon_mm, half_thickness_mm: depth + half })
 }
 
-/// Centres (volume-local mm) of voxels of cell `c` or `c+1` that touch the other cell.
-fn boundary_points(cells: &Field<u16>, c: u16, sp: [f64; 3]) -> Vec<DVec3> {
+/// For each cut c, the centres (volume-local mm) of the voxels on either side of it: voxels
+/// of cells c and c + 1 that are 26-adjacent. One pass over the box, each neighbour pair seen
+/// once. Cells further apart than one must never touch (that is the guarantee visibility
+/// needs); if they do, that is an error.
+fn boundary_points(cells: &Field<u16>, cuts: usize, sp: [f64; 3]) -> Result<Vec<Vec<DVec3>>> {
     let [nx, ny, nz] = cells.grid.dims;
     let lo = cells.grid.lo;
-    let mut out = Vec::new();
-    for k in 0..nz {
-        for j in 0..ny {
-            for i in 0..nx {
-                let me = cells.data[cells.grid.index(i, j, k)];
-                if me != c && me != c + 1 {
-                    continue;
-                }
-                let other = if me == c { c + 1 } else { c };
-                if touches(cells, [i, j, k], other) {
-                    out.push(DVec3::new(((i + lo[0]) as f64) * sp[0], ((j + lo[1]) as f64) * sp[1], ((k + lo[2]) as f64) * sp[2]));
-                }
-            }
-        }
-    }
-    out
-}
-
-fn touches(cells: &Field<u16>, p: [usize; 3], other: u16) -> bool {
-    let d = cells.grid.dims;
+    let centre = |i: usize, j: usize, k: usize| DVec3::new(((i + lo[0]) as f64) * sp[0], ((j + lo[1]) as f64) * sp[1], ((k + lo[2]) as f64) * sp[2]);
+    // The 13 "forward" neighbour offsets: each unordered pair once.
+    let mut offs = Vec::with_capacity(13);
     for dk in -1i64..=1 {
         for dj in -1i64..=1 {
             for di in -1i64..=1 {
-                let q = [p[0] as i64 + di, p[1] as i64 + dj, p[2] as i64 + dk];
-                if q.iter().zip(&d).any(|(&x, &n)| x < 0 || x >= n as i64) {
-                    continue;
-                }
-                if cells.data[cells.grid.index(q[0] as usize, q[1] as usize, q[2] as usize)] == other {
-                    return true;
+                if (dk, dj, di) > (0, 0, 0) {
+                    offs.push((di, dj, dk));
                 }
             }
         }
     }
-    false
+    let mut out: Vec<Vec<DVec3>> = vec![Vec::new(); cuts];
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                let a = cells.data[cells.grid.index(i, j, k)];
+                if a == u16::MAX {
+                    continue;
+                }
+                for &(di, dj, dk) in &offs {
+                    let (qi, qj, qk) = (i as i64 + di, j as i64 + dj, k as i64 + dk);
+                    if qi < 0 || qj < 0 || qi >= nx as i64 || qj >= ny as i64 || qk >= nz as i64 {
+                        continue;
+                    }
+                    let b = cells.data[cells.grid.index(qi as usize, qj as usize, qk as usize)];
+                    if b == u16::MAX || b == a {
+                        continue;
+                    }
+                    if a.abs_diff(b) != 1 {
+                        return Err(Error::invalid(format!("cells {a} and {b} touch: the cuts are too close")));
+                    }
+                    let cut = a.min(b) as usize;
+                    out[cut].push(centre(i, j, k));
+                    out[cut].push(centre(qi as usize, qj as usize, qk as usize));
+                }
+            }
+        }
+    }
+    Ok(out)
 }
 
 /// Two unit vectors spanning the plane with this normal, (u, v, normal) right-handed.
