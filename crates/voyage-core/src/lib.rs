@@ -10,6 +10,7 @@ pub mod centerline;
 pub mod distance;
 pub mod endpoints;
 pub mod error;
+pub mod export;
 pub mod field;
 pub mod io;
 pub mod phantom;

@@ -34,10 +34,12 @@ pub fn geodesic_distance(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3]) 
 pub struct Search {
     pub dist: Vec<f32>,
     /// Per voxel, the label of the source it was reached from (when asked for).
-    pub(crate) label: Vec<u32>,
+    pub label: Vec<u32>,
     pub far: usize,
     pub far_d: f32,
-    pub(crate) reached: usize,
+    pub reached: usize,
+    /// Queue pushes (≥ reached; the excess is voxels improved after first being queued).
+    pub pushes: usize,
 }
 
 /// The box's mask with one layer of zeros around it, so that the 26 neighbours of every lumen
@@ -158,11 +160,13 @@ pub fn dial(pad: &Padded, sources: &[(usize, u32)], spacing: [f64; 3], weight: O
     let ring = (longest * w_max / width).ceil() as usize + 2;
     let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); ring];
     let n = pad.inside.len();
-    let mut dist = vec![f32::INFINITY; n];
-    // 0 wall, 1 lumen not yet settled, 2 settled: one byte read per neighbour.
-    let mut state = pad.inside.clone();
+    // Walls start at distance 0, so that `candidate < dist[v]` is never true for them and the
+    // inner loop needs no separate test of what the neighbour is; they become +∞ at the end.
+    let mut dist: Vec<f32> = pad.inside.iter().map(|&m| if m != 0 { f32::INFINITY } else { 0.0 }).collect();
+    let mut settled = vec![false; n];
     let mut label = if labels { vec![u32::MAX; n] } else { Vec::new() };
     let mut pending = 0usize;
+    let mut pushes = 0usize;
     for &(s, l) in sources {
         if dist[s] > 0.0 {
             dist[s] = 0.0;
@@ -183,10 +187,10 @@ pub fn dial(pad: &Padded, sources: &[(usize, u32)], spacing: [f64; 3], weight: O
             pending -= work.len();
             for &u in &work {
                 let u = u as usize;
-                if state[u] == 2 {
+                if settled[u] {
                     continue;
                 }
-                state[u] = 2;
+                settled[u] = true;
                 reached += 1;
                 let du = dist[u];
                 if du > far_d {
@@ -196,13 +200,12 @@ pub fn dial(pad: &Padded, sources: &[(usize, u32)], spacing: [f64; 3], weight: O
                 let wu = weight.map_or(1.0, |w| w[u]);
                 for &(off, len) in &nbrs {
                     let v = (u as isize + off) as usize;
-                    if state[v] != 1 {
-                        continue;
-                    }
                     let dv = match weight {
                         Some(w) => du + len * 0.5 * (wu + w[v]),
                         None => du + len,
                     };
+                    // Settled voxels are never improved (dv ≥ their distance, bar rounding,
+                    // which the `settled` test at pop absorbs); walls hold 0.
                     if dv < dist[v] {
                         dist[v] = dv;
                         if labels {
@@ -213,6 +216,7 @@ pub fn dial(pad: &Padded, sources: &[(usize, u32)], spacing: [f64; 3], weight: O
                         let b = ((dv / width) as usize).max(current);
                         buckets[b % ring].push(v as u32);
                         pending += 1;
+                        pushes += 1;
                     }
                 }
             }
@@ -220,7 +224,12 @@ pub fn dial(pad: &Padded, sources: &[(usize, u32)], spacing: [f64; 3], weight: O
         }
         current += 1;
     }
-    Search { dist, label, far, far_d, reached }
+    for (d, &m) in dist.iter_mut().zip(&pad.inside) {
+        if m == 0 {
+            *d = f32::INFINITY;
+        }
+    }
+    Search { dist, label, far, far_d, reached, pushes }
 }
 
 #[cfg(test)]

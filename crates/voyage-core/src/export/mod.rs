@@ -1,0 +1,10 @@
+//! Exports that other tools open. With `io/`, the only place that writes files; every file
+//! is written atomically (temp + rename). Patient coordinates (LPS mm) are used here, at the
+//! edge, and nowhere inside the pipeline. No patient identity is ever written.
+
+pub mod markups;
+pub mod mesh;
+pub mod study;
+
+pub use markups::{write_markups_curve, MarkupsPoint};
+pub use mesh::{write_ply, write_stl};

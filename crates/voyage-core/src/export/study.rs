@@ -1,0 +1,86 @@
+//! The files `voyage prep` writes from a [`Study`].
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use glam::DVec3;
+use serde_json::json;
+
+use super::{write_markups_curve, write_ply, write_stl, MarkupsPoint};
+use crate::io::{atomic::write_atomic, nifti};
+use crate::prep::Study;
+use crate::Result;
+
+/// Writes every export of a study into `dir`; returns the paths written.
+pub fn write_study(dir: &Path, study: &Study) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir).map_err(|e| crate::Error::io(dir, e))?;
+    let g = study.ct.geometry();
+    let mut out = Vec::new();
+    let mut put = |name: &str| {
+        let p = dir.join(name);
+        out.push(p.clone());
+        p
+    };
+    nifti::save(&put("lumen.nii.gz"), &study.segmentation.lumen)?;
+    nifti::save(&put("ds.nii.gz"), &study.ds.to_volume(0.0)?)?;
+    let cl = &study.centerline;
+    let lps: Vec<[f64; 3]> = cl.points_mm.iter().map(|p| g.local_to_patient(DVec3::from_array(*p)).to_array()).collect();
+    let cl_json = json!({
+        "frame": "points_mm: volume-local mm (x = i·sx, y = j·sy, z = k·sz); points_lps_mm: DICOM patient LPS",
+        "length_mm": cl.length_mm,
+        "source_mm": study.source_mm().to_array(),
+        "target_mm": study.target_mm().to_array(),
+        "points_mm": cl.points_mm,
+        "points_lps_mm": lps,
+        "arc_mm": cl.arc_mm,
+        "radius_mm": cl.radius_mm,
+    });
+    write_json(&put("centerline.json"), &cl_json)?;
+    let points: Vec<MarkupsPoint> = lps
+        .iter()
+        .step_by(5)
+        .chain(lps.last())
+        .enumerate()
+        .map(|(i, p)| MarkupsPoint { label: format!("CL-{}", i + 1), position_lps: *p, description: String::new() })
+        .collect();
+    write_markups_curve(&put("centerline.mrk.json"), "Centerline", &points)?;
+    write_ply(&put("surface.ply"), &study.surface.mesh, g)?;
+    write_stl(&put("surface.stl"), &study.surface.mesh, g)?;
+    let cells: Vec<_> = study
+        .cells
+        .cells
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let portal = |p: Option<usize>| {
+                p.map(|p| {
+                    let portal = &study.cells.portals[p];
+                    json!({
+                        "index": p,
+                        "centre_mm": portal.centre_mm,
+                        "normal": portal.normal,
+                        "polygon_mm": portal.polygon_mm,
+                        "polygon_lps_mm": portal.polygon_mm.iter().map(|q| g.local_to_patient(DVec3::from_array(*q)).to_array()).collect::<Vec<_>>(),
+                        "half_thickness_mm": portal.half_thickness_mm,
+                    })
+                })
+            };
+            json!({
+                "cell": i,
+                "triangles": c.triangles.len(),
+                "voxels": c.voxels,
+                "centerline_span": [c.centerline_span.0, c.centerline_span.1],
+                "arc_mm": [cl.arc_mm[c.centerline_span.0], cl.arc_mm[c.centerline_span.1]],
+                "portal_back": portal(c.portal_back),
+                "portal_front": portal(c.portal_front),
+            })
+        })
+        .collect();
+    write_json(&put("cells.json"), &json!({ "frame": "volume-local mm, with LPS copies", "cells": cells }))?;
+    Ok(out)
+}
+
+fn write_json(path: &Path, v: &serde_json::Value) -> Result<()> {
+    let text = serde_json::to_string_pretty(v).expect("plain data") + "\n";
+    write_atomic(path, |w| w.write_all(text.as_bytes()))
+}
