@@ -3,6 +3,7 @@
 mod bench;
 mod info;
 mod phantom;
+mod prep;
 
 use std::path::PathBuf;
 
@@ -30,6 +31,8 @@ enum Command {
         #[arg(long)]
         small: bool,
     },
+    /// Preprocess a CT or lumen mask: colon, distance fields, centerline, surface, cells.
+    Prep(prep::PrepArgs),
     /// Benchmarks against reference libraries.
     Bench(bench::BenchArgs),
 }
@@ -39,6 +42,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Info(a) => info::run(&a),
         Command::Phantom(a) => phantom::run(&a),
         Command::Demo { out, small } => phantom::demo(&out, small),
+        Command::Prep(a) => prep::run(&a),
         Command::Bench(a) => bench::run(&a),
     }
 }

@@ -1,0 +1,174 @@
+//! `voyage prep INPUT --out DIR`: the whole preprocessing, with its exports.
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, ValueEnum};
+use glam::DVec3;
+use indicatif::{ProgressBar, ProgressStyle};
+use serde_json::json;
+use voyage_core::export::study::write_study;
+use voyage_core::io::{self, LoadOptions};
+use voyage_core::prep::{prepare, PrepOptions, Stage, Study};
+use voyage_core::Geometry;
+
+#[derive(Clone, Copy, Debug, Default, ValueEnum)]
+pub enum Frame {
+    /// DICOM patient coordinates (LPS mm), as viewers show them.
+    #[default]
+    Lps,
+    /// Volume-local mm (x = i·sx, y = j·sy, z = k·sz), as the phantoms' truth files give them.
+    Local,
+}
+
+#[derive(Args, Debug)]
+pub struct PrepArgs {
+    /// A CT (DICOM folder or file, NIfTI, MetaImage, NRRD) or a lumen mask (0/1 labels).
+    pub input: PathBuf,
+    /// Folder for the exports (created if missing).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Print one JSON object with counts and timings.
+    #[arg(long)]
+    pub json: bool,
+    /// Treat the input as a lumen mask (default: detected, values only 0 and 1).
+    #[arg(long)]
+    pub mask: bool,
+    /// A point in the colon's air to grow from (mm, see --frame).
+    #[arg(long, value_parser = parse_point)]
+    pub seed: Option<DVec3>,
+    /// The rectum end of the flight (mm, see --frame).
+    #[arg(long, value_parser = parse_point)]
+    pub source: Option<DVec3>,
+    /// The cecum end of the flight (mm, see --frame).
+    #[arg(long, value_parser = parse_point)]
+    pub target: Option<DVec3>,
+    /// The frame of --seed, --source and --target.
+    #[arg(long, value_enum, default_value_t = Frame::Lps)]
+    pub frame: Frame,
+    /// DICOM: which series to load when the folder holds several.
+    #[arg(long)]
+    pub series: Option<String>,
+}
+
+fn parse_point(s: &str) -> Result<DVec3, String> {
+    let v: Vec<f64> = s.split(',').map(|x| x.trim().parse::<f64>()).collect::<Result<_, _>>().map_err(|e| format!("{s}: {e}"))?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(DVec3::new(x, y, z)),
+        _ => Err(format!("{s}: expected three numbers x,y,z")),
+    }
+}
+
+pub fn run(a: &PrepArgs) -> Result<()> {
+    let t0 = Instant::now();
+    let loaded = io::load(&a.input, &LoadOptions { series_uid: a.series.clone() })?;
+    let load_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let g = loaded.volume.geometry().clone();
+    let to_local = |p: DVec3| match a.frame {
+        Frame::Lps => g.patient_to_local(p),
+        Frame::Local => p,
+    };
+    let mut opts = PrepOptions::default();
+    opts.segment.seed_mm = a.seed.map(to_local);
+    opts.segment.mask = a.mask.then_some(true);
+    opts.endpoints.source_mm = a.source.map(to_local);
+    opts.endpoints.target_mm = a.target.map(to_local);
+
+    let bar = progress_bar();
+    let study = prepare(loaded.volume, &opts, |stage| {
+        if let Some(b) = &bar {
+            b.set_message(stage.name());
+            b.set_position(Stage::ALL.iter().position(|s| *s == stage).unwrap_or(0) as u64);
+        }
+    })
+    .with_context(|| format!("{}", a.input.display()))?;
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let written = write_study(&a.out, &study)?;
+    if study.centerline.points_mm.len() < 2 {
+        bail!("{}: the centerline is empty", a.input.display());
+    }
+    let summary = summary(&study, &g, load_ms);
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        print_text(&study, &g, load_ms);
+        for p in written {
+            println!("  wrote {}", p.display());
+        }
+    }
+    Ok(())
+}
+
+fn progress_bar() -> Option<ProgressBar> {
+    if !std::io::stderr().is_terminal() {
+        return None;
+    }
+    let b = ProgressBar::new(Stage::ALL.len() as u64);
+    b.set_style(ProgressStyle::with_template("{bar:30} {pos}/{len} {msg}").ok()?);
+    Some(b)
+}
+
+fn summary(s: &Study, g: &Geometry, load_ms: f64) -> serde_json::Value {
+    let t = &s.timings;
+    json!({
+        "lumen_voxels": s.segmentation.lumen_voxels,
+        "from_mask": s.segmentation.from_mask,
+        "components": s.segmentation.components.iter().map(|c| c.voxels).collect::<Vec<_>>(),
+        "component_details": s.segmentation.components,
+        "source_mm": s.source_mm().to_array(),
+        "target_mm": s.target_mm().to_array(),
+        "source_lps_mm": g.local_to_patient(s.source_mm()).to_array(),
+        "target_lps_mm": g.local_to_patient(s.target_mm()).to_array(),
+        "centerline_length_mm": s.centerline.length_mm,
+        "cells": s.cells.cells.len(),
+        "triangles": s.surface.mesh.triangles.len(),
+        "timings_ms": {
+            "load": load_ms,
+            "segment": t.segment,
+            "ds": t.ds,
+            "dt": t.dt,
+            "centerline": t.centerline,
+            "cells": t.cells,
+            "surface": t.surface,
+            "total_after_load": t.total_after_load,
+        },
+        "peak_rss_mb": peak_rss_mb(),
+    })
+}
+
+fn print_text(s: &Study, g: &Geometry, load_ms: f64) {
+    let seg = &s.segmentation;
+    println!("lumen       {} voxels ({:.0} ml){}", seg.lumen_voxels, seg.components.first().map_or(0.0, |c| c.volume_ml), if seg.from_mask { ", from a mask" } else { "" });
+    for c in &seg.components {
+        println!("  gas       {:>9} voxels {:>8.1} ml  {:?}", c.voxels, c.volume_ml, c.kind);
+    }
+    if seg.small_components > 0 {
+        println!("  gas       {} smaller pockets", seg.small_components);
+    }
+    let lps = |p: DVec3| g.local_to_patient(p);
+    println!("source      {:.1?} mm LPS (rectum)", lps(s.source_mm()).to_array());
+    println!("target      {:.1?} mm LPS (cecum)", lps(s.target_mm()).to_array());
+    println!("centerline  {:.0} mm, {} points", s.centerline.length_mm, s.centerline.points_mm.len());
+    println!("surface     {} triangles, {} vertices", s.surface.mesh.triangles.len(), s.surface.mesh.positions.len());
+    println!("cells       {}", s.cells.cells.len());
+    let t = &s.timings;
+    println!(
+        "time        load {load_ms:.0} ms; segment {:.0}, ds {:.0}, dt {:.0}, centerline {:.0}, surface {:.0}, cells {:.0}; total after load {:.0} ms",
+        t.segment, t.ds, t.dt, t.centerline, t.surface, t.cells, t.total_after_load
+    );
+    if let Some(mb) = peak_rss_mb() {
+        println!("memory      peak {mb:.0} MB");
+    }
+}
+
+/// Peak resident memory of this process (Linux), MB.
+pub fn peak_rss_mb() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
+}
