@@ -378,7 +378,7 @@ fn cut_files_and_garbage_never_panic() {
         }
     }
     let mut state = 12345u64;
-    for round in 0..300 {
+    for round in 0..1000 {
         let mut b = bytes.clone();
         for _ in 0..4 {
             state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);

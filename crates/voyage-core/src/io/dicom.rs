@@ -950,8 +950,13 @@ fn read_pixel_data(h: &Header) -> Result<Raw> {
     let raw = guarded(path, &format!("decoding pixel data ({name})"), || {
         let mut obj = match open_dicom(path, None) {
             Ok(obj) => obj,
-            Err(OpenError::Parse(e)) => return Err(unreadable_pixel_data(path, &h.ts_uid, expected, &e)),
-            Err(e) => return Err(e.into_error(path, "not a readable DICOM file")),
+            Err(OpenError::Truncated { declared, found }) if declared as usize >= expected => {
+                return Err(Error::format(
+                    path,
+                    format!("pixel data truncated: expected {expected} bytes, found {found} (the file ends early)"),
+                ));
+            }
+            Err(e) => return Err(e.into_error(path, "pixel data unreadable")),
         };
         extract_pixels(path, &mut obj, &h.ts_uid, &name)
     })?;
@@ -1021,39 +1026,6 @@ fn extract_pixels(path: &Path, obj: &mut DefaultDicomObject, ts_uid: &str, name:
         }
         Value::Sequence(_) => Err(decode_error("pixel data is a sequence, not pixel values".into())),
     }
-}
-
-/// The file's header read fine but the whole file did not: the pixel data is cut short or
-/// corrupt. Says how many bytes are there when the element can be found.
-fn unreadable_pixel_data(path: &Path, ts_uid: &str, expected: usize, e: &dyn std::error::Error) -> Error {
-    let big_endian = ts_uid == "1.2.840.10008.1.2.2";
-    let implicit = ts_uid == "1.2.840.10008.1.2";
-    match std::fs::read(path).ok().and_then(|bytes| pixel_value_offset(&bytes, big_endian, implicit).map(|o| bytes.len() - o)) {
-        Some(found) if found < expected => Error::format(
-            path,
-            format!("pixel data truncated: expected {expected} bytes, found {found} (the file ends early)"),
-        ),
-        _ => Error::format(path, format!("pixel data unreadable (file cut short or corrupt): {}", error_chain(e))),
-    }
-}
-
-/// Byte offset of the PixelData value in a file, found by its element header (used only to
-/// report how much of a truncated file is there).
-fn pixel_value_offset(bytes: &[u8], big_endian: bool, implicit: bool) -> Option<usize> {
-    let tag: [u8; 4] = if big_endian { [0x7F, 0xE0, 0x00, 0x10] } else { [0xE0, 0x7F, 0x10, 0x00] };
-    let mut at = 132;
-    while at + 12 <= bytes.len() {
-        let rel = bytes[at..].windows(4).position(|w| w == tag)?;
-        let start = at + rel;
-        if implicit {
-            return Some((start + 8).min(bytes.len()));
-        }
-        if start + 12 <= bytes.len() && matches!(&bytes[start + 4..start + 8], b"OW\0\0" | b"OB\0\0") {
-            return Some(start + 12);
-        }
-        at = start + 1;
-    }
-    None
 }
 
 /// Turns frame `frame` of a file's pixel data into HU: mask to BitsStored, extend the sign,
@@ -1237,6 +1209,8 @@ enum OpenError {
     Io(std::io::Error),
     /// The file meta information (group 0002) is unusable; the message says why.
     Meta(String),
+    /// The top-level pixel data element announces more bytes than the file has left.
+    Truncated { declared: u32, found: u64 },
     /// dicom-rs could not parse the data set.
     Parse(dicom_object::ReadError),
 }
@@ -1246,6 +1220,10 @@ impl OpenError {
         match self {
             OpenError::Io(e) => Error::io(path, e),
             OpenError::Meta(m) => Error::format(path, format!("{what}: {m}")),
+            OpenError::Truncated { declared, found } => Error::format(
+                path,
+                format!("pixel data truncated: the element announces {declared} bytes, found {found}"),
+            ),
             OpenError::Parse(e) if ends_early(&e) => {
                 Error::format(path, format!("{what}: the file is cut short (truncated): {}", error_chain(&e)))
             }
@@ -1299,6 +1277,25 @@ fn open_dicom(path: &Path, until: Option<Tag>) -> std::result::Result<DefaultDic
             "cannot decode pixel data (transfer syntax {}): not supported by voyage's DICOM reader",
             describe_unknown_ts(&meta.ts_uid)
         )));
+    }
+    if let Some(layout) = Layout::of(&meta.ts_uid) {
+        let size = file.metadata().map_err(OpenError::Io)?.len();
+        loop {
+            match scan_lengths(&buf, meta.end, size, layout) {
+                Scan::Sound => break,
+                Scan::NeedMore(upto) if !eof && (buf.len() as u64) < size => {
+                    let want = upto.max(buf.len() * 2).min(size as usize) - buf.len();
+                    let got = (&mut file).take(want as u64).read_to_end(&mut buf).map_err(OpenError::Io)?;
+                    eof = got < want;
+                }
+                // Cut short within the header: dicom-rs reports where.
+                Scan::NeedMore(_) => break,
+                // The header pass stops before the pixel data; the pixel pass reports this.
+                Scan::Truncated { .. } if until.is_some() => break,
+                Scan::Truncated { declared, found } => return Err(OpenError::Truncated { declared, found }),
+                Scan::Bad(m) => return Err(OpenError::Meta(m)),
+            }
+        }
     }
     let source = Cursor::new(meta.clean).chain(Cursor::new(buf.split_off(meta.end))).chain(file);
     let mut options = OpenFileOptions::new().read_preamble(dicom_object::file::ReadPreamble::Never);
@@ -1420,4 +1417,140 @@ fn put_meta_element(out: &mut Vec<u8>, element: u16, vr: &[u8; 2], value: &[u8])
         out.extend_from_slice(&(value.len() as u16).to_le_bytes());
     }
     out.extend_from_slice(value);
+}
+
+/// How a data set is encoded, for [`scan_lengths`].
+#[derive(Clone, Copy)]
+struct Layout {
+    explicit: bool,
+    big_endian: bool,
+}
+
+impl Layout {
+    /// `None` for deflated data sets, which cannot be scanned before inflating.
+    fn of(ts_uid: &str) -> Option<Layout> {
+        let ts = TransferSyntaxRegistry.get(ts_uid)?;
+        if matches!(ts.codec(), dicom_encoding::transfer_syntax::Codec::Dataset(_)) {
+            return None;
+        }
+        Some(Layout { explicit: ts_uid != "1.2.840.10008.1.2", big_endian: ts.endianness() == Endianness::Big })
+    }
+
+    fn u16(&self, b: &[u8]) -> u16 {
+        if self.big_endian { u16::from_be_bytes([b[0], b[1]]) } else { u16::from_le_bytes([b[0], b[1]]) }
+    }
+
+    fn u32(&self, b: &[u8]) -> u32 {
+        if self.big_endian { u32::from_be_bytes([b[0], b[1], b[2], b[3]]) } else { u32::from_le_bytes([b[0], b[1], b[2], b[3]]) }
+    }
+}
+
+enum Scan {
+    /// Every length up to the top-level pixel data (or the end) fits in the file.
+    Sound,
+    /// Needs the file's bytes up to this offset.
+    NeedMore(usize),
+    Truncated { declared: u32, found: u64 },
+    Bad(String),
+}
+
+const UNDEFINED: u32 = 0xFFFF_FFFF;
+const MAX_NESTING: usize = 64;
+
+/// Walks the element headers of a data set (descending into sequences and items) and checks
+/// that every announced length fits in what is left of the file. dicom-rs allocates and zeroes
+/// a buffer of the announced length before reading a value, so a corrupt length would
+/// otherwise cost gigabytes of memory before the read fails.
+fn scan_lengths(buf: &[u8], start: usize, file_size: u64, layout: Layout) -> Scan {
+    // Open containers: `Some(end)` for a defined length, `None` for one closed by a delimiter.
+    let mut open: Vec<Option<usize>> = Vec::new();
+    let mut pos = start;
+    loop {
+        while let Some(Some(end)) = open.last() {
+            if pos < *end {
+                break;
+            }
+            open.pop();
+        }
+        if pos as u64 >= file_size {
+            return Scan::Sound;
+        }
+        if pos + 8 > buf.len() {
+            return Scan::NeedMore(pos + 12);
+        }
+        let (group, element) = (layout.u16(&buf[pos..]), layout.u16(&buf[pos + 2..]));
+        if group == 0xFFFE {
+            // Item (E000) opens a container; delimiters (E00D, E0DD) close one.
+            let len = layout.u32(&buf[pos + 4..]);
+            if element == 0xE000 {
+                if let Some(bad) = check_len(group, element, len, pos + 8, file_size) {
+                    return bad;
+                }
+                open.push((len != UNDEFINED).then_some(pos + 8 + len as usize));
+            } else if open.last().is_some_and(Option::is_none) {
+                open.pop();
+            }
+            pos += 8;
+        } else {
+            let (header, len, sequence) = match element_header(buf, pos, layout) {
+                Some(h) => h,
+                None => return Scan::NeedMore(pos + 12),
+            };
+            let value = pos + header;
+            if (group, element) == (0x7FE0, 0x0010) && open.is_empty() {
+                let found = file_size.saturating_sub(value as u64);
+                return if len != UNDEFINED && u64::from(len) > found {
+                    Scan::Truncated { declared: len, found }
+                } else {
+                    Scan::Sound
+                };
+            }
+            if let Some(bad) = check_len(group, element, len, value, file_size) {
+                return bad;
+            }
+            if sequence || len == UNDEFINED {
+                open.push((len != UNDEFINED).then_some(value + len as usize));
+                pos = value;
+            } else {
+                pos = value + len as usize;
+            }
+        }
+        if open.len() > MAX_NESTING {
+            return Scan::Bad(format!("sequences nested more than {MAX_NESTING} deep"));
+        }
+    }
+}
+
+/// Header size, value length and whether the element is a sequence to descend into.
+fn element_header(buf: &[u8], pos: usize, layout: Layout) -> Option<(usize, u32, bool)> {
+    if !layout.explicit {
+        let len = layout.u32(&buf[pos + 4..]);
+        // Implicit VR does not say SQ: a defined-length value that starts with an item tag is one.
+        let item = pos + 12 <= buf.len() && layout.u16(&buf[pos + 8..]) == 0xFFFE && layout.u16(&buf[pos + 10..]) == 0xE000;
+        return Some((8, len, item));
+    }
+    let vr = &buf[pos + 4..pos + 6];
+    // As in PS3.5 7.1.2 and dicom-rs: these VRs have a 16-bit length; all others, unknown
+    // (corrupt) ones included, have two reserved bytes and a 32-bit length.
+    let short = matches!(
+        vr,
+        b"AE" | b"AS" | b"AT" | b"CS" | b"DA" | b"DS" | b"DT" | b"FL" | b"FD" | b"IS" | b"LO" | b"LT" | b"PN" | b"SH" | b"SL" | b"SS" | b"ST" | b"TM" | b"UI" | b"UL" | b"US"
+    );
+    if !short {
+        if pos + 12 > buf.len() {
+            return None;
+        }
+        Some((12, layout.u32(&buf[pos + 8..]), vr == b"SQ"))
+    } else {
+        Some((8, u32::from(layout.u16(&buf[pos + 6..])), false))
+    }
+}
+
+fn check_len(group: u16, element: u16, len: u32, value: usize, file_size: u64) -> Option<Scan> {
+    let left = file_size.saturating_sub(value as u64);
+    (len != UNDEFINED && u64::from(len) > left).then(|| {
+        Scan::Bad(format!(
+            "the file is cut short or corrupt: element ({group:04X},{element:04X}) announces {len} bytes, but only {left} remain"
+        ))
+    })
 }
