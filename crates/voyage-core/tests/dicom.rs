@@ -81,7 +81,12 @@ fn assert_same_geometry(a: &Geometry, b: &Geometry) {
         assert!((a.spacing[c] - b.spacing[c]).abs() < 1e-6, "spacing {:?} vs {:?}", a.spacing, b.spacing);
         assert!((a.origin[c] - b.origin[c]).abs() < 1e-6, "origin {:?} vs {:?}", a.origin, b.origin);
         for r in 0..3 {
-            assert!((a.direction[r][c] - b.direction[r][c]).abs() < 1e-6, "direction {:?} vs {:?}", a.direction, b.direction);
+            assert!(
+                (a.direction[r][c] - b.direction[r][c]).abs() < 1e-6,
+                "direction {:?} vs {:?}",
+                a.direction,
+                b.direction
+            );
         }
     }
 }
@@ -230,7 +235,9 @@ enum Expect {
 fn every_transfer_syntax_decodes_to_the_reference_hu_or_is_refused_clearly() {
     let Some(data) = data_dir() else { return };
     let dir = data.join("dicom/transfer-syntaxes");
-    let reference = dicom::load_file(&dir.join("CTImage.dcm_LittleEndianExplicitTransferSyntax_1.2.840.10008.1.2.1.dcm"), &opts()).unwrap();
+    let reference =
+        dicom::load_file(&dir.join("CTImage.dcm_LittleEndianExplicitTransferSyntax_1.2.840.10008.1.2.1.dcm"), &opts())
+            .unwrap();
     let cases: &[(&str, Expect)] = &[
         ("CTImage.dcm", Expect::Exact),
         ("LittleEndianImplicit", Expect::Exact),
@@ -268,7 +275,13 @@ fn every_transfer_syntax_decodes_to_the_reference_hu_or_is_refused_clearly() {
             Expect::Within(max, mean) => {
                 let l = result.unwrap_or_else(|e| panic!("{pattern}: {e}"));
                 assert_eq!(l.volume.dims(), reference.volume.dims());
-                let errs: Vec<i32> = l.volume.data().iter().zip(reference.volume.data()).map(|(a, b)| (*a as i32 - *b as i32).abs()).collect();
+                let errs: Vec<i32> = l
+                    .volume
+                    .data()
+                    .iter()
+                    .zip(reference.volume.data())
+                    .map(|(a, b)| (*a as i32 - *b as i32).abs())
+                    .collect();
                 let got_max = *errs.iter().max().unwrap();
                 let got_mean = errs.iter().map(|&e| e as f64).sum::<f64>() / errs.len() as f64;
                 assert!(got_max <= *max && got_mean <= *mean, "{pattern}: max {got_max} mean {got_mean:.3}");
@@ -446,7 +459,10 @@ fn round_trip_oblique_anisotropic() {
     // Same volume, same bytes: the UIDs are deterministic.
     let again = TempDir::new("roundtrip-again");
     write_series(again.path(), &vol).unwrap();
-    assert_eq!(std::fs::read(tmp.path().join("slice0003.dcm")).unwrap(), std::fs::read(again.path().join("slice0003.dcm")).unwrap());
+    assert_eq!(
+        std::fs::read(tmp.path().join("slice0003.dcm")).unwrap(),
+        std::fs::read(again.path().join("slice0003.dcm")).unwrap()
+    );
 }
 
 #[test]
@@ -480,7 +496,10 @@ fn a_missing_slice_is_an_error_naming_the_gap() {
     write_series(dup.path(), &vol).unwrap();
     std::fs::copy(dup.path().join("slice0004.dcm"), dup.path().join("extra.dcm")).unwrap();
     let msg = err_text(dicom::load_dir(dup.path(), &opts()));
-    assert!(msg.contains("two slices at the same position") && msg.contains("slice0004.dcm") && msg.contains("extra.dcm"), "{msg}");
+    assert!(
+        msg.contains("two slices at the same position") && msg.contains("slice0004.dcm") && msg.contains("extra.dcm"),
+        "{msg}"
+    );
 
     // Uneven gaps: one slice moved by a third of the spacing.
     let uneven = TempDir::new("uneven");
@@ -517,11 +536,22 @@ fn two_series_pick_the_bigger_unless_told() {
     let small = synthetic([16, 16, 8], [0.5, 0.5, 3.0], [10.0, 0.0, 0.0], DMat3::IDENTITY);
     let tmp = TempDir::new("twoseries");
     let (a, b) = (TempDir::new("series-a"), TempDir::new("series-b"));
-    write_series_with(a.path(), &big, &SeriesWriteOptions { series_description: "big".into(), series_number: 2, uid_seed: 1 }).unwrap();
-    write_series_with(b.path(), &small, &SeriesWriteOptions { series_description: "small".into(), series_number: 3, uid_seed: 2 }).unwrap();
+    write_series_with(
+        a.path(),
+        &big,
+        &SeriesWriteOptions { series_description: "big".into(), series_number: 2, uid_seed: 1 },
+    )
+    .unwrap();
+    write_series_with(
+        b.path(),
+        &small,
+        &SeriesWriteOptions { series_description: "small".into(), series_number: 3, uid_seed: 2 },
+    )
+    .unwrap();
     for (prefix, dir) in [("a", &a), ("b", &b)] {
         for f in files_in(dir.path()) {
-            std::fs::rename(&f, tmp.path().join(format!("{prefix}-{}", f.file_name().unwrap().to_string_lossy()))).unwrap();
+            std::fs::rename(&f, tmp.path().join(format!("{prefix}-{}", f.file_name().unwrap().to_string_lossy())))
+                .unwrap();
         }
     }
     std::fs::write(tmp.path().join("README.txt"), "two series\n").unwrap();
@@ -541,7 +571,12 @@ fn two_series_pick_the_bigger_unless_told() {
 
     let missing = LoadOptions { series_uid: Some("1.2.3.4".into()) };
     let msg = err_text(dicom::load_dir(tmp.path(), &missing));
-    assert!(msg.contains("1.2.3.4 not found") && msg.contains(&other.uid) && msg.contains(l.meta.series_uid.as_deref().unwrap()), "{msg}");
+    assert!(
+        msg.contains("1.2.3.4 not found")
+            && msg.contains(&other.uid)
+            && msg.contains(l.meta.series_uid.as_deref().unwrap()),
+        "{msg}"
+    );
 }
 
 #[test]

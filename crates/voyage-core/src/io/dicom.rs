@@ -62,7 +62,7 @@ const GAP_TOL_REL: f64 = 0.01;
 /// Tolerance on direction cosines and pixel spacing agreeing between slices.
 const COSINE_TOL: f64 = 1e-4;
 
-/// The SOP class of a DICOMDIR, skipped without comment.
+/// The SOP class of a DICOMDIR (an index of a disc, not an image).
 const MEDIA_STORAGE_DIRECTORY: &str = "1.2.840.10008.1.3.10";
 
 // ---------------------------------------------------------------------------------------------
@@ -98,14 +98,21 @@ pub fn load_dir(path: &Path, opts: &LoadOptions) -> Result<Loaded> {
 
 /// Loads one DICOM file: a multi-frame image becomes a volume of its frames, a single slice a
 /// volume one voxel deep (k spacing from SpacingBetweenSlices, else SliceThickness, else 1 mm).
-pub fn load_file(path: &Path, _opts: &LoadOptions) -> Result<Loaded> {
+/// When `opts.series_uid` is given, the file must belong to that series.
+pub fn load_file(path: &Path, opts: &LoadOptions) -> Result<Loaded> {
     match probe_file(path)? {
         Probe::NotDicom(_) => Err(Error::format(
             path,
             "not a DICOM file (no 'DICM' marker at byte 128; files without the DICOM Part 10 header are not supported)",
         )),
         Probe::NotImage(_, why) => Err(Error::format(path, format!("no image to load: {why}"))),
-        Probe::Image(h) => load_series(vec![*h]),
+        Probe::Image(h) => match &opts.series_uid {
+            Some(want) if *want != h.series_uid => Err(Error::format(
+                path,
+                format!("this file belongs to series {}, not to the requested {want}", h.series_uid),
+            )),
+            _ => load_series(vec![*h]),
+        },
     }
 }
 
@@ -139,6 +146,8 @@ struct Header {
     /// without per-frame positions).
     slice_step: Option<f64>,
     gantry_tilt_deg: Option<f64>,
+    /// LossyImageCompression is "01": the pixels went through lossy compression at some point.
+    lossy: bool,
 }
 
 /// How stored pixel values are laid out.
@@ -196,8 +205,7 @@ fn probe_file(path: &Path) -> Result<Probe> {
         return Ok(Probe::NotDicom(path.to_path_buf()));
     }
     let obj = guarded(path, "reading the header", || {
-        open_dicom(path, Some(tags::PIXEL_DATA))
-            .map_err(|e| e.into_error(path, "not a readable DICOM file"))
+        open_dicom(path, Some(tags::PIXEL_DATA)).map_err(|e| e.into_error(path, "not a readable DICOM file"))
     })?;
     guarded(path, "reading the header", || parse_header(path, &obj).map_err(|m| Error::format(path, m)))
 }
@@ -276,6 +284,7 @@ fn parse_header(path: &Path, obj: &DefaultDicomObject) -> std::result::Result<Pr
         planes,
         slice_step,
         gantry_tilt_deg: float(obj, tags::GANTRY_DETECTOR_TILT, "GantryDetectorTilt")?,
+        lossy: text(obj, tags::LOSSY_IMAGE_COMPRESSION).as_deref() == Some("01"),
     })))
 }
 
@@ -288,8 +297,8 @@ fn parse_pixel_format(obj: &InMemDicomObject) -> std::result::Result<PixelFormat
             "not a grayscale image (SamplesPerPixel {samples}, PhotometricInterpretation {photometric}): its values are not CT numbers"
         ));
     }
-    let bits_allocated = uint(obj, tags::BITS_ALLOCATED, "BitsAllocated")?
-        .ok_or("BitsAllocated (0028,0100) is missing")?;
+    let bits_allocated =
+        uint(obj, tags::BITS_ALLOCATED, "BitsAllocated")?.ok_or("BitsAllocated (0028,0100) is missing")?;
     if bits_allocated != 8 && bits_allocated != 16 {
         return Err(format!("BitsAllocated {bits_allocated} is not supported (CT images use 8 or 16)"));
     }
@@ -317,10 +326,7 @@ fn parse_planes(obj: &InMemDicomObject, frames: usize) -> std::result::Result<Ve
     if let Some(items) = per_frame
         && items.len() != frames
     {
-        return Err(format!(
-            "PerFrameFunctionalGroupsSequence has {} items for {frames} frames",
-            items.len()
-        ));
+        return Err(format!("PerFrameFunctionalGroupsSequence has {} items for {frames} frames", items.len()));
     }
     (0..frames)
         .map(|f| {
@@ -330,12 +336,19 @@ fn parse_planes(obj: &InMemDicomObject, frames: usize) -> std::result::Result<Ve
             let position = if frames == 1 || f == 0 {
                 at(tags::PLANE_POSITION_SEQUENCE, tags::IMAGE_POSITION_PATIENT, "ImagePositionPatient")?
             } else {
-                grouped_floats(None, &groups[..1], tags::PLANE_POSITION_SEQUENCE, tags::IMAGE_POSITION_PATIENT, "ImagePositionPatient")?
+                grouped_floats(
+                    None,
+                    &groups[..1],
+                    tags::PLANE_POSITION_SEQUENCE,
+                    tags::IMAGE_POSITION_PATIENT,
+                    "ImagePositionPatient",
+                )?
             };
             let position = position.map(|v| vec3(&v, "ImagePositionPatient")).transpose()?;
-            let orientation = at(tags::PLANE_ORIENTATION_SEQUENCE, tags::IMAGE_ORIENTATION_PATIENT, "ImageOrientationPatient")?
-                .map(|v| orientation(&v))
-                .transpose()?;
+            let orientation =
+                at(tags::PLANE_ORIENTATION_SEQUENCE, tags::IMAGE_ORIENTATION_PATIENT, "ImageOrientationPatient")?
+                    .map(|v| orientation(&v))
+                    .transpose()?;
             let spacing = at(tags::PIXEL_MEASURES_SEQUENCE, tags::PIXEL_SPACING, "PixelSpacing")?
                 .map(|v| pixel_spacing(&v))
                 .transpose()?;
@@ -400,7 +413,9 @@ fn orientation(v: &[f64]) -> std::result::Result<[DVec3; 2], String> {
 
 fn pixel_spacing(v: &[f64]) -> std::result::Result<[f64; 2], String> {
     match v {
-        [between_rows, between_cols] if *between_rows > 0.0 && *between_cols > 0.0 => Ok([*between_cols, *between_rows]),
+        [between_rows, between_cols] if *between_rows > 0.0 && *between_cols > 0.0 => {
+            Ok([*between_cols, *between_rows])
+        }
         _ => Err(format!("PixelSpacing {v:?} is not two positive numbers")),
     }
 }
@@ -471,7 +486,11 @@ fn skipped_notes(non_dicom: &[PathBuf], non_image: &[(PathBuf, String)]) -> Vec<
     }
     if !non_image.is_empty() {
         let (p, why) = &non_image[0];
-        notes.push(format!("skipped {} DICOM file(s) without an image, e.g. {} ({why})", non_image.len(), file_name(p)));
+        notes.push(format!(
+            "skipped {} DICOM file(s) without an image, e.g. {} ({why})",
+            non_image.len(),
+            file_name(p)
+        ));
     }
     notes
 }
@@ -514,8 +533,13 @@ fn choose_series(dir: &Path, images: Vec<Header>, opts: &LoadOptions) -> Result<
     };
     let others: Vec<SeriesSummary> = summaries.iter().filter(|s| s.uid != chosen_uid).cloned().collect();
     let note = (!others.is_empty()).then(|| {
-        let chosen = summaries.iter().find(|s| s.uid == chosen_uid).map(describe_series).unwrap_or_default();
-        let how = if opts.series_uid.is_some() { "as asked" } else { "the CT series with the most slices" };
+        let chosen = summaries.iter().find(|s| s.uid == chosen_uid);
+        let how = match chosen {
+            _ if opts.series_uid.is_some() => "as asked",
+            Some(s) if s.modality.as_deref() == Some("CT") => "the CT series with the most slices",
+            _ => "no CT series; the series with the most slices",
+        };
+        let chosen = chosen.map(describe_series).unwrap_or_default();
         format!("the folder holds {} series; loaded {chosen} ({how})", summaries.len())
     });
     let chosen = groups.remove(&chosen_uid).unwrap_or_default();
@@ -590,7 +614,9 @@ fn build_stack(headers: &[Header]) -> Result<Stack> {
     let slices: Vec<SliceRef> = headers
         .iter()
         .enumerate()
-        .flat_map(|(file, h)| h.planes.iter().enumerate().map(move |(frame, p)| SliceRef { file, frame, plane: p.clone() }))
+        .flat_map(|(file, h)| {
+            h.planes.iter().enumerate().map(move |(frame, p)| SliceRef { file, frame, plane: p.clone() })
+        })
         .collect();
     let path_of = |s: &SliceRef| headers[s.file].path.clone();
     let mut notes = Vec::new();
@@ -608,7 +634,9 @@ fn build_stack(headers: &[Header]) -> Result<Stack> {
     }
     let mut slices = slices;
     let pos = |s: &SliceRef| s.plane.position.unwrap_or_default();
-    slices.sort_by(|a, b| pos(a).dot(normal).total_cmp(&pos(b).dot(normal)).then(a.file.cmp(&b.file)).then(a.frame.cmp(&b.frame)));
+    slices.sort_by(|a, b| {
+        pos(a).dot(normal).total_cmp(&pos(b).dot(normal)).then(a.file.cmp(&b.file)).then(a.frame.cmp(&b.frame))
+    });
 
     let steps: Vec<DVec3> = slices.windows(2).map(|w| pos(&w[1]) - pos(&w[0])).collect();
     let gaps: Vec<f64> = steps.iter().map(|s| s.dot(normal)).collect();
@@ -621,17 +649,23 @@ fn build_stack(headers: &[Header]) -> Result<Stack> {
     let drift = (total - normal * total.dot(normal)) / (n - 1) as f64;
     check_straight_line(headers, &slices, &steps, drift, normal, dz)?;
     let shear_mm = [drift.dot(row), drift.dot(col)];
-    // A drift below a twentieth of a pixel over the whole stack is rounding in the positions.
-    let negligible = shear_mm[0].abs() * (n - 1) as f64 <= 0.05 * spacing[0]
-        && shear_mm[1].abs() * (n - 1) as f64 <= 0.05 * spacing[1];
+    // Drift over the whole stack, in pixels. Below a quarter pixel it is rounding in the
+    // positions (or a tilt too small to matter), and resampling would only blur.
+    let drift_px = (shear_mm[0].abs() / spacing[0]).max(shear_mm[1].abs() / spacing[1]) * (n - 1) as f64;
+    let negligible = drift_px <= 0.25;
+    if negligible && drift_px > 0.01 {
+        notes
+            .push(format!("slice positions drift {drift_px:.2} pixel within the slice plane over the series: ignored"));
+    }
     if negligible && let Some(t) = first.gantry_tilt_deg.filter(|t| t.abs() > 0.01) {
         notes.push(format!(
             "GantryDetectorTilt is {t}°, but the slice positions follow the slice normal: no correction needed"
         ));
     }
 
-    let mut geometry = Geometry::new([first.cols, first.rows, n], [spacing[0], spacing[1], dz], pos(&slices[0]).to_array())
-        .map_err(super::at(&first.path))?;
+    let mut geometry =
+        Geometry::new([first.cols, first.rows, n], [spacing[0], spacing[1], dz], pos(&slices[0]).to_array())
+            .map_err(super::at(&first.path))?;
     geometry.set_direction_mat(glam::DMat3::from_cols(row, col, normal));
     Ok(Stack { slices, geometry, shear: (!negligible).then_some(shear_mm), notes })
 }
@@ -662,8 +696,9 @@ fn single_file_stack(
     if slices.len() > 1 {
         notes.push(format!("frames carry no positions: stacked along the slice normal {dz} mm apart"));
     }
-    let mut geometry = Geometry::new([header.cols, header.rows, slices.len()], [spacing[0], spacing[1], dz], origin.to_array())
-        .map_err(super::at(&header.path))?;
+    let mut geometry =
+        Geometry::new([header.cols, header.rows, slices.len()], [spacing[0], spacing[1], dz], origin.to_array())
+            .map_err(super::at(&header.path))?;
     geometry.set_direction_mat(glam::DMat3::from_cols(axes[0], axes[1], axes[2]));
     Ok(Stack { slices, geometry, shear: None, notes })
 }
@@ -763,7 +798,10 @@ fn check_gaps(headers: &[Header], slices: &[SliceRef], gaps: &[f64], tilt: Optio
     let gap = gaps[k];
     let mut msg = if gap <= tol {
         format!("two slices at the same position ({za:.2} mm along the slice normal): {a} and {b}")
-    } else if typical > tol && (gap / typical).round() >= 2.0 && (gap - (gap / typical).round() * typical).abs() <= tol * 2.0 {
+    } else if typical > tol
+        && (gap / typical).round() >= 2.0
+        && (gap - (gap / typical).round() * typical).abs() <= tol * 2.0
+    {
         let missing = (gap / typical).round() as usize - 1;
         format!(
             "{missing} slice(s) missing: gap of {gap:.2} mm between {a} ({za:.2} mm along the slice normal) and {b} ({zb:.2} mm), where the other slices are {typical:.2} mm apart"
@@ -823,7 +861,12 @@ fn load_series(headers: Vec<Header>) -> Result<Loaded> {
         if h.pixel != first.pixel {
             return Err(Error::format(
                 &h.path,
-                format!("pixel layout {:?} differs from {} ({:?}) in the same series", h.pixel, file_name(&first.path), first.pixel),
+                format!(
+                    "pixel layout {:?} differs from {} ({:?}) in the same series",
+                    h.pixel,
+                    file_name(&first.path),
+                    first.pixel
+                ),
             ));
         }
     }
@@ -837,7 +880,7 @@ fn load_series(headers: Vec<Header>) -> Result<Loaded> {
         notes.push(note);
     }
     let transfer_syntaxes = transfer_syntax_names(&headers);
-    if headers.iter().any(|h| is_lossy(&h.ts_uid)) {
+    if headers.iter().any(|h| h.lossy || is_lossy(&h.ts_uid)) {
         notes.push("pixel data is lossy-compressed: HU values carry the compression error".into());
     }
     let coarsest = stack.slices.iter().map(|s| s.plane.rescale.slope.abs()).fold(0.0, f64::max);
@@ -876,7 +919,8 @@ fn ts_name(uid: &str) -> String {
     TransferSyntaxRegistry.get(uid).map(|ts| ts.name().to_string()).unwrap_or_else(|| uid.to_string())
 }
 
-/// JPEG baseline/extended, JPEG-LS near-lossless, JPEG 2000 (lossy allowed), JPEG-XL.
+/// Transfer syntaxes that are, or may be, lossy: JPEG baseline/extended/progressive, JPEG-LS
+/// near-lossless, JPEG 2000 and HTJ2K (lossy allowed), JPEG XL.
 fn is_lossy(uid: &str) -> bool {
     matches!(
         uid,
@@ -888,6 +932,7 @@ fn is_lossy(uid: &str) -> bool {
             | "1.2.840.10008.1.2.4.91"
             | "1.2.840.10008.1.2.4.203"
             | "1.2.840.10008.1.2.4.111"
+            | "1.2.840.10008.1.2.4.112"
     )
 }
 
@@ -897,18 +942,26 @@ fn read_slices(headers: &[Header], slices: &[SliceRef], dims: [usize; 3]) -> Res
     let plane = dims[0] * dims[1];
     let mut data = vec![0i16; plane * dims[2]];
     if headers.iter().all(|h| h.frames == 1) {
-        data.par_chunks_mut(plane).zip(slices.par_iter()).try_for_each(|(out, s)| {
-            let h = &headers[s.file];
-            let raw = read_pixel_data(h)?;
-            convert_frame(h, &raw, 0, s.plane.rescale, out)
-        })?;
+        // Collected rather than short-circuited, so that the error reported is always the one
+        // of the first bad slice, whatever the thread timing.
+        let results: Vec<Result<()>> = data
+            .par_chunks_mut(plane)
+            .zip(slices.par_iter())
+            .map(|(out, s)| {
+                let h = &headers[s.file];
+                let raw = read_pixel_data(h)?;
+                convert_frame(h, &raw, 0, s.plane.rescale, out)
+            })
+            .collect();
+        results.into_iter().collect::<Result<()>>()?;
         return Ok(data);
     }
     for (file, h) in headers.iter().enumerate() {
         let raw = read_pixel_data(h)?;
-        data.par_chunks_mut(plane).zip(slices.par_iter()).filter(|(_, s)| s.file == file).try_for_each(|(out, s)| {
-            convert_frame(h, &raw, s.frame, s.plane.rescale, out)
-        })?;
+        data.par_chunks_mut(plane)
+            .zip(slices.par_iter())
+            .filter(|(_, s)| s.file == file)
+            .try_for_each(|(out, s)| convert_frame(h, &raw, s.frame, s.plane.rescale, out))?;
     }
     Ok(data)
 }
@@ -984,7 +1037,8 @@ fn native_fast_path(h: &Header, expected: usize) -> Result<Option<Raw>> {
     let header_len = if explicit { 12 } else { 8 };
     let Some(start) = bytes.len().checked_sub(value_len + header_len) else { return Ok(None) };
     let head = &bytes[start..start + header_len];
-    let declared = u32::from_le_bytes([head[header_len - 4], head[header_len - 3], head[header_len - 2], head[header_len - 1]]);
+    let declared =
+        u32::from_le_bytes([head[header_len - 4], head[header_len - 3], head[header_len - 2], head[header_len - 1]]);
     let tag_ok = head[..4] == [0xE0, 0x7F, 0x10, 0x00];
     let vr_ok = !explicit || matches!(&head[4..8], b"OW\0\0" | b"OB\0\0");
     if !(tag_ok && vr_ok && declared as usize == value_len) {
@@ -996,7 +1050,8 @@ fn native_fast_path(h: &Header, expected: usize) -> Result<Option<Raw>> {
 }
 
 fn extract_pixels(path: &Path, obj: &mut DefaultDicomObject, ts_uid: &str, name: &str) -> Result<Raw> {
-    let decode_error = |why: String| Error::format(path, format!("cannot decode pixel data (transfer syntax {name}): {why}"));
+    let decode_error =
+        |why: String| Error::format(path, format!("cannot decode pixel data (transfer syntax {name}): {why}"));
     let Some(ts) = TransferSyntaxRegistry.get(ts_uid) else {
         return Err(decode_error(format!("unknown transfer syntax UID {ts_uid}")));
     };
@@ -1016,10 +1071,12 @@ fn extract_pixels(path: &Path, obj: &mut DefaultDicomObject, ts_uid: &str, name:
             let elem = obj.take(tags::PIXEL_DATA).ok_or_else(|| decode_error("pixel data vanished".into()))?;
             match elem.into_value() {
                 Value::Primitive(PrimitiveValue::U16(w)) => Ok(Raw::Words(w.into_vec())),
-                Value::Primitive(PrimitiveValue::U8(b)) if ts.endianness() == Endianness::Little => Ok(Raw::Bytes(b.into_vec())),
-                Value::Primitive(PrimitiveValue::U8(b)) => Ok(Raw::Words(
-                    b.chunks_exact(2).map(|c| u16::from_be_bytes([c[0], c[1]])).collect(),
-                )),
+                Value::Primitive(PrimitiveValue::U8(b)) if ts.endianness() == Endianness::Little => {
+                    Ok(Raw::Bytes(b.into_vec()))
+                }
+                Value::Primitive(PrimitiveValue::U8(b)) => {
+                    Ok(Raw::Words(b.chunks_exact(2).map(|c| u16::from_be_bytes([c[0], c[1]])).collect()))
+                }
                 Value::Primitive(PrimitiveValue::Empty) => Err(Error::format(path, "pixel data (7FE0,0010) is empty")),
                 _ => Err(decode_error("pixel data has an unexpected value representation".into())),
             }
@@ -1047,7 +1104,7 @@ fn convert_frame(h: &Header, raw: &Raw, frame: usize, rescale: Rescale, out: &mu
         (Raw::Words(w), 8) => {
             // 8-bit samples read as OW words (implicit VR): two samples per word, low byte first.
             let start = frame * n;
-            let byte = |i: usize| u32::from(if i % 2 == 0 { w[i / 2] & 0xFF } else { w[i / 2] >> 8 });
+            let byte = |i: usize| u32::from(if i.is_multiple_of(2) { w[i / 2] & 0xFF } else { w[i / 2] >> 8 });
             convert((start..start + n).map(byte), unpack, hu, out)
         }
         _ => return Err(Error::format(&h.path, format!("BitsAllocated {} is not supported", f.bits_allocated))),
@@ -1176,13 +1233,19 @@ fn shift_slice(src: &[i16], [sx, sy]: [usize; 2], dst: &mut [i16], [dx, dy]: [us
     let (wi, wj) = (off[0] - fi, off[1] - fj);
     let (fi, fj) = (fi as isize, fj as isize);
     let at = |i: isize, j: isize| -> Option<f64> {
-        (i >= 0 && j >= 0 && (i as usize) < sx && (j as usize) < sy).then(|| f64::from(src[i as usize + sx * j as usize]))
+        (i >= 0 && j >= 0 && (i as usize) < sx && (j as usize) < sy)
+            .then(|| f64::from(src[i as usize + sx * j as usize]))
     };
     for j in 0..dy {
         let j0 = j as isize + fj;
         for i in 0..dx {
             let i0 = i as isize + fi;
-            let corners = [(at(i0, j0), (1.0 - wi) * (1.0 - wj)), (at(i0 + 1, j0), wi * (1.0 - wj)), (at(i0, j0 + 1), (1.0 - wi) * wj), (at(i0 + 1, j0 + 1), wi * wj)];
+            let corners = [
+                (at(i0, j0), (1.0 - wi) * (1.0 - wj)),
+                (at(i0 + 1, j0), wi * (1.0 - wj)),
+                (at(i0, j0 + 1), (1.0 - wi) * wj),
+                (at(i0 + 1, j0 + 1), wi * wj),
+            ];
             let (mut sum, mut weight) = (0.0, 0.0);
             for (v, w) in corners {
                 if let Some(v) = v
@@ -1210,7 +1273,10 @@ enum OpenError {
     /// The file meta information (group 0002) is unusable; the message says why.
     Meta(String),
     /// The top-level pixel data element announces more bytes than the file has left.
-    Truncated { declared: u32, found: u64 },
+    Truncated {
+        declared: u32,
+        found: u64,
+    },
     /// dicom-rs could not parse the data set.
     Parse(dicom_object::ReadError),
 }
@@ -1330,7 +1396,8 @@ fn describe_unknown_ts(uid: &str) -> String {
 
 /// Parses the file meta group from the start of a file. `Ok(None)` asks for more bytes.
 fn parse_meta(buf: &[u8], eof: bool) -> std::result::Result<Option<MetaGroup>, String> {
-    let need_more = |eof: bool| if eof { Err("the file ends inside its file meta information".to_string()) } else { Ok(None) };
+    let need_more =
+        |eof: bool| if eof { Err("the file ends inside its file meta information".to_string()) } else { Ok(None) };
     if buf.len() < 132 && !eof {
         return Ok(None);
     }
@@ -1358,7 +1425,10 @@ fn parse_meta(buf: &[u8], eof: bool) -> std::result::Result<Option<MetaGroup>, S
         if !vr.iter().all(u8::is_ascii_uppercase) {
             return Err(format!("file meta element (0002,{element:04X}) is not explicit VR little endian"));
         }
-        let long = matches!(&vr, b"OB" | b"OW" | b"OF" | b"OD" | b"OL" | b"OV" | b"SQ" | b"UT" | b"UN" | b"UC" | b"UR" | b"SV" | b"UV");
+        let long = matches!(
+            &vr,
+            b"OB" | b"OW" | b"OF" | b"OD" | b"OL" | b"OV" | b"SQ" | b"UT" | b"UN" | b"UC" | b"UR" | b"SV" | b"UV"
+        );
         let (header, len) = if long {
             if pos + 12 > buf.len() {
                 return need_more(eof);
@@ -1380,9 +1450,10 @@ fn parse_meta(buf: &[u8], eof: bool) -> std::result::Result<Option<MetaGroup>, S
         pos += header + len;
     }
     let text = |el: u16| {
-        elements.iter().find(|(e, _)| *e == el).map(|(_, v)| {
-            String::from_utf8_lossy(v).trim_matches(|c: char| c == '\0' || c.is_whitespace()).to_string()
-        })
+        elements
+            .iter()
+            .find(|(e, _)| *e == el)
+            .map(|(_, v)| String::from_utf8_lossy(v).trim_matches(|c: char| c == '\0' || c.is_whitespace()).to_string())
     };
     let ts = text(0x0010)
         .filter(|t| !t.is_empty())
@@ -1441,7 +1512,11 @@ impl Layout {
     }
 
     fn u32(&self, b: &[u8]) -> u32 {
-        if self.big_endian { u32::from_be_bytes([b[0], b[1], b[2], b[3]]) } else { u32::from_le_bytes([b[0], b[1], b[2], b[3]]) }
+        if self.big_endian {
+            u32::from_be_bytes([b[0], b[1], b[2], b[3]])
+        } else {
+            u32::from_le_bytes([b[0], b[1], b[2], b[3]])
+        }
     }
 }
 
@@ -1450,7 +1525,10 @@ enum Scan {
     Sound,
     /// Needs the file's bytes up to this offset.
     NeedMore(usize),
-    Truncated { declared: u32, found: u64 },
+    Truncated {
+        declared: u32,
+        found: u64,
+    },
     Bad(String),
 }
 
@@ -1526,7 +1604,8 @@ fn element_header(buf: &[u8], pos: usize, layout: Layout) -> Option<(usize, u32,
     if !layout.explicit {
         let len = layout.u32(&buf[pos + 4..]);
         // Implicit VR does not say SQ: a defined-length value that starts with an item tag is one.
-        let item = pos + 12 <= buf.len() && layout.u16(&buf[pos + 8..]) == 0xFFFE && layout.u16(&buf[pos + 10..]) == 0xE000;
+        let item =
+            pos + 12 <= buf.len() && layout.u16(&buf[pos + 8..]) == 0xFFFE && layout.u16(&buf[pos + 10..]) == 0xE000;
         return Some((8, len, item));
     }
     let vr = &buf[pos + 4..pos + 6];
@@ -1534,7 +1613,27 @@ fn element_header(buf: &[u8], pos: usize, layout: Layout) -> Option<(usize, u32,
     // (corrupt) ones included, have two reserved bytes and a 32-bit length.
     let short = matches!(
         vr,
-        b"AE" | b"AS" | b"AT" | b"CS" | b"DA" | b"DS" | b"DT" | b"FL" | b"FD" | b"IS" | b"LO" | b"LT" | b"PN" | b"SH" | b"SL" | b"SS" | b"ST" | b"TM" | b"UI" | b"UL" | b"US"
+        b"AE"
+            | b"AS"
+            | b"AT"
+            | b"CS"
+            | b"DA"
+            | b"DS"
+            | b"DT"
+            | b"FL"
+            | b"FD"
+            | b"IS"
+            | b"LO"
+            | b"LT"
+            | b"PN"
+            | b"SH"
+            | b"SL"
+            | b"SS"
+            | b"ST"
+            | b"TM"
+            | b"UI"
+            | b"UL"
+            | b"US"
     );
     if !short {
         if pos + 12 > buf.len() {

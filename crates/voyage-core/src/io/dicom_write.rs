@@ -294,7 +294,17 @@ mod tests {
 
     #[test]
     fn decimal_strings_fit_and_are_close() {
-        for v in [0.0, -0.0, 1.0, -161.399994, 0.7071067811865476, -0.7071067811865476, 1e-12, 123456.789012345, -1.0e-7] {
+        for v in [
+            0.0,
+            -0.0,
+            1.0,
+            -161.399994,
+            std::f64::consts::FRAC_1_SQRT_2,
+            -0.123_456_789_012_345_68,
+            1e-12,
+            123456.789012345,
+            -1.0e-7,
+        ] {
             let s = ds(v);
             assert!(s.len() <= 16, "{s}");
             let back: f64 = s.parse().unwrap();
