@@ -970,15 +970,16 @@ fn read_slices(headers: &[Header], slices: &[SliceRef], dims: [usize; 3]) -> Res
 enum Raw {
     /// 16-bit words in host order (native OW data, already byte-swapped for big endian).
     Words(Vec<u16>),
-    /// Bytes: 8-bit samples, or 16-bit samples little endian (codec output, OB data).
-    Bytes(Vec<u8>),
+    /// Bytes from `start` on: 8-bit samples, or 16-bit samples little endian (codec output,
+    /// OB data, or a whole file read by the fast path).
+    Bytes(Vec<u8>, usize),
 }
 
 impl Raw {
     fn byte_len(&self) -> usize {
         match self {
             Raw::Words(w) => w.len() * 2,
-            Raw::Bytes(b) => b.len(),
+            Raw::Bytes(b, start) => b.len() - start,
         }
     }
 }
@@ -1044,9 +1045,8 @@ fn native_fast_path(h: &Header, expected: usize) -> Result<Option<Raw>> {
     if !(tag_ok && vr_ok && declared as usize == value_len) {
         return Ok(None);
     }
-    bytes.drain(..start + header_len);
-    bytes.truncate(expected);
-    Ok(Some(Raw::Bytes(bytes)))
+    bytes.truncate(start + header_len + expected);
+    Ok(Some(Raw::Bytes(bytes, start + header_len)))
 }
 
 fn extract_pixels(path: &Path, obj: &mut DefaultDicomObject, ts_uid: &str, name: &str) -> Result<Raw> {
@@ -1065,14 +1065,14 @@ fn extract_pixels(path: &Path, obj: &mut DefaultDicomObject, ts_uid: &str, name:
             };
             let mut out = Vec::new();
             reader.decode(&*obj, &mut out).map_err(|e| decode_error(error_chain(&e)))?;
-            Ok(Raw::Bytes(out))
+            Ok(Raw::Bytes(out, 0))
         }
         Value::Primitive(_) => {
             let elem = obj.take(tags::PIXEL_DATA).ok_or_else(|| decode_error("pixel data vanished".into()))?;
             match elem.into_value() {
                 Value::Primitive(PrimitiveValue::U16(w)) => Ok(Raw::Words(w.into_vec())),
                 Value::Primitive(PrimitiveValue::U8(b)) if ts.endianness() == Endianness::Little => {
-                    Ok(Raw::Bytes(b.into_vec()))
+                    Ok(Raw::Bytes(b.into_vec(), 0))
                 }
                 Value::Primitive(PrimitiveValue::U8(b)) => {
                     Ok(Raw::Words(b.chunks_exact(2).map(|c| u16::from_be_bytes([c[0], c[1]])).collect()))
@@ -1094,13 +1094,13 @@ fn convert_frame(h: &Header, raw: &Raw, frame: usize, rescale: Rescale, out: &mu
     let hu = Hu::new(rescale);
     match (raw, f.bits_allocated) {
         (Raw::Words(w), 16) => convert(w[frame * n..(frame + 1) * n].iter().map(|&v| u32::from(v)), unpack, hu, out),
-        (Raw::Bytes(b), 16) => convert(
-            b[frame * n * 2..(frame + 1) * n * 2].as_chunks::<2>().0.iter().map(|c| u32::from(u16::from_le_bytes(*c))),
-            unpack,
-            hu,
-            out,
-        ),
-        (Raw::Bytes(b), 8) => convert(b[frame * n..(frame + 1) * n].iter().map(|&v| u32::from(v)), unpack, hu, out),
+        (Raw::Bytes(b, start), 16) => {
+            let b = &b[start + frame * n * 2..start + (frame + 1) * n * 2];
+            convert(b.as_chunks::<2>().0.iter().map(|c| u32::from(u16::from_le_bytes(*c))), unpack, hu, out)
+        }
+        (Raw::Bytes(b, start), 8) => {
+            convert(b[start + frame * n..start + (frame + 1) * n].iter().map(|&v| u32::from(v)), unpack, hu, out)
+        }
         (Raw::Words(w), 8) => {
             // 8-bit samples read as OW words (implicit VR): two samples per word, low byte first.
             let start = frame * n;
