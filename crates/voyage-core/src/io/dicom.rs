@@ -29,9 +29,19 @@
 //! - **Lossy syntaxes are decoded** (JPEG baseline/extended, JPEG-LS near-lossless, JPEG 2000
 //!   lossy): their rescale slope maps the stored bits back to HU, so the result is the CT up
 //!   to the compression error; a note says the data is lossy.
+//!   12-bit lossy JPEG (Process 2 & 4) and the retired JPEG processes (6 & 8, 10 & 12) have no
+//!   decoder here and are refused with an error naming the transfer syntax, never decoded into
+//!   wrong values.
 //! - Only grayscale images (one sample, MONOCHROME1/2, 8 or 16 bits) are read; colour and
 //!   palette images are refused, since their values are not HU.
+//! - A left-handed stack cannot be told apart in DICOM: the volume is always returned with
+//!   k = row cosine × column cosine, slices ascending along it.
 //! - Subfolders are not searched.
+//!
+//! Robustness: the file meta group is parsed leniently here and rewritten for dicom-rs (real
+//! files break its rules), every element length is checked against the file size before
+//! dicom-rs allocates for it, image sizes go through [`check_dims`], and any panic inside the
+//! DICOM libraries is caught and reported as an error naming the file.
 //!
 //! Patient name and ID are never read.
 
