@@ -20,7 +20,7 @@ pub fn distance_to_wall(mask: &Volume<u8>) -> Result<Field<f32>> {
     let grid = bounding_box(mask, 1, |v| v != 0).ok_or_else(|| Error::invalid("the lumen mask is empty"))?;
     let inside = crop(mask, &grid);
     let sp = mask.spacing();
-    let mut f: Vec<f32> = inside.iter().map(|&m| if m != 0 { f32::INFINITY } else { 0.0 }).collect();
+    let mut f: Vec<f32> = inside.par_iter().map(|&m| if m != 0 { f32::INFINITY } else { 0.0 }).collect();
     pass_x(&mut f, &grid, sp[0]);
     pass_y(&mut f, &grid, sp[1]);
     pass_z(&mut f, &grid, sp[2]);
@@ -28,131 +28,135 @@ pub fn distance_to_wall(mask: &Volume<u8>) -> Result<Field<f32>> {
     Ok(Field { grid, geometry: mask.geometry().clone(), data: f })
 }
 
-/// Scratch space for one 1D transform: the column with a zero (wall) at each end, the
-/// envelope's parabola sites `v` and boundaries `z`.
+/// Scratch space for the 1D transforms: the envelope's parabola sites `v` (positions) and
+/// their values `f`, and the boundaries `z` between them.
 struct Scratch {
-    col: Vec<f64>,
-    out: Vec<f64>,
-    v: Vec<usize>,
-    z: Vec<f64>,
+    v: Vec<f32>,
+    f: Vec<f32>,
+    z: Vec<f32>,
+    col: Vec<f32>,
 }
 
 impl Scratch {
     fn new(n: usize) -> Self {
-        Scratch { col: vec![0.0; n + 2], out: vec![0.0; n + 2], v: vec![0; n + 2], z: vec![0.0; n + 3] }
+        Scratch { v: vec![0.0; n + 2], f: vec![0.0; n + 2], z: vec![0.0; n + 3], col: vec![0.0; n] }
     }
 }
 
-/// 1D squared distance transform of `s.col[..n+2]` (sites at positions −1..=n, in units of
-/// `h` mm; the two end sites are wall) into `s.out`. Infinite entries are not sites.
-fn transform_1d(s: &mut Scratch, n: usize, h: f64) {
-    let m = n + 2;
-    let pos = |q: usize| (q as f64 - 1.0) * h;
-    let (col, v, z) = (&s.col, &mut s.v, &mut s.z);
-    let mut k = 0usize;
-    v[0] = 0;
-    z[0] = f64::NEG_INFINITY;
-    z[1] = f64::INFINITY;
-    for q in 1..m {
-        let fq = col[q];
-        if !fq.is_finite() {
-            continue;
-        }
-        let pq = pos(q);
-        // z[0] = −∞, so the envelope never loses its first (wall) parabola.
-        let mut sct;
-        loop {
-            let r = v[k];
-            let pr = pos(r);
-            sct = ((fq + pq * pq) - (col[r] + pr * pr)) / (2.0 * (pq - pr));
-            if sct > z[k] {
-                break;
-            }
-            k -= 1;
-        }
-        k += 1;
-        v[k] = q;
-        z[k] = sct;
-        z[k + 1] = f64::INFINITY;
-    }
-    let mut k = 0usize;
-    for q in 1..=n {
-        let pq = pos(q);
-        while z[k + 1] < pq {
-            k += 1;
-        }
-        let r = v[k];
-        let d = pq - pos(r);
-        s.out[q] = d * d + col[r];
-    }
-}
-
-fn load_column(s: &mut Scratch, values: impl Iterator<Item = f32>, n: usize) {
-    s.col[0] = 0.0;
-    s.col[n + 1] = 0.0;
-    for (dst, x) in s.col[1..=n].iter_mut().zip(values) {
-        *dst = x as f64;
-    }
-}
-
-/// Transforms one column (`get`/`set` address its n entries) run by run.
+/// Squared distance transform of one column, in place, run by run.
 ///
 /// A wall entry (0) stays 0 in every pass, and for an entry between two walls no parabola
 /// beyond either wall can win: it is farther away and no lower than the wall's own. So each
-/// run of non-zero entries is transformed on its own, bounded by its two walls (the volume's
+/// run of non-zero entries is transformed on its own, between its two walls (the volume's
 /// border counting as wall), and the work is proportional to the lumen, not to the box.
-fn transform_column(s: &mut Scratch, n: usize, h: f64, get: impl Fn(usize) -> f32, mut set: impl FnMut(usize, f32)) {
+fn transform_column(col: &mut [f32], h: f32, s: &mut Scratch) {
+    let n = col.len();
     let mut q = 0;
     while q < n {
-        if get(q) == 0.0 {
+        if col[q] == 0.0 {
             q += 1;
             continue;
         }
         let start = q;
-        while q < n && get(q) != 0.0 {
+        while q < n && col[q] != 0.0 {
             q += 1;
         }
-        let len = q - start;
-        load_column(s, (start..q).map(&get), len);
-        transform_1d(s, len, h);
-        for t in 0..len {
-            set(start + t, s.out[t + 1] as f32);
-        }
+        lower_envelope(&mut col[start..q], h, s);
     }
 }
 
-/// First pass, along x: rows are contiguous.
+/// Felzenszwalb–Huttenlocher on one run with a wall (value 0) just before and just after it;
+/// positions are relative to the run, in mm, so that squares stay small and f32 suffices.
+fn lower_envelope(run: &mut [f32], h: f32, s: &mut Scratch) {
+    let n = run.len();
+    let (v, f, z) = (&mut s.v, &mut s.f, &mut s.z);
+    // Site 0 is the wall before the run, at position −h.
+    v[0] = -h;
+    f[0] = 0.0;
+    z[0] = f32::NEG_INFINITY;
+    z[1] = f32::INFINITY;
+    let mut k = 0usize;
+    let mut push = |pq: f32, fq: f32, k: &mut usize| {
+        let mut sct;
+        loop {
+            // z[0] = −∞: the first (wall) parabola is never dropped.
+            sct = ((fq + pq * pq) - (f[*k] + v[*k] * v[*k])) / (2.0 * (pq - v[*k]));
+            if sct > z[*k] {
+                break;
+            }
+            *k -= 1;
+        }
+        *k += 1;
+        v[*k] = pq;
+        f[*k] = fq;
+        z[*k] = sct;
+        z[*k + 1] = f32::INFINITY;
+    };
+    for (q, &fq) in run.iter().enumerate() {
+        if fq.is_finite() {
+            push(q as f32 * h, fq, &mut k);
+        }
+    }
+    push(n as f32 * h, 0.0, &mut k);
+    let mut k = 0usize;
+    for (q, out) in run.iter_mut().enumerate() {
+        let pq = q as f32 * h;
+        while z[k + 1] < pq {
+            k += 1;
+        }
+        let d = pq - v[k];
+        *out = d * d + f[k];
+    }
+}
+
+/// First pass, along x: the input is only walls (0) and lumen (∞), so the squared distance
+/// to the nearer end of each run is all there is to it.
 fn pass_x(f: &mut [f32], grid: &BoxGrid, h: f64) {
     let n = grid.dims[0];
-    f.par_chunks_mut(n).for_each_init(
-        || (Scratch::new(n), vec![0.0f32; n]),
-        |(s, col), row| {
-            if row.iter().all(|&x| x == 0.0) {
-                return;
+    let h = h as f32;
+    f.par_chunks_mut(n).for_each(|row| {
+        let mut q = 0;
+        while q < n {
+            if row[q] == 0.0 {
+                q += 1;
+                continue;
             }
-            col.copy_from_slice(row);
-            let c: &[f32] = col;
-            transform_column(s, n, h, |q| c[q], |q, v| row[q] = v);
-        },
-    );
+            let start = q;
+            while q < n && row[q] != 0.0 {
+                q += 1;
+            }
+            let len = q - start;
+            for (t, x) in row[start..q].iter_mut().enumerate() {
+                let d = (t + 1).min(len - t) as f32 * h;
+                *x = d * d;
+            }
+        }
+    });
 }
 
 /// Second pass, along y: each z-slab is independent and fits in cache.
 fn pass_y(f: &mut [f32], grid: &BoxGrid, h: f64) {
     let [nx, ny, _] = grid.dims;
+    let h = h as f32;
     f.par_chunks_mut(nx * ny).for_each_init(
-        || (Scratch::new(ny), vec![0.0f32; ny]),
-        |(s, col), slab| {
+        || Scratch::new(ny),
+        |s, slab| {
             for i in 0..nx {
                 let mut any = false;
                 for j in 0..ny {
-                    col[j] = slab[i + nx * j];
-                    any |= col[j] != 0.0;
+                    let x = slab[i + nx * j];
+                    s.col[j] = x;
+                    any |= x != 0.0;
                 }
-                if any {
-                    let c: &[f32] = col;
-                    transform_column(s, ny, h, |j| c[j], |j, v| slab[i + nx * j] = v);
+                if !any {
+                    continue;
                 }
+                let mut col = std::mem::take(&mut s.col);
+                transform_column(&mut col, h, s);
+                for j in 0..ny {
+                    slab[i + nx * j] = col[j];
+                }
+                s.col = col;
             }
         },
     );
@@ -162,24 +166,31 @@ fn pass_y(f: &mut [f32], grid: &BoxGrid, h: f64) {
 /// of columns; the rows of different tasks never overlap.
 fn pass_z(f: &mut [f32], grid: &BoxGrid, h: f64) {
     let [nx, ny, nz] = grid.dims;
+    let h = h as f32;
     let plane = nx * ny;
     let shared = SharedSlice::new(f);
     (0..ny).into_par_iter().for_each_init(
-        || (Scratch::new(nz), vec![0.0f32; nz]),
-        |(s, col), j| {
+        || Scratch::new(nz),
+        |s, j| {
             for i in 0..nx {
-                let at = |k: usize| i + nx * j + plane * k;
+                let base = i + nx * j;
                 let mut any = false;
                 for k in 0..nz {
                     // SAFETY: task j reads and writes only indices with this j, which no other
-                    // task touches; `at` stays below nx*ny*nz = len.
-                    col[k] = unsafe { shared.get(at(k)) };
-                    any |= col[k] != 0.0;
+                    // task touches; base + plane·k < nx·ny·nz = len.
+                    let x = unsafe { shared.get(base + plane * k) };
+                    s.col[k] = x;
+                    any |= x != 0.0;
                 }
-                if any {
-                    let c: &[f32] = col;
-                    transform_column(s, nz, h, |k| c[k], |k, v| unsafe { shared.set(at(k), v) });
+                if !any {
+                    continue;
                 }
+                let mut col = std::mem::take(&mut s.col);
+                transform_column(&mut col, h, s);
+                for (k, &x) in col.iter().enumerate() {
+                    unsafe { shared.set(base + plane * k, x) };
+                }
+                s.col = col;
             }
         },
     );
