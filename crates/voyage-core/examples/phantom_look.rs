@@ -1,0 +1,193 @@
+//! Writes pictures of the phantoms into /tmp/phantom-look/ (PNG, 8-bit grey) for a human
+//! to look at: axial, coronal and sagittal slices with an abdomen window, and projections
+//! of the lumen mask (the coronal one should show the colon's upside-down U).
+//!
+//! `cargo run --release -p voyage-core --example phantom_look [pipe|colon|small|all]`
+
+use std::io::Write;
+use std::path::Path;
+use std::time::Instant;
+
+use voyage_core::Volume;
+use voyage_core::phantom::{self, ColonOptions, Phantom};
+
+type Res<T> = Result<T, Box<dyn std::error::Error>>;
+
+/// A grey image, row-major, top row first.
+struct Image {
+    w: usize,
+    h: usize,
+    px: Vec<u8>,
+}
+
+fn main() -> Res<()> {
+    let which = std::env::args().nth(1).unwrap_or_else(|| "all".into());
+    let dir = Path::new("/tmp/phantom-look");
+    std::fs::create_dir_all(dir)?;
+    if which == "pipe" || which == "all" {
+        let t = Instant::now();
+        let p = phantom::pipe(1)?;
+        eprintln!("pipe: {:.2} s", t.elapsed().as_secs_f64());
+        look(&p, dir, "pipe")?;
+    }
+    if which == "small" || which == "all" {
+        let t = Instant::now();
+        let p = phantom::colon(&ColonOptions { small: true, tagged_fluid: true, ..ColonOptions::default() })?;
+        eprintln!("small colon: {:.2} s", t.elapsed().as_secs_f64());
+        look(&p, dir, "small")?;
+        let p = phantom::colon(&ColonOptions { small: true, collapsed_segment: true, ..ColonOptions::default() })?;
+        look(&p, dir, "small-collapsed")?;
+    }
+    if which == "colon" || which == "all" {
+        let t = Instant::now();
+        let p = phantom::colon(&ColonOptions::default())?;
+        eprintln!("colon: {:.2} s", t.elapsed().as_secs_f64());
+        look(&p, dir, "colon")?;
+        let p = phantom::colon(&ColonOptions { tagged_fluid: true, ..ColonOptions::default() })?;
+        look(&p, dir, "colon-fluid")?;
+    }
+    Ok(())
+}
+
+fn look(p: &Phantom, dir: &Path, name: &str) -> Res<()> {
+    let [nx, ny, nz] = p.ct.dims();
+    let t = &p.truth;
+    eprintln!(
+        "{name}: length {:.0} mm, {} folds, {} polyps, lumen {} voxels, gap {:.1} mm",
+        t.centerline_length_mm,
+        t.folds,
+        t.polyps.len(),
+        t.lumen_voxels,
+        t.min_part_gap_mm
+    );
+    save(&axial(&p.ct, nz / 2), &dir.join(format!("{name}-axial-mid.png")))?;
+    save(&coronal(&p.ct, ny / 2), &dir.join(format!("{name}-coronal-mid.png")))?;
+    save(&sagittal(&p.ct, nx / 2), &dir.join(format!("{name}-sagittal-mid.png")))?;
+    for f in [0.1, 0.3, 0.7, 0.95] {
+        let k = ((nz as f64 * f) as usize).min(nz - 1);
+        save(&axial(&p.ct, k), &dir.join(format!("{name}-axial-{k:03}.png")))?;
+    }
+    save(&project(&p.lumen, 1), &dir.join(format!("{name}-lumen-coronal-projection.png")))?;
+    save(&project(&p.lumen, 2), &dir.join(format!("{name}-lumen-axial-projection.png")))?;
+    // Slices through each polyp (axial), to see them on the wall.
+    for (n, pol) in t.polyps.iter().enumerate() {
+        let k = (pol.center_mm[2] / p.ct.spacing()[2]).round() as usize;
+        let j = (pol.center_mm[1] / p.ct.spacing()[1]).round() as usize;
+        save(&axial(&p.ct, k.min(nz - 1)), &dir.join(format!("{name}-polyp{n}-axial.png")))?;
+        save(&coronal(&p.ct, j.min(ny - 1)), &dir.join(format!("{name}-polyp{n}-coronal.png")))?;
+    }
+    Ok(())
+}
+
+/// Abdomen-ish window: −1000 → 0, +400 → 255.
+fn window(hu: i16) -> u8 {
+    ((hu as f64 + 1000.0) / 1400.0 * 255.0).clamp(0.0, 255.0) as u8
+}
+
+/// Axial slice k: patient right (small x) on the left, anterior (small y) on top.
+fn axial(ct: &Volume<i16>, k: usize) -> Image {
+    let [nx, ny, _] = ct.dims();
+    let px = (0..ny).flat_map(|j| (0..nx).map(move |i| (i, j))).map(|(i, j)| window(ct.get(i, j, k))).collect();
+    Image { w: nx, h: ny, px }
+}
+
+/// Coronal slice j: superior on top, resampled to square pixels of the x spacing.
+fn coronal(ct: &Volume<i16>, j: usize) -> Image {
+    let [nx, _, nz] = ct.dims();
+    let s = ct.spacing();
+    let h = (nz as f64 * s[2] / s[0]).round() as usize;
+    let px = (0..h)
+        .flat_map(|r| (0..nx).map(move |i| (i, r)))
+        .map(|(i, r)| {
+            let k = nz - 1 - ((r as f64 * s[0] / s[2]) as usize).min(nz - 1);
+            window(ct.get(i, j, k))
+        })
+        .collect();
+    Image { w: nx, h, px }
+}
+
+/// Sagittal slice i: superior on top, anterior on the left.
+fn sagittal(ct: &Volume<i16>, i: usize) -> Image {
+    let [_, ny, nz] = ct.dims();
+    let s = ct.spacing();
+    let h = (nz as f64 * s[2] / s[1]).round() as usize;
+    let px = (0..h)
+        .flat_map(|r| (0..ny).map(move |j| (j, r)))
+        .map(|(j, r)| {
+            let k = nz - 1 - ((r as f64 * s[1] / s[2]) as usize).min(nz - 1);
+            window(ct.get(i, j, k))
+        })
+        .collect();
+    Image { w: ny, h, px }
+}
+
+/// Projection of a mask along `axis` (1 = y: coronal view; 2 = z: axial view): brighter
+/// where more mask voxels lie on the ray, so overlapping loops show.
+fn project(m: &Volume<u8>, axis: usize) -> Image {
+    let [nx, ny, nz] = m.dims();
+    let s = m.spacing();
+    let count = |i: usize, r: usize| -> usize {
+        match axis {
+            1 => (0..ny).filter(|&j| m.get(i, j, r) != 0).count(),
+            _ => (0..nz).filter(|&k| m.get(i, r, k) != 0).count(),
+        }
+    };
+    let (h, rows): (usize, Vec<usize>) = if axis == 1 {
+        let h = (nz as f64 * s[2] / s[0]).round() as usize;
+        (h, (0..h).map(|r| nz - 1 - ((r as f64 * s[0] / s[2]) as usize).min(nz - 1)).collect())
+    } else {
+        (ny, (0..ny).collect())
+    };
+    let scale = 255.0 / 60.0;
+    let px = rows
+        .iter()
+        .flat_map(|&r| (0..nx).map(move |i| (i, r)))
+        .map(|(i, r)| {
+            let c = count(i, r);
+            if c == 0 { 0 } else { (60.0 + c as f64 * scale).min(255.0) as u8 }
+        })
+        .collect();
+    Image { w: nx, h, px }
+}
+
+/// Minimal PNG writer (grey, 8-bit, zlib via flate2).
+fn save(img: &Image, path: &Path) -> Res<()> {
+    let mut raw = Vec::with_capacity((img.w + 1) * img.h);
+    for row in img.px.chunks(img.w) {
+        raw.push(0u8);
+        raw.extend_from_slice(row);
+    }
+    let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::fast());
+    z.write_all(&raw)?;
+    let idat = z.finish()?;
+    let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
+    let mut ihdr = Vec::new();
+    ihdr.extend_from_slice(&(img.w as u32).to_be_bytes());
+    ihdr.extend_from_slice(&(img.h as u32).to_be_bytes());
+    ihdr.extend_from_slice(&[8, 0, 0, 0, 0]);
+    chunk(&mut out, b"IHDR", &ihdr);
+    chunk(&mut out, b"IDAT", &idat);
+    chunk(&mut out, b"IEND", &[]);
+    std::fs::write(path, out)?;
+    Ok(())
+}
+
+fn chunk(out: &mut Vec<u8>, kind: &[u8; 4], data: &[u8]) {
+    out.extend_from_slice(&(data.len() as u32).to_be_bytes());
+    let start = out.len();
+    out.extend_from_slice(kind);
+    out.extend_from_slice(data);
+    let crc = crc32(&out[start..]);
+    out.extend_from_slice(&crc.to_be_bytes());
+}
+
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut c = 0xFFFF_FFFFu32;
+    for &b in bytes {
+        c ^= b as u32;
+        for _ in 0..8 {
+            c = if c & 1 != 0 { 0xEDB8_8320 ^ (c >> 1) } else { c >> 1 };
+        }
+    }
+    !c
+}
