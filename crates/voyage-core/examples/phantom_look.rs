@@ -69,14 +69,35 @@ fn look(p: &Phantom, dir: &Path, name: &str) -> Res<()> {
     }
     save(&project(&p.lumen, 1), &dir.join(format!("{name}-lumen-coronal-projection.png")))?;
     save(&project(&p.lumen, 2), &dir.join(format!("{name}-lumen-axial-projection.png")))?;
-    // Slices through each polyp (axial), to see them on the wall.
+    // Close-ups (×4) of an axial and a coronal slice through each polyp.
     for (n, pol) in t.polyps.iter().enumerate() {
-        let k = (pol.center_mm[2] / p.ct.spacing()[2]).round() as usize;
-        let j = (pol.center_mm[1] / p.ct.spacing()[1]).round() as usize;
-        save(&axial(&p.ct, k.min(nz - 1)), &dir.join(format!("{name}-polyp{n}-axial.png")))?;
-        save(&coronal(&p.ct, j.min(ny - 1)), &dir.join(format!("{name}-polyp{n}-coronal.png")))?;
+        let s = p.ct.spacing();
+        let [i, j, k] = [0, 1, 2].map(|a| ((pol.center_mm[a] / s[a]).round() as usize).min(p.ct.dims()[a] - 1));
+        let ax = crop(&axial(&p.ct, k), i, j, 24);
+        let row = ((nz - 1 - k) as f64 * s[2] / s[0]).round() as usize;
+        let co = crop(&coronal(&p.ct, j), i, row, 24);
+        let tag = format!("{:.0}mm-{}{}", pol.diameter_mm, pol.segment, if pol.behind_fold { "-behind-fold" } else { "" });
+        save(&zoom(&ax, 4), &dir.join(format!("{name}-polyp{n}-{tag}-axial.png")))?;
+        save(&zoom(&co, 4), &dir.join(format!("{name}-polyp{n}-{tag}-coronal.png")))?;
     }
     Ok(())
+}
+
+/// The square of half-size `half` around (cx, cy), clipped to the image.
+fn crop(img: &Image, cx: usize, cy: usize, half: usize) -> Image {
+    let x0 = cx.saturating_sub(half);
+    let y0 = cy.saturating_sub(half);
+    let x1 = (cx + half).min(img.w - 1);
+    let y1 = (cy + half).min(img.h - 1);
+    let px = (y0..=y1).flat_map(|y| (x0..=x1).map(move |x| (x, y))).map(|(x, y)| img.px[x + img.w * y]).collect();
+    Image { w: x1 - x0 + 1, h: y1 - y0 + 1, px }
+}
+
+/// Nearest-neighbour enlargement.
+fn zoom(img: &Image, f: usize) -> Image {
+    let (w, h) = (img.w * f, img.h * f);
+    let px = (0..h).flat_map(|y| (0..w).map(move |x| (x, y))).map(|(x, y)| img.px[x / f + img.w * (y / f)]).collect();
+    Image { w, h, px }
 }
 
 /// Abdomen-ish window: −1000 → 0, +400 → 255.
@@ -138,15 +159,9 @@ fn project(m: &Volume<u8>, axis: usize) -> Image {
     } else {
         (ny, (0..ny).collect())
     };
-    let scale = 255.0 / 60.0;
-    let px = rows
-        .iter()
-        .flat_map(|&r| (0..nx).map(move |i| (i, r)))
-        .map(|(i, r)| {
-            let c = count(i, r);
-            if c == 0 { 0 } else { (60.0 + c as f64 * scale).min(255.0) as u8 }
-        })
-        .collect();
+    let counts: Vec<usize> = rows.iter().flat_map(|&r| (0..nx).map(move |i| (i, r))).map(|(i, r)| count(i, r)).collect();
+    let max = counts.iter().copied().max().unwrap_or(1).max(1) as f64;
+    let px = counts.iter().map(|&c| if c == 0 { 0 } else { (50.0 + 205.0 * c as f64 / max) as u8 }).collect();
     Image { w: nx, h, px }
 }
 

@@ -146,9 +146,9 @@ const POLYPS: &[(&str, f64, bool, Option<f64>)] = &[
     ("sigmoid", 8.0, false, None),
     ("sigmoid", 4.0, true, None),
     ("descending", 3.0, true, None),
-    ("transverse", 10.0, false, Some(4.0)),
+    ("transverse", 12.0, false, None),
     ("transverse", 5.0, true, None),
-    ("ascending", 12.0, false, None),
+    ("ascending", 10.0, false, Some(4.0)),
     ("cecum", 7.0, false, None),
 ];
 
@@ -446,45 +446,51 @@ fn fold_truth(tube: &Tube, segments: &[SegmentTruth]) -> Vec<FoldTruth> {
 /// Places the polyps of [`POLYPS`]: between two folds (or anywhere in the fold-free
 /// rectum), or just behind a fold (on its cecal side) in the middle of one of its crescents,
 /// which is deepened if needed so that it hides the polyp from the rectal side.
+///
+/// A polyp never reaches in further than [`MAX_PROTRUSION`] of the local radius (the
+/// diameter is reduced if needed), so the lumen stays open around the centerline. In the
+/// small phantom a diameter d becomes d/2 + 2.5 mm (3–12 mm → 4–8.5 mm: at least about three
+/// voxels, so the centre voxel is solid tissue) and every polyp is sessile.
 fn make_polyps(frame: &Frame, tube: &mut Tube, segments: &[SegmentTruth], seed: u64) -> Result<(Vec<Blob>, Vec<PolypTruth>)> {
     let s = frame.scale;
+    let small = s < 1.0;
     let mut rng = Rng::new(seed, STREAM_POLYPS);
-    let mut specs = Vec::new();
+    let mut specs: Vec<PolypSpec> = Vec::new();
     for &(seg_name, diameter, behind, stalk) in POLYPS {
         let seg = segment(segments, seg_name)?;
-        let d = (diameter * s).max(2.0 * frame.max_spacing());
-        let frac = rng.range(0.3, 0.7);
-        let mut arc = seg.start_arc_mm + frac * (seg.end_arc_mm - seg.start_arc_mm);
-        if let Some(c) = &tube.collapse {
-            // Keep clear of the collapsed stretch: move to the lower part of the segment.
-            if arc > c.start - c.taper - 2.0 * d && arc < c.end + c.taper + 2.0 * d {
-                arc = seg.start_arc_mm + 0.25 * (c.start - c.taper - seg.start_arc_mm).max(0.0) + 5.0 * s;
-            }
-        }
+        let stalk = if small { None } else { stalk };
+        let wanted = if small { 0.5 * diameter + 2.5 } else { diameter };
+        let mut arc = seg.start_arc_mm + rng.range(0.3, 0.7) * (seg.end_arc_mm - seg.start_arc_mm);
         let mut angle = rng.range(0.0, std::f64::consts::TAU);
-        let protrusion = match stalk {
-            None => (1.0 + super::polyp::SESSILE_INSET) * d / 2.0,
-            Some(len) => len * s + d,
-        };
-        if behind {
-            let (fi, k) = nearest_fold(tube, arc, &mut rng)?;
-            let f = &mut tube.folds[fi];
-            let r = tube.axis.radius_at(f.arc);
-            let need = (protrusion + 1.0 * s).min(FOLD_MAX_FRACTION * r);
-            f.sectors[k].depth = f.sectors[k].depth.max(need);
-            arc = f.arc + f.sectors[k].offset + f.half_width + d / 2.0 + 1.5 * s;
-            angle = f.sector_mid_angle(k);
-        } else if let Some((a, b)) = folds_around(tube, arc) {
-            arc = 0.5 * (a + b);
+        let k = ((rng.uniform() * 3.0) as usize).min(2);
+        let mut spec = None;
+        // Try a few places along the segment until one is clear of the collapse and of the
+        // other polyps.
+        for _ in 0..8 {
+            let d = fit_diameter(wanted, stalk, tube.axis.radius_at(arc));
+            let mut at = arc;
+            if behind {
+                let fi = nearest_fold(tube, arc)?;
+                let f = &tube.folds[fi];
+                at = f.arc + f.sectors[k].offset + f.half_width + d / 2.0 + 1.5 * s;
+                angle = f.sector_mid_angle(k);
+            } else if let Some((a, b)) = folds_around(tube, arc) {
+                at = 0.5 * (a + b);
+            }
+            let d = fit_diameter(wanted, stalk, tube.axis.radius_at(at));
+            let clear_collapse = tube.collapse.as_ref().is_none_or(|c| at + d < c.start - c.taper || at - d > c.end + c.taper);
+            let clear_polyps = specs.iter().all(|o| (o.arc - at).abs() > 20.0 * s);
+            if clear_collapse && clear_polyps && at > seg.start_arc_mm && at < seg.end_arc_mm {
+                spec = Some(PolypSpec { arc: at, angle, diameter: d, stalk, segment: seg_name.into(), behind_fold: behind });
+                break;
+            }
+            arc = seg.start_arc_mm + rng.range(0.1, 0.9) * (seg.end_arc_mm - seg.start_arc_mm);
         }
-        specs.push(PolypSpec {
-            arc,
-            angle,
-            diameter: d,
-            stalk: stalk.map(|l| l * s),
-            segment: segment_name(segments, arc),
-            behind_fold: behind,
-        });
+        let spec = spec.ok_or_else(|| Error::invalid(format!("colon phantom: no room for a polyp in the {seg_name}")))?;
+        if behind {
+            deepen_fold_before(tube, &spec, k, frame);
+        }
+        specs.push(spec);
     }
     // Re-index folds after any deepening (the reach of a fold does not change).
     let folds = std::mem::take(&mut tube.folds);
@@ -492,13 +498,43 @@ fn make_polyps(frame: &Frame, tube: &mut Tube, segments: &[SegmentTruth], seed: 
     Ok(specs.iter().map(|sp| place(tube, sp)).unzip())
 }
 
-/// The fold nearest to `arc` and a random crescent of it.
-fn nearest_fold(tube: &Tube, arc: f64, rng: &mut Rng) -> Result<(usize, usize)> {
-    let fi = (0..tube.folds.len())
+/// A polyp reaches in at most this fraction of the local lumen radius.
+pub const MAX_PROTRUSION: f64 = 0.55;
+
+/// How far a polyp of diameter `d` reaches in from the wall.
+fn protrusion(d: f64, stalk: Option<f64>) -> f64 {
+    match stalk {
+        None => (1.0 + super::polyp::SESSILE_INSET) * d / 2.0,
+        Some(len) => len + d,
+    }
+}
+
+/// `wanted`, or less so that the polyp leaves the middle of the lumen free.
+fn fit_diameter(wanted: f64, stalk: Option<f64>, radius: f64) -> f64 {
+    let limit = MAX_PROTRUSION * radius;
+    if protrusion(wanted, stalk) <= limit {
+        return wanted;
+    }
+    match stalk {
+        None => limit * 2.0 / (1.0 + super::polyp::SESSILE_INSET),
+        Some(len) => (limit - len).max(0.0),
+    }
+}
+
+/// Makes crescent `k` of the fold just before a behind-fold polyp deep enough to hide it.
+fn deepen_fold_before(tube: &mut Tube, spec: &PolypSpec, k: usize, frame: &Frame) {
+    let Ok(fi) = nearest_fold(tube, spec.arc) else { return };
+    let r = tube.axis.radius_at(tube.folds[fi].arc);
+    let need = (protrusion(spec.diameter, spec.stalk) + 1.0 * frame.scale).min(FOLD_MAX_FRACTION * r).min(FOLD_DEPTH.1 * frame.scale);
+    let sector = &mut tube.folds[fi].sectors[k];
+    sector.depth = sector.depth.max(need);
+}
+
+/// The fold nearest to `arc`.
+fn nearest_fold(tube: &Tube, arc: f64) -> Result<usize> {
+    (0..tube.folds.len())
         .min_by(|&a, &b| (tube.folds[a].arc - arc).abs().total_cmp(&(tube.folds[b].arc - arc).abs()))
-        .ok_or_else(|| Error::invalid("colon phantom: no fold to hide a polyp behind"))?;
-    let k = ((rng.uniform() * 3.0) as usize).min(2);
-    Ok((fi, k))
+        .ok_or_else(|| Error::invalid("colon phantom: no fold to hide a polyp behind"))
 }
 
 /// Arcs of the folds just before and after `arc`, if it lies between two folds.

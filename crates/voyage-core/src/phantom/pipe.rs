@@ -30,6 +30,8 @@ pub const POLYP_DIAMETERS: [f64; 3] = [7.0, 5.0, 3.0];
 /// Source and target lie this far inside the caps (≥ radius / 2).
 pub const END_INSET: f64 = 15.0;
 pub const NOISE_HU: f64 = 20.0;
+/// The caps' inner faces lie this far beyond the centerline's end points.
+pub const CAP_MARGIN: f64 = 1.0;
 
 const AIR: f64 = -1000.0;
 const WATER: f64 = 0.0;
@@ -95,7 +97,8 @@ pub fn pipe(seed: u64) -> Result<Phantom> {
     let center = DVec3::new(ext.x / 2.0, ext.y / 2.0, 0.0);
     let axis = Axis::through(&spiral_knots(center), 1.0)?;
     check_pipe_axis(&axis)?;
-    let tube = Tube::new(axis, PIPE_WALL, Ends::Flat);
+    let mut tube = Tube::new(axis, PIPE_WALL, Ends::Flat);
+    tube.end_margin = CAP_MARGIN;
     let mut rng = Rng::new(seed, STREAM_POLYPS);
     let mid = tube.axis.length / 2.0;
     let (blobs, polyps): (Vec<_>, Vec<_>) = POLYP_DIAMETERS

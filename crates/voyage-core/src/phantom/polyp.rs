@@ -46,6 +46,7 @@ pub fn place(tube: &Tube, spec: &PolypSpec) -> (Blob, PolypTruth) {
         segment: spec.segment.clone(),
         behind_fold: spec.behind_fold,
         arc_mm: spec.arc,
+        angle_rad: spec.angle,
         base_mm: arr(base),
         direction: arr(-out),
         protrusion_mm: protrusion,

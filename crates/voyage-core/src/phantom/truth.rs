@@ -72,6 +72,8 @@ pub struct PolypTruth {
     /// On the far side of a fold when flying source → target (hidden from afar).
     pub behind_fold: bool,
     pub arc_mm: f64,
+    /// Angle around the axis, in the centerline's rotation-minimising frame.
+    pub angle_rad: f64,
     /// Where it meets the nominal wall.
     pub base_mm: [f64; 3],
     /// Unit vector from the base into the lumen.

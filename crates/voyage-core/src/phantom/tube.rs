@@ -125,6 +125,9 @@ pub struct Tube {
     pub axis: Axis,
     pub wall_mm: f64,
     pub ends: Ends,
+    /// Flat ends only: the caps lie this far beyond the axis's end points, so that the
+    /// centerline's first and last points are inside the lumen.
+    pub end_margin: f64,
     pub folds: Vec<Fold>,
     /// Per segment (vertex i → i+1), the fold that can reach it, or `u32::MAX`.
     fold_at: Vec<u32>,
@@ -166,6 +169,7 @@ impl Tube {
             axis,
             wall_mm,
             ends,
+            end_margin: 0.0,
             folds: Vec::new(),
             fold_at: vec![u32::MAX; nseg],
             collapse: None,
@@ -261,7 +265,7 @@ impl Tube {
         let ax = &self.axis;
         let seg_len = ax.arc[i + 1] - ax.arc[i];
         let last = self.segments() - 1;
-        // Beyond a flat cap the axial coordinate runs on past the end.
+        // Beyond a flat end the axial coordinate runs on past the last point.
         let flat_end = self.ends == Ends::Flat && ((i == 0 && raw < 0.0) || (i == last && raw > 1.0));
         let tt = if flat_end { raw } else { t };
         let q = ax.points[i] + (ax.points[i + 1] - ax.points[i]) * tt;
@@ -293,7 +297,7 @@ impl Tube {
         }
         let mut outer = d - r_outer;
         if flat_end {
-            let axial = if raw < 0.0 { -raw * seg_len } else { (raw - 1.0) * seg_len };
+            let axial = if i == 0 { -raw * seg_len } else { (raw - 1.0) * seg_len } - self.end_margin;
             lumen = capped(lumen, axial);
             outer = capped(outer, axial - self.wall_mm);
         }
