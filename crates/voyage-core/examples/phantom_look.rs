@@ -2,7 +2,9 @@
 //! to look at: axial, coronal and sagittal slices with an abdomen window, and projections
 //! of the lumen mask (the coronal one should show the colon's upside-down U).
 //!
-//! `cargo run --release -p voyage-core --example phantom_look [pipe|colon|small|all]`
+//! `cargo run --release -p voyage-core --example phantom_look [pipe|colon|small|all]`;
+//! `... phantom_look time` times the generators; `... phantom_look anatomy` prints the
+//! colon's course (lengths, tightest bend, closest loops) for tuning it.
 
 use std::io::Write;
 use std::path::Path;
@@ -24,6 +26,13 @@ fn main() -> Res<()> {
     let which = std::env::args().nth(1).unwrap_or_else(|| "all".into());
     let dir = Path::new("/tmp/phantom-look");
     std::fs::create_dir_all(dir)?;
+    if which == "time" {
+        return time();
+    }
+    if which == "anatomy" {
+        print!("{}", phantom::colon::anatomy_report(false)?);
+        return Ok(());
+    }
     if which == "pipe" || which == "all" {
         let t = Instant::now();
         let p = phantom::pipe(1)?;
@@ -46,6 +55,25 @@ fn main() -> Res<()> {
         let p = phantom::colon(&ColonOptions { tagged_fluid: true, ..ColonOptions::default() })?;
         look(&p, dir, "colon-fluid")?;
     }
+    Ok(())
+}
+
+/// Generation times (best of three) of the small colon, the full colon and the pipe.
+fn time() -> Res<()> {
+    let best = |f: &dyn Fn() -> Res<()>| -> Res<f64> {
+        let mut best = f64::INFINITY;
+        for _ in 0..3 {
+            let t = Instant::now();
+            f()?;
+            best = best.min(t.elapsed().as_secs_f64());
+        }
+        Ok(best)
+    };
+    let threads = rayon::current_num_threads();
+    let small = best(&|| phantom::colon(&ColonOptions { small: true, ..ColonOptions::default() }).map(drop).map_err(Into::into))?;
+    let full = best(&|| phantom::colon(&ColonOptions::default()).map(drop).map_err(Into::into))?;
+    let pipe = best(&|| phantom::pipe(1).map(drop).map_err(Into::into))?;
+    println!("{threads} threads: small colon {small:.3} s, full colon {full:.3} s, pipe {pipe:.3} s");
     Ok(())
 }
 

@@ -694,6 +694,22 @@ fn small_colon_collapsed_segment_splits_the_gas() {
 }
 
 #[test]
+fn small_colon_fluid_and_collapse_together() {
+    let p = small(ColonOptions { tagged_fluid: true, collapsed_segment: true, seed: 3, ..ColonOptions::default() });
+    check_colon(&p, true);
+    let t = &p.truth;
+    let c = t.collapsed.as_ref().expect("collapse");
+    assert!(!t.fluid_pools.is_empty());
+    for pl in &t.fluid_pools {
+        assert!(pl.end_arc_mm <= c.start_arc_mm - c.taper_mm || pl.start_arc_mm >= c.end_arc_mm + c.taper_mm);
+    }
+    for (&l, &m) in p.labels.data().iter().zip(p.lumen.data()) {
+        assert!(l != label::LUMEN_FLUID || m == 1);
+    }
+    assert_eq!(components(&p.lumen, |i| p.lumen.data()[i] == 1).len(), 2);
+}
+
+#[test]
 fn truth_json_round_trips() {
     for p in [small_default(), pipe()] {
         let json = p.truth.to_json();

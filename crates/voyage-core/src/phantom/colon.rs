@@ -21,7 +21,7 @@ use glam::{DVec2, DVec3};
 use super::axis::{Axis, Knot};
 use super::body::{self, Body, Lung, Spine};
 use super::polyp::{PolypSpec, place};
-use super::raster::{Background, Materials, Scene};
+use super::raster::{Materials, Scene};
 use super::rng::{Rng, stream_key};
 use super::truth::{
     COORDINATES_NOTE, CollapsedTruth, DistractorTruth, FoldTruth, PolypTruth, PoolTruth, RoiTruth, SegmentTruth,
@@ -205,7 +205,7 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
     let folds = make_folds(&frame, &tube, &segments, opts.seed);
     tube.set_folds(folds);
     let (mut blobs, polyps) = make_polyps(&frame, &mut tube, &segments, opts.seed)?;
-    let pools = if opts.tagged_fluid { make_pools(&frame, &tube, &segments, opts.seed) } else { Vec::new() };
+    let pools = if opts.tagged_fluid { make_pools(&tube, &segments, opts.seed) } else { Vec::new() };
     tube.pools = pools.iter().map(|(p, _)| p.clone()).collect();
     let mut distractors = Vec::new();
     if opts.small_bowel_gas {
@@ -292,14 +292,14 @@ fn materials() -> Vec<(String, f64)> {
     .collect()
 }
 
-/// The abdomen: 330×250 mm ellipse, 10 mm rim, spine posteriorly, optional lung bases.
+/// The abdomen: a 340×260 mm ellipse (full size) with a 10 mm rim, the spine posteriorly
+/// and, optionally, the lung bases in the top 24 slices.
 fn make_body(frame: &Frame, lungs: bool) -> Body {
     let s = frame.scale;
     let c = |x: f64, y: f64| {
         let p = frame.pos([x, y, 0.0]);
         DVec2::new(p.x, p.y)
     };
-    let top = frame.pos([0.0, 0.0, 400.0]).z;
     let lung = |x: f64| Lung {
         center: c(x, 222.0),
         semi: DVec2::new(55.0, 68.0) * s,
@@ -320,7 +320,7 @@ fn make_body(frame: &Frame, lungs: bool) -> Body {
             arch_inner: 7.0 * s,
             arch_outer: 11.0 * s,
         },
-        lungs: if lungs && top > 0.0 { vec![lung(192.0 - 88.0), lung(192.0 + 88.0)] } else { Vec::new() },
+        lungs: if lungs { vec![lung(192.0 - 88.0), lung(192.0 + 88.0)] } else { Vec::new() },
         inv_w: 3.0 / frame.geom.spacing.iter().sum::<f64>(),
     }
 }
@@ -551,7 +551,7 @@ fn folds_around(tube: &Tube, arc: f64) -> Option<(f64, f64)> {
 /// lumen's floor there, and it extends along the colon as long as the lumen's floor
 /// (axis y + radius) is below the level — where the colon rises above the level, the pool
 /// ends by itself, so the level is flat and the fluid physically plausible.
-fn make_pools(frame: &Frame, tube: &Tube, segments: &[SegmentTruth], seed: u64) -> Vec<(Pool, PoolTruth)> {
+fn make_pools(tube: &Tube, segments: &[SegmentTruth], seed: u64) -> Vec<(Pool, PoolTruth)> {
     let mut rng = Rng::new(seed, STREAM_POOLS);
     let ax = &tube.axis;
     let floor = |i: usize| ax.points[i].y + ax.radius[i];
@@ -559,7 +559,8 @@ fn make_pools(frame: &Frame, tube: &Tube, segments: &[SegmentTruth], seed: u64) 
     for &name in POOL_SEGMENTS {
         let Ok(seg) = segment(segments, name) else { continue };
         let (a, b) = (ax.vertex_at(seg.start_arc_mm), ax.vertex_at(seg.end_arc_mm));
-        let Some(anchor) = (a..=b).max_by(|&i, &j| floor(i).total_cmp(&floor(j))) else { continue };
+        let open = |i: &usize| tube.collapse.as_ref().is_none_or(|c| ax.arc[*i] < c.start - c.taper || ax.arc[*i] > c.end + c.taper);
+        let Some(anchor) = (a..=b).filter(open).max_by(|&i, &j| floor(i).total_cmp(&floor(j))) else { continue };
         let depth = rng.range(0.3, 0.5) * ax.radius[anchor];
         let level = floor(anchor) - depth;
         let hu = rng.range(400.0, 700.0);
@@ -572,20 +573,20 @@ fn make_pools(frame: &Frame, tube: &Tube, segments: &[SegmentTruth], seed: u64) 
             hi += 1;
         }
         let (mut start, mut end) = (ax.arc[lo] - ax.radius[lo], ax.arc[hi] + ax.radius[hi]);
-        if let Some(c) = &tube.collapse {
-            if start < c.end + c.taper && end > c.start - c.taper {
-                // Fluid does not cross the collapsed cord: keep the anchor's side.
-                if ax.arc[anchor] < c.start {
-                    end = end.min(c.start - c.taper);
-                } else {
-                    start = start.max(c.end + c.taper);
-                }
+        if let Some(c) = &tube.collapse
+            && start < c.end + c.taper
+            && end > c.start - c.taper
+        {
+            // Fluid does not cross the collapsed cord: keep the anchor's side.
+            if ax.arc[anchor] < c.start {
+                end = end.min(c.start - c.taper);
+            } else {
+                start = start.max(c.end + c.taper);
             }
         }
         if pools.iter().any(|(p, _)| start < p.end && end > p.start) {
             continue;
         }
-        let _ = frame;
         let pool = Pool { start, end, level_y: level, hu };
         let truth = PoolTruth { segment: name.into(), start_arc_mm: start, end_arc_mm: end, level_y_mm: level, hu };
         pools.push((pool, truth));
@@ -657,10 +658,8 @@ fn fat_roi(frame: &Frame, tube: &Tube, blobs: &[Blob], body: &Body) -> Option<Ro
     None
 }
 
-#[allow(dead_code)]
-fn unused(_: &dyn Background) {}
-
-/// Development aid: the axis's length, per-segment lengths, tightest bend and closest loops.
+/// Development aid (for tuning [`KNOTS`]): the axis's length, per-segment lengths, the
+/// tightest bend, the closest loops and what [`check_anatomy`] says.
 #[doc(hidden)]
 pub fn anatomy_report(small: bool) -> Result<String> {
     let frame = Frame::new(small)?;
@@ -668,38 +667,13 @@ pub fn anatomy_report(small: bool) -> Result<String> {
     let wall = frame.thin(WALL, 1.0);
     let (bend, at) = axis.min_bend_ratio(wall);
     let (gap, i, j) = axis.min_part_gap(wall, 2);
-    let body = make_body(&frame, true);
     let mut out = format!(
-        "length {:.0}, bend {bend:.2} at {:.0}, gap {gap:.1} between {:.0} {:?} and {:.0} {:?}\n",
-        axis.length, axis.arc[at], axis.arc[i], axis.points[i], axis.arc[j], axis.points[j]
+        "length {:.0} mm; tightest bend {bend:.2} × (radius + wall) at arc {:.0}; loops closest ({gap:.1} mm) at arcs {:.0} and {:.0}\n",
+        axis.length, axis.arc[at], axis.arc[i], axis.arc[j]
     );
     for g in segments(&axis) {
-        out += &format!("  {} {:.0}..{:.0} ({:.0})\n", g.name, g.start_arc_mm, g.end_arc_mm, g.end_arc_mm - g.start_arc_mm);
+        out += &format!("  {:<16} {:6.0} .. {:6.0} mm ({:.0} mm)\n", g.name, g.start_arc_mm, g.end_arc_mm, g.end_arc_mm - g.start_arc_mm);
     }
-    for i in (3..axis.len() - 3).step_by(6) {
-        let turn = axis.tangent[i - 3].angle_between(axis.tangent[i + 3]);
-        let rho = (axis.arc[i + 3] - axis.arc[i - 3]) / turn.max(1e-9);
-        let ratio = rho / (axis.radius[i] + wall);
-        if ratio < 1.15 {
-            out += &format!("  bend {ratio:.2} at arc {:.0} {:.0?}\n", axis.arc[i], axis.points[i].to_array());
-        }
-    }
-    // Worst gaps list
-    let mut worst: Vec<(f64, usize, usize)> = Vec::new();
-    for a in (0..axis.len()).step_by(4) {
-        for b in (a..axis.len()).step_by(4) {
-            let reach = std::f64::consts::PI * (axis.radius[a].max(axis.radius[b]) + wall);
-            if axis.arc[b] - axis.arc[a] <= reach { continue; }
-            let g = axis.points[a].distance(axis.points[b]) - axis.radius[a] - axis.radius[b];
-            if g < 12.0 { worst.push((g, a, b)); }
-        }
-    }
-    worst.sort_by(|x, y| x.0.total_cmp(&y.0));
-    for (g, a, b) in worst.iter().take(8) {
-        out += &format!("  gap {g:.1}: arc {:.0} and {:.0}\n", axis.arc[*a], axis.arc[*b]);
-    }
-    if let Err(e) = check_anatomy(&frame, &axis, &body) {
-        out += &format!("check: {e}\n");
-    }
-    Ok(out)
+    let verdict = check_anatomy(&frame, &axis, &make_body(&frame, true)).map_or_else(|e| e.to_string(), |_| "checks pass".into());
+    Ok(out + &verdict + "\n")
 }

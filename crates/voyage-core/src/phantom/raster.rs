@@ -99,13 +99,7 @@ fn ramp(sdf: f64, inv_w: f64) -> f64 {
 impl<B: Background> Scene<'_, B> {
     /// Rasterises the scene.
     pub fn render(&self) -> Result<Rendered> {
-        let t0 = std::time::Instant::now();
         let index = self.build_index();
-        if std::env::var_os("PHANTOM_TIMING").is_some() {
-            let n = index.bricks.iter().filter(|b| b.is_some()).count();
-            let segs: usize = index.bricks.iter().flatten().map(|b| b.segs.len()).sum();
-            eprintln!("index {:.3} s, {} bricks, {:.1} segs/brick", t0.elapsed().as_secs_f64(), n, segs as f64 / n.max(1) as f64);
-        }
         let [nx, ny, nz] = self.geom.dims;
         let plane = nx * ny;
         let mut ct = vec![0i16; plane * nz];
