@@ -4,17 +4,23 @@
 //!
 //! Full size: 512×512×400 voxels of 0.75×0.75×1.0 mm (384×384×400 mm), like a clinical
 //! scan. Small (for fast tests): 128×128×125 voxels of 1.5×1.5×1.6 mm with the whole
-//! anatomy scaled by ½ (so the lumen radius, 5–15 mm, stays ≥ 3 voxels); thin features are
-//! kept at least about one voxel thick (wall, folds, polyps ≥ 2 voxels).
+//! anatomy scaled by ½ (lumen radius 6–15 mm, so ≥ 4 voxels); thin features are kept about
+//! a voxel thick at least (wall 1.6 mm, fold half-width 1.44 mm), polyps become d/2 + 2.5 mm.
 //!
-//! Anatomy (identity LPS frame: +x patient left, +y posterior, +z superior): the rectum
-//! rises in the midline in front of the sacrum; the sigmoid loops through the pelvis to the
-//! right and anteriorly and back to the left iliac fossa; the descending colon climbs the
-//! left flank, posteriorly, to the splenic flexure under the left diaphragm; the transverse
-//! colon crosses anteriorly to the right, sagging in the middle; the hepatic flexure (a
-//! little lower than the splenic) turns down into the ascending colon on the right, which
-//! ends in the wide, blind cecum. About 1.5 m long; radius 12–30 mm (rectum and cecum
-//! widest, sigmoid and descending narrowest).
+//! Anatomy (identity LPS frame: +x patient left, +y posterior, +z superior), see `KNOTS`:
+//! the rectum rises in the midline in front of the sacrum; the sigmoid swings right, dips
+//! into the pelvis in front of the rectum, climbs on the left, makes an anterior loop under
+//! the transverse colon and reaches the left iliac fossa; the descending colon climbs the
+//! left flank posteriorly to the splenic flexure under the left lung; the transverse colon
+//! crosses anteriorly to the right, sagging to z ≈ 250 mm; the hepatic flexure (a little
+//! lower than the splenic) turns down into the ascending colon on the right, which ends in
+//! the wide, blind cecum. 1562 mm long; radius 12–30 mm (rectum and cecum widest, sigmoid
+//! and descending narrowest); different loops keep ≥ 10 mm of tissue between their lumens.
+//!
+//! Haustral folds every 20–30 mm from the sigmoid on (none in the rectum): three crescents
+//! between the taeniae, each 3–8 mm deep (at most 45 % of the radius) and ≈ 2–4 mm thick
+//! (see [`Fold`]). Eight polyps of 3–12 mm in six segments, three hidden just behind a fold
+//! (see `POLYPS`). The truth records everything (see [`Truth`]).
 
 use glam::{DVec2, DVec3};
 

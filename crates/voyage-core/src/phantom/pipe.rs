@@ -9,7 +9,11 @@
 //! discs) is coiled as a flat spiral of 1.5 turns whose radius grows 60 mm per turn from
 //! 45 mm (so neighbouring turns leave 15 mm of water between their walls), bobbing ±10 mm
 //! in z. Three rubber spheres of 7, 5 and 3 mm sit on the inner wall near the middle of
-//! the pipe, 40 mm apart, protruding 75 % of their diameter into the lumen.
+//! the pipe, 40 mm apart, protruding 75 % of their diameter into the lumen (close together,
+//! as in the paper's Fig. 10a, where one view shows all three).
+//!
+//! Truth: the centerline is the pipe's axis, from 1 mm inside one cap to 1 mm inside the
+//! other (≈ 850 mm); source and target lie on it 15 mm from its ends.
 
 use glam::DVec3;
 

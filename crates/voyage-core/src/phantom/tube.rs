@@ -256,7 +256,7 @@ impl Tube {
         d_axis + h + margin < r_min
     }
 
-    /// The tube at `p`, using the nearest of the candidate segments (see [`Tube::nearest`]).
+    /// The tube at `p`, using the nearest of the candidate segments (see `Tube::nearest`).
     pub fn sample(&self, p: DVec3, segs: &[u32], seg_dist: &[f64], pc: f64) -> TubeHit {
         if segs.is_empty() {
             return TubeHit::NONE;
