@@ -1,0 +1,164 @@
+//! Ground truth that comes with every phantom, serialisable to JSON.
+//!
+//! All points are in volume-local millimetres (x = i·sx, y = j·sy, z = k·sz); the origin
+//! and direction given alongside turn them into LPS patient coordinates:
+//! `lps = origin + direction · local`.
+
+use serde::{Deserialize, Serialize};
+
+/// What the JSON says about its coordinates.
+pub const COORDINATES_NOTE: &str = "All *_mm points are volume-local millimetres: x = i*spacing[0], y = j*spacing[1], \
+z = k*spacing[2] (voxel centres). Patient LPS = origin_lps_mm + direction * local (direction columns are the LPS \
+unit vectors of the i, j, k axes; identity here: +x patient left, +y posterior, +z superior). Arc lengths are mm \
+along the centerline from its first point.";
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct Truth {
+    /// "pipe" or "colon".
+    pub kind: String,
+    pub seed: u64,
+    pub coordinates: String,
+    pub dims: [usize; 3],
+    pub spacing_mm: [f64; 3],
+    pub origin_lps_mm: [f64; 3],
+    /// Row-major; columns are the LPS unit vectors of i, j, k.
+    pub direction: [[f64; 3]; 3],
+    /// Size of the anatomy relative to the full-size model (0.5 for the small colon).
+    pub scale: f64,
+    pub noise_hu: f64,
+    /// The tube's axis, source end first, vertices at most 1 mm apart.
+    pub centerline_mm: Vec<[f64; 3]>,
+    pub centerline_arc_mm: Vec<f64>,
+    /// Nominal lumen radius at each centerline point (without folds, collapse or polyps).
+    pub centerline_radius_mm: Vec<f64>,
+    pub centerline_length_mm: f64,
+    pub source_mm: [f64; 3],
+    pub target_mm: [f64; 3],
+    pub source_arc_mm: f64,
+    pub target_arc_mm: f64,
+    /// Thickness of the colon (or pipe) wall.
+    pub wall_thickness_mm: f64,
+    /// Smallest lumen-to-lumen distance between different parts of the tube (nominal radii).
+    pub min_part_gap_mm: f64,
+    pub polyps: Vec<PolypTruth>,
+    /// Voxels of the ground-truth lumen mask.
+    pub lumen_voxels: usize,
+    /// Number of haustral folds.
+    pub folds: usize,
+    pub fold_list: Vec<FoldTruth>,
+    /// Named parts of the tube along the centerline, in order.
+    pub segments: Vec<SegmentTruth>,
+    pub fluid_pools: Vec<PoolTruth>,
+    /// Lumen voxels filled with tagged fluid (label 3).
+    pub fluid_voxels: usize,
+    pub collapsed: Option<CollapsedTruth>,
+    /// Gas that is not colon: small-bowel pockets and lung bases.
+    pub distractors: Vec<DistractorTruth>,
+    /// A box of homogeneous tissue (inclusive voxel ranges) for measuring noise.
+    pub noise_roi: Option<RoiTruth>,
+    /// Noise-free HU of the materials.
+    pub materials_hu: Vec<(String, f64)>,
+    /// Meaning of the label volume's values.
+    pub labels: Vec<(u8, String)>,
+}
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct PolypTruth {
+    /// Centre of the polyp's head (a sphere).
+    pub center_mm: [f64; 3],
+    pub diameter_mm: f64,
+    /// Name of the segment it sits in.
+    pub segment: String,
+    /// On the far side of a fold when flying source → target (hidden from afar).
+    pub behind_fold: bool,
+    pub arc_mm: f64,
+    /// Angle around the axis, in the centerline's rotation-minimising frame.
+    pub angle_rad: f64,
+    /// Where it meets the nominal wall.
+    pub base_mm: [f64; 3],
+    /// Unit vector from the base into the lumen.
+    pub direction: [f64; 3],
+    /// How far the head reaches in from the nominal wall.
+    pub protrusion_mm: f64,
+    /// "sessile" or "pedunculated".
+    pub shape: String,
+    /// Pedunculated: length of the stalk between the wall and the head.
+    pub stalk_length_mm: f64,
+}
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct FoldTruth {
+    pub arc_mm: f64,
+    /// Half the fold's thickness at its base.
+    pub half_width_mm: f64,
+    /// Frame angle of the first taenia (crescents lie between taeniae).
+    pub phase_rad: f64,
+    /// Depth of each of the three crescents.
+    pub depth_mm: [f64; 3],
+    /// Shift of each crescent along the axis.
+    pub offset_mm: [f64; 3],
+    pub segment: String,
+}
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct SegmentTruth {
+    pub name: String,
+    pub start_arc_mm: f64,
+    pub end_arc_mm: f64,
+}
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct PoolTruth {
+    pub segment: String,
+    pub start_arc_mm: f64,
+    pub end_arc_mm: f64,
+    /// The air–fluid level: fluid where y > level (posterior, dependent for a supine patient).
+    pub level_y_mm: f64,
+    pub hu: f64,
+}
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct CollapsedTruth {
+    pub segment: String,
+    /// No lumen at all between these arc lengths.
+    pub start_arc_mm: f64,
+    pub end_arc_mm: f64,
+    /// The lumen narrows to nothing over this length on either side.
+    pub taper_mm: f64,
+}
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct DistractorTruth {
+    /// "small_bowel_gas" or "lung".
+    pub kind: String,
+    pub center_mm: [f64; 3],
+    /// Semi-axes of its bounding ellipsoid (a sphere for gas pockets).
+    pub semi_axes_mm: [f64; 3],
+    pub hu: f64,
+}
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct RoiTruth {
+    pub min_ijk: [usize; 3],
+    pub max_ijk: [usize; 3],
+    pub expected_hu: f64,
+}
+
+impl Truth {
+    /// Pretty JSON. Serialising plain numbers and strings cannot fail; if it ever did, the
+    /// error comes back as a JSON object so that callers never panic.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self)
+            .unwrap_or_else(|e| serde_json::json!({ "error": format!("cannot serialise truth: {e}") }).to_string())
+    }
+
+    /// Parses what [`Truth::to_json`] wrote.
+    pub fn from_json(text: &str) -> crate::Result<Truth> {
+        serde_json::from_str(text).map_err(|e| crate::Error::invalid(format!("truth JSON: {e}")))
+    }
+
+    /// Name of the segment that contains arc length `s`.
+    pub fn segment_at(&self, s: f64) -> Option<&str> {
+        self.segments.iter().find(|g| s >= g.start_arc_mm && s <= g.end_arc_mm).map(|g| g.name.as_str())
+    }
+}
