@@ -1,7 +1,6 @@
 //! 3D Slicer markups JSON (`.mrk.json`, schema v1.0.3): curves (the centerline) and point
 //! lists, in LPS.
 
-use std::io::Write;
 use std::path::Path;
 
 use serde_json::{json, Value};

@@ -3,7 +3,6 @@
 //! 3D Slicer reads models as LPS unless the file says otherwise, and both files say so in
 //! their header comment ("SPACE=LPS"), as Slicer itself writes.
 
-use std::io::Write;
 use std::path::Path;
 
 use glam::{DMat3, DVec3, Vec3};

@@ -1,6 +1,5 @@
 //! The files `voyage prep` writes from a [`Study`].
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use glam::DVec3;

@@ -1,6 +1,5 @@
 //! `voyage phantom` and `voyage demo`: synthetic scans with ground truth.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
