@@ -55,6 +55,7 @@ pub struct PhantomArgs {
 }
 
 pub fn run(a: &PhantomArgs) -> Result<()> {
+    writable_format(&a.out)?;
     let t = Instant::now();
     let p = make(a)?;
     eprintln!("made {:?} phantom in {:.2} s", a.kind, t.elapsed().as_secs_f64());
@@ -98,8 +99,16 @@ pub fn write_outputs(p: &Phantom, out: &Path, truth: Option<&Path>, mask: Option
     Ok(())
 }
 
-fn save_volume(path: &Path, v: &voyage_core::Volume<i16>) -> Result<()> {
+/// Refuses an output name no writer handles, before minutes go into making the phantom.
+fn writable_format(path: &Path) -> Result<io::Format> {
     match io::detect_format(path).ok() {
+        Some(f @ (io::Format::MetaImage | io::Format::Nrrd | io::Format::Nifti)) => Ok(f),
+        _ => anyhow::bail!("{}: give the output a .nii.gz, .nii, .mha or .nrrd name", path.display()),
+    }
+}
+
+fn save_volume(path: &Path, v: &voyage_core::Volume<i16>) -> Result<()> {
+    match writable_format(path).ok() {
         Some(io::Format::MetaImage) => io::metaimage::save(path, v)?,
         Some(io::Format::Nrrd) => io::nrrd::save(path, v)?,
         Some(io::Format::Nifti) => io::nifti::save(path, v)?,

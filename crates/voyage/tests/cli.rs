@@ -1,0 +1,160 @@
+//! The `voyage` binary as a user meets it: exit codes, one-line errors naming the file,
+//! no patient identity in any output, and the phantom → file → info round trip.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn voyage(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_voyage")).args(args).output().expect("run voyage")
+}
+
+fn shared_data() -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
+    if p.is_dir() {
+        Some(p)
+    } else {
+        eprintln!("skipping: ../shared/data not found");
+        None
+    }
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("voyage-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn text(o: &Output) -> String {
+    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+/// Identity strings present in the shared test files' headers; none may ever be printed.
+const IDENTITIES: [&str; 6] = ["MISTER", "2178309", "CompressedSamples", "1CT1", "QMNx85rKkkg", "REMOVED"];
+
+fn assert_private(o: &Output) {
+    let t = text(o);
+    for id in IDENTITIES {
+        assert!(!t.contains(id), "patient identity {id:?} printed:\n{t}");
+    }
+}
+
+#[test]
+fn info_on_each_dicom_folder() {
+    let Some(data) = shared_data() else { return };
+    let chest = voyage(&["info", "--json", data.join("dicom/chest-reversed").to_str().unwrap()]);
+    assert!(chest.status.success(), "{}", text(&chest));
+    let j: serde_json::Value = serde_json::from_slice(&chest.stdout).unwrap();
+    assert_eq!(j["dims"], serde_json::json!([512, 512, 40]));
+    assert_eq!(j["orientation"], "LPS", "k must run toward superior after sorting");
+    assert_eq!(j["modality"], "CT");
+    let abd = voyage(&["info", data.join("dicom/abdomen-j2k").to_str().unwrap()]);
+    assert!(abd.status.success(), "{}", text(&abd));
+    assert!(text(&abd).contains("512 × 512 × 20"));
+    let tilt = voyage(&["info", data.join("dicom/head-gantry-tilt").to_str().unwrap()]);
+    assert!(!tilt.status.success());
+    let err = String::from_utf8_lossy(&tilt.stderr);
+    assert!(err.contains("tilt") && err.contains("head-gantry-tilt"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "one-line error: {err}");
+    for o in [&chest, &abd, &tilt] {
+        assert_private(o);
+    }
+}
+
+#[test]
+fn every_transfer_syntax_file_reports_or_fails_cleanly() {
+    let Some(data) = shared_data() else { return };
+    for e in std::fs::read_dir(data.join("dicom/transfer-syntaxes")).unwrap() {
+        let p = e.unwrap().path();
+        let o = voyage(&["info", "--json", p.to_str().unwrap()]);
+        assert_private(&o);
+        if o.status.success() {
+            let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+            assert_eq!(j["dims"][0], 512, "{}", p.display());
+        } else {
+            let err = String::from_utf8_lossy(&o.stderr);
+            let name = p.file_name().unwrap().to_string_lossy();
+            assert!(err.contains(name.as_ref()), "error does not name the file: {err}");
+            assert_eq!(err.trim().lines().count(), 1, "{err}");
+        }
+    }
+}
+
+#[test]
+fn broken_inputs_fail_with_one_line_naming_the_file() {
+    let dir = scratch("broken");
+    let empty = dir.join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let texts = dir.join("texts");
+    std::fs::create_dir_all(&texts).unwrap();
+    std::fs::write(texts.join("README"), "not a scan").unwrap();
+    std::fs::write(texts.join("notes.txt"), "nor this").unwrap();
+    let huge = dir.join("huge.nii");
+    let mut hdr = vec![0u8; 352];
+    hdr[0..4].copy_from_slice(&348i32.to_le_bytes());
+    for (i, d) in [3i16, 32767, 32767, 32767, 1, 1, 1, 1].iter().enumerate() {
+        hdr[40 + 2 * i..42 + 2 * i].copy_from_slice(&d.to_le_bytes());
+    }
+    hdr[70..72].copy_from_slice(&4i16.to_le_bytes());
+    hdr[72..74].copy_from_slice(&16i16.to_le_bytes());
+    for i in 0..4 {
+        hdr[76 + 4 * i..80 + 4 * i].copy_from_slice(&1f32.to_le_bytes());
+    }
+    hdr[108..112].copy_from_slice(&352f32.to_le_bytes());
+    hdr[344..348].copy_from_slice(b"n+1\0");
+    std::fs::write(&huge, &hdr).unwrap();
+    let mut cases: Vec<PathBuf> = vec![empty, texts, huge, dir.join("missing.nii.gz")];
+    if let Some(data) = shared_data() {
+        for e in std::fs::read_dir(data.join("dicom/broken")).unwrap() {
+            cases.push(e.unwrap().path());
+        }
+        let real = std::fs::read(data.join("ct/abdomen-3mm.nii.gz")).unwrap();
+        let cut = dir.join("cut.nii.gz");
+        std::fs::write(&cut, &real[..real.len() / 2]).unwrap();
+        cases.push(cut);
+    }
+    for p in cases {
+        let o = voyage(&["info", p.to_str().unwrap()]);
+        assert!(!o.status.success(), "{} loaded", p.display());
+        let err = String::from_utf8_lossy(&o.stderr);
+        let name = p.file_name().unwrap().to_string_lossy();
+        assert!(err.starts_with("error: ") && err.contains(name.as_ref()), "{}: {err}", p.display());
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(!err.contains("panicked"), "{err}");
+        assert_private(&o);
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn phantom_files_round_trip_through_info() {
+    let dir = scratch("phantom");
+    let ct = dir.join("colon.nii.gz");
+    let truth = dir.join("colon.json");
+    let series = dir.join("series");
+    let o = voyage(&["phantom", "colon", "--small", "--seed", "3", "--out", ct.to_str().unwrap(), "--truth", truth.to_str().unwrap(), "--dicom", series.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    let t: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&truth).unwrap()).unwrap();
+    assert!(dir.join(t["lumen_mask"].as_str().unwrap()).is_file(), "lumen mask beside the truth");
+    let a: serde_json::Value = serde_json::from_slice(&voyage(&["info", "--json", ct.to_str().unwrap()]).stdout).unwrap();
+    let b: serde_json::Value = serde_json::from_slice(&voyage(&["info", "--json", series.to_str().unwrap()]).stdout).unwrap();
+    for key in ["dims", "orientation", "hu_min", "hu_max"] {
+        assert_eq!(a[key], b[key], "{key} differs between NIfTI and DICOM");
+    }
+    for axis in 0..3 {
+        let (x, y) = (a["spacing_mm"][axis].as_f64().unwrap(), b["spacing_mm"][axis].as_f64().unwrap());
+        assert!((x - y).abs() < 1e-4, "spacing {x} vs {y}");
+    }
+    assert_eq!(b["modality"], "CT");
+    assert_eq!(a["dims"], t["dims"]);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn bad_arguments_are_refused() {
+    let o = voyage(&["phantom", "colon", "--out", "/nonexistent-dir/x.nii.gz", "--small"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("/nonexistent-dir/x.nii.gz"));
+    let o = voyage(&["phantom", "colon", "--out", "x.unknown", "--small"]);
+    assert!(!o.status.success());
+}
