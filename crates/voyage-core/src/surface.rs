@@ -49,62 +49,76 @@ pub fn extract_surface(lumen: &Volume<u8>, ct: Option<&Volume<i16>>, grid: &BoxG
     Ok(march(&s, spacing, lumen.dims()))
 }
 
-/// The scalar over the box plus one layer of wall all round (padded layout).
-struct Scalar {
+/// The scalar over the box plus one layer of wall all round ("padded" coordinates: padded
+/// (1, 1, 1) is the box's first voxel), computed where it is needed rather than stored: only
+/// the voxels beside the surface are ever read. Its sign is the lumen mask's.
+struct Scalar<'a> {
     /// Padded dims.
     dims: [usize; 3],
     /// Volume voxel of padded (1,1,1).
     lo: [usize; 3],
-    s: Vec<f32>,
+    lumen: &'a Volume<u8>,
+    ct: Option<&'a Volume<i16>>,
+    iso: f32,
 }
 
-impl Scalar {
-    fn new(lumen: &Volume<u8>, ct: Option<&Volume<i16>>, grid: &BoxGrid, iso: f32) -> Scalar {
-        let dims = grid.dims.map(|d| d + 2);
-        let mut s = vec![-1.0f32; dims[0] * dims[1] * dims[2]];
-        let g = lumen.geometry();
-        for k in 0..grid.dims[2] {
-            for j in 0..grid.dims[1] {
-                let src = g.index(grid.lo[0], grid.lo[1] + j, grid.lo[2] + k);
-                let dst = 1 + dims[0] * (j + 1 + dims[1] * (k + 1));
-                let m = &lumen.data()[src..src + grid.dims[0]];
-                let out = &mut s[dst..dst + grid.dims[0]];
-                match ct {
-                    Some(ct) => {
-                        let hu = &ct.data()[src..src + grid.dims[0]];
-                        for ((o, &m), &h) in out.iter_mut().zip(m).zip(hu) {
-                            let v = iso - h as f32;
-                            *o = if m != 0 { v.max(0.5) } else { v.min(-1.0) };
-                        }
-                    }
-                    None => {
-                        for (o, &m) in out.iter_mut().zip(m) {
-                            *o = if m != 0 { 0.5 } else { -0.5 };
-                        }
-                    }
-                }
+impl<'a> Scalar<'a> {
+    fn new(lumen: &'a Volume<u8>, ct: Option<&'a Volume<i16>>, grid: &BoxGrid, iso: f32) -> Self {
+        Scalar { dims: grid.dims.map(|d| d + 2), lo: grid.lo, lumen, ct, iso }
+    }
+
+    /// The volume voxel of a padded position, None in the padding.
+    #[inline]
+    fn voxel(&self, p: [usize; 3]) -> Option<usize> {
+        if (0..3).any(|a| p[a] == 0 || p[a] == self.dims[a] - 1) {
+            return None;
+        }
+        let g = [0, 1, 2].map(|a| p[a] - 1 + self.lo[a]);
+        Some(self.lumen.geometry().index(g[0], g[1], g[2]))
+    }
+
+    /// s at a padded position: positive (≥ 0.5) in the lumen, ≤ −1 elsewhere.
+    #[inline]
+    fn value(&self, p: [usize; 3]) -> f32 {
+        let Some(v) = self.voxel(p) else { return -1.0 };
+        let m = self.lumen.data()[v] != 0;
+        match self.ct {
+            Some(ct) => {
+                let x = self.iso - ct.data()[v] as f32;
+                if m { x.max(0.5) } else { x.min(-1.0) }
+            }
+            None => {
+                if m { 0.5 } else { -0.5 }
             }
         }
-        Scalar { dims, lo: grid.lo, s }
     }
 
-    #[inline]
-    fn idx(&self, i: usize, j: usize, k: usize) -> usize {
-        i + self.dims[0] * (j + self.dims[1] * k)
+    /// The inside bits (lumen = 1) of padded row (j, k), padding included, into `out`.
+    fn row_bits(&self, j: usize, k: usize, out: &mut [u8]) {
+        out.fill(0);
+        if j == 0 || k == 0 || j == self.dims[1] - 1 || k == self.dims[2] - 1 {
+            return;
+        }
+        let n = self.dims[0] - 2;
+        let start = self.lumen.geometry().index(self.lo[0], j - 1 + self.lo[1], k - 1 + self.lo[2]);
+        for (o, &m) in out[1..=n].iter_mut().zip(&self.lumen.data()[start..start + n]) {
+            *o = (m != 0) as u8;
+        }
     }
 
-    /// Central-difference gradient at padded voxel (i, j, k), one-sided at the padding.
-    fn gradient(&self, i: usize, j: usize, k: usize, spacing: Vec3) -> Vec3 {
-        let d = |a: usize, lo: usize, hi: usize, f: &dyn Fn(usize) -> f32| -> f32 {
-            let (l, h) = (a.saturating_sub(1).max(lo), (a + 1).min(hi));
-            if h == l { 0.0 } else { (f(h) - f(l)) / (h - l) as f32 }
-        };
-        let [nx, ny, nz] = self.dims;
-        Vec3::new(
-            d(i, 0, nx - 1, &|a| self.s[self.idx(a, j, k)]) / spacing.x,
-            d(j, 0, ny - 1, &|a| self.s[self.idx(i, a, k)]) / spacing.y,
-            d(k, 0, nz - 1, &|a| self.s[self.idx(i, j, a)]) / spacing.z,
-        )
+    /// Central-difference gradient at padded voxel p, one-sided at the padding's edge.
+    fn gradient(&self, p: [usize; 3], spacing: Vec3) -> Vec3 {
+        let mut g = [0.0f32; 3];
+        for (a, slot) in g.iter_mut().enumerate() {
+            let (mut lo, mut hi) = (p, p);
+            lo[a] = p[a].saturating_sub(1);
+            hi[a] = (p[a] + 1).min(self.dims[a] - 1);
+            let steps = (hi[a] - lo[a]) as f32;
+            if steps > 0.0 {
+                *slot = (self.value(hi) - self.value(lo)) / steps;
+            }
+        }
+        Vec3::new(g[0] / spacing.x, g[1] / spacing.y, g[2] / spacing.z)
     }
 }
 
@@ -212,10 +226,17 @@ fn march(s: &Scalar, spacing: Vec3, vol_dims: [usize; 3]) -> Surface {
     let mut lower = EdgeCache::new(nx, ny);
     let mut upper = EdgeCache::new(nx, ny);
     let mut zed = vec![u32::MAX; nx * ny];
-    let plane = nx * ny;
-    let inside: Vec<u8> = s.s.iter().map(|&v| (v > 0.0) as u8).collect();
-    // A cube layer k needs nothing unless a lumen voxel lies in plane k or k+1.
-    let plane_has: Vec<bool> = (0..nz).map(|k| inside[k * plane..(k + 1) * plane].contains(&1)).collect();
+    // Per row (j, k): does it hold a lumen voxel? A row of cubes needs work only when one of
+    // its four corner rows does, which skips most of the box at the cost of one flag a row.
+    let mut bits = vec![0u8; nx];
+    let row_has: Vec<bool> = (0..ny * nz)
+        .map(|r| {
+            s.row_bits(r % ny, r / ny, &mut bits);
+            bits.contains(&1)
+        })
+        .collect();
+    let plane_has: Vec<bool> = row_has.chunks(ny).map(|p| p.contains(&true)).collect();
+    let mut rowbuf = vec![vec![0u8; nx]; 4];
     for k in 0..nz - 1 {
         if !(plane_has[k] || plane_has[k + 1]) {
             std::mem::swap(&mut lower, &mut upper);
@@ -224,13 +245,22 @@ fn march(s: &Scalar, spacing: Vec3, vol_dims: [usize; 3]) -> Surface {
         }
         zed.fill(u32::MAX);
         for j in 0..ny - 1 {
+            let rows = [j + ny * k, j + 1 + ny * k, j + ny * (k + 1), j + 1 + ny * (k + 1)];
+            if !rows.iter().any(|&r| row_has[r]) {
+                continue;
+            }
+            for (buf, &r) in rowbuf.iter_mut().zip(&rows) {
+                s.row_bits(r % ny, r / ny, buf);
+            }
+            let [r0, r1, r2, r3] = [&rowbuf[0], &rowbuf[1], &rowbuf[2], &rowbuf[3]];
+            // Corner bits of the cube's x = 0 face; the x = 1 face becomes the next cube's x = 0.
+            let face = |i: usize| (r0[i] | r1[i] << 1 | r2[i] << 2 | r3[i] << 3) as usize;
+            let mut left = face(0);
             for i in 0..nx - 1 {
-                let base = s.idx(i, j, k);
-                let mut case = 0usize;
-                for c in 0..8 {
-                    let [a, b, d] = corner(c);
-                    case |= (inside[base + a + nx * b + plane * d] as usize) << c;
-                }
+                let right = face(i + 1);
+                // Corner c = x + 2y + 4z: x = 0 corners are bits 0, 2, 4, 6.
+                let case = spread(left) | spread(right) << 1;
+                left = right;
                 if case == 0 || case == 255 {
                     continue;
                 }
@@ -257,13 +287,19 @@ fn march(s: &Scalar, spacing: Vec3, vol_dims: [usize; 3]) -> Surface {
     out
 }
 
+/// Face bits (y + 2z) → cube corner bits for x = 0 (0, 2, 4, 6).
+#[inline]
+fn spread(face: usize) -> usize {
+    (face & 1) | (face & 2) << 1 | (face & 4) << 2 | (face & 8) << 3
+}
+
 /// The cube's deepest lumen corner, as a volume voxel index.
 fn owner_voxel(s: &Scalar, c: [usize; 3], vol_dims: [usize; 3]) -> u32 {
     let mut best = (f32::NEG_INFINITY, [0usize; 3]);
     for k in 0..8 {
         let [a, b, d] = corner(k);
         let p = [c[0] + a, c[1] + b, c[2] + d];
-        let v = s.s[s.idx(p[0], p[1], p[2])];
+        let v = s.value(p);
         if v > best.0 {
             best = (v, p);
         }
@@ -291,15 +327,15 @@ fn edge_vertex(s: &Scalar, spacing: Vec3, c: [usize; 3], e: usize, lower: &mut E
     if *cache != u32::MAX {
         return *cache;
     }
-    let va = s.s[s.idx(ga[0], ga[1], ga[2])];
-    let vb = s.s[s.idx(gb[0], gb[1], gb[2])];
+    let va = s.value(ga);
+    let vb = s.value(gb);
     let t = (va / (va - vb)).clamp(0.0, 1.0);
     let fa = Vec3::new(ga[0] as f32, ga[1] as f32, ga[2] as f32);
     let fb = Vec3::new(gb[0] as f32, gb[1] as f32, gb[2] as f32);
     // Padded index 1 is volume index lo; positions in volume-local mm.
     let lo = Vec3::new(s.lo[0] as f32, s.lo[1] as f32, s.lo[2] as f32) - Vec3::ONE;
     let p = (fa + (fb - fa) * t + lo) * spacing;
-    let n = s.gradient(ga[0], ga[1], ga[2], spacing) * (1.0 - t) + s.gradient(gb[0], gb[1], gb[2], spacing) * t;
+    let n = s.gradient(ga, spacing) * (1.0 - t) + s.gradient(gb, spacing) * t;
     let id = mesh.positions.len() as u32;
     mesh.positions.push(p.to_array());
     mesh.normals.push(n.normalize_or_zero().to_array());
