@@ -11,7 +11,7 @@ use serde::Serialize;
 use crate::distance::geodesic::Padded;
 use crate::skeleton::{colon_path, tree_search, SkeletonOptions};
 use crate::field::Field;
-use crate::{Error, Result, Volume};
+use crate::{Result, Volume};
 
 #[derive(Clone, Debug, Serialize)]
 pub struct Centerline {
@@ -52,7 +52,7 @@ pub fn centerline(mask: &Volume<u8>, ds: &Field<f32>, source: [usize; 3], target
     let weight = cost_weight(&pad, ds, opts);
     let src = pad.lumen_index(source)?;
     let dst = pad.lumen_index(target)?;
-    let tree = tree_search(&pad, &[src], mask.spacing(), &weight, None);
+    let tree = tree_search(&pad, &[src], mask.spacing(), Some(&weight), None);
     let ds_pad = pad.pad(&ds.data, 0.0);
     let (path, _) = colon_path(&pad, &tree, &ds_pad, mask.spacing(), src, Some(dst), &opts.skeleton)?;
     let voxels: Vec<[usize; 3]> = path.iter().map(|&i| pad.global_of_index(i)).collect();
@@ -82,36 +82,6 @@ pub fn cost_weight(pad: &Padded, ds: &Field<f32>, opts: &CenterlineOptions) -> V
     let k = opts.penalty_scale as f32;
     let p = opts.penalty_power as i32;
     pad.pad(&ds.data, 0.0).into_iter().map(|d| 1.0 + k * ((dmax - d) / dmax).max(0.0).powi(p)).collect()
-}
-
-/// Walks from `from` down the search's distances to its source (distance 0), each step to
-/// the neighbour through which the distance was reached.
-pub(crate) fn trace_path(pad: &Padded, dist: &[f32], weight: &[f32], spacing: [f64; 3], from: usize) -> Result<Vec<[usize; 3]>> {
-    if !dist[from].is_finite() {
-        return Err(Error::invalid("the target cannot be reached from the source through the lumen"));
-    }
-    let nbrs = pad.neighbours(spacing);
-    let mut path = vec![pad.global_of_index(from)];
-    let mut v = from;
-    while dist[v] > 0.0 {
-        let mut best = (f32::INFINITY, usize::MAX);
-        for &(off, len) in &nbrs {
-            let u = (v as isize + off) as usize;
-            if pad.inside[u] == 0 || dist[u] >= dist[v] {
-                continue;
-            }
-            let via = dist[u] + len * 0.5 * (weight[u] + weight[v]);
-            if via < best.0 {
-                best = (via, u);
-            }
-        }
-        if best.1 == usize::MAX {
-            return Err(Error::invalid("centerline trace lost its way (no downhill neighbour)"));
-        }
-        v = best.1;
-        path.push(pad.global_of_index(v));
-    }
-    Ok(path)
 }
 
 /// Points every `step` mm along the polyline (first and last kept).

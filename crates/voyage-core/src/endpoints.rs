@@ -60,13 +60,13 @@ pub fn find_endpoints(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], opt
         None => {
             // The search stops at the first wide voxel it settles: the nearest.
             let wide = |v: usize| ds_pad[v] > 0.0 && ds_pad[v] >= floor;
-            let from_seed = tree_search(&pad, &[pad.lumen_index(seed)?], sp, &weight, Some(&wide as &dyn Fn(usize) -> bool));
+            let from_seed = tree_search(&pad, &[pad.lumen_index(seed)?], sp, Some(&weight), Some(&wide as &dyn Fn(usize) -> bool));
             pad.global_of_index(*from_seed.order.last().unwrap() as usize)
         }
     };
     let s = pad.lumen_index(source)?;
     let t0 = std::time::Instant::now();
-    let tree = tree_search(&pad, &[s], sp, &weight, None);
+    let tree = tree_search(&pad, &[s], sp, Some(&weight), None);
     let t_given = given_target.map(|t| pad.lumen_index(t)).transpose()?;
     if let (Some(t), Some(tv)) = (t_given, given_target) {
         if !tree.dist[t].is_finite() {
@@ -77,15 +77,7 @@ pub fn find_endpoints(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], opt
             )));
         }
     }
-    let mut sk_opts = SkeletonOptions { min_width: opts.min_width, ..cl_opts.skeleton.clone() };
-    if let Ok(v) = std::env::var("VOYAGE_SK") {
-        let f: Vec<f64> = v.split(',').map(|x| x.parse().unwrap()).collect();
-        sk_opts.cover_scale = f[0];
-        sk_opts.cover_mm = f[1];
-        sk_opts.meet_scale = f[2];
-        sk_opts.meet_mm = f[3];
-        sk_opts.min_width = f[4];
-    }
+    let sk_opts = SkeletonOptions { min_width: opts.min_width, ..cl_opts.skeleton.clone() };
     let t1 = std::time::Instant::now();
     let (path, _stats) = colon_path(&pad, &tree, &ds_pad, sp, s, t_given, &sk_opts)?;
     if std::env::var_os("VOYAGE_DEBUG").is_some() {

@@ -17,8 +17,8 @@
 //!    fraction of Dmax) not yet covered is traced back along the tree until it meets the
 //!    skeleton; a tube of radius `cover_scale`·Ds + `cover_mm` around the new branch becomes
 //!    covered. This gives a tree of branches.
-//! 3. Cycles: every lumen voxel belongs to the skeleton voxel where its tree path first meets
-//!    the skeleton. Where two touching voxels belong to skeleton points far apart along the
+//! 3. Cycles: every lumen voxel belongs to its nearest skeleton voxel through the lumen (one
+//!    multi-source search from the whole skeleton: a geodesic Voronoi partition). Where two touching voxels belong to skeleton points far apart along the
 //!    skeleton (much farther than the local radius), two search fronts met: around a loop of
 //!    the lumen, or across a contact. Each such meeting place (one per cluster) becomes an edge
 //!    joining the two skeleton points, so the graph has the lumen's cycles.
@@ -75,9 +75,16 @@ impl Tree {
 /// Dial's bucket queue over the padded grid (see [`crate::distance::geodesic::dial`]), with
 /// a per-voxel weight, predecessors and settling order. Stops early, after settling it, at
 /// the first voxel where `stop` holds.
-pub(crate) fn tree_search(pad: &Padded, sources: &[usize], spacing: [f64; 3], weight: &[f32], stop: Option<&dyn Fn(usize) -> bool>) -> Tree {
+pub(crate) fn tree_search(pad: &Padded, sources: &[usize], spacing: [f64; 3], weight: Option<&[f32]>, stop: Option<&dyn Fn(usize) -> bool>) -> Tree {
+    match weight {
+        Some(w) => search::<true>(pad, sources, spacing, w, stop),
+        None => search::<false>(pad, sources, spacing, &[], stop),
+    }
+}
+
+fn search<const W: bool>(pad: &Padded, sources: &[usize], spacing: [f64; 3], weight: &[f32], stop: Option<&dyn Fn(usize) -> bool>) -> Tree {
     let nbrs = pad.neighbours(spacing);
-    let (w_min, w_max) = weight.iter().zip(&pad.inside).filter(|(_, m)| **m != 0).fold((f32::INFINITY, 0.0f32), |(lo, hi), (&x, _)| (lo.min(x), hi.max(x)));
+    let (w_min, w_max) = if !W { (1.0, 1.0) } else { weight.iter().zip(&pad.inside).filter(|(_, m)| **m != 0).fold((f32::INFINITY, 0.0f32), |(lo, hi), (&x, _)| (lo.min(x), hi.max(x))) };
     let w_min = if w_min.is_finite() { w_min.max(1e-6) } else { 1.0 };
     let shortest = nbrs.iter().map(|n| n.1).fold(f32::INFINITY, f32::min);
     let longest = nbrs.iter().map(|n| n.1).fold(0.0, f32::max);
@@ -118,13 +125,13 @@ pub(crate) fn tree_search(pad: &Padded, sources: &[usize], spacing: [f64; 3], we
                     break 'outer;
                 }
                 let du = dist[u];
-                let wu = weight[u];
+                let wu = if W { weight[u] } else { 1.0 };
                 for (c, &(off, len)) in nbrs.iter().enumerate() {
                     let v = (u as isize + off) as usize;
                     if state[v] != 1 {
                         continue;
                     }
-                    let dv = du + len * 0.5 * (wu + weight[v]);
+                    let dv = if W { du + len * 0.5 * (wu + weight[v]) } else { du + len };
                     if dv < dist[v] {
                         dist[v] = dv;
                         parent[v] = back[c];
@@ -288,11 +295,13 @@ pub(crate) fn colon_path(pad: &Padded, tree: &Tree, ds: &[f32], spacing: [f64; 3
         }
     }
 
-    // Owner of every reached voxel: the skeleton voxel where its tree path meets the skeleton.
+    // Owner of every voxel: the nearest skeleton voxel through the lumen (a geodesic Voronoi
+    // partition by the skeleton), and the way there.
+    let near = tree_search(pad, &nodes.iter().map(|nd| nd.idx).collect::<Vec<_>>(), spacing, None, None);
     let mut owner = vec![u32::MAX; n];
-    for &v in &tree.order {
+    for &v in &near.order {
         let v = v as usize;
-        owner[v] = if flags[v] & SKELETON != 0 { ord_of[&v] } else { tree.parent_of(v).map_or(u32::MAX, |p| owner[p]) };
+        owner[v] = if flags[v] & SKELETON != 0 { ord_of[&v] } else { near.parent_of(v).map_or(u32::MAX, |p| owner[p]) };
     }
 
     // Tree distance along the skeleton between two skeleton voxels.
@@ -311,9 +320,9 @@ pub(crate) fn colon_path(pad: &Padded, tree: &Tree, ds: &[f32], spacing: [f64; 3
     };
 
     // Meeting places: touching voxels owned by skeleton points far apart along the skeleton.
-    let half: Vec<isize> = tree.nbrs.iter().map(|n| n.0).filter(|&o| o > 0).collect();
+    let half: Vec<isize> = near.nbrs.iter().map(|n| n.0).filter(|&o| o > 0).collect();
     let mut meets: Vec<(f32, u32, u32, usize, usize)> = Vec::new();
-    for &u in &tree.order {
+    for &u in &near.order {
         let u = u as usize;
         let a = owner[u];
         if a == u32::MAX {
@@ -399,12 +408,12 @@ pub(crate) fn colon_path(pad: &Padded, tree: &Tree, ds: &[f32], spacing: [f64; 3
     for &(a, b, u, w) in &kept {
         let mut pa = vec![u];
         while owner_of_walk(&flags, pa[pa.len() - 1]) {
-            let p = tree.parent_of(pa[pa.len() - 1]).unwrap();
+            let p = near.parent_of(pa[pa.len() - 1]).unwrap();
             pa.push(p);
         }
         let mut pb = vec![w];
         while owner_of_walk(&flags, pb[pb.len() - 1]) {
-            let p = tree.parent_of(pb[pb.len() - 1]).unwrap();
+            let p = near.parent_of(pb[pb.len() - 1]).unwrap();
             pb.push(p);
         }
         pa.reverse();
@@ -462,11 +471,12 @@ pub(crate) fn colon_path(pad: &Padded, tree: &Tree, ds: &[f32], spacing: [f64; 3
         // From the target's owner out to the target itself.
         let mut tail = vec![t];
         while owner_of_walk(&flags, tail[tail.len() - 1]) {
-            let p = tree.parent_of(tail[tail.len() - 1]).unwrap();
+            let p = near.parent_of(tail[tail.len() - 1]).unwrap();
             tail.push(p);
         }
         out.extend(tail.iter().rev().skip(1));
     }
+    let out = erase_returns(&out, ds, dims, sp);
     let stats = SkeletonStats {
         branches: branches.len(),
         skeleton_voxels: nodes.len(),
@@ -477,6 +487,27 @@ pub(crate) fn colon_path(pad: &Padded, tree: &Tree, ds: &[f32], spacing: [f64; 3
         path_mm: length,
     };
     Ok((out, stats))
+}
+
+/// Cuts out every excursion that comes back into the lumen ball (radius Ds) of an earlier
+/// voxel: it passed the same place twice (a detour into a contact or round a junction). The
+/// straight step that replaces it stays inside that ball, so inside the lumen.
+fn erase_returns(path: &[usize], ds: &[f32], dims: [usize; 3], sp: [f32; 3]) -> Vec<usize> {
+    let pos: Vec<[f32; 3]> = path.iter().map(|&v| {
+        let p = ijk(v, dims);
+        [p[0] as f32 * sp[0], p[1] as f32 * sp[1], p[2] as f32 * sp[2]]
+    }).collect();
+    let d2 = |a: usize, b: usize| (0..3).map(|k| (pos[a][k] - pos[b][k]).powi(2)).sum::<f32>();
+    let mut out = Vec::with_capacity(path.len());
+    let mut i = 0;
+    while i < path.len() {
+        out.push(path[i]);
+        let r2 = ds[path[i]] * ds[path[i]];
+        // The last voxel of the path inside this one's ball (at least the next one).
+        let j = (i + 1..path.len()).rev().find(|&j| d2(i, j) < r2).unwrap_or(i + 1);
+        i = j;
+    }
+    out
 }
 
 /// True while a walk up the tree from `v` has not yet reached the skeleton.
@@ -554,4 +585,86 @@ fn longest_path(adj: &[Vec<(usize, usize)>], len: &[f32], start: usize, goal: Op
     s.seen[start] = true;
     go(&mut s, start, 0.0);
     (s.best.map(|b| b.1), s.steps)
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::DVec3;
+
+    use crate::centerline::CenterlineOptions;
+    use crate::distance::distance_to_wall;
+    use crate::endpoints::{find_endpoints, EndpointOptions};
+    use crate::{Geometry, Volume};
+
+    const R: f64 = 6.0;
+    const LEG: f64 = 80.0;
+    const BEND: f64 = 15.0;
+    /// Millimetre offset of the tube's own frame inside the volume.
+    const OFF: DVec3 = DVec3::new(25.0, 10.0, 8.0);
+
+    /// A serpentine tube (radius 6 mm, 1 mm voxels): leg 1 along +x at y = 0, a half turn,
+    /// leg 2 back along −x at y = 30, a half turn, leg 3 along +x at y = 60; 334 mm in all.
+    /// With `bridge`, legs 1 and 2 also touch at x = 20 through a contact as wide as the tube,
+    /// a short cut of 30 mm past 176 mm of tube, as where loops of a real colon touch.
+    fn serpentine(bridge: bool) -> Volume<u8> {
+        let g = Geometry::new([130, 90, 16], [1.0; 3], [0.0; 3]).unwrap();
+        let capsule = |p: DVec3, a: DVec3, b: DVec3| {
+            let t = ((p - a).dot(b - a) / (b - a).length_squared()).clamp(0.0, 1.0);
+            p.distance(a + (b - a) * t)
+        };
+        let half_ring = |p: DVec3, c: DVec3, side: f64| {
+            if (p.x - c.x) * side < 0.0 {
+                return f64::INFINITY;
+            }
+            ((p.x - c.x).hypot(p.y - c.y) - BEND).hypot(p.z)
+        };
+        let data = (0..g.len())
+            .map(|idx| {
+                let [i, j, k] = g.ijk(idx);
+                let p = DVec3::new(i as f64, j as f64, k as f64) - OFF;
+                let mut d = capsule(p, DVec3::ZERO, DVec3::new(LEG, 0.0, 0.0))
+                    .min(capsule(p, DVec3::new(0.0, 30.0, 0.0), DVec3::new(LEG, 30.0, 0.0)))
+                    .min(capsule(p, DVec3::new(0.0, 60.0, 0.0), DVec3::new(LEG, 60.0, 0.0)))
+                    .min(half_ring(p, DVec3::new(LEG, 15.0, 0.0), 1.0))
+                    .min(half_ring(p, DVec3::new(0.0, 45.0, 0.0), -1.0));
+                if bridge {
+                    d = d.min(capsule(p, DVec3::new(20.0, 0.0, 0.0), DVec3::new(20.0, 30.0, 0.0)));
+                }
+                (d < R) as u8
+            })
+            .collect();
+        Volume::from_vec(g, data).unwrap()
+    }
+
+    fn check_serpentine(bridge: bool) {
+        let m = serpentine(bridge);
+        let ds = distance_to_wall(&m).unwrap();
+        let seed = [(OFF.x - R + 1.0) as usize, OFF.y as usize, OFF.z as usize];
+        let e = find_endpoints(&m, &ds, seed, &EndpointOptions::default(), &CenterlineOptions::default()).unwrap();
+        let cl = &e.centerline;
+        let pts: Vec<DVec3> = cl.points_mm.iter().map(|p| DVec3::from_array(*p) - OFF).collect();
+        let full = 3.0 * LEG + 2.0 * std::f64::consts::PI * BEND;
+        assert!((cl.length_mm - full).abs() < 15.0, "bridge {bridge}: length {} mm, the tube is {full} mm", cl.length_mm);
+        assert!(pts[0].length() < 8.0, "starts at {}", pts[0]);
+        assert!(pts.last().unwrap().distance(DVec3::new(LEG, 60.0, 0.0)) < 8.0, "ends at {}", pts.last().unwrap());
+        // Through the first turn's apex, never through the middle of the contact.
+        let near = |q: DVec3| pts.iter().map(|p| p.distance(q)).fold(f64::INFINITY, f64::min);
+        assert!(near(DVec3::new(LEG + BEND, 15.0, 0.0)) < 3.0, "misses the first turn");
+        assert!(near(DVec3::new(20.0, 15.0, 0.0)) > 8.0, "takes the short cut");
+        for p in &cl.points_mm {
+            let q = (DVec3::from_array(*p) / m.geometry().spacing_vec()).round();
+            assert_eq!(m.get(q.x as usize, q.y as usize, q.z as usize), 1, "point {p:?} outside the lumen");
+        }
+        assert!(cl.arc_mm.windows(2).all(|w| w[1] > w[0]));
+    }
+
+    #[test]
+    fn serpentine_without_contact() {
+        check_serpentine(false);
+    }
+
+    #[test]
+    fn follows_the_tube_not_the_contact() {
+        check_serpentine(true);
+    }
 }
