@@ -1,13 +1,17 @@
-//! The centerline (paper §4.2): the minimum-cost path from source to target with voxel cost
-//! Dmax − Ds, so that the path keeps to the middle of the lumen; then centred, smoothed and
-//! resampled every millimetre. Every point stays inside the lumen.
+//! The centerline (paper §4.2): a path from source to target that keeps to the middle of the
+//! lumen (its voxels come from the minimum-cost tree with voxel cost Dmax − Ds), then centred,
+//! smoothed and resampled every millimetre. Every point stays inside the lumen. The path is
+//! not the minimum-cost path itself but the longest simple path through the lumen's skeleton
+//! graph ([`crate::skeleton`]): in real scans loops of the colon touch, and the minimum-cost
+//! path would cut through the contacts.
 
 use glam::DVec3;
 use serde::Serialize;
 
-use crate::distance::geodesic::{dial, Padded};
+use crate::distance::geodesic::Padded;
+use crate::skeleton::{colon_path, tree_search, SkeletonOptions};
 use crate::field::Field;
-use crate::{Error, Result, Volume};
+use crate::{Result, Volume};
 
 #[derive(Clone, Debug, Serialize)]
 pub struct Centerline {
@@ -31,21 +35,27 @@ pub struct CenterlineOptions {
     /// The cost weight's power p and scale K (see [`cost_weight`]).
     pub penalty_power: u32,
     pub penalty_scale: f64,
+    /// The skeleton graph the path is chosen from (see [`crate::skeleton`]).
+    pub skeleton: SkeletonOptions,
 }
 
 impl Default for CenterlineOptions {
     fn default() -> Self {
-        CenterlineOptions { step_mm: 1.0, smooth_mm: 4.0, centre_iterations: 6, penalty_power: 16, penalty_scale: 5000.0 }
+        CenterlineOptions { step_mm: 1.0, smooth_mm: 4.0, centre_iterations: 6, penalty_power: 16, penalty_scale: 5000.0, skeleton: SkeletonOptions::default() }
     }
 }
 
-/// The centerline from `source` to `target` (volume voxels in the lumen).
+/// The centerline from `source` to `target` (volume voxels in the lumen): the longest simple
+/// path between them through the skeleton graph, centred and smoothed.
 pub fn centerline(mask: &Volume<u8>, ds: &Field<f32>, source: [usize; 3], target: [usize; 3], opts: &CenterlineOptions) -> Result<Centerline> {
     let pad = Padded::new(mask, &ds.grid);
     let weight = cost_weight(&pad, ds, opts);
     let src = pad.lumen_index(source)?;
-    let search = dial(&pad, &[(pad.lumen_index(target)?, 0)], mask.spacing(), Some(&weight), false);
-    let voxels = trace_path(&pad, &search.dist, &weight, mask.spacing(), src)?;
+    let dst = pad.lumen_index(target)?;
+    let tree = tree_search(&pad, &[src], mask.spacing(), Some(&weight), None);
+    let ds_pad = pad.pad(&ds.data, 0.0);
+    let (path, _) = colon_path(&pad, &tree, &ds_pad, mask.spacing(), src, Some(dst), &opts.skeleton)?;
+    let voxels: Vec<[usize; 3]> = path.iter().map(|&i| pad.global_of_index(i)).collect();
     Ok(refine(&voxels, mask, ds, opts))
 }
 
@@ -72,36 +82,6 @@ pub fn cost_weight(pad: &Padded, ds: &Field<f32>, opts: &CenterlineOptions) -> V
     let k = opts.penalty_scale as f32;
     let p = opts.penalty_power as i32;
     pad.pad(&ds.data, 0.0).into_iter().map(|d| 1.0 + k * ((dmax - d) / dmax).max(0.0).powi(p)).collect()
-}
-
-/// Walks from `from` down the search's distances to its source (distance 0), each step to
-/// the neighbour through which the distance was reached.
-pub(crate) fn trace_path(pad: &Padded, dist: &[f32], weight: &[f32], spacing: [f64; 3], from: usize) -> Result<Vec<[usize; 3]>> {
-    if !dist[from].is_finite() {
-        return Err(Error::invalid("the target cannot be reached from the source through the lumen"));
-    }
-    let nbrs = pad.neighbours(spacing);
-    let mut path = vec![pad.global_of_index(from)];
-    let mut v = from;
-    while dist[v] > 0.0 {
-        let mut best = (f32::INFINITY, usize::MAX);
-        for &(off, len) in &nbrs {
-            let u = (v as isize + off) as usize;
-            if pad.inside[u] == 0 || dist[u] >= dist[v] {
-                continue;
-            }
-            let via = dist[u] + len * 0.5 * (weight[u] + weight[v]);
-            if via < best.0 {
-                best = (via, u);
-            }
-        }
-        if best.1 == usize::MAX {
-            return Err(Error::invalid("centerline trace lost its way (no downhill neighbour)"));
-        }
-        v = best.1;
-        path.push(pad.global_of_index(v));
-    }
-    Ok(path)
 }
 
 /// Points every `step` mm along the polyline (first and last kept).

@@ -3,15 +3,18 @@
 //! back); and the centerline between them (paper §4.2).
 //!
 //! The automatic source is the rectum: the candidate nearest the seed (the colon's lowest
-//! voxel, where the rectal tube enters). The automatic target is the cecum, the colon's other
-//! end: the candidate farthest from the source. Near and far are measured with the centerline's cost (a path that keeps to the middle), not
-//! with plain length: in real scans loops of the colon touch, and the plain shortest path
-//! would cut through the contact and find the wrong ends. Only voxels at least a quarter of
-//! the widest radius from the wall are candidates, so an end is never a crevice by the wall.
+//! voxel, where the rectal tube enters), by the centerline's cost. The automatic target is the
+//! cecum, the colon's other end: the end of the longest simple path from the source through
+//! the lumen's skeleton graph (see [`crate::skeleton`]), not the point farthest from the
+//! source: in real scans loops of the colon touch, often over wide contacts, and every
+//! shortest path (plain or centred) cuts through the contacts, so the farthest point by any
+//! distance is somewhere in the middle of the colon. Only voxels at least `min_width` of the
+//! widest radius from the wall are candidates, so an end is never a crevice by the wall.
 
 use glam::DVec3;
 
-use crate::centerline::{cost_weight, refine, trace_path, Centerline, CenterlineOptions};
+use crate::centerline::{cost_weight, refine, Centerline, CenterlineOptions};
+use crate::skeleton::{colon_path, tree_search, SkeletonOptions};
 use crate::distance::geodesic::{dial, Geodesic, Padded};
 use crate::field::Field;
 use crate::{Error, Result, Volume};
@@ -47,67 +50,47 @@ pub fn find_endpoints(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], opt
     let pad = Padded::new(lumen, &ds.grid);
     let sp = lumen.spacing();
     let weight = cost_weight(&pad, ds, cl_opts);
-    let wide = candidates(&pad, ds, opts.min_width);
+    let ds_pad = pad.pad(&ds.data, 0.0);
+    let dmax = ds.data.iter().cloned().fold(0.0f32, f32::max);
+    let floor = (opts.min_width as f32 * dmax).min(dmax);
     let given_source = opts.source_mm.map(|p| lumen_voxel(lumen, p, "source")).transpose()?;
     let given_target = opts.target_mm.map(|p| lumen_voxel(lumen, p, "target")).transpose()?;
     let source = match given_source {
         Some(s) => s,
         None => {
-            let from_seed = dial(&pad, &[(pad.lumen_index(seed)?, 0)], sp, Some(&weight), false);
-            pad.global_of_index(nearest(&from_seed.dist, &wide))
+            // The search stops at the first wide voxel it settles: the nearest.
+            let wide = |v: usize| ds_pad[v] > 0.0 && ds_pad[v] >= floor;
+            let from_seed = tree_search(&pad, &[pad.lumen_index(seed)?], sp, Some(&weight), Some(&wide as &dyn Fn(usize) -> bool));
+            pad.global_of_index(*from_seed.order.last().unwrap() as usize)
         }
     };
     let s = pad.lumen_index(source)?;
-    let target = match given_target {
-        Some(t) => t,
-        None => {
-            let from_source = dial(&pad, &[(s, 0)], sp, Some(&weight), false);
-            pad.global_of_index(farthest(&from_source.dist, &wide))
+    let t0 = std::time::Instant::now();
+    let tree = tree_search(&pad, &[s], sp, Some(&weight), None);
+    let t_given = given_target.map(|t| pad.lumen_index(t)).transpose()?;
+    if let (Some(t), Some(tv)) = (t_given, given_target) {
+        if !tree.dist[t].is_finite() {
+            return Err(Error::invalid(format!(
+                "the target {} mm cannot be reached from the source {} mm through the lumen",
+                mm_of(lumen, tv),
+                mm_of(lumen, source)
+            )));
         }
-    };
-    let t = pad.lumen_index(target)?;
-    let from_target = dial(&pad, &[(t, 0)], sp, Some(&weight), false);
-    if !from_target.dist[s].is_finite() {
-        return Err(Error::invalid(format!(
-            "the target {} mm cannot be reached from the source {} mm through the lumen",
-            mm_of(lumen, target),
-            mm_of(lumen, source)
-        )));
     }
-    let path = trace_path(&pad, &from_target.dist, &weight, sp, s)?;
-    let centerline = refine(&path, lumen, ds, cl_opts);
+    let sk_opts = SkeletonOptions { min_width: opts.min_width, ..cl_opts.skeleton.clone() };
+    let t1 = std::time::Instant::now();
+    let (path, _stats) = colon_path(&pad, &tree, &ds_pad, sp, s, t_given, &sk_opts)?;
+    if std::env::var_os("VOYAGE_DEBUG").is_some() {
+        eprintln!("tree {:?} skeleton {:?} {:?}", t1 - t0, t1.elapsed(), _stats);
+    }
+    drop(tree);
+    let t = *path.last().unwrap();
+    let target = pad.global_of_index(t);
+    let voxels: Vec<[usize; 3]> = path.iter().map(|&i| pad.global_of_index(i)).collect();
+    let centerline = refine(&voxels, lumen, ds, cl_opts);
     let to_target = pad.geodesic(lumen, dial(&pad, &[(t, 0)], sp, None, false));
     let to_source = pad.geodesic(lumen, dial(&pad, &[(s, 0)], sp, None, false));
     Ok(Endpoints { source, target, to_target, to_source, centerline })
-}
-
-/// Lumen voxels wide enough to be an endpoint (padded layout).
-fn candidates(pad: &Padded, ds: &Field<f32>, min_width: f64) -> Vec<bool> {
-    let dmax = ds.data.iter().cloned().fold(0.0f32, f32::max);
-    let floor = (min_width as f32 * dmax).min(dmax);
-    pad.pad(&ds.data, 0.0).into_iter().map(|d| d > 0.0 && d >= floor).collect()
-}
-
-/// The reachable candidate with the smallest distance.
-fn nearest(dist: &[f32], wide: &[bool]) -> usize {
-    let mut best = (f32::INFINITY, 0usize);
-    for (i, (&d, &w)) in dist.iter().zip(wide).enumerate() {
-        if w && d < best.0 {
-            best = (d, i);
-        }
-    }
-    best.1
-}
-
-/// The reachable candidate with the largest distance.
-fn farthest(dist: &[f32], wide: &[bool]) -> usize {
-    let mut best = (f32::NEG_INFINITY, 0usize);
-    for (i, (&d, &w)) in dist.iter().zip(wide).enumerate() {
-        if w && d.is_finite() && d > best.0 {
-            best = (d, i);
-        }
-    }
-    best.1
 }
 
 fn lumen_voxel(lumen: &Volume<u8>, mm: DVec3, what: &str) -> Result<[usize; 3]> {

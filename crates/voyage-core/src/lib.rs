@@ -16,6 +16,7 @@ pub mod io;
 pub mod phantom;
 pub mod prep;
 pub mod segment;
+pub mod skeleton;
 pub mod surface;
 pub mod volume;
 

@@ -1,0 +1,36 @@
+//! The centerline on a real, complete colon (colon-a: 512×512×321 at 0.82×0.82×1.25 mm, loops
+//! touching over wide contacts). Needs `../shared/data`; skips with a message without it. Run
+//! in release mode (`cargo test --release -p voyage-core --test colon_a`).
+
+use std::path::PathBuf;
+
+use voyage_core::io::{load, LoadOptions};
+use voyage_core::prep::{prepare, PrepOptions};
+
+#[test]
+fn colon_a_centerline_runs_rectum_to_cecum() {
+    let dir = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data"));
+    let path = dir.join("masks/colon-a.nii.gz");
+    if !path.exists() {
+        eprintln!("skipping: {} not found", path.display());
+        return;
+    }
+    let ct = load(&path, &LoadOptions::default()).unwrap().volume;
+    let dims = ct.dims();
+    let s = prepare(ct, &PrepOptions::default(), |_| {}).unwrap();
+    let cl = &s.centerline;
+    eprintln!("length {:.0} mm, source {:?}, target {:?}, timings {:?}", cl.length_mm, s.source, s.target, s.timings);
+    // Source low (the rectum, where the rectal tube is).
+    assert!(s.source[2] < dims[2] / 8, "source {:?} is not low", s.source);
+    // Target (cecum) in the lower half, on the patient's right (identity LPS: small i).
+    assert!(s.target[2] < dims[2] / 2, "target {:?} is not low", s.target);
+    assert!(s.target[0] < dims[0] / 2, "target {:?} is not on the patient's right", s.target);
+    // The whole colon, not a short cut: at least 1.1 m. The lumen holds about 3 m of tube
+    // that no path passes twice (see the report on the topology branch), hence the upper bound.
+    assert!(cl.length_mm > 1100.0 && cl.length_mm < 3200.0, "length {} mm", cl.length_mm);
+    let lumen = &s.segmentation.lumen;
+    for p in &cl.points_mm {
+        let q = lumen.geometry().local_to_index(glam::DVec3::from_array(*p)).round();
+        assert_eq!(lumen.get(q.x as usize, q.y as usize, q.z as usize), 1, "point {p:?} outside the lumen");
+    }
+}
