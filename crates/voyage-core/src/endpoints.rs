@@ -65,7 +65,6 @@ pub fn find_endpoints(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], opt
         }
     };
     let s = pad.lumen_index(source)?;
-    let t0 = std::time::Instant::now();
     let tree = tree_search(&pad, &[s], sp, Some(&weight), None);
     let t_given = given_target.map(|t| pad.lumen_index(t)).transpose()?;
     if let (Some(t), Some(tv)) = (t_given, given_target) {
@@ -78,11 +77,7 @@ pub fn find_endpoints(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], opt
         }
     }
     let sk_opts = SkeletonOptions { min_width: opts.min_width, ..cl_opts.skeleton.clone() };
-    let t1 = std::time::Instant::now();
     let (path, _stats) = colon_path(&pad, &tree, &ds_pad, sp, s, t_given, &sk_opts)?;
-    if std::env::var_os("VOYAGE_DEBUG").is_some() {
-        eprintln!("tree {:?} skeleton {:?} {:?}", t1 - t0, t1.elapsed(), _stats);
-    }
     drop(tree);
     let t = *path.last().unwrap();
     let target = pad.global_of_index(t);

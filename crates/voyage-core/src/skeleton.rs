@@ -421,20 +421,6 @@ pub(crate) fn colon_path(pad: &Padded, tree: &Tree, ds: &[f32], spacing: [f64; 3
         let len: f32 = pa.windows(2).map(|x| step_len(x[0], x[1])).sum();
         edges.push((is_node[&a], is_node[&b], len, pa));
     }
-    if let Some(f) = std::env::var_os("VOYAGE_SKELETON_DUMP") {
-        let mut txt = String::new();
-        for (bi, br) in branches.iter().enumerate() {
-            for &o in &br.ords {
-                let p = pad.global_of_index(nodes[o as usize].idx);
-                txt += &format!("B {bi} {} {} {} {:.1}\n", p[0], p[1], p[2], nodes[o as usize].arc);
-            }
-        }
-        for (mi, &(a, b, _, _)) in kept.iter().enumerate() {
-            let (p, q) = (pad.global_of_index(nodes[a as usize].idx), pad.global_of_index(nodes[b as usize].idx));
-            txt += &format!("M {mi} {} {} {} {} {} {}\n", p[0], p[1], p[2], q[0], q[1], q[2]);
-        }
-        std::fs::write(f, txt).ok();
-    }
     let nn = node_ord.len();
     let mut adj: Vec<Vec<(usize, usize)>> = vec![Vec::new(); nn];
     for (e, &(f, t, _, _)) in edges.iter().enumerate() {
