@@ -41,7 +41,7 @@ pub struct CenterlineOptions {
 
 impl Default for CenterlineOptions {
     fn default() -> Self {
-        CenterlineOptions { step_mm: 1.0, smooth_mm: 4.0, centre_iterations: 6, penalty_power: 16, penalty_scale: 5000.0, skeleton: SkeletonOptions::default() }
+        CenterlineOptions { step_mm: 1.0, smooth_mm: 4.0, centre_iterations: 12, penalty_power: 16, penalty_scale: 5000.0, skeleton: SkeletonOptions::default() }
     }
 }
 
@@ -111,7 +111,7 @@ fn resample(pts: &[DVec3], step: f64) -> Vec<DVec3> {
 }
 
 /// Moves each inner point up the gradient of Ds, across the path only (along-path motion
-/// would bunch the points), by at most half a millimetre.
+/// would bunch the points), by at most a millimetre.
 fn centre(pts: &[DVec3], ds: &Field<f32>) -> Vec<DVec3> {
     let h = 0.5;
     let mut out = pts.to_vec();
@@ -123,11 +123,17 @@ fn centre(pts: &[DVec3], ds: &Field<f32>) -> Vec<DVec3> {
             ds.sample(p + DVec3::Y * h, 0.0) as f64 - ds.sample(p - DVec3::Y * h, 0.0) as f64,
             ds.sample(p + DVec3::Z * h, 0.0) as f64 - ds.sample(p - DVec3::Z * h, 0.0) as f64,
         ) / (2.0 * h);
-        let across = grad - t * grad.dot(t);
-        let step = across.clamp_length_max(0.5);
-        let q = p + step;
-        if ds.sample(q, 0.0) > ds.sample(p, 0.0) {
-            out[i] = q;
+        let across = (grad - t * grad.dot(t)).normalize_or_zero();
+        // Up to 1 mm across the path, halving until Ds grows (a line search on the ridge).
+        let here = ds.sample(p, 0.0);
+        let mut len = 1.0;
+        while len > 0.1 {
+            let q = p + across * len;
+            if ds.sample(q, 0.0) > here {
+                out[i] = q;
+                break;
+            }
+            len *= 0.5;
         }
     }
     out

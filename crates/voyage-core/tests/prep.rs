@@ -1,0 +1,98 @@
+//! The whole preprocessing on phantoms with ground truth: the lumen, the centerline, the
+//! polyps on the surface, the cells.
+
+use glam::{DVec3, Vec3};
+use voyage_core::phantom::{self, ColonOptions, Phantom};
+use voyage_core::prep::{prepare, PrepOptions, Study};
+
+fn dice(a: &[u8], b: &[u8]) -> f64 {
+    let (mut both, mut na, mut nb) = (0usize, 0usize, 0usize);
+    for (&x, &y) in a.iter().zip(b) {
+        let (x, y) = (x != 0, y != 0);
+        both += (x && y) as usize;
+        na += x as usize;
+        nb += y as usize;
+    }
+    2.0 * both as f64 / (na + nb) as f64
+}
+
+/// Mean over our centerline points of the distance to the true polyline (points ≤ 1 mm apart).
+fn mean_distance_to_truth(ours: &[[f64; 3]], truth: &[[f64; 3]]) -> f64 {
+    let t: Vec<DVec3> = truth.iter().map(|p| DVec3::from_array(*p)).collect();
+    ours.iter().map(|p| t.iter().map(|q| q.distance(DVec3::from_array(*p))).fold(f64::INFINITY, f64::min)).sum::<f64>() / ours.len() as f64
+}
+
+fn check(p: &Phantom, s: &Study, what: &str) {
+    let d = dice(p.lumen.data(), s.segmentation.lumen.data());
+    assert!(d >= 0.97, "{what}: lumen Dice {d:.4}");
+    let cl = &s.centerline;
+    // Inside the lumen everywhere.
+    for q in &cl.points_mm {
+        let ijk = s.ct.geometry().local_to_index(DVec3::from_array(*q)).round();
+        assert_eq!(s.segmentation.lumen.get(ijk.x as usize, ijk.y as usize, ijk.z as usize), 1, "{what}: centerline point {q:?} outside the lumen");
+    }
+    // Near the true centerline: the ends are compared from the truth's side (ours may run
+    // further into a blind end than the truth's inset source and target).
+    let mean = mean_distance_to_truth(&p.truth.centerline_mm, &cl.points_mm);
+    assert!(mean <= 2.0, "{what}: mean distance to the true centerline {mean:.2} mm");
+    let rel = (cl.length_mm - p.truth.centerline_length_mm) / p.truth.centerline_length_mm;
+    assert!(rel.abs() < 0.1, "{what}: length {:.0} vs {:.0} mm", cl.length_mm, p.truth.centerline_length_mm);
+    // Every polyp is on the surface: vertices within 1 mm of its sphere, on the lumen side.
+    let mesh = &s.surface.mesh;
+    for polyp in &p.truth.polyps {
+        let c = DVec3::from_array(polyp.center_mm).as_vec3();
+        let r = (polyp.diameter_mm / 2.0) as f32;
+        let into = DVec3::from_array(polyp.direction).as_vec3();
+        let near = mesh
+            .positions
+            .iter()
+            .filter(|v| {
+                let v = Vec3::from_array(**v);
+                ((v - c).length() - r).abs() <= 1.0 && (v - c).dot(into) > 0.0
+            })
+            .count();
+        assert!(near >= 3, "{what}: polyp of {} mm in the {} has {near} vertices within 1 mm of its surface", polyp.diameter_mm, polyp.segment);
+    }
+    // Cells: a partition of the lumen and of the triangles.
+    let cells = &s.cells;
+    assert_eq!(cells.cells.iter().map(|c| c.voxels).sum::<usize>(), s.segmentation.lumen_voxels, "{what}: cells vs lumen");
+    assert_eq!(cells.cells.iter().map(|c| c.triangles.len()).sum::<usize>(), mesh.triangles.len());
+    assert!(cells.cells.len() > 5, "{what}: {} cells", cells.cells.len());
+}
+
+#[test]
+fn small_colon_with_distractors() {
+    let p = phantom::colon(&ColonOptions { small: true, seed: 2, ..Default::default() }).unwrap();
+    let s = prepare(p.ct.clone(), &PrepOptions::default(), |_| {}).unwrap();
+    check(&p, &s, "small colon");
+    // The source is in the rectum, the target in the cecum.
+    let src = DVec3::from_array(p.truth.source_mm);
+    let dst = DVec3::from_array(p.truth.target_mm);
+    assert!(s.source_mm().distance(src) < 30.0, "source {} vs truth {src}", s.source_mm());
+    assert!(s.target_mm().distance(dst) < 30.0, "target {} vs truth {dst}", s.target_mm());
+}
+
+#[test]
+fn full_size_colon() {
+    let p = phantom::colon(&ColonOptions::default()).unwrap();
+    let s = prepare(p.ct.clone(), &PrepOptions::default(), |_| {}).unwrap();
+    check(&p, &s, "colon");
+}
+
+#[test]
+fn the_papers_pipe() {
+    let p = phantom::pipe(1).unwrap();
+    let s = prepare(p.ct.clone(), &PrepOptions::default(), |_| {}).unwrap();
+    check(&p, &s, "pipe");
+}
+
+#[test]
+fn mask_input_gives_the_same_colon() {
+    let p = phantom::colon(&ColonOptions { small: true, seed: 4, ..Default::default() }).unwrap();
+    let mask = p.lumen.map(|m| m as i16);
+    let s = prepare(mask, &PrepOptions::default(), |_| {}).unwrap();
+    assert!(s.segmentation.from_mask);
+    assert_eq!(s.segmentation.lumen.data(), p.lumen.data());
+    let mean = mean_distance_to_truth(&p.truth.centerline_mm, &s.centerline.points_mm);
+    assert!(mean <= 2.0, "mask input: mean distance {mean:.2} mm");
+}
