@@ -753,3 +753,25 @@ fn time_400_slices() {
         assert!(l.volume.data() == v.data());
     }
 }
+
+/// Found by the `load_dicom` fuzzer: a fragment of encapsulated pixel data announcing 2.4 GB
+/// made dicom-rs allocate it before failing. The length walk now covers the fragments.
+#[test]
+fn huge_fragment_length_is_refused_before_allocating() {
+    let Some(data) = data_dir() else { return };
+    let src = data.join("dicom/transfer-syntaxes/CTImage.dcm_JPEG2000LosslessOnlyTransferSyntax_1.2.840.10008.1.2.4.90.dcm");
+    let mut bytes = std::fs::read(&src).unwrap();
+    // Pixel data (7FE0,0010) OB, undefined length, then the offset-table item, then fragments.
+    let pd = bytes.windows(12).position(|w| w == [0xE0, 0x7F, 0x10, 0x00, b'O', b'B', 0, 0, 0xFF, 0xFF, 0xFF, 0xFF]).expect("encapsulated pixel data");
+    let bot = pd + 12;
+    assert_eq!(bytes[bot..bot + 4], [0xFE, 0xFF, 0x00, 0xE0]);
+    let bot_len = u32::from_le_bytes(bytes[bot + 4..bot + 8].try_into().unwrap()) as usize;
+    let frag = bot + 8 + bot_len;
+    assert_eq!(bytes[frag..frag + 4], [0xFE, 0xFF, 0x00, 0xE0]);
+    bytes[frag + 4..frag + 8].copy_from_slice(&0x8E4C_0000u32.to_le_bytes());
+    let dir = TempDir::new("huge-fragment");
+    let p = dir.path().join("huge-fragment.dcm");
+    std::fs::write(&p, &bytes).unwrap();
+    let err = voyage_core::io::load(&p, &opts()).unwrap_err().to_string();
+    assert!(err.contains("huge-fragment.dcm") && err.contains("announces"), "{err}");
+}

@@ -1357,7 +1357,7 @@ fn open_dicom(path: &Path, until: Option<Tag>) -> std::result::Result<DefaultDic
     if let Some(layout) = Layout::of(&meta.ts_uid) {
         let size = file.metadata().map_err(OpenError::Io)?.len();
         loop {
-            match scan_lengths(&buf, meta.end, size, layout) {
+            match scan_lengths(&buf, meta.end, size, layout, until.is_none()) {
                 Scan::Sound => break,
                 Scan::NeedMore(upto) if !eof && (buf.len() as u64) < size => {
                     let want = upto.max(buf.len() * 2).min(size as usize) - buf.len();
@@ -1548,8 +1548,10 @@ const MAX_NESTING: usize = 64;
 /// Walks the element headers of a data set (descending into sequences and items) and checks
 /// that every announced length fits in what is left of the file. dicom-rs allocates and zeroes
 /// a buffer of the announced length before reading a value, so a corrupt length would
-/// otherwise cost gigabytes of memory before the read fails.
-fn scan_lengths(buf: &[u8], start: usize, file_size: u64, layout: Layout) -> Scan {
+/// otherwise cost gigabytes of memory before the read fails. With `whole`, the walk goes on
+/// through the pixel data (each fragment of encapsulated data too) to the end of the file, as
+/// the full read will; without, it stops at the pixel data, where the header read stops.
+fn scan_lengths(buf: &[u8], start: usize, file_size: u64, layout: Layout, whole: bool) -> Scan {
     // Open containers: `Some(end)` for a defined length, `None` for one closed by a delimiter.
     let mut open: Vec<Option<usize>> = Vec::new();
     let mut pos = start;
@@ -1587,11 +1589,23 @@ fn scan_lengths(buf: &[u8], start: usize, file_size: u64, layout: Layout) -> Sca
             let value = pos + header;
             if (group, element) == (0x7FE0, 0x0010) && open.is_empty() {
                 let found = file_size.saturating_sub(value as u64);
-                return if len != UNDEFINED && u64::from(len) > found {
-                    Scan::Truncated { declared: len, found }
-                } else {
-                    Scan::Sound
-                };
+                if len != UNDEFINED && u64::from(len) > found {
+                    return Scan::Truncated { declared: len, found };
+                }
+                if !whole {
+                    return Scan::Sound;
+                }
+                if len == UNDEFINED {
+                    match scan_fragments(buf, value, file_size, layout) {
+                        Ok(after) => {
+                            pos = after;
+                            continue;
+                        }
+                        Err(scan) => return scan,
+                    }
+                }
+                pos = value + len as usize;
+                continue;
             }
             if let Some(bad) = check_len(group, element, len, value, file_size) {
                 return bad;
@@ -1605,6 +1619,33 @@ fn scan_lengths(buf: &[u8], start: usize, file_size: u64, layout: Layout) -> Sca
         }
         if open.len() > MAX_NESTING {
             return Scan::Bad(format!("sequences nested more than {MAX_NESTING} deep"));
+        }
+    }
+}
+
+/// Walks the items of encapsulated pixel data (offset table and fragments, raw bytes each) up
+/// to the sequence delimiter; returns the offset after it.
+fn scan_fragments(buf: &[u8], start: usize, file_size: u64, layout: Layout) -> Result<usize, Scan> {
+    let mut pos = start;
+    loop {
+        if pos as u64 >= file_size {
+            // No delimiter before the end: dicom-rs reports that; nothing more to allocate.
+            return Ok(pos);
+        }
+        if pos + 8 > buf.len() {
+            return Err(Scan::NeedMore(pos + 8));
+        }
+        let (group, element) = (layout.u16(&buf[pos..]), layout.u16(&buf[pos + 2..]));
+        let len = layout.u32(&buf[pos + 4..]);
+        match (group, element) {
+            (0xFFFE, 0xE0DD) => return Ok(pos + 8),
+            (0xFFFE, 0xE000) if len != UNDEFINED => {
+                if let Some(bad) = check_len(group, element, len, pos + 8, file_size) {
+                    return Err(bad);
+                }
+                pos += 8 + len as usize;
+            }
+            _ => return Err(Scan::Bad(format!("encapsulated pixel data holds ({group:04X},{element:04X}) where a fragment item belongs"))),
         }
     }
 }
