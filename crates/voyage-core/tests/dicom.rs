@@ -761,8 +761,11 @@ fn huge_fragment_length_is_refused_before_allocating() {
     let Some(data) = data_dir() else { return };
     let src = data.join("dicom/transfer-syntaxes/CTImage.dcm_JPEG2000LosslessOnlyTransferSyntax_1.2.840.10008.1.2.4.90.dcm");
     let mut bytes = std::fs::read(&src).unwrap();
-    // Pixel data (7FE0,0010) OB, undefined length, then the offset-table item, then fragments.
-    let pd = bytes.windows(12).position(|w| w == [0xE0, 0x7F, 0x10, 0x00, b'O', b'B', 0, 0, 0xFF, 0xFF, 0xFF, 0xFF]).expect("encapsulated pixel data");
+    // Pixel data (7FE0,0010) OB/OW, undefined length, then the offset-table item, then fragments.
+    let pd = bytes
+        .windows(12)
+        .position(|w| w[..4] == [0xE0, 0x7F, 0x10, 0x00] && w[4] == b'O' && w[6..] == [0, 0, 0xFF, 0xFF, 0xFF, 0xFF])
+        .expect("encapsulated pixel data");
     let bot = pd + 12;
     assert_eq!(bytes[bot..bot + 4], [0xFE, 0xFF, 0x00, 0xE0]);
     let bot_len = u32::from_le_bytes(bytes[bot + 4..bot + 8].try_into().unwrap()) as usize;
