@@ -24,6 +24,36 @@ enum BenchWhat {
     /// Loading: the colon phantom as a 400-slice uncompressed DICOM series and as .nii.gz,
     /// against pydicom+numpy and nibabel.
     Load(LoadBench),
+    /// Preprocessing, stage by stage, on the colon phantom and any CT or mask given, against
+    /// edt/scipy (Ds), dijkstra3d (Dt), scikit-image and VTK flying edges (surface).
+    Prep(PrepBench),
+}
+
+#[derive(Args, Debug)]
+struct PrepBench {
+    /// CTs or lumen masks to measure besides the full-size colon phantom.
+    inputs: Vec<PathBuf>,
+    /// Leave out the colon phantom.
+    #[arg(long)]
+    no_phantom: bool,
+    /// Working folder for the masks handed to the reference.
+    #[arg(long, default_value = "target/bench-prep")]
+    dir: PathBuf,
+    /// Timed repeats (after one warm-up).
+    #[arg(long, default_value_t = 3)]
+    repeats: usize,
+    /// Worker threads for voyage (the targets are for one core).
+    #[arg(long, default_value_t = 1)]
+    threads: usize,
+    /// Python with the reference libraries (default: bench/.venv from bench/setup.sh).
+    #[arg(long)]
+    python: Option<PathBuf>,
+    /// Skip the reference libraries.
+    #[arg(long)]
+    no_reference: bool,
+    /// Print one JSON object.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Args, Debug)]
@@ -51,6 +81,7 @@ struct LoadBench {
 pub fn run(a: &BenchArgs) -> Result<()> {
     match &a.what {
         BenchWhat::Load(l) => load(l),
+        BenchWhat::Prep(p) => super::bench_prep::run(p.inputs.clone(), !p.no_phantom, &p.dir, p.repeats, p.threads, p.python.as_deref(), !p.no_reference, p.json),
     }
 }
 
@@ -165,7 +196,7 @@ fn median_ms(repeats: usize, mut f: impl FnMut() -> voyage_core::Result<()>) -> 
     Ok(median(&mut times))
 }
 
-fn median(v: &mut [f64]) -> f64 {
+pub fn median(v: &mut [f64]) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
 }

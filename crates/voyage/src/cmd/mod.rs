@@ -1,6 +1,7 @@
 //! The subcommands.
 
 mod bench;
+mod bench_prep;
 mod info;
 mod phantom;
 mod prep;
