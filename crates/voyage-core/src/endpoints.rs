@@ -15,7 +15,7 @@ use glam::DVec3;
 
 use crate::centerline::{cost_weight, refine, Centerline, CenterlineOptions};
 use crate::skeleton::{colon_path, tree_search, SkeletonOptions};
-use crate::distance::geodesic::{dial, Geodesic, Padded};
+use crate::distance::geodesic::{dial, Geodesic, Padded, SearchOptions};
 use crate::field::Field;
 use crate::{Error, Result, Volume};
 
@@ -83,8 +83,8 @@ pub fn find_endpoints(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], opt
     let target = pad.global_of_index(t);
     let voxels: Vec<[usize; 3]> = path.iter().map(|&i| pad.global_of_index(i)).collect();
     let centerline = refine(&voxels, lumen, ds, cl_opts);
-    let to_target = pad.geodesic(lumen, dial(&pad, &[(t, 0)], sp, None, false));
-    let to_source = pad.geodesic(lumen, dial(&pad, &[(s, 0)], sp, None, false));
+    let to_target = pad.geodesic(lumen, dial(&pad, &[t], sp, &SearchOptions::default()));
+    let to_source = pad.geodesic(lumen, dial(&pad, &[s], sp, &SearchOptions::default()));
     Ok(Endpoints { source, target, to_target, to_source, centerline })
 }
 

@@ -28,7 +28,7 @@
 
 use std::collections::HashMap;
 
-use crate::distance::geodesic::Padded;
+use crate::distance::geodesic::{dial, Padded, Search, SearchOptions};
 use crate::{Error, Result};
 
 #[derive(Clone, Debug)]
@@ -52,100 +52,13 @@ impl Default for SkeletonOptions {
     }
 }
 
-/// A minimum-cost search that remembers, for each voxel, the neighbour it was reached from,
-/// and the order in which voxels were settled.
-pub(crate) struct Tree {
-    pub dist: Vec<f32>,
-    /// Index into `nbrs` of the predecessor's offset; `NONE` for sources and unreached voxels.
-    pub parent: Vec<u8>,
-    pub order: Vec<u32>,
-    pub nbrs: Vec<(isize, f32)>,
-}
+/// A minimum-cost search with predecessors and settling order.
+pub(crate) type Tree = Search;
 
-const NONE: u8 = u8::MAX;
-
-impl Tree {
-    #[inline]
-    pub fn parent_of(&self, v: usize) -> Option<usize> {
-        let p = self.parent[v];
-        (p != NONE).then(|| (v as isize + self.nbrs[p as usize].0) as usize)
-    }
-}
-
-/// Dial's bucket queue over the padded grid (see [`crate::distance::geodesic::dial`]), with
-/// a per-voxel weight, predecessors and settling order. Stops early, after settling it, at
-/// the first voxel where `stop` holds.
+/// A weighted (or plain) search from `sources` that records its tree; stops early, after
+/// settling it, at the first voxel where `stop` holds.
 pub(crate) fn tree_search(pad: &Padded, sources: &[usize], spacing: [f64; 3], weight: Option<&[f32]>, stop: Option<&dyn Fn(usize) -> bool>) -> Tree {
-    match weight {
-        Some(w) => search::<true>(pad, sources, spacing, w, stop),
-        None => search::<false>(pad, sources, spacing, &[], stop),
-    }
-}
-
-fn search<const W: bool>(pad: &Padded, sources: &[usize], spacing: [f64; 3], weight: &[f32], stop: Option<&dyn Fn(usize) -> bool>) -> Tree {
-    let nbrs = pad.neighbours(spacing);
-    let (w_min, w_max) = if !W { (1.0, 1.0) } else { weight.iter().zip(&pad.inside).filter(|(_, m)| **m != 0).fold((f32::INFINITY, 0.0f32), |(lo, hi), (&x, _)| (lo.min(x), hi.max(x))) };
-    let w_min = if w_min.is_finite() { w_min.max(1e-6) } else { 1.0 };
-    let shortest = nbrs.iter().map(|n| n.1).fold(f32::INFINITY, f32::min);
-    let longest = nbrs.iter().map(|n| n.1).fold(0.0, f32::max);
-    let width = shortest * w_min;
-    let ring = (longest * w_max.max(w_min) / width).ceil() as usize + 2;
-    let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); ring];
-    let n = pad.inside.len();
-    let mut dist = vec![f32::INFINITY; n];
-    let mut parent = vec![NONE; n];
-    let mut state = pad.inside.clone();
-    let mut order = Vec::new();
-    let mut pending = 0usize;
-    for &s in sources {
-        if dist[s] > 0.0 {
-            dist[s] = 0.0;
-            buckets[0].push(s as u32);
-            pending += 1;
-        }
-    }
-    // Offsets back: parent code c of v means v + nbrs[c].0 is the predecessor; the neighbour
-    // at offset `off` from u records the opposite offset.
-    let back: Vec<u8> = nbrs.iter().map(|&(off, _)| nbrs.iter().position(|&(o, _)| o == -off).unwrap() as u8).collect();
-    let mut current = 0usize;
-    let mut work = Vec::new();
-    'outer: while pending > 0 {
-        let slot = current % ring;
-        while !buckets[slot].is_empty() {
-            std::mem::swap(&mut work, &mut buckets[slot]);
-            pending -= work.len();
-            for &u in &work {
-                let u = u as usize;
-                if state[u] == 2 {
-                    continue;
-                }
-                state[u] = 2;
-                order.push(u as u32);
-                if stop.is_some_and(|f| f(u)) {
-                    break 'outer;
-                }
-                let du = dist[u];
-                let wu = if W { weight[u] } else { 1.0 };
-                for (c, &(off, len)) in nbrs.iter().enumerate() {
-                    let v = (u as isize + off) as usize;
-                    if state[v] != 1 {
-                        continue;
-                    }
-                    let dv = if W { du + len * 0.5 * (wu + weight[v]) } else { du + len };
-                    if dv < dist[v] {
-                        dist[v] = dv;
-                        parent[v] = back[c];
-                        let b = ((dv / width) as usize).max(current);
-                        buckets[b % ring].push(v as u32);
-                        pending += 1;
-                    }
-                }
-            }
-            work.clear();
-        }
-        current += 1;
-    }
-    Tree { dist, parent, order, nbrs }
+    dial(pad, sources, spacing, &SearchOptions { weight, tree: true, stop })
 }
 
 /// One skeleton voxel.

@@ -26,20 +26,46 @@ pub struct Geodesic {
 pub fn geodesic_distance(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3]) -> Result<Geodesic> {
     let pad = Padded::new(mask, grid);
     let src = pad.lumen_index(source)?;
-    let r = dial(&pad, &[(src, 0)], mask.spacing(), None, false);
+    let r = dial(&pad, &[src], mask.spacing(), &SearchOptions::default());
     Ok(pad.geodesic(mask, r))
 }
 
 /// What a search over the padded grid found.
 pub struct Search {
     pub dist: Vec<f32>,
-    /// Per voxel, the label of the source it was reached from (when asked for).
-    pub label: Vec<u32>,
     pub far: usize,
     pub far_d: f32,
     pub reached: usize,
     /// Queue pushes (≥ reached; the excess is voxels improved after first being queued).
     pub pushes: usize,
+    /// With `tree`: per voxel, the index into `nbrs` of the offset to its predecessor
+    /// ([`NO_PARENT`] for sources and unreached voxels), and the voxels in settling order.
+    pub parent: Vec<u8>,
+    pub order: Vec<u32>,
+    pub nbrs: Vec<(isize, f32)>,
+}
+
+pub const NO_PARENT: u8 = u8::MAX;
+
+impl Search {
+    /// The voxel `v` was reached from (needs `tree`).
+    #[inline]
+    pub fn parent_of(&self, v: usize) -> Option<usize> {
+        let p = self.parent[v];
+        (p != NO_PARENT).then(|| (v as isize + self.nbrs[p as usize].0) as usize)
+    }
+}
+
+/// How a search runs.
+#[derive(Default)]
+pub struct SearchOptions<'a> {
+    /// Per-voxel cost weight (padded layout, > 0 on lumen voxels): an edge u–v costs its
+    /// length times (w(u) + w(v)) / 2.
+    pub weight: Option<&'a [f32]>,
+    /// Record predecessors and the settling order.
+    pub tree: bool,
+    /// Stop, after settling it, at the first voxel where this holds.
+    pub stop: Option<&'a dyn Fn(usize) -> bool>,
 }
 
 /// The box's mask with one layer of zeros around it, so that the 26 neighbours of every lumen
@@ -140,47 +166,59 @@ impl Padded {
     }
 }
 
-/// Dial's algorithm over the padded grid from several sources (padded index, label).
+/// Dial's algorithm over the padded grid from several sources.
 ///
-/// With `weight` (padded layout, ≥ some w_min > 0 on lumen voxels) an edge u–v costs its
-/// length times (w(u) + w(v)) / 2; the bucket width is then the shortest edge times w_min,
-/// which keeps the buckets exact. With `labels`, each voxel records the label of the source
-/// whose search reached it first (a geodesic Voronoi partition).
-pub fn dial(pad: &Padded, sources: &[(usize, u32)], spacing: [f64; 3], weight: Option<&[f32]>, labels: bool) -> Search {
+/// With a weight the bucket width is the shortest edge times the smallest weight, which keeps
+/// the buckets exact.
+pub fn dial(pad: &Padded, sources: &[usize], spacing: [f64; 3], opts: &SearchOptions) -> Search {
+    match (opts.weight, opts.tree) {
+        (Some(w), true) => dial_impl::<true, true>(pad, sources, spacing, w, opts.stop),
+        (Some(w), false) => dial_impl::<true, false>(pad, sources, spacing, w, opts.stop),
+        (None, true) => dial_impl::<false, true>(pad, sources, spacing, &[], opts.stop),
+        (None, false) => dial_impl::<false, false>(pad, sources, spacing, &[], opts.stop),
+    }
+}
+
+/// `W`: weighted; `T`: record the tree. Monomorphised so the plain search pays for neither.
+fn dial_impl<const W: bool, const T: bool>(pad: &Padded, sources: &[usize], spacing: [f64; 3], weight: &[f32], stop: Option<&dyn Fn(usize) -> bool>) -> Search {
     let nbrs = pad.neighbours(spacing);
-    let (w_min, w_max) = match weight {
-        Some(w) => w.iter().zip(&pad.inside).filter(|(_, m)| **m != 0).fold((f32::INFINITY, 0.0f32), |(lo, hi), (&x, _)| (lo.min(x), hi.max(x))),
-        None => (1.0, 1.0),
+    let (w_min, w_max) = if W {
+        weight.iter().zip(&pad.inside).filter(|(_, m)| **m != 0).fold((f32::INFINITY, 0.0f32), |(lo, hi), (&x, _)| (lo.min(x), hi.max(x)))
+    } else {
+        (1.0, 1.0)
     };
+    let w_min = if w_min.is_finite() { w_min.max(1e-6) } else { 1.0 };
     let shortest = nbrs.iter().map(|n| n.1).fold(f32::INFINITY, f32::min);
     let longest = nbrs.iter().map(|n| n.1).fold(0.0, f32::max);
-    let width = shortest * w_min.max(1e-6);
+    let width = shortest * w_min;
     // Buckets in a ring: a relaxation never reaches more than the costliest edge beyond the
     // current bucket.
-    let ring = (longest * w_max / width).ceil() as usize + 2;
+    let ring = (longest * w_max.max(w_min) / width).ceil() as usize + 2;
     let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); ring];
     let n = pad.inside.len();
     // Walls start at distance 0, so that `candidate < dist[v]` is never true for them and the
     // inner loop needs no separate test of what the neighbour is; they become +∞ at the end.
+    // A settled voxel is never improved either: within a bucket distances differ by less than
+    // the bucket width, and every edge is at least that long.
     let mut dist: Vec<f32> = pad.inside.iter().map(|&m| if m != 0 { f32::INFINITY } else { 0.0 }).collect();
     let mut settled = vec![false; n];
-    let mut label = if labels { vec![u32::MAX; n] } else { Vec::new() };
+    let mut parent = if T { vec![NO_PARENT; n] } else { Vec::new() };
+    let mut order = Vec::new();
+    // Offsets back: parent code c of v means v + nbrs[c].0 is the predecessor.
+    let back: Vec<u8> = nbrs.iter().map(|&(off, _)| nbrs.iter().position(|&(o, _)| o == -off).unwrap_or(0) as u8).collect();
     let mut pending = 0usize;
     let mut pushes = 0usize;
-    for &(s, l) in sources {
+    for &s in sources {
         if dist[s] > 0.0 {
             dist[s] = 0.0;
             buckets[0].push(s as u32);
             pending += 1;
-            if labels {
-                label[s] = l;
-            }
         }
     }
     let mut current = 0usize;
-    let (mut far, mut far_d, mut reached) = (sources.first().map_or(0, |s| s.0), 0.0f32, 0usize);
+    let (mut far, mut far_d, mut reached) = (sources.first().copied().unwrap_or(0), 0.0f32, 0usize);
     let mut work = Vec::new();
-    while pending > 0 {
+    'outer: while pending > 0 {
         let slot = current % ring;
         while !buckets[slot].is_empty() {
             std::mem::swap(&mut work, &mut buckets[slot]);
@@ -192,24 +230,25 @@ pub fn dial(pad: &Padded, sources: &[(usize, u32)], spacing: [f64; 3], weight: O
                 }
                 settled[u] = true;
                 reached += 1;
+                if T {
+                    order.push(u as u32);
+                }
                 let du = dist[u];
                 if du > far_d {
                     far_d = du;
                     far = u;
                 }
-                let wu = weight.map_or(1.0, |w| w[u]);
-                for &(off, len) in &nbrs {
+                if stop.is_some_and(|f| f(u)) {
+                    break 'outer;
+                }
+                let wu = if W { weight[u] } else { 1.0 };
+                for (c, &(off, len)) in nbrs.iter().enumerate() {
                     let v = (u as isize + off) as usize;
-                    let dv = match weight {
-                        Some(w) => du + len * 0.5 * (wu + w[v]),
-                        None => du + len,
-                    };
-                    // Settled voxels are never improved (dv ≥ their distance, bar rounding,
-                    // which the `settled` test at pop absorbs); walls hold 0.
+                    let dv = if W { du + len * 0.5 * (wu + weight[v]) } else { du + len };
                     if dv < dist[v] {
                         dist[v] = dv;
-                        if labels {
-                            label[v] = label[u];
+                        if T {
+                            parent[v] = back[c];
                         }
                         // Rounding can put dv a hair below the next bucket: never file it earlier
                         // than the one being emptied.
@@ -229,7 +268,7 @@ pub fn dial(pad: &Padded, sources: &[(usize, u32)], spacing: [f64; 3], weight: O
             *d = f32::INFINITY;
         }
     }
-    Search { dist, label, far, far_d, reached, pushes }
+    Search { dist, far, far_d, reached, pushes, parent, order, nbrs }
 }
 
 #[cfg(test)]
