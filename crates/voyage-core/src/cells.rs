@@ -143,7 +143,7 @@ pub fn build_cells(lumen: &Volume<u8>, dt_source: &Field<f32>, centerline: &Cent
         }
     }
     set_spans(&mut cells, &cl_dt, &levels);
-    let boundaries = boundary_points(&voxel_cell, levels.len(), lumen.spacing())?;
+    let boundaries = boundary_points(&voxel_cell, dt_source, &levels, lumen.spacing())?;
     let portals = levels
         .iter()
         .zip(boundaries)
@@ -176,7 +176,7 @@ fn centerline_levels(dt: &Field<f32>, cl: &Centerline) -> Vec<f64> {
 /// long enough or holds enough triangles, keeping cuts `min_len` apart in Dt.
 fn choose_levels(cl_dt: &[f64], arc: &[f64], tri_dt: &[f32], opts: &CellOptions, min_len: f64) -> Vec<f64> {
     let mut sorted: Vec<f32> = tri_dt.iter().copied().filter(|d| d.is_finite()).collect();
-    sorted.sort_by(f32::total_cmp);
+    sorted.sort_unstable_by(f32::total_cmp);
     let tris_below = |level: f64| sorted.partition_point(|&d| (d as f64) < level);
     let end = *cl_dt.last().unwrap_or(&0.0);
     let mut levels = Vec::new();
@@ -250,11 +250,17 @@ fn make_portal(pts: Vec<DVec3>, c: usize, level: f64, cl: &Centerline, cl_dt: &[
 /// For each cut c, the centres (volume-local mm) of the voxels on either side of it: voxels
 /// of cells c and c + 1 that are 26-adjacent. One pass over the box, each neighbour pair seen
 /// once. Cells further apart than one must never touch (that is the guarantee visibility
-/// needs); if they do, that is an error.
-fn boundary_points(cells: &Field<u16>, cuts: usize, sp: [f64; 3]) -> Result<Vec<Vec<DVec3>>> {
+/// needs); if they do, that is an error. Dt changes by at most a voxel diagonal between
+/// neighbours, so only voxels within a diagonal of a cut can touch another cell: the others
+/// are skipped without looking at their neighbours.
+fn boundary_points(cells: &Field<u16>, dt: &Field<f32>, levels: &[f64], sp: [f64; 3]) -> Result<Vec<Vec<DVec3>>> {
+    let cuts = levels.len();
+    let reach = diagonal(sp) as f32 * 1.01;
+    let near_cut = |d: f32| {
+        let i = levels.partition_point(|&l| (l as f32) < d - reach);
+        i < cuts && (levels[i] as f32) <= d + reach
+    };
     let [nx, ny, nz] = cells.grid.dims;
-    let lo = cells.grid.lo;
-    let centre = |i: usize, j: usize, k: usize| DVec3::new(((i + lo[0]) as f64) * sp[0], ((j + lo[1]) as f64) * sp[1], ((k + lo[2]) as f64) * sp[2]);
     // The 13 "forward" neighbour offsets: each unordered pair once.
     let mut offs = Vec::with_capacity(13);
     for dk in -1i64..=1 {
@@ -266,12 +272,14 @@ fn boundary_points(cells: &Field<u16>, cuts: usize, sp: [f64; 3]) -> Result<Vec<
             }
         }
     }
-    let mut out: Vec<Vec<DVec3>> = vec![Vec::new(); cuts];
+    // Box indices per cut; a voxel is met once per neighbour across, so deduplicated after.
+    let mut out: Vec<Vec<u32>> = vec![Vec::new(); cuts];
     for k in 0..nz {
         for j in 0..ny {
             for i in 0..nx {
-                let a = cells.data[cells.grid.index(i, j, k)];
-                if a == u16::MAX {
+                let here = cells.grid.index(i, j, k);
+                let a = cells.data[here];
+                if a == u16::MAX || !near_cut(dt.data[here]) {
                     continue;
                 }
                 for &(di, dj, dk) in &offs {
@@ -279,21 +287,35 @@ fn boundary_points(cells: &Field<u16>, cuts: usize, sp: [f64; 3]) -> Result<Vec<
                     if qi < 0 || qj < 0 || qi >= nx as i64 || qj >= ny as i64 || qk >= nz as i64 {
                         continue;
                     }
-                    let b = cells.data[cells.grid.index(qi as usize, qj as usize, qk as usize)];
+                    let there = cells.grid.index(qi as usize, qj as usize, qk as usize);
+                    let b = cells.data[there];
                     if b == u16::MAX || b == a {
                         continue;
                     }
                     if a.abs_diff(b) != 1 {
                         return Err(Error::invalid(format!("cells {a} and {b} touch: the cuts are too close")));
                     }
-                    let cut = a.min(b) as usize;
-                    out[cut].push(centre(i, j, k));
-                    out[cut].push(centre(qi as usize, qj as usize, qk as usize));
+                    let cut = &mut out[a.min(b) as usize];
+                    cut.push(here as u32);
+                    cut.push(there as u32);
                 }
             }
         }
     }
-    Ok(out)
+    let lo = cells.grid.lo;
+    Ok(out
+        .into_iter()
+        .map(|mut v| {
+            v.sort_unstable();
+            v.dedup();
+            v.into_iter()
+                .map(|idx| {
+                    let [i, j, k] = cells.grid.ijk(idx as usize);
+                    DVec3::new(((i + lo[0]) as f64) * sp[0], ((j + lo[1]) as f64) * sp[1], ((k + lo[2]) as f64) * sp[2])
+                })
+                .collect()
+        })
+        .collect())
 }
 
 /// Two unit vectors spanning the plane with this normal, (u, v, normal) right-handed.
@@ -305,7 +327,7 @@ fn plane_axes(n: DVec3) -> (DVec3, DVec3) {
 
 /// Andrew's monotone chain; counter-clockwise.
 fn convex_hull(mut pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
-    pts.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    pts.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
     pts.dedup();
     if pts.len() < 3 {
         return pts;

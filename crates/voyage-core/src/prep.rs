@@ -55,6 +55,9 @@ impl Stage {
 pub struct Timings {
     pub segment: f64,
     pub ds: f64,
+    /// The skeleton search: endpoints and the raw centerline path.
+    pub skeleton: f64,
+    /// The two Dt fields.
     pub dt: f64,
     pub centerline: f64,
     pub surface: f64,
@@ -110,7 +113,9 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Sta
 
     progress(Stage::Dt);
     let ends = find_endpoints(&seg.lumen, &ds, seg.seed_voxel, &opts.endpoints, &opts.centerline)?;
-    lap(&mut t.dt);
+    let mut ignored = 0.0;
+    lap(&mut ignored);
+    (t.skeleton, t.centerline, t.dt) = (ends.skeleton_ms, ends.refine_ms, ends.dt_ms);
     let cl = ends.centerline;
 
     progress(Stage::Surface);

@@ -84,6 +84,7 @@ fn measure(name: &str, ct: Volume<i16>, repeats: usize) -> Result<Measured> {
     let timings = Timings {
         segment: med(|t| t.segment),
         ds: med(|t| t.ds),
+        skeleton: med(|t| t.skeleton),
         dt: med(|t| t.dt),
         centerline: med(|t| t.centerline),
         surface: med(|t| t.surface),
@@ -144,7 +145,9 @@ fn report(m: &Measured, refs: Value, threads: usize) -> Value {
             row("ds", t.ds, "edt (1 thread)", r("edt"), 100.0, Some(5.0)),
             row("ds", t.ds, "scipy.ndimage EDT", r("scipy_edt"), 100.0, None),
             row("one Dt", m.dt_single_ms, "dijkstra3d", r("dijkstra3d"), 100.0, Some(4.0)),
-            row("endpoints+skeleton+centerline+2 Dt", t.dt, "-", None, 300.0, None),
+            row("endpoints + skeleton path", t.skeleton, "-", None, 200.0, None),
+            row("centerline refinement", t.centerline, "-", None, 50.0, None),
+            row("both Dt fields", t.dt, "-", None, 200.0, None),
             row("surface", t.surface, "VTK flying edges", r("vtk_flying_edges"), 80.0, Some(1.0)),
             row("surface", t.surface, "scikit-image", r("skimage_marching_cubes"), 80.0, None),
             row("cells", t.cells, "-", None, 50.0, None),

@@ -130,6 +130,7 @@ fn summary(s: &Study, g: &Geometry, load_ms: f64) -> serde_json::Value {
             "load": load_ms,
             "segment": t.segment,
             "ds": t.ds,
+            "skeleton": t.skeleton,
             "dt": t.dt,
             "centerline": t.centerline,
             "cells": t.cells,
@@ -157,8 +158,8 @@ fn print_text(s: &Study, g: &Geometry, load_ms: f64) {
     println!("cells       {}", s.cells.cells.len());
     let t = &s.timings;
     println!(
-        "time        load {load_ms:.0} ms; segment {:.0}, ds {:.0}, dt {:.0}, centerline {:.0}, surface {:.0}, cells {:.0}; total after load {:.0} ms",
-        t.segment, t.ds, t.dt, t.centerline, t.surface, t.cells, t.total_after_load
+        "time        load {load_ms:.0} ms; segment {:.0}, ds {:.0}, skeleton {:.0}, centerline {:.0}, dt {:.0}, surface {:.0}, cells {:.0}; total after load {:.0} ms",
+        t.segment, t.ds, t.skeleton, t.centerline, t.dt, t.surface, t.cells, t.total_after_load
     );
     if let Some(mb) = peak_rss_mb() {
         println!("memory      peak {mb:.0} MB");
