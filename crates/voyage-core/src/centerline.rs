@@ -32,6 +32,10 @@ pub struct CenterlineOptions {
     pub smooth_mm: f64,
     /// Centring iterations (each moves points up the Ds ridge across the path).
     pub centre_iterations: usize,
+    /// The skeleton search runs on 2×2×2 blocks when the finest spacing is below this (mm)
+    /// and the lumen has more voxels than `coarse_above_voxels`.
+    pub coarse_below_mm: f64,
+    pub coarse_above_voxels: usize,
     /// The cost weight's power p and scale K (see [`cost_weight`]).
     pub penalty_power: u32,
     pub penalty_scale: f64,
@@ -41,7 +45,7 @@ pub struct CenterlineOptions {
 
 impl Default for CenterlineOptions {
     fn default() -> Self {
-        CenterlineOptions { step_mm: 1.0, smooth_mm: 4.0, centre_iterations: 12, penalty_power: 16, penalty_scale: 5000.0, skeleton: SkeletonOptions::default() }
+        CenterlineOptions { step_mm: 1.0, smooth_mm: 4.0, centre_iterations: 12, coarse_below_mm: 1.0, coarse_above_voxels: 1_000_000, penalty_power: 16, penalty_scale: 5000.0, skeleton: SkeletonOptions::default() }
     }
 }
 
@@ -63,6 +67,11 @@ pub fn centerline(mask: &Volume<u8>, ds: &Field<f32>, source: [usize; 3], target
 pub fn refine(voxels: &[[usize; 3]], mask: &Volume<u8>, ds: &Field<f32>, opts: &CenterlineOptions) -> Centerline {
     let sp = mask.geometry().spacing_vec();
     let raw: Vec<DVec3> = voxels.iter().map(|v| DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64) * sp).collect();
+    refine_points(raw, ds, opts)
+}
+
+/// [`refine`] of a path given in volume-local mm (each point at a lumen voxel's centre).
+pub fn refine_points(raw: Vec<DVec3>, ds: &Field<f32>, opts: &CenterlineOptions) -> Centerline {
     let mut pts = resample(&raw, opts.step_mm);
     for _ in 0..opts.centre_iterations {
         pts = centre(&pts, ds);
