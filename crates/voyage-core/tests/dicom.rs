@@ -778,3 +778,32 @@ fn huge_fragment_length_is_refused_before_allocating() {
     let err = voyage_core::io::load(&p, &opts()).unwrap_err().to_string();
     assert!(err.contains("huge-fragment.dcm") && err.contains("announces"), "{err}");
 }
+
+/// Found by the `load_dicom` fuzzer: inside a deflated data set, an element announcing 4 GB
+/// made dicom-rs allocate it while inflating. The data set is now inflated (bounded) and its
+/// lengths checked before dicom-rs sees it.
+#[test]
+fn huge_length_inside_a_deflated_data_set_is_refused() {
+    use std::io::{Read, Write};
+    let Some(data) = data_dir() else { return };
+    let src = data.join("dicom/transfer-syntaxes/CTImage.dcm_DeflatedExplicitVRLittleEndianTransferSyntax_1.2.840.10008.1.2.1.99.dcm");
+    let bytes = std::fs::read(&src).unwrap();
+    assert_eq!(&bytes[128..132], b"DICM");
+    let group_len = u32::from_le_bytes(bytes[140..144].try_into().unwrap()) as usize;
+    let meta_end = 144 + group_len;
+    let mut inflated = Vec::new();
+    flate2::read::DeflateDecoder::new(&bytes[meta_end..]).read_to_end(&mut inflated).unwrap();
+    // A private element announcing 4 GB, in front of the real data set.
+    let mut bomb = vec![0x09, 0x00, 0x10, 0x00, b'U', b'N', 0, 0];
+    bomb.extend_from_slice(&0xF000_0000u32.to_le_bytes());
+    bomb.extend_from_slice(&inflated);
+    let mut enc = flate2::write::DeflateEncoder::new(Vec::new(), flate2::Compression::default());
+    enc.write_all(&bomb).unwrap();
+    let mut file = bytes[..meta_end].to_vec();
+    file.extend_from_slice(&enc.finish().unwrap());
+    let dir = TempDir::new("deflate-bomb");
+    let p = dir.path().join("deflate-bomb.dcm");
+    std::fs::write(&p, &file).unwrap();
+    let err = voyage_core::io::load(&p, &opts()).unwrap_err().to_string();
+    assert!(err.contains("deflate-bomb.dcm") && err.contains("announces"), "{err}");
+}

@@ -1354,6 +1354,9 @@ fn open_dicom(path: &Path, until: Option<Tag>) -> std::result::Result<DefaultDic
             describe_unknown_ts(&meta.ts_uid)
         )));
     }
+    if meta.ts_uid == DEFLATED_EXPLICIT_LE {
+        return open_deflated(meta, buf, file, until);
+    }
     if let Some(layout) = Layout::of(&meta.ts_uid) {
         let size = file.metadata().map_err(OpenError::Io)?.len();
         loop {
@@ -1388,6 +1391,81 @@ struct MetaGroup {
     /// Offset in the file where the data set starts.
     end: usize,
     ts_uid: String,
+}
+
+const DEFLATED_EXPLICIT_LE: &str = "1.2.840.10008.1.2.1.99";
+const EXPLICIT_LE: &str = "1.2.840.10008.1.2.1";
+
+/// A deflated data set holds at most this many times its compressed size (real ones: 2–10×);
+/// more is a corrupt or hostile stream, refused before it fills the memory.
+const MAX_INFLATE_RATIO: u64 = 256;
+
+/// Deflated explicit VR little endian: inflated here (bounded), its lengths checked like any
+/// other data set's, and handed to dicom-rs as plain explicit VR little endian. dicom-rs would
+/// otherwise inflate as it parses and allocate whatever a corrupt length inside announces.
+fn open_deflated(meta: MetaGroup, mut buf: Vec<u8>, mut file: std::fs::File, until: Option<Tag>) -> std::result::Result<DefaultDicomObject, OpenError> {
+    use std::io::{Cursor, Read};
+    file.read_to_end(&mut buf).map_err(OpenError::Io)?;
+    let compressed = &buf[meta.end.min(buf.len())..];
+    let cap = (compressed.len() as u64).saturating_mul(MAX_INFLATE_RATIO).max(1 << 20);
+    let mut inflated = Vec::new();
+    flate2::read::DeflateDecoder::new(compressed)
+        .take(cap + 1)
+        .read_to_end(&mut inflated)
+        .map_err(|e| OpenError::Meta(format!("the deflated data set cannot be inflated: {e}")))?;
+    if inflated.len() as u64 > cap {
+        return Err(OpenError::Meta(format!("the deflated data set inflates to more than {MAX_INFLATE_RATIO} times its size")));
+    }
+    let layout = Layout { explicit: true, big_endian: false };
+    match scan_lengths(&inflated, 0, inflated.len() as u64, layout, until.is_none()) {
+        Scan::Sound | Scan::NeedMore(_) => {}
+        Scan::Truncated { .. } if until.is_some() => {}
+        Scan::Truncated { declared, found } => return Err(OpenError::Truncated { declared, found }),
+        Scan::Bad(m) => return Err(OpenError::Meta(m)),
+    }
+    let clean = with_transfer_syntax(&meta.clean, EXPLICIT_LE);
+    let source = Cursor::new(clean).chain(Cursor::new(inflated));
+    let mut options = OpenFileOptions::new().read_preamble(dicom_object::file::ReadPreamble::Never);
+    if let Some(tag) = until {
+        options = options.read_until(tag);
+    }
+    let mut obj = options.from_reader(source).map_err(OpenError::Parse)?;
+    // Report the file as it is: deflated.
+    obj.meta_mut().transfer_syntax = DEFLATED_EXPLICIT_LE.to_string();
+    Ok(obj)
+}
+
+/// The rewritten meta group ("DICM" + group length + elements, as `parse_meta` makes it)
+/// with another transfer syntax.
+fn with_transfer_syntax(clean: &[u8], ts: &str) -> Vec<u8> {
+    let mut body = Vec::with_capacity(clean.len());
+    let mut pos = 16; // "DICM" and the group length element
+    while pos + 8 <= clean.len() {
+        let element = u16::from_le_bytes([clean[pos + 2], clean[pos + 3]]);
+        let vr = [clean[pos + 4], clean[pos + 5]];
+        let (header, len) = if &vr == b"OB" {
+            (12, u32::from_le_bytes([clean[pos + 8], clean[pos + 9], clean[pos + 10], clean[pos + 11]]) as usize)
+        } else {
+            (8, u16::from_le_bytes([clean[pos + 6], clean[pos + 7]]) as usize)
+        };
+        let value = &clean[pos + header..(pos + header + len).min(clean.len())];
+        if element == 0x0010 {
+            let mut v = ts.as_bytes().to_vec();
+            if v.len() % 2 == 1 {
+                v.push(0);
+            }
+            put_meta_element(&mut body, element, &vr, &v);
+        } else {
+            put_meta_element(&mut body, element, &vr, value);
+        }
+        pos += header + len;
+    }
+    let mut out = Vec::with_capacity(body.len() + 16);
+    out.extend_from_slice(b"DICM");
+    out.extend_from_slice(&[0x02, 0x00, 0x00, 0x00, b'U', b'L', 4, 0]);
+    out.extend_from_slice(&(body.len() as u32).to_le_bytes());
+    out.extend_from_slice(&body);
+    out
 }
 
 /// Names for transfer syntaxes that dicom-rs does not know (retired JPEG processes mostly), so
