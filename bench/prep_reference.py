@@ -69,7 +69,9 @@ def main():
     vimg.SetSpacing(*sp)
     arr = numpy_support.numpy_to_vtk(f.ravel(order="F"), deep=True)
     vimg.GetPointData().SetScalars(arr)
+    # Flying edges runs on vtkSMPTools, not vtkMultiThreader: both are held to one thread.
     vtk.vtkMultiThreader.SetGlobalMaximumNumberOfThreads(1)
+    vtk.vtkSMPTools.Initialize(1)
 
     def flying_edges():
         fe = vtk.vtkFlyingEdges3D()

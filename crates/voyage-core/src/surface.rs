@@ -226,16 +226,20 @@ fn march(s: &Scalar, spacing: Vec3, vol_dims: [usize; 3]) -> Surface {
     let mut lower = EdgeCache::new(nx, ny);
     let mut upper = EdgeCache::new(nx, ny);
     let mut zed = vec![u32::MAX; nx * ny];
-    // Per row (j, k): does it hold a lumen voxel? A row of cubes needs work only when one of
-    // its four corner rows does, which skips most of the box at the cost of one flag a row.
+    // Per row (j, k): where its lumen voxels lie (padded x, first and one past the last;
+    // empty when none). A row of cubes needs work only where one of its four corner rows has
+    // lumen, which skips most of the box.
     let mut bits = vec![0u8; nx];
-    let row_has: Vec<bool> = (0..ny * nz)
+    let row_span: Vec<(usize, usize)> = (0..ny * nz)
         .map(|r| {
             s.row_bits(r % ny, r / ny, &mut bits);
-            bits.contains(&1)
+            match bits.iter().position(|&b| b != 0) {
+                Some(first) => (first, bits.iter().rposition(|&b| b != 0).unwrap_or(first) + 1),
+                None => (0, 0),
+            }
         })
         .collect();
-    let plane_has: Vec<bool> = row_has.chunks(ny).map(|p| p.contains(&true)).collect();
+    let plane_has: Vec<bool> = row_span.chunks(ny).map(|p| p.iter().any(|r| r.1 > r.0)).collect();
     let mut rowbuf = vec![vec![0u8; nx]; 4];
     for k in 0..nz - 1 {
         if !(plane_has[k] || plane_has[k + 1]) {
@@ -246,17 +250,21 @@ fn march(s: &Scalar, spacing: Vec3, vol_dims: [usize; 3]) -> Surface {
         zed.fill(u32::MAX);
         for j in 0..ny - 1 {
             let rows = [j + ny * k, j + 1 + ny * k, j + ny * (k + 1), j + 1 + ny * (k + 1)];
-            if !rows.iter().any(|&r| row_has[r]) {
+            let spans: Vec<(usize, usize)> = rows.iter().map(|&r| row_span[r]).filter(|sp| sp.1 > sp.0).collect();
+            if spans.is_empty() {
                 continue;
             }
+            // Cubes i with a lumen corner at x = i or i + 1.
+            let i_lo = spans.iter().map(|sp| sp.0).min().unwrap_or(0).saturating_sub(1);
+            let i_hi = spans.iter().map(|sp| sp.1).max().unwrap_or(0).min(nx - 1);
             for (buf, &r) in rowbuf.iter_mut().zip(&rows) {
                 s.row_bits(r % ny, r / ny, buf);
             }
             let [r0, r1, r2, r3] = [&rowbuf[0], &rowbuf[1], &rowbuf[2], &rowbuf[3]];
             // Corner bits of the cube's x = 0 face; the x = 1 face becomes the next cube's x = 0.
             let face = |i: usize| (r0[i] | r1[i] << 1 | r2[i] << 2 | r3[i] << 3) as usize;
-            let mut left = face(0);
-            for i in 0..nx - 1 {
+            let mut left = face(i_lo);
+            for i in i_lo..i_hi {
                 let right = face(i + 1);
                 // Corner c = x + 2y + 4z: x = 0 corners are bits 0, 2, 4, 6.
                 let case = spread(left) | spread(right) << 1;
