@@ -21,14 +21,12 @@ impl BoxGrid {
     /// Index inside the box of box-local voxel (i, j, k).
     #[inline]
     pub fn index(&self, i: usize, j: usize, k: usize) -> usize {
-        i + self.dims[0] * (j + self.dims[1] * k)
+        crate::volume::grid_index(self.dims, i, j, k)
     }
     /// Box-local (i, j, k) of a box index.
     #[inline]
     pub fn ijk(&self, index: usize) -> [usize; 3] {
-        let nx = self.dims[0];
-        let ny = self.dims[1];
-        [index % nx, (index / nx) % ny, index / (nx * ny)]
+        crate::volume::grid_ijk(self.dims, index)
     }
     /// Box index of a volume voxel, or None when it lies outside the box.
     #[inline]

@@ -61,15 +61,13 @@ impl Geometry {
 
     #[inline]
     pub fn index(&self, i: usize, j: usize, k: usize) -> usize {
-        i + self.dims[0] * (j + self.dims[1] * k)
+        grid_index(self.dims, i, j, k)
     }
 
     /// Inverse of [`Geometry::index`].
     #[inline]
     pub fn ijk(&self, index: usize) -> [usize; 3] {
-        let nx = self.dims[0];
-        let ny = self.dims[1];
-        [index % nx, (index / nx) % ny, index / (nx * ny)]
+        grid_ijk(self.dims, index)
     }
 
     pub fn direction_mat(&self) -> DMat3 {
@@ -154,6 +152,18 @@ impl Geometry {
             })
             .collect()
     }
+}
+
+/// Linear index of voxel (i, j, k) in an x-fastest grid of `dims`.
+#[inline]
+pub fn grid_index(dims: [usize; 3], i: usize, j: usize, k: usize) -> usize {
+    i + dims[0] * (j + dims[1] * k)
+}
+
+/// Inverse of [`grid_index`].
+#[inline]
+pub fn grid_ijk(dims: [usize; 3], index: usize) -> [usize; 3] {
+    [index % dims[0], (index / dims[0]) % dims[1], index / (dims[0] * dims[1])]
 }
 
 pub const IDENTITY: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];

@@ -27,12 +27,7 @@ use crate::{Error, Result, Volume};
 
 /// Loads a .mha or .mhd (+ data file) as an `i16` volume in LPS.
 pub fn load(path: &Path) -> Result<Loaded> {
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
-    if len == 0 {
-        return Err(Error::format(path, "empty file"));
-    }
-    let mut r = BufReader::with_capacity(1 << 16, file);
+    let (mut r, len) = shared::open_nonempty(path)?;
     let mut lines = shared::HeaderLines::new(path, &mut r);
     let h = Header::read(path, &mut lines)?;
     let consumed = lines.consumed;
@@ -100,7 +95,7 @@ impl Header {
                 continue;
             }
             let Some((key, value)) = line.split_once('=') else {
-                return Err(Error::format(path, format!("not a MetaImage header line: \"{}\"", clip(line))));
+                return Err(Error::format(path, format!("not a MetaImage header line: \"{}\"", shared::clip(line))));
             };
             any = true;
             let (key, value) = (key.trim(), value.trim());
@@ -274,10 +269,6 @@ fn boolean(key: &str, value: &str) -> Result<bool, String> {
     }
 }
 
-/// At most 80 characters of a line, for messages.
-fn clip(line: &str) -> String {
-    line.chars().take(80).collect()
-}
 
 // ---------------------------------------------------------------------------------------
 // Writing

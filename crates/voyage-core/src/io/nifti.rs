@@ -22,7 +22,7 @@
 //!   to `i16`. NaN voxels become -1024 (air) and the count goes into `Meta::notes`, as does
 //!   the count of saturated voxels.
 
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{BufRead, Read, Write};
 use std::path::Path;
 
 use glam::{DMat3, DQuat, DVec3};
@@ -41,12 +41,7 @@ const SHEAR_TOLERANCE: f64 = 1e-3;
 
 /// Loads a .nii or .nii.gz file as an `i16` volume in LPS.
 pub fn load(path: &Path) -> Result<Loaded> {
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
-    if len == 0 {
-        return Err(Error::format(path, "empty file"));
-    }
-    let mut r = BufReader::with_capacity(1 << 16, file);
+    let (mut r, len) = shared::open_nonempty(path)?;
     let head = r.fill_buf().map_err(|e| Error::io(path, e))?;
     if shared::is_gzip(head) {
         let mut gz = flate2::bufread::MultiGzDecoder::new(r);
@@ -511,13 +506,28 @@ fn quaternion_of(dir: DMat3) -> (DQuat, f64) {
 /// conversion to `i16` with rescale, truncation checks, text header lines, direction checks.
 /// (It lives here because the io module's file list belongs to others.)
 pub(crate) mod shared {
-    use std::io::{BufRead, Read};
+    use std::io::{BufRead, BufReader, Read};
     use std::path::Path;
 
     use glam::{DMat3, DVec3};
 
     use crate::volume::check_dims;
     use crate::{Error, Geometry, Result};
+
+    /// Opens a volume file for buffered reading, with its length; an empty file is an error.
+    pub fn open_nonempty(path: &Path) -> Result<(BufReader<std::fs::File>, u64)> {
+        let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+        let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
+        if len == 0 {
+            return Err(Error::format(path, "empty file"));
+        }
+        Ok((BufReader::with_capacity(1 << 16, file), len))
+    }
+
+    /// At most 80 characters of a line, for messages.
+    pub fn clip(line: &str) -> String {
+        line.chars().take(80).collect()
+    }
 
     /// Stored element type.
     #[derive(Clone, Copy, Debug, PartialEq, Eq)]

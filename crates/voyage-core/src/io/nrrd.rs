@@ -23,12 +23,7 @@ use crate::{Error, Geometry, Result, Volume};
 
 /// Loads a .nrrd or .nhdr (+ data file) as an `i16` volume in LPS.
 pub fn load(path: &Path) -> Result<Loaded> {
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
-    if len == 0 {
-        return Err(Error::format(path, "empty file"));
-    }
-    let mut r = BufReader::with_capacity(1 << 16, file);
+    let (mut r, len) = shared::open_nonempty(path)?;
     let mut lines = shared::HeaderLines::new(path, &mut r);
     let h = Header::read(path, &mut lines)?;
     let consumed = lines.consumed;
@@ -130,7 +125,7 @@ impl Header {
                 continue;
             }
             let Some((field, value)) = line.split_once(": ") else {
-                return Err(Error::format(path, format!("not a NRRD field line: \"{}\"", clip(&line))));
+                return Err(Error::format(path, format!("not a NRRD field line: \"{}\"", shared::clip(&line))));
             };
             h.set(&field.trim().to_ascii_lowercase(), value.trim()).map_err(|m| Error::format(path, m))?;
         }
@@ -297,10 +292,10 @@ fn vectors(field: &str, value: &str) -> Result<Vec<DVec3>, String> {
     let mut rest = value.trim();
     while !rest.is_empty() {
         let Some(inner) = rest.strip_prefix('(') else {
-            return Err(format!("{field}: expected \"(x,y,z)\" vectors in \"{}\"", clip(value)));
+            return Err(format!("{field}: expected \"(x,y,z)\" vectors in \"{}\"", shared::clip(value)));
         };
         let Some((inside, after)) = inner.split_once(')') else {
-            return Err(format!("{field}: unclosed parenthesis in \"{}\"", clip(value)));
+            return Err(format!("{field}: unclosed parenthesis in \"{}\"", shared::clip(value)));
         };
         let v: Vec<f64> = inside
             .split(',')
@@ -338,10 +333,6 @@ fn open_data(header: &Path, data: &Path) -> Result<(BufReader<std::fs::File>, u6
     }
 }
 
-/// At most 80 characters of a line, for messages.
-fn clip(line: &str) -> String {
-    line.chars().take(80).collect()
-}
 
 // ---------------------------------------------------------------------------------------
 // Writing
