@@ -807,3 +807,34 @@ fn huge_length_inside_a_deflated_data_set_is_refused() {
     let err = voyage_core::io::load(&p, &opts()).unwrap_err().to_string();
     assert!(err.contains("deflate-bomb.dcm") && err.contains("announces"), "{err}");
 }
+
+/// Writes a 4×4 CT slice whose RLE segments decode to one byte each instead of sixteen: the
+/// shape of a file the `load_dicom` fuzzer found to panic inside dicom-rs's RLE decoder.
+pub fn short_rle_file(path: &Path) {
+    use dicom_core::value::PixelFragmentSequence;
+    let g = Geometry::new([4, 4, 1], [0.7, 0.7, 1.0], [0.0; 3]).unwrap();
+    let dir = path.parent().unwrap().join("rle-src");
+    write_series(&dir, &Volume::filled(g, 7i16).unwrap()).unwrap();
+    let src = files_in(&dir).remove(0);
+    let mut obj = open_file(&src).unwrap();
+    obj.meta_mut().transfer_syntax = "1.2.840.10008.1.2.5".to_string();
+    let mut frame = vec![0u8; 64];
+    frame[0..4].copy_from_slice(&2u32.to_le_bytes());
+    frame[4..8].copy_from_slice(&64u32.to_le_bytes());
+    frame[8..12].copy_from_slice(&66u32.to_le_bytes());
+    frame.extend_from_slice(&[0x00, 0x01, 0x00, 0x02]);
+    let pixels = PixelFragmentSequence::new(Vec::<u32>::new(), vec![frame]);
+    obj.put(DataElement::new(tags::PIXEL_DATA, VR::OB, pixels));
+    obj.write_to_file(path).unwrap();
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn short_rle_segments_give_an_error_not_a_panic() {
+    let dir = TempDir::new("short-rle");
+    let p = dir.path().join("short-rle.dcm");
+    short_rle_file(&p);
+    let err = voyage_core::io::load(&p, &opts()).unwrap_err().to_string();
+    assert!(err.contains("short-rle.dcm") && err.contains("RLE"), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+}

@@ -158,3 +158,36 @@ fn bad_arguments_are_refused() {
     let o = voyage(&["phantom", "colon", "--out", "x.unknown", "--small"]);
     assert!(!o.status.success());
 }
+
+/// A CT slice whose RLE segments decode short makes dicom-rs's decoder panic (found by the
+/// fuzzer). voyage turns that into its usual one-line error, with no panic report or backtrace.
+#[test]
+fn a_panicking_decoder_still_gives_one_line() {
+    use dicom_core::value::{PixelFragmentSequence, PrimitiveValue};
+    use dicom_core::{DataElement, VR};
+    use dicom_dictionary_std::tags;
+    let dir = scratch("rle");
+    let ct = dir.join("ct.nii");
+    let series = dir.join("series");
+    let made = voyage(&["phantom", "colon", "--small", "--out", ct.to_str().unwrap(), "--dicom", series.to_str().unwrap()]);
+    assert!(made.status.success(), "{}", text(&made));
+    let first = std::fs::read_dir(&series).unwrap().map(|e| e.unwrap().path()).min().unwrap();
+    let mut obj = dicom_object::open_file(&first).unwrap();
+    obj.meta_mut().transfer_syntax = "1.2.840.10008.1.2.5".to_string();
+    let mut frame = vec![0u8; 64];
+    frame[0..4].copy_from_slice(&2u32.to_le_bytes());
+    frame[4..8].copy_from_slice(&64u32.to_le_bytes());
+    frame[8..12].copy_from_slice(&66u32.to_le_bytes());
+    frame.extend_from_slice(&[0x00, 0x01, 0x00, 0x02]);
+    obj.put(DataElement::new(tags::PIXEL_DATA, VR::OB, PixelFragmentSequence::new(Vec::<u32>::new(), vec![frame])));
+    obj.put(DataElement::new(tags::ROWS, VR::US, PrimitiveValue::from(4u16)));
+    obj.put(DataElement::new(tags::COLUMNS, VR::US, PrimitiveValue::from(4u16)));
+    let bad = dir.join("short-rle.dcm");
+    obj.write_to_file(&bad).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_voyage")).args(["info", bad.to_str().unwrap()]).env("RUST_BACKTRACE", "1").output().unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(err.starts_with("error: ") && err.contains("short-rle.dcm") && !err.contains("panicked"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

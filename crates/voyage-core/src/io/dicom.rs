@@ -231,7 +231,8 @@ fn has_dicm_marker(path: &Path) -> Result<bool> {
 /// Runs `f`, converting a panic (a bug or an unchecked case in a decoder) into an error that
 /// names the file, so that no input can crash the program.
 fn guarded<T>(path: &Path, what: &str, f: impl FnOnce() -> Result<T>) -> Result<T> {
-    match catch_unwind(AssertUnwindSafe(f)) {
+    let result = crate::error::quietly(|| catch_unwind(AssertUnwindSafe(f)));
+    match result {
         Ok(r) => r,
         Err(panic) => {
             let msg = panic
