@@ -21,11 +21,36 @@ pub fn distance_to_wall(mask: &Volume<u8>) -> Result<Field<f32>> {
     let inside = crop(mask, &grid);
     let sp = mask.spacing();
     let mut f: Vec<f32> = inside.par_iter().map(|&m| if m != 0 { f32::INFINITY } else { 0.0 }).collect();
+    let (has_y, has_z) = column_flags(&inside, &grid);
     pass_x(&mut f, &grid, sp[0]);
-    pass_y(&mut f, &grid, sp[1]);
-    pass_z(&mut f, &grid, sp[2]);
+    pass_y(&mut f, &grid, sp[1], &has_y);
+    pass_z(&mut f, &grid, sp[2], &has_z);
     f.par_iter_mut().zip(inside.par_iter()).for_each(|(d, &m)| *d = if m != 0 { d.sqrt() } else { 0.0 });
     Ok(Field { grid, geometry: mask.geometry().clone(), data: f })
+}
+
+/// Which columns hold lumen: along y, indexed i + nx·k; along z, indexed i + nx·j. After the
+/// first pass exactly the lumen is non-zero, so a column without lumen is all walls and its
+/// transform is itself: it need not even be read.
+fn column_flags(inside: &[u8], grid: &BoxGrid) -> (Vec<bool>, Vec<bool>) {
+    let [nx, ny, nz] = grid.dims;
+    let mut has_y = vec![false; nx * nz];
+    let mut has_z = vec![false; nx * ny];
+    for k in 0..nz {
+        for j in 0..ny {
+            let row = &inside[nx * (j + ny * k)..][..nx];
+            if !row.contains(&1) {
+                continue;
+            }
+            for (i, &m) in row.iter().enumerate() {
+                if m != 0 {
+                    has_y[i + nx * k] = true;
+                    has_z[i + nx * j] = true;
+                }
+            }
+        }
+    }
+    (has_y, has_z)
 }
 
 /// Scratch space for the 1D transforms: the envelope's parabola sites `v` (positions) and
@@ -135,21 +160,18 @@ fn pass_x(f: &mut [f32], grid: &BoxGrid, h: f64) {
 }
 
 /// Second pass, along y: each z-slab is independent and fits in cache.
-fn pass_y(f: &mut [f32], grid: &BoxGrid, h: f64) {
+fn pass_y(f: &mut [f32], grid: &BoxGrid, h: f64, has: &[bool]) {
     let [nx, ny, _] = grid.dims;
     let h = h as f32;
-    f.par_chunks_mut(nx * ny).for_each_init(
+    f.par_chunks_mut(nx * ny).enumerate().for_each_init(
         || Scratch::new(ny),
-        |s, slab| {
+        |s, (k, slab)| {
             for i in 0..nx {
-                let mut any = false;
-                for j in 0..ny {
-                    let x = slab[i + nx * j];
-                    s.col[j] = x;
-                    any |= x != 0.0;
-                }
-                if !any {
+                if !has[i + nx * k] {
                     continue;
+                }
+                for j in 0..ny {
+                    s.col[j] = slab[i + nx * j];
                 }
                 let mut col = std::mem::take(&mut s.col);
                 transform_column(&mut col, h, s);
@@ -164,7 +186,7 @@ fn pass_y(f: &mut [f32], grid: &BoxGrid, h: f64) {
 
 /// Third pass, along z: columns are strided by a whole slab, so each task takes one y-row
 /// of columns; the rows of different tasks never overlap.
-fn pass_z(f: &mut [f32], grid: &BoxGrid, h: f64) {
+fn pass_z(f: &mut [f32], grid: &BoxGrid, h: f64, has: &[bool]) {
     let [nx, ny, nz] = grid.dims;
     let h = h as f32;
     let plane = nx * ny;
@@ -174,16 +196,13 @@ fn pass_z(f: &mut [f32], grid: &BoxGrid, h: f64) {
         |s, j| {
             for i in 0..nx {
                 let base = i + nx * j;
-                let mut any = false;
+                if !has[base] {
+                    continue;
+                }
                 for k in 0..nz {
                     // SAFETY: task j reads and writes only indices with this j, which no other
                     // task touches; base + plane·k < nx·ny·nz = len.
-                    let x = unsafe { shared.get(base + plane * k) };
-                    s.col[k] = x;
-                    any |= x != 0.0;
-                }
-                if !any {
-                    continue;
+                    s.col[k] = unsafe { shared.get(base + plane * k) };
                 }
                 let mut col = std::mem::take(&mut s.col);
                 transform_column(&mut col, h, s);
