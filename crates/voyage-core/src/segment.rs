@@ -35,11 +35,13 @@ pub struct SegmentOptions {
     pub mask: Option<bool>,
     /// Components smaller than this (ml) are not reported one by one.
     pub min_report_ml: f64,
+    /// Tagged fluid is HU at or above this; None: no fluid is added to the lumen.
+    pub fluid_hu: Option<i16>,
 }
 
 impl Default for SegmentOptions {
     fn default() -> Self {
-        SegmentOptions { air_hu: -500, seed_mm: None, mask: None, min_report_ml: 0.5 }
+        SegmentOptions { air_hu: -500, seed_mm: None, mask: None, min_report_ml: 0.5, fluid_hu: Some(200) }
     }
 }
 
@@ -76,6 +78,8 @@ pub struct Segmentation {
     pub components: Vec<Component>,
     /// Smaller components not listed one by one.
     pub small_components: usize,
+    /// Voxels of tagged fluid (and of the air–fluid interface) counted in the lumen.
+    pub fluid_voxels: usize,
     /// Whether the input was taken as a mask.
     pub from_mask: bool,
     /// Voxel of air (from the seed, or the colon's lowest voxel) the colon was grown from.
@@ -117,14 +121,18 @@ pub fn segment(vol: &Volume<i16>, opts: &SegmentOptions) -> Result<Segmentation>
     classify_lungs(&mut comps, from_mask);
     let colon = choose_colon(&comps, &runs, &run_comp, vol, opts)?;
     comps[colon].kind = ComponentKind::Colon;
-    let lumen = rasterize(&runs, &run_comp, colon, vol)?;
+    let mut lumen = rasterize(&runs, &run_comp, colon, vol)?;
+    let fluid_voxels = match (from_mask, opts.fluid_hu) {
+        (false, Some(hu)) => add_tagged_fluid(vol, &mut lumen, hu),
+        _ => 0,
+    };
     let seed_voxel = match opts.seed_mm {
         Some(mm) => voxel_of(vol, mm)?,
         None => lowest_voxel(&runs, &run_comp, colon, vol.dims()),
     };
-    let lumen_voxels = comps[colon].voxels;
+    let lumen_voxels = comps[colon].voxels + fluid_voxels;
     let (components, small) = report(comps, colon, opts.min_report_ml);
-    Ok(Segmentation { lumen, lumen_voxels, components, small_components: small, from_mask, seed_voxel })
+    Ok(Segmentation { lumen, lumen_voxels, components, small_components: small, fluid_voxels, from_mask, seed_voxel })
 }
 
 /// A volume holding only 0 and 1 is a mask, not a CT.
@@ -377,6 +385,93 @@ fn rasterize(runs: &Runs, run_comp: &[u32], colon: usize, vol: &Volume<i16>) -> 
         }
     });
     Ok(lumen)
+}
+
+/// Tagged fluid (paper-era scans had none; CT colonography today tags residual fluid with oral
+/// contrast): bright pools lying in the colon under a flat level. A 6-connected component of
+/// voxels at or above `fluid_hu` joins the lumen when enough of it lies within two voxels of
+/// the colon's air, and so does the thin partial-volume layer between air and fluid (voxels
+/// beside the fluid and within two voxels of the air). Bone is as bright, but never that close to the colon's air: the wall and fat
+/// lie between. Returns the voxels added.
+fn add_tagged_fluid(vol: &Volume<i16>, lumen: &mut Volume<u8>, fluid_hu: i16) -> usize {
+    const AIR: u8 = 1;
+    const FLUID: u8 = 2;
+    const LAYER: u8 = 3;
+    /// Fewer contacts than this is a brush past the wall, not a pool.
+    const MIN_CONTACTS: usize = 20;
+    let runs = extract_runs(vol, |v| v >= fluid_hu, false);
+    if runs.runs.is_empty() {
+        return 0;
+    }
+    let all = vec![true; runs.runs.len()];
+    let mut uf = UnionFind::new(runs.runs.len());
+    connect_3d(&runs, &all, vol.dims(), &mut uf);
+    let g = vol.geometry().clone();
+    let [nx, ny, nz] = g.dims;
+    let air_near = |lumen: &Volume<u8>, i: usize, j: usize, k: usize| {
+        (1..=2).any(|d| {
+            [(i.wrapping_sub(d), j, k), (i + d, j, k), (i, j.wrapping_sub(d), k), (i, j + d, k), (i, j, k.wrapping_sub(d)), (i, j, k + d)]
+                .iter()
+                .any(|&(a, b, c)| a < nx && b < ny && c < nz && lumen.get(a, b, c) == AIR)
+        })
+    };
+    let mut contacts = vec![0usize; runs.runs.len()];
+    for k in 0..nz {
+        for j in 0..ny {
+            for r in runs.row(j, k) {
+                let run = runs.runs[r];
+                let n = (run.x0..run.x1).filter(|&i| air_near(lumen, i as usize, j, k)).count();
+                if n > 0 {
+                    contacts[uf.find(r)] += n;
+                }
+            }
+        }
+    }
+    let mut added = 0;
+    for k in 0..nz {
+        for j in 0..ny {
+            for r in runs.row(j, k) {
+                if contacts[uf.find(r)] >= MIN_CONTACTS {
+                    let run = runs.runs[r];
+                    for i in run.x0 as usize..run.x1 as usize {
+                        lumen.set(i, j, k, FLUID);
+                    }
+                    added += (run.x1 - run.x0) as usize;
+                }
+            }
+        }
+    }
+    if added == 0 {
+        return 0;
+    }
+    // The interface: voxels beside fluid and within two voxels of the air.
+    let beside = |lumen: &Volume<u8>, i: usize, j: usize, k: usize, what: u8| {
+        [(i.wrapping_sub(1), j, k), (i + 1, j, k), (i, j.wrapping_sub(1), k), (i, j + 1, k), (i, j, k.wrapping_sub(1)), (i, j, k + 1)]
+            .iter()
+            .any(|&(a, b, c)| a < nx && b < ny && c < nz && lumen.get(a, b, c) == what)
+    };
+    let mut layer = Vec::new();
+    for idx in 0..g.len() {
+        if lumen.data()[idx] != FLUID {
+            continue;
+        }
+        let [i, j, k] = g.ijk(idx);
+        for (a, b, c) in [(i.wrapping_sub(1), j, k), (i + 1, j, k), (i, j.wrapping_sub(1), k), (i, j + 1, k), (i, j, k.wrapping_sub(1)), (i, j, k + 1)] {
+            if a < nx && b < ny && c < nz && lumen.get(a, b, c) == 0 && (beside(lumen, a, b, c, AIR) || air_near(lumen, a, b, c)) {
+                layer.push(g.index(a, b, c));
+            }
+        }
+    }
+    for idx in layer {
+        if lumen.data()[idx] == 0 {
+            lumen.data_mut()[idx] = LAYER;
+            added += 1;
+        }
+    }
+    for v in lumen.data_mut() {
+        *v = (*v != 0) as u8;
+    }
+    added
 }
 
 /// The colon voxel lowest in k (first slice), middle of its first run: used as the seed when
