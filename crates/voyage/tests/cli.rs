@@ -191,3 +191,37 @@ fn a_panicking_decoder_still_gives_one_line() {
     assert!(err.starts_with("error: ") && err.contains("short-rle.dcm") && !err.contains("panicked"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn prep_writes_its_exports_and_reports_json() {
+    let dir = scratch("prep");
+    let ct = dir.join("colon.nii.gz");
+    let truth = dir.join("colon.json");
+    let made = voyage(&["phantom", "colon", "--small", "--out", ct.to_str().unwrap(), "--truth", truth.to_str().unwrap()]);
+    assert!(made.status.success(), "{}", text(&made));
+    let out = dir.join("prep");
+    let o = voyage(&["prep", ct.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    for key in ["lumen_voxels", "components", "source_mm", "target_mm", "centerline_length_mm", "cells", "triangles", "timings_ms", "peak_rss_mb"] {
+        assert!(!j[key].is_null(), "{key} missing from {j}");
+    }
+    for key in ["load", "segment", "ds", "dt", "centerline", "cells", "surface", "total_after_load"] {
+        assert!(j["timings_ms"][key].as_f64().is_some(), "timings_ms.{key} missing");
+    }
+    let t: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&truth).unwrap()).unwrap();
+    let (ours, truth_len) = (j["centerline_length_mm"].as_f64().unwrap(), t["centerline_length_mm"].as_f64().unwrap());
+    assert!((ours - truth_len).abs() < 0.1 * truth_len, "centerline {ours} mm vs truth {truth_len} mm");
+    for f in ["lumen.nii.gz", "ds.nii.gz", "centerline.json", "centerline.mrk.json", "surface.ply", "surface.stl", "cells.json"] {
+        assert!(out.join(f).metadata().map(|m| m.len() > 0).unwrap_or(false), "{f} not written");
+    }
+    let mrk: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("centerline.mrk.json")).unwrap()).unwrap();
+    assert_eq!(mrk["markups"][0]["type"], "Curve");
+    assert_eq!(mrk["markups"][0]["coordinateSystem"], "LPS");
+    // A seed in soft tissue is refused on one line.
+    let bad = voyage(&["prep", ct.to_str().unwrap(), "--out", out.to_str().unwrap(), "--frame", "local", "--seed", "1,1,1"]);
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(err.contains("seed") && err.trim().lines().count() == 1, "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
