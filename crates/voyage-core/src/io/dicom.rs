@@ -1070,6 +1070,10 @@ fn extract_pixels(path: &Path, obj: &mut DefaultDicomObject, ts_uid: &str, name:
         return Err(Error::format(path, "no pixel data (7FE0,0010) in this file"));
     };
     match elem.value() {
+        Value::PixelSequence(seq) if ts_uid == RLE_LOSSLESS => {
+            let shape = RleShape::of(obj).map_err(decode_error)?;
+            decode_rle(seq.fragments(), shape).map(|b| Raw::Bytes(b, 0)).map_err(decode_error)
+        }
         Value::PixelSequence(_) => {
             let Some(reader) = ts.pixel_data_reader() else {
                 return Err(decode_error("no decoder for this transfer syntax is built in".into()));
@@ -1094,6 +1098,97 @@ fn extract_pixels(path: &Path, obj: &mut DefaultDicomObject, ts_uid: &str, name:
         }
         Value::Sequence(_) => Err(decode_error("pixel data is a sequence, not pixel values".into())),
     }
+}
+
+const RLE_LOSSLESS: &str = "1.2.840.10008.1.2.5";
+
+/// What an RLE frame decodes to.
+#[derive(Clone, Copy)]
+struct RleShape {
+    pixels: usize,
+    bytes_per_sample: usize,
+    frames: usize,
+}
+
+impl RleShape {
+    fn of(obj: &DefaultDicomObject) -> std::result::Result<RleShape, String> {
+        let get = |tag: Tag, name: &str| uint(obj, tag, name);
+        let rows = get(tags::ROWS, "Rows")?.ok_or("no Rows")? as usize;
+        let cols = get(tags::COLUMNS, "Columns")?.ok_or("no Columns")? as usize;
+        let bits = get(tags::BITS_ALLOCATED, "BitsAllocated")?.ok_or("no BitsAllocated")?;
+        let samples = get(tags::SAMPLES_PER_PIXEL, "SamplesPerPixel")?.unwrap_or(1);
+        let frames = get(tags::NUMBER_OF_FRAMES, "NumberOfFrames")?.unwrap_or(1).max(1) as usize;
+        if samples != 1 || !(bits == 8 || bits == 16) {
+            return Err(format!("RLE with {samples} samples of {bits} bits is not a CT image"));
+        }
+        Ok(RleShape { pixels: rows * cols, bytes_per_sample: bits as usize / 8, frames })
+    }
+}
+
+/// DICOM RLE Lossless (PS3.5 Annex G), grayscale: per frame a 64-byte header (segment count,
+/// offsets), then one PackBits segment per byte of the sample, most significant first. Decoded
+/// here, with every length checked, into little-endian samples: dicom-rs's decoder indexes past
+/// its buffer when a segment decodes short (found by fuzzing).
+fn decode_rle(fragments: &[Vec<u8>], shape: RleShape) -> std::result::Result<Vec<u8>, String> {
+    // The first fragment may be the basic offset table's successor; frames are the fragments.
+    if fragments.len() != shape.frames {
+        return Err(format!("{} fragments for {} frames (frames split over fragments are not supported)", fragments.len(), shape.frames));
+    }
+    let bps = shape.bytes_per_sample;
+    let mut out = vec![0u8; shape.frames * shape.pixels * bps];
+    for (f, frame) in fragments.iter().enumerate() {
+        if frame.len() < 64 {
+            return Err(format!("RLE frame {f} has no 64-byte header"));
+        }
+        let word = |i: usize| u32::from_le_bytes([frame[4 * i], frame[4 * i + 1], frame[4 * i + 2], frame[4 * i + 3]]) as usize;
+        let segments = word(0);
+        if segments != bps {
+            return Err(format!("RLE frame {f} has {segments} segments, expected {bps}"));
+        }
+        let dst = &mut out[f * shape.pixels * bps..(f + 1) * shape.pixels * bps];
+        for seg in 0..segments {
+            let start = word(1 + seg);
+            let end = if seg + 1 < segments { word(2 + seg) } else { frame.len() };
+            if start < 64 || start > end || end > frame.len() {
+                return Err(format!("RLE frame {f} segment {seg} spans bytes {start}..{end} of {}", frame.len()));
+            }
+            // Segment 0 holds the most significant bytes; samples are stored little-endian.
+            let byte = bps - 1 - seg;
+            unpack_bits(&frame[start..end], shape.pixels, |i, v| dst[i * bps + byte] = v)
+                .map_err(|n| format!("RLE frame {f} segment {seg} decodes to {n} bytes, expected {}", shape.pixels))?;
+        }
+    }
+    Ok(out)
+}
+
+/// PackBits: a control byte n ≥ 0 copies the next n + 1 bytes, n in −127..=−1 repeats the next
+/// byte 1 − n times, −128 does nothing. Calls `put(i, byte)` for each of the first `want`
+/// bytes; returns how many there were when that is fewer.
+fn unpack_bits(src: &[u8], want: usize, mut put: impl FnMut(usize, u8)) -> std::result::Result<(), usize> {
+    let (mut i, mut n) = (0usize, 0usize);
+    while i < src.len() && n < want {
+        let c = src[i] as i8;
+        i += 1;
+        if c >= 0 {
+            let len = c as usize + 1;
+            for &b in src.get(i..i + len).ok_or(n)?.iter().take(want - n) {
+                put(n, b);
+                n += 1;
+            }
+            i += len;
+        } else if c != -128 {
+            let b = *src.get(i).ok_or(n)?;
+            i += 1;
+            for _ in 0..(1 - c as isize) as usize {
+                if n == want {
+                    break;
+                }
+                put(n, b);
+                n += 1;
+            }
+        }
+    }
+    if n < want { Err(n) } else { Ok(()) }
 }
 
 /// Turns frame `frame` of a file's pixel data into HU: mask to BitsStored, extend the sign,
