@@ -126,14 +126,14 @@ fn skeleton_path(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], given_so
     let s = pad.lumen_index(source)?;
     let tree = tree_search(&pad, &[s], sp, Some(&weight), None);
     let t_given = given_target.map(|t| pad.lumen_index(t)).transpose()?;
-    if let (Some(t), Some(tv)) = (t_given, given_target) {
-        if !tree.dist[t].is_finite() {
-            return Err(Error::invalid(format!(
-                "the target {} mm cannot be reached from the source {} mm through the lumen",
-                mm_of(lumen, tv),
-                mm_of(lumen, source)
-            )));
-        }
+    if let (Some(t), Some(tv)) = (t_given, given_target)
+        && !tree.dist[t].is_finite()
+    {
+        return Err(Error::invalid(format!(
+            "the target {} mm cannot be reached from the source {} mm through the lumen",
+            mm_of(lumen, tv),
+            mm_of(lumen, source)
+        )));
     }
     let sk_opts = SkeletonOptions { min_width: opts.min_width, ..cl_opts.skeleton.clone() };
     let (path, _stats) = colon_path(&pad, &tree, &ds_pad, sp, s, t_given, &sk_opts)?;

@@ -143,7 +143,9 @@ pub fn is_mask(vol: &Volume<i16>) -> bool {
 fn extract_runs(vol: &Volume<i16>, is_air: impl Fn(i16) -> bool + Sync, stats: bool) -> Runs {
     let [nx, ny, nz] = vol.dims();
     // One task per slice; concatenated in slice order so the result is thread-independent.
-    let per_slice: Vec<(Vec<Run>, Vec<u32>, Vec<i64>, Vec<u32>)> = (0..nz)
+    // Per slice: its runs, run count per row, HU sum and dark count per run.
+    type SliceRuns = (Vec<Run>, Vec<u32>, Vec<i64>, Vec<u32>);
+    let per_slice: Vec<SliceRuns> = (0..nz)
         .into_par_iter()
         .map(|k| {
             let slice = vol.slice_k(k);
@@ -502,7 +504,7 @@ fn report(comps: Vec<Component>, colon: usize, min_ml: f64) -> (Vec<Component>, 
             small += 1;
         }
     }
-    listed.sort_by(|a, b| b.voxels.cmp(&a.voxels));
+    listed.sort_by_key(|c| std::cmp::Reverse(c.voxels));
     (listed, small)
 }
 

@@ -99,10 +99,10 @@ const SKELETON: u8 = 2;
 /// path ends (the cecum). `tree` is the weighted search from `source`; `ds` is Ds in the
 /// padded layout.
 pub(crate) fn colon_path(pad: &Padded, tree: &Tree, ds: &[f32], spacing: [f64; 3], source: usize, target: Option<usize>, opts: &SkeletonOptions) -> Result<(Vec<usize>, SkeletonStats)> {
-    if let Some(t) = target {
-        if !tree.dist[t].is_finite() {
-            return Err(Error::invalid("the target cannot be reached from the source through the lumen"));
-        }
+    if let Some(t) = target
+        && !tree.dist[t].is_finite()
+    {
+        return Err(Error::invalid("the target cannot be reached from the source through the lumen"));
     }
     let n = pad.inside.len();
     let dmax = tree.order.iter().map(|&v| ds[v as usize]).fold(0.0f32, f32::max);

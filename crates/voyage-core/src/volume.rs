@@ -170,7 +170,7 @@ pub const IDENTITY: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0
 
 /// Validates header dimensions before anything is allocated.
 pub fn check_dims(dims: [u64; 3]) -> Result<()> {
-    if dims.iter().any(|&d| d == 0) {
+    if dims.contains(&0) {
         return Err(Error::invalid(format!("dimensions {dims:?} contain zero")));
     }
     if dims.iter().any(|&d| d > MAX_DIM) {
