@@ -113,8 +113,11 @@ impl Runs {
 /// Segments the colon lumen from a CT (or takes it from a mask).
 pub fn segment(vol: &Volume<i16>, opts: &SegmentOptions) -> Result<Segmentation> {
     let from_mask = opts.mask.unwrap_or_else(|| is_mask(vol));
-    let runs = if from_mask { extract_runs(vol, |v| v != 0, false) } else { extract_runs(vol, |v| v < opts.air_hu, true) };
+    let mut runs = if from_mask { extract_runs(vol, |v| v != 0) } else { extract_runs(vol, |v| v < opts.air_hu) };
     let inside = if from_mask { vec![true; runs.runs.len()] } else { inside_body(&runs, vol.dims()) };
+    if !from_mask {
+        fill_stats(&mut runs, &inside, vol);
+    }
     let mut labels = UnionFind::new(runs.runs.len());
     connect_3d(&runs, &inside, vol.dims(), &mut labels);
     let (mut comps, run_comp) = component_stats(&runs, &inside, vol, &mut labels, from_mask);
@@ -140,16 +143,14 @@ pub fn is_mask(vol: &Volume<i16>) -> bool {
     vol.data().par_iter().all(|&v| v == 0 || v == 1) && vol.data().contains(&1)
 }
 
-fn extract_runs(vol: &Volume<i16>, is_air: impl Fn(i16) -> bool + Sync, stats: bool) -> Runs {
+fn extract_runs(vol: &Volume<i16>, is_air: impl Fn(i16) -> bool + Sync) -> Runs {
     let [nx, ny, nz] = vol.dims();
     // One task per slice; concatenated in slice order so the result is thread-independent.
-    // Per slice: its runs, run count per row, HU sum and dark count per run.
-    type SliceRuns = (Vec<Run>, Vec<u32>, Vec<i64>, Vec<u32>);
-    let per_slice: Vec<SliceRuns> = (0..nz)
+    let per_slice: Vec<(Vec<Run>, Vec<u32>)> = (0..nz)
         .into_par_iter()
         .map(|k| {
             let slice = vol.slice_k(k);
-            let (mut runs, mut counts, mut sums, mut darks) = (Vec::new(), Vec::with_capacity(ny), Vec::new(), Vec::new());
+            let (mut runs, mut counts) = (Vec::new(), Vec::with_capacity(ny));
             for j in 0..ny {
                 let row = &slice[j * nx..(j + 1) * nx];
                 let before = runs.len();
@@ -164,33 +165,52 @@ fn extract_runs(vol: &Volume<i16>, is_air: impl Fn(i16) -> bool + Sync, stats: b
                         i += 1;
                     }
                     runs.push(Run { x0: x0 as u32, x1: i as u32 });
-                    if stats {
-                        let seg = &row[x0..i];
-                        sums.push(seg.iter().map(|&v| v as i64).sum());
-                        darks.push(seg.iter().filter(|&&v| v < -950).count() as u32);
-                    } else {
-                        sums.push(0);
-                        darks.push(0);
-                    }
                 }
                 counts.push((runs.len() - before) as u32);
             }
-            (runs, counts, sums, darks)
+            (runs, counts)
         })
         .collect();
     let total: usize = per_slice.iter().map(|s| s.0.len()).sum();
-    let mut out = Runs { runs: Vec::with_capacity(total), row_start: Vec::with_capacity(ny * nz + 1), hu_sum: Vec::with_capacity(total), dark: Vec::with_capacity(total), ny };
+    let mut out = Runs { runs: Vec::with_capacity(total), row_start: Vec::with_capacity(ny * nz + 1), hu_sum: vec![0; total], dark: vec![0; total], ny };
     out.row_start.push(0);
-    for (runs, counts, sums, darks) in per_slice {
+    for (runs, counts) in per_slice {
         for c in counts {
             let last = *out.row_start.last().unwrap_or(&0);
             out.row_start.push(last + c);
         }
         out.runs.extend(runs);
-        out.hu_sum.extend(sums);
-        out.dark.extend(darks);
     }
     out
+}
+
+/// HU sum and count of voxels darker than −950 HU, for the runs inside the body only (the
+/// outside air is most of a scan's air and needs none).
+fn fill_stats(runs: &mut Runs, inside: &[bool], vol: &Volume<i16>) {
+    let [nx, ny, nz] = vol.dims();
+    let per_slice: Vec<Vec<(i64, u32)>> = (0..nz)
+        .into_par_iter()
+        .map(|k| {
+            let slice = vol.slice_k(k);
+            let mut out = Vec::with_capacity(runs.row(ny - 1, k).end - runs.row(0, k).start);
+            for j in 0..ny {
+                for r in runs.row(j, k) {
+                    let run = runs.runs[r];
+                    out.push(if inside[r] {
+                        let seg = &slice[j * nx + run.x0 as usize..j * nx + run.x1 as usize];
+                        (seg.iter().map(|&v| v as i64).sum(), seg.iter().filter(|&&v| v < -950).count() as u32)
+                    } else {
+                        (0, 0)
+                    });
+                }
+            }
+            out
+        })
+        .collect();
+    for (r, (sum, dark)) in per_slice.into_iter().flatten().enumerate() {
+        runs.hu_sum[r] = sum;
+        runs.dark[r] = dark;
+    }
 }
 
 /// Calls `f(a, b)` for every pair of runs, one in row `ra` and one in row `rb`, that share an x.
@@ -401,7 +421,7 @@ fn add_tagged_fluid(vol: &Volume<i16>, lumen: &mut Volume<u8>, fluid_hu: i16) ->
     const LAYER: u8 = 3;
     /// Fewer contacts than this is a brush past the wall, not a pool.
     const MIN_CONTACTS: usize = 20;
-    let runs = extract_runs(vol, |v| v >= fluid_hu, false);
+    let runs = extract_runs(vol, |v| v >= fluid_hu);
     if runs.runs.is_empty() {
         return 0;
     }
