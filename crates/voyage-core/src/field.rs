@@ -91,6 +91,23 @@ impl<T: Copy> Field<T> {
     pub fn get_global(&self, g: [usize; 3], outside: T) -> T {
         self.grid.index_of_global(g).map_or(outside, |i| self.data[i])
     }
+    /// Axial slice k of the field spread over the whole volume (x fastest), `outside` beyond
+    /// the box: for writing a field without a whole volume in memory.
+    pub fn fill_slice(&self, k: usize, out: &mut [T], outside: T) {
+        out.fill(outside);
+        let lo = self.grid.lo;
+        let [bx, by, bz] = self.grid.dims;
+        if k < lo[2] || k >= lo[2] + bz {
+            return;
+        }
+        let nx = self.geometry.dims[0];
+        for j in 0..by {
+            let src = &self.data[self.grid.index(0, j, k - lo[2])..][..bx];
+            let start = lo[0] + nx * (j + lo[1]);
+            out[start..start + bx].copy_from_slice(src);
+        }
+    }
+
     /// The field spread over the whole volume, `outside` beyond the box (for exports).
     pub fn to_volume(&self, outside: T) -> Result<Volume<T>> {
         let mut v = Volume::filled(self.geometry.clone(), outside)?;
@@ -143,5 +160,26 @@ impl Field<f32> {
             acc += w * v as f64;
         }
         acc as f32
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn slices_equal_the_spread_volume() {
+        let g = Geometry::new([7, 6, 5], [1.0, 0.5, 2.0], [0.0; 3]).unwrap();
+        let grid = BoxGrid { lo: [2, 1, 1], dims: [3, 4, 3] };
+        let data = (0..grid.len()).map(|i| i as f32 + 1.0).collect();
+        let f = Field { grid, geometry: g.clone(), data };
+        let v = f.to_volume(-1.0).unwrap();
+        let mut s = vec![0.0f32; 7 * 6];
+        for k in 0..5 {
+            f.fill_slice(k, &mut s, -1.0);
+            assert_eq!(&s[..], v.slice_k(k));
+        }
+        assert_eq!(f.get_global([2, 1, 1], -1.0), 1.0);
+        assert_eq!(f.get_global([0, 0, 0], -1.0), -1.0);
     }
 }

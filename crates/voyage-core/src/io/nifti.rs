@@ -432,6 +432,36 @@ pub fn save_i16(path: &Path, vol: &Volume<i16>) -> Result<()> {
 }
 
 /// Header, the 4-byte "no extensions" flag, then the voxels in chunks (bounded memory).
+/// Saves a volume given slice by slice (`slice(k, out)` fills axial slice k, x fastest), so
+/// that a field stored on a box never has to be spread over a whole volume in memory.
+pub fn save_slices<T: NiftiVoxel + Default>(path: &Path, geometry: &Geometry, slice: impl Fn(usize, &mut [T])) -> Result<()> {
+    let header = header_bytes::<T>(geometry).map_err(at(path))?;
+    let gz = path.to_string_lossy().to_ascii_lowercase().ends_with(".gz");
+    let [nx, ny, nz] = geometry.dims;
+    let body = |w: &mut dyn Write| -> std::io::Result<()> {
+        w.write_all(&header)?;
+        let mut vals = vec![T::default(); nx * ny];
+        let mut buf = Vec::with_capacity(nx * ny * std::mem::size_of::<T>());
+        for k in 0..nz {
+            slice(k, &mut vals);
+            buf.clear();
+            T::extend_le(&vals, &mut buf);
+            w.write_all(&buf)?;
+        }
+        Ok(())
+    };
+    super::atomic::write_atomic(path, |w| {
+        if gz {
+            let mut enc = flate2::write::GzEncoder::new(w, flate2::Compression::new(GZIP_LEVEL));
+            body(&mut enc)?;
+            enc.finish()?;
+            Ok(())
+        } else {
+            body(w)
+        }
+    })
+}
+
 fn write_body<T: NiftiVoxel>(w: &mut dyn Write, header: &[u8; VOX_OFFSET], data: &[T]) -> std::io::Result<()> {
     w.write_all(header)?;
     let mut buf = Vec::with_capacity(1 << 20);
