@@ -150,5 +150,20 @@ pub fn demo(out: &Path, small: bool) -> Result<()> {
     write_outputs(&p, &ct, Some(&out.join("colon.json")), None, None)?;
     let loaded = io::load(&ct, &LoadOptions::default())?;
     super::info::Info::new(&ct, &loaded).print_text();
+    // The preprocessing on what was read back, checked against the phantom's truth.
+    let study = voyage_core::prep::prepare(loaded.volume, &Default::default(), |_| {})?;
+    let written = voyage_core::export::study::write_study(&out.join("prep"), &study)?;
+    let (mut both, mut a, mut b) = (0usize, 0usize, 0usize);
+    for (&x, &y) in p.lumen.data().iter().zip(study.segmentation.lumen.data()) {
+        both += (x != 0 && y != 0) as usize;
+        a += (x != 0) as usize;
+        b += (y != 0) as usize;
+    }
+    let t = &study.timings;
+    println!("preprocessed in {:.0} ms after loading:", t.total_after_load);
+    println!("  lumen        {} voxels, Dice {:.4} against the truth", study.segmentation.lumen_voxels, 2.0 * both as f64 / (a + b) as f64);
+    println!("  centerline   {:.0} mm (truth {:.0} mm)", study.centerline.length_mm, p.truth.centerline_length_mm);
+    println!("  surface      {} triangles in {} cells", study.surface.mesh.triangles.len(), study.cells.cells.len());
+    println!("  exports      {} files in {}", written.len(), out.join("prep").display());
     Ok(())
 }
