@@ -225,3 +225,17 @@ fn prep_writes_its_exports_and_reports_json() {
     assert!(err.contains("seed") && err.trim().lines().count() == 1, "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn demo_makes_preprocesses_and_checks_the_phantom() {
+    let dir = scratch("demo");
+    let o = voyage(&["demo", "--small", "--out", dir.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    let dice: f64 = out.lines().find(|l| l.contains("Dice")).and_then(|l| l.split_whitespace().nth(4)).and_then(|d| d.parse().ok()).unwrap_or(0.0);
+    assert!(dice > 0.97, "{out}");
+    for f in ["colon.nii.gz", "colon.json", "colon.lumen.nii.gz", "prep/centerline.json", "prep/surface.ply"] {
+        assert!(dir.join(f).is_file(), "{f} missing");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
