@@ -42,18 +42,25 @@ struct PrepBench {
     /// Timed repeats (after one warm-up).
     #[arg(long, default_value_t = 3)]
     repeats: usize,
-    /// Worker threads for voyage (the targets are for one core).
-    #[arg(long, default_value_t = 1)]
-    threads: usize,
-    /// Python with the reference libraries (default: bench/.venv from bench/setup.sh).
-    #[arg(long)]
-    python: Option<PathBuf>,
     /// Skip the reference libraries.
     #[arg(long)]
     no_reference: bool,
+    #[command(flatten)]
+    common: Common,
+}
+
+/// What every benchmark takes.
+#[derive(Args, Debug)]
+pub struct Common {
+    /// Worker threads for voyage (the targets are for one core).
+    #[arg(long, default_value_t = 1)]
+    pub threads: usize,
+    /// Python with the reference libraries (default: bench/.venv from bench/setup.sh).
+    #[arg(long)]
+    pub python: Option<PathBuf>,
     /// Print one JSON object.
     #[arg(long)]
-    json: bool,
+    pub json: bool,
 }
 
 #[derive(Args, Debug)]
@@ -67,21 +74,14 @@ struct LoadBench {
     /// Timed repeats per loader (after one warm-up).
     #[arg(long, default_value_t = 5)]
     repeats: usize,
-    /// Worker threads for voyage (the targets are for one core).
-    #[arg(long, default_value_t = 1)]
-    threads: usize,
-    /// Python with numpy, pydicom and nibabel (default: bench/.venv from bench/setup.sh).
-    #[arg(long)]
-    python: Option<PathBuf>,
-    /// Print one JSON object.
-    #[arg(long)]
-    json: bool,
+    #[command(flatten)]
+    common: Common,
 }
 
 pub fn run(a: &BenchArgs) -> Result<()> {
     match &a.what {
         BenchWhat::Load(l) => load(l),
-        BenchWhat::Prep(p) => super::bench_prep::run(p.inputs.clone(), !p.no_phantom, &p.dir, p.repeats, p.threads, p.python.as_deref(), !p.no_reference, p.json),
+        BenchWhat::Prep(p) => super::bench_prep::run(p.inputs.clone(), !p.no_phantom, &p.dir, p.repeats, !p.no_reference, &p.common),
     }
 }
 
@@ -99,7 +99,7 @@ struct LoadRow {
 }
 
 fn load(a: &LoadBench) -> Result<()> {
-    rayon::ThreadPoolBuilder::new().num_threads(a.threads).build_global().ok();
+    rayon::ThreadPoolBuilder::new().num_threads(a.common.threads).build_global().ok();
     let (series, nii) = prepare_load_files(&a.dir, a.small)?;
     let opts = LoadOptions::default();
     let mb = |v: &voyage_core::Volume<i16>| (v.data().len() * 2) as f64 / 1e6;
@@ -122,11 +122,11 @@ fn load(a: &LoadBench) -> Result<()> {
         row("DICOM series (uncompressed)", megabytes, dicom_ms, "pydicom+numpy", ref_dicom, 3.0),
         row("NIfTI .nii.gz", megabytes, nii_ms, "nibabel", ref_nii, 1.0),
     ];
-    if a.json {
-        let out = serde_json::json!({"bench": "load", "threads": a.threads, "repeats": a.repeats, "rows": rows});
+    if a.common.json {
+        let out = serde_json::json!({"bench": "load", "threads": a.common.threads, "repeats": a.repeats, "rows": rows});
         println!("{}", serde_json::to_string_pretty(&out)?);
     } else {
-        print_load_table(&rows, a.threads);
+        print_load_table(&rows, a.common.threads);
     }
     Ok(())
 }
@@ -205,7 +205,7 @@ const LOAD_REFERENCE_PY: &str = include_str!("../../../../bench/load_reference.p
 
 /// Runs bench/load_reference.py; returns the median (DICOM ms, NIfTI ms).
 fn run_reference(a: &LoadBench, series: &Path, nii: &Path) -> Result<(f64, f64)> {
-    let python = find_python(a.python.as_deref())?;
+    let python = find_python(a.common.python.as_deref())?;
     let script = a.dir.join("load_reference.py");
     std::fs::write(&script, LOAD_REFERENCE_PY).with_context(|| format!("{}: cannot write", script.display()))?;
     // One more repeat than ours: the reference's first run is its warm-up.

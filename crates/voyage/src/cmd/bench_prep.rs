@@ -13,12 +13,12 @@ use voyage_core::phantom::{self, ColonOptions};
 use voyage_core::prep::{prepare, PrepOptions, Study, Timings};
 use voyage_core::Volume;
 
-use super::bench::{find_python, median};
+use super::bench::{find_python, median, Common};
 
 const PREP_REFERENCE_PY: &str = include_str!("../../../../bench/prep_reference.py");
 
-#[allow(clippy::too_many_arguments)]
-pub fn run(inputs: Vec<PathBuf>, phantom: bool, dir: &Path, repeats: usize, threads: usize, python: Option<&Path>, reference: bool, json_out: bool) -> Result<()> {
+pub fn run(inputs: Vec<PathBuf>, phantom: bool, dir: &Path, repeats: usize, reference: bool, common: &Common) -> Result<()> {
+    let (threads, python, json_out) = (common.threads, common.python.as_deref(), common.json);
     rayon::ThreadPoolBuilder::new().num_threads(threads).build_global().ok();
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create folder", dir.display()))?;
     let mut cases: Vec<(String, Volume<i16>)> = Vec::new();
