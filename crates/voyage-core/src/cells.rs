@@ -128,7 +128,8 @@ pub fn build_cells(lumen: &Volume<u8>, dt_source: &Field<f32>, centerline: &Cent
     let tri_dt: Vec<f32> = surface.owner_voxel.iter().map(|&v| dt_source.get_global(lumen.geometry().ijk(v as usize), f32::INFINITY)).collect();
     let min_len = opts.min_length_mm.max(2.0 * diagonal(lumen.spacing()));
     let levels = choose_levels(&cl_dt, &centerline.arc_mm, &tri_dt, opts, min_len);
-    let voxel_cell = label_voxels(dt_source, &levels);
+    let reach = diagonal(lumen.spacing()) * 1.01;
+    let Labels { cells: voxel_cell, counts, near_cut } = label_voxels(dt_source, &levels, reach);
     let triangle_cell: Vec<u16> = tri_dt.iter().map(|&d| cell_of_level(&levels, d)).collect();
     let ncells = levels.len() + 1;
     let mut cells: Vec<Cell> = (0..ncells)
@@ -137,13 +138,11 @@ pub fn build_cells(lumen: &Volume<u8>, dt_source: &Field<f32>, centerline: &Cent
     for (t, &c) in triangle_cell.iter().enumerate() {
         cells[c as usize].triangles.push(t as u32);
     }
-    for &c in &voxel_cell.data {
-        if c != u16::MAX {
-            cells[c as usize].voxels += 1;
-        }
+    for (cell, n) in cells.iter_mut().zip(counts) {
+        cell.voxels = n;
     }
     set_spans(&mut cells, &cl_dt, &levels);
-    let boundaries = boundary_points(&voxel_cell, dt_source, &levels, lumen.spacing())?;
+    let boundaries = boundary_points(&voxel_cell, &near_cut, levels.len(), lumen.spacing())?;
     let portals = levels
         .iter()
         .zip(boundaries)
@@ -200,12 +199,36 @@ fn cell_of_level(levels: &[f64], d: f32) -> u16 {
     levels.partition_point(|&l| l <= d as f64) as u16
 }
 
-fn label_voxels(dt: &Field<f32>, levels: &[f64]) -> Field<u16> {
-    Field {
-        grid: dt.grid.clone(),
-        geometry: dt.geometry.clone(),
-        data: dt.data.iter().map(|&d| if d.is_finite() { cell_of_level(levels, d) } else { u16::MAX }).collect(),
-    }
+/// Each voxel's cell, the voxels per cell, and the voxels within `reach` (a voxel diagonal)
+/// of a cut: only those can touch another cell, since Dt changes by at most a diagonal
+/// between neighbours.
+struct Labels {
+    cells: Field<u16>,
+    counts: Vec<usize>,
+    near_cut: Vec<u32>,
+}
+
+fn label_voxels(dt: &Field<f32>, levels: &[f64], reach: f64) -> Labels {
+    let mut counts = vec![0usize; levels.len() + 1];
+    let mut near_cut = Vec::new();
+    let data = dt
+        .data
+        .iter()
+        .enumerate()
+        .map(|(idx, &d)| {
+            if !d.is_finite() {
+                return u16::MAX;
+            }
+            let c = levels.partition_point(|&l| l <= d as f64);
+            counts[c] += 1;
+            let d = d as f64;
+            if (c < levels.len() && levels[c] - d <= reach) || (c > 0 && d - levels[c - 1] <= reach) {
+                near_cut.push(idx as u32);
+            }
+            c as u16
+        })
+        .collect();
+    Labels { cells: Field { grid: dt.grid.clone(), geometry: dt.geometry.clone(), data }, counts, near_cut }
 }
 
 fn set_spans(cells: &mut [Cell], cl_dt: &[f64], levels: &[f64]) {
@@ -248,18 +271,11 @@ fn make_portal(pts: Vec<DVec3>, c: usize, level: f64, cl: &Centerline, cl_dt: &[
 }
 
 /// For each cut c, the centres (volume-local mm) of the voxels on either side of it: voxels
-/// of cells c and c + 1 that are 26-adjacent. One pass over the box, each neighbour pair seen
-/// once. Cells further apart than one must never touch (that is the guarantee visibility
-/// needs); if they do, that is an error. Dt changes by at most a voxel diagonal between
-/// neighbours, so only voxels within a diagonal of a cut can touch another cell: the others
-/// are skipped without looking at their neighbours.
-fn boundary_points(cells: &Field<u16>, dt: &Field<f32>, levels: &[f64], sp: [f64; 3]) -> Result<Vec<Vec<DVec3>>> {
-    let cuts = levels.len();
-    let reach = diagonal(sp) as f32 * 1.01;
-    let near_cut = |d: f32| {
-        let i = levels.partition_point(|&l| (l as f32) < d - reach);
-        i < cuts && (levels[i] as f32) <= d + reach
-    };
+/// of cells c and c + 1 that are 26-adjacent, found from the voxels near a cut (see
+/// [`label_voxels`]: no other voxel can touch another cell), each neighbour pair seen once.
+/// Cells further apart than one must never touch (that is the guarantee visibility needs);
+/// if they do, that is an error.
+fn boundary_points(cells: &Field<u16>, near_cut: &[u32], cuts: usize, sp: [f64; 3]) -> Result<Vec<Vec<DVec3>>> {
     let [nx, ny, nz] = cells.grid.dims;
     // The 13 "forward" neighbour offsets: each unordered pair once.
     let mut offs = Vec::with_capacity(13);
@@ -274,32 +290,26 @@ fn boundary_points(cells: &Field<u16>, dt: &Field<f32>, levels: &[f64], sp: [f64
     }
     // Box indices per cut; a voxel is met once per neighbour across, so deduplicated after.
     let mut out: Vec<Vec<u32>> = vec![Vec::new(); cuts];
-    for k in 0..nz {
-        for j in 0..ny {
-            for i in 0..nx {
-                let here = cells.grid.index(i, j, k);
-                let a = cells.data[here];
-                if a == u16::MAX || !near_cut(dt.data[here]) {
-                    continue;
-                }
-                for &(di, dj, dk) in &offs {
-                    let (qi, qj, qk) = (i as i64 + di, j as i64 + dj, k as i64 + dk);
-                    if qi < 0 || qj < 0 || qi >= nx as i64 || qj >= ny as i64 || qk >= nz as i64 {
-                        continue;
-                    }
-                    let there = cells.grid.index(qi as usize, qj as usize, qk as usize);
-                    let b = cells.data[there];
-                    if b == u16::MAX || b == a {
-                        continue;
-                    }
-                    if a.abs_diff(b) != 1 {
-                        return Err(Error::invalid(format!("cells {a} and {b} touch: the cuts are too close")));
-                    }
-                    let cut = &mut out[a.min(b) as usize];
-                    cut.push(here as u32);
-                    cut.push(there as u32);
-                }
+    for &here in near_cut {
+        let here = here as usize;
+        let [i, j, k] = cells.grid.ijk(here);
+        let a = cells.data[here];
+        for &(di, dj, dk) in &offs {
+            let (qi, qj, qk) = (i as i64 + di, j as i64 + dj, k as i64 + dk);
+            if qi < 0 || qj < 0 || qi >= nx as i64 || qj >= ny as i64 || qk >= nz as i64 {
+                continue;
             }
+            let there = cells.grid.index(qi as usize, qj as usize, qk as usize);
+            let b = cells.data[there];
+            if b == u16::MAX || b == a {
+                continue;
+            }
+            if a.abs_diff(b) != 1 {
+                return Err(Error::invalid(format!("cells {a} and {b} touch: the cuts are too close")));
+            }
+            let cut = &mut out[a.min(b) as usize];
+            cut.push(here as u32);
+            cut.push(there as u32);
         }
     }
     let lo = cells.grid.lo;
