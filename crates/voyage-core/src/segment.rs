@@ -35,13 +35,16 @@ pub struct SegmentOptions {
     pub mask: Option<bool>,
     /// Components smaller than this (ml) are not reported one by one.
     pub min_report_ml: f64,
+    /// Without a seed, the colon must hold at least this much gas (ml): a few millilitres
+    /// of gas are bowel gas or noise, not a colon to fly through.
+    pub min_colon_ml: f64,
     /// Tagged fluid is HU at or above this; None: no fluid is added to the lumen.
     pub fluid_hu: Option<i16>,
 }
 
 impl Default for SegmentOptions {
     fn default() -> Self {
-        SegmentOptions { air_hu: -500, seed_mm: None, mask: None, min_report_ml: 0.5, fluid_hu: Some(200) }
+        SegmentOptions { air_hu: -500, seed_mm: None, mask: None, min_report_ml: 0.5, min_colon_ml: 10.0, fluid_hu: Some(200) }
     }
 }
 
@@ -382,7 +385,14 @@ fn choose_colon(comps: &[Component], runs: &Runs, run_comp: &[u32], vol: &Volume
         .filter(|(_, c)| c.kind != ComponentKind::Lung)
         .max_by_key(|(_, c)| c.voxels)
         .map(|(i, _)| i)
-        .ok_or_else(|| Error::invalid("no gas inside the body: no colon lumen found (is this an insufflated CT colonography?)"))
+        .filter(|&i| comps[i].volume_ml >= opts.min_colon_ml)
+        .ok_or_else(|| {
+            let biggest = comps.iter().filter(|c| c.kind != ComponentKind::Lung).map(|c| c.volume_ml).fold(0.0, f64::max);
+            Error::invalid(format!(
+                "no colon lumen found: the largest gas inside the body, lungs left out, is {biggest:.1} ml (at least {} ml expected; is this a CT colonography? a --seed picks any gas)",
+                opts.min_colon_ml
+            ))
+        })
 }
 
 fn voxel_of(vol: &Volume<i16>, mm: DVec3) -> Result<[usize; 3]> {
@@ -587,10 +597,21 @@ mod tests {
         v
     }
 
+    /// The toy's tube holds 5.6 ml of gas: below the default minimum for a colon.
+    fn toy_options() -> SegmentOptions {
+        SegmentOptions { min_colon_ml: 1.0, ..Default::default() }
+    }
+
+    #[test]
+    fn too_little_gas_is_no_colon() {
+        let e = segment(&toy(), &SegmentOptions::default()).unwrap_err().to_string();
+        assert!(e.contains("no colon lumen") && e.contains("5.6 ml"), "{e}");
+    }
+
     #[test]
     fn finds_the_tube_not_the_pocket_lung_or_outside() {
         let v = toy();
-        let s = segment(&v, &SegmentOptions::default()).unwrap();
+        let s = segment(&v, &toy_options()).unwrap();
         assert!(!s.from_mask);
         assert_eq!(s.lumen.get(20, 25, 20), 1);
         assert_eq!(s.lumen.get(40, 20, 10), 0, "small pocket taken");
@@ -620,9 +641,9 @@ mod tests {
     #[test]
     fn mask_input_is_detected_and_used() {
         let v = toy();
-        let s = segment(&v, &SegmentOptions::default()).unwrap();
+        let s = segment(&v, &toy_options()).unwrap();
         let mask = s.lumen.map(|m| m as i16);
-        let again = segment(&mask, &SegmentOptions::default()).unwrap();
+        let again = segment(&mask, &toy_options()).unwrap();
         assert!(again.from_mask);
         assert_eq!(again.lumen, s.lumen);
     }

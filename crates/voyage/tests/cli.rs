@@ -239,3 +239,16 @@ fn demo_makes_preprocesses_and_checks_the_phantom() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn prep_of_a_chest_ct_says_there_is_no_colon() {
+    let Some(data) = shared_data() else { return };
+    let dir = scratch("chest");
+    let o = voyage(&["prep", data.join("dicom/chest-reversed").to_str().unwrap(), "--out", dir.to_str().unwrap()]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("no colon lumen") && err.contains("chest-reversed"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert_private(&o);
+    std::fs::remove_dir_all(&dir).unwrap();
+}

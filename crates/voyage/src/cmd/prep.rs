@@ -12,6 +12,7 @@ use serde_json::json;
 use voyage_core::export::study::write_study;
 use voyage_core::io::{self, LoadOptions};
 use voyage_core::prep::{prepare, PrepOptions, Stage, Study};
+use voyage_core::segment::ComponentKind;
 use voyage_core::Geometry;
 
 #[derive(Clone, Copy, Debug, Default, ValueEnum)]
@@ -143,7 +144,8 @@ fn summary(s: &Study, g: &Geometry, load_ms: f64) -> serde_json::Value {
 
 fn print_text(s: &Study, g: &Geometry, load_ms: f64) {
     let seg = &s.segmentation;
-    println!("lumen       {} voxels ({:.0} ml){}", seg.lumen_voxels, seg.components.first().map_or(0.0, |c| c.volume_ml), if seg.from_mask { ", from a mask" } else { "" });
+    let colon_ml = seg.components.iter().find(|c| c.kind == ComponentKind::Colon).map_or(0.0, |c| c.volume_ml);
+    println!("lumen       {} voxels ({colon_ml:.0} ml of gas{}){}", seg.lumen_voxels, if seg.fluid_voxels > 0 { format!(", {} voxels of tagged fluid", seg.fluid_voxels) } else { String::new() }, if seg.from_mask { ", from a mask" } else { "" });
     for c in &seg.components {
         println!("  gas       {:>9} voxels {:>8.1} ml  {:?}", c.voxels, c.volume_ml, c.kind);
     }
