@@ -68,7 +68,7 @@ pub fn find_endpoints(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], opt
     let path_mm: Vec<DVec3> = match &coarse {
         Some(c) => {
             let to_coarse = |v: [usize; 3]| c.coarse_voxel(v);
-            let voxels = skeleton_path(&c.mask, &c.ds, to_coarse(seed).unwrap_or(seed), given_source.map(to_coarse).transpose()?, given_target.map(to_coarse).transpose()?, opts, cl_opts)?;
+            let voxels = skeleton_path(&c.mask, &c.ds, to_coarse(seed)?, given_source.map(to_coarse).transpose()?, given_target.map(to_coarse).transpose()?, opts, cl_opts)?;
             voxels.iter().map(|&v| c.fine_mm(v)).collect()
         }
         None => {
@@ -140,6 +140,9 @@ fn skeleton_path(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], given_so
     Ok(path.iter().map(|&i| pad.global_of_index(i)).collect())
 }
 
+/// How far (in blocks) a point may be moved onto the coarse grid's lumen.
+const MAX_SNAP_BLOCKS: i64 = 8;
+
 /// The lumen's box in blocks of 2×2×2 voxels: a block is lumen only when all its voxels are,
 /// so that no wall, however thin, disappears (a block half lumen, half wall would open a
 /// short cut between two loops that the full grid does not have); the lumen shrinks by at most
@@ -176,26 +179,33 @@ impl Coarse {
         Ok(Coarse { mask, ds, lo, fine_spacing: sp })
     }
 
-    /// The block holding fine voxel `v`, or the widest lumen block next to it.
+    /// The block holding fine voxel `v` when it is lumen, else the nearest lumen block (the
+    /// seed, at the tip of a rectal tube, may lie where no whole block is lumen).
     fn coarse_voxel(&self, v: [usize; 3]) -> Result<[usize; 3]> {
-        let c = [0, 1, 2].map(|a| v[a].saturating_sub(self.lo[a]) / 2);
-        let mut best: Option<(f32, [usize; 3])> = None;
-        for o in 0..27 {
-            let d = [(o % 3) as i64 - 1, ((o / 3) % 3) as i64 - 1, (o / 9) as i64 - 1];
-            let q = [0, 1, 2].map(|a| c[a] as i64 + d[a]);
-            if q.iter().zip(self.mask.dims()).any(|(&x, n)| x < 0 || x >= n as i64) {
-                continue;
+        let c = [0, 1, 2].map(|a| (v[a].saturating_sub(self.lo[a]) / 2) as i64);
+        let dims = self.mask.dims();
+        for r in 0..=MAX_SNAP_BLOCKS {
+            let mut best: Option<(i64, [usize; 3])> = None;
+            for dk in -r..=r {
+                for dj in -r..=r {
+                    for di in -r..=r {
+                        let q = [c[0] + di, c[1] + dj, c[2] + dk];
+                        if q.iter().zip(dims).any(|(&x, n)| x < 0 || x >= n as i64) {
+                            continue;
+                        }
+                        let q = q.map(|x| x as usize);
+                        let d2 = di * di + dj * dj + dk * dk;
+                        if self.mask.get(q[0], q[1], q[2]) != 0 && best.is_none_or(|b| d2 < b.0) {
+                            best = Some((d2, q));
+                        }
+                    }
+                }
             }
-            let q = q.map(|x| x as usize);
-            if self.mask.get(q[0], q[1], q[2]) == 0 {
-                continue;
-            }
-            let w = self.ds.get_global(q, 0.0) - if d == [0, 0, 0] { 0.0 } else { 1e6 };
-            if best.is_none_or(|b| w > b.0) {
-                best = Some((w, q));
+            if let Some(b) = best {
+                return Ok(b.1);
             }
         }
-        best.map(|b| b.1).ok_or_else(|| Error::invalid(format!("the voxel {v:?} lies where the lumen is too narrow to follow")))
+        Err(Error::invalid(format!("the voxel {v:?} lies where the lumen is too narrow to follow")))
     }
 
     /// Fine volume-local mm of a block's centre.
