@@ -110,3 +110,21 @@ fn tagged_fluid_belongs_to_the_lumen() {
     let found = fluid.iter().filter(|&&i| s.segmentation.lumen.data()[i] != 0).count();
     assert!(found as f64 >= 0.9 * fluid.len() as f64, "{found} of {} fluid voxels in the lumen", fluid.len());
 }
+
+/// Every stage is deterministic: one thread or two, the same study bit for bit.
+#[test]
+fn the_same_study_whatever_the_threads() {
+    let p = phantom::colon(&ColonOptions { small: true, seed: 9, ..Default::default() }).unwrap();
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| prepare(p.ct.clone(), &PrepOptions::default(), |_| {}).unwrap())
+    };
+    let (a, b) = (run(1), run(2));
+    assert_eq!(a.segmentation.lumen.data(), b.segmentation.lumen.data());
+    assert!(a.ds.data.iter().zip(&b.ds.data).all(|(x, y)| x.to_bits() == y.to_bits()), "Ds differs");
+    assert!(a.dt_target.data.iter().zip(&b.dt_target.data).all(|(x, y)| x.to_bits() == y.to_bits()), "Dt differs");
+    assert_eq!(a.centerline.points_mm, b.centerline.points_mm);
+    assert_eq!(a.surface.mesh.triangles, b.surface.mesh.triangles);
+    assert_eq!(a.surface.mesh.positions, b.surface.mesh.positions);
+    assert_eq!(a.cells.triangle_cell, b.cells.triangle_cell);
+}
