@@ -282,7 +282,7 @@ fn march(s: &Scalar, spacing: Vec3, vol_dims: [usize; 3]) -> Surface {
                         }
                     }
                 }
-                let owner = owner_voxel(s, [i, j, k], vol_dims);
+                let owner = owner_voxel(s, [i, j, k], case, vol_dims);
                 for tri in tris {
                     out.mesh.triangles.push([vid[tri[0] as usize], vid[tri[1] as usize], vid[tri[2] as usize]]);
                     out.owner_voxel.push(owner);
@@ -301,19 +301,13 @@ fn spread(face: usize) -> usize {
     (face & 1) | (face & 2) << 1 | (face & 4) << 2 | (face & 8) << 3
 }
 
-/// The cube's deepest lumen corner, as a volume voxel index.
-fn owner_voxel(s: &Scalar, c: [usize; 3], vol_dims: [usize; 3]) -> u32 {
-    let mut best = (f32::NEG_INFINITY, [0usize; 3]);
-    for k in 0..8 {
-        let [a, b, d] = corner(k);
-        let p = [c[0] + a, c[1] + b, c[2] + d];
-        let v = s.value(p);
-        if v > best.0 {
-            best = (v, p);
-        }
-    }
-    // Padded → volume: the deepest corner is lumen, so never in the padding.
-    let g = [0, 1, 2].map(|a| best.1[a] - 1 + s.lo[a]);
+/// A lumen corner of the cube, as a volume voxel index.
+fn owner_voxel(s: &Scalar, c: [usize; 3], case: usize, vol_dims: [usize; 3]) -> u32 {
+    // The first lumen corner (the case has at least one): any lumen voxel of the cube is in
+    // the cell of the cube or in a neighbouring one.
+    let [a, b, d] = corner(case.trailing_zeros() as usize);
+    // Padded → volume: a lumen corner is never in the padding.
+    let g = [c[0] + a - 1 + s.lo[0], c[1] + b - 1 + s.lo[1], c[2] + d - 1 + s.lo[2]];
     (g[0] + vol_dims[0] * (g[1] + vol_dims[1] * g[2])) as u32
 }
 
