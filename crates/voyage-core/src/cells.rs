@@ -219,7 +219,7 @@ fn label_voxels(dt: &Field<f32>, levels: &[f64], reach: f64) -> Labels {
             if !d.is_finite() {
                 return u16::MAX;
             }
-            let c = levels.partition_point(|&l| l <= d as f64);
+            let c = cell_of_level(levels, d) as usize;
             counts[c] += 1;
             let d = d as f64;
             if (c < levels.len() && levels[c] - d <= reach) || (c > 0 && d - levels[c - 1] <= reach) {

@@ -111,14 +111,9 @@ impl<T: Copy> Field<T> {
     /// The field spread over the whole volume, `outside` beyond the box (for exports).
     pub fn to_volume(&self, outside: T) -> Result<Volume<T>> {
         let mut v = Volume::filled(self.geometry.clone(), outside)?;
-        let [bx, by, bz] = self.grid.dims;
-        let g = self.geometry.clone();
-        for k in 0..bz {
-            for j in 0..by {
-                let src = &self.data[self.grid.index(0, j, k)..][..bx];
-                let start = g.index(self.grid.lo[0], j + self.grid.lo[1], k + self.grid.lo[2]);
-                v.data_mut()[start..start + bx].copy_from_slice(src);
-            }
+        let [nx, ny, _] = self.geometry.dims;
+        for (k, slice) in v.data_mut().chunks_mut(nx * ny).enumerate() {
+            self.fill_slice(k, slice, outside);
         }
         Ok(v)
     }
@@ -178,7 +173,13 @@ mod tests {
         for k in 0..5 {
             f.fill_slice(k, &mut s, -1.0);
             assert_eq!(&s[..], v.slice_k(k));
+            for j in 0..6 {
+                for i in 0..7 {
+                    assert_eq!(v.get(i, j, k), f.get_global([i, j, k], -1.0), "voxel {i},{j},{k}");
+                }
+            }
         }
+        assert_eq!(v.data().iter().filter(|&&x| x > 0.0).count(), 36, "every box value placed once");
         assert_eq!(f.get_global([2, 1, 1], -1.0), 1.0);
         assert_eq!(f.get_global([0, 0, 0], -1.0), -1.0);
     }

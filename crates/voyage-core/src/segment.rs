@@ -442,7 +442,7 @@ fn add_tagged_fluid(vol: &Volume<i16>, lumen: &mut Volume<u8>, fluid_hu: i16) ->
     let [nx, ny, nz] = g.dims;
     let air_near = |lumen: &Volume<u8>, i: usize, j: usize, k: usize| {
         (1..=2).any(|d| {
-            [(i.wrapping_sub(d), j, k), (i + d, j, k), (i, j.wrapping_sub(d), k), (i, j + d, k), (i, j, k.wrapping_sub(d)), (i, j, k + d)]
+            face_neighbours(i, j, k, d)
                 .iter()
                 .any(|&(a, b, c)| a < nx && b < ny && c < nz && lumen.get(a, b, c) == AIR)
         })
@@ -478,7 +478,7 @@ fn add_tagged_fluid(vol: &Volume<i16>, lumen: &mut Volume<u8>, fluid_hu: i16) ->
     }
     // The interface: voxels beside fluid and within two voxels of the air.
     let beside = |lumen: &Volume<u8>, i: usize, j: usize, k: usize, what: u8| {
-        [(i.wrapping_sub(1), j, k), (i + 1, j, k), (i, j.wrapping_sub(1), k), (i, j + 1, k), (i, j, k.wrapping_sub(1)), (i, j, k + 1)]
+        face_neighbours(i, j, k, 1)
             .iter()
             .any(|&(a, b, c)| a < nx && b < ny && c < nz && lumen.get(a, b, c) == what)
     };
@@ -488,7 +488,7 @@ fn add_tagged_fluid(vol: &Volume<i16>, lumen: &mut Volume<u8>, fluid_hu: i16) ->
             continue;
         }
         let [i, j, k] = g.ijk(idx);
-        for (a, b, c) in [(i.wrapping_sub(1), j, k), (i + 1, j, k), (i, j.wrapping_sub(1), k), (i, j + 1, k), (i, j, k.wrapping_sub(1)), (i, j, k + 1)] {
+        for (a, b, c) in face_neighbours(i, j, k, 1) {
             if a < nx && b < ny && c < nz && lumen.get(a, b, c) == 0 && (beside(lumen, a, b, c, AIR) || air_near(lumen, a, b, c)) {
                 layer.push(g.index(a, b, c));
             }
@@ -504,6 +504,12 @@ fn add_tagged_fluid(vol: &Volume<i16>, lumen: &mut Volume<u8>, fluid_hu: i16) ->
         *v = (*v != 0) as u8;
     }
     added
+}
+
+/// The six voxels `d` steps away along the axes; below zero wraps to a huge index, which the
+/// callers' bounds tests reject.
+fn face_neighbours(i: usize, j: usize, k: usize, d: usize) -> [(usize, usize, usize); 6] {
+    [(i.wrapping_sub(d), j, k), (i + d, j, k), (i, j.wrapping_sub(d), k), (i, j + d, k), (i, j, k.wrapping_sub(d)), (i, j, k + d)]
 }
 
 /// The colon voxel lowest in k (first slice), middle of its first run: used as the seed when
