@@ -16,7 +16,7 @@ use glam::DVec3;
 use crate::centerline::{cost_weight, refine_points, Centerline, CenterlineOptions};
 use crate::skeleton::{colon_path, tree_search, SkeletonOptions};
 use crate::distance::geodesic::{dial, Geodesic, Padded, SearchOptions};
-use crate::field::Field;
+use crate::field::{BoxGrid, Field};
 use crate::{Error, Result, Volume};
 
 #[derive(Clone, Debug)]
@@ -38,19 +38,14 @@ impl Default for EndpointOptions {
 pub struct Endpoints {
     pub source: [usize; 3],
     pub target: [usize; 3],
-    /// Dt to the target (flying forward, rectum → cecum).
-    pub to_target: Geodesic,
-    /// Dt to the source (flying backward).
-    pub to_source: Geodesic,
     pub centerline: Centerline,
-    /// Wall time (ms) of the parts: the skeleton search (endpoints and raw path), the
-    /// centerline's refinement, and the two Dt fields.
+    /// Wall time (ms) of the parts: the skeleton search (endpoints and raw path) and the
+    /// centerline's refinement.
     pub skeleton_ms: f64,
     pub refine_ms: f64,
-    pub dt_ms: f64,
 }
 
-/// Finds (or checks) the endpoints, traces the centerline, and computes both Dt fields.
+/// Finds (or checks) the endpoints and traces the centerline.
 ///
 /// The skeleton search (every voxel of the lumen visited several times) runs on a grid of
 /// 2×2×2 blocks when the lumen is large and finely sampled: a voxel of 0.8 mm is far finer
@@ -94,16 +89,19 @@ pub fn find_endpoints(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], opt
     pts[last] = mm_of(lumen, target);
     let centerline = refine_points(pts, ds, cl_opts);
     let refine_ms = clock.elapsed().as_secs_f64() * 1e3;
-    let clock = std::time::Instant::now();
-    let pad = Padded::new(lumen, &ds.grid);
+    Ok(Endpoints { source, target, centerline, skeleton_ms, refine_ms })
+}
+
+/// Dt to the target and Dt to the source over the lumen inside `grid`.
+pub fn dt_fields(lumen: &Volume<u8>, grid: &BoxGrid, source: [usize; 3], target: [usize; 3]) -> Result<(Geodesic, Geodesic)> {
+    let pad = Padded::new(lumen, grid);
+    let sp = lumen.spacing();
     let (s, t) = (pad.lumen_index(source)?, pad.lumen_index(target)?);
     // The two fields are independent: on two cores they cost one.
-    let (to_target, to_source) = rayon::join(
+    Ok(rayon::join(
         || pad.geodesic(lumen, dial(&pad, &[t], sp, &SearchOptions::default())),
         || pad.geodesic(lumen, dial(&pad, &[s], sp, &SearchOptions::default())),
-    );
-    let dt_ms = clock.elapsed().as_secs_f64() * 1e3;
-    Ok(Endpoints { source, target, to_target, to_source, centerline, skeleton_ms, refine_ms, dt_ms })
+    ))
 }
 
 /// The raw colon path (voxels of `lumen`, source → target) from the skeleton graph.

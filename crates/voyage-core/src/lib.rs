@@ -5,18 +5,23 @@
 //! navigation) take values and return values. `phantom` makes synthetic scans with ground
 //! truth for tests and benchmarks.
 
+pub mod camera;
 pub mod cells;
 pub mod centerline;
+pub mod contacts;
 pub mod distance;
 pub mod endpoints;
 pub mod error;
 pub mod export;
 pub mod field;
+pub mod flight;
 pub mod io;
 pub mod phantom;
+pub mod potential;
 pub mod prep;
 pub mod segment;
 pub mod skeleton;
+pub mod submarine;
 pub mod surface;
 pub mod volume;
 

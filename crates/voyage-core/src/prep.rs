@@ -10,7 +10,8 @@ use serde::Serialize;
 use crate::cells::{build_cells, CellOptions, Cells};
 use crate::centerline::{Centerline, CenterlineOptions};
 use crate::distance::distance_to_wall;
-use crate::endpoints::{find_endpoints, EndpointOptions};
+use crate::contacts::{cut_contacts, ContactOptions};
+use crate::endpoints::{dt_fields, find_endpoints, EndpointOptions};
 use crate::field::Field;
 use crate::segment::{segment, SegmentOptions, Segmentation};
 use crate::surface::{extract_surface, Surface};
@@ -22,6 +23,7 @@ pub struct PrepOptions {
     pub endpoints: EndpointOptions,
     pub centerline: CenterlineOptions,
     pub cells: CellOptions,
+    pub contacts: ContactOptions,
 }
 
 /// The stages, in order, for progress reports.
@@ -57,6 +59,8 @@ pub struct Timings {
     pub ds: f64,
     /// The skeleton search: endpoints and the raw centerline path.
     pub skeleton: f64,
+    /// Walls where loops touch (and Ds again when there were any).
+    pub contacts: f64,
     /// The two Dt fields.
     pub dt: f64,
     pub centerline: f64,
@@ -78,6 +82,8 @@ pub struct Study {
     pub dt_source: Field<f32>,
     pub source: [usize; 3],
     pub target: [usize; 3],
+    /// Lumen voxels left out of Dt where loops of the colon touch ([`crate::contacts`]).
+    pub contact_voxels: usize,
     pub centerline: Centerline,
     pub surface: Surface,
     pub cells: Cells,
@@ -104,19 +110,42 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Sta
     };
 
     progress(Stage::Segment);
-    let seg = segment(&ct, &opts.segment)?;
+    let mut seg = segment(&ct, &opts.segment)?;
     lap(&mut t.segment);
 
     progress(Stage::Ds);
-    let ds = distance_to_wall(&seg.lumen)?;
+    let mut ds = distance_to_wall(&seg.lumen)?;
     lap(&mut t.ds);
 
     progress(Stage::Dt);
     let ends = find_endpoints(&seg.lumen, &ds, seg.seed_voxel, &opts.endpoints, &opts.centerline)?;
     let mut ignored = 0.0;
     lap(&mut ignored);
-    (t.skeleton, t.centerline, t.dt) = (ends.skeleton_ms, ends.refine_ms, ends.dt_ms);
+    (t.skeleton, t.centerline) = (ends.skeleton_ms, ends.refine_ms);
     let cl = ends.centerline;
+    let (source, target) = (ends.source, ends.target);
+
+    let taken = cut_contacts(&mut seg.lumen, &ds.grid, &cl, &[source, target], &opts.contacts);
+    if !taken.is_empty() {
+        // Ds must see the new walls too (the repulsion, the exports).
+        ds = distance_to_wall(&seg.lumen)?;
+    }
+    lap(&mut t.contacts);
+    let (mut dt_target, mut dt_source) = dt_fields(&seg.lumen, &ds.grid, source, target)?;
+    if !taken.is_empty() && !dt_target.dist.get_global(source, f32::INFINITY).is_finite() {
+        // The walls closed the colon itself (a centerline across a contact): go without.
+        for &v in &taken {
+            seg.lumen.data_mut()[v] = 1;
+        }
+        ds = distance_to_wall(&seg.lumen)?;
+        (dt_target, dt_source) = dt_fields(&seg.lumen, &ds.grid, source, target)?;
+    }
+    let contact_voxels = if dt_target.dist.get_global(source, f32::INFINITY).is_finite() { taken.len() } else { 0 };
+    if !dt_target.dist.get_global(source, f32::INFINITY).is_finite() {
+        return Err(crate::Error::invalid("the target cannot be reached from the source through the lumen"));
+    }
+    seg.lumen_voxels -= contact_voxels;
+    lap(&mut t.dt);
 
     progress(Stage::Surface);
     let iso = if seg.from_mask { None } else { Some(&ct) };
@@ -124,7 +153,7 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Sta
     lap(&mut t.surface);
 
     progress(Stage::Cells);
-    let cells = build_cells(&seg.lumen, &ends.to_source.dist, &cl, &surface, &opts.cells)?;
+    let cells = build_cells(&seg.lumen, &dt_source.dist, &cl, &surface, &opts.cells)?;
     lap(&mut t.cells);
 
     t.total_after_load = start.elapsed().as_secs_f64() * 1e3;
@@ -132,10 +161,11 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Sta
         ct,
         segmentation: seg,
         ds,
-        dt_target: ends.to_target.dist,
-        dt_source: ends.to_source.dist,
-        source: ends.source,
-        target: ends.target,
+        dt_target: dt_target.dist,
+        dt_source: dt_source.dist,
+        source,
+        target,
+        contact_voxels,
         centerline: cl,
         surface,
         cells,

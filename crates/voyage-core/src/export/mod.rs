@@ -5,6 +5,7 @@
 pub mod markups;
 pub mod mesh;
 pub mod study;
+pub mod trajectory;
 
 pub use markups::{write_markups_curve, MarkupsPoint};
 pub use mesh::{write_ply, write_stl};

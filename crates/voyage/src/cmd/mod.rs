@@ -2,6 +2,7 @@
 
 mod bench;
 mod bench_prep;
+mod fly;
 mod info;
 mod phantom;
 mod prep;
@@ -34,6 +35,8 @@ enum Command {
     },
     /// Preprocess a CT or lumen mask: colon, distance fields, centerline, surface, cells.
     Prep(prep::PrepArgs),
+    /// Fly the camera through the colon automatically (both ways by default).
+    Fly(fly::FlyArgs),
     /// Benchmarks against reference libraries.
     Bench(bench::BenchArgs),
 }
@@ -44,6 +47,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Phantom(a) => phantom::run(&a),
         Command::Demo { out, small } => phantom::demo(&out, small),
         Command::Prep(a) => prep::run(&a),
+        Command::Fly(a) => fly::run(&a),
         Command::Bench(a) => bench::run(&a),
     }
 }

@@ -24,16 +24,11 @@ pub enum Frame {
     Local,
 }
 
-#[derive(Args, Debug)]
-pub struct PrepArgs {
+/// The input and the preprocessing choices every command that runs `prep` shares.
+#[derive(Args, Debug, Clone)]
+pub struct InputArgs {
     /// A CT (DICOM folder or file, NIfTI, MetaImage, NRRD) or a lumen mask (0/1 labels).
     pub input: PathBuf,
-    /// Folder for the exports (created if missing).
-    #[arg(long)]
-    pub out: PathBuf,
-    /// Print one JSON object with counts and timings.
-    #[arg(long)]
-    pub json: bool,
     /// Treat the input as a lumen mask (default: detected, values only 0 and 1).
     #[arg(long)]
     pub mask: bool,
@@ -54,7 +49,19 @@ pub struct PrepArgs {
     pub series: Option<String>,
 }
 
-fn parse_point(s: &str) -> Result<DVec3, String> {
+#[derive(Args, Debug)]
+pub struct PrepArgs {
+    #[command(flatten)]
+    pub input: InputArgs,
+    /// Folder for the exports (created if missing).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Print one JSON object with counts and timings.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn parse_point(s: &str) -> Result<DVec3, String> {
     let v: Vec<f64> = s.split(',').map(|x| x.trim().parse::<f64>()).collect::<Result<_, _>>().map_err(|e| format!("{s}: {e}"))?;
     match v[..] {
         [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(DVec3::new(x, y, z)),
@@ -62,7 +69,15 @@ fn parse_point(s: &str) -> Result<DVec3, String> {
     }
 }
 
-pub fn run(a: &PrepArgs) -> Result<()> {
+/// A study ready for navigation, and what it cost to load.
+pub struct Prepared {
+    pub study: Study,
+    pub geometry: Geometry,
+    pub load_ms: f64,
+}
+
+/// Loads the input and runs the whole preprocessing (a progress bar on a terminal).
+pub fn load_and_prepare(a: &InputArgs) -> Result<Prepared> {
     let t0 = Instant::now();
     let loaded = io::load(&a.input, &LoadOptions { series_uid: a.series.clone() })?;
     let load_ms = t0.elapsed().as_secs_f64() * 1e3;
@@ -88,10 +103,15 @@ pub fn run(a: &PrepArgs) -> Result<()> {
     if let Some(b) = bar {
         b.finish_and_clear();
     }
-    let written = write_study(&a.out, &study)?;
     if study.centerline.points_mm.len() < 2 {
         bail!("{}: the centerline is empty", a.input.display());
     }
+    Ok(Prepared { study, geometry: g, load_ms })
+}
+
+pub fn run(a: &PrepArgs) -> Result<()> {
+    let Prepared { study, geometry: g, load_ms } = load_and_prepare(&a.input)?;
+    let written = write_study(&a.out, &study)?;
     let summary = summary(&study, &g, load_ms);
     if a.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
@@ -125,6 +145,7 @@ fn summary(s: &Study, g: &Geometry, load_ms: f64) -> serde_json::Value {
         "source_lps_mm": g.local_to_patient(s.source_mm()).to_array(),
         "target_lps_mm": g.local_to_patient(s.target_mm()).to_array(),
         "centerline_length_mm": s.centerline.length_mm,
+        "contact_voxels": s.contact_voxels,
         "cells": s.cells.cells.len(),
         "triangles": s.surface.mesh.triangles.len(),
         "timings_ms": {
@@ -132,6 +153,7 @@ fn summary(s: &Study, g: &Geometry, load_ms: f64) -> serde_json::Value {
             "segment": t.segment,
             "ds": t.ds,
             "skeleton": t.skeleton,
+            "contacts": t.contacts,
             "dt": t.dt,
             "centerline": t.centerline,
             "cells": t.cells,
@@ -158,10 +180,13 @@ fn print_text(s: &Study, g: &Geometry, load_ms: f64) {
     println!("centerline  {:.0} mm, {} points", s.centerline.length_mm, s.centerline.points_mm.len());
     println!("surface     {} triangles, {} vertices", s.surface.mesh.triangles.len(), s.surface.mesh.positions.len());
     println!("cells       {}", s.cells.cells.len());
+    if s.contact_voxels > 0 {
+        println!("contacts    {} lumen voxels made wall where loops of the colon touch", s.contact_voxels);
+    }
     let t = &s.timings;
     println!(
-        "time        load {load_ms:.0} ms; segment {:.0}, ds {:.0}, skeleton {:.0}, centerline {:.0}, dt {:.0}, surface {:.0}, cells {:.0}; total after load {:.0} ms",
-        t.segment, t.ds, t.skeleton, t.centerline, t.dt, t.surface, t.cells, t.total_after_load
+        "time        load {load_ms:.0} ms; segment {:.0}, ds {:.0}, skeleton {:.0}, centerline {:.0}, contacts {:.0}, dt {:.0}, surface {:.0}, cells {:.0}; total after load {:.0} ms",
+        t.segment, t.ds, t.skeleton, t.centerline, t.contacts, t.dt, t.surface, t.cells, t.total_after_load
     );
     if let Some(mb) = peak_rss_mb() {
         println!("memory      peak {mb:.0} MB");

@@ -1,0 +1,164 @@
+//! `voyage fly INPUT`: automatic flights through the colon (paper §3), no user.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::{Args, ValueEnum};
+use serde_json::json;
+use voyage_core::export::trajectory::write_trajectory;
+use voyage_core::flight::{fly, Flight, FlightOptions};
+use voyage_core::potential::{potential_field, Direction};
+
+use super::prep::{load_and_prepare, InputArgs, Prepared};
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum Directions {
+    /// Rectum → cecum.
+    Forward,
+    /// Cecum → rectum.
+    Backward,
+    /// Forward, then backward.
+    Both,
+}
+
+impl Directions {
+    fn list(self) -> Vec<Direction> {
+        match self {
+            Directions::Forward => vec![Direction::Forward],
+            Directions::Backward => vec![Direction::Backward],
+            Directions::Both => vec![Direction::Forward, Direction::Backward],
+        }
+    }
+}
+
+/// The physics knobs shared by `fly`, `render` and `movie`.
+#[derive(Args, Debug, Clone)]
+pub struct PhysicsArgs {
+    /// Ct: pull toward the goal (Eq. 2).
+    #[arg(long)]
+    pub ct: Option<f64>,
+    /// Cs: push away from the wall (Eq. 2).
+    #[arg(long)]
+    pub cs: Option<f64>,
+    /// ρ: reach of the wall's push, mm (Eq. 2).
+    #[arg(long)]
+    pub rho: Option<f64>,
+    /// kf: linear friction (Eq. 3).
+    #[arg(long)]
+    pub kf: Option<f64>,
+    /// ka: angular friction (Eq. 4).
+    #[arg(long)]
+    pub ka: Option<f64>,
+    /// The camera never comes closer to the wall than this (mm).
+    #[arg(long)]
+    pub min_wall: Option<f64>,
+    /// Frames per second of the trajectory.
+    #[arg(long, default_value_t = 30.0)]
+    pub fps: f64,
+    /// Turn off compass mode (z_body follows −∇V).
+    #[arg(long)]
+    pub no_compass: bool,
+    /// Turn off leveling mode (y_body against gravity).
+    #[arg(long)]
+    pub no_leveling: bool,
+    /// Give up after this many simulated seconds (default: length / 5 mm/s + 60 s).
+    #[arg(long)]
+    pub max_seconds: Option<f64>,
+}
+
+impl PhysicsArgs {
+    pub fn options(&self) -> Result<FlightOptions> {
+        let mut o = FlightOptions::default();
+        let set = |slot: &mut f64, v: Option<f64>, name: &str, min: f64| -> Result<()> {
+            if let Some(v) = v {
+                anyhow::ensure!(v.is_finite() && v >= min, "--{name} must be a number ≥ {min}, not {v}");
+                *slot = v;
+            }
+            Ok(())
+        };
+        set(&mut o.potential.ct, self.ct, "ct", 0.0)?;
+        set(&mut o.potential.cs, self.cs, "cs", 0.0)?;
+        set(&mut o.potential.rho, self.rho, "rho", 0.0)?;
+        set(&mut o.dynamics.kf, self.kf, "kf", 0.0)?;
+        set(&mut o.dynamics.ka, self.ka, "ka", 0.0)?;
+        set(&mut o.safety.min_wall_mm, self.min_wall, "min-wall", 0.0)?;
+        anyhow::ensure!(self.fps.is_finite() && self.fps >= 1.0 && self.fps <= 1000.0, "--fps must lie in 1..1000");
+        o.fps = self.fps;
+        o.modes.compass = !self.no_compass;
+        o.modes.leveling = !self.no_leveling;
+        o.max_sim_s = self.max_seconds;
+        Ok(o)
+    }
+}
+
+#[derive(Args, Debug)]
+pub struct FlyArgs {
+    #[command(flatten)]
+    pub input: InputArgs,
+    #[arg(long, value_enum, default_value_t = Directions::Both)]
+    pub direction: Directions,
+    #[command(flatten)]
+    pub physics: PhysicsArgs,
+    /// Write the poses of every frame here (JSON).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Print one JSON object per direction.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(a: &FlyArgs) -> Result<()> {
+    let opts = a.physics.options()?;
+    let Prepared { study, geometry, .. } = load_and_prepare(&a.input)?;
+    let field = potential_field(&study, opts.safety.min_wall_mm).with_context(|| format!("{}", a.input.input.display()))?;
+    let mut flights: Vec<Flight> = Vec::new();
+    for dir in a.direction.list() {
+        let f = fly(&field, &study.centerline, dir, &opts).with_context(|| format!("{}: {} flight", a.input.input.display(), dir.name()))?;
+        flights.push(f);
+    }
+    if let Some(out) = &a.out {
+        write_trajectory(out, &flights, &geometry, opts.fps)?;
+    }
+    if a.json {
+        let per: serde_json::Map<String, serde_json::Value> = flights.iter().map(|f| (f.direction.name().to_string(), summary(f))).collect();
+        println!("{}", serde_json::to_string_pretty(&json!({ "centerline_length_mm": study.centerline.length_mm, "directions": per }))?);
+    } else {
+        for f in &flights {
+            println!(
+                "{:<8} {} in {} frames ({:.1} s simulated), path {:.0} mm, wall distance min {:.1} / mean {:.1} mm (mean radius {:.1}), {} stalls, physics {:.2} µs/frame",
+                f.direction.name(),
+                if f.reached { "reached" } else { "did NOT reach the goal" },
+                f.frames,
+                f.sim_seconds,
+                f.path_length_mm,
+                f.min_wall_distance_mm,
+                f.mean_wall_distance_mm,
+                f.mean_local_radius_mm,
+                f.stalls,
+                f.step_ns / 1e3
+            );
+        }
+        if let Some(out) = &a.out {
+            println!("  wrote {}", out.display());
+        }
+    }
+    Ok(())
+}
+
+fn summary(f: &Flight) -> serde_json::Value {
+    json!({
+        "reached": f.reached,
+        "frames": f.frames,
+        "sim_seconds": f.sim_seconds,
+        "min_wall_distance_mm": f.min_wall_distance_mm,
+        "mean_wall_distance_mm": f.mean_wall_distance_mm,
+        "mean_local_radius_mm": f.mean_local_radius_mm,
+        "stalls": f.stalls,
+        "path_length_mm": f.path_length_mm,
+        "step_ns": f.step_ns,
+        "substeps": f.substeps,
+        "clipped_substeps": f.clipped_substeps,
+        "final_dt_mm": f.final_dt_mm,
+        "mean_heading_error_deg": f.mean_heading_error_deg,
+    })
+}
