@@ -302,6 +302,46 @@ impl DistanceStore for BrickStore {
     }
 }
 
+/// The densest layout, for comparison: every voxel of the lumen's box (12 bytes each).
+pub struct BoxStore {
+    lo: [i64; 3],
+    dims: [i64; 3],
+    values: Vec<Voxel>,
+    voxels: usize,
+}
+
+impl BoxStore {
+    pub fn new(nav: &Navigable) -> Result<Self> {
+        let grid = &nav.ds.grid;
+        let mut values = vec![OUTSIDE; grid.len()];
+        let mut voxels = 0;
+        lumen_voxels(nav, |g, v| {
+            let l = [0, 1, 2].map(|a| g[a] - grid.lo[a]);
+            values[grid.index(l[0], l[1], l[2])] = v;
+            voxels += 1;
+        });
+        Ok(BoxStore { lo: grid.lo.map(|x| x as i64), dims: grid.dims.map(|x| x as i64), values, voxels })
+    }
+}
+
+impl DistanceStore for BoxStore {
+    #[inline]
+    fn get(&self, g: [i64; 3]) -> Option<Voxel> {
+        let l = [g[0] - self.lo[0], g[1] - self.lo[1], g[2] - self.lo[2]];
+        if (0..3).any(|a| l[a] < 0 || l[a] >= self.dims[a]) {
+            return None;
+        }
+        let v = self.values[(l[0] + self.dims[0] * (l[1] + self.dims[1] * l[2])) as usize];
+        (v.ds > 0.0).then_some(v)
+    }
+    fn bytes(&self) -> usize {
+        self.values.capacity() * std::mem::size_of::<Voxel>()
+    }
+    fn voxels(&self) -> usize {
+        self.voxels
+    }
+}
+
 /// Distances reconstructed at a point (trilinear over the eight voxels around it).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Sample {

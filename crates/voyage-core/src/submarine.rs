@@ -3,7 +3,7 @@
 //!
 //! **Safety by construction.** The camera's position X only ever takes values in the safe
 //! set S = {X : the eight voxels around X are all lumen, and Ds(X) ≥ `min_wall_mm`}. Every
-//! sub-step moves X by less than half the finest voxel spacing (and less than a quarter of the
+//! sub-step moves X by less than 0.9 of the finest voxel spacing (and less than a quarter of the
 //! local Ds), so it cannot jump over a wall: two cubes of voxel centres that do not touch are
 //! at least one voxel apart. If the step's end is outside S, X stops at the farthest safe
 //! point of the step (bisection) and the momentum loses its component into the wall. The
@@ -39,7 +39,7 @@ pub struct Dynamics {
 
 impl Default for Dynamics {
     fn default() -> Self {
-        Dynamics { kf: 6.0, ka: 35.0, radius_mm: 2.0, length_mm: 6.0, user_force: 240.0, gravity: DVec3::new(0.0, 40.0, 0.0), max_speed: 150.0, max_spin: 3.0 }
+        Dynamics { kf: 6.0, ka: 35.0, radius_mm: 2.0, length_mm: 6.0, user_force: 240.0, gravity: DVec3::new(0.0, 150.0, 0.0), max_speed: 150.0, max_spin: 3.0 }
     }
 }
 
@@ -83,7 +83,7 @@ pub struct Safety {
 
 impl Default for Safety {
     fn default() -> Self {
-        Safety { min_wall_mm: 1.0, voxel_fraction: 0.5, ds_fraction: 0.25, max_substep_s: 1.0 / 60.0, max_frame_s: 0.1, max_substeps: 2000 }
+        Safety { min_wall_mm: 1.0, voxel_fraction: 0.9, ds_fraction: 0.25, max_substep_s: 1.0 / 60.0, max_frame_s: 0.1, max_substeps: 2000 }
     }
 }
 

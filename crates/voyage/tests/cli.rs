@@ -252,3 +252,33 @@ fn prep_of_a_chest_ct_says_there_is_no_colon() {
     assert_private(&o);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn fly_reports_both_directions_and_writes_a_trajectory() {
+    let dir = scratch("fly");
+    let ct = dir.join("colon.nii.gz");
+    let made = voyage(&["phantom", "colon", "--small", "--out", ct.to_str().unwrap()]);
+    assert!(made.status.success(), "{}", text(&made));
+    let traj = dir.join("trajectory.json");
+    let o = voyage(&["fly", ct.to_str().unwrap(), "--direction", "both", "--out", traj.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    for d in ["forward", "backward"] {
+        let f = &j["directions"][d];
+        for key in ["reached", "frames", "sim_seconds", "min_wall_distance_mm", "mean_wall_distance_mm", "stalls", "path_length_mm", "step_ns"] {
+            assert!(!f[key].is_null(), "{d}.{key} missing from {f}");
+        }
+        assert_eq!(f["reached"], true, "{d}: {f}");
+        assert!(f["min_wall_distance_mm"].as_f64().unwrap() >= 1.0);
+    }
+    // The trajectory holds one pose per frame (plus the start) for each direction.
+    let poses = voyage_core::export::trajectory::read_poses(&traj).unwrap();
+    assert_eq!(poses.len(), 2);
+    assert_eq!(poses[0].len() as u64, j["directions"]["forward"]["frames"].as_u64().unwrap() + 1);
+    // Bad physics is refused on one line, before any work.
+    let bad = voyage(&["fly", ct.to_str().unwrap(), "--cs=-1"]);
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(err.contains("--cs") && err.trim().lines().count() == 1, "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

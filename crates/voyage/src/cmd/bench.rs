@@ -27,6 +27,23 @@ enum BenchWhat {
     /// Preprocessing, stage by stage, on the colon phantom and any CT or mask given, against
     /// edt/scipy (Ds), dijkstra3d (Dt), scikit-image and VTK flying edges (surface).
     Prep(PrepBench),
+    /// Navigation: a potential-field sample in each storage layout, and the physics per frame
+    /// of the automatic flights, on the pipe and colon phantoms and any CT or mask given.
+    Fly(FlyBench),
+}
+
+#[derive(Args, Debug)]
+struct FlyBench {
+    /// CTs or lumen masks to measure besides the phantoms.
+    inputs: Vec<PathBuf>,
+    /// Leave out the phantoms.
+    #[arg(long)]
+    no_phantom: bool,
+    /// Samples per layout.
+    #[arg(long, default_value_t = 2_000_000)]
+    samples: usize,
+    #[command(flatten)]
+    common: Common,
 }
 
 #[derive(Args, Debug)]
@@ -82,6 +99,7 @@ pub fn run(a: &BenchArgs) -> Result<()> {
     match &a.what {
         BenchWhat::Load(l) => load(l),
         BenchWhat::Prep(p) => super::bench_prep::run(p.inputs.clone(), !p.no_phantom, &p.dir, p.repeats, !p.no_reference, &p.common),
+        BenchWhat::Fly(f) => super::bench_fly::run(&f.inputs, !f.no_phantom, f.samples, &f.common),
     }
 }
 

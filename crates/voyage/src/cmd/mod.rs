@@ -1,6 +1,7 @@
 //! The subcommands.
 
 mod bench;
+mod bench_fly;
 mod bench_prep;
 mod fly;
 mod info;
