@@ -94,6 +94,25 @@ impl Study {
     pub fn source_mm(&self) -> DVec3 {
         self.ct.geometry().index_to_local(DVec3::new(self.source[0] as f64, self.source[1] as f64, self.source[2] as f64))
     }
+    /// `n` points drawn uniformly in the lumen's box, kept where the nearest voxel is lumen
+    /// (many lie within a voxel of the wall): for tests and benchmarks of the fields.
+    pub fn random_lumen_points(&self, n: usize, seed: u64) -> Vec<DVec3> {
+        let mut rng = crate::phantom::rng::Rng::new(seed, 1);
+        let grid = &self.ds.grid;
+        let mut out = Vec::with_capacity(n);
+        while out.len() < n {
+            let ijk = DVec3::new(
+                grid.lo[0] as f64 + rng.range(0.0, (grid.dims[0] - 1) as f64),
+                grid.lo[1] as f64 + rng.range(0.0, (grid.dims[1] - 1) as f64),
+                grid.lo[2] as f64 + rng.range(0.0, (grid.dims[2] - 1) as f64),
+            );
+            let v = ijk.round();
+            if self.segmentation.lumen.get(v.x as usize, v.y as usize, v.z as usize) != 0 {
+                out.push(self.ct.geometry().index_to_local(ijk));
+            }
+        }
+        out
+    }
     pub fn target_mm(&self) -> DVec3 {
         self.ct.geometry().index_to_local(DVec3::new(self.target[0] as f64, self.target[1] as f64, self.target[2] as f64))
     }

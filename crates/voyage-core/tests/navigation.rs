@@ -67,26 +67,6 @@ fn direct_v(nav: &Navigable, mm: DVec3, p: &PotentialParams, slot: usize) -> Opt
     Some((v, ds, dt))
 }
 
-/// Random points in the lumen's box, many near the wall.
-fn random_points(study: &Study, n: usize, seed: u64) -> Vec<DVec3> {
-    let mut rng = Rng::new(seed, 1);
-    let g = study.ct.geometry();
-    let grid = &study.ds.grid;
-    let mut out = Vec::new();
-    while out.len() < n {
-        let ijk = DVec3::new(
-            grid.lo[0] as f64 + rng.range(0.0, (grid.dims[0] - 1) as f64),
-            grid.lo[1] as f64 + rng.range(0.0, (grid.dims[1] - 1) as f64),
-            grid.lo[2] as f64 + rng.range(0.0, (grid.dims[2] - 1) as f64),
-        );
-        let v = ijk.round();
-        if study.segmentation.lumen.get(v.x as usize, v.y as usize, v.z as usize) != 0 {
-            out.push(g.index_to_local(ijk));
-        }
-    }
-    out
-}
-
 #[test]
 fn potential_matches_a_direct_evaluation_of_eq2() {
     let study = small_colon(3);
@@ -96,7 +76,7 @@ fn potential_matches_a_direct_evaluation_of_eq2() {
     assert_eq!(f.store().voxels(), sorted.store().voxels());
     let params = [PotentialParams::default(), PotentialParams { ct: 1.0, cs: 5.0, rho: 30.0 }, PotentialParams { ct: 30.0, cs: 5.0, rho: 15.0 }, PotentialParams { ct: 3.0, cs: 0.0, rho: 10.0 }];
     let (mut inside, mut edge) = (0, 0);
-    for (i, x) in random_points(&study, 4000, 7).into_iter().enumerate() {
+    for (i, x) in study.random_lumen_points(4000, 7).into_iter().enumerate() {
         let p = &params[i % params.len()];
         for dir in [Direction::Forward, Direction::Backward] {
             let slot = (dir == Direction::Backward) as usize;

@@ -10,7 +10,6 @@ use glam::DVec3;
 use serde_json::{json, Value};
 use voyage_core::flight::{fly, FlightOptions};
 use voyage_core::io::{self, LoadOptions};
-use voyage_core::phantom::rng::Rng;
 use voyage_core::phantom::{self, ColonOptions};
 use voyage_core::potential::{BoxStore, BrickStore, Direction, DistanceStore, Navigable, PotentialField, PotentialParams, SortedStore};
 use voyage_core::prep::{prepare, PrepOptions, Study};
@@ -51,7 +50,7 @@ pub fn run(inputs: &[PathBuf], phantoms: bool, samples: usize, common: &Common) 
 fn measure(name: &str, study: &Study, samples: usize) -> Result<Value> {
     let opts = FlightOptions::default();
     let nav = Navigable::new(study, opts.safety.min_wall_mm)?;
-    let points = sample_points(study, samples);
+    let points = study.random_lumen_points(samples, 5);
     let g = study.ct.geometry();
     let layouts = vec![
         layout("sorted list + binary search (paper)", &PotentialField::new(SortedStore::new(&nav)?, g), &points),
@@ -76,27 +75,6 @@ fn measure(name: &str, study: &Study, samples: usize) -> Result<Value> {
         "flights": flights,
         "target_step_ns": 5000.0,
     }))
-}
-
-/// Points where a flight samples: the lumen, within a voxel or two of the centerline's
-/// neighbourhood and everywhere else, drawn uniformly in the lumen's box.
-fn sample_points(study: &Study, n: usize) -> Vec<DVec3> {
-    let mut rng = Rng::new(5, 9);
-    let grid = &study.ds.grid;
-    let g = study.ct.geometry();
-    let mut out = Vec::with_capacity(n);
-    while out.len() < n {
-        let ijk = DVec3::new(
-            grid.lo[0] as f64 + rng.range(0.0, (grid.dims[0] - 1) as f64),
-            grid.lo[1] as f64 + rng.range(0.0, (grid.dims[1] - 1) as f64),
-            grid.lo[2] as f64 + rng.range(0.0, (grid.dims[2] - 1) as f64),
-        );
-        let v = ijk.round();
-        if study.segmentation.lumen.get(v.x as usize, v.y as usize, v.z as usize) != 0 {
-            out.push(g.index_to_local(ijk));
-        }
-    }
-    out
 }
 
 fn layout<S: DistanceStore>(name: &str, f: &PotentialField<S>, points: &[DVec3]) -> Value {
