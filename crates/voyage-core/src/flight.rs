@@ -88,21 +88,20 @@ pub struct Flight {
 }
 
 /// The centerline as the flight sees it: points from the flight's start to its goal.
-struct Guide<'a> {
+struct Guide {
     points: Vec<DVec3>,
     radius: Vec<f64>,
-    _cl: &'a Centerline,
 }
 
-impl<'a> Guide<'a> {
-    fn new(cl: &'a Centerline, dir: Direction) -> Self {
+impl Guide {
+    fn new(cl: &Centerline, dir: Direction) -> Self {
         let mut points: Vec<DVec3> = cl.points_mm.iter().map(|p| DVec3::from_array(*p)).collect();
         let mut radius = cl.radius_mm.clone();
         if dir == Direction::Backward {
             points.reverse();
             radius.reverse();
         }
-        Guide { points, radius, _cl: cl }
+        Guide { points, radius }
     }
     fn nearest(&self, x: DVec3) -> usize {
         let mut best = (f64::INFINITY, 0);

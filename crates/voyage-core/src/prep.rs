@@ -151,16 +151,18 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Sta
     }
     lap(&mut t.contacts);
     let (mut dt_target, mut dt_source) = dt_fields(&seg.lumen, &ds.grid, source, target)?;
-    if !taken.is_empty() && !dt_target.dist.get_global(source, f32::INFINITY).is_finite() {
+    let joined = |dt: &crate::distance::Geodesic| dt.dist.get_global(source, f32::INFINITY).is_finite();
+    let mut contact_voxels = taken.len();
+    if contact_voxels > 0 && !joined(&dt_target) {
         // The walls closed the colon itself (a centerline across a contact): go without.
         for &v in &taken {
             seg.lumen.data_mut()[v] = 1;
         }
+        contact_voxels = 0;
         ds = distance_to_wall(&seg.lumen)?;
         (dt_target, dt_source) = dt_fields(&seg.lumen, &ds.grid, source, target)?;
     }
-    let contact_voxels = if dt_target.dist.get_global(source, f32::INFINITY).is_finite() { taken.len() } else { 0 };
-    if !dt_target.dist.get_global(source, f32::INFINITY).is_finite() {
+    if !joined(&dt_target) {
         return Err(crate::Error::invalid("the target cannot be reached from the source through the lumen"));
     }
     seg.lumen_voxels -= contact_voxels;
