@@ -218,7 +218,6 @@ pub fn fly<S: DistanceStore>(field: &PotentialField<S>, cl: &Centerline, dir: Di
         }
         let mut input = Input::default();
         if t < escape_until {
-            near = guide.nearest(sub.state.x);
             let boost = 1.5f64.powi(in_a_row.saturating_sub(1).min(8) as i32);
             input.force = guide.toward_ahead(near, sub.state.x) * opts.escape_factor * boost * sub.potential.ct.max(1.0);
         }
