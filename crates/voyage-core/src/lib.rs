@@ -19,6 +19,7 @@ pub mod io;
 pub mod phantom;
 pub mod potential;
 pub mod prep;
+pub mod render;
 pub mod segment;
 pub mod skeleton;
 pub mod submarine;

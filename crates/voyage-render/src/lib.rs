@@ -1,0 +1,1 @@
+//! wgpu renderer (being written).
