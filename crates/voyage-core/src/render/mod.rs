@@ -3,7 +3,9 @@
 //! strategies that choose which cells to draw (paper §4.3).
 
 pub mod mesh;
+pub mod raster;
 pub mod shading;
 
 pub use mesh::CellMesh;
+pub use raster::{render_rgba, shade, Frame, Rasterizer, View, NO_TRIANGLE};
 pub use shading::Lighting;

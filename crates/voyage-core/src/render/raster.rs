@@ -1,0 +1,438 @@
+//! The CPU reference rasterizer: perspective, a depth buffer and a triangle-id buffer, then
+//! deferred endoscope shading. It is the visibility oracle and the renderer when no GPU
+//! exists, so two properties matter more than speed:
+//!
+//! - **Order independence.** A pixel keeps the nearest triangle covering its centre, ties
+//!   going to the smaller id, and whether a triangle covers a pixel (and at what depth) is a
+//!   function of that triangle and the camera alone. So the id buffer is the same whatever
+//!   order the cells are drawn in, and culling changes it only if it leaves out a triangle
+//!   that wins somewhere: exactly what the exactness tests look for.
+//! - **Shared edges are exact.** Edge functions are computed from the edge's endpoints in a
+//!   canonical order and negated for the other direction, with a top-left rule, so two
+//!   triangles sharing an edge never both take, or both miss, a pixel centre on it.
+//!
+//! Back faces are culled: the camera is always inside the closed surface (the navigation's
+//! safe set), where every first hit is a face whose normal points back into the lumen.
+
+use glam::{DVec3, Vec3};
+
+use super::mesh::CellMesh;
+use super::shading::Lighting;
+use crate::camera::Camera;
+
+/// Marks a pixel no triangle covers.
+pub const NO_TRIANGLE: u32 = u32::MAX;
+
+/// Depth (mm along the view axis) below which points are clipped away.
+const MIN_NEAR_MM: f64 = 1e-4;
+
+/// What the rasterizer writes: per pixel (row-major, top row first) the inverse depth of the
+/// nearest triangle (mm⁻¹; 0 where none) and its draw index in the [`CellMesh`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Frame {
+    pub width: u32,
+    pub height: u32,
+    pub inv_depth: Vec<f32>,
+    pub ids: Vec<u32>,
+}
+
+impl Frame {
+    pub fn new(width: u32, height: u32) -> Self {
+        let n = width as usize * height as usize;
+        Frame { width, height, inv_depth: vec![0.0; n], ids: vec![NO_TRIANGLE; n] }
+    }
+
+    pub fn clear(&mut self) {
+        self.inv_depth.fill(0.0);
+        self.ids.fill(NO_TRIANGLE);
+    }
+
+    /// Pixels whose triangle differs from `other`'s.
+    pub fn id_differences(&self, other: &Frame) -> usize {
+        self.ids.iter().zip(&other.ids).filter(|(a, b)| a != b).count()
+    }
+
+    /// Pixels some triangle covers.
+    pub fn covered(&self) -> usize {
+        self.ids.iter().filter(|&&i| i != NO_TRIANGLE).count()
+    }
+}
+
+/// A camera as the rasterizer uses it: eye, view axes, focal length in pixels.
+#[derive(Clone, Copy, Debug)]
+pub struct View {
+    pub eye: DVec3,
+    /// Screen right, screen up and forward (the view direction), unit vectors.
+    pub right: DVec3,
+    pub up: DVec3,
+    pub forward: DVec3,
+    pub width: u32,
+    pub height: u32,
+    /// Pixels per unit of x/depth (and y/depth): height / (2 tan(fov/2)).
+    pub focal: f64,
+    pub near: f64,
+}
+
+impl View {
+    pub fn new(camera: &Camera, width: u32, height: u32) -> Self {
+        let p = &camera.pose;
+        View {
+            eye: p.position,
+            right: -p.x_body(),
+            up: p.y_body(),
+            forward: p.z_body(),
+            width,
+            height,
+            focal: height as f64 / (2.0 * camera.tan_half_fov()),
+            near: camera.near_mm.max(MIN_NEAR_MM),
+        }
+    }
+
+    /// Eye coordinates (right, up, depth) of a volume-local point.
+    #[inline]
+    pub fn to_eye(&self, p: DVec3) -> DVec3 {
+        let v = p - self.eye;
+        DVec3::new(v.dot(self.right), v.dot(self.up), v.dot(self.forward))
+    }
+
+    /// Continuous pixel coordinates (top-left origin) of an eye point in front of the camera.
+    #[inline]
+    pub fn project(&self, e: DVec3) -> (f64, f64) {
+        let s = self.focal / e.z;
+        (0.5 * self.width as f64 + e.x * s, 0.5 * self.height as f64 - e.y * s)
+    }
+
+    /// The (unnormalised) direction of the ray through the centre of pixel (x, y).
+    #[inline]
+    pub fn pixel_direction(&self, x: u32, y: u32) -> DVec3 {
+        let sx = (x as f64 + 0.5 - 0.5 * self.width as f64) / self.focal;
+        let sy = (0.5 * self.height as f64 - (y as f64 + 0.5)) / self.focal;
+        self.forward + sx * self.right + sy * self.up
+    }
+}
+
+/// The eye transform in f32, relative to the eye, for the per-triangle work.
+struct EyeXf {
+    eye: Vec3,
+    right: Vec3,
+    up: Vec3,
+    forward: Vec3,
+}
+
+impl EyeXf {
+    fn new(view: &View) -> Self {
+        EyeXf { eye: view.eye.as_vec3(), right: view.right.as_vec3(), up: view.up.as_vec3(), forward: view.forward.as_vec3() }
+    }
+}
+
+/// A vertex on screen: pixel coordinates and inverse depth.
+#[derive(Clone, Copy)]
+struct ScreenVertex {
+    x: f64,
+    y: f64,
+    w: f64,
+}
+
+/// Draws cells into a frame: the rasterizer proper.
+pub struct Rasterizer<'a> {
+    mesh: &'a CellMesh,
+    view: View,
+    xf: EyeXf,
+}
+
+impl<'a> Rasterizer<'a> {
+    pub fn new(mesh: &'a CellMesh, view: View) -> Self {
+        Rasterizer { mesh, xf: EyeXf::new(&view), view }
+    }
+
+    pub fn view(&self) -> &View {
+        &self.view
+    }
+
+    /// Draws every triangle of a cell; returns how many triangles that was.
+    pub fn draw_cell(&self, frame: &mut Frame, cell: u32) -> usize {
+        let range = self.mesh.cell_ranges[cell as usize].clone();
+        for id in range.clone() {
+            self.draw_triangle(frame, id);
+        }
+        range.len()
+    }
+
+    pub fn draw_cells(&self, frame: &mut Frame, cells: &[u32]) -> usize {
+        cells.iter().map(|&c| self.draw_cell(frame, c)).sum()
+    }
+
+    fn draw_triangle(&self, frame: &mut Frame, id: u32) {
+        let [ia, ib, ic] = self.mesh.triangles[id as usize];
+        let pos = &self.mesh.positions;
+        let xf = &self.xf;
+        let a = Vec3::from_array(pos[ia as usize]) - xf.eye;
+        let b = Vec3::from_array(pos[ib as usize]) - xf.eye;
+        let c = Vec3::from_array(pos[ic as usize]) - xf.eye;
+        // Back face (or edge-on): its normal does not point toward the eye.
+        if (b - a).cross(c - a).dot(a) >= 0.0 {
+            return;
+        }
+        let eye = |v: Vec3| DVec3::new(v.dot(xf.right) as f64, v.dot(xf.up) as f64, v.dot(xf.forward) as f64);
+        let e = [eye(a), eye(b), eye(c)];
+        let near = self.view.near;
+        let inside = e.map(|v| v.z >= near);
+        if !inside.iter().any(|&i| i) {
+            return;
+        }
+        if inside.iter().all(|&i| i) {
+            let s = e.map(|v| self.screen(v));
+            self.fill(frame, id, s[0], s[1], s[2]);
+            return;
+        }
+        // Clip against the near plane (Sutherland–Hodgman, one plane): 3 or 4 vertices.
+        let mut poly: [DVec3; 4] = [DVec3::ZERO; 4];
+        let mut n = 0;
+        for i in 0..3 {
+            let (p, q) = (e[i], e[(i + 1) % 3]);
+            if p.z >= near {
+                poly[n] = p;
+                n += 1;
+            }
+            if (p.z >= near) != (q.z >= near) {
+                let t = (near - p.z) / (q.z - p.z);
+                let mut x = p + (q - p) * t;
+                x.z = near;
+                poly[n] = x;
+                n += 1;
+            }
+        }
+        let s0 = self.screen(poly[0]);
+        for k in 1..n - 1 {
+            self.fill(frame, id, s0, self.screen(poly[k]), self.screen(poly[k + 1]));
+        }
+    }
+
+    #[inline]
+    fn screen(&self, e: DVec3) -> ScreenVertex {
+        let (x, y) = self.view.project(e);
+        ScreenVertex { x, y, w: 1.0 / e.z }
+    }
+
+    /// Scan-converts one triangle: pixel centres inside it (top-left rule on edges) take its
+    /// id where it is nearer, or as near with a smaller id.
+    fn fill(&self, frame: &mut Frame, id: u32, v0: ScreenVertex, v1: ScreenVertex, v2: ScreenVertex) {
+        let (w, h) = (frame.width as i64, frame.height as i64);
+        let min_x = v0.x.min(v1.x).min(v2.x);
+        let max_x = v0.x.max(v1.x).max(v2.x);
+        let min_y = v0.y.min(v1.y).min(v2.y);
+        let max_y = v0.y.max(v1.y).max(v2.y);
+        // Pixel centres (i + 0.5) inside the bounding box.
+        let x0 = ((min_x - 0.5).ceil().max(0.0) as i64).max(0);
+        let x1 = ((max_x - 0.5).floor().min((w - 1) as f64)) as i64;
+        let y0 = ((min_y - 0.5).ceil().max(0.0) as i64).max(0);
+        let y1 = ((max_y - 0.5).floor().min((h - 1) as f64)) as i64;
+        if x0 > x1 || y0 > y1 || max_x < 0.0 || max_y < 0.0 {
+            return;
+        }
+        let area = (v1.x - v0.x) * (v2.y - v0.y) - (v1.y - v0.y) * (v2.x - v0.x);
+        if area == 0.0 || !area.is_finite() {
+            return;
+        }
+        // Edge i is opposite vertex i; its function is positive inside for either winding.
+        let e0 = Edge::new(v1, v2, area);
+        let e1 = Edge::new(v2, v0, area);
+        let e2 = Edge::new(v0, v1, area);
+        let inv_area = 1.0 / area.abs();
+        for py in y0..=y1 {
+            let cy = py as f64 + 0.5;
+            let (r0, r1, r2) = (e0.row(cy), e1.row(cy), e2.row(cy));
+            let row = py as usize * frame.width as usize;
+            for px in x0..=x1 {
+                let cx = px as f64 + 0.5;
+                let (d0, d1, d2) = (e0.at(r0, cx), e1.at(r1, cx), e2.at(r2, cx));
+                if !(e0.covers(d0) && e1.covers(d1) && e2.covers(d2)) {
+                    continue;
+                }
+                let wz = ((d0 * v0.w + d1 * v1.w + d2 * v2.w) * inv_area) as f32;
+                let i = row + px as usize;
+                let old = frame.inv_depth[i];
+                if wz > old || (wz == old && id < frame.ids[i]) {
+                    frame.inv_depth[i] = wz;
+                    frame.ids[i] = id;
+                }
+            }
+        }
+    }
+}
+
+/// An edge function a·x + b·y + c, evaluated from the edge's endpoints in a canonical order
+/// so that the two triangles sharing an edge compute bit-identical values of opposite sign.
+#[derive(Clone, Copy)]
+struct Edge {
+    a: f64,
+    b: f64,
+    c: f64,
+    /// −1 when the canonical order runs against this triangle's (then the value is negated).
+    sign: f64,
+    /// Whether a pixel centre exactly on the edge belongs to this triangle (top-left rule).
+    owns_ties: bool,
+}
+
+impl Edge {
+    fn new(p: ScreenVertex, q: ScreenVertex, area: f64) -> Self {
+        let flip = (q.x, q.y) < (p.x, p.y);
+        let (s, t) = if flip { (q, p) } else { (p, q) };
+        let a = -(t.y - s.y);
+        let b = t.x - s.x;
+        let c = -(a * s.x + b * s.y);
+        // Positive inside: for area > 0 the inside lies left of p→q in this formula.
+        let sign = if flip { -1.0 } else { 1.0 } * area.signum();
+        // The triangle whose signed value grows with +y (or +x on a horizontal edge) owns
+        // the ties: exactly one of the two triangles across an edge does.
+        let (ga, gb) = (a * sign, b * sign);
+        let owns_ties = gb > 0.0 || (gb == 0.0 && ga > 0.0);
+        Edge { a, b, c, sign, owns_ties }
+    }
+
+    #[inline]
+    fn row(&self, y: f64) -> f64 {
+        self.b * y + self.c
+    }
+
+    #[inline]
+    fn at(&self, row: f64, x: f64) -> f64 {
+        (self.a * x + row) * self.sign
+    }
+
+    #[inline]
+    fn covers(&self, d: f64) -> bool {
+        d > 0.0 || (d == 0.0 && self.owns_ties)
+    }
+}
+
+/// Deferred shading of a drawn frame: per pixel the ray through its centre meets its
+/// triangle; the vertex normals are interpolated there (perspective-correct, like a GPU's
+/// varyings) and lit by [`Lighting`]. RGBA8, row-major, top row first; black where empty.
+pub fn shade(frame: &Frame, mesh: &CellMesh, view: &View, lighting: &Lighting) -> Vec<u8> {
+    let mut out = vec![0u8; frame.ids.len() * 4];
+    for (i, px) in out.chunks_exact_mut(4).enumerate() {
+        px[3] = 255;
+        let id = frame.ids[i];
+        if id == NO_TRIANGLE {
+            continue;
+        }
+        let (x, y) = ((i % frame.width as usize) as u32, (i / frame.width as usize) as u32);
+        if let Some(rgb) = shade_pixel(mesh, view, lighting, id, x, y) {
+            px[..3].copy_from_slice(&rgb);
+        }
+    }
+    out
+}
+
+fn shade_pixel(mesh: &CellMesh, view: &View, lighting: &Lighting, id: u32, x: u32, y: u32) -> Option<[u8; 3]> {
+    let [ia, ib, ic] = mesh.triangles[id as usize];
+    let p = |i: u32| DVec3::from_array(mesh.positions[i as usize].map(f64::from)) - view.eye;
+    let n = |i: u32| DVec3::from_array(mesh.normals[i as usize].map(f64::from));
+    let (a, b, c) = (p(ia), p(ib), p(ic));
+    let dir = view.pixel_direction(x, y).normalize();
+    // Möller–Trumbore, from the eye at the origin.
+    let (e1, e2) = (b - a, c - a);
+    let pv = dir.cross(e2);
+    let det = e1.dot(pv);
+    if det.abs() < 1e-300 {
+        return None;
+    }
+    let tv = -a;
+    let u = tv.dot(pv) / det;
+    let qv = tv.cross(e1);
+    let v = dir.dot(qv) / det;
+    let t = e2.dot(qv) / det;
+    // The pixel centre lies inside (up to rounding) since the rasterizer chose it; clamp so
+    // an edge pixel does not extrapolate the normals.
+    let (u, v) = (u.clamp(0.0, 1.0), v.clamp(0.0, 1.0));
+    let (u, v) = if u + v > 1.0 { (u / (u + v), v / (u + v)) } else { (u, v) };
+    let normal = (n(ia) * (1.0 - u - v) + n(ib) * u + n(ic) * v).normalize_or_zero();
+    let ndl = normal.dot(-dir) as f32;
+    Some(lighting.rgb8(t.max(0.0) as f32, ndl))
+}
+
+/// Renders the listed cells and shades them: the CPU path end to end.
+pub fn render_rgba(mesh: &CellMesh, camera: &Camera, cells: &[u32], width: u32, height: u32, lighting: &Lighting) -> Vec<u8> {
+    let view = View::new(camera, width, height);
+    let mut frame = Frame::new(width, height);
+    Rasterizer::new(mesh, view).draw_cells(&mut frame, cells);
+    shade(&frame, mesh, &view, lighting)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::Pose;
+
+    /// A square wall 10 mm in front of the camera, facing it, in two triangles; and one
+    /// triangle behind it facing away.
+    fn wall() -> CellMesh {
+        CellMesh {
+            positions: vec![[-5.0, -5.0, 10.0], [5.0, -5.0, 10.0], [5.0, 5.0, 10.0], [-5.0, 5.0, 10.0]],
+            normals: vec![[0.0, 0.0, -1.0]; 4],
+            // (b − a) × (c − a) must point toward the camera (−z).
+            triangles: vec![[0, 2, 1], [0, 3, 2], [0, 1, 2]],
+            cell_ranges: vec![0..2, 2..3],
+            surface_triangle: vec![0, 1, 2],
+        }
+    }
+
+    fn camera() -> Camera {
+        Camera::new(Pose::looking(DVec3::ZERO, DVec3::Z, DVec3::Y))
+    }
+
+    #[test]
+    fn a_facing_square_fills_its_projection_without_gaps_or_overlaps() {
+        let mesh = wall();
+        let mut f = Frame::new(64, 64);
+        let view = View::new(&camera(), 64, 64);
+        Rasterizer::new(&mesh, view).draw_cells(&mut f, &[0, 1]);
+        // 90° fov: the 10 mm half-width at 10 mm covers half the half-screen → 32 pixels.
+        assert_eq!(f.covered(), 32 * 32);
+        // The back-facing triangle (id 2) is never drawn.
+        assert!(!f.ids.contains(&2));
+        // Depth is 10 mm everywhere on the wall.
+        for (&w, &id) in f.inv_depth.iter().zip(&f.ids) {
+            if id != NO_TRIANGLE {
+                assert!((w - 0.1).abs() < 1e-6);
+            }
+        }
+        // Drawing in the other order gives the same buffers.
+        let mut g = Frame::new(64, 64);
+        Rasterizer::new(&mesh, view).draw_cells(&mut g, &[1, 0]);
+        assert_eq!(f, g);
+    }
+
+    #[test]
+    fn near_clipping_keeps_the_part_in_front() {
+        // A floor running from behind the camera to far ahead: half the screen below the
+        // horizon is floor.
+        let mesh = CellMesh {
+            positions: vec![[-100.0, -2.0, -50.0], [100.0, -2.0, -50.0], [100.0, -2.0, 500.0], [-100.0, -2.0, 500.0]],
+            normals: vec![[0.0, 1.0, 0.0]; 4],
+            triangles: vec![[0, 2, 1], [0, 3, 2]],
+            cell_ranges: vec![0..2],
+            surface_triangle: vec![0, 1],
+        };
+        let mut f = Frame::new(32, 32);
+        Rasterizer::new(&mesh, View::new(&camera(), 32, 32)).draw_cells(&mut f, &[0]);
+        let below = (16..32).flat_map(|y| (0..32).map(move |x| (x, y))).filter(|&(x, y)| f.ids[y * 32 + x] != NO_TRIANGLE).count();
+        let above = (0..16).flat_map(|y| (0..32).map(move |x| (x, y))).filter(|&(x, y)| f.ids[y * 32 + x] != NO_TRIANGLE).count();
+        assert_eq!(above, 0);
+        // The floor ends 500 mm ahead: rows just below the horizon see past its end.
+        assert!(below > 14 * 32, "{below}");
+    }
+
+    #[test]
+    fn shading_is_brightest_facing_the_light() {
+        let mesh = wall();
+        let rgba = render_rgba(&mesh, &camera(), &[0], 64, 64, &Lighting::default());
+        let at = |x: usize, y: usize| rgba[(y * 64 + x) * 4];
+        // Centre (facing, nearest) brighter than the corner of the wall; background black.
+        assert!(at(32, 32) > at(17, 17));
+        assert_eq!(at(2, 2), 0);
+        let want = Lighting::default().rgb8(10.0 * (1.0 + 2.0 * (0.5f64 / 32.0).powi(2)).sqrt() as f32, 1.0);
+        assert!((at(32, 32) as i32 - want[0] as i32).abs() <= 1);
+    }
+}
