@@ -5,7 +5,9 @@
 pub mod mesh;
 pub mod raster;
 pub mod shading;
+pub mod visibility;
 
 pub use mesh::CellMesh;
 pub use raster::{render_rgba, shade, Frame, Rasterizer, View, NO_TRIANGLE};
 pub use shading::Lighting;
+pub use visibility::{Drawn, Strategy, Visibility};
