@@ -5,9 +5,11 @@
 pub mod mesh;
 pub mod raster;
 pub mod shading;
+pub mod survey;
 pub mod visibility;
 
 pub use mesh::CellMesh;
 pub use raster::{render_rgba, shade, Frame, Rasterizer, View, NO_TRIANGLE};
 pub use shading::Lighting;
+pub use survey::{look_around, survey, StrategyStats, Survey};
 pub use visibility::{Drawn, Strategy, Visibility};

@@ -19,7 +19,7 @@ pub struct Lighting {
 
 impl Default for Lighting {
     fn default() -> Self {
-        Lighting { albedo: [0.93, 0.52, 0.45], ambient: 0.04, falloff_mm: 45.0, specular: 0.25, shininess: 24.0 }
+        Lighting { albedo: [0.82, 0.30, 0.20], ambient: 0.05, falloff_mm: 40.0, specular: 0.30, shininess: 30.0 }
     }
 }
 
