@@ -176,7 +176,9 @@ impl GpuRenderer {
     }
 
     /// Renders every frame (no readback), each submitted and waited for, after
-    /// [`WARM_UP_FRAMES`] untimed frames taken from the start of `frames`.
+    /// [`WARM_UP_FRAMES`] untimed frames taken from the start of `frames`. This is what
+    /// `voyage bench render` reports as GPU frames/s. An empty list times nothing (zero
+    /// frames, 0 frames/s).
     pub fn time_frames(
         &mut self,
         frames: &[(Camera, Vec<u32>)],
