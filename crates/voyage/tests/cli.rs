@@ -219,7 +219,7 @@ fn prep_writes_its_exports_and_reports_json() {
     assert_eq!(mrk["markups"][0]["type"], "Curve");
     assert_eq!(mrk["markups"][0]["coordinateSystem"], "LPS");
     // A seed in soft tissue is refused on one line.
-    let bad = voyage(&["prep", ct.to_str().unwrap(), "--out", out.to_str().unwrap(), "--frame", "local", "--seed", "1,1,1"]);
+    let bad = voyage(&["prep", ct.to_str().unwrap(), "--out", out.to_str().unwrap(), "--coords", "local", "--seed", "1,1,1"]);
     assert!(!bad.status.success());
     let err = String::from_utf8_lossy(&bad.stderr);
     assert!(err.contains("seed") && err.trim().lines().count() == 1, "{err}");

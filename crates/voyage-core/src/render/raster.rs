@@ -15,6 +15,7 @@
 //! safe set), where every first hit is a face whose normal points back into the lumen.
 
 use glam::{DVec3, Vec3};
+use rayon::prelude::*;
 
 use super::mesh::CellMesh;
 use super::shading::Lighting;
@@ -34,12 +35,16 @@ pub struct Frame {
     pub height: u32,
     pub inv_depth: Vec<f32>,
     pub ids: Vec<u32>,
+    /// Perspective-correct barycentrics (of the triangle's 2nd and 3rd vertices) of the
+    /// pixel centre, for shading; NaN where the triangle was clipped (shading then
+    /// intersects the ray with the triangle instead).
+    pub bary: Vec<[f32; 2]>,
 }
 
 impl Frame {
     pub fn new(width: u32, height: u32) -> Self {
         let n = width as usize * height as usize;
-        Frame { width, height, inv_depth: vec![0.0; n], ids: vec![NO_TRIANGLE; n] }
+        Frame { width, height, inv_depth: vec![0.0; n], ids: vec![NO_TRIANGLE; n], bary: vec![[0.0; 2]; n] }
     }
 
     pub fn clear(&mut self) {
@@ -182,7 +187,7 @@ impl<'a> Rasterizer<'a> {
         }
         if inside.iter().all(|&i| i) {
             let s = e.map(|v| self.screen(v));
-            self.fill(frame, id, s[0], s[1], s[2]);
+            self.fill(frame, id, s[0], s[1], s[2], true);
             return;
         }
         // Clip against the near plane (Sutherland–Hodgman, one plane): 3 or 4 vertices.
@@ -204,7 +209,7 @@ impl<'a> Rasterizer<'a> {
         }
         let s0 = self.screen(poly[0]);
         for k in 1..n - 1 {
-            self.fill(frame, id, s0, self.screen(poly[k]), self.screen(poly[k + 1]));
+            self.fill(frame, id, s0, self.screen(poly[k]), self.screen(poly[k + 1]), false);
         }
     }
 
@@ -216,7 +221,7 @@ impl<'a> Rasterizer<'a> {
 
     /// Scan-converts one triangle: pixel centres inside it (top-left rule on edges) take its
     /// id where it is nearer, or as near with a smaller id.
-    fn fill(&self, frame: &mut Frame, id: u32, v0: ScreenVertex, v1: ScreenVertex, v2: ScreenVertex) {
+    fn fill(&self, frame: &mut Frame, id: u32, v0: ScreenVertex, v1: ScreenVertex, v2: ScreenVertex, whole: bool) {
         let (w, h) = (frame.width as i64, frame.height as i64);
         let min_x = v0.x.min(v1.x).min(v2.x);
         let max_x = v0.x.max(v1.x).max(v2.x);
@@ -249,12 +254,15 @@ impl<'a> Rasterizer<'a> {
                 if !(e0.covers(d0) && e1.covers(d1) && e2.covers(d2)) {
                     continue;
                 }
-                let wz = ((d0 * v0.w + d1 * v1.w + d2 * v2.w) * inv_area) as f32;
+                let (p0, p1, p2) = (d0 * v0.w, d1 * v1.w, d2 * v2.w);
+                let sum = p0 + p1 + p2;
+                let wz = (sum * inv_area) as f32;
                 let i = row + px as usize;
                 let old = frame.inv_depth[i];
                 if wz > old || (wz == old && id < frame.ids[i]) {
                     frame.inv_depth[i] = wz;
                     frame.ids[i] = id;
+                    frame.bary[i] = if whole { [(p1 / sum) as f32, (p2 / sum) as f32] } else { [f32::NAN; 2] };
                 }
             }
         }
@@ -306,32 +314,88 @@ impl Edge {
     }
 }
 
-/// Deferred shading of a drawn frame: per pixel the ray through its centre meets its
-/// triangle; the vertex normals are interpolated there (perspective-correct, like a GPU's
-/// varyings) and lit by [`Lighting`]. RGBA8, row-major, top row first; black where empty.
+/// Deferred shading of a drawn frame (rows in parallel on rayon's pool; benchmarks pin it
+/// to one thread): per pixel the vertex normals are interpolated at the
+/// pixel centre (perspective-correct, like a GPU's varyings) and lit by [`Lighting`].
+/// RGBA8, row-major, top row first; black where empty.
 pub fn shade(frame: &Frame, mesh: &CellMesh, view: &View, lighting: &Lighting) -> Vec<u8> {
+    let lut = ShadeTables::new(lighting);
     let mut out = vec![0u8; frame.ids.len() * 4];
-    for (i, px) in out.chunks_exact_mut(4).enumerate() {
-        px[3] = 255;
-        let id = frame.ids[i];
-        if id == NO_TRIANGLE {
-            continue;
+    let w = frame.width as usize;
+    // Per pixel the ray direction is forward + sx·right + sy·up (forward component 1, so
+    // distance = |d| / w); built incrementally in f32 along each row.
+    let step = (view.right / view.focal).as_vec3();
+    let inv_falloff2 = 1.0 / (lighting.falloff_mm * lighting.falloff_mm);
+    out.par_chunks_exact_mut(4 * w).enumerate().for_each(|(y, row)| {
+        let row_start = view.pixel_direction(0, y as u32).as_vec3();
+        for (x, px) in row.chunks_exact_mut(4).enumerate() {
+            px[3] = 255;
+            let i = y * w + x;
+            let id = frame.ids[i];
+            if id == NO_TRIANGLE {
+                continue;
+            }
+            let dir = row_start + step * x as f32;
+            let [b1, b2] = frame.bary[i];
+            let tri = mesh.triangles[id as usize];
+            let d2 = dir.length_squared();
+            let (normal, att) = if b1.is_nan() {
+                match intersect(mesh, view, tri, dir.as_dvec3()) {
+                    Some((n, dist)) => (n, 1.0 / (1.0 + dist * dist * inv_falloff2)),
+                    None => continue,
+                }
+            } else {
+                let n = |k: usize| Vec3::from_array(mesh.normals[tri[k] as usize]);
+                let n0 = n(0);
+                let normal = n0 + (n(1) - n0) * b1 + (n(2) - n0) * b2;
+                let wz = frame.inv_depth[i];
+                (normal, 1.0 / (1.0 + d2 * inv_falloff2 / (wz * wz)))
+            };
+            let nn = normal.length_squared() * d2;
+            let ndl = if nn > 0.0 { -normal.dot(dir) / nn.sqrt() } else { 0.0 };
+            px[..3].copy_from_slice(&lut.rgb8(lighting, att, ndl));
         }
-        let (x, y) = ((i % frame.width as usize) as u32, (i / frame.width as usize) as u32);
-        if let Some(rgb) = shade_pixel(mesh, view, lighting, id, x, y) {
-            px[..3].copy_from_slice(&rgb);
-        }
-    }
+    });
     out
 }
 
-fn shade_pixel(mesh: &CellMesh, view: &View, lighting: &Lighting, id: u32, x: u32, y: u32) -> Option<[u8; 3]> {
-    let [ia, ib, ic] = mesh.triangles[id as usize];
+/// Tables for the two powers per pixel (specular and display gamma), which would otherwise
+/// cost more than the rest of shading; both are within a unit of 8-bit output of the exact
+/// formula that the GPU evaluates.
+struct ShadeTables {
+    specular: Vec<f32>,
+    gamma: Vec<u8>,
+}
+
+const SPEC_STEPS: usize = 4096;
+const GAMMA_STEPS: usize = 16384;
+
+impl ShadeTables {
+    fn new(l: &Lighting) -> Self {
+        let specular = (0..=SPEC_STEPS).map(|i| (i as f32 / SPEC_STEPS as f32).powf(l.shininess)).collect();
+        let gamma = (0..=GAMMA_STEPS).map(|i| super::shading::encode(i as f32 / GAMMA_STEPS as f32)).collect();
+        ShadeTables { specular, gamma }
+    }
+
+    #[inline]
+    fn rgb8(&self, l: &Lighting, att: f32, n_dot_l: f32) -> [u8; 3] {
+        let ndl = n_dot_l.clamp(0.0, 1.0);
+        let diffuse = l.ambient + (1.0 - l.ambient) * ndl * att;
+        let f = ndl * SPEC_STEPS as f32;
+        let k = (f as usize).min(SPEC_STEPS - 1);
+        let pw = self.specular[k] + (self.specular[k + 1] - self.specular[k]) * (f - k as f32);
+        let spec = l.specular * pw * att;
+        l.albedo.map(|a| self.gamma[((a * diffuse + spec).clamp(0.0, 1.0) * GAMMA_STEPS as f32 + 0.5) as usize])
+    }
+}
+
+/// Normal and distance where the ray meets a triangle (for clipped triangles, whose
+/// barycentrics the rasterizer did not keep): Möller–Trumbore from the eye.
+fn intersect(mesh: &CellMesh, view: &View, tri: [u32; 3], dir: DVec3) -> Option<(Vec3, f32)> {
     let p = |i: u32| DVec3::from_array(mesh.positions[i as usize].map(f64::from)) - view.eye;
-    let n = |i: u32| DVec3::from_array(mesh.normals[i as usize].map(f64::from));
-    let (a, b, c) = (p(ia), p(ib), p(ic));
-    let dir = view.pixel_direction(x, y).normalize();
-    // Möller–Trumbore, from the eye at the origin.
+    let n = |i: u32| Vec3::from_array(mesh.normals[i as usize]);
+    let (a, b, c) = (p(tri[0]), p(tri[1]), p(tri[2]));
+    let dir = dir.normalize();
     let (e1, e2) = (b - a, c - a);
     let pv = dir.cross(e2);
     let det = e1.dot(pv);
@@ -343,13 +407,12 @@ fn shade_pixel(mesh: &CellMesh, view: &View, lighting: &Lighting, id: u32, x: u3
     let qv = tv.cross(e1);
     let v = dir.dot(qv) / det;
     let t = e2.dot(qv) / det;
-    // The pixel centre lies inside (up to rounding) since the rasterizer chose it; clamp so
-    // an edge pixel does not extrapolate the normals.
+    // The pixel centre lies inside up to rounding; clamp so an edge pixel does not
+    // extrapolate the normals.
     let (u, v) = (u.clamp(0.0, 1.0), v.clamp(0.0, 1.0));
     let (u, v) = if u + v > 1.0 { (u / (u + v), v / (u + v)) } else { (u, v) };
-    let normal = (n(ia) * (1.0 - u - v) + n(ib) * u + n(ic) * v).normalize_or_zero();
-    let ndl = normal.dot(-dir) as f32;
-    Some(lighting.rgb8(t.max(0.0) as f32, ndl))
+    let normal = n(tri[0]) * (1.0 - u - v) as f32 + n(tri[1]) * u as f32 + n(tri[2]) * v as f32;
+    Some((normal, t.max(0.0) as f32))
 }
 
 /// Renders the listed cells and shades them: the CPU path end to end.

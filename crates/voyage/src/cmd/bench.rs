@@ -30,6 +30,35 @@ enum BenchWhat {
     /// Navigation: a potential-field sample in each storage layout, and the physics per frame
     /// of the automatic flights, on the pipe and colon phantoms and any CT or mask given.
     Fly(FlyBench),
+    /// Rendering (paper Table 1): triangles per frame per visibility strategy along both
+    /// automatic flights, exactness against drawing everything, CPU and GPU frames/s.
+    Render(RenderBench),
+}
+
+#[derive(Args, Debug)]
+struct RenderBench {
+    /// CTs or lumen masks (default, with no input and no --pipe: the colon phantom).
+    inputs: Vec<PathBuf>,
+    /// Add the pipe phantom.
+    #[arg(long)]
+    pipe: bool,
+    /// Add the full-size colon phantom.
+    #[arg(long)]
+    colon: bool,
+    /// Image size for the CPU renderer and the exactness check (square).
+    #[arg(long, default_value_t = 512)]
+    size: u32,
+    /// Frames taken evenly from each flight.
+    #[arg(long, default_value_t = 300)]
+    frames: usize,
+    /// Random look-around views besides the flights.
+    #[arg(long, default_value_t = 100)]
+    random: usize,
+    /// Leave out the GPU renderer.
+    #[arg(long)]
+    no_gpu: bool,
+    #[command(flatten)]
+    common: Common,
 }
 
 #[derive(Args, Debug)]
@@ -100,6 +129,19 @@ pub fn run(a: &BenchArgs) -> Result<()> {
         BenchWhat::Load(l) => load(l),
         BenchWhat::Prep(p) => super::bench_prep::run(p.inputs.clone(), !p.no_phantom, &p.dir, p.repeats, !p.no_reference, &p.common),
         BenchWhat::Fly(f) => super::bench_fly::run(&f.inputs, !f.no_phantom, f.samples, &f.common),
+        BenchWhat::Render(r) => {
+            anyhow::ensure!((16..=4096).contains(&r.size), "--size must lie in 16..4096");
+            let plan = super::bench_render::Plan {
+                inputs: r.inputs.clone(),
+                pipe: r.pipe,
+                colon: r.colon,
+                size: r.size,
+                frames_per_flight: r.frames.max(1),
+                random: r.random,
+                gpu: !r.no_gpu,
+            };
+            super::bench_render::run(&plan, &r.common)
+        }
     }
 }
 

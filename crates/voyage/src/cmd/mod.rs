@@ -3,10 +3,12 @@
 mod bench;
 mod bench_fly;
 mod bench_prep;
+mod bench_render;
 mod fly;
 mod info;
 mod phantom;
 mod prep;
+mod render;
 
 use std::path::PathBuf;
 
@@ -40,6 +42,10 @@ enum Command {
     Fly(fly::FlyArgs),
     /// Benchmarks against reference libraries.
     Bench(bench::BenchArgs),
+    /// One endoscopic frame to a PNG: frame N of the automatic flight, or a given pose.
+    Render(render::RenderArgs),
+    /// Every frame of an automatic flight as PNGs, and an .mp4 when ffmpeg is installed.
+    Movie(render::MovieArgs),
 }
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
@@ -50,5 +56,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Prep(a) => prep::run(&a),
         Command::Fly(a) => fly::run(&a),
         Command::Bench(a) => bench::run(&a),
+        Command::Render(a) => render::render(&a),
+        Command::Movie(a) => render::movie(&a),
     }
 }

@@ -32,18 +32,18 @@ pub struct InputArgs {
     /// Treat the input as a lumen mask (default: detected, values only 0 and 1).
     #[arg(long)]
     pub mask: bool,
-    /// A point in the colon's air to grow from (mm, see --frame).
+    /// A point in the colon's air to grow from (mm, see --coords).
     #[arg(long, value_parser = parse_point)]
     pub seed: Option<DVec3>,
-    /// The rectum end of the flight (mm, see --frame).
+    /// The rectum end of the flight (mm, see --coords).
     #[arg(long, value_parser = parse_point)]
     pub source: Option<DVec3>,
-    /// The cecum end of the flight (mm, see --frame).
+    /// The cecum end of the flight (mm, see --coords).
     #[arg(long, value_parser = parse_point)]
     pub target: Option<DVec3>,
-    /// The frame of --seed, --source and --target.
+    /// The coordinate frame of --seed, --source and --target.
     #[arg(long, value_enum, default_value_t = Frame::Lps)]
-    pub frame: Frame,
+    pub coords: Frame,
     /// DICOM: which series to load when the folder holds several.
     #[arg(long)]
     pub series: Option<String>,
@@ -82,7 +82,7 @@ pub fn load_and_prepare(a: &InputArgs) -> Result<Prepared> {
     let loaded = io::load(&a.input, &LoadOptions { series_uid: a.series.clone() })?;
     let load_ms = t0.elapsed().as_secs_f64() * 1e3;
     let g = loaded.volume.geometry().clone();
-    let to_local = |p: DVec3| match a.frame {
+    let to_local = |p: DVec3| match a.coords {
         Frame::Lps => g.patient_to_local(p),
         Frame::Local => p,
     };
