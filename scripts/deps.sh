@@ -1,12 +1,16 @@
 #!/usr/bin/env bash
 # Installs what voyage needs from Debian beyond Rust itself:
 #   cmake, g++  — build the CharLS (JPEG-LS) decoder.
+#   mesa-vulkan-drivers, libvulkan1 — Mesa's CPU Vulkan driver (lavapipe), so the wgpu
+#     renderer runs (and is tested) where there is no GPU.
 # Idempotent; skips apt when everything is already there. Needs root (or sudo) for apt.
 set -euo pipefail
 need=()
 command -v cmake >/dev/null 2>&1 || need+=(cmake)
 command -v g++ >/dev/null 2>&1 || need+=(g++)
 command -v pkg-config >/dev/null 2>&1 || need+=(pkg-config)
+ls /usr/lib/*/libvulkan.so.1 >/dev/null 2>&1 || need+=(libvulkan1)
+ls /usr/share/vulkan/icd.d/lvp_icd.*.json >/dev/null 2>&1 || need+=(mesa-vulkan-drivers)
 if [ ${#need[@]} -eq 0 ]; then
   exit 0
 fi
