@@ -41,18 +41,10 @@ fn main() -> Res<()> {
     }
     if which == "small" || which == "all" {
         let t = Instant::now();
-        let p = phantom::colon(&ColonOptions {
-            small: true,
-            tagged_fluid: true,
-            ..ColonOptions::default()
-        })?;
+        let p = phantom::colon(&ColonOptions { small: true, tagged_fluid: true, ..ColonOptions::default() })?;
         eprintln!("small colon: {:.2} s", t.elapsed().as_secs_f64());
         look(&p, dir, "small")?;
-        let p = phantom::colon(&ColonOptions {
-            small: true,
-            collapsed_segment: true,
-            ..ColonOptions::default()
-        })?;
+        let p = phantom::colon(&ColonOptions { small: true, collapsed_segment: true, ..ColonOptions::default() })?;
         look(&p, dir, "small-collapsed")?;
     }
     if which == "colon" || which == "all" {
@@ -60,10 +52,7 @@ fn main() -> Res<()> {
         let p = phantom::colon(&ColonOptions::default())?;
         eprintln!("colon: {:.2} s", t.elapsed().as_secs_f64());
         look(&p, dir, "colon")?;
-        let p = phantom::colon(&ColonOptions {
-            tagged_fluid: true,
-            ..ColonOptions::default()
-        })?;
+        let p = phantom::colon(&ColonOptions { tagged_fluid: true, ..ColonOptions::default() })?;
         look(&p, dir, "colon-fluid")?;
     }
     Ok(())
@@ -81,23 +70,10 @@ fn time() -> Res<()> {
         Ok(best)
     };
     let threads = rayon::current_num_threads();
-    let small = best(&|| {
-        phantom::colon(&ColonOptions {
-            small: true,
-            ..ColonOptions::default()
-        })
-        .map(drop)
-        .map_err(Into::into)
-    })?;
-    let full = best(&|| {
-        phantom::colon(&ColonOptions::default())
-            .map(drop)
-            .map_err(Into::into)
-    })?;
+    let small = best(&|| phantom::colon(&ColonOptions { small: true, ..ColonOptions::default() }).map(drop).map_err(Into::into))?;
+    let full = best(&|| phantom::colon(&ColonOptions::default()).map(drop).map_err(Into::into))?;
     let pipe = best(&|| phantom::pipe(1).map(drop).map_err(Into::into))?;
-    println!(
-        "{threads} threads: small colon {small:.3} s, full colon {full:.3} s, pipe {pipe:.3} s"
-    );
+    println!("{threads} threads: small colon {small:.3} s, full colon {full:.3} s, pipe {pipe:.3} s");
     Ok(())
 }
 
@@ -112,55 +88,25 @@ fn look(p: &Phantom, dir: &Path, name: &str) -> Res<()> {
         t.lumen_voxels,
         t.min_part_gap_mm
     );
-    save(
-        &axial(&p.ct, nz / 2),
-        &dir.join(format!("{name}-axial-mid.png")),
-    )?;
-    save(
-        &coronal(&p.ct, ny / 2),
-        &dir.join(format!("{name}-coronal-mid.png")),
-    )?;
-    save(
-        &sagittal(&p.ct, nx / 2),
-        &dir.join(format!("{name}-sagittal-mid.png")),
-    )?;
+    save(&axial(&p.ct, nz / 2), &dir.join(format!("{name}-axial-mid.png")))?;
+    save(&coronal(&p.ct, ny / 2), &dir.join(format!("{name}-coronal-mid.png")))?;
+    save(&sagittal(&p.ct, nx / 2), &dir.join(format!("{name}-sagittal-mid.png")))?;
     for f in [0.1, 0.3, 0.7, 0.95] {
         let k = ((nz as f64 * f) as usize).min(nz - 1);
-        save(
-            &axial(&p.ct, k),
-            &dir.join(format!("{name}-axial-{k:03}.png")),
-        )?;
+        save(&axial(&p.ct, k), &dir.join(format!("{name}-axial-{k:03}.png")))?;
     }
-    save(
-        &project(&p.lumen, 1),
-        &dir.join(format!("{name}-lumen-coronal-projection.png")),
-    )?;
-    save(
-        &project(&p.lumen, 2),
-        &dir.join(format!("{name}-lumen-axial-projection.png")),
-    )?;
+    save(&project(&p.lumen, 1), &dir.join(format!("{name}-lumen-coronal-projection.png")))?;
+    save(&project(&p.lumen, 2), &dir.join(format!("{name}-lumen-axial-projection.png")))?;
     // Close-ups (×4) of an axial and a coronal slice through each polyp.
     for (n, pol) in t.polyps.iter().enumerate() {
         let s = p.ct.spacing();
-        let [i, j, k] =
-            [0, 1, 2].map(|a| ((pol.center_mm[a] / s[a]).round() as usize).min(p.ct.dims()[a] - 1));
+        let [i, j, k] = [0, 1, 2].map(|a| ((pol.center_mm[a] / s[a]).round() as usize).min(p.ct.dims()[a] - 1));
         let ax = crop(&axial(&p.ct, k), i, j, 24);
         let row = ((nz - 1 - k) as f64 * s[2] / s[0]).round() as usize;
         let co = crop(&coronal(&p.ct, j), i, row, 24);
-        let tag = format!(
-            "{:.0}mm-{}{}",
-            pol.diameter_mm,
-            pol.segment,
-            if pol.behind_fold { "-behind-fold" } else { "" }
-        );
-        save(
-            &zoom(&ax, 4),
-            &dir.join(format!("{name}-polyp{n}-{tag}-axial.png")),
-        )?;
-        save(
-            &zoom(&co, 4),
-            &dir.join(format!("{name}-polyp{n}-{tag}-coronal.png")),
-        )?;
+        let tag = format!("{:.0}mm-{}{}", pol.diameter_mm, pol.segment, if pol.behind_fold { "-behind-fold" } else { "" });
+        save(&zoom(&ax, 4), &dir.join(format!("{name}-polyp{n}-{tag}-axial.png")))?;
+        save(&zoom(&co, 4), &dir.join(format!("{name}-polyp{n}-{tag}-coronal.png")))?;
     }
     Ok(())
 }
@@ -171,24 +117,14 @@ fn crop(img: &Image, cx: usize, cy: usize, half: usize) -> Image {
     let y0 = cy.saturating_sub(half);
     let x1 = (cx + half).min(img.w - 1);
     let y1 = (cy + half).min(img.h - 1);
-    let px = (y0..=y1)
-        .flat_map(|y| (x0..=x1).map(move |x| (x, y)))
-        .map(|(x, y)| img.px[x + img.w * y])
-        .collect();
-    Image {
-        w: x1 - x0 + 1,
-        h: y1 - y0 + 1,
-        px,
-    }
+    let px = (y0..=y1).flat_map(|y| (x0..=x1).map(move |x| (x, y))).map(|(x, y)| img.px[x + img.w * y]).collect();
+    Image { w: x1 - x0 + 1, h: y1 - y0 + 1, px }
 }
 
 /// Nearest-neighbour enlargement.
 fn zoom(img: &Image, f: usize) -> Image {
     let (w, h) = (img.w * f, img.h * f);
-    let px = (0..h)
-        .flat_map(|y| (0..w).map(move |x| (x, y)))
-        .map(|(x, y)| img.px[x / f + img.w * (y / f)])
-        .collect();
+    let px = (0..h).flat_map(|y| (0..w).map(move |x| (x, y))).map(|(x, y)| img.px[x / f + img.w * (y / f)]).collect();
     Image { w, h, px }
 }
 
@@ -200,10 +136,7 @@ fn window(hu: i16) -> u8 {
 /// Axial slice k: patient right (small x) on the left, anterior (small y) on top.
 fn axial(ct: &Volume<i16>, k: usize) -> Image {
     let [nx, ny, _] = ct.dims();
-    let px = (0..ny)
-        .flat_map(|j| (0..nx).map(move |i| (i, j)))
-        .map(|(i, j)| window(ct.get(i, j, k)))
-        .collect();
+    let px = (0..ny).flat_map(|j| (0..nx).map(move |i| (i, j))).map(|(i, j)| window(ct.get(i, j, k))).collect();
     Image { w: nx, h: ny, px }
 }
 
@@ -250,31 +183,13 @@ fn project(m: &Volume<u8>, axis: usize) -> Image {
     };
     let (h, rows): (usize, Vec<usize>) = if axis == 1 {
         let h = (nz as f64 * s[2] / s[0]).round() as usize;
-        (
-            h,
-            (0..h)
-                .map(|r| nz - 1 - ((r as f64 * s[0] / s[2]) as usize).min(nz - 1))
-                .collect(),
-        )
+        (h, (0..h).map(|r| nz - 1 - ((r as f64 * s[0] / s[2]) as usize).min(nz - 1)).collect())
     } else {
         (ny, (0..ny).collect())
     };
-    let counts: Vec<usize> = rows
-        .iter()
-        .flat_map(|&r| (0..nx).map(move |i| (i, r)))
-        .map(|(i, r)| count(i, r))
-        .collect();
+    let counts: Vec<usize> = rows.iter().flat_map(|&r| (0..nx).map(move |i| (i, r))).map(|(i, r)| count(i, r)).collect();
     let max = counts.iter().copied().max().unwrap_or(1).max(1) as f64;
-    let px = counts
-        .iter()
-        .map(|&c| {
-            if c == 0 {
-                0
-            } else {
-                (50.0 + 205.0 * c as f64 / max) as u8
-            }
-        })
-        .collect();
+    let px = counts.iter().map(|&c| if c == 0 { 0 } else { (50.0 + 205.0 * c as f64 / max) as u8 }).collect();
     Image { w: nx, h, px }
 }
 
@@ -314,11 +229,7 @@ fn crc32(bytes: &[u8]) -> u32 {
     for &b in bytes {
         c ^= b as u32;
         for _ in 0..8 {
-            c = if c & 1 != 0 {
-                0xEDB8_8320 ^ (c >> 1)
-            } else {
-                c >> 1
-            };
+            c = if c & 1 != 0 { 0xEDB8_8320 ^ (c >> 1) } else { c >> 1 };
         }
     }
     !c

@@ -36,11 +36,7 @@ pub struct CellOptions {
 
 impl Default for CellOptions {
     fn default() -> Self {
-        CellOptions {
-            max_length_mm: 20.0,
-            max_triangles: 20_000,
-            min_length_mm: 6.0,
-        }
+        CellOptions { max_length_mm: 20.0, max_triangles: 20_000, min_length_mm: 6.0 }
     }
 }
 
@@ -65,10 +61,7 @@ impl Portal {
     /// so the screen bounds of these points bound those of the boundary.
     pub fn bounding_points(&self) -> Vec<DVec3> {
         let n = DVec3::from_array(self.normal) * self.half_thickness_mm;
-        self.polygon_mm
-            .iter()
-            .flat_map(|p| [DVec3::from_array(*p) + n, DVec3::from_array(*p) - n])
-            .collect()
+        self.polygon_mm.iter().flat_map(|p| [DVec3::from_array(*p) + n, DVec3::from_array(*p) - n]).collect()
     }
 }
 
@@ -127,40 +120,20 @@ impl Cells {
 }
 
 /// Splits the lumen into cells. `dt_source`: Dt from the source (box layout, +∞ outside).
-pub fn build_cells(
-    lumen: &Volume<u8>,
-    dt_source: &Field<f32>,
-    centerline: &Centerline,
-    surface: &Surface,
-    opts: &CellOptions,
-) -> Result<Cells> {
+pub fn build_cells(lumen: &Volume<u8>, dt_source: &Field<f32>, centerline: &Centerline, surface: &Surface, opts: &CellOptions) -> Result<Cells> {
     if centerline.points_mm.len() < 2 {
         return Err(Error::invalid("the centerline has fewer than two points"));
     }
     let cl_dt = centerline_levels(dt_source, centerline);
-    let tri_dt: Vec<f32> = surface
-        .owner_voxel
-        .iter()
-        .map(|&v| dt_source.get_global(lumen.geometry().ijk(v as usize), f32::INFINITY))
-        .collect();
+    let tri_dt: Vec<f32> = surface.owner_voxel.iter().map(|&v| dt_source.get_global(lumen.geometry().ijk(v as usize), f32::INFINITY)).collect();
     let min_len = opts.min_length_mm.max(2.0 * diagonal(lumen.spacing()));
     let levels = choose_levels(&cl_dt, &centerline.arc_mm, &tri_dt, opts, min_len);
     let reach = diagonal(lumen.spacing()) * 1.01;
-    let Labels {
-        cells: voxel_cell,
-        counts,
-        near_cut,
-    } = label_voxels(dt_source, &levels, reach);
+    let Labels { cells: voxel_cell, counts, near_cut } = label_voxels(dt_source, &levels, reach);
     let triangle_cell: Vec<u16> = tri_dt.iter().map(|&d| cell_of_level(&levels, d)).collect();
     let ncells = levels.len() + 1;
     let mut cells: Vec<Cell> = (0..ncells)
-        .map(|c| Cell {
-            triangles: Vec::new(),
-            voxels: 0,
-            centerline_span: (0, 0),
-            portal_back: c.checked_sub(1),
-            portal_front: (c + 1 < ncells).then_some(c),
-        })
+        .map(|c| Cell { triangles: Vec::new(), voxels: 0, centerline_span: (0, 0), portal_back: c.checked_sub(1), portal_front: (c + 1 < ncells).then_some(c) })
         .collect();
     for (t, &c) in triangle_cell.iter().enumerate() {
         cells[c as usize].triangles.push(t as u32);
@@ -176,12 +149,7 @@ pub fn build_cells(
         .enumerate()
         .map(|(c, (&level, pts))| make_portal(pts, c, level, centerline, &cl_dt, lumen.spacing()))
         .collect::<Result<Vec<_>>>()?;
-    Ok(Cells {
-        cells,
-        portals,
-        voxel_cell,
-        triangle_cell,
-    })
+    Ok(Cells { cells, portals, voxel_cell, triangle_cell })
 }
 
 fn diagonal(sp: [f64; 3]) -> f64 {
@@ -195,10 +163,7 @@ fn centerline_levels(dt: &Field<f32>, cl: &Centerline) -> Vec<f64> {
     for p in &cl.points_mm {
         let p = DVec3::from_array(*p);
         let ijk = dt.geometry.local_to_index(p).round();
-        let d = dt.get_global(
-            [ijk.x as usize, ijk.y as usize, ijk.z as usize],
-            f32::INFINITY,
-        ) as f64;
+        let d = dt.get_global([ijk.x as usize, ijk.y as usize, ijk.z as usize], f32::INFINITY) as f64;
         let d = if d.is_finite() { d } else { last };
         last = last.max(d);
         out.push(last);
@@ -208,13 +173,7 @@ fn centerline_levels(dt: &Field<f32>, cl: &Centerline) -> Vec<f64> {
 
 /// Cut levels (in Dt): walk the centerline, cutting when the stretch since the last cut is
 /// long enough or holds enough triangles, keeping cuts `min_len` apart in Dt.
-fn choose_levels(
-    cl_dt: &[f64],
-    arc: &[f64],
-    tri_dt: &[f32],
-    opts: &CellOptions,
-    min_len: f64,
-) -> Vec<f64> {
+fn choose_levels(cl_dt: &[f64], arc: &[f64], tri_dt: &[f32], opts: &CellOptions, min_len: f64) -> Vec<f64> {
     let mut sorted: Vec<f32> = tri_dt.iter().copied().filter(|d| d.is_finite()).collect();
     sorted.sort_unstable_by(f32::total_cmp);
     let tris_below = |level: f64| sorted.partition_point(|&d| (d as f64) < level);
@@ -263,22 +222,13 @@ fn label_voxels(dt: &Field<f32>, levels: &[f64], reach: f64) -> Labels {
             let c = cell_of_level(levels, d) as usize;
             counts[c] += 1;
             let d = d as f64;
-            if (c < levels.len() && levels[c] - d <= reach) || (c > 0 && d - levels[c - 1] <= reach)
-            {
+            if (c < levels.len() && levels[c] - d <= reach) || (c > 0 && d - levels[c - 1] <= reach) {
                 near_cut.push(idx as u32);
             }
             c as u16
         })
         .collect();
-    Labels {
-        cells: Field {
-            grid: dt.grid.clone(),
-            geometry: dt.geometry.clone(),
-            data,
-        },
-        counts,
-        near_cut,
-    }
+    Labels { cells: Field { grid: dt.grid.clone(), geometry: dt.geometry.clone(), data }, counts, near_cut }
 }
 
 fn set_spans(cells: &mut [Cell], cl_dt: &[f64], levels: &[f64]) {
@@ -295,26 +245,14 @@ fn set_spans(cells: &mut [Cell], cl_dt: &[f64], levels: &[f64]) {
 /// The portal between cells `c` and `c + 1`: boundary voxels (in either cell, 26-adjacent to
 /// the other) projected on the plane across the centerline at the cut; their convex hull,
 /// grown by half a voxel diagonal; the thickness their spread out of the plane.
-fn make_portal(
-    pts: Vec<DVec3>,
-    c: usize,
-    level: f64,
-    cl: &Centerline,
-    cl_dt: &[f64],
-    sp: [f64; 3],
-) -> Result<Portal> {
-    let at = cl_dt
-        .partition_point(|&d| d < level)
-        .min(cl.points_mm.len() - 1);
+fn make_portal(pts: Vec<DVec3>, c: usize, level: f64, cl: &Centerline, cl_dt: &[f64], sp: [f64; 3]) -> Result<Portal> {
+    let at = cl_dt.partition_point(|&d| d < level).min(cl.points_mm.len() - 1);
     let centre = DVec3::from_array(cl.points_mm[at]);
     let a = DVec3::from_array(cl.points_mm[at.saturating_sub(2)]);
     let b = DVec3::from_array(cl.points_mm[(at + 2).min(cl.points_mm.len() - 1)]);
     let normal = (b - a).normalize_or(DVec3::Z);
     if pts.is_empty() {
-        return Err(Error::invalid(format!(
-            "cells {c} and {} do not touch",
-            c + 1
-        )));
+        return Err(Error::invalid(format!("cells {c} and {} do not touch", c + 1)));
     }
     let (u, v) = plane_axes(normal);
     let half = 0.5 * diagonal(sp);
@@ -328,18 +266,8 @@ fn make_portal(
         })
         .collect();
     let hull = convex_hull(flat);
-    let polygon_mm = grow(&hull, half)
-        .into_iter()
-        .map(|(x, y)| (centre + u * x + v * y).to_array())
-        .collect();
-    Ok(Portal {
-        level_mm: level,
-        centerline_index: at,
-        centre_mm: centre.to_array(),
-        normal: normal.to_array(),
-        polygon_mm,
-        half_thickness_mm: depth + half,
-    })
+    let polygon_mm = grow(&hull, half).into_iter().map(|(x, y)| (centre + u * x + v * y).to_array()).collect();
+    Ok(Portal { level_mm: level, centerline_index: at, centre_mm: centre.to_array(), normal: normal.to_array(), polygon_mm, half_thickness_mm: depth + half })
 }
 
 /// For each cut c, the centres (volume-local mm) of the voxels on either side of it: voxels
@@ -347,12 +275,7 @@ fn make_portal(
 /// [`label_voxels`]: no other voxel can touch another cell), each neighbour pair seen once.
 /// Cells further apart than one must never touch (that is the guarantee visibility needs);
 /// if they do, that is an error.
-fn boundary_points(
-    cells: &Field<u16>,
-    near_cut: &[u32],
-    cuts: usize,
-    sp: [f64; 3],
-) -> Result<Vec<Vec<DVec3>>> {
+fn boundary_points(cells: &Field<u16>, near_cut: &[u32], cuts: usize, sp: [f64; 3]) -> Result<Vec<Vec<DVec3>>> {
     let [nx, ny, nz] = cells.grid.dims;
     // The 13 "forward" neighbour offsets: each unordered pair once.
     let mut offs = Vec::with_capacity(13);
@@ -382,9 +305,7 @@ fn boundary_points(
                 continue;
             }
             if a.abs_diff(b) != 1 {
-                return Err(Error::invalid(format!(
-                    "cells {a} and {b} touch: the cuts are too close"
-                )));
+                return Err(Error::invalid(format!("cells {a} and {b} touch: the cuts are too close")));
             }
             let cut = &mut out[a.min(b) as usize];
             cut.push(here as u32);
@@ -400,11 +321,7 @@ fn boundary_points(
             v.into_iter()
                 .map(|idx| {
                     let [i, j, k] = cells.grid.ijk(idx as usize);
-                    DVec3::new(
-                        ((i + lo[0]) as f64) * sp[0],
-                        ((j + lo[1]) as f64) * sp[1],
-                        ((k + lo[2]) as f64) * sp[2],
-                    )
+                    DVec3::new(((i + lo[0]) as f64) * sp[0], ((j + lo[1]) as f64) * sp[1], ((k + lo[2]) as f64) * sp[2])
                 })
                 .collect()
         })
@@ -425,21 +342,13 @@ fn convex_hull(mut pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
     if pts.len() < 3 {
         return pts;
     }
-    let cross = |o: (f64, f64), a: (f64, f64), b: (f64, f64)| {
-        (a.0 - o.0) * (b.1 - o.1) - (a.1 - o.1) * (b.0 - o.0)
-    };
+    let cross = |o: (f64, f64), a: (f64, f64), b: (f64, f64)| (a.0 - o.0) * (b.1 - o.1) - (a.1 - o.1) * (b.0 - o.0);
     let mut hull: Vec<(f64, f64)> = Vec::with_capacity(2 * pts.len());
     for pass in 0..2 {
         let start = hull.len();
-        let iter: Box<dyn Iterator<Item = &(f64, f64)>> = if pass == 0 {
-            Box::new(pts.iter())
-        } else {
-            Box::new(pts.iter().rev())
-        };
+        let iter: Box<dyn Iterator<Item = &(f64, f64)>> = if pass == 0 { Box::new(pts.iter()) } else { Box::new(pts.iter().rev()) };
         for &p in iter {
-            while hull.len() >= start + 2
-                && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0
-            {
+            while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0 {
                 hull.pop();
             }
             hull.push(p);
@@ -455,17 +364,7 @@ fn grow(hull: &[(f64, f64)], r: f64) -> Vec<(f64, f64)> {
     let n = hull.len();
     if n < 3 {
         // Degenerate boundary: a square of side 2r around each point.
-        let corners = hull
-            .iter()
-            .flat_map(|&(x, y)| {
-                [
-                    (x - r, y - r),
-                    (x + r, y - r),
-                    (x + r, y + r),
-                    (x - r, y + r),
-                ]
-            })
-            .collect();
+        let corners = hull.iter().flat_map(|&(x, y)| [(x - r, y - r), (x + r, y - r), (x + r, y + r), (x - r, y + r)]).collect();
         return convex_hull(corners);
     }
     (0..n)
@@ -485,21 +384,17 @@ fn grow(hull: &[(f64, f64)], r: f64) -> Vec<(f64, f64)> {
 
 fn norm(v: (f64, f64)) -> (f64, f64) {
     let l = (v.0 * v.0 + v.1 * v.1).sqrt();
-    if l == 0.0 {
-        (0.0, 0.0)
-    } else {
-        (v.0 / l, v.1 / l)
-    }
+    if l == 0.0 { (0.0, 0.0) } else { (v.0 / l, v.1 / l) }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Geometry;
-    use crate::centerline::{CenterlineOptions, centerline};
+    use crate::centerline::{centerline, CenterlineOptions};
     use crate::distance::{distance_to_wall, geodesic_distance};
     use crate::field::bounding_box;
     use crate::surface::extract_surface;
+    use crate::Geometry;
 
     /// A U-shaped tube whose two legs run side by side 4 mm apart (wall between), as where the
     /// sigmoid folds back: a plane cut across one leg would also cut the other.
@@ -510,12 +405,9 @@ mod tests {
                 let [i, j, k] = g.ijk(idx);
                 let (x, y, z) = (i as f64, j as f64, k as f64);
                 let r = 5.0;
-                let leg1 = ((y - 10.0).powi(2) + (z - 12.0).powi(2)).sqrt() < r
-                    && (5.0..=55.0).contains(&x);
-                let leg2 = ((y - 24.0).powi(2) + (z - 12.0).powi(2)).sqrt() < r
-                    && (5.0..=55.0).contains(&x);
-                let bend = x > 55.0
-                    && (((x - 55.0).powi(2) + (y - 17.0).powi(2)).sqrt() - 7.0).hypot(z - 12.0) < r;
+                let leg1 = ((y - 10.0).powi(2) + (z - 12.0).powi(2)).sqrt() < r && (5.0..=55.0).contains(&x);
+                let leg2 = ((y - 24.0).powi(2) + (z - 12.0).powi(2)).sqrt() < r && (5.0..=55.0).contains(&x);
+                let bend = x > 55.0 && (((x - 55.0).powi(2) + (y - 17.0).powi(2)).sqrt() - 7.0).hypot(z - 12.0) < r;
                 (leg1 || leg2 || bend) as u8
             })
             .collect();
@@ -531,10 +423,7 @@ mod tests {
         let dt = geodesic_distance(&m, &grid, src).unwrap();
         let cl = centerline(&m, &ds, src, dst, &CenterlineOptions::default()).unwrap();
         let surf = extract_surface(&m, None, &grid, 0.0).unwrap();
-        let opts = CellOptions {
-            max_length_mm: 12.0,
-            ..Default::default()
-        };
+        let opts = CellOptions { max_length_mm: 12.0, ..Default::default() };
         let cells = build_cells(&m, &dt.dist, &cl, &surf, &opts).unwrap();
         let n = cells.cells.len();
         assert!(n >= 6, "only {n} cells");
@@ -542,10 +431,7 @@ mod tests {
         // Every lumen voxel in exactly one cell; every triangle in one cell.
         let lumen = m.data().iter().filter(|&&v| v != 0).count();
         assert_eq!(cells.cells.iter().map(|c| c.voxels).sum::<usize>(), lumen);
-        assert_eq!(
-            cells.cells.iter().map(|c| c.triangles.len()).sum::<usize>(),
-            surf.mesh.triangles.len()
-        );
+        assert_eq!(cells.cells.iter().map(|c| c.triangles.len()).sum::<usize>(), surf.mesh.triangles.len());
         // Cells touch only their neighbours in the chain.
         let f = &cells.voxel_cell;
         let [nx, ny, nz] = f.grid.dims;
@@ -556,21 +442,9 @@ mod tests {
                     if a == u16::MAX {
                         continue;
                     }
-                    for (di, dj, dk) in [
-                        (1, 0, 0),
-                        (0, 1, 0),
-                        (0, 0, 1),
-                        (1, 1, 1),
-                        (1, -1, 1),
-                        (-1, 1, 1),
-                        (1, 1, 0),
-                        (1, -1, 0),
-                    ] {
+                    for (di, dj, dk) in [(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 1), (1, -1, 1), (-1, 1, 1), (1, 1, 0), (1, -1, 0)] {
                         let q = [i as i64 + di, j as i64 + dj, k as i64 + dk];
-                        if q.iter()
-                            .zip(&f.grid.dims)
-                            .any(|(&x, &n)| x < 0 || x >= n as i64)
-                        {
+                        if q.iter().zip(&f.grid.dims).any(|(&x, &n)| x < 0 || x >= n as i64) {
                             continue;
                         }
                         let b = f.data[f.grid.index(q[0] as usize, q[1] as usize, q[2] as usize)];
@@ -597,11 +471,7 @@ mod tests {
         // Portals: roughly the tube's cross-section (radius 5 mm), across the centerline.
         for p in &cells.portals {
             let c = DVec3::from_array(p.centre_mm);
-            let far = p
-                .polygon_mm
-                .iter()
-                .map(|q| DVec3::from_array(*q).distance(c))
-                .fold(0.0, f64::max);
+            let far = p.polygon_mm.iter().map(|q| DVec3::from_array(*q).distance(c)).fold(0.0, f64::max);
             assert!((4.0..10.0).contains(&far), "portal outline radius {far}");
             assert!(p.polygon_mm.len() >= 4);
         }

@@ -16,10 +16,10 @@
 
 use glam::DVec3;
 
-use crate::Volume;
 use crate::centerline::Centerline;
-use crate::distance::geodesic::{Padded, SearchOptions, dial};
+use crate::distance::geodesic::{dial, Padded, SearchOptions};
 use crate::field::BoxGrid;
+use crate::Volume;
 
 #[derive(Clone, Debug)]
 pub struct ContactOptions {
@@ -30,11 +30,7 @@ pub struct ContactOptions {
 
 impl Default for ContactOptions {
     fn default() -> Self {
-        ContactOptions {
-            enabled: true,
-            arc_ratio: 3.0,
-            min_arc_mm: 50.0,
-        }
+        ContactOptions { enabled: true, arc_ratio: 3.0, min_arc_mm: 50.0 }
     }
 }
 
@@ -42,13 +38,7 @@ const NO_LABEL: u16 = u16::MAX;
 
 /// Takes the contact voxels out of the lumen mask (never `keep`, volume voxels); returns the
 /// volume indices taken, so that a caller can put them back.
-pub fn cut_contacts(
-    lumen: &mut Volume<u8>,
-    grid: &BoxGrid,
-    cl: &Centerline,
-    keep: &[[usize; 3]],
-    opts: &ContactOptions,
-) -> Vec<usize> {
+pub fn cut_contacts(lumen: &mut Volume<u8>, grid: &BoxGrid, cl: &Centerline, keep: &[[usize; 3]], opts: &ContactOptions) -> Vec<usize> {
     if !opts.enabled || cl.points_mm.len() < 2 {
         return Vec::new();
     }
@@ -99,12 +89,7 @@ fn label_points(cl: &Centerline) -> (Vec<DVec3>, Vec<f64>) {
     let n = cl.points_mm.len();
     let stride = n.div_ceil(NO_LABEL as usize - 1).max(1);
     let idx: Vec<usize> = (0..n).step_by(stride).collect();
-    (
-        idx.iter()
-            .map(|&i| DVec3::from_array(cl.points_mm[i]))
-            .collect(),
-        idx.iter().map(|&i| cl.arc_mm[i]).collect(),
-    )
+    (idx.iter().map(|&i| DVec3::from_array(cl.points_mm[i])).collect(), idx.iter().map(|&i| cl.arc_mm[i]).collect())
 }
 
 /// Per padded voxel, the label of the geodesically nearest centerline point (NO_LABEL for
@@ -121,15 +106,7 @@ fn label_voxels(pad: &Padded, points: &[DVec3], spacing: [f64; 3]) -> Vec<u16> {
             sources.push(i);
         }
     }
-    let search = dial(
-        pad,
-        &sources,
-        spacing,
-        &SearchOptions {
-            tree: true,
-            ..Default::default()
-        },
-    );
+    let search = dial(pad, &sources, spacing, &SearchOptions { tree: true, ..Default::default() });
     for &u in &search.order {
         let u = u as usize;
         if let Some(p) = search.parent_of(u) {

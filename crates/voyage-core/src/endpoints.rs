@@ -13,10 +13,10 @@
 
 use glam::DVec3;
 
-use crate::centerline::{Centerline, CenterlineOptions, cost_weight, refine_points};
-use crate::distance::geodesic::{Geodesic, Padded, SearchOptions, dial};
+use crate::centerline::{cost_weight, refine_points, Centerline, CenterlineOptions};
+use crate::skeleton::{colon_path, tree_search, SkeletonOptions};
+use crate::distance::geodesic::{dial, Geodesic, Padded, SearchOptions};
 use crate::field::{BoxGrid, Field};
-use crate::skeleton::{SkeletonOptions, colon_path, tree_search};
 use crate::{Error, Result, Volume};
 
 #[derive(Clone, Debug)]
@@ -30,11 +30,7 @@ pub struct EndpointOptions {
 
 impl Default for EndpointOptions {
     fn default() -> Self {
-        EndpointOptions {
-            source_mm: None,
-            target_mm: None,
-            min_width: 0.25,
-        }
+        EndpointOptions { source_mm: None, target_mm: None, min_width: 0.25 }
     }
 }
 
@@ -55,40 +51,19 @@ pub struct Endpoints {
 /// 2×2×2 blocks when the lumen is large and finely sampled: a voxel of 0.8 mm is far finer
 /// than the path needs, the coarse grid has an eighth of the voxels, and the path is then
 /// centred on the fine Ds anyway. Dt and everything after stay at full resolution.
-pub fn find_endpoints(
-    lumen: &Volume<u8>,
-    ds: &Field<f32>,
-    seed: [usize; 3],
-    opts: &EndpointOptions,
-    cl_opts: &CenterlineOptions,
-) -> Result<Endpoints> {
+pub fn find_endpoints(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], opts: &EndpointOptions, cl_opts: &CenterlineOptions) -> Result<Endpoints> {
     let clock = std::time::Instant::now();
-    let given_source = opts
-        .source_mm
-        .map(|p| lumen_voxel(lumen, p, "source"))
-        .transpose()?;
-    let given_target = opts
-        .target_mm
-        .map(|p| lumen_voxel(lumen, p, "target"))
-        .transpose()?;
+    let given_source = opts.source_mm.map(|p| lumen_voxel(lumen, p, "source")).transpose()?;
+    let given_target = opts.target_mm.map(|p| lumen_voxel(lumen, p, "target")).transpose()?;
     let sp = lumen.spacing();
     let lumen_voxels = ds.data.iter().filter(|&&d| d > 0.0).count();
-    let coarse = (sp.iter().cloned().fold(f64::INFINITY, f64::min) < cl_opts.coarse_below_mm
-        && lumen_voxels > cl_opts.coarse_above_voxels)
+    let coarse = (sp.iter().cloned().fold(f64::INFINITY, f64::min) < cl_opts.coarse_below_mm && lumen_voxels > cl_opts.coarse_above_voxels)
         .then(|| Coarse::new(lumen, ds))
         .transpose()?;
     let path_mm: Vec<DVec3> = match &coarse {
         Some(c) => {
             let to_coarse = |v: [usize; 3]| c.coarse_voxel(v);
-            let voxels = skeleton_path(
-                &c.mask,
-                &c.ds,
-                to_coarse(seed)?,
-                given_source.map(to_coarse).transpose()?,
-                given_target.map(to_coarse).transpose()?,
-                opts,
-                cl_opts,
-            )?;
+            let voxels = skeleton_path(&c.mask, &c.ds, to_coarse(seed)?, given_source.map(to_coarse).transpose()?, given_target.map(to_coarse).transpose()?, opts, cl_opts)?;
             voxels.iter().map(|&v| c.fine_mm(v)).collect()
         }
         None => {
@@ -108,31 +83,17 @@ pub fn find_endpoints(
     };
     let skeleton_ms = clock.elapsed().as_secs_f64() * 1e3;
     let clock = std::time::Instant::now();
-    let mut pts: Vec<DVec3> = path_mm
-        .iter()
-        .map(|&p| mm_of(lumen, snap(lumen, ds, p).unwrap_or(source)))
-        .collect();
+    let mut pts: Vec<DVec3> = path_mm.iter().map(|&p| mm_of(lumen, snap(lumen, ds, p).unwrap_or(source))).collect();
     pts[0] = mm_of(lumen, source);
     let last = pts.len() - 1;
     pts[last] = mm_of(lumen, target);
     let centerline = refine_points(pts, ds, cl_opts);
     let refine_ms = clock.elapsed().as_secs_f64() * 1e3;
-    Ok(Endpoints {
-        source,
-        target,
-        centerline,
-        skeleton_ms,
-        refine_ms,
-    })
+    Ok(Endpoints { source, target, centerline, skeleton_ms, refine_ms })
 }
 
 /// Dt to the target and Dt to the source over the lumen inside `grid`.
-pub fn dt_fields(
-    lumen: &Volume<u8>,
-    grid: &BoxGrid,
-    source: [usize; 3],
-    target: [usize; 3],
-) -> Result<(Geodesic, Geodesic)> {
+pub fn dt_fields(lumen: &Volume<u8>, grid: &BoxGrid, source: [usize; 3], target: [usize; 3]) -> Result<(Geodesic, Geodesic)> {
     let pad = Padded::new(lumen, grid);
     let sp = lumen.spacing();
     let (s, t) = (pad.lumen_index(source)?, pad.lumen_index(target)?);
@@ -144,15 +105,7 @@ pub fn dt_fields(
 }
 
 /// The raw colon path (voxels of `lumen`, source → target) from the skeleton graph.
-fn skeleton_path(
-    lumen: &Volume<u8>,
-    ds: &Field<f32>,
-    seed: [usize; 3],
-    given_source: Option<[usize; 3]>,
-    given_target: Option<[usize; 3]>,
-    opts: &EndpointOptions,
-    cl_opts: &CenterlineOptions,
-) -> Result<Vec<[usize; 3]>> {
+fn skeleton_path(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], given_source: Option<[usize; 3]>, given_target: Option<[usize; 3]>, opts: &EndpointOptions, cl_opts: &CenterlineOptions) -> Result<Vec<[usize; 3]>> {
     let pad = Padded::new(lumen, &ds.grid);
     let sp = lumen.spacing();
     let weight = cost_weight(&pad, ds, cl_opts);
@@ -164,13 +117,7 @@ fn skeleton_path(
         None => {
             // The search stops at the first wide voxel it settles: the nearest.
             let wide = |v: usize| ds_pad[v] > 0.0 && ds_pad[v] >= floor;
-            let from_seed = tree_search(
-                &pad,
-                &[pad.lumen_index(seed)?],
-                sp,
-                Some(&weight),
-                Some(&wide as &dyn Fn(usize) -> bool),
-            );
+            let from_seed = tree_search(&pad, &[pad.lumen_index(seed)?], sp, Some(&weight), Some(&wide as &dyn Fn(usize) -> bool));
             pad.global_of_index(*from_seed.order.last().unwrap() as usize)
         }
     };
@@ -186,10 +133,7 @@ fn skeleton_path(
             mm_of(lumen, source)
         )));
     }
-    let sk_opts = SkeletonOptions {
-        min_width: opts.min_width,
-        ..cl_opts.skeleton.clone()
-    };
+    let sk_opts = SkeletonOptions { min_width: opts.min_width, ..cl_opts.skeleton.clone() };
     let (path, _stats) = colon_path(&pad, &tree, &ds_pad, sp, s, t_given, &sk_opts)?;
     Ok(path.iter().map(|&i| pad.global_of_index(i)).collect())
 }
@@ -218,21 +162,11 @@ impl Coarse {
         let geom = crate::Geometry::new(dims, sp.map(|s| 2.0 * s), [0.0; 3])?;
         let mut data = vec![0u8; dims[0] * dims[1] * dims[2]];
         for (idx, out) in data.iter_mut().enumerate() {
-            let c = [
-                idx % dims[0],
-                (idx / dims[0]) % dims[1],
-                idx / (dims[0] * dims[1]),
-            ];
+            let c = [idx % dims[0], (idx / dims[0]) % dims[1], idx / (dims[0] * dims[1])];
             let mut n = 0;
             for o in 0..8 {
-                let f = [
-                    lo[0] + 2 * c[0] + (o & 1),
-                    lo[1] + 2 * c[1] + ((o >> 1) & 1),
-                    lo[2] + 2 * c[2] + ((o >> 2) & 1),
-                ];
-                if f.iter().zip(lumen.dims()).all(|(&x, n)| x < n)
-                    && lumen.get(f[0], f[1], f[2]) != 0
-                {
+                let f = [lo[0] + 2 * c[0] + (o & 1), lo[1] + 2 * c[1] + ((o >> 1) & 1), lo[2] + 2 * c[2] + ((o >> 2) & 1)];
+                if f.iter().zip(lumen.dims()).all(|(&x, n)| x < n) && lumen.get(f[0], f[1], f[2]) != 0 {
                     n += 1;
                 }
             }
@@ -240,12 +174,7 @@ impl Coarse {
         }
         let mask = Volume::from_vec(geom, data)?;
         let ds = crate::distance::distance_to_wall(&mask)?;
-        Ok(Coarse {
-            mask,
-            ds,
-            lo,
-            fine_spacing: sp,
-        })
+        Ok(Coarse { mask, ds, lo, fine_spacing: sp })
     }
 
     /// The block holding fine voxel `v` when it is lumen, else the nearest lumen block (the
@@ -274,9 +203,7 @@ impl Coarse {
                 return Ok(b.1);
             }
         }
-        Err(Error::invalid(format!(
-            "the voxel {v:?} lies where the lumen is too narrow to follow"
-        )))
+        Err(Error::invalid(format!("the voxel {v:?} lies where the lumen is too narrow to follow")))
     }
 
     /// Fine volume-local mm of a block's centre.
@@ -299,10 +226,7 @@ fn snap(lumen: &Volume<u8>, ds: &Field<f32>, p: DVec3) -> Result<[usize; 3]> {
             for j in lo..=hi {
                 for i in lo..=hi {
                     let q = [base.x as i64 + i, base.y as i64 + j, base.z as i64 + k];
-                    if q.iter()
-                        .zip(lumen.dims())
-                        .any(|(&x, n)| x < 0 || x >= n as i64)
-                    {
+                    if q.iter().zip(lumen.dims()).any(|(&x, n)| x < 0 || x >= n as i64) {
                         continue;
                     }
                     let q = q.map(|x| x as usize);
@@ -323,20 +247,15 @@ fn snap(lumen: &Volume<u8>, ds: &Field<f32>, p: DVec3) -> Result<[usize; 3]> {
 fn lumen_voxel(lumen: &Volume<u8>, mm: DVec3, what: &str) -> Result<[usize; 3]> {
     let ijk = lumen.geometry().local_to_index(mm).round();
     if !lumen.geometry().contains_index(ijk) {
-        return Err(Error::invalid(format!(
-            "the {what} {mm} mm lies outside the volume"
-        )));
+        return Err(Error::invalid(format!("the {what} {mm} mm lies outside the volume")));
     }
     let v = [ijk.x as usize, ijk.y as usize, ijk.z as usize];
     if lumen.get(v[0], v[1], v[2]) == 0 {
-        return Err(Error::invalid(format!(
-            "the {what} {mm} mm is not inside the colon lumen"
-        )));
+        return Err(Error::invalid(format!("the {what} {mm} mm is not inside the colon lumen")));
     }
     Ok(v)
 }
 
 pub fn mm_of(vol: &Volume<u8>, v: [usize; 3]) -> DVec3 {
-    vol.geometry()
-        .index_to_local(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64))
+    vol.geometry().index_to_local(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64))
 }

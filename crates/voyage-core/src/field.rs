@@ -50,11 +50,7 @@ impl BoxGrid {
 
 /// The bounding box of the voxels where `pred` holds, grown by `margin` voxels and clipped to
 /// the volume. None when no voxel matches.
-pub fn bounding_box<T: Copy>(
-    vol: &Volume<T>,
-    margin: usize,
-    pred: impl Fn(T) -> bool,
-) -> Option<BoxGrid> {
+pub fn bounding_box<T: Copy>(vol: &Volume<T>, margin: usize, pred: impl Fn(T) -> bool) -> Option<BoxGrid> {
     let [nx, ny, nz] = vol.dims();
     let mut lo = [usize::MAX; 3];
     let mut hi = [0usize; 3];
@@ -62,9 +58,7 @@ pub fn bounding_box<T: Copy>(
         let slice = vol.slice_k(k);
         for j in 0..ny {
             let row = &slice[j * nx..(j + 1) * nx];
-            let Some(first) = row.iter().position(|&v| pred(v)) else {
-                continue;
-            };
+            let Some(first) = row.iter().position(|&v| pred(v)) else { continue };
             let last = row.iter().rposition(|&v| pred(v)).unwrap_or(first);
             lo = [lo[0].min(first), lo[1].min(j), lo[2].min(k)];
             hi = [hi[0].max(last), hi[1].max(j), hi[2].max(k)];
@@ -76,10 +70,7 @@ pub fn bounding_box<T: Copy>(
     let dims = vol.dims();
     let lo_m = [0, 1, 2].map(|a| lo[a].saturating_sub(margin));
     let hi_m = [0, 1, 2].map(|a| (hi[a] + margin).min(dims[a] - 1));
-    Some(BoxGrid {
-        lo: lo_m,
-        dims: [0, 1, 2].map(|a| hi_m[a] - lo_m[a] + 1),
-    })
+    Some(BoxGrid { lo: lo_m, dims: [0, 1, 2].map(|a| hi_m[a] - lo_m[a] + 1) })
 }
 
 /// Values over a [`BoxGrid`] of a volume with the given geometry.
@@ -93,18 +84,12 @@ pub struct Field<T> {
 impl<T: Copy> Field<T> {
     pub fn filled(grid: BoxGrid, geometry: Geometry, v: T) -> Self {
         let n = grid.len();
-        Field {
-            grid,
-            geometry,
-            data: vec![v; n],
-        }
+        Field { grid, geometry, data: vec![v; n] }
     }
     /// Value at a volume voxel; `outside` when the voxel is not in the box.
     #[inline]
     pub fn get_global(&self, g: [usize; 3], outside: T) -> T {
-        self.grid
-            .index_of_global(g)
-            .map_or(outside, |i| self.data[i])
+        self.grid.index_of_global(g).map_or(outside, |i| self.data[i])
     }
     /// Axial slice k of the field spread over the whole volume (x fastest), `outside` beyond
     /// the box: for writing a field without a whole volume in memory.
@@ -140,9 +125,7 @@ pub fn crop<T: Copy>(vol: &Volume<T>, grid: &BoxGrid) -> Vec<T> {
     let [bx, by, bz] = grid.dims;
     for k in 0..bz {
         for j in 0..by {
-            let start = vol
-                .geometry()
-                .index(grid.lo[0], j + grid.lo[1], k + grid.lo[2]);
+            let start = vol.geometry().index(grid.lo[0], j + grid.lo[1], k + grid.lo[2]);
             out.extend_from_slice(&vol.data()[start..start + bx]);
         }
     }
@@ -159,9 +142,7 @@ impl Field<f32> {
         let mut acc = 0.0f64;
         for c in 0..8 {
             let o = [(c & 1) as f64, ((c >> 1) & 1) as f64, ((c >> 2) & 1) as f64];
-            let w = (if o[0] > 0.0 { t.x } else { 1.0 - t.x })
-                * (if o[1] > 0.0 { t.y } else { 1.0 - t.y })
-                * (if o[2] > 0.0 { t.z } else { 1.0 - t.z });
+            let w = (if o[0] > 0.0 { t.x } else { 1.0 - t.x }) * (if o[1] > 0.0 { t.y } else { 1.0 - t.y }) * (if o[2] > 0.0 { t.z } else { 1.0 - t.z });
             if w == 0.0 {
                 continue;
             }
@@ -184,16 +165,9 @@ mod tests {
     #[test]
     fn slices_equal_the_spread_volume() {
         let g = Geometry::new([7, 6, 5], [1.0, 0.5, 2.0], [0.0; 3]).unwrap();
-        let grid = BoxGrid {
-            lo: [2, 1, 1],
-            dims: [3, 4, 3],
-        };
+        let grid = BoxGrid { lo: [2, 1, 1], dims: [3, 4, 3] };
         let data = (0..grid.len()).map(|i| i as f32 + 1.0).collect();
-        let f = Field {
-            grid,
-            geometry: g.clone(),
-            data,
-        };
+        let f = Field { grid, geometry: g.clone(), data };
         let v = f.to_volume(-1.0).unwrap();
         let mut s = vec![0.0f32; 7 * 6];
         for k in 0..5 {
@@ -201,19 +175,11 @@ mod tests {
             assert_eq!(&s[..], v.slice_k(k));
             for j in 0..6 {
                 for i in 0..7 {
-                    assert_eq!(
-                        v.get(i, j, k),
-                        f.get_global([i, j, k], -1.0),
-                        "voxel {i},{j},{k}"
-                    );
+                    assert_eq!(v.get(i, j, k), f.get_global([i, j, k], -1.0), "voxel {i},{j},{k}");
                 }
             }
         }
-        assert_eq!(
-            v.data().iter().filter(|&&x| x > 0.0).count(),
-            36,
-            "every box value placed once"
-        );
+        assert_eq!(v.data().iter().filter(|&&x| x > 0.0).count(), 36, "every box value placed once");
         assert_eq!(f.get_global([2, 1, 1], -1.0), 1.0);
         assert_eq!(f.get_global([0, 0, 0], -1.0), -1.0);
     }

@@ -47,11 +47,7 @@ impl Default for FlightOptions {
             fps: 30.0,
             potential: PotentialParams::default(),
             dynamics: Dynamics::default(),
-            modes: Modes {
-                compass: true,
-                leveling: true,
-                still: false,
-            },
+            modes: Modes { compass: true, leveling: true, still: false },
             safety: Safety::default(),
             reach_mm: None,
             max_sim_s: None,
@@ -133,20 +129,13 @@ impl Guide {
         while j + 1 < self.points.len() && self.points[j].distance(self.points[i]) < reach {
             j += 1;
         }
-        (self.points[j] - x)
-            .try_normalize()
-            .unwrap_or_else(|| self.ahead(i))
+        (self.points[j] - x).try_normalize().unwrap_or_else(|| self.ahead(i))
     }
 }
 
 /// Where a flight starts: the first centerline point from the start end that lies in the
 /// safe set, looking along the centerline, up against gravity.
-pub fn start_pose<S: DistanceStore>(
-    field: &PotentialField<S>,
-    cl: &Centerline,
-    dir: Direction,
-    opts: &FlightOptions,
-) -> Result<Pose> {
+pub fn start_pose<S: DistanceStore>(field: &PotentialField<S>, cl: &Centerline, dir: Direction, opts: &FlightOptions) -> Result<Pose> {
     if cl.points_mm.len() < 2 {
         return Err(Error::invalid("the centerline is empty"));
     }
@@ -158,19 +147,11 @@ pub fn start_pose<S: DistanceStore>(
             return Ok(Pose::looking(p, guide.ahead(i), up));
         }
     }
-    Err(Error::invalid(format!(
-        "no centerline point lies in the lumen at least {} mm from the wall",
-        opts.safety.min_wall_mm
-    )))
+    Err(Error::invalid(format!("no centerline point lies in the lumen at least {} mm from the wall", opts.safety.min_wall_mm)))
 }
 
 /// Flies from one end to the other without a user.
-pub fn fly<S: DistanceStore>(
-    field: &PotentialField<S>,
-    cl: &Centerline,
-    dir: Direction,
-    opts: &FlightOptions,
-) -> Result<Flight> {
+pub fn fly<S: DistanceStore>(field: &PotentialField<S>, cl: &Centerline, dir: Direction, opts: &FlightOptions) -> Result<Flight> {
     let guide = Guide::new(cl, dir);
     let pose = start_pose(field, cl, dir, opts)?;
     let mut sub = Submarine::new(field, pose, opts.safety)?;
@@ -238,10 +219,7 @@ pub fn fly<S: DistanceStore>(
         let mut input = Input::default();
         if t < escape_until {
             let boost = 1.5f64.powi(in_a_row.saturating_sub(1).min(8) as i32);
-            input.force = guide.toward_ahead(near, sub.state.x)
-                * opts.escape_factor
-                * boost
-                * sub.potential.ct.max(1.0);
+            input.force = guide.toward_ahead(near, sub.state.x) * opts.escape_factor * boost * sub.potential.ct.max(1.0);
         }
         let before = sub.state.x;
         let clock = Instant::now();
@@ -305,9 +283,5 @@ fn nearest_from(guide: &Guide, x: DVec3, last: usize) -> usize {
             bi = i;
         }
     }
-    if best.sqrt() > guide.radius[bi].max(5.0) {
-        guide.nearest(x)
-    } else {
-        bi
-    }
+    if best.sqrt() > guide.radius[bi].max(5.0) { guide.nearest(x) } else { bi }
 }

@@ -7,14 +7,14 @@ use std::time::Instant;
 use glam::DVec3;
 use serde::Serialize;
 
-use crate::cells::{CellOptions, Cells, build_cells};
+use crate::cells::{build_cells, CellOptions, Cells};
 use crate::centerline::{Centerline, CenterlineOptions};
-use crate::contacts::{ContactOptions, cut_contacts};
 use crate::distance::distance_to_wall;
-use crate::endpoints::{EndpointOptions, dt_fields, find_endpoints};
+use crate::contacts::{cut_contacts, ContactOptions};
+use crate::endpoints::{dt_fields, find_endpoints, EndpointOptions};
 use crate::field::Field;
-use crate::segment::{SegmentOptions, Segmentation, segment};
-use crate::surface::{Surface, extract_surface};
+use crate::segment::{segment, SegmentOptions, Segmentation};
+use crate::surface::{extract_surface, Surface};
 use crate::{Result, Volume};
 
 #[derive(Clone, Debug, Default)]
@@ -39,14 +39,7 @@ pub enum Stage {
 }
 
 impl Stage {
-    pub const ALL: [Stage; 6] = [
-        Stage::Segment,
-        Stage::Ds,
-        Stage::Dt,
-        Stage::Centerline,
-        Stage::Surface,
-        Stage::Cells,
-    ];
+    pub const ALL: [Stage; 6] = [Stage::Segment, Stage::Ds, Stage::Dt, Stage::Centerline, Stage::Surface, Stage::Cells];
     pub fn name(self) -> &'static str {
         match self {
             Stage::Segment => "segment",
@@ -99,11 +92,7 @@ pub struct Study {
 
 impl Study {
     pub fn source_mm(&self) -> DVec3 {
-        self.ct.geometry().index_to_local(DVec3::new(
-            self.source[0] as f64,
-            self.source[1] as f64,
-            self.source[2] as f64,
-        ))
+        self.ct.geometry().index_to_local(DVec3::new(self.source[0] as f64, self.source[1] as f64, self.source[2] as f64))
     }
     /// `n` points drawn uniformly in the lumen's box, kept where the nearest voxel is lumen
     /// (many lie within a voxel of the wall): for tests and benchmarks of the fields.
@@ -118,32 +107,19 @@ impl Study {
                 grid.lo[2] as f64 + rng.range(0.0, (grid.dims[2] - 1) as f64),
             );
             let v = ijk.round();
-            if self
-                .segmentation
-                .lumen
-                .get(v.x as usize, v.y as usize, v.z as usize)
-                != 0
-            {
+            if self.segmentation.lumen.get(v.x as usize, v.y as usize, v.z as usize) != 0 {
                 out.push(self.ct.geometry().index_to_local(ijk));
             }
         }
         out
     }
     pub fn target_mm(&self) -> DVec3 {
-        self.ct.geometry().index_to_local(DVec3::new(
-            self.target[0] as f64,
-            self.target[1] as f64,
-            self.target[2] as f64,
-        ))
+        self.ct.geometry().index_to_local(DVec3::new(self.target[0] as f64, self.target[1] as f64, self.target[2] as f64))
     }
 }
 
 /// Runs every stage. `progress` hears of each stage as it starts.
-pub fn prepare(
-    ct: Volume<i16>,
-    opts: &PrepOptions,
-    mut progress: impl FnMut(Stage),
-) -> Result<Study> {
+pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Stage)) -> Result<Study> {
     let start = Instant::now();
     let mut t = Timings::default();
     let mut clock = Instant::now();
@@ -161,34 +137,21 @@ pub fn prepare(
     lap(&mut t.ds);
 
     progress(Stage::Dt);
-    let ends = find_endpoints(
-        &seg.lumen,
-        &ds,
-        seg.seed_voxel,
-        &opts.endpoints,
-        &opts.centerline,
-    )?;
+    let ends = find_endpoints(&seg.lumen, &ds, seg.seed_voxel, &opts.endpoints, &opts.centerline)?;
     let mut ignored = 0.0;
     lap(&mut ignored);
     (t.skeleton, t.centerline) = (ends.skeleton_ms, ends.refine_ms);
     let cl = ends.centerline;
     let (source, target) = (ends.source, ends.target);
 
-    let taken = cut_contacts(
-        &mut seg.lumen,
-        &ds.grid,
-        &cl,
-        &[source, target],
-        &opts.contacts,
-    );
+    let taken = cut_contacts(&mut seg.lumen, &ds.grid, &cl, &[source, target], &opts.contacts);
     if !taken.is_empty() {
         // Ds must see the new walls too (the repulsion, the exports).
         ds = distance_to_wall(&seg.lumen)?;
     }
     lap(&mut t.contacts);
     let (mut dt_target, mut dt_source) = dt_fields(&seg.lumen, &ds.grid, source, target)?;
-    let joined =
-        |dt: &crate::distance::Geodesic| dt.dist.get_global(source, f32::INFINITY).is_finite();
+    let joined = |dt: &crate::distance::Geodesic| dt.dist.get_global(source, f32::INFINITY).is_finite();
     let mut contact_voxels = taken.len();
     if contact_voxels > 0 && !joined(&dt_target) {
         // The walls closed the colon itself (a centerline across a contact): go without.
@@ -200,9 +163,7 @@ pub fn prepare(
         (dt_target, dt_source) = dt_fields(&seg.lumen, &ds.grid, source, target)?;
     }
     if !joined(&dt_target) {
-        return Err(crate::Error::invalid(
-            "the target cannot be reached from the source through the lumen",
-        ));
+        return Err(crate::Error::invalid("the target cannot be reached from the source through the lumen"));
     }
     seg.lumen_voxels -= contact_voxels;
     lap(&mut t.dt);

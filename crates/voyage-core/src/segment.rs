@@ -44,14 +44,7 @@ pub struct SegmentOptions {
 
 impl Default for SegmentOptions {
     fn default() -> Self {
-        SegmentOptions {
-            air_hu: -500,
-            seed_mm: None,
-            mask: None,
-            min_report_ml: 0.5,
-            min_colon_ml: 10.0,
-            fluid_hu: Some(200),
-        }
+        SegmentOptions { air_hu: -500, seed_mm: None, mask: None, min_report_ml: 0.5, min_colon_ml: 10.0, fluid_hu: Some(200) }
     }
 }
 
@@ -123,16 +116,8 @@ impl Runs {
 /// Segments the colon lumen from a CT (or takes it from a mask).
 pub fn segment(vol: &Volume<i16>, opts: &SegmentOptions) -> Result<Segmentation> {
     let from_mask = opts.mask.unwrap_or_else(|| is_mask(vol));
-    let mut runs = if from_mask {
-        extract_runs(vol, |v| v != 0)
-    } else {
-        extract_runs(vol, |v| v < opts.air_hu)
-    };
-    let inside = if from_mask {
-        vec![true; runs.runs.len()]
-    } else {
-        inside_body(&runs, vol.dims())
-    };
+    let mut runs = if from_mask { extract_runs(vol, |v| v != 0) } else { extract_runs(vol, |v| v < opts.air_hu) };
+    let inside = if from_mask { vec![true; runs.runs.len()] } else { inside_body(&runs, vol.dims()) };
     if !from_mask {
         fill_stats(&mut runs, &inside, vol);
     }
@@ -153,15 +138,7 @@ pub fn segment(vol: &Volume<i16>, opts: &SegmentOptions) -> Result<Segmentation>
     };
     let lumen_voxels = comps[colon].voxels + fluid_voxels;
     let (components, small) = report(comps, colon, opts.min_report_ml);
-    Ok(Segmentation {
-        lumen,
-        lumen_voxels,
-        components,
-        small_components: small,
-        fluid_voxels,
-        from_mask,
-        seed_voxel,
-    })
+    Ok(Segmentation { lumen, lumen_voxels, components, small_components: small, fluid_voxels, from_mask, seed_voxel })
 }
 
 /// A volume holding only 0 and 1 is a mask, not a CT.
@@ -190,10 +167,7 @@ fn extract_runs(vol: &Volume<i16>, is_air: impl Fn(i16) -> bool + Sync) -> Runs 
                     while i < nx && is_air(row[i]) {
                         i += 1;
                     }
-                    runs.push(Run {
-                        x0: x0 as u32,
-                        x1: i as u32,
-                    });
+                    runs.push(Run { x0: x0 as u32, x1: i as u32 });
                 }
                 counts.push((runs.len() - before) as u32);
             }
@@ -201,13 +175,7 @@ fn extract_runs(vol: &Volume<i16>, is_air: impl Fn(i16) -> bool + Sync) -> Runs 
         })
         .collect();
     let total: usize = per_slice.iter().map(|s| s.0.len()).sum();
-    let mut out = Runs {
-        runs: Vec::with_capacity(total),
-        row_start: Vec::with_capacity(ny * nz + 1),
-        hu_sum: vec![0; total],
-        dark: vec![0; total],
-        ny,
-    };
+    let mut out = Runs { runs: Vec::with_capacity(total), row_start: Vec::with_capacity(ny * nz + 1), hu_sum: vec![0; total], dark: vec![0; total], ny };
     out.row_start.push(0);
     for (runs, counts) in per_slice {
         for c in counts {
@@ -233,10 +201,7 @@ fn fill_stats(runs: &mut Runs, inside: &[bool], vol: &Volume<i16>) {
                     let run = runs.runs[r];
                     out.push(if inside[r] {
                         let seg = &slice[j * nx + run.x0 as usize..j * nx + run.x1 as usize];
-                        (
-                            seg.iter().map(|&v| v as i64).sum(),
-                            seg.iter().filter(|&&v| v < -950).count() as u32,
-                        )
+                        (seg.iter().map(|&v| v as i64).sum(), seg.iter().filter(|&&v| v < -950).count() as u32)
                     } else {
                         (0, 0)
                     });
@@ -252,12 +217,7 @@ fn fill_stats(runs: &mut Runs, inside: &[bool], vol: &Volume<i16>) {
 }
 
 /// Calls `f(a, b)` for every pair of runs, one in row `ra` and one in row `rb`, that share an x.
-fn for_overlaps(
-    runs: &Runs,
-    ra: std::ops::Range<usize>,
-    rb: std::ops::Range<usize>,
-    mut f: impl FnMut(usize, usize),
-) {
+fn for_overlaps(runs: &Runs, ra: std::ops::Range<usize>, rb: std::ops::Range<usize>, mut f: impl FnMut(usize, usize)) {
     let (mut a, mut b) = (ra.start, rb.start);
     while a < ra.end && b < rb.end {
         let (p, q) = (runs.runs[a], runs.runs[b]);
@@ -282,9 +242,7 @@ fn inside_body(runs: &Runs, dims: [usize; 3]) -> Vec<bool> {
             let last = runs.row(ny - 1, k).end;
             let mut uf = UnionFind::new(last - first);
             for j in 1..ny {
-                for_overlaps(runs, runs.row(j - 1, k), runs.row(j, k), |a, b| {
-                    uf.union(a - first, b - first)
-                });
+                for_overlaps(runs, runs.row(j - 1, k), runs.row(j, k), |a, b| uf.union(a - first, b - first));
             }
             let mut outside = vec![false; last - first];
             for j in 0..ny {
@@ -330,13 +288,7 @@ fn connect_3d(runs: &Runs, inside: &[bool], dims: [usize; 3], uf: &mut UnionFind
 }
 
 /// Per component statistics; returns the components and, per run, its component (or MAX).
-fn component_stats(
-    runs: &Runs,
-    inside: &[bool],
-    vol: &Volume<i16>,
-    uf: &mut UnionFind,
-    from_mask: bool,
-) -> (Vec<Component>, Vec<u32>) {
+fn component_stats(runs: &Runs, inside: &[bool], vol: &Volume<i16>, uf: &mut UnionFind, from_mask: bool) -> (Vec<Component>, Vec<u32>) {
     let [_, ny, nz] = vol.dims();
     let sp = vol.spacing();
     let mut comp_of_root = vec![u32::MAX; runs.runs.len()];
@@ -360,10 +312,7 @@ fn component_stats(
                 let root = uf.find(r);
                 if comp_of_root[root] == u32::MAX {
                     comp_of_root[root] = acc.len() as u32;
-                    acc.push(Acc {
-                        lo: [usize::MAX; 3],
-                        ..Default::default()
-                    });
+                    acc.push(Acc { lo: [usize::MAX; 3], ..Default::default() });
                 }
                 let c = comp_of_root[root];
                 run_comp[r] = c;
@@ -375,11 +324,7 @@ fn component_stats(
                 a.sum[1] += (j * len) as f64;
                 a.sum[2] += (k * len) as f64;
                 a.lo = [a.lo[0].min(run.x0 as usize), a.lo[1].min(j), a.lo[2].min(k)];
-                a.hi = [
-                    a.hi[0].max(run.x1 as usize - 1),
-                    a.hi[1].max(j),
-                    a.hi[2].max(k),
-                ];
+                a.hi = [a.hi[0].max(run.x1 as usize - 1), a.hi[1].max(j), a.hi[2].max(k)];
                 a.hu += runs.hu_sum[r];
                 a.dark += runs.dark[r] as u64;
             }
@@ -393,11 +338,7 @@ fn component_stats(
             Component {
                 voxels: a.n,
                 volume_ml: n * voxel_ml,
-                centroid_mm: [
-                    a.sum[0] / n * sp[0],
-                    a.sum[1] / n * sp[1],
-                    a.sum[2] / n * sp[2],
-                ],
+                centroid_mm: [a.sum[0] / n * sp[0], a.sum[1] / n * sp[1], a.sum[2] / n * sp[2]],
                 bbox_lo: a.lo,
                 bbox_hi: a.hi,
                 mean_hu: (!from_mask).then(|| a.hu as f64 / n),
@@ -422,29 +363,15 @@ fn classify_lungs(comps: &mut [Component], from_mask: bool) {
 }
 
 /// Step 5: the seed's component, or the largest component that is not lung.
-fn choose_colon(
-    comps: &[Component],
-    runs: &Runs,
-    run_comp: &[u32],
-    vol: &Volume<i16>,
-    opts: &SegmentOptions,
-) -> Result<usize> {
+fn choose_colon(comps: &[Component], runs: &Runs, run_comp: &[u32], vol: &Volume<i16>, opts: &SegmentOptions) -> Result<usize> {
     if let Some(mm) = opts.seed_mm {
         let [i, j, k] = voxel_of(vol, mm)?;
         let row = runs.row(j, k);
-        let hit = row
-            .clone()
-            .find(|&r| runs.runs[r].x0 as usize <= i && i < runs.runs[r].x1 as usize);
+        let hit = row.clone().find(|&r| runs.runs[r].x0 as usize <= i && i < runs.runs[r].x1 as usize);
         return match hit.map(|r| run_comp[r]) {
-            Some(c) if c != u32::MAX && comps[c as usize].kind != ComponentKind::Lung => {
-                Ok(c as usize)
-            }
-            Some(c) if c != u32::MAX => Err(Error::invalid(format!(
-                "the seed {mm} mm lies in a lung, not in the colon"
-            ))),
-            Some(_) => Err(Error::invalid(format!(
-                "the seed {mm} mm lies in air outside the body"
-            ))),
+            Some(c) if c != u32::MAX && comps[c as usize].kind != ComponentKind::Lung => Ok(c as usize),
+            Some(c) if c != u32::MAX => Err(Error::invalid(format!("the seed {mm} mm lies in a lung, not in the colon"))),
+            Some(_) => Err(Error::invalid(format!("the seed {mm} mm lies in air outside the body"))),
             None => Err(Error::invalid(format!(
                 "the seed {mm} mm is not in air (HU {} ≥ {})",
                 vol.get(i, j, k),
@@ -471,9 +398,7 @@ fn choose_colon(
 fn voxel_of(vol: &Volume<i16>, mm: DVec3) -> Result<[usize; 3]> {
     let ijk = vol.geometry().local_to_index(mm).round();
     if !vol.geometry().contains_index(ijk) {
-        return Err(Error::invalid(format!(
-            "the seed {mm} mm lies outside the volume"
-        )));
+        return Err(Error::invalid(format!("the seed {mm} mm lies outside the volume")));
     }
     Ok([ijk.x as usize, ijk.y as usize, ijk.z as usize])
 }
@@ -481,20 +406,16 @@ fn voxel_of(vol: &Volume<i16>, mm: DVec3) -> Result<[usize; 3]> {
 fn rasterize(runs: &Runs, run_comp: &[u32], colon: usize, vol: &Volume<i16>) -> Result<Volume<u8>> {
     let [nx, ny, _] = vol.dims();
     let mut lumen = Volume::filled(vol.geometry().clone(), 0u8)?;
-    lumen
-        .data_mut()
-        .par_chunks_mut(nx * ny)
-        .enumerate()
-        .for_each(|(k, slab)| {
-            for j in 0..ny {
-                for r in runs.row(j, k) {
-                    if run_comp[r] == colon as u32 {
-                        let run = runs.runs[r];
-                        slab[j * nx + run.x0 as usize..j * nx + run.x1 as usize].fill(1);
-                    }
+    lumen.data_mut().par_chunks_mut(nx * ny).enumerate().for_each(|(k, slab)| {
+        for j in 0..ny {
+            for r in runs.row(j, k) {
+                if run_comp[r] == colon as u32 {
+                    let run = runs.runs[r];
+                    slab[j * nx + run.x0 as usize..j * nx + run.x1 as usize].fill(1);
                 }
             }
-        });
+        }
+    });
     Ok(lumen)
 }
 
@@ -531,9 +452,7 @@ fn add_tagged_fluid(vol: &Volume<i16>, lumen: &mut Volume<u8>, fluid_hu: i16) ->
         for j in 0..ny {
             for r in runs.row(j, k) {
                 let run = runs.runs[r];
-                let n = (run.x0..run.x1)
-                    .filter(|&i| air_near(lumen, i as usize, j, k))
-                    .count();
+                let n = (run.x0..run.x1).filter(|&i| air_near(lumen, i as usize, j, k)).count();
                 if n > 0 {
                     contacts[uf.find(r)] += n;
                 }
@@ -570,12 +489,7 @@ fn add_tagged_fluid(vol: &Volume<i16>, lumen: &mut Volume<u8>, fluid_hu: i16) ->
         }
         let [i, j, k] = g.ijk(idx);
         for (a, b, c) in face_neighbours(i, j, k, 1) {
-            if a < nx
-                && b < ny
-                && c < nz
-                && lumen.get(a, b, c) == 0
-                && (beside(lumen, a, b, c, AIR) || air_near(lumen, a, b, c))
-            {
+            if a < nx && b < ny && c < nz && lumen.get(a, b, c) == 0 && (beside(lumen, a, b, c, AIR) || air_near(lumen, a, b, c)) {
                 layer.push(g.index(a, b, c));
             }
         }
@@ -595,14 +509,7 @@ fn add_tagged_fluid(vol: &Volume<i16>, lumen: &mut Volume<u8>, fluid_hu: i16) ->
 /// The six voxels `d` steps away along the axes; below zero wraps to a huge index, which the
 /// callers' bounds tests reject.
 fn face_neighbours(i: usize, j: usize, k: usize, d: usize) -> [(usize, usize, usize); 6] {
-    [
-        (i.wrapping_sub(d), j, k),
-        (i + d, j, k),
-        (i, j.wrapping_sub(d), k),
-        (i, j + d, k),
-        (i, j, k.wrapping_sub(d)),
-        (i, j, k + d),
-    ]
+    [(i.wrapping_sub(d), j, k), (i + d, j, k), (i, j.wrapping_sub(d), k), (i, j + d, k), (i, j, k.wrapping_sub(d)), (i, j, k + d)]
 }
 
 /// The colon voxel lowest in k (first slice), middle of its first run: used as the seed when
@@ -645,10 +552,7 @@ struct UnionFind {
 
 impl UnionFind {
     fn new(n: usize) -> Self {
-        UnionFind {
-            parent: (0..n as u32).collect(),
-            size: vec![1; n],
-        }
+        UnionFind { parent: (0..n as u32).collect(), size: vec![1; n] }
     }
     fn find(&mut self, mut x: usize) -> usize {
         while self.parent[x] as usize != x {
@@ -684,27 +588,14 @@ mod tests {
         for k in 0..40 {
             for j in 0..50 {
                 for i in 0..60 {
-                    let body = ((i as f64 - 30.0) / 27.0).powi(2)
-                        + ((j as f64 - 25.0) / 22.0).powi(2)
-                        < 1.0;
+                    let body = ((i as f64 - 30.0) / 27.0).powi(2) + ((j as f64 - 25.0) / 22.0).powi(2) < 1.0;
                     if !body {
                         continue;
                     }
-                    let tube = (i as f64 - 20.0).powi(2) + (j as f64 - 25.0).powi(2) < 36.0
-                        && (3..37).contains(&k);
-                    let pocket = (i as f64 - 40.0).powi(2)
-                        + (j as f64 - 20.0).powi(2)
-                        + (k as f64 - 10.0).powi(2)
-                        < 6.0;
-                    let lung =
-                        (i as f64 - 40.0).powi(2) + (j as f64 - 30.0).powi(2) < 30.0 && k >= 30;
-                    let hu = if tube || pocket {
-                        -1000
-                    } else if lung {
-                        -850
-                    } else {
-                        40
-                    };
+                    let tube = (i as f64 - 20.0).powi(2) + (j as f64 - 25.0).powi(2) < 36.0 && (3..37).contains(&k);
+                    let pocket = (i as f64 - 40.0).powi(2) + (j as f64 - 20.0).powi(2) + (k as f64 - 10.0).powi(2) < 6.0;
+                    let lung = (i as f64 - 40.0).powi(2) + (j as f64 - 30.0).powi(2) < 30.0 && k >= 30;
+                    let hu = if tube || pocket { -1000 } else if lung { -850 } else { 40 };
                     v.set(i, j, k, hu);
                 }
             }
@@ -714,17 +605,12 @@ mod tests {
 
     /// The toy's tube holds 5.6 ml of gas: below the default minimum for a colon.
     fn toy_options() -> SegmentOptions {
-        SegmentOptions {
-            min_colon_ml: 1.0,
-            ..Default::default()
-        }
+        SegmentOptions { min_colon_ml: 1.0, ..Default::default() }
     }
 
     #[test]
     fn too_little_gas_is_no_colon() {
-        let e = segment(&toy(), &SegmentOptions::default())
-            .unwrap_err()
-            .to_string();
+        let e = segment(&toy(), &SegmentOptions::default()).unwrap_err().to_string();
         assert!(e.contains("no colon lumen") && e.contains("5.6 ml"), "{e}");
     }
 
@@ -737,52 +623,24 @@ mod tests {
         assert_eq!(s.lumen.get(40, 20, 10), 0, "small pocket taken");
         assert_eq!(s.lumen.get(40, 30, 35), 0, "lung taken");
         assert_eq!(s.lumen.get(0, 0, 0), 0, "outside air taken");
-        assert_eq!(
-            s.lumen_voxels,
-            s.lumen.data().iter().filter(|&&m| m == 1).count()
-        );
+        assert_eq!(s.lumen_voxels, s.lumen.data().iter().filter(|&&m| m == 1).count());
         assert!(s.components.iter().any(|c| c.kind == ComponentKind::Lung));
         assert_eq!(s.components[0].kind, ComponentKind::Colon);
-        assert_eq!(
-            s.seed_voxel[2], 3,
-            "automatic seed at the lowest slice of the colon"
-        );
+        assert_eq!(s.seed_voxel[2], 3, "automatic seed at the lowest slice of the colon");
     }
 
     #[test]
     fn seed_picks_its_component_and_bad_seeds_fail() {
         let v = toy();
-        let seeded = SegmentOptions {
-            seed_mm: Some(DVec3::new(40.0, 20.0, 15.0)),
-            ..Default::default()
-        };
+        let seeded = SegmentOptions { seed_mm: Some(DVec3::new(40.0, 20.0, 15.0)), ..Default::default() };
         let s = segment(&v, &seeded).unwrap();
         assert_eq!(s.lumen.get(40, 20, 10), 1);
         assert_eq!(s.lumen.get(20, 25, 20), 0);
-        let in_tissue = SegmentOptions {
-            seed_mm: Some(DVec3::new(30.0, 10.0, 30.0)),
-            ..Default::default()
-        };
-        assert!(
-            segment(&v, &in_tissue)
-                .unwrap_err()
-                .to_string()
-                .contains("not in air")
-        );
-        let outside = SegmentOptions {
-            seed_mm: Some(DVec3::new(0.0, 0.0, 0.0)),
-            ..Default::default()
-        };
-        assert!(
-            segment(&v, &outside)
-                .unwrap_err()
-                .to_string()
-                .contains("outside the body")
-        );
-        let beyond = SegmentOptions {
-            seed_mm: Some(DVec3::new(500.0, 0.0, 0.0)),
-            ..Default::default()
-        };
+        let in_tissue = SegmentOptions { seed_mm: Some(DVec3::new(30.0, 10.0, 30.0)), ..Default::default() };
+        assert!(segment(&v, &in_tissue).unwrap_err().to_string().contains("not in air"));
+        let outside = SegmentOptions { seed_mm: Some(DVec3::new(0.0, 0.0, 0.0)), ..Default::default() };
+        assert!(segment(&v, &outside).unwrap_err().to_string().contains("outside the body"));
+        let beyond = SegmentOptions { seed_mm: Some(DVec3::new(500.0, 0.0, 0.0)), ..Default::default() };
         assert!(segment(&v, &beyond).is_err());
     }
 
@@ -800,11 +658,6 @@ mod tests {
     fn no_gas_is_an_error() {
         let g = Geometry::new([10, 10, 10], [1.0; 3], [0.0; 3]).unwrap();
         let v = Volume::filled(g, 40i16).unwrap();
-        assert!(
-            segment(&v, &SegmentOptions::default())
-                .unwrap_err()
-                .to_string()
-                .contains("no colon")
-        );
+        assert!(segment(&v, &SegmentOptions::default()).unwrap_err().to_string().contains("no colon"));
     }
 }

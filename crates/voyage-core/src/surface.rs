@@ -42,12 +42,7 @@ pub struct Surface {
 
 /// Marching cubes over `grid` (which must hold the whole lumen, e.g. its bounding box grown
 /// by one voxel). `ct`: HU with `iso` as threshold; None: the mask alone, at 0.5.
-pub fn extract_surface(
-    lumen: &Volume<u8>,
-    ct: Option<&Volume<i16>>,
-    grid: &BoxGrid,
-    iso: f32,
-) -> Result<Surface> {
+pub fn extract_surface(lumen: &Volume<u8>, ct: Option<&Volume<i16>>, grid: &BoxGrid, iso: f32) -> Result<Surface> {
     let s = Scalar::new(lumen, ct, grid, iso);
     let sp = lumen.spacing();
     let spacing = Vec3::new(sp[0] as f32, sp[1] as f32, sp[2] as f32);
@@ -69,13 +64,7 @@ struct Scalar<'a> {
 
 impl<'a> Scalar<'a> {
     fn new(lumen: &'a Volume<u8>, ct: Option<&'a Volume<i16>>, grid: &BoxGrid, iso: f32) -> Self {
-        Scalar {
-            dims: grid.dims.map(|d| d + 2),
-            lo: grid.lo,
-            lumen,
-            ct,
-            iso,
-        }
+        Scalar { dims: grid.dims.map(|d| d + 2), lo: grid.lo, lumen, ct, iso }
     }
 
     /// The volume voxel of a padded position, None in the padding.
@@ -99,11 +88,7 @@ impl<'a> Scalar<'a> {
                 if m { x.max(0.5) } else { x.min(-1.0) }
             }
             None => {
-                if m {
-                    0.5
-                } else {
-                    -0.5
-                }
+                if m { 0.5 } else { -0.5 }
             }
         }
     }
@@ -115,14 +100,8 @@ impl<'a> Scalar<'a> {
             return;
         }
         let n = self.dims[0] - 2;
-        let start = self
-            .lumen
-            .geometry()
-            .index(self.lo[0], j - 1 + self.lo[1], k - 1 + self.lo[2]);
-        for (o, &m) in out[1..=n]
-            .iter_mut()
-            .zip(&self.lumen.data()[start..start + n])
-        {
+        let start = self.lumen.geometry().index(self.lo[0], j - 1 + self.lo[1], k - 1 + self.lo[2]);
+        for (o, &m) in out[1..=n].iter_mut().zip(&self.lumen.data()[start..start + n]) {
             *o = (m != 0) as u8;
         }
     }
@@ -149,26 +128,10 @@ const fn corner(c: usize) -> [usize; 3] {
 }
 
 /// The 12 cube edges as corner pairs; edges 0–3 run along x, 4–7 along y, 8–11 along z.
-const EDGES: [(usize, usize); 12] = [
-    (0, 1),
-    (2, 3),
-    (4, 5),
-    (6, 7),
-    (0, 2),
-    (1, 3),
-    (4, 6),
-    (5, 7),
-    (0, 4),
-    (1, 5),
-    (2, 6),
-    (3, 7),
-];
+const EDGES: [(usize, usize); 12] = [(0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0, 4), (1, 5), (2, 6), (3, 7)];
 
 fn edge_of(a: usize, b: usize) -> usize {
-    EDGES
-        .iter()
-        .position(|&(p, q)| (p, q) == (a.min(b), a.max(b)))
-        .expect("corners share an edge")
+    EDGES.iter().position(|&(p, q)| (p, q) == (a.min(b), a.max(b))).expect("corners share an edge")
 }
 
 /// Triangles (as cube edges) for each of the 256 inside/outside patterns.
@@ -248,11 +211,7 @@ struct EdgeCache {
 
 impl EdgeCache {
     fn new(nx: usize, ny: usize) -> Self {
-        EdgeCache {
-            nx,
-            x: vec![u32::MAX; nx * ny],
-            y: vec![u32::MAX; nx * ny],
-        }
+        EdgeCache { nx, x: vec![u32::MAX; nx * ny], y: vec![u32::MAX; nx * ny] }
     }
     fn clear(&mut self) {
         self.x.fill(u32::MAX);
@@ -275,18 +234,12 @@ fn march(s: &Scalar, spacing: Vec3, vol_dims: [usize; 3]) -> Surface {
         .map(|r| {
             s.row_bits(r % ny, r / ny, &mut bits);
             match bits.iter().position(|&b| b != 0) {
-                Some(first) => (
-                    first,
-                    bits.iter().rposition(|&b| b != 0).unwrap_or(first) + 1,
-                ),
+                Some(first) => (first, bits.iter().rposition(|&b| b != 0).unwrap_or(first) + 1),
                 None => (0, 0),
             }
         })
         .collect();
-    let plane_has: Vec<bool> = row_span
-        .chunks(ny)
-        .map(|p| p.iter().any(|r| r.1 > r.0))
-        .collect();
+    let plane_has: Vec<bool> = row_span.chunks(ny).map(|p| p.iter().any(|r| r.1 > r.0)).collect();
     let mut rowbuf = vec![vec![0u8; nx]; 4];
     for k in 0..nz - 1 {
         if !(plane_has[k] || plane_has[k + 1]) {
@@ -296,27 +249,13 @@ fn march(s: &Scalar, spacing: Vec3, vol_dims: [usize; 3]) -> Surface {
         }
         zed.fill(u32::MAX);
         for j in 0..ny - 1 {
-            let rows = [
-                j + ny * k,
-                j + 1 + ny * k,
-                j + ny * (k + 1),
-                j + 1 + ny * (k + 1),
-            ];
-            let spans: Vec<(usize, usize)> = rows
-                .iter()
-                .map(|&r| row_span[r])
-                .filter(|sp| sp.1 > sp.0)
-                .collect();
+            let rows = [j + ny * k, j + 1 + ny * k, j + ny * (k + 1), j + 1 + ny * (k + 1)];
+            let spans: Vec<(usize, usize)> = rows.iter().map(|&r| row_span[r]).filter(|sp| sp.1 > sp.0).collect();
             if spans.is_empty() {
                 continue;
             }
             // Cubes i with a lumen corner at x = i or i + 1.
-            let i_lo = spans
-                .iter()
-                .map(|sp| sp.0)
-                .min()
-                .unwrap_or(0)
-                .saturating_sub(1);
+            let i_lo = spans.iter().map(|sp| sp.0).min().unwrap_or(0).saturating_sub(1);
             let i_hi = spans.iter().map(|sp| sp.1).max().unwrap_or(0).min(nx - 1);
             for (buf, &r) in rowbuf.iter_mut().zip(&rows) {
                 s.row_bits(r % ny, r / ny, buf);
@@ -339,26 +278,13 @@ fn march(s: &Scalar, spacing: Vec3, vol_dims: [usize; 3]) -> Surface {
                     for &e in tri {
                         let e = e as usize;
                         if vid[e] == u32::MAX {
-                            vid[e] = edge_vertex(
-                                s,
-                                spacing,
-                                [i, j, k],
-                                e,
-                                &mut lower,
-                                &mut upper,
-                                &mut zed,
-                                &mut out.mesh,
-                            );
+                            vid[e] = edge_vertex(s, spacing, [i, j, k], e, &mut lower, &mut upper, &mut zed, &mut out.mesh);
                         }
                     }
                 }
                 let owner = owner_voxel(s, [i, j, k], case, vol_dims);
                 for tri in tris {
-                    out.mesh.triangles.push([
-                        vid[tri[0] as usize],
-                        vid[tri[1] as usize],
-                        vid[tri[2] as usize],
-                    ]);
+                    out.mesh.triangles.push([vid[tri[0] as usize], vid[tri[1] as usize], vid[tri[2] as usize]]);
                     out.owner_voxel.push(owner);
                 }
             }
@@ -381,26 +307,13 @@ fn owner_voxel(s: &Scalar, c: [usize; 3], case: usize, vol_dims: [usize; 3]) -> 
     // the cell of the cube or in a neighbouring one.
     let [a, b, d] = corner(case.trailing_zeros() as usize);
     // Padded → volume: a lumen corner is never in the padding.
-    let g = [
-        c[0] + a - 1 + s.lo[0],
-        c[1] + b - 1 + s.lo[1],
-        c[2] + d - 1 + s.lo[2],
-    ];
+    let g = [c[0] + a - 1 + s.lo[0], c[1] + b - 1 + s.lo[1], c[2] + d - 1 + s.lo[2]];
     (g[0] + vol_dims[0] * (g[1] + vol_dims[1] * g[2])) as u32
 }
 
 /// The vertex on cube edge `e` of the cube at padded `c`, made once and shared.
 #[allow(clippy::too_many_arguments)]
-fn edge_vertex(
-    s: &Scalar,
-    spacing: Vec3,
-    c: [usize; 3],
-    e: usize,
-    lower: &mut EdgeCache,
-    upper: &mut EdgeCache,
-    zed: &mut [u32],
-    mesh: &mut Mesh,
-) -> u32 {
+fn edge_vertex(s: &Scalar, spacing: Vec3, c: [usize; 3], e: usize, lower: &mut EdgeCache, upper: &mut EdgeCache, zed: &mut [u32], mesh: &mut Mesh) -> u32 {
     let (a, b) = EDGES[e];
     let pa = corner(a).map(|o| o);
     let pb = corner(b);
@@ -409,20 +322,8 @@ fn edge_vertex(
     let nx = lower.nx;
     let slot = ga[0] + nx * ga[1];
     let cache: &mut u32 = match e {
-        0..=3 => {
-            if ga[2] == c[2] {
-                &mut lower.x[slot]
-            } else {
-                &mut upper.x[slot]
-            }
-        }
-        4..=7 => {
-            if ga[2] == c[2] {
-                &mut lower.y[slot]
-            } else {
-                &mut upper.y[slot]
-            }
-        }
+        0..=3 => if ga[2] == c[2] { &mut lower.x[slot] } else { &mut upper.x[slot] },
+        4..=7 => if ga[2] == c[2] { &mut lower.y[slot] } else { &mut upper.y[slot] },
         _ => &mut zed[slot],
     };
     if *cache != u32::MAX {
@@ -447,8 +348,8 @@ fn edge_vertex(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Geometry;
     use crate::field::bounding_box;
+    use crate::Geometry;
     use std::collections::HashMap;
 
     fn ball(dims: [usize; 3], sp: [f64; 3], c: [f64; 3], r: f64) -> Volume<u8> {
@@ -456,11 +357,7 @@ mod tests {
         let data = (0..g.len())
             .map(|idx| {
                 let [i, j, k] = g.ijk(idx);
-                let p = [
-                    i as f64 * sp[0] - c[0],
-                    j as f64 * sp[1] - c[1],
-                    k as f64 * sp[2] - c[2],
-                ];
+                let p = [i as f64 * sp[0] - c[0], j as f64 * sp[1] - c[1], k as f64 * sp[2] - c[2]];
                 ((p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() < r) as u8
             })
             .collect();
@@ -474,11 +371,7 @@ mod tests {
         let data = (0..g.len())
             .map(|idx| {
                 let [i, j, k] = g.ijk(idx);
-                let p = [
-                    i as f64 * sp[0] - c[0],
-                    j as f64 * sp[1] - c[1],
-                    k as f64 * sp[2] - c[2],
-                ];
+                let p = [i as f64 * sp[0] - c[0], j as f64 * sp[1] - c[1], k as f64 * sp[2] - c[2]];
                 let d = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() - r; // signed, mm
                 let t = (d / sp[0] + 0.5).clamp(0.0, 1.0);
                 (-1000.0 + 1040.0 * t).round() as i16
@@ -521,11 +414,7 @@ mod tests {
             }
             for (&(a, b), &n) in &edges {
                 assert_eq!(n, 1, "directed edge repeated");
-                assert_eq!(
-                    edges.get(&(b, a)),
-                    Some(&1),
-                    "edge without its twin: not closed"
-                );
+                assert_eq!(edges.get(&(b, a)), Some(&1), "edge without its twin: not closed");
             }
             let centre = Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32);
             let mut max_err = 0.0f32;
@@ -533,18 +422,12 @@ mod tests {
                 let [a, b, d] = t.map(|v| Vec3::from_array(mesh.positions[v as usize]));
                 let face_n = (b - a).cross(d - a);
                 let to_centre = centre - (a + b + d) / 3.0;
-                assert!(
-                    face_n.dot(to_centre) > 0.0,
-                    "triangle faces away from the lumen"
-                );
+                assert!(face_n.dot(to_centre) > 0.0, "triangle faces away from the lumen");
             }
             for (p, n) in mesh.positions.iter().zip(&mesh.normals) {
                 let p = Vec3::from_array(*p);
                 max_err = max_err.max(((p - centre).length() - r as f32).abs());
-                assert!(
-                    Vec3::from_array(*n).dot(centre - p) > 0.0,
-                    "normal points out of the lumen"
-                );
+                assert!(Vec3::from_array(*n).dot(centre - p) > 0.0, "normal points out of the lumen");
             }
             let bound = if ct.is_some() { 0.5 } else { 1.2 };
             assert!(max_err < bound, "surface off the sphere by {max_err} mm");

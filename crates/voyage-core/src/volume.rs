@@ -30,12 +30,7 @@ pub struct Geometry {
 impl Geometry {
     /// Axis-aligned geometry with the identity direction (i→L, j→P, k→S).
     pub fn new(dims: [usize; 3], spacing: [f64; 3], origin: [f64; 3]) -> Result<Self> {
-        let g = Geometry {
-            dims,
-            spacing,
-            origin,
-            direction: IDENTITY,
-        };
+        let g = Geometry { dims, spacing, origin, direction: IDENTITY };
         g.validate()?;
         Ok(g)
     }
@@ -44,23 +39,14 @@ impl Geometry {
     pub fn validate(&self) -> Result<()> {
         check_dims(self.dims.map(|d| d as u64))?;
         if self.spacing.iter().any(|s| !s.is_finite() || *s <= 0.0) {
-            return Err(Error::invalid(format!(
-                "voxel spacing {:?} mm is not positive and finite",
-                self.spacing
-            )));
+            return Err(Error::invalid(format!("voxel spacing {:?} mm is not positive and finite", self.spacing)));
         }
         if self.origin.iter().any(|o| !o.is_finite()) {
-            return Err(Error::invalid(format!(
-                "origin {:?} is not finite",
-                self.origin
-            )));
+            return Err(Error::invalid(format!("origin {:?} is not finite", self.origin)));
         }
         let d = self.direction_mat();
         if !d.is_finite() || (d.determinant().abs() - 1.0).abs() > 1e-3 {
-            return Err(Error::invalid(format!(
-                "direction matrix {:?} is not a rotation",
-                self.direction
-            )));
+            return Err(Error::invalid(format!("direction matrix {:?} is not a rotation", self.direction)));
         }
         Ok(())
     }
@@ -138,11 +124,7 @@ impl Geometry {
 
     /// Size of the volume in mm (from first to last voxel centre, plus one voxel).
     pub fn extent_mm(&self) -> DVec3 {
-        DVec3::new(
-            self.dims[0] as f64,
-            self.dims[1] as f64,
-            self.dims[2] as f64,
-        ) * self.spacing_vec()
+        DVec3::new(self.dims[0] as f64, self.dims[1] as f64, self.dims[2] as f64) * self.spacing_vec()
     }
 
     /// Whether the continuous index lies inside the grid of voxel centres.
@@ -181,11 +163,7 @@ pub fn grid_index(dims: [usize; 3], i: usize, j: usize, k: usize) -> usize {
 /// Inverse of [`grid_index`].
 #[inline]
 pub fn grid_ijk(dims: [usize; 3], index: usize) -> [usize; 3] {
-    [
-        index % dims[0],
-        (index / dims[0]) % dims[1],
-        index / (dims[0] * dims[1]),
-    ]
+    [index % dims[0], (index / dims[0]) % dims[1], index / (dims[0] * dims[1])]
 }
 
 pub const IDENTITY: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
@@ -196,15 +174,11 @@ pub fn check_dims(dims: [u64; 3]) -> Result<()> {
         return Err(Error::invalid(format!("dimensions {dims:?} contain zero")));
     }
     if dims.iter().any(|&d| d > MAX_DIM) {
-        return Err(Error::invalid(format!(
-            "dimensions {dims:?} exceed the limit of {MAX_DIM} per axis"
-        )));
+        return Err(Error::invalid(format!("dimensions {dims:?} exceed the limit of {MAX_DIM} per axis")));
     }
     let n = dims[0].saturating_mul(dims[1]).saturating_mul(dims[2]);
     if n > MAX_VOXELS {
-        return Err(Error::invalid(format!(
-            "dimensions {dims:?} give {n} voxels, over the limit of {MAX_VOXELS}"
-        )));
+        return Err(Error::invalid(format!("dimensions {dims:?} give {n} voxels, over the limit of {MAX_VOXELS}")));
     }
     Ok(())
 }
@@ -233,10 +207,7 @@ impl<T: Copy> Volume<T> {
     pub fn filled(geom: Geometry, value: T) -> Result<Self> {
         geom.validate()?;
         let n = geom.len();
-        Ok(Volume {
-            geom,
-            data: vec![value; n],
-        })
+        Ok(Volume { geom, data: vec![value; n] })
     }
 
     pub fn geometry(&self) -> &Geometry {
@@ -271,10 +242,7 @@ impl<T: Copy> Volume<T> {
     }
     /// Same geometry, values mapped voxel by voxel.
     pub fn map<U: Copy>(&self, f: impl Fn(T) -> U) -> Volume<U> {
-        Volume {
-            geom: self.geom.clone(),
-            data: self.data.iter().map(|&v| f(v)).collect(),
-        }
+        Volume { geom: self.geom.clone(), data: self.data.iter().map(|&v| f(v)).collect() }
     }
     /// One axial slice (fixed k), x fastest.
     pub fn slice_k(&self, k: usize) -> &[T] {

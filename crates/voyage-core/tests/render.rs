@@ -5,13 +5,11 @@ use std::path::PathBuf;
 
 use glam::DVec3;
 use voyage_core::camera::{Camera, Pose};
-use voyage_core::flight::{FlightOptions, fly};
+use voyage_core::flight::{fly, FlightOptions};
 use voyage_core::phantom::{self, ColonOptions, Phantom};
 use voyage_core::potential::{BrickStore, Direction, Navigable, PotentialField};
-use voyage_core::prep::{PrepOptions, Study, prepare};
-use voyage_core::render::{
-    CellMesh, Frame, NO_TRIANGLE, Rasterizer, Strategy, View, look_around, survey,
-};
+use voyage_core::prep::{prepare, PrepOptions, Study};
+use voyage_core::render::{look_around, survey, CellMesh, Frame, Rasterizer, Strategy, View, NO_TRIANGLE};
 
 /// Poses along both automatic flights (`per_flight` each, evenly spaced, in flight order so
 /// the paper's temporal coherence is exercised) and `random` look-around views.
@@ -35,15 +33,7 @@ fn check_exact_and_reduced(study: &Study, what: &str, min_paper_ratio: f64) {
     let mesh = CellMesh::new(&study.surface, &study.cells);
     let cameras = flight_cameras(study, 80, 80);
     assert!(cameras.len() >= 200);
-    let s = survey(
-        &mesh,
-        &study.cells,
-        &cameras,
-        256,
-        256,
-        &Strategy::ALL,
-        false,
-    );
+    let s = survey(&mesh, &study.cells, &cameras, 256, 256, &Strategy::ALL, false);
     for st in &s.strategies {
         eprintln!(
             "{what}: {:5} mean {:9.0} max {:8} ratio {:5.1} inexact frames {} ({} px)",
@@ -54,31 +44,16 @@ fn check_exact_and_reduced(study: &Study, what: &str, min_paper_ratio: f64) {
             st.inexact_frames,
             st.differing_pixels
         );
-        assert_eq!(
-            st.inexact_frames,
-            0,
-            "{what}: {} changed the image in {} frames",
-            st.strategy.name(),
-            st.inexact_frames
-        );
+        assert_eq!(st.inexact_frames, 0, "{what}: {} changed the image in {} frames", st.strategy.name(), st.inexact_frames);
     }
     assert!(s.exact);
     let get = |k: Strategy| s.get(k).unwrap().mean_triangles;
     // Something was culled, so exactness was not trivially true.
     assert!(get(Strategy::Lg) < 0.5 * get(Strategy::All), "{what}");
     let paper = s.get(Strategy::Paper).unwrap().ratio_to_all;
-    assert!(
-        paper >= min_paper_ratio,
-        "{what}: MC : paper = {paper:.1} : 1, want ≥ {min_paper_ratio}"
-    );
-    assert!(
-        get(Strategy::Ours) < get(Strategy::Paper),
-        "{what}: ours draws no fewer triangles than the paper's"
-    );
-    assert!(
-        get(Strategy::Paper) < get(Strategy::Lg),
-        "{what}: the depth test removed nothing"
-    );
+    assert!(paper >= min_paper_ratio, "{what}: MC : paper = {paper:.1} : 1, want ≥ {min_paper_ratio}");
+    assert!(get(Strategy::Ours) < get(Strategy::Paper), "{what}: ours draws no fewer triangles than the paper's");
+    assert!(get(Strategy::Paper) < get(Strategy::Lg), "{what}: the depth test removed nothing");
 }
 
 #[test]
@@ -90,17 +65,12 @@ fn culling_never_changes_the_image_on_the_colon_phantom() {
 
 #[test]
 fn culling_never_changes_the_image_on_colon_a() {
-    let path = PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../../shared/data/masks/colon-a.nii.gz"
-    ));
+    let path = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/masks/colon-a.nii.gz"));
     if !path.exists() {
         eprintln!("skipping colon-a: {} not found", path.display());
         return;
     }
-    let ct = voyage_core::io::load(&path, &Default::default())
-        .unwrap()
-        .volume;
+    let ct = voyage_core::io::load(&path, &Default::default()).unwrap().volume;
     let study = prepare(ct, &PrepOptions::default(), |_| {}).unwrap();
     check_exact_and_reduced(&study, "colon-a", 9.0);
 }
@@ -111,10 +81,7 @@ fn pixels_on(frame: &Frame, mesh: &CellMesh, c: DVec3, r: f64) -> usize {
         .ids
         .iter()
         .filter(|&&id| {
-            id != NO_TRIANGLE
-                && mesh.triangles[id as usize].iter().all(|&v| {
-                    (DVec3::from_array(mesh.positions[v as usize].map(f64::from)) - c).length() <= r
-                })
+            id != NO_TRIANGLE && mesh.triangles[id as usize].iter().all(|&v| (DVec3::from_array(mesh.positions[v as usize].map(f64::from)) - c).length() <= r)
         })
         .count()
 }
@@ -129,13 +96,7 @@ fn the_pipe_shows_its_three_polyps() {
     for polyp in &truth.polyps {
         let c = DVec3::from_array(polyp.center_mm);
         // From the centerline 35 mm before the polyp, looking at it.
-        let near = (0..cl.points_mm.len())
-            .min_by(|&a, &b| {
-                (DVec3::from_array(cl.points_mm[a]) - c)
-                    .length()
-                    .total_cmp(&(DVec3::from_array(cl.points_mm[b]) - c).length())
-            })
-            .unwrap();
+        let near = (0..cl.points_mm.len()).min_by(|&a, &b| (DVec3::from_array(cl.points_mm[a]) - c).length().total_cmp(&(DVec3::from_array(cl.points_mm[b]) - c).length())).unwrap();
         let at = cl.arc_mm[near] - 35.0;
         let i = cl.arc_mm.partition_point(|&a| a < at).min(near);
         let eye = DVec3::from_array(cl.points_mm[i]);
@@ -144,20 +105,12 @@ fn the_pipe_shows_its_three_polyps() {
         let mut frame = Frame::new(512, 512);
         let cell = study.cells.cell_of_point(eye).unwrap() as u32;
         assert!(cell < mesh.cells() as u32);
-        Rasterizer::new(&mesh, view)
-            .draw_cells(&mut frame, &(0..mesh.cells() as u32).collect::<Vec<_>>());
+        Rasterizer::new(&mesh, view).draw_cells(&mut frame, &(0..mesh.cells() as u32).collect::<Vec<_>>());
         let seen = pixels_on(&frame, &mesh, c, polyp.diameter_mm / 2.0 + 0.5);
         // Its disc seen from ~35 mm covers ≈ π(256·r/35)² pixels; at least a fifth must show.
         let r = polyp.diameter_mm / 2.0;
         let disc = std::f64::consts::PI * (256.0 * r / (c - eye).length()).powi(2);
-        eprintln!(
-            "polyp {} mm: {seen} px (disc ≈ {disc:.0})",
-            polyp.diameter_mm
-        );
-        assert!(
-            seen as f64 >= 0.2 * disc,
-            "the {} mm polyp shows on {seen} pixels only",
-            polyp.diameter_mm
-        );
+        eprintln!("polyp {} mm: {seen} px (disc ≈ {disc:.0})", polyp.diameter_mm);
+        assert!(seen as f64 >= 0.2 * disc, "the {} mm polyp shows on {seen} pixels only", polyp.diameter_mm);
     }
 }

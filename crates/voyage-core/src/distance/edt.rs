@@ -11,32 +11,22 @@
 
 use rayon::prelude::*;
 
-use crate::field::{BoxGrid, Field, bounding_box, crop};
+use crate::field::{bounding_box, crop, BoxGrid, Field};
 use crate::{Error, Result, Volume};
 
 /// Ds over the lumen's bounding box (grown by one voxel): distance in mm to the nearest wall
 /// for lumen voxels (mask ≠ 0), 0 elsewhere.
 pub fn distance_to_wall(mask: &Volume<u8>) -> Result<Field<f32>> {
-    let grid = bounding_box(mask, 1, |v| v != 0)
-        .ok_or_else(|| Error::invalid("the lumen mask is empty"))?;
+    let grid = bounding_box(mask, 1, |v| v != 0).ok_or_else(|| Error::invalid("the lumen mask is empty"))?;
     let inside = crop(mask, &grid);
     let sp = mask.spacing();
-    let mut f: Vec<f32> = inside
-        .par_iter()
-        .map(|&m| if m != 0 { f32::INFINITY } else { 0.0 })
-        .collect();
+    let mut f: Vec<f32> = inside.par_iter().map(|&m| if m != 0 { f32::INFINITY } else { 0.0 }).collect();
     let (has_y, has_z) = column_flags(&inside, &grid);
     pass_x(&mut f, &grid, sp[0]);
     pass_y(&mut f, &grid, sp[1], &has_y);
     pass_z(&mut f, &grid, sp[2], &has_z);
-    f.par_iter_mut()
-        .zip(inside.par_iter())
-        .for_each(|(d, &m)| *d = if m != 0 { d.sqrt() } else { 0.0 });
-    Ok(Field {
-        grid,
-        geometry: mask.geometry().clone(),
-        data: f,
-    })
+    f.par_iter_mut().zip(inside.par_iter()).for_each(|(d, &m)| *d = if m != 0 { d.sqrt() } else { 0.0 });
+    Ok(Field { grid, geometry: mask.geometry().clone(), data: f })
 }
 
 /// Which columns hold lumen: along y, indexed i + nx·k; along z, indexed i + nx·j. After the
@@ -74,12 +64,7 @@ struct Scratch {
 
 impl Scratch {
     fn new(n: usize) -> Self {
-        Scratch {
-            v: vec![0.0; n + 2],
-            f: vec![0.0; n + 2],
-            z: vec![0.0; n + 3],
-            col: vec![0.0; n],
-        }
+        Scratch { v: vec![0.0; n + 2], f: vec![0.0; n + 2], z: vec![0.0; n + 3], col: vec![0.0; n] }
     }
 }
 
@@ -240,10 +225,7 @@ unsafe impl<T: Send> Send for SharedSlice<T> {}
 
 impl<T: Copy> SharedSlice<T> {
     fn new(s: &mut [T]) -> Self {
-        SharedSlice {
-            ptr: s.as_mut_ptr(),
-            len: s.len(),
-        }
+        SharedSlice { ptr: s.as_mut_ptr(), len: s.len() }
     }
     /// SAFETY: `i < len`, and no other task writes index `i` concurrently.
     unsafe fn get(&self, i: usize) -> T {
@@ -271,12 +253,7 @@ mod tests {
         for k in -1..=nz as i64 {
             for j in -1..=ny as i64 {
                 for i in -1..=nx as i64 {
-                    let inside = i >= 0
-                        && j >= 0
-                        && k >= 0
-                        && i < nx as i64
-                        && j < ny as i64
-                        && k < nz as i64;
+                    let inside = i >= 0 && j >= 0 && k >= 0 && i < nx as i64 && j < ny as i64 && k < nz as i64;
                     if !inside || mask.get(i as usize, j as usize, k as usize) == 0 {
                         walls.push([i as f64 * s[0], j as f64 * s[1], k as f64 * s[2]]);
                     }
@@ -292,10 +269,7 @@ mod tests {
                 let p = [i as f64 * s[0], j as f64 * s[1], k as f64 * s[2]];
                 walls
                     .iter()
-                    .map(|w| {
-                        ((p[0] - w[0]).powi(2) + (p[1] - w[1]).powi(2) + (p[2] - w[2]).powi(2))
-                            .sqrt()
-                    })
+                    .map(|w| ((p[0] - w[0]).powi(2) + (p[1] - w[1]).powi(2) + (p[2] - w[2]).powi(2)).sqrt())
                     .fold(f64::INFINITY, f64::min)
             })
             .collect()
@@ -322,10 +296,7 @@ mod tests {
             let ds = distance_to_wall(&m).unwrap().to_volume(0.0).unwrap();
             let want = brute(&m);
             for (idx, (&got, &w)) in ds.data().iter().zip(&want).enumerate() {
-                assert!(
-                    (got as f64 - w).abs() < 1e-4,
-                    "seed {seed} voxel {idx}: {got} vs {w}"
-                );
+                assert!((got as f64 - w).abs() < 1e-4, "seed {seed} voxel {idx}: {got} vs {w}");
             }
         }
     }
@@ -339,8 +310,7 @@ mod tests {
             .map(|idx| {
                 let [i, j, k] = g.ijk(idx);
                 let p = [i as f64 * 0.5, j as f64 * 0.5, k as f64 * 0.8];
-                (((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2) + (p[2] - c[2]).powi(2)).sqrt() < r)
-                    as u8
+                (((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2) + (p[2] - c[2]).powi(2)).sqrt() < r) as u8
             })
             .collect();
         let m = Volume::from_vec(g, data).unwrap();

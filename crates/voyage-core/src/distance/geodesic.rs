@@ -23,11 +23,7 @@ pub struct Geodesic {
 
 /// Shortest-path distances from `source` (a lumen voxel) to every lumen voxel of `mask`
 /// inside `grid`.
-pub fn geodesic_distance(
-    mask: &Volume<u8>,
-    grid: &BoxGrid,
-    source: [usize; 3],
-) -> Result<Geodesic> {
+pub fn geodesic_distance(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3]) -> Result<Geodesic> {
     let pad = Padded::new(mask, grid);
     let src = pad.lumen_index(source)?;
     let r = dial(&pad, &[src], mask.spacing(), &SearchOptions::default());
@@ -89,19 +85,12 @@ impl Padded {
             for j in 0..grid.dims[1] {
                 let src = g.index(grid.lo[0], grid.lo[1] + j, grid.lo[2] + k);
                 let dst = 1 + dims[0] * (j + 1 + dims[1] * (k + 1));
-                for (d, &m) in inside[dst..dst + grid.dims[0]]
-                    .iter_mut()
-                    .zip(&mask.data()[src..src + grid.dims[0]])
-                {
+                for (d, &m) in inside[dst..dst + grid.dims[0]].iter_mut().zip(&mask.data()[src..src + grid.dims[0]]) {
                     *d = (m != 0) as u8;
                 }
             }
         }
-        Padded {
-            grid: grid.clone(),
-            dims,
-            inside,
-        }
+        Padded { grid: grid.clone(), dims, inside }
     }
 
     /// Padded index of a volume voxel that must be lumen.
@@ -113,11 +102,7 @@ impl Padded {
 
     pub fn geodesic(&self, mask: &Volume<u8>, r: Search) -> Geodesic {
         Geodesic {
-            dist: Field {
-                grid: self.grid.clone(),
-                geometry: mask.geometry().clone(),
-                data: self.unpad(&r.dist),
-            },
+            dist: Field { grid: self.grid.clone(), geometry: mask.geometry().clone(), data: self.unpad(&r.dist) },
             farthest: self.global_of_index(r.far),
             max_mm: r.far_d,
             reached: r.reached,
@@ -145,10 +130,7 @@ impl Padded {
                     if di == 0 && dj == 0 && dk == 0 {
                         continue;
                     }
-                    let len = ((di as f64 * spacing[0]).powi(2)
-                        + (dj as f64 * spacing[1]).powi(2)
-                        + (dk as f64 * spacing[2]).powi(2))
-                    .sqrt();
+                    let len = ((di as f64 * spacing[0]).powi(2) + (dj as f64 * spacing[1]).powi(2) + (dk as f64 * spacing[2]).powi(2)).sqrt();
                     out.push((di + nx * (dj + ny * dk), len as f32));
                 }
             }
@@ -198,30 +180,14 @@ pub fn dial(pad: &Padded, sources: &[usize], spacing: [f64; 3], opts: &SearchOpt
 }
 
 /// `W`: weighted; `T`: record the tree. Monomorphised so the plain search pays for neither.
-fn dial_impl<const W: bool, const T: bool>(
-    pad: &Padded,
-    sources: &[usize],
-    spacing: [f64; 3],
-    weight: &[f32],
-    stop: Option<&dyn Fn(usize) -> bool>,
-) -> Search {
+fn dial_impl<const W: bool, const T: bool>(pad: &Padded, sources: &[usize], spacing: [f64; 3], weight: &[f32], stop: Option<&dyn Fn(usize) -> bool>) -> Search {
     let nbrs = pad.neighbours(spacing);
     let (w_min, w_max) = if W {
-        weight
-            .iter()
-            .zip(&pad.inside)
-            .filter(|(_, m)| **m != 0)
-            .fold((f32::INFINITY, 0.0f32), |(lo, hi), (&x, _)| {
-                (lo.min(x), hi.max(x))
-            })
+        weight.iter().zip(&pad.inside).filter(|(_, m)| **m != 0).fold((f32::INFINITY, 0.0f32), |(lo, hi), (&x, _)| (lo.min(x), hi.max(x)))
     } else {
         (1.0, 1.0)
     };
-    let w_min = if w_min.is_finite() {
-        w_min.max(1e-6)
-    } else {
-        1.0
-    };
+    let w_min = if w_min.is_finite() { w_min.max(1e-6) } else { 1.0 };
     let shortest = nbrs.iter().map(|n| n.1).fold(f32::INFINITY, f32::min);
     let longest = nbrs.iter().map(|n| n.1).fold(0.0, f32::max);
     let width = shortest * w_min;
@@ -234,19 +200,12 @@ fn dial_impl<const W: bool, const T: bool>(
     // inner loop needs no separate test of what the neighbour is; they become +∞ at the end.
     // A settled voxel is never improved either: within a bucket distances differ by less than
     // the bucket width, and every edge is at least that long.
-    let mut dist: Vec<f32> = pad
-        .inside
-        .iter()
-        .map(|&m| if m != 0 { f32::INFINITY } else { 0.0 })
-        .collect();
+    let mut dist: Vec<f32> = pad.inside.iter().map(|&m| if m != 0 { f32::INFINITY } else { 0.0 }).collect();
     let mut settled = vec![false; n];
     let mut parent = if T { vec![NO_PARENT; n] } else { Vec::new() };
     let mut order = Vec::new();
     // Offsets back: parent code c of v means v + nbrs[c].0 is the predecessor.
-    let back: Vec<u8> = nbrs
-        .iter()
-        .map(|&(off, _)| nbrs.iter().position(|&(o, _)| o == -off).unwrap_or(0) as u8)
-        .collect();
+    let back: Vec<u8> = nbrs.iter().map(|&(off, _)| nbrs.iter().position(|&(o, _)| o == -off).unwrap_or(0) as u8).collect();
     let mut pending = 0usize;
     let mut pushes = 0usize;
     for &s in sources {
@@ -285,11 +244,7 @@ fn dial_impl<const W: bool, const T: bool>(
                 let wu = if W { weight[u] } else { 1.0 };
                 for (c, &(off, len)) in nbrs.iter().enumerate() {
                     let v = (u as isize + off) as usize;
-                    let dv = if W {
-                        du + len * 0.5 * (wu + weight[v])
-                    } else {
-                        du + len
-                    };
+                    let dv = if W { du + len * 0.5 * (wu + weight[v]) } else { du + len };
                     if dv < dist[v] {
                         dist[v] = dv;
                         if T {
@@ -313,23 +268,14 @@ fn dial_impl<const W: bool, const T: bool>(
             *d = f32::INFINITY;
         }
     }
-    Search {
-        dist,
-        far,
-        far_d,
-        reached,
-        pushes,
-        parent,
-        order,
-        nbrs,
-    }
+    Search { dist, far, far_d, reached, pushes, parent, order, nbrs }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Geometry;
     use crate::field::bounding_box;
+    use crate::Geometry;
     use std::cmp::Reverse;
     use std::collections::BinaryHeap;
 
@@ -353,24 +299,14 @@ mod tests {
                 for dj in -1i64..=1 {
                     for di in -1i64..=1 {
                         let (a, b, c) = (i as i64 + di, j as i64 + dj, k as i64 + dk);
-                        if (di, dj, dk) == (0, 0, 0)
-                            || a < 0
-                            || b < 0
-                            || c < 0
-                            || a >= nx as i64
-                            || b >= ny as i64
-                            || c >= nz as i64
-                        {
+                        if (di, dj, dk) == (0, 0, 0) || a < 0 || b < 0 || c < 0 || a >= nx as i64 || b >= ny as i64 || c >= nz as i64 {
                             continue;
                         }
                         let v = g.index(a as usize, b as usize, c as usize);
                         if mask.data()[v] == 0 {
                             continue;
                         }
-                        let len = ((di as f64 * s[0]).powi(2)
-                            + (dj as f64 * s[1]).powi(2)
-                            + (dk as f64 * s[2]).powi(2))
-                        .sqrt();
+                        let len = ((di as f64 * s[0]).powi(2) + (dj as f64 * s[1]).powi(2) + (dk as f64 * s[2]).powi(2)).sqrt();
                         if du + len < d[v] {
                             d[v] = du + len;
                             heap.push(Reverse(((du + len).to_bits(), v)));
@@ -408,24 +344,14 @@ mod tests {
             let mut reached = 0;
             for (idx, (&a, &b)) in got.data().iter().zip(&want).enumerate() {
                 if b.is_infinite() {
-                    assert!(
-                        a.is_infinite(),
-                        "seed {seed} voxel {idx}: reached {a}, reference unreachable"
-                    );
+                    assert!(a.is_infinite(), "seed {seed} voxel {idx}: reached {a}, reference unreachable");
                 } else {
                     reached += 1;
-                    assert!(
-                        (a as f64 - b).abs() <= 1e-5 * b + 1e-4,
-                        "seed {seed} voxel {idx}: {a} vs {b}"
-                    );
+                    assert!((a as f64 - b).abs() <= 1e-5 * b + 1e-4, "seed {seed} voxel {idx}: {a} vs {b}");
                 }
             }
             assert_eq!(geo.reached, reached);
-            let far = want
-                .iter()
-                .cloned()
-                .filter(|d| d.is_finite())
-                .fold(0.0, f64::max);
+            let far = want.iter().cloned().filter(|d| d.is_finite()).fold(0.0, f64::max);
             assert!((geo.max_mm as f64 - far).abs() < 1e-3);
         }
     }

@@ -5,10 +5,10 @@ use std::path::{Path, PathBuf};
 use glam::DVec3;
 use serde_json::json;
 
-use super::{MarkupsPoint, write_markups_curve, write_ply, write_stl};
-use crate::Result;
+use super::{write_markups_curve, write_ply, write_stl, MarkupsPoint};
 use crate::io::{atomic::write_atomic, nifti};
 use crate::prep::Study;
+use crate::Result;
 
 /// Writes every export of a study into `dir`; returns the paths written.
 pub fn write_study(dir: &Path, study: &Study) -> Result<Vec<PathBuf>> {
@@ -21,15 +21,9 @@ pub fn write_study(dir: &Path, study: &Study) -> Result<Vec<PathBuf>> {
         p
     };
     nifti::save(&put("lumen.nii.gz"), &study.segmentation.lumen)?;
-    nifti::save_slices(&put("ds.nii.gz"), g, |k, out: &mut [f32]| {
-        study.ds.fill_slice(k, out, 0.0)
-    })?;
+    nifti::save_slices(&put("ds.nii.gz"), g, |k, out: &mut [f32]| study.ds.fill_slice(k, out, 0.0))?;
     let cl = &study.centerline;
-    let lps: Vec<[f64; 3]> = cl
-        .points_mm
-        .iter()
-        .map(|p| g.local_to_patient(DVec3::from_array(*p)).to_array())
-        .collect();
+    let lps: Vec<[f64; 3]> = cl.points_mm.iter().map(|p| g.local_to_patient(DVec3::from_array(*p)).to_array()).collect();
     let cl_json = json!({
         "frame": "points_mm: volume-local mm (x = i·sx, y = j·sy, z = k·sz); points_lps_mm: DICOM patient LPS",
         "length_mm": cl.length_mm,
@@ -46,11 +40,7 @@ pub fn write_study(dir: &Path, study: &Study) -> Result<Vec<PathBuf>> {
         .step_by(5)
         .chain(lps.last())
         .enumerate()
-        .map(|(i, p)| MarkupsPoint {
-            label: format!("CL-{}", i + 1),
-            position_lps: *p,
-            description: String::new(),
-        })
+        .map(|(i, p)| MarkupsPoint { label: format!("CL-{}", i + 1), position_lps: *p, description: String::new() })
         .collect();
     write_markups_curve(&put("centerline.mrk.json"), "Centerline", &points)?;
     write_ply(&put("surface.ply"), &study.surface.mesh, g)?;
@@ -85,10 +75,7 @@ pub fn write_study(dir: &Path, study: &Study) -> Result<Vec<PathBuf>> {
             })
         })
         .collect();
-    write_json(
-        &put("cells.json"),
-        &json!({ "frame": "volume-local mm, with LPS copies", "cells": cells }),
-    )?;
+    write_json(&put("cells.json"), &json!({ "frame": "volume-local mm, with LPS copies", "cells": cells }))?;
     Ok(out)
 }
 

@@ -30,8 +30,8 @@ use super::polyp::{PolypSpec, place};
 use super::raster::{Materials, Scene};
 use super::rng::{Rng, stream_key};
 use super::truth::{
-    COORDINATES_NOTE, CollapsedTruth, DistractorTruth, FoldTruth, PolypTruth, PoolTruth, RoiTruth,
-    SegmentTruth, Truth,
+    COORDINATES_NOTE, CollapsedTruth, DistractorTruth, FoldTruth, PolypTruth, PoolTruth, RoiTruth, SegmentTruth,
+    Truth,
 };
 use super::tube::{Blob, BlobKind, Collapse, Ends, Fold, FoldSector, Pool, Tube};
 use super::{Phantom, arr, label, label_counts};
@@ -171,20 +171,13 @@ struct Frame {
 
 impl Frame {
     fn new(small: bool) -> Result<Frame> {
-        let (dims, spacing, scale) = if small {
-            (SMALL_DIMS, SMALL_SPACING, SMALL_SCALE)
-        } else {
-            (FULL_DIMS, FULL_SPACING, 1.0)
-        };
+        let (dims, spacing, scale) =
+            if small { (SMALL_DIMS, SMALL_SPACING, SMALL_SCALE) } else { (FULL_DIMS, FULL_SPACING, 1.0) };
         let geom = Geometry::new(dims, spacing, [0.0; 3])?;
         let full = Geometry::new(FULL_DIMS, FULL_SPACING, [0.0; 3])?;
         let ext = |g: &Geometry| g.extent_mm() - g.spacing_vec();
         let offset = (ext(&geom) - ext(&full) * scale) * 0.5;
-        Ok(Frame {
-            geom,
-            scale,
-            offset,
-        })
+        Ok(Frame { geom, scale, offset })
     }
 
     /// Full-size anatomy position → this volume's local mm.
@@ -205,10 +198,7 @@ impl Frame {
 /// Makes the colon phantom.
 pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
     if !(opts.noise_hu >= 0.0 && opts.noise_hu.is_finite()) {
-        return Err(Error::invalid(format!(
-            "noise {} HU is not a non-negative number",
-            opts.noise_hu
-        )));
+        return Err(Error::invalid(format!("noise {} HU is not a non-negative number", opts.noise_hu)));
     }
     let frame = Frame::new(opts.small)?;
     let body = make_body(&frame, opts.lung_bases);
@@ -216,18 +206,12 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
     let segments = segments(&axis);
     check_anatomy(&frame, &axis, &body)?;
     let mut tube = Tube::new(axis, frame.thin(WALL, 1.0), Ends::Round);
-    let collapse = opts
-        .collapsed_segment
-        .then(|| make_collapse(&frame, &segments));
+    let collapse = opts.collapsed_segment.then(|| make_collapse(&frame, &segments));
     tube.collapse = collapse.as_ref().map(|(c, _)| c.clone());
     let folds = make_folds(&frame, &tube, &segments, opts.seed);
     tube.set_folds(folds);
     let (mut blobs, polyps) = make_polyps(&frame, &mut tube, &segments, opts.seed)?;
-    let pools = if opts.tagged_fluid {
-        make_pools(&tube, &segments, opts.seed)
-    } else {
-        Vec::new()
-    };
+    let pools = if opts.tagged_fluid { make_pools(&tube, &segments, opts.seed) } else { Vec::new() };
     tube.pools = pools.iter().map(|(p, _)| p.clone()).collect();
     let mut distractors = Vec::new();
     if opts.small_bowel_gas {
@@ -242,16 +226,8 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
     }
     distractors.extend(body.lungs.iter().map(|l| DistractorTruth {
         kind: "lung".into(),
-        center_mm: [
-            l.center.x,
-            l.center.y,
-            0.5 * (l.recess + frame.geom.extent_mm().z),
-        ],
-        semi_axes_mm: [
-            l.semi.x,
-            l.semi.y,
-            0.5 * (frame.geom.extent_mm().z - l.recess),
-        ],
+        center_mm: [l.center.x, l.center.y, 0.5 * (l.recess + frame.geom.extent_mm().z)],
+        semi_axes_mm: [l.semi.x, l.semi.y, 0.5 * (frame.geom.extent_mm().z - l.recess)],
         hu: body::LUNG,
     }));
     let noise_roi = fat_roi(&frame, &tube, &blobs, &body);
@@ -259,12 +235,7 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
         geom: frame.geom.clone(),
         tube: &tube,
         blobs: &blobs,
-        materials: Materials {
-            lumen_air: body::AIR,
-            wall: body::SOFT_TISSUE,
-            polyp: body::SOFT_TISSUE,
-            pocket_air: body::AIR,
-        },
+        materials: Materials { lumen_air: body::AIR, wall: body::SOFT_TISSUE, polyp: body::SOFT_TISSUE, pocket_air: body::AIR },
         background: &body,
         noise_sigma: opts.noise_hu,
         noise_key: stream_key(opts.seed, STREAM_NOISE),
@@ -307,12 +278,7 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
         materials_hu: materials(),
         labels: label::legend(),
     };
-    Ok(Phantom {
-        ct: r.ct,
-        lumen: r.lumen,
-        labels: r.labels,
-        truth,
-    })
+    Ok(Phantom { ct: r.ct, lumen: r.lumen, labels: r.labels, truth })
 }
 
 fn materials() -> Vec<(String, f64)> {
@@ -360,59 +326,37 @@ fn make_body(frame: &Frame, lungs: bool) -> Body {
             arch_inner: 7.0 * s,
             arch_outer: 11.0 * s,
         },
-        lungs: if lungs {
-            vec![lung(192.0 - 88.0), lung(192.0 + 88.0)]
-        } else {
-            Vec::new()
-        },
+        lungs: if lungs { vec![lung(192.0 - 88.0), lung(192.0 + 88.0)] } else { Vec::new() },
         inv_w: 3.0 / frame.geom.spacing.iter().sum::<f64>(),
     }
 }
 
 fn make_axis(frame: &Frame) -> Result<Axis> {
-    let knots: Vec<Knot> = KNOTS
-        .iter()
-        .map(|(p, r, _)| Knot {
-            pos: frame.pos(*p),
-            radius: r * frame.scale,
-        })
-        .collect();
+    let knots: Vec<Knot> = KNOTS.iter().map(|(p, r, _)| Knot { pos: frame.pos(*p), radius: r * frame.scale }).collect();
     Axis::through(&knots, 1.0)
 }
 
 /// Named arc ranges from the knots that start each segment.
 fn segments(axis: &Axis) -> Vec<SegmentTruth> {
-    let starts: Vec<(usize, &str)> = KNOTS
-        .iter()
-        .enumerate()
-        .filter(|(_, k)| !k.2.is_empty())
-        .map(|(i, k)| (i, k.2))
-        .collect();
+    let starts: Vec<(usize, &str)> =
+        KNOTS.iter().enumerate().filter(|(_, k)| !k.2.is_empty()).map(|(i, k)| (i, k.2)).collect();
     starts
         .iter()
         .enumerate()
         .map(|(n, &(i, name))| SegmentTruth {
             name: name.to_string(),
             start_arc_mm: axis.knot_arc[i],
-            end_arc_mm: starts
-                .get(n + 1)
-                .map_or(axis.length, |&(j, _)| axis.knot_arc[j]),
+            end_arc_mm: starts.get(n + 1).map_or(axis.length, |&(j, _)| axis.knot_arc[j]),
         })
         .collect()
 }
 
 fn segment<'a>(segments: &'a [SegmentTruth], name: &str) -> Result<&'a SegmentTruth> {
-    segments
-        .iter()
-        .find(|s| s.name == name)
-        .ok_or_else(|| Error::invalid(format!("colon has no segment {name}")))
+    segments.iter().find(|s| s.name == name).ok_or_else(|| Error::invalid(format!("colon has no segment {name}")))
 }
 
 fn segment_name(segments: &[SegmentTruth], s: f64) -> String {
-    segments
-        .iter()
-        .find(|g| s >= g.start_arc_mm && s <= g.end_arc_mm)
-        .map_or_else(String::new, |g| g.name.clone())
+    segments.iter().find(|g| s >= g.start_arc_mm && s <= g.end_arc_mm).map_or_else(String::new, |g| g.name.clone())
 }
 
 /// The checks that make the truth trustworthy: length, bends, separation of the loops,
@@ -426,17 +370,11 @@ fn check_anatomy(frame: &Frame, axis: &Axis, body: &Body) -> Result<()> {
     }
     let (bend, at) = axis.min_bend_ratio(wall);
     if bend < 1.05 {
-        return bad(format!(
-            "bend too tight at arc {:.0} mm (ratio {bend:.2})",
-            axis.arc[at]
-        ));
+        return bad(format!("bend too tight at arc {:.0} mm (ratio {bend:.2})", axis.arc[at]));
     }
     let (gap, i, j) = axis.min_part_gap(wall, 2);
     if gap < MIN_PART_GAP * s {
-        return bad(format!(
-            "loops at arcs {:.0} and {:.0} mm only {gap:.1} mm apart",
-            axis.arc[i], axis.arc[j]
-        ));
+        return bad(format!("loops at arcs {:.0} and {:.0} mm only {gap:.1} mm apart", axis.arc[i], axis.arc[j]));
     }
     let ext = frame.geom.extent_mm() - frame.geom.spacing_vec();
     for (p, r) in axis.points.iter().zip(&axis.radius) {
@@ -451,10 +389,7 @@ fn check_anatomy(frame: &Frame, axis: &Axis, body: &Body) -> Result<()> {
             return bad(format!("colon at {p:?} touches the spine"));
         }
         if let Some(l) = body.lungs.iter().find(|l| l.sdf(*p) < reach + 10.0 * s) {
-            return bad(format!(
-                "colon at {p:?} within 10 mm of the lung at {:?}",
-                l.center
-            ));
+            return bad(format!("colon at {p:?} within 10 mm of the lung at {:?}", l.center));
         }
     }
     Ok(())
@@ -463,23 +398,12 @@ fn check_anatomy(frame: &Frame, axis: &Axis, body: &Body) -> Result<()> {
 /// 30 mm of the descending colon, 60 % of the way up, collapses to a tissue cord.
 fn make_collapse(frame: &Frame, segments: &[SegmentTruth]) -> (Collapse, CollapsedTruth) {
     let s = frame.scale;
-    let (a, b) =
-        segment(segments, "descending").map_or((0.0, 0.0), |g| (g.start_arc_mm, g.end_arc_mm));
+    let (a, b) = segment(segments, "descending").map_or((0.0, 0.0), |g| (g.start_arc_mm, g.end_arc_mm));
     let mid = a + 0.6 * (b - a);
     let half = 15.0 * s;
     let taper = 8.0 * s;
-    let c = Collapse {
-        start: mid - half,
-        end: mid + half,
-        taper,
-        cord_radius: 2.0 * frame.thin(WALL, 1.0),
-    };
-    let t = CollapsedTruth {
-        segment: "descending".into(),
-        start_arc_mm: c.start,
-        end_arc_mm: c.end,
-        taper_mm: taper,
-    };
+    let c = Collapse { start: mid - half, end: mid + half, taper, cord_radius: 2.0 * frame.thin(WALL, 1.0) };
+    let t = CollapsedTruth { segment: "descending".into(), start_arc_mm: c.start, end_arc_mm: c.end, taper_mm: taper };
     (c, t)
 }
 
@@ -489,19 +413,13 @@ fn make_folds(frame: &Frame, tube: &Tube, segments: &[SegmentTruth], seed: u64) 
     let s = frame.scale;
     let mut rng = Rng::new(seed, STREAM_FOLDS);
     let hw = frame.thin(FOLD_HALF_WIDTH, 0.9);
-    let start = segments
-        .iter()
-        .find(|g| g.name == "sigmoid")
-        .map_or(0.0, |g| g.start_arc_mm)
-        + 10.0 * s;
+    let start = segments.iter().find(|g| g.name == "sigmoid").map_or(0.0, |g| g.start_arc_mm) + 10.0 * s;
     let end = tube.axis.length - 12.0 * s;
     let phase0 = rng.range(0.0, std::f64::consts::TAU);
     let mut folds = Vec::new();
     let mut arc = start;
     while arc < end {
-        let collapsed = tube.collapse.as_ref().is_some_and(|c| {
-            arc > c.start - c.taper - 3.0 * hw && arc < c.end + c.taper + 3.0 * hw
-        });
+        let collapsed = tube.collapse.as_ref().is_some_and(|c| arc > c.start - c.taper - 3.0 * hw && arc < c.end + c.taper + 3.0 * hw);
         let r = tube.axis.radius_at(arc);
         let mut sector = || FoldSector {
             offset: rng.range(-1.5, 1.5) * s,
@@ -510,12 +428,7 @@ fn make_folds(frame: &Frame, tube: &Tube, segments: &[SegmentTruth], seed: u64) 
         let sectors = [sector(), sector(), sector()];
         if !collapsed {
             // The taeniae twist slowly around the colon.
-            folds.push(Fold {
-                arc,
-                phase: phase0 + 0.002 * arc / s,
-                half_width: hw,
-                sectors,
-            });
+            folds.push(Fold { arc, phase: phase0 + 0.002 * arc / s, half_width: hw, sectors });
         }
         arc += rng.range(FOLD_SPACING.0, FOLD_SPACING.1) * s;
     }
@@ -544,12 +457,7 @@ fn fold_truth(tube: &Tube, segments: &[SegmentTruth]) -> Vec<FoldTruth> {
 /// diameter is reduced if needed), so the lumen stays open around the centerline. In the
 /// small phantom a diameter d becomes d/2 + 2.5 mm (3–12 mm → 4–8.5 mm: at least about three
 /// voxels, so the centre voxel is solid tissue) and every polyp is sessile.
-fn make_polyps(
-    frame: &Frame,
-    tube: &mut Tube,
-    segments: &[SegmentTruth],
-    seed: u64,
-) -> Result<(Vec<Blob>, Vec<PolypTruth>)> {
+fn make_polyps(frame: &Frame, tube: &mut Tube, segments: &[SegmentTruth], seed: u64) -> Result<(Vec<Blob>, Vec<PolypTruth>)> {
     let s = frame.scale;
     let small = s < 1.0;
     let mut rng = Rng::new(seed, STREAM_POLYPS);
@@ -557,11 +465,7 @@ fn make_polyps(
     for &(seg_name, diameter, behind, stalk) in POLYPS {
         let seg = segment(segments, seg_name)?;
         let stalk = if small { None } else { stalk };
-        let wanted = if small {
-            0.5 * diameter + 2.5
-        } else {
-            diameter
-        };
+        let wanted = if small { 0.5 * diameter + 2.5 } else { diameter };
         let mut arc = seg.start_arc_mm + rng.range(0.3, 0.7) * (seg.end_arc_mm - seg.start_arc_mm);
         let mut angle = rng.range(0.0, std::f64::consts::TAU);
         let k = ((rng.uniform() * 3.0) as usize).min(2);
@@ -580,29 +484,15 @@ fn make_polyps(
                 at = 0.5 * (a + b);
             }
             let d = fit_diameter(wanted, stalk, tube.axis.radius_at(at));
-            let clear_collapse = tube
-                .collapse
-                .as_ref()
-                .is_none_or(|c| at + d < c.start - c.taper || at - d > c.end + c.taper);
+            let clear_collapse = tube.collapse.as_ref().is_none_or(|c| at + d < c.start - c.taper || at - d > c.end + c.taper);
             let clear_polyps = specs.iter().all(|o| (o.arc - at).abs() > 20.0 * s);
             if clear_collapse && clear_polyps && at > seg.start_arc_mm && at < seg.end_arc_mm {
-                spec = Some(PolypSpec {
-                    arc: at,
-                    angle,
-                    diameter: d,
-                    stalk,
-                    segment: seg_name.into(),
-                    behind_fold: behind,
-                });
+                spec = Some(PolypSpec { arc: at, angle, diameter: d, stalk, segment: seg_name.into(), behind_fold: behind });
                 break;
             }
             arc = seg.start_arc_mm + rng.range(0.1, 0.9) * (seg.end_arc_mm - seg.start_arc_mm);
         }
-        let spec = spec.ok_or_else(|| {
-            Error::invalid(format!(
-                "colon phantom: no room for a polyp in the {seg_name}"
-            ))
-        })?;
+        let spec = spec.ok_or_else(|| Error::invalid(format!("colon phantom: no room for a polyp in the {seg_name}")))?;
         if behind {
             deepen_fold_before(tube, &spec, k, frame);
         }
@@ -639,13 +529,9 @@ fn fit_diameter(wanted: f64, stalk: Option<f64>, radius: f64) -> f64 {
 
 /// Makes crescent `k` of the fold just before a behind-fold polyp deep enough to hide it.
 fn deepen_fold_before(tube: &mut Tube, spec: &PolypSpec, k: usize, frame: &Frame) {
-    let Ok(fi) = nearest_fold(tube, spec.arc) else {
-        return;
-    };
+    let Ok(fi) = nearest_fold(tube, spec.arc) else { return };
     let r = tube.axis.radius_at(tube.folds[fi].arc);
-    let need = (protrusion(spec.diameter, spec.stalk) + 1.0 * frame.scale)
-        .min(FOLD_MAX_FRACTION * r)
-        .min(FOLD_DEPTH.1 * frame.scale);
+    let need = (protrusion(spec.diameter, spec.stalk) + 1.0 * frame.scale).min(FOLD_MAX_FRACTION * r).min(FOLD_DEPTH.1 * frame.scale);
     let sector = &mut tube.folds[fi].sectors[k];
     sector.depth = sector.depth.max(need);
 }
@@ -653,11 +539,7 @@ fn deepen_fold_before(tube: &mut Tube, spec: &PolypSpec, k: usize, frame: &Frame
 /// The fold nearest to `arc`.
 fn nearest_fold(tube: &Tube, arc: f64) -> Result<usize> {
     (0..tube.folds.len())
-        .min_by(|&a, &b| {
-            (tube.folds[a].arc - arc)
-                .abs()
-                .total_cmp(&(tube.folds[b].arc - arc).abs())
-        })
+        .min_by(|&a, &b| (tube.folds[a].arc - arc).abs().total_cmp(&(tube.folds[b].arc - arc).abs()))
         .ok_or_else(|| Error::invalid("colon phantom: no fold to hide a polyp behind"))
 }
 
@@ -681,21 +563,10 @@ fn make_pools(tube: &Tube, segments: &[SegmentTruth], seed: u64) -> Vec<(Pool, P
     let floor = |i: usize| ax.points[i].y + ax.radius[i];
     let mut pools: Vec<(Pool, PoolTruth)> = Vec::new();
     for &name in POOL_SEGMENTS {
-        let Ok(seg) = segment(segments, name) else {
-            continue;
-        };
+        let Ok(seg) = segment(segments, name) else { continue };
         let (a, b) = (ax.vertex_at(seg.start_arc_mm), ax.vertex_at(seg.end_arc_mm));
-        let open = |i: &usize| {
-            tube.collapse
-                .as_ref()
-                .is_none_or(|c| ax.arc[*i] < c.start - c.taper || ax.arc[*i] > c.end + c.taper)
-        };
-        let Some(anchor) = (a..=b)
-            .filter(open)
-            .max_by(|&i, &j| floor(i).total_cmp(&floor(j)))
-        else {
-            continue;
-        };
+        let open = |i: &usize| tube.collapse.as_ref().is_none_or(|c| ax.arc[*i] < c.start - c.taper || ax.arc[*i] > c.end + c.taper);
+        let Some(anchor) = (a..=b).filter(open).max_by(|&i, &j| floor(i).total_cmp(&floor(j))) else { continue };
         let depth = rng.range(0.3, 0.5) * ax.radius[anchor];
         let level = floor(anchor) - depth;
         let hu = rng.range(400.0, 700.0);
@@ -722,19 +593,8 @@ fn make_pools(tube: &Tube, segments: &[SegmentTruth], seed: u64) -> Vec<(Pool, P
         if pools.iter().any(|(p, _)| start < p.end && end > p.start) {
             continue;
         }
-        let pool = Pool {
-            start,
-            end,
-            level_y: level,
-            hu,
-        };
-        let truth = PoolTruth {
-            segment: name.into(),
-            start_arc_mm: start,
-            end_arc_mm: end,
-            level_y_mm: level,
-            hu,
-        };
+        let pool = Pool { start, end, level_y: level, hu };
+        let truth = PoolTruth { segment: name.into(), start_arc_mm: start, end_arc_mm: end, level_y_mm: level, hu };
         pools.push((pool, truth));
     }
     pools
@@ -755,11 +615,7 @@ fn make_pockets(frame: &Frame, tube: &Tube, body: &Body, seed: u64) -> Vec<Blob>
             break;
         }
         let r = rng.range(5.0, 10.0) * s;
-        let c = frame.pos([
-            rng.range(110.0, 274.0),
-            rng.range(100.0, 260.0),
-            rng.range(60.0, 330.0),
-        ]);
+        let c = frame.pos([rng.range(110.0, 274.0), rng.range(100.0, 260.0), rng.range(60.0, 330.0)]);
         let colon_ok = ax
             .points
             .iter()
@@ -769,17 +625,9 @@ fn make_pockets(frame: &Frame, tube: &Tube, body: &Body, seed: u64) -> Vec<Blob>
         let body_ok = body.skin_sdf(c) + r + wall + clear <= -body.rim
             && body.spine.sdf_xy(c) >= r + wall + clear
             && body.lungs.iter().all(|l| l.sdf(c) >= r + wall + clear);
-        let apart = pockets
-            .iter()
-            .all(|o| o.center.distance(c) - o.radius - r - 2.0 * wall >= clear);
+        let apart = pockets.iter().all(|o| o.center.distance(c) - o.radius - r - 2.0 * wall >= clear);
         if colon_ok && body_ok && apart {
-            pockets.push(Blob {
-                kind: BlobKind::Pocket,
-                center: c,
-                radius: r,
-                stalk: None,
-                wall_mm: wall,
-            });
+            pockets.push(Blob { kind: BlobKind::Pocket, center: c, radius: r, stalk: None, wall_mm: wall });
         }
     }
     pockets
@@ -801,14 +649,8 @@ fn fat_roi(frame: &Frame, tube: &Tube, blobs: &[Blob], body: &Body) -> Option<Ro
                 let ok = body.skin_sdf(c) + margin <= -body.rim
                     && body.spine.sdf_xy(c) >= margin
                     && body.lungs.iter().all(|l| l.sdf(c) >= margin)
-                    && ax
-                        .points
-                        .iter()
-                        .zip(&ax.radius)
-                        .all(|(p, r)| p.distance(c) - r - tube.wall_mm >= margin)
-                    && blobs
-                        .iter()
-                        .all(|b| b.center.distance(c) - b.reach() >= margin);
+                    && ax.points.iter().zip(&ax.radius).all(|(p, r)| p.distance(c) - r - tube.wall_mm >= margin)
+                    && blobs.iter().all(|b| b.center.distance(c) - b.reach() >= margin);
                 if ok {
                     return Some(RoiTruth {
                         min_ijk: [i - half_vox, j - half_vox, k - half_vox],
@@ -836,15 +678,8 @@ pub fn anatomy_report(small: bool) -> Result<String> {
         axis.length, axis.arc[at], axis.arc[i], axis.arc[j]
     );
     for g in segments(&axis) {
-        out += &format!(
-            "  {:<16} {:6.0} .. {:6.0} mm ({:.0} mm)\n",
-            g.name,
-            g.start_arc_mm,
-            g.end_arc_mm,
-            g.end_arc_mm - g.start_arc_mm
-        );
+        out += &format!("  {:<16} {:6.0} .. {:6.0} mm ({:.0} mm)\n", g.name, g.start_arc_mm, g.end_arc_mm, g.end_arc_mm - g.start_arc_mm);
     }
-    let verdict = check_anatomy(&frame, &axis, &make_body(&frame, true))
-        .map_or_else(|e| e.to_string(), |_| "checks pass".into());
+    let verdict = check_anatomy(&frame, &axis, &make_body(&frame, true)).map_or_else(|e| e.to_string(), |_| "checks pass".into());
     Ok(out + &verdict + "\n")
 }

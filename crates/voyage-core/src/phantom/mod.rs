@@ -26,8 +26,7 @@ pub mod tube;
 pub use colon::{ColonOptions, colon};
 pub use pipe::pipe;
 pub use truth::{
-    CollapsedTruth, DistractorTruth, FoldTruth, PolypTruth, PoolTruth, RoiTruth, SegmentTruth,
-    Truth,
+    CollapsedTruth, DistractorTruth, FoldTruth, PolypTruth, PoolTruth, RoiTruth, SegmentTruth, Truth,
 };
 
 use crate::Volume;

@@ -48,13 +48,7 @@ impl CellMesh {
             }
             cell_ranges.push(start..triangles.len() as u32);
         }
-        CellMesh {
-            positions: surface.mesh.positions.clone(),
-            normals: surface.mesh.normals.clone(),
-            triangles,
-            cell_ranges,
-            surface_triangle,
-        }
+        CellMesh { positions: surface.mesh.positions.clone(), normals: surface.mesh.normals.clone(), triangles, cell_ranges, surface_triangle }
     }
 
     pub fn cells(&self) -> usize {
@@ -62,19 +56,12 @@ impl CellMesh {
     }
 
     pub fn triangles_in(&self, cells: &[u32]) -> usize {
-        cells
-            .iter()
-            .map(|&c| self.cell_ranges[c as usize].len())
-            .sum()
+        cells.iter().map(|&c| self.cell_ranges[c as usize].len()).sum()
     }
 }
 
 /// Averages each vertex normal with those of the triangles around it, `passes` times.
-pub fn smooth_normals(
-    normals: &[[f32; 3]],
-    triangles: &[[u32; 3]],
-    passes: usize,
-) -> Vec<[f32; 3]> {
+pub fn smooth_normals(normals: &[[f32; 3]], triangles: &[[u32; 3]], passes: usize) -> Vec<[f32; 3]> {
     let mut cur: Vec<Vec3> = normals.iter().map(|&n| Vec3::from_array(n)).collect();
     for _ in 0..passes {
         let mut acc = cur.clone();

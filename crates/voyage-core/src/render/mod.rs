@@ -9,7 +9,7 @@ pub mod survey;
 pub mod visibility;
 
 pub use mesh::CellMesh;
-pub use raster::{Frame, NO_TRIANGLE, Rasterizer, View, render_rgba, shade};
+pub use raster::{render_rgba, shade, Frame, Rasterizer, View, NO_TRIANGLE};
 pub use shading::Lighting;
-pub use survey::{StrategyStats, Survey, look_around, survey};
+pub use survey::{look_around, survey, StrategyStats, Survey};
 pub use visibility::{Drawn, Strategy, Visibility};

@@ -44,13 +44,7 @@ pub struct Frame {
 impl Frame {
     pub fn new(width: u32, height: u32) -> Self {
         let n = width as usize * height as usize;
-        Frame {
-            width,
-            height,
-            inv_depth: vec![0.0; n],
-            ids: vec![NO_TRIANGLE; n],
-            bary: vec![[0.0; 2]; n],
-        }
+        Frame { width, height, inv_depth: vec![0.0; n], ids: vec![NO_TRIANGLE; n], bary: vec![[0.0; 2]; n] }
     }
 
     pub fn clear(&mut self) {
@@ -60,11 +54,7 @@ impl Frame {
 
     /// Pixels whose triangle differs from `other`'s.
     pub fn id_differences(&self, other: &Frame) -> usize {
-        self.ids
-            .iter()
-            .zip(&other.ids)
-            .filter(|(a, b)| a != b)
-            .count()
+        self.ids.iter().zip(&other.ids).filter(|(a, b)| a != b).count()
     }
 
     /// Pixels some triangle covers.
@@ -114,10 +104,7 @@ impl View {
     #[inline]
     pub fn project(&self, e: DVec3) -> (f64, f64) {
         let s = self.focal / e.z;
-        (
-            0.5 * self.width as f64 + e.x * s,
-            0.5 * self.height as f64 - e.y * s,
-        )
+        (0.5 * self.width as f64 + e.x * s, 0.5 * self.height as f64 - e.y * s)
     }
 
     /// The (unnormalised) direction of the ray through the centre of pixel (x, y).
@@ -139,12 +126,7 @@ struct EyeXf {
 
 impl EyeXf {
     fn new(view: &View) -> Self {
-        EyeXf {
-            eye: view.eye.as_vec3(),
-            right: view.right.as_vec3(),
-            up: view.up.as_vec3(),
-            forward: view.forward.as_vec3(),
-        }
+        EyeXf { eye: view.eye.as_vec3(), right: view.right.as_vec3(), up: view.up.as_vec3(), forward: view.forward.as_vec3() }
     }
 }
 
@@ -165,11 +147,7 @@ pub struct Rasterizer<'a> {
 
 impl<'a> Rasterizer<'a> {
     pub fn new(mesh: &'a CellMesh, view: View) -> Self {
-        Rasterizer {
-            mesh,
-            xf: EyeXf::new(&view),
-            view,
-        }
+        Rasterizer { mesh, xf: EyeXf::new(&view), view }
     }
 
     pub fn view(&self) -> &View {
@@ -200,13 +178,7 @@ impl<'a> Rasterizer<'a> {
         if (b - a).cross(c - a).dot(a) >= 0.0 {
             return;
         }
-        let eye = |v: Vec3| {
-            DVec3::new(
-                v.dot(xf.right) as f64,
-                v.dot(xf.up) as f64,
-                v.dot(xf.forward) as f64,
-            )
-        };
+        let eye = |v: Vec3| DVec3::new(v.dot(xf.right) as f64, v.dot(xf.up) as f64, v.dot(xf.forward) as f64);
         let e = [eye(a), eye(b), eye(c)];
         let near = self.view.near;
         let inside = e.map(|v| v.z >= near);
@@ -237,14 +209,7 @@ impl<'a> Rasterizer<'a> {
         }
         let s0 = self.screen(poly[0]);
         for k in 1..n - 1 {
-            self.fill(
-                frame,
-                id,
-                s0,
-                self.screen(poly[k]),
-                self.screen(poly[k + 1]),
-                false,
-            );
+            self.fill(frame, id, s0, self.screen(poly[k]), self.screen(poly[k + 1]), false);
         }
     }
 
@@ -256,15 +221,7 @@ impl<'a> Rasterizer<'a> {
 
     /// Scan-converts one triangle: pixel centres inside it (top-left rule on edges) take its
     /// id where it is nearer, or as near with a smaller id.
-    fn fill(
-        &self,
-        frame: &mut Frame,
-        id: u32,
-        v0: ScreenVertex,
-        v1: ScreenVertex,
-        v2: ScreenVertex,
-        whole: bool,
-    ) {
+    fn fill(&self, frame: &mut Frame, id: u32, v0: ScreenVertex, v1: ScreenVertex, v2: ScreenVertex, whole: bool) {
         let (w, h) = (frame.width as i64, frame.height as i64);
         let min_x = v0.x.min(v1.x).min(v2.x);
         let max_x = v0.x.max(v1.x).max(v2.x);
@@ -305,11 +262,7 @@ impl<'a> Rasterizer<'a> {
                 if wz > old || (wz == old && id < frame.ids[i]) {
                     frame.inv_depth[i] = wz;
                     frame.ids[i] = id;
-                    frame.bary[i] = if whole {
-                        [(p1 / sum) as f32, (p2 / sum) as f32]
-                    } else {
-                        [f32::NAN; 2]
-                    };
+                    frame.bary[i] = if whole { [(p1 / sum) as f32, (p2 / sum) as f32] } else { [f32::NAN; 2] };
                 }
             }
         }
@@ -342,13 +295,7 @@ impl Edge {
         // the ties: exactly one of the two triangles across an edge does.
         let (ga, gb) = (a * sign, b * sign);
         let owns_ties = gb > 0.0 || (gb == 0.0 && ga > 0.0);
-        Edge {
-            a,
-            b,
-            c,
-            sign,
-            owns_ties,
-        }
+        Edge { a, b, c, sign, owns_ties }
     }
 
     #[inline]
@@ -379,42 +326,36 @@ pub fn shade(frame: &Frame, mesh: &CellMesh, view: &View, lighting: &Lighting) -
     // distance = |d| / w); built incrementally in f32 along each row.
     let step = (view.right / view.focal).as_vec3();
     let inv_falloff2 = 1.0 / (lighting.falloff_mm * lighting.falloff_mm);
-    out.par_chunks_exact_mut(4 * w)
-        .enumerate()
-        .for_each(|(y, row)| {
-            let row_start = view.pixel_direction(0, y as u32).as_vec3();
-            for (x, px) in row.chunks_exact_mut(4).enumerate() {
-                px[3] = 255;
-                let i = y * w + x;
-                let id = frame.ids[i];
-                if id == NO_TRIANGLE {
-                    continue;
-                }
-                let dir = row_start + step * x as f32;
-                let [b1, b2] = frame.bary[i];
-                let tri = mesh.triangles[id as usize];
-                let d2 = dir.length_squared();
-                let (normal, att) = if b1.is_nan() {
-                    match intersect(mesh, view, tri, dir.as_dvec3()) {
-                        Some((n, dist)) => (n, 1.0 / (1.0 + dist * dist * inv_falloff2)),
-                        None => continue,
-                    }
-                } else {
-                    let n = |k: usize| Vec3::from_array(mesh.normals[tri[k] as usize]);
-                    let n0 = n(0);
-                    let normal = n0 + (n(1) - n0) * b1 + (n(2) - n0) * b2;
-                    let wz = frame.inv_depth[i];
-                    (normal, 1.0 / (1.0 + d2 * inv_falloff2 / (wz * wz)))
-                };
-                let nn = normal.length_squared() * d2;
-                let ndl = if nn > 0.0 {
-                    -normal.dot(dir) / nn.sqrt()
-                } else {
-                    0.0
-                };
-                px[..3].copy_from_slice(&lut.rgb8(lighting, att, ndl));
+    out.par_chunks_exact_mut(4 * w).enumerate().for_each(|(y, row)| {
+        let row_start = view.pixel_direction(0, y as u32).as_vec3();
+        for (x, px) in row.chunks_exact_mut(4).enumerate() {
+            px[3] = 255;
+            let i = y * w + x;
+            let id = frame.ids[i];
+            if id == NO_TRIANGLE {
+                continue;
             }
-        });
+            let dir = row_start + step * x as f32;
+            let [b1, b2] = frame.bary[i];
+            let tri = mesh.triangles[id as usize];
+            let d2 = dir.length_squared();
+            let (normal, att) = if b1.is_nan() {
+                match intersect(mesh, view, tri, dir.as_dvec3()) {
+                    Some((n, dist)) => (n, 1.0 / (1.0 + dist * dist * inv_falloff2)),
+                    None => continue,
+                }
+            } else {
+                let n = |k: usize| Vec3::from_array(mesh.normals[tri[k] as usize]);
+                let n0 = n(0);
+                let normal = n0 + (n(1) - n0) * b1 + (n(2) - n0) * b2;
+                let wz = frame.inv_depth[i];
+                (normal, 1.0 / (1.0 + d2 * inv_falloff2 / (wz * wz)))
+            };
+            let nn = normal.length_squared() * d2;
+            let ndl = if nn > 0.0 { -normal.dot(dir) / nn.sqrt() } else { 0.0 };
+            px[..3].copy_from_slice(&lut.rgb8(lighting, att, ndl));
+        }
+    });
     out
 }
 
@@ -431,12 +372,8 @@ const GAMMA_STEPS: usize = 16384;
 
 impl ShadeTables {
     fn new(l: &Lighting) -> Self {
-        let specular = (0..=SPEC_STEPS)
-            .map(|i| (i as f32 / SPEC_STEPS as f32).powf(l.shininess))
-            .collect();
-        let gamma = (0..=GAMMA_STEPS)
-            .map(|i| super::shading::encode(i as f32 / GAMMA_STEPS as f32))
-            .collect();
+        let specular = (0..=SPEC_STEPS).map(|i| (i as f32 / SPEC_STEPS as f32).powf(l.shininess)).collect();
+        let gamma = (0..=GAMMA_STEPS).map(|i| super::shading::encode(i as f32 / GAMMA_STEPS as f32)).collect();
         ShadeTables { specular, gamma }
     }
 
@@ -448,9 +385,7 @@ impl ShadeTables {
         let k = (f as usize).min(SPEC_STEPS - 1);
         let pw = self.specular[k] + (self.specular[k + 1] - self.specular[k]) * (f - k as f32);
         let spec = l.specular * pw * att;
-        l.albedo.map(|a| {
-            self.gamma[((a * diffuse + spec).clamp(0.0, 1.0) * GAMMA_STEPS as f32 + 0.5) as usize]
-        })
+        l.albedo.map(|a| self.gamma[((a * diffuse + spec).clamp(0.0, 1.0) * GAMMA_STEPS as f32 + 0.5) as usize])
     }
 }
 
@@ -475,24 +410,13 @@ fn intersect(mesh: &CellMesh, view: &View, tri: [u32; 3], dir: DVec3) -> Option<
     // The pixel centre lies inside up to rounding; clamp so an edge pixel does not
     // extrapolate the normals.
     let (u, v) = (u.clamp(0.0, 1.0), v.clamp(0.0, 1.0));
-    let (u, v) = if u + v > 1.0 {
-        (u / (u + v), v / (u + v))
-    } else {
-        (u, v)
-    };
+    let (u, v) = if u + v > 1.0 { (u / (u + v), v / (u + v)) } else { (u, v) };
     let normal = n(tri[0]) * (1.0 - u - v) as f32 + n(tri[1]) * u as f32 + n(tri[2]) * v as f32;
     Some((normal, t.max(0.0) as f32))
 }
 
 /// Renders the listed cells and shades them: the CPU path end to end.
-pub fn render_rgba(
-    mesh: &CellMesh,
-    camera: &Camera,
-    cells: &[u32],
-    width: u32,
-    height: u32,
-    lighting: &Lighting,
-) -> Vec<u8> {
+pub fn render_rgba(mesh: &CellMesh, camera: &Camera, cells: &[u32], width: u32, height: u32, lighting: &Lighting) -> Vec<u8> {
     let view = View::new(camera, width, height);
     let mut frame = Frame::new(width, height);
     Rasterizer::new(mesh, view).draw_cells(&mut frame, cells);
@@ -508,12 +432,7 @@ mod tests {
     /// triangle behind it facing away.
     fn wall() -> CellMesh {
         CellMesh {
-            positions: vec![
-                [-5.0, -5.0, 10.0],
-                [5.0, -5.0, 10.0],
-                [5.0, 5.0, 10.0],
-                [-5.0, 5.0, 10.0],
-            ],
+            positions: vec![[-5.0, -5.0, 10.0], [5.0, -5.0, 10.0], [5.0, 5.0, 10.0], [-5.0, 5.0, 10.0]],
             normals: vec![[0.0, 0.0, -1.0]; 4],
             // (b − a) × (c − a) must point toward the camera (−z).
             triangles: vec![[0, 2, 1], [0, 3, 2], [0, 1, 2]],
@@ -553,12 +472,7 @@ mod tests {
         // A floor running from behind the camera to far ahead: half the screen below the
         // horizon is floor.
         let mesh = CellMesh {
-            positions: vec![
-                [-100.0, -2.0, -50.0],
-                [100.0, -2.0, -50.0],
-                [100.0, -2.0, 500.0],
-                [-100.0, -2.0, 500.0],
-            ],
+            positions: vec![[-100.0, -2.0, -50.0], [100.0, -2.0, -50.0], [100.0, -2.0, 500.0], [-100.0, -2.0, 500.0]],
             normals: vec![[0.0, 1.0, 0.0]; 4],
             triangles: vec![[0, 2, 1], [0, 3, 2]],
             cell_ranges: std::iter::once(0..2).collect(),
@@ -566,14 +480,8 @@ mod tests {
         };
         let mut f = Frame::new(32, 32);
         Rasterizer::new(&mesh, View::new(&camera(), 32, 32)).draw_cells(&mut f, &[0]);
-        let below = (16..32)
-            .flat_map(|y| (0..32).map(move |x| (x, y)))
-            .filter(|&(x, y)| f.ids[y * 32 + x] != NO_TRIANGLE)
-            .count();
-        let above = (0..16)
-            .flat_map(|y| (0..32).map(move |x| (x, y)))
-            .filter(|&(x, y)| f.ids[y * 32 + x] != NO_TRIANGLE)
-            .count();
+        let below = (16..32).flat_map(|y| (0..32).map(move |x| (x, y))).filter(|&(x, y)| f.ids[y * 32 + x] != NO_TRIANGLE).count();
+        let above = (0..16).flat_map(|y| (0..32).map(move |x| (x, y))).filter(|&(x, y)| f.ids[y * 32 + x] != NO_TRIANGLE).count();
         assert_eq!(above, 0);
         // The floor ends 500 mm ahead: rows just below the horizon see past its end.
         assert!(below > 14 * 32, "{below}");
@@ -587,10 +495,7 @@ mod tests {
         // Centre (facing, nearest) brighter than the corner of the wall; background black.
         assert!(at(32, 32) > at(17, 17));
         assert_eq!(at(2, 2), 0);
-        let want = Lighting::default().rgb8(
-            10.0 * (1.0 + 2.0 * (0.5f64 / 32.0).powi(2)).sqrt() as f32,
-            1.0,
-        );
+        let want = Lighting::default().rgb8(10.0 * (1.0 + 2.0 * (0.5f64 / 32.0).powi(2)).sqrt() as f32, 1.0);
         assert!((at(32, 32) as i32 - want[0] as i32).abs() <= 1);
     }
 }

@@ -62,10 +62,7 @@ impl fmt::Display for Strategy {
 impl FromStr for Strategy {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        Strategy::ALL
-            .into_iter()
-            .find(|k| k.name() == s)
-            .ok_or_else(|| format!("unknown visibility strategy '{s}' (all, lg, paper, ours)"))
+        Strategy::ALL.into_iter().find(|k| k.name() == s).ok_or_else(|| format!("unknown visibility strategy '{s}' (all, lg, paper, ours)"))
     }
 }
 
@@ -113,20 +110,10 @@ impl Visibility {
             .iter()
             .map(|p| {
                 let normal = DVec3::from_array(p.normal);
-                PortalShape {
-                    corners: p.bounding_points(),
-                    normal,
-                    offset: normal.dot(DVec3::from_array(p.centre_mm)),
-                    half_thickness: p.half_thickness_mm,
-                }
+                PortalShape { corners: p.bounding_points(), normal, offset: normal.dot(DVec3::from_array(p.centre_mm)), half_thickness: p.half_thickness_mm }
             })
             .collect();
-        Visibility {
-            strategy,
-            coherence: strategy == Strategy::Paper,
-            portals,
-            last: None,
-        }
+        Visibility { strategy, coherence: strategy == Strategy::Paper, portals, last: None }
     }
 
     /// Forgets last frame (after a jump).
@@ -140,10 +127,7 @@ impl Visibility {
         let view = *raster.view();
         let ncells = cells.cells.len() as u32;
         let camera_cell = cells.cell_of_point(view.eye).map(|c| c as u32);
-        let mut drawn = Drawn {
-            camera_cell,
-            ..Drawn::default()
-        };
+        let mut drawn = Drawn { camera_cell, ..Drawn::default() };
         let Some(home) = camera_cell.filter(|_| self.strategy != Strategy::All) else {
             let all: Vec<u32> = (0..ncells).collect();
             drawn.triangles = raster.draw_cells(frame, &all);
@@ -182,13 +166,7 @@ impl Visibility {
                     _ => break,
                 };
                 drawn.portals_tested += 1;
-                if !self.narrow(
-                    &mut region,
-                    portal,
-                    frame,
-                    &view,
-                    &mut drawn.depth_pixels_read,
-                ) {
+                if !self.narrow(&mut region, portal, frame, &view, &mut drawn.depth_pixels_read) {
                     break;
                 }
                 draw(next, &mut drawn, frame);
@@ -202,14 +180,7 @@ impl Visibility {
 
     /// Narrows a sequence's region by the next portal; false when nothing can be seen
     /// through it any more.
-    fn narrow(
-        &self,
-        region: &mut Region,
-        portal: usize,
-        frame: &Frame,
-        view: &View,
-        reads: &mut usize,
-    ) -> bool {
+    fn narrow(&self, region: &mut Region, portal: usize, frame: &Frame, view: &View, reads: &mut usize) -> bool {
         let shape = &self.portals[portal];
         let Some(outline) = project_prism(&shape.corners, view) else {
             return false;
@@ -217,14 +188,8 @@ impl Visibility {
         match self.strategy {
             Strategy::All => true,
             Strategy::Lg => region.clip_rect(&outline, view),
-            Strategy::Paper => {
-                region.clip_rect(&outline, view)
-                    && region.drop_covered_rows(frame, outline.min_depth, reads)
-            }
-            Strategy::Ours => {
-                region.clip_hull(&outline, view)
-                    && region.trim_covered(frame, shape, outline.min_depth, view, reads)
-            }
+            Strategy::Paper => region.clip_rect(&outline, view) && region.drop_covered_rows(frame, outline.min_depth, reads),
+            Strategy::Ours => region.clip_hull(&outline, view) && region.trim_covered(frame, shape, outline.min_depth, view, reads),
         }
     }
 }
@@ -278,11 +243,7 @@ const SLACK_PX: f64 = 1e-3;
 
 impl Region {
     fn full(view: &View) -> Self {
-        Region {
-            y0: 0,
-            y1: view.height as i64 - 1,
-            rows: vec![(0, view.width as i64 - 1); view.height as usize],
-        }
+        Region { y0: 0, y1: view.height as i64 - 1, rows: vec![(0, view.width as i64 - 1); view.height as usize] }
     }
 
     fn is_empty(&self) -> bool {
@@ -302,12 +263,7 @@ impl Region {
 
     /// Intersects with the outline's bounding rectangle (LG, paper).
     fn clip_rect(&mut self, o: &Outline, view: &View) -> bool {
-        let (mut x0, mut x1, mut y0, mut y1) = (
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-        );
+        let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
         for &(x, y) in &o.hull {
             x0 = x0.min(x);
             x1 = x1.max(x);
@@ -367,14 +323,7 @@ impl Region {
 
     /// Ours: trims both ends of every row while the pixel is nearer than where its ray can
     /// first meet the portal's slab.
-    fn trim_covered(
-        &mut self,
-        frame: &Frame,
-        portal: &PortalShape,
-        min_depth: f64,
-        view: &View,
-        reads: &mut usize,
-    ) -> bool {
+    fn trim_covered(&mut self, frame: &Frame, portal: &PortalShape, min_depth: f64, view: &View, reads: &mut usize) -> bool {
         let bound = SlabBound::new(portal, view);
         let prism_bound = 1.0 / (min_depth * (1.0 - 1e-6));
         for y in self.y0.max(0)..=self.y1 {
@@ -414,15 +363,9 @@ impl SlabBound {
         } else if s > p.half_thickness {
             (-p.normal, -(p.offset + p.half_thickness))
         } else {
-            return SlabBound {
-                plane: None,
-                eye_side: 0.0,
-            };
+            return SlabBound { plane: None, eye_side: 0.0 };
         };
-        SlabBound {
-            plane: Some((n, c)),
-            eye_side: n.dot(view.eye),
-        }
+        SlabBound { plane: Some((n, c)), eye_side: n.dot(view.eye) }
     }
 
     /// The largest inverse depth (nearest point) at which the ray through pixel (x, y) can
@@ -448,21 +391,13 @@ impl SlabBound {
 fn centres(a: f64, b: f64, size: u32) -> (i64, i64) {
     let lo = (a - 0.5 - SLACK_PX).ceil().max(0.0);
     let hi = (b - 0.5 + SLACK_PX).floor().min(size as f64 - 1.0);
-    if lo > hi || hi < 0.0 {
-        (1, 0)
-    } else {
-        (lo as i64, hi as i64)
-    }
+    if lo > hi || hi < 0.0 { (1, 0) } else { (lo as i64, hi as i64) }
 }
 
 /// The x extent of a convex polygon along the horizontal line y (a line within the slack
 /// of the top or bottom vertex counts as touching it).
 fn hull_span(hull: &[(f64, f64)], y: f64) -> Option<(f64, f64)> {
-    let (ymin, ymax) = hull
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
-            (a.min(p.1), b.max(p.1))
-        });
+    let (ymin, ymax) = hull.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.1), b.max(p.1)));
     if hull.is_empty() || y < ymin - SLACK_PX || y > ymax + SLACK_PX {
         return None;
     }
@@ -490,16 +425,12 @@ fn convex_hull(mut pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
     if pts.len() < 3 {
         return pts;
     }
-    let cross = |o: (f64, f64), a: (f64, f64), b: (f64, f64)| {
-        (a.0 - o.0) * (b.1 - o.1) - (a.1 - o.1) * (b.0 - o.0)
-    };
+    let cross = |o: (f64, f64), a: (f64, f64), b: (f64, f64)| (a.0 - o.0) * (b.1 - o.1) - (a.1 - o.1) * (b.0 - o.0);
     let mut hull: Vec<(f64, f64)> = Vec::with_capacity(pts.len() + 1);
     for pass in 0..2 {
         let start = hull.len();
         let push = |p: (f64, f64), hull: &mut Vec<(f64, f64)>| {
-            while hull.len() >= start + 2
-                && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0
-            {
+            while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0 {
                 hull.pop();
             }
             hull.push(p);
@@ -520,13 +451,7 @@ mod tests {
 
     #[test]
     fn hull_spans_cover_the_polygon() {
-        let sq = convex_hull(vec![
-            (1.0, 1.0),
-            (5.0, 1.0),
-            (5.0, 5.0),
-            (1.0, 5.0),
-            (3.0, 3.0),
-        ]);
+        let sq = convex_hull(vec![(1.0, 1.0), (5.0, 1.0), (5.0, 5.0), (1.0, 5.0), (3.0, 3.0)]);
         assert_eq!(sq.len(), 4);
         assert_eq!(hull_span(&sq, 2.0), Some((1.0, 5.0)));
         assert_eq!(hull_span(&sq, 6.0), None);

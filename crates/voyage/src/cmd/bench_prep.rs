@@ -5,46 +5,29 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
-use anyhow::{Context, Result, bail};
-use serde_json::{Value, json};
-use voyage_core::Volume;
+use anyhow::{bail, Context, Result};
+use serde_json::{json, Value};
 use voyage_core::distance::geodesic_distance;
-use voyage_core::io::{self, LoadOptions, nifti};
+use voyage_core::io::{self, nifti, LoadOptions};
 use voyage_core::phantom::{self, ColonOptions};
-use voyage_core::prep::{PrepOptions, Study, Timings, prepare};
+use voyage_core::prep::{prepare, PrepOptions, Study, Timings};
+use voyage_core::Volume;
 
-use super::bench::{Common, find_python, median};
+use super::bench::{find_python, median, Common};
 
 const PREP_REFERENCE_PY: &str = include_str!("../../../../bench/prep_reference.py");
 
-pub fn run(
-    inputs: Vec<PathBuf>,
-    phantom: bool,
-    dir: &Path,
-    repeats: usize,
-    reference: bool,
-    common: &Common,
-) -> Result<()> {
+pub fn run(inputs: Vec<PathBuf>, phantom: bool, dir: &Path, repeats: usize, reference: bool, common: &Common) -> Result<()> {
     let (threads, python, json_out) = (common.threads, common.python.as_deref(), common.json);
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build_global()
-        .ok();
-    std::fs::create_dir_all(dir)
-        .with_context(|| format!("{}: cannot create folder", dir.display()))?;
+    rayon::ThreadPoolBuilder::new().num_threads(threads).build_global().ok();
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create folder", dir.display()))?;
     let mut cases: Vec<(String, Volume<i16>)> = Vec::new();
     if phantom {
         eprintln!("making the colon phantom ...");
-        cases.push((
-            "colon phantom (512×512×400)".into(),
-            phantom::colon(&ColonOptions::default())?.ct,
-        ));
+        cases.push(("colon phantom (512×512×400)".into(), phantom::colon(&ColonOptions::default())?.ct));
     }
     for p in &inputs {
-        cases.push((
-            p.display().to_string(),
-            io::load(p, &LoadOptions::default())?.volume,
-        ));
+        cases.push((p.display().to_string(), io::load(p, &LoadOptions::default())?.volume));
     }
     if cases.is_empty() {
         bail!("nothing to measure: give an input or leave the phantom in");
@@ -69,12 +52,7 @@ pub fn run(
         results.push(report(&r, refs, threads));
     }
     if json_out {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(
-                &json!({"bench": "prep", "threads": threads, "repeats": repeats, "cases": results})
-            )?
-        );
+        println!("{}", serde_json::to_string_pretty(&json!({"bench": "prep", "threads": threads, "repeats": repeats, "cases": results}))?);
     } else {
         for r in &results {
             print_case(r);
@@ -121,27 +99,13 @@ fn measure(name: &str, ct: Volume<i16>, repeats: usize) -> Result<Measured> {
         geodesic_distance(lumen, &study.ds.grid, study.source)?;
         single.push(t.elapsed().as_secs_f64() * 1e3);
     }
-    Ok(Measured {
-        name: name.into(),
-        dt_single_ms: median(&mut single),
-        study,
-        timings,
-        ct_mb,
-        peak_rss_mb: super::prep::peak_rss_mb(),
-    })
+    Ok(Measured { name: name.into(), dt_single_ms: median(&mut single), study, timings, ct_mb, peak_rss_mb: super::prep::peak_rss_mb() })
 }
 
-fn run_reference(
-    python: Option<&Path>,
-    dir: &Path,
-    mask: &Path,
-    source: [usize; 3],
-    repeats: usize,
-) -> Result<Value> {
+fn run_reference(python: Option<&Path>, dir: &Path, mask: &Path, source: [usize; 3], repeats: usize) -> Result<Value> {
     let python = find_python(python)?;
     let script = dir.join("prep_reference.py");
-    std::fs::write(&script, PREP_REFERENCE_PY)
-        .with_context(|| format!("{}: cannot write", script.display()))?;
+    std::fs::write(&script, PREP_REFERENCE_PY).with_context(|| format!("{}: cannot write", script.display()))?;
     let out = Command::new(&python)
         .arg(&script)
         .arg(mask)
@@ -151,11 +115,7 @@ fn run_reference(
         .output()
         .with_context(|| format!("cannot run {}", python.display()))?;
     if !out.status.success() {
-        bail!(
-            "{} failed: {}",
-            script.display(),
-            String::from_utf8_lossy(&out.stderr).trim()
-        );
+        bail!("{} failed: {}", script.display(), String::from_utf8_lossy(&out.stderr).trim());
     }
     serde_json::from_slice(&out.stdout).context("reference printed no JSON")
 }
@@ -164,12 +124,7 @@ fn report(m: &Measured, refs: Value, threads: usize) -> Value {
     let t = &m.timings;
     let s = &m.study;
     let r = |k: &str| refs.get(k).and_then(|v| v["ms"].as_f64());
-    let row = |stage: &str,
-               ours: f64,
-               reference: &str,
-               ref_ms: Option<f64>,
-               target_ms: f64,
-               target_ratio: Option<f64>| {
+    let row = |stage: &str, ours: f64, reference: &str, ref_ms: Option<f64>, target_ms: f64, target_ratio: Option<f64>| {
         json!({
             "stage": stage, "voyage_ms": ours, "reference": reference, "reference_ms": ref_ms,
             "speedup": ref_ms.map(|x| x / ours), "target_ms": target_ms, "target_speedup": target_ratio,
@@ -216,17 +171,10 @@ fn print_case(c: &Value) {
         c["peak_rss_mb"].as_f64().unwrap_or(0.0),
         c["ct_mb"].as_f64().unwrap_or(0.0)
     );
-    println!(
-        "  {:<38} {:>10} {:<20} {:>10} {:>8} {:>10} {:>8}",
-        "stage", "voyage ms", "reference", "ref ms", "speedup", "target ms", "target×"
-    );
+    println!("  {:<38} {:>10} {:<20} {:>10} {:>8} {:>10} {:>8}", "stage", "voyage ms", "reference", "ref ms", "speedup", "target ms", "target×");
     let empty = vec![];
     for r in c["rows"].as_array().unwrap_or(&empty) {
-        let f = |v: &Value, p: usize| {
-            v.as_f64()
-                .map(|x| format!("{x:.p$}"))
-                .unwrap_or_else(|| "-".into())
-        };
+        let f = |v: &Value, p: usize| v.as_f64().map(|x| format!("{x:.p$}")).unwrap_or_else(|| "-".into());
         println!(
             "  {:<38} {:>10} {:<20} {:>10} {:>7}× {:>10} {:>7}",
             r["stage"].as_str().unwrap_or(""),
@@ -235,10 +183,7 @@ fn print_case(c: &Value) {
             f(&r["reference_ms"], 1),
             f(&r["speedup"], 2),
             f(&r["target_ms"], 0),
-            r["target_speedup"]
-                .as_f64()
-                .map(|x| format!("{x:.0}×"))
-                .unwrap_or_else(|| "-".into()),
+            r["target_speedup"].as_f64().map(|x| format!("{x:.0}×")).unwrap_or_else(|| "-".into()),
         );
     }
 }

@@ -15,11 +15,7 @@ use std::path::PathBuf;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser, Debug)]
-#[command(
-    name = "voyage",
-    version,
-    about = "Interactive virtual colonoscopy (Hong et al., Virtual Voyage, 1997)"
-)]
+#[command(name = "voyage", version, about = "Interactive virtual colonoscopy (Hong et al., Virtual Voyage, 1997)")]
 pub struct Cli {
     #[command(subcommand)]
     command: Command,

@@ -4,16 +4,16 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use glam::DVec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
-use voyage_core::Geometry;
 use voyage_core::export::study::write_study;
 use voyage_core::io::{self, LoadOptions};
-use voyage_core::prep::{PrepOptions, Stage, Study, prepare};
+use voyage_core::prep::{prepare, PrepOptions, Stage, Study};
 use voyage_core::segment::ComponentKind;
+use voyage_core::Geometry;
 
 #[derive(Clone, Copy, Debug, Default, ValueEnum)]
 pub enum Frame {
@@ -62,11 +62,7 @@ pub struct PrepArgs {
 }
 
 pub fn parse_point(s: &str) -> Result<DVec3, String> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|x| x.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .map_err(|e| format!("{s}: {e}"))?;
+    let v: Vec<f64> = s.split(',').map(|x| x.trim().parse::<f64>()).collect::<Result<_, _>>().map_err(|e| format!("{s}: {e}"))?;
     match v[..] {
         [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(DVec3::new(x, y, z)),
         _ => Err(format!("{s}: expected three numbers x,y,z")),
@@ -83,12 +79,7 @@ pub struct Prepared {
 /// Loads the input and runs the whole preprocessing (a progress bar on a terminal).
 pub fn load_and_prepare(a: &InputArgs) -> Result<Prepared> {
     let t0 = Instant::now();
-    let loaded = io::load(
-        &a.input,
-        &LoadOptions {
-            series_uid: a.series.clone(),
-        },
-    )?;
+    let loaded = io::load(&a.input, &LoadOptions { series_uid: a.series.clone() })?;
     let load_ms = t0.elapsed().as_secs_f64() * 1e3;
     let g = loaded.volume.geometry().clone();
     let to_local = |p: DVec3| match a.coords {
@@ -115,19 +106,11 @@ pub fn load_and_prepare(a: &InputArgs) -> Result<Prepared> {
     if study.centerline.points_mm.len() < 2 {
         bail!("{}: the centerline is empty", a.input.display());
     }
-    Ok(Prepared {
-        study,
-        geometry: g,
-        load_ms,
-    })
+    Ok(Prepared { study, geometry: g, load_ms })
 }
 
 pub fn run(a: &PrepArgs) -> Result<()> {
-    let Prepared {
-        study,
-        geometry: g,
-        load_ms,
-    } = load_and_prepare(&a.input)?;
+    let Prepared { study, geometry: g, load_ms } = load_and_prepare(&a.input)?;
     let written = write_study(&a.out, &study)?;
     let summary = summary(&study, &g, load_ms);
     if a.json {
@@ -183,68 +166,27 @@ fn summary(s: &Study, g: &Geometry, load_ms: f64) -> serde_json::Value {
 
 fn print_text(s: &Study, g: &Geometry, load_ms: f64) {
     let seg = &s.segmentation;
-    let colon_ml = seg
-        .components
-        .iter()
-        .find(|c| c.kind == ComponentKind::Colon)
-        .map_or(0.0, |c| c.volume_ml);
-    println!(
-        "lumen       {} voxels ({colon_ml:.0} ml of gas{}){}",
-        seg.lumen_voxels,
-        if seg.fluid_voxels > 0 {
-            format!(", {} voxels of tagged fluid", seg.fluid_voxels)
-        } else {
-            String::new()
-        },
-        if seg.from_mask { ", from a mask" } else { "" }
-    );
+    let colon_ml = seg.components.iter().find(|c| c.kind == ComponentKind::Colon).map_or(0.0, |c| c.volume_ml);
+    println!("lumen       {} voxels ({colon_ml:.0} ml of gas{}){}", seg.lumen_voxels, if seg.fluid_voxels > 0 { format!(", {} voxels of tagged fluid", seg.fluid_voxels) } else { String::new() }, if seg.from_mask { ", from a mask" } else { "" });
     for c in &seg.components {
-        println!(
-            "  gas       {:>9} voxels {:>8.1} ml  {:?}",
-            c.voxels, c.volume_ml, c.kind
-        );
+        println!("  gas       {:>9} voxels {:>8.1} ml  {:?}", c.voxels, c.volume_ml, c.kind);
     }
     if seg.small_components > 0 {
         println!("  gas       {} smaller pockets", seg.small_components);
     }
     let lps = |p: DVec3| g.local_to_patient(p);
-    println!(
-        "source      {:.1?} mm LPS (rectum)",
-        lps(s.source_mm()).to_array()
-    );
-    println!(
-        "target      {:.1?} mm LPS (cecum)",
-        lps(s.target_mm()).to_array()
-    );
-    println!(
-        "centerline  {:.0} mm, {} points",
-        s.centerline.length_mm,
-        s.centerline.points_mm.len()
-    );
-    println!(
-        "surface     {} triangles, {} vertices",
-        s.surface.mesh.triangles.len(),
-        s.surface.mesh.positions.len()
-    );
+    println!("source      {:.1?} mm LPS (rectum)", lps(s.source_mm()).to_array());
+    println!("target      {:.1?} mm LPS (cecum)", lps(s.target_mm()).to_array());
+    println!("centerline  {:.0} mm, {} points", s.centerline.length_mm, s.centerline.points_mm.len());
+    println!("surface     {} triangles, {} vertices", s.surface.mesh.triangles.len(), s.surface.mesh.positions.len());
     println!("cells       {}", s.cells.cells.len());
     if s.contact_voxels > 0 {
-        println!(
-            "contacts    {} lumen voxels made wall where loops of the colon touch",
-            s.contact_voxels
-        );
+        println!("contacts    {} lumen voxels made wall where loops of the colon touch", s.contact_voxels);
     }
     let t = &s.timings;
     println!(
         "time        load {load_ms:.0} ms; segment {:.0}, ds {:.0}, skeleton {:.0}, centerline {:.0}, contacts {:.0}, dt {:.0}, surface {:.0}, cells {:.0}; total after load {:.0} ms",
-        t.segment,
-        t.ds,
-        t.skeleton,
-        t.centerline,
-        t.contacts,
-        t.dt,
-        t.surface,
-        t.cells,
-        t.total_after_load
+        t.segment, t.ds, t.skeleton, t.centerline, t.contacts, t.dt, t.surface, t.cells, t.total_after_load
     );
     if let Some(mb) = peak_rss_mb() {
         println!("memory      peak {mb:.0} MB");
