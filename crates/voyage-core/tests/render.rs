@@ -78,9 +78,8 @@ fn culling_never_changes_the_image_on_colon_a() {
 /// Pixels showing a triangle with all three vertices within `r` of `c`.
 fn pixels_on(frame: &Frame, mesh: &CellMesh, c: DVec3, r: f64) -> usize {
     frame
-        .ids
-        .iter()
-        .filter(|&&id| {
+        .ids()
+        .filter(|&id| {
             id != NO_TRIANGLE && mesh.triangles[id as usize].iter().all(|&v| (DVec3::from_array(mesh.positions[v as usize].map(f64::from)) - c).length() <= r)
         })
         .count()

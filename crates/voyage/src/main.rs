@@ -9,6 +9,7 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
+    quiet_vulkan_layer();
     voyage_core::error::install_panic_hook();
     let cli = cmd::Cli::parse();
     match cmd::run(cli) {
@@ -18,5 +19,15 @@ fn main() -> ExitCode {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE
         }
+    }
+}
+
+/// Mesa's device-select Vulkan layer prints "XDG_RUNTIME_DIR is invalid" on machines without
+/// a desktop session (CI, servers) although nothing is wrong; wgpu chooses the adapter
+/// itself, so the layer is not needed.
+fn quiet_vulkan_layer() {
+    if std::env::var_os("NODEVICE_SELECT").is_none() && std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+        // SAFETY: first thing in main, before any other thread exists.
+        unsafe { std::env::set_var("NODEVICE_SELECT", "1") };
     }
 }

@@ -20,6 +20,12 @@ pub struct CellMesh {
     pub cell_ranges: Vec<Range<u32>>,
     /// Draw index → triangle index in the surface.
     pub surface_triangle: Vec<u32>,
+    /// For the CPU rasterizer, which transforms each vertex once per cell rather than once
+    /// per triangle: cell c's vertices are `cell_vertices[cell_vertex_ranges[c]]` and
+    /// `local_triangles[t]` indexes them (empty until [`CellMesh::index_cells`]).
+    pub cell_vertices: Vec<u32>,
+    pub cell_vertex_ranges: Vec<Range<u32>>,
+    pub local_triangles: Vec<[u32; 3]>,
 }
 
 /// Normal smoothing passes [`CellMesh::new`] applies: the marching-cubes surface of a
@@ -35,6 +41,37 @@ impl CellMesh {
         mesh
     }
 
+    /// Builds the per-cell vertex lists (see `cell_vertices`).
+    pub fn index_cells(&mut self) {
+        let mut local = vec![u32::MAX; self.positions.len()];
+        self.cell_vertices.clear();
+        self.cell_vertex_ranges.clear();
+        self.local_triangles = Vec::with_capacity(self.triangles.len());
+        for range in &self.cell_ranges {
+            let start = self.cell_vertices.len();
+            for t in &self.triangles[range.start as usize..range.end as usize] {
+                let l = t.map(|v| {
+                    let slot = &mut local[v as usize];
+                    if *slot == u32::MAX {
+                        *slot = (self.cell_vertices.len() - start) as u32;
+                        self.cell_vertices.push(v);
+                    }
+                    *slot
+                });
+                self.local_triangles.push(l);
+            }
+            for &v in &self.cell_vertices[start..] {
+                local[v as usize] = u32::MAX;
+            }
+            self.cell_vertex_ranges.push(start as u32..self.cell_vertices.len() as u32);
+        }
+    }
+
+    /// Whether [`CellMesh::index_cells`] matches the triangles.
+    pub fn is_indexed(&self) -> bool {
+        self.local_triangles.len() == self.triangles.len() && self.cell_vertex_ranges.len() == self.cell_ranges.len()
+    }
+
     /// The surface's own normals (the CT gradient), unsmoothed.
     pub fn unsmoothed(surface: &Surface, cells: &Cells) -> Self {
         let mut triangles = Vec::with_capacity(surface.mesh.triangles.len());
@@ -48,7 +85,16 @@ impl CellMesh {
             }
             cell_ranges.push(start..triangles.len() as u32);
         }
-        CellMesh { positions: surface.mesh.positions.clone(), normals: surface.mesh.normals.clone(), triangles, cell_ranges, surface_triangle }
+        let mut mesh = CellMesh {
+            positions: surface.mesh.positions.clone(),
+            normals: surface.mesh.normals.clone(),
+            triangles,
+            cell_ranges,
+            surface_triangle,
+            ..CellMesh::default()
+        };
+        mesh.index_cells();
+        mesh
     }
 
     pub fn cells(&self) -> usize {

@@ -14,6 +14,8 @@
 //! Back faces are culled: the camera is always inside the closed surface (the navigation's
 //! safe set), where every first hit is a face whose normal points back into the lumen.
 
+use std::cell::RefCell;
+
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
@@ -24,42 +26,61 @@ use crate::camera::Camera;
 /// Marks a pixel no triangle covers.
 pub const NO_TRIANGLE: u32 = u32::MAX;
 
+/// Bounding boxes at least this wide (pixels) are scanned only between the edges' crossings
+/// of each row; narrower ones are tested pixel by pixel.
+const SPAN_MIN_WIDTH: i64 = 8;
+
 /// Depth (mm along the view axis) below which points are clipped away.
 const MIN_NEAR_MM: f64 = 1e-4;
 
-/// What the rasterizer writes: per pixel (row-major, top row first) the inverse depth of the
-/// nearest triangle (mm⁻¹; 0 where none) and its draw index in the [`CellMesh`].
+/// One pixel of a [`Frame`]: kept together so that the depth test and the writes after it
+/// touch one cache line, not three.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pixel {
+    /// Inverse depth (mm⁻¹) of the nearest triangle; 0 where none.
+    pub inv_depth: f32,
+    /// Its draw index in the [`CellMesh`], or [`NO_TRIANGLE`].
+    pub id: u32,
+    /// The vertex normals interpolated (perspective-correct, as a GPU interpolates varyings)
+    /// at the pixel centre, ×32767: shading then reads nothing but the frame.
+    pub normal: [i16; 3],
+}
+
+const EMPTY: Pixel = Pixel { inv_depth: 0.0, id: NO_TRIANGLE, normal: [0; 3] };
+
+/// What the rasterizer writes, per pixel, row-major, top row first.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Frame {
     pub width: u32,
     pub height: u32,
-    pub inv_depth: Vec<f32>,
-    pub ids: Vec<u32>,
-    /// Perspective-correct barycentrics (of the triangle's 2nd and 3rd vertices) of the
-    /// pixel centre, for shading; NaN where the triangle was clipped (shading then
-    /// intersects the ray with the triangle instead).
-    pub bary: Vec<[f32; 2]>,
+    pub pixels: Vec<Pixel>,
 }
 
 impl Frame {
     pub fn new(width: u32, height: u32) -> Self {
-        let n = width as usize * height as usize;
-        Frame { width, height, inv_depth: vec![0.0; n], ids: vec![NO_TRIANGLE; n], bary: vec![[0.0; 2]; n] }
+        Frame { width, height, pixels: vec![EMPTY; width as usize * height as usize] }
     }
 
     pub fn clear(&mut self) {
-        self.inv_depth.fill(0.0);
-        self.ids.fill(NO_TRIANGLE);
+        self.pixels.fill(EMPTY);
+    }
+
+    pub fn id(&self, i: usize) -> u32 {
+        self.pixels[i].id
+    }
+
+    pub fn ids(&self) -> impl Iterator<Item = u32> + '_ {
+        self.pixels.iter().map(|p| p.id)
     }
 
     /// Pixels whose triangle differs from `other`'s.
     pub fn id_differences(&self, other: &Frame) -> usize {
-        self.ids.iter().zip(&other.ids).filter(|(a, b)| a != b).count()
+        self.pixels.iter().zip(&other.pixels).filter(|(a, b)| a.id != b.id).count()
     }
 
     /// Pixels some triangle covers.
     pub fn covered(&self) -> usize {
-        self.ids.iter().filter(|&&i| i != NO_TRIANGLE).count()
+        self.pixels.iter().filter(|p| p.id != NO_TRIANGLE).count()
     }
 }
 
@@ -130,12 +151,23 @@ impl EyeXf {
     }
 }
 
-/// A vertex on screen: pixel coordinates and inverse depth.
+/// A vertex on screen: pixel coordinates, inverse depth and its (display) normal.
 #[derive(Clone, Copy)]
 struct ScreenVertex {
     x: f64,
     y: f64,
     w: f64,
+    n: Vec3,
+}
+
+/// A vertex transformed for one frame: relative to the eye (world axes, f32, for the
+/// facing test), in eye coordinates, and on screen (when in front of the near plane).
+#[derive(Clone, Copy)]
+struct Vertex {
+    rel: Vec3,
+    eye: DVec3,
+    normal: Vec3,
+    screen: ScreenVertex,
 }
 
 /// Draws cells into a frame: the rasterizer proper.
@@ -143,11 +175,13 @@ pub struct Rasterizer<'a> {
     mesh: &'a CellMesh,
     view: View,
     xf: EyeXf,
+    /// The current cell's transformed vertices.
+    scratch: RefCell<Vec<Vertex>>,
 }
 
 impl<'a> Rasterizer<'a> {
     pub fn new(mesh: &'a CellMesh, view: View) -> Self {
-        Rasterizer { mesh, xf: EyeXf::new(&view), view }
+        Rasterizer { mesh, xf: EyeXf::new(&view), view, scratch: RefCell::new(Vec::new()) }
     }
 
     pub fn view(&self) -> &View {
@@ -156,9 +190,24 @@ impl<'a> Rasterizer<'a> {
 
     /// Draws every triangle of a cell; returns how many triangles that was.
     pub fn draw_cell(&self, frame: &mut Frame, cell: u32) -> usize {
-        let range = self.mesh.cell_ranges[cell as usize].clone();
-        for id in range.clone() {
-            self.draw_triangle(frame, id);
+        let mesh = self.mesh;
+        let range = mesh.cell_ranges[cell as usize].clone();
+        if !mesh.is_indexed() {
+            for id in range.clone() {
+                let t = mesh.triangles[id as usize];
+                let [a, b, c] = t.map(|v| self.vertex(v));
+                self.draw_triangle(frame, id, &a, &b, &c);
+            }
+            return range.len();
+        }
+        // Each vertex once per cell (a vertex is shared by about six triangles).
+        let mut buf = self.scratch.borrow_mut();
+        buf.clear();
+        let vr = mesh.cell_vertex_ranges[cell as usize].clone();
+        buf.extend(mesh.cell_vertices[vr.start as usize..vr.end as usize].iter().map(|&v| self.vertex(v)));
+        let local = &mesh.local_triangles[range.start as usize..range.end as usize];
+        for (id, t) in (range.start..).zip(local) {
+            self.draw_triangle(frame, id, &buf[t[0] as usize], &buf[t[1] as usize], &buf[t[2] as usize]);
         }
         range.len()
     }
@@ -167,61 +216,64 @@ impl<'a> Rasterizer<'a> {
         cells.iter().map(|&c| self.draw_cell(frame, c)).sum()
     }
 
-    fn draw_triangle(&self, frame: &mut Frame, id: u32) {
-        let [ia, ib, ic] = self.mesh.triangles[id as usize];
-        let pos = &self.mesh.positions;
+    #[inline]
+    fn vertex(&self, v: u32) -> Vertex {
         let xf = &self.xf;
-        let a = Vec3::from_array(pos[ia as usize]) - xf.eye;
-        let b = Vec3::from_array(pos[ib as usize]) - xf.eye;
-        let c = Vec3::from_array(pos[ic as usize]) - xf.eye;
+        let rel = Vec3::from_array(self.mesh.positions[v as usize]) - xf.eye;
+        let eye = DVec3::new(rel.dot(xf.right) as f64, rel.dot(xf.up) as f64, rel.dot(xf.forward) as f64);
+        let normal = Vec3::from_array(self.mesh.normals[v as usize]);
+        let screen = if eye.z >= self.view.near { self.screen(eye, normal) } else { ScreenVertex { x: 0.0, y: 0.0, w: 0.0, n: normal } };
+        Vertex { rel, eye, normal, screen }
+    }
+
+    fn draw_triangle(&self, frame: &mut Frame, id: u32, a: &Vertex, b: &Vertex, c: &Vertex) {
         // Back face (or edge-on): its normal does not point toward the eye.
-        if (b - a).cross(c - a).dot(a) >= 0.0 {
+        if (b.rel - a.rel).cross(c.rel - a.rel).dot(a.rel) >= 0.0 {
             return;
         }
-        let eye = |v: Vec3| DVec3::new(v.dot(xf.right) as f64, v.dot(xf.up) as f64, v.dot(xf.forward) as f64);
-        let e = [eye(a), eye(b), eye(c)];
         let near = self.view.near;
-        let inside = e.map(|v| v.z >= near);
+        let inside = [a, b, c].map(|v| v.eye.z >= near);
         if !inside.iter().any(|&i| i) {
             return;
         }
         if inside.iter().all(|&i| i) {
-            let s = e.map(|v| self.screen(v));
-            self.fill(frame, id, s[0], s[1], s[2], true);
+            self.fill(frame, id, a.screen, b.screen, c.screen);
             return;
         }
-        // Clip against the near plane (Sutherland–Hodgman, one plane): 3 or 4 vertices.
-        let mut poly: [DVec3; 4] = [DVec3::ZERO; 4];
+        let v = [a, b, c];
+        // Clip against the near plane (Sutherland–Hodgman, one plane): 3 or 4 vertices; the
+        // normal is cut in the same proportion as the position (linear in eye space).
+        let mut poly: [(DVec3, Vec3); 4] = [(DVec3::ZERO, Vec3::ZERO); 4];
         let mut n = 0;
         for i in 0..3 {
-            let (p, q) = (e[i], e[(i + 1) % 3]);
-            if p.z >= near {
-                poly[n] = p;
+            let (p, q) = (v[i], v[(i + 1) % 3]);
+            if p.eye.z >= near {
+                poly[n] = (p.eye, p.normal);
                 n += 1;
             }
-            if (p.z >= near) != (q.z >= near) {
-                let t = (near - p.z) / (q.z - p.z);
-                let mut x = p + (q - p) * t;
+            if (p.eye.z >= near) != (q.eye.z >= near) {
+                let t = (near - p.eye.z) / (q.eye.z - p.eye.z);
+                let mut x = p.eye + (q.eye - p.eye) * t;
                 x.z = near;
-                poly[n] = x;
+                poly[n] = (x, p.normal + (q.normal - p.normal) * t as f32);
                 n += 1;
             }
         }
-        let s0 = self.screen(poly[0]);
+        let s0 = self.screen(poly[0].0, poly[0].1);
         for k in 1..n - 1 {
-            self.fill(frame, id, s0, self.screen(poly[k]), self.screen(poly[k + 1]), false);
+            self.fill(frame, id, s0, self.screen(poly[k].0, poly[k].1), self.screen(poly[k + 1].0, poly[k + 1].1));
         }
     }
 
     #[inline]
-    fn screen(&self, e: DVec3) -> ScreenVertex {
+    fn screen(&self, e: DVec3, n: Vec3) -> ScreenVertex {
         let (x, y) = self.view.project(e);
-        ScreenVertex { x, y, w: 1.0 / e.z }
+        ScreenVertex { x, y, w: 1.0 / e.z, n }
     }
 
     /// Scan-converts one triangle: pixel centres inside it (top-left rule on edges) take its
     /// id where it is nearer, or as near with a smaller id.
-    fn fill(&self, frame: &mut Frame, id: u32, v0: ScreenVertex, v1: ScreenVertex, v2: ScreenVertex, whole: bool) {
+    fn fill(&self, frame: &mut Frame, id: u32, v0: ScreenVertex, v1: ScreenVertex, v2: ScreenVertex) {
         let (w, h) = (frame.width as i64, frame.height as i64);
         let min_x = v0.x.min(v1.x).min(v2.x);
         let max_x = v0.x.max(v1.x).max(v2.x);
@@ -248,7 +300,24 @@ impl<'a> Rasterizer<'a> {
             let cy = py as f64 + 0.5;
             let (r0, r1, r2) = (e0.row(cy), e1.row(cy), e2.row(cy));
             let row = py as usize * frame.width as usize;
-            for px in x0..=x1 {
+            // Where on this row all three edge functions can be ≥ 0, widened by a pixel so
+            // rounding of the division never loses a centre: only those are tested exactly.
+            let (mut lo, mut hi) = (x0 as f64 + 0.5, x1 as f64 + 0.5);
+            for (e, r) in [(&e0, r0), (&e1, r1), (&e2, r2)].into_iter().filter(|_| x1 - x0 >= SPAN_MIN_WIDTH) {
+                let a = e.a;
+                if a != 0.0 {
+                    let x = -r / a;
+                    if a > 0.0 { lo = lo.max(x - 1.0) } else { hi = hi.min(x + 1.0) }
+                } else if r < 0.0 {
+                    hi = f64::NEG_INFINITY;
+                }
+            }
+            if !(lo <= hi) {
+                continue;
+            }
+            let sx0 = ((lo - 0.5).floor().max(x0 as f64)) as i64;
+            let sx1 = ((hi - 0.5).ceil().min(x1 as f64)) as i64;
+            for px in sx0..=sx1 {
                 let cx = px as f64 + 0.5;
                 let (d0, d1, d2) = (e0.at(r0, cx), e1.at(r1, cx), e2.at(r2, cx));
                 if !(e0.covers(d0) && e1.covers(d1) && e2.covers(d2)) {
@@ -258,11 +327,11 @@ impl<'a> Rasterizer<'a> {
                 let sum = p0 + p1 + p2;
                 let wz = (sum * inv_area) as f32;
                 let i = row + px as usize;
-                let old = frame.inv_depth[i];
-                if wz > old || (wz == old && id < frame.ids[i]) {
-                    frame.inv_depth[i] = wz;
-                    frame.ids[i] = id;
-                    frame.bary[i] = if whole { [(p1 / sum) as f32, (p2 / sum) as f32] } else { [f32::NAN; 2] };
+                let px = &mut frame.pixels[i];
+                if wz > px.inv_depth || (wz == px.inv_depth && id < px.id) {
+                    let inv = 1.0 / sum;
+                    let n = v0.n + (v1.n - v0.n) * (p1 * inv) as f32 + (v2.n - v0.n) * (p2 * inv) as f32;
+                    *px = Pixel { inv_depth: wz, id, normal: (n * 32767.0).to_array().map(|c| c as i16) };
                 }
             }
         }
@@ -273,11 +342,11 @@ impl<'a> Rasterizer<'a> {
 /// so that the two triangles sharing an edge compute bit-identical values of opposite sign.
 #[derive(Clone, Copy)]
 struct Edge {
+    /// Coefficients already multiplied by the sign (−1 when the canonical order runs against
+    /// this triangle's): negation is exact, so the two triangles still agree bit for bit.
     a: f64,
     b: f64,
     c: f64,
-    /// −1 when the canonical order runs against this triangle's (then the value is negated).
-    sign: f64,
     /// Whether a pixel centre exactly on the edge belongs to this triangle (top-left rule).
     owns_ties: bool,
 }
@@ -293,9 +362,9 @@ impl Edge {
         let sign = if flip { -1.0 } else { 1.0 } * area.signum();
         // The triangle whose signed value grows with +y (or +x on a horizontal edge) owns
         // the ties: exactly one of the two triangles across an edge does.
-        let (ga, gb) = (a * sign, b * sign);
-        let owns_ties = gb > 0.0 || (gb == 0.0 && ga > 0.0);
-        Edge { a, b, c, sign, owns_ties }
+        let (a, b, c) = (a * sign, b * sign, c * sign);
+        let owns_ties = b > 0.0 || (b == 0.0 && a > 0.0);
+        Edge { a, b, c, owns_ties }
     }
 
     #[inline]
@@ -305,7 +374,7 @@ impl Edge {
 
     #[inline]
     fn at(&self, row: f64, x: f64) -> f64 {
-        (self.a * x + row) * self.sign
+        self.a * x + row
     }
 
     #[inline]
@@ -318,39 +387,40 @@ impl Edge {
 /// to one thread): per pixel the vertex normals are interpolated at the
 /// pixel centre (perspective-correct, like a GPU's varyings) and lit by [`Lighting`].
 /// RGBA8, row-major, top row first; black where empty.
-pub fn shade(frame: &Frame, mesh: &CellMesh, view: &View, lighting: &Lighting) -> Vec<u8> {
-    let lut = ShadeTables::new(lighting);
-    let mut out = vec![0u8; frame.ids.len() * 4];
+pub fn shade(frame: &Frame, view: &View, lighting: &Lighting) -> Vec<u8> {
+    thread_local! {
+        static TABLES: RefCell<Option<(Lighting, std::rc::Rc<ShadeTables>)>> = const { RefCell::new(None) };
+    }
+    // The tables cost about as much as shading a frame: build them once per lighting.
+    let lut = TABLES.with(|t| {
+        let mut t = t.borrow_mut();
+        match &*t {
+            Some((l, tables)) if l == lighting => tables.clone(),
+            _ => {
+                let tables = std::rc::Rc::new(ShadeTables::new(lighting));
+                *t = Some((*lighting, tables.clone()));
+                tables
+            }
+        }
+    });
+    let lut = &*lut;
+    let mut out = vec![0u8; frame.pixels.len() * 4];
     let w = frame.width as usize;
     // Per pixel the ray direction is forward + sx·right + sy·up (forward component 1, so
     // distance = |d| / w); built incrementally in f32 along each row.
     let step = (view.right / view.focal).as_vec3();
     let inv_falloff2 = 1.0 / (lighting.falloff_mm * lighting.falloff_mm);
-    out.par_chunks_exact_mut(4 * w).enumerate().for_each(|(y, row)| {
+    out.par_chunks_exact_mut(4 * w).zip(frame.pixels.par_chunks_exact(w)).enumerate().for_each(|(y, (row, pixels))| {
         let row_start = view.pixel_direction(0, y as u32).as_vec3();
-        for (x, px) in row.chunks_exact_mut(4).enumerate() {
+        for (x, (px, p)) in row.chunks_exact_mut(4).zip(pixels).enumerate() {
             px[3] = 255;
-            let i = y * w + x;
-            let id = frame.ids[i];
-            if id == NO_TRIANGLE {
+            if p.id == NO_TRIANGLE {
                 continue;
             }
             let dir = row_start + step * x as f32;
-            let [b1, b2] = frame.bary[i];
-            let tri = mesh.triangles[id as usize];
             let d2 = dir.length_squared();
-            let (normal, att) = if b1.is_nan() {
-                match intersect(mesh, view, tri, dir.as_dvec3()) {
-                    Some((n, dist)) => (n, 1.0 / (1.0 + dist * dist * inv_falloff2)),
-                    None => continue,
-                }
-            } else {
-                let n = |k: usize| Vec3::from_array(mesh.normals[tri[k] as usize]);
-                let n0 = n(0);
-                let normal = n0 + (n(1) - n0) * b1 + (n(2) - n0) * b2;
-                let wz = frame.inv_depth[i];
-                (normal, 1.0 / (1.0 + d2 * inv_falloff2 / (wz * wz)))
-            };
+            let att = 1.0 / (1.0 + d2 * inv_falloff2 / (p.inv_depth * p.inv_depth));
+            let normal = Vec3::new(p.normal[0] as f32, p.normal[1] as f32, p.normal[2] as f32);
             let nn = normal.length_squared() * d2;
             let ndl = if nn > 0.0 { -normal.dot(dir) / nn.sqrt() } else { 0.0 };
             px[..3].copy_from_slice(&lut.rgb8(lighting, att, ndl));
@@ -389,38 +459,12 @@ impl ShadeTables {
     }
 }
 
-/// Normal and distance where the ray meets a triangle (for clipped triangles, whose
-/// barycentrics the rasterizer did not keep): Möller–Trumbore from the eye.
-fn intersect(mesh: &CellMesh, view: &View, tri: [u32; 3], dir: DVec3) -> Option<(Vec3, f32)> {
-    let p = |i: u32| DVec3::from_array(mesh.positions[i as usize].map(f64::from)) - view.eye;
-    let n = |i: u32| Vec3::from_array(mesh.normals[i as usize]);
-    let (a, b, c) = (p(tri[0]), p(tri[1]), p(tri[2]));
-    let dir = dir.normalize();
-    let (e1, e2) = (b - a, c - a);
-    let pv = dir.cross(e2);
-    let det = e1.dot(pv);
-    if det.abs() < 1e-300 {
-        return None;
-    }
-    let tv = -a;
-    let u = tv.dot(pv) / det;
-    let qv = tv.cross(e1);
-    let v = dir.dot(qv) / det;
-    let t = e2.dot(qv) / det;
-    // The pixel centre lies inside up to rounding; clamp so an edge pixel does not
-    // extrapolate the normals.
-    let (u, v) = (u.clamp(0.0, 1.0), v.clamp(0.0, 1.0));
-    let (u, v) = if u + v > 1.0 { (u / (u + v), v / (u + v)) } else { (u, v) };
-    let normal = n(tri[0]) * (1.0 - u - v) as f32 + n(tri[1]) * u as f32 + n(tri[2]) * v as f32;
-    Some((normal, t.max(0.0) as f32))
-}
-
 /// Renders the listed cells and shades them: the CPU path end to end.
 pub fn render_rgba(mesh: &CellMesh, camera: &Camera, cells: &[u32], width: u32, height: u32, lighting: &Lighting) -> Vec<u8> {
     let view = View::new(camera, width, height);
     let mut frame = Frame::new(width, height);
     Rasterizer::new(mesh, view).draw_cells(&mut frame, cells);
-    shade(&frame, mesh, &view, lighting)
+    shade(&frame, &view, lighting)
 }
 
 #[cfg(test)]
@@ -438,6 +482,7 @@ mod tests {
             triangles: vec![[0, 2, 1], [0, 3, 2], [0, 1, 2]],
             cell_ranges: vec![0..2, 2..3],
             surface_triangle: vec![0, 1, 2],
+            ..CellMesh::default()
         }
     }
 
@@ -454,17 +499,24 @@ mod tests {
         // 90° fov: the 10 mm half-width at 10 mm covers half the half-screen → 32 pixels.
         assert_eq!(f.covered(), 32 * 32);
         // The back-facing triangle (id 2) is never drawn.
-        assert!(!f.ids.contains(&2));
+        assert!(!f.ids().any(|i| i == 2));
         // Depth is 10 mm everywhere on the wall.
-        for (&w, &id) in f.inv_depth.iter().zip(&f.ids) {
+        for &Pixel { inv_depth: w, id, .. } in &f.pixels {
             if id != NO_TRIANGLE {
                 assert!((w - 0.1).abs() < 1e-6);
             }
         }
-        // Drawing in the other order gives the same buffers.
+        // Drawing in the other order gives the same buffers, and so does the per-cell vertex
+        // path.
         let mut g = Frame::new(64, 64);
         Rasterizer::new(&mesh, view).draw_cells(&mut g, &[1, 0]);
         assert_eq!(f, g);
+        let mut indexed = mesh.clone();
+        indexed.index_cells();
+        assert!(indexed.is_indexed() && !mesh.is_indexed());
+        let mut h = Frame::new(64, 64);
+        Rasterizer::new(&indexed, view).draw_cells(&mut h, &[1, 0]);
+        assert_eq!(f, h);
     }
 
     #[test]
@@ -477,11 +529,12 @@ mod tests {
             triangles: vec![[0, 2, 1], [0, 3, 2]],
             cell_ranges: std::iter::once(0..2).collect(),
             surface_triangle: vec![0, 1],
+            ..CellMesh::default()
         };
         let mut f = Frame::new(32, 32);
         Rasterizer::new(&mesh, View::new(&camera(), 32, 32)).draw_cells(&mut f, &[0]);
-        let below = (16..32).flat_map(|y| (0..32).map(move |x| (x, y))).filter(|&(x, y)| f.ids[y * 32 + x] != NO_TRIANGLE).count();
-        let above = (0..16).flat_map(|y| (0..32).map(move |x| (x, y))).filter(|&(x, y)| f.ids[y * 32 + x] != NO_TRIANGLE).count();
+        let below = (16..32).flat_map(|y| (0..32).map(move |x| (x, y))).filter(|&(x, y)| f.id(y * 32 + x) != NO_TRIANGLE).count();
+        let above = (0..16).flat_map(|y| (0..32).map(move |x| (x, y))).filter(|&(x, y)| f.id(y * 32 + x) != NO_TRIANGLE).count();
         assert_eq!(above, 0);
         // The floor ends 500 mm ahead: rows just below the horizon see past its end.
         assert!(below > 14 * 32, "{below}");

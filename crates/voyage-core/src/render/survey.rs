@@ -109,7 +109,7 @@ pub fn survey(mesh: &CellMesh, cells: &Cells, cameras: &[Camera], width: u32, he
             }
         }
         let t = Instant::now();
-        std::hint::black_box(shade(&reference, mesh, &view, &lighting));
+        std::hint::black_box(shade(&reference, &view, &lighting));
         shade_ms += t.elapsed().as_secs_f64() * 1e3;
     }
     let n = cameras.len().max(1) as f64;

@@ -306,7 +306,7 @@ impl Region {
             let base = y as usize * frame.width as usize;
             for x in row.0..=row.1 {
                 *reads += 1;
-                if frame.inv_depth[base + x as usize] <= w_portal {
+                if frame.pixels[base + x as usize].inv_depth <= w_portal {
                     return false;
                 }
             }
@@ -331,7 +331,7 @@ impl Region {
             let (mut lo, mut hi) = self.rows[y as usize];
             let hidden = |x: i64, reads: &mut usize| {
                 *reads += 1;
-                let w = frame.inv_depth[base + x as usize];
+                let w = frame.pixels[base + x as usize].inv_depth;
                 w > 0.0 && (w as f64) > bound.max_inv_depth(view, x, y).min(prism_bound)
             };
             while lo <= hi && hidden(lo, reads) {

@@ -156,7 +156,7 @@ impl<'a> Renderer<'a> {
         let drawn = self.vis.draw(&mut self.frame, &raster, &self.study.cells);
         match &mut self.gpu {
             Some(g) => Ok(g.render(camera, &drawn.cells, w, h, &self.lighting)?),
-            None => Ok(shade(&self.frame, &self.mesh, &view, &self.lighting)),
+            None => Ok(shade(&self.frame, &view, &self.lighting)),
         }
     }
 }
