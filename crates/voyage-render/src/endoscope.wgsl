@@ -1,6 +1,7 @@
-// Endoscopic view: one light at the camera. The fragment stage is
-// voyage_core::render::shading::Lighting::linear and encode(), term for term, so that the
-// GPU image equals the CPU reference renderer's within rounding.
+// Endoscopic view: one light at the camera, lit per vertex (Gouraud) like the CPU reference
+// renderer. The vertex stage is voyage_core::render::shading::Lighting::linear and the
+// display gamma, term for term; the fragment stage writes the interpolated colour, so the
+// GPU image equals the CPU one within rounding.
 
 struct Uniforms {
     // proj · view · translate(eye): clip position of an eye-relative point.
@@ -21,34 +22,25 @@ struct VertexIn {
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
-    // P − eye in mm, interpolated perspective-correctly: the fragment's world position
-    // relative to the camera, without the cancellation of subtracting two ~500 mm values
-    // per fragment.
-    @location(0) rel: vec3<f32>,
-    @location(1) normal: vec3<f32>,
+    // Display colour (gamma applied), interpolated perspective-correctly.
+    @location(0) color: vec3<f32>,
 };
-
-@vertex
-fn vs_main(v: VertexIn) -> VertexOut {
-    var out: VertexOut;
-    let rel = v.position - u.eye.xyz;
-    out.clip = u.eye_relative_to_clip * vec4<f32>(rel, 1.0);
-    out.rel = rel;
-    out.normal = v.normal;
-    return out;
-}
 
 // pow(x, y) for x ≥ 0 with pow(0, y) = 0 (WGSL leaves pow(0, y) to the implementation).
 fn pow0(x: f32, y: f32) -> f32 {
     return select(0.0, pow(x, y), x > 0.0);
 }
 
-@fragment
-fn fs_main(f: VertexOut) -> @location(0) vec4<f32> {
-    let d = length(f.rel);
+@vertex
+fn vs_main(v: VertexIn) -> VertexOut {
+    var out: VertexOut;
+    // P − eye in mm: no cancellation of two ~500 mm values.
+    let rel = v.position - u.eye.xyz;
+    out.clip = u.eye_relative_to_clip * vec4<f32>(rel, 1.0);
+    let d = length(rel);
     // L = (eye − P) / d.
-    let l = -f.rel / max(d, 1e-12);
-    let n = normalize(f.normal);
+    let l = -rel / max(d, 1e-12);
+    let n = normalize(v.normal);
     let ndl = clamp(dot(n, l), 0.0, 1.0);
     let albedo = u.albedo_ambient.xyz;
     let ambient = u.albedo_ambient.w;
@@ -60,8 +52,14 @@ fn fs_main(f: VertexOut) -> @location(0) vec4<f32> {
     let diffuse = ambient + (1.0 - ambient) * ndl * att;
     let spec = specular * pow0(ndl, shininess) * att;
     let lin = clamp(albedo * diffuse + vec3<f32>(spec), vec3<f32>(0.0), vec3<f32>(1.0));
-    // Display gamma 2.2 into a plain Unorm target: the hardware's float → 8-bit conversion
-    // rounds like encode()'s + 0.5.
     let g = 1.0 / 2.2;
-    return vec4<f32>(pow0(lin.x, g), pow0(lin.y, g), pow0(lin.z, g), 1.0);
+    out.color = vec3<f32>(pow0(lin.x, g), pow0(lin.y, g), pow0(lin.z, g));
+    return out;
+}
+
+@fragment
+fn fs_main(f: VertexOut) -> @location(0) vec4<f32> {
+    // A plain Unorm target: the hardware's float → 8-bit conversion rounds like the CPU's
+    // + 0.5.
+    return vec4<f32>(f.color, 1.0);
 }

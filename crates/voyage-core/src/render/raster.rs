@@ -1,5 +1,7 @@
-//! The CPU reference rasterizer: perspective, a depth buffer and a triangle-id buffer, then
-//! deferred endoscope shading. It is the visibility oracle and the renderer when no GPU
+//! The CPU reference rasterizer: perspective, a depth buffer and a triangle-id buffer, and
+//! endoscope lighting per vertex (Gouraud, as the GPU renderer's vertex stage does; with
+//! voxel-sized triangles it is indistinguishable from lighting every pixel, at a fraction
+//! of the cost). It is the visibility oracle and the renderer when no GPU
 //! exists, so two properties matter more than speed:
 //!
 //! - **Order independence.** A pixel keeps the nearest triangle covering its centre, ties
@@ -17,7 +19,6 @@
 use std::cell::RefCell;
 
 use glam::{DVec3, Vec3};
-use rayon::prelude::*;
 
 use super::mesh::CellMesh;
 use super::shading::Lighting;
@@ -41,12 +42,12 @@ pub struct Pixel {
     pub inv_depth: f32,
     /// Its draw index in the [`CellMesh`], or [`NO_TRIANGLE`].
     pub id: u32,
-    /// The vertex normals interpolated (perspective-correct, as a GPU interpolates varyings)
-    /// at the pixel centre, ×32767: shading then reads nothing but the frame.
-    pub normal: [i16; 3],
+    /// The colour: the vertices' lit colours interpolated at the pixel centre
+    /// (perspective-correct, as a GPU interpolates varyings).
+    pub rgb: [u8; 3],
 }
 
-const EMPTY: Pixel = Pixel { inv_depth: 0.0, id: NO_TRIANGLE, normal: [0; 3] };
+const EMPTY: Pixel = Pixel { inv_depth: 0.0, id: NO_TRIANGLE, rgb: [0; 3] };
 
 /// What the rasterizer writes, per pixel, row-major, top row first.
 #[derive(Clone, Debug, PartialEq)]
@@ -151,13 +152,14 @@ impl EyeXf {
     }
 }
 
-/// A vertex on screen: pixel coordinates, inverse depth and its (display) normal.
+/// A vertex on screen: pixel coordinates, inverse depth and its lit colour (display values
+/// 0..1).
 #[derive(Clone, Copy)]
 struct ScreenVertex {
     x: f64,
     y: f64,
     w: f64,
-    n: Vec3,
+    c: Vec3,
 }
 
 /// A vertex transformed for one frame: relative to the eye (world axes, f32, for the
@@ -166,7 +168,7 @@ struct ScreenVertex {
 struct Vertex {
     rel: Vec3,
     eye: DVec3,
-    normal: Vec3,
+    color: Vec3,
     screen: ScreenVertex,
 }
 
@@ -175,13 +177,20 @@ pub struct Rasterizer<'a> {
     mesh: &'a CellMesh,
     view: View,
     xf: EyeXf,
+    lighting: Lighting,
+    tables: std::rc::Rc<ShadeTables>,
     /// The current cell's transformed vertices.
     scratch: RefCell<Vec<Vertex>>,
 }
 
 impl<'a> Rasterizer<'a> {
+    /// With the default [`Lighting`].
     pub fn new(mesh: &'a CellMesh, view: View) -> Self {
-        Rasterizer { mesh, xf: EyeXf::new(&view), view, scratch: RefCell::new(Vec::new()) }
+        Self::lit(mesh, view, &Lighting::default())
+    }
+
+    pub fn lit(mesh: &'a CellMesh, view: View, lighting: &Lighting) -> Self {
+        Rasterizer { mesh, xf: EyeXf::new(&view), view, lighting: *lighting, tables: ShadeTables::cached(lighting), scratch: RefCell::new(Vec::new()) }
     }
 
     pub fn view(&self) -> &View {
@@ -221,9 +230,14 @@ impl<'a> Rasterizer<'a> {
         let xf = &self.xf;
         let rel = Vec3::from_array(self.mesh.positions[v as usize]) - xf.eye;
         let eye = DVec3::new(rel.dot(xf.right) as f64, rel.dot(xf.up) as f64, rel.dot(xf.forward) as f64);
+        // Lit at the vertex (Gouraud), like the GPU's vertex stage: the light sits at the eye.
         let normal = Vec3::from_array(self.mesh.normals[v as usize]);
-        let screen = if eye.z >= self.view.near { self.screen(eye, normal) } else { ScreenVertex { x: 0.0, y: 0.0, w: 0.0, n: normal } };
-        Vertex { rel, eye, normal, screen }
+        let d2 = rel.length_squared();
+        let ndl = if d2 > 0.0 { -normal.dot(rel) / d2.sqrt() } else { 0.0 };
+        let att = 1.0 / (1.0 + d2 / (self.lighting.falloff_mm * self.lighting.falloff_mm));
+        let color = self.tables.encoded(&self.lighting, att, ndl);
+        let screen = if eye.z >= self.view.near { self.screen(eye, color) } else { ScreenVertex { x: 0.0, y: 0.0, w: 0.0, c: color } };
+        Vertex { rel, eye, color, screen }
     }
 
     fn draw_triangle(&self, frame: &mut Frame, id: u32, a: &Vertex, b: &Vertex, c: &Vertex) {
@@ -242,20 +256,20 @@ impl<'a> Rasterizer<'a> {
         }
         let v = [a, b, c];
         // Clip against the near plane (Sutherland–Hodgman, one plane): 3 or 4 vertices; the
-        // normal is cut in the same proportion as the position (linear in eye space).
+        // colour is cut in the same proportion as the position (linear in eye space).
         let mut poly: [(DVec3, Vec3); 4] = [(DVec3::ZERO, Vec3::ZERO); 4];
         let mut n = 0;
         for i in 0..3 {
             let (p, q) = (v[i], v[(i + 1) % 3]);
             if p.eye.z >= near {
-                poly[n] = (p.eye, p.normal);
+                poly[n] = (p.eye, p.color);
                 n += 1;
             }
             if (p.eye.z >= near) != (q.eye.z >= near) {
                 let t = (near - p.eye.z) / (q.eye.z - p.eye.z);
                 let mut x = p.eye + (q.eye - p.eye) * t;
                 x.z = near;
-                poly[n] = (x, p.normal + (q.normal - p.normal) * t as f32);
+                poly[n] = (x, p.color + (q.color - p.color) * t as f32);
                 n += 1;
             }
         }
@@ -266,9 +280,9 @@ impl<'a> Rasterizer<'a> {
     }
 
     #[inline]
-    fn screen(&self, e: DVec3, n: Vec3) -> ScreenVertex {
+    fn screen(&self, e: DVec3, c: Vec3) -> ScreenVertex {
         let (x, y) = self.view.project(e);
-        ScreenVertex { x, y, w: 1.0 / e.z, n }
+        ScreenVertex { x, y, w: 1.0 / e.z, c }
     }
 
     /// Scan-converts one triangle: pixel centres inside it (top-left rule on edges) take its
@@ -280,10 +294,10 @@ impl<'a> Rasterizer<'a> {
         let min_y = v0.y.min(v1.y).min(v2.y);
         let max_y = v0.y.max(v1.y).max(v2.y);
         // Pixel centres (i + 0.5) inside the bounding box.
-        let x0 = ((min_x - 0.5).ceil().max(0.0) as i64).max(0);
-        let x1 = ((max_x - 0.5).floor().min((w - 1) as f64)) as i64;
-        let y0 = ((min_y - 0.5).ceil().max(0.0) as i64).max(0);
-        let y1 = ((max_y - 0.5).floor().min((h - 1) as f64)) as i64;
+        let x0 = ceil_clamped(min_x - 0.5, 0, w - 1);
+        let x1 = floor_clamped(max_x - 0.5, 0, w - 1);
+        let y0 = ceil_clamped(min_y - 0.5, 0, h - 1);
+        let y1 = floor_clamped(max_y - 0.5, 0, h - 1);
         if x0 > x1 || y0 > y1 || max_x < 0.0 || max_y < 0.0 {
             return;
         }
@@ -315,8 +329,8 @@ impl<'a> Rasterizer<'a> {
             if !(lo <= hi) {
                 continue;
             }
-            let sx0 = ((lo - 0.5).floor().max(x0 as f64)) as i64;
-            let sx1 = ((hi - 0.5).ceil().min(x1 as f64)) as i64;
+            let sx0 = floor_clamped(lo - 0.5, x0, x1).max(x0);
+            let sx1 = ceil_clamped(hi - 0.5, x0, x1).min(x1);
             for px in sx0..=sx1 {
                 let cx = px as f64 + 0.5;
                 let (d0, d1, d2) = (e0.at(r0, cx), e1.at(r1, cx), e2.at(r2, cx));
@@ -330,12 +344,39 @@ impl<'a> Rasterizer<'a> {
                 let px = &mut frame.pixels[i];
                 if wz > px.inv_depth || (wz == px.inv_depth && id < px.id) {
                     let inv = 1.0 / sum;
-                    let n = v0.n + (v1.n - v0.n) * (p1 * inv) as f32 + (v2.n - v0.n) * (p2 * inv) as f32;
-                    *px = Pixel { inv_depth: wz, id, normal: (n * 32767.0).to_array().map(|c| c as i16) };
+                    let c = v0.c + (v1.c - v0.c) * (p1 * inv) as f32 + (v2.c - v0.c) * (p2 * inv) as f32;
+                    *px = Pixel { inv_depth: wz, id, rgb: (c * 255.0 + 0.5).to_array().map(|v| v as u8) };
                 }
             }
         }
     }
+}
+
+/// ⌊x⌋ clamped to [lo, hi] (hi + 1 when x is beyond, so that an empty range stays empty),
+/// without a libm call (x86-64's baseline has no rounding instruction).
+#[inline]
+fn floor_clamped(x: f64, lo: i64, hi: i64) -> i64 {
+    if !(x < hi as f64 + 1.0) {
+        return if x.is_nan() { lo - 1 } else { hi };
+    }
+    if x < lo as f64 {
+        return lo - 1;
+    }
+    let t = x as i64;
+    if (t as f64) > x { t - 1 } else { t }
+}
+
+/// ⌈x⌉ clamped like [`floor_clamped`]: below lo gives lo, beyond hi gives hi + 1.
+#[inline]
+fn ceil_clamped(x: f64, lo: i64, hi: i64) -> i64 {
+    if !(x > lo as f64 - 1.0) {
+        return if x.is_nan() { hi + 1 } else { lo };
+    }
+    if x > hi as f64 {
+        return hi + 1;
+    }
+    let t = x as i64;
+    if (t as f64) < x { t + 1 } else { t }
 }
 
 /// An edge function a·x + b·y + c, evaluated from the edge's endpoints in a canonical order
@@ -383,58 +424,22 @@ impl Edge {
     }
 }
 
-/// Deferred shading of a drawn frame (rows in parallel on rayon's pool; benchmarks pin it
-/// to one thread): per pixel the vertex normals are interpolated at the
-/// pixel centre (perspective-correct, like a GPU's varyings) and lit by [`Lighting`].
-/// RGBA8, row-major, top row first; black where empty.
-pub fn shade(frame: &Frame, view: &View, lighting: &Lighting) -> Vec<u8> {
-    thread_local! {
-        static TABLES: RefCell<Option<(Lighting, std::rc::Rc<ShadeTables>)>> = const { RefCell::new(None) };
-    }
-    // The tables cost about as much as shading a frame: build them once per lighting.
-    let lut = TABLES.with(|t| {
-        let mut t = t.borrow_mut();
-        match &*t {
-            Some((l, tables)) if l == lighting => tables.clone(),
-            _ => {
-                let tables = std::rc::Rc::new(ShadeTables::new(lighting));
-                *t = Some((*lighting, tables.clone()));
-                tables
-            }
-        }
-    });
-    let lut = &*lut;
+/// The drawn frame as an image: RGBA8, row-major, top row first; black where empty.
+pub fn shade(frame: &Frame) -> Vec<u8> {
     let mut out = vec![0u8; frame.pixels.len() * 4];
-    let w = frame.width as usize;
-    // Per pixel the ray direction is forward + sx·right + sy·up (forward component 1, so
-    // distance = |d| / w); built incrementally in f32 along each row.
-    let step = (view.right / view.focal).as_vec3();
-    let inv_falloff2 = 1.0 / (lighting.falloff_mm * lighting.falloff_mm);
-    out.par_chunks_exact_mut(4 * w).zip(frame.pixels.par_chunks_exact(w)).enumerate().for_each(|(y, (row, pixels))| {
-        let row_start = view.pixel_direction(0, y as u32).as_vec3();
-        for (x, (px, p)) in row.chunks_exact_mut(4).zip(pixels).enumerate() {
-            px[3] = 255;
-            if p.id == NO_TRIANGLE {
-                continue;
-            }
-            let dir = row_start + step * x as f32;
-            let d2 = dir.length_squared();
-            let att = 1.0 / (1.0 + d2 * inv_falloff2 / (p.inv_depth * p.inv_depth));
-            let normal = Vec3::new(p.normal[0] as f32, p.normal[1] as f32, p.normal[2] as f32);
-            let nn = normal.length_squared() * d2;
-            let ndl = if nn > 0.0 { -normal.dot(dir) / nn.sqrt() } else { 0.0 };
-            px[..3].copy_from_slice(&lut.rgb8(lighting, att, ndl));
-        }
-    });
+    for (px, p) in out.chunks_exact_mut(4).zip(&frame.pixels) {
+        px[..3].copy_from_slice(&p.rgb);
+        px[3] = 255;
+    }
     out
 }
 
-/// Tables for the two powers per pixel (specular and display gamma), which would otherwise
-/// cost more than the rest of shading; both are within a unit of 8-bit output of the exact
-/// formula that the GPU evaluates.
+/// Tables for the two powers per vertex (specular and display gamma), which would otherwise
+/// cost more than the rest of the lighting; both agree with the exact formula that the GPU
+/// evaluates to far below one 8-bit level.
 struct ShadeTables {
     specular: Vec<f32>,
-    gamma: Vec<u8>,
+    gamma: Vec<f32>,
 }
 
 const SPEC_STEPS: usize = 4096;
@@ -443,19 +448,43 @@ const GAMMA_STEPS: usize = 16384;
 impl ShadeTables {
     fn new(l: &Lighting) -> Self {
         let specular = (0..=SPEC_STEPS).map(|i| (i as f32 / SPEC_STEPS as f32).powf(l.shininess)).collect();
-        let gamma = (0..=GAMMA_STEPS).map(|i| super::shading::encode(i as f32 / GAMMA_STEPS as f32)).collect();
+        let gamma = (0..=GAMMA_STEPS).map(|i| (i as f32 / GAMMA_STEPS as f32).powf(1.0 / 2.2)).collect();
         ShadeTables { specular, gamma }
     }
 
+    /// The tables for this lighting, built once per thread and lighting.
+    fn cached(lighting: &Lighting) -> std::rc::Rc<ShadeTables> {
+        thread_local! {
+            static TABLES: RefCell<Option<(Lighting, std::rc::Rc<ShadeTables>)>> = const { RefCell::new(None) };
+        }
+        TABLES.with(|t| {
+            let mut t = t.borrow_mut();
+            match &*t {
+                Some((l, tables)) if l == lighting => tables.clone(),
+                _ => {
+                    let tables = std::rc::Rc::new(ShadeTables::new(lighting));
+                    *t = Some((*lighting, tables.clone()));
+                    tables
+                }
+            }
+        })
+    }
+
+    /// Display values (0..1, gamma applied) of [`Lighting::linear`]; the gamma table is
+    /// interpolated.
     #[inline]
-    fn rgb8(&self, l: &Lighting, att: f32, n_dot_l: f32) -> [u8; 3] {
+    fn encoded(&self, l: &Lighting, att: f32, n_dot_l: f32) -> Vec3 {
         let ndl = n_dot_l.clamp(0.0, 1.0);
         let diffuse = l.ambient + (1.0 - l.ambient) * ndl * att;
         let f = ndl * SPEC_STEPS as f32;
         let k = (f as usize).min(SPEC_STEPS - 1);
         let pw = self.specular[k] + (self.specular[k + 1] - self.specular[k]) * (f - k as f32);
         let spec = l.specular * pw * att;
-        l.albedo.map(|a| self.gamma[((a * diffuse + spec).clamp(0.0, 1.0) * GAMMA_STEPS as f32 + 0.5) as usize])
+        Vec3::from_array(l.albedo.map(|a| {
+            let g = (a * diffuse + spec).clamp(0.0, 1.0) * GAMMA_STEPS as f32;
+            let k = (g as usize).min(GAMMA_STEPS - 1);
+            self.gamma[k] + (self.gamma[k + 1] - self.gamma[k]) * (g - k as f32)
+        }))
     }
 }
 
@@ -463,8 +492,8 @@ impl ShadeTables {
 pub fn render_rgba(mesh: &CellMesh, camera: &Camera, cells: &[u32], width: u32, height: u32, lighting: &Lighting) -> Vec<u8> {
     let view = View::new(camera, width, height);
     let mut frame = Frame::new(width, height);
-    Rasterizer::new(mesh, view).draw_cells(&mut frame, cells);
-    shade(&frame, &view, lighting)
+    Rasterizer::lit(mesh, view, lighting).draw_cells(&mut frame, cells);
+    shade(&frame)
 }
 
 #[cfg(test)]
@@ -520,6 +549,16 @@ mod tests {
     }
 
     #[test]
+    fn floor_and_ceil_match_the_library() {
+        for &x in &[-3.5, -1.0, -0.5, -0.0, 0.0, 0.25, 0.5, 1.0, 2.999, 3.0, 3.5, 9.0, 1e12, -1e12] {
+            assert_eq!(floor_clamped(x, 0, 5), (x.floor() as i64).clamp(-1, 5), "{x}");
+            assert_eq!(ceil_clamped(x, 0, 5), (x.ceil() as i64).clamp(0, 6), "{x}");
+        }
+        assert_eq!(floor_clamped(f64::NAN, 0, 5), -1);
+        assert_eq!(ceil_clamped(f64::NAN, 0, 5), 6);
+    }
+
+    #[test]
     fn near_clipping_keeps_the_part_in_front() {
         // A floor running from behind the camera to far ahead: half the screen below the
         // horizon is floor.
@@ -542,13 +581,33 @@ mod tests {
 
     #[test]
     fn shading_is_brightest_facing_the_light() {
-        let mesh = wall();
+        // A wall 10 mm ahead in a fine grid, so that lighting at the vertices and interpolated
+        // between them is close to lighting every pixel.
+        let (n, half) = (40usize, 5.0f32);
+        let mut mesh = CellMesh::default();
+        for j in 0..=n {
+            for i in 0..=n {
+                let x = -half + 2.0 * half * i as f32 / n as f32;
+                let y = -half + 2.0 * half * j as f32 / n as f32;
+                mesh.positions.push([x, y, 10.0]);
+                mesh.normals.push([0.0, 0.0, -1.0]);
+            }
+        }
+        let at = |i: usize, j: usize| (j * (n + 1) + i) as u32;
+        for j in 0..n {
+            for i in 0..n {
+                mesh.triangles.push([at(i, j), at(i + 1, j + 1), at(i + 1, j)]);
+                mesh.triangles.push([at(i, j), at(i, j + 1), at(i + 1, j + 1)]);
+            }
+        }
+        mesh.cell_ranges = std::iter::once(0..mesh.triangles.len() as u32).collect();
+        mesh.index_cells();
         let rgba = render_rgba(&mesh, &camera(), &[0], 64, 64, &Lighting::default());
-        let at = |x: usize, y: usize| rgba[(y * 64 + x) * 4];
+        let px = |x: usize, y: usize| rgba[(y * 64 + x) * 4];
         // Centre (facing, nearest) brighter than the corner of the wall; background black.
-        assert!(at(32, 32) > at(17, 17));
-        assert_eq!(at(2, 2), 0);
+        assert!(px(32, 32) > px(17, 17));
+        assert_eq!(px(2, 2), 0);
         let want = Lighting::default().rgb8(10.0 * (1.0 + 2.0 * (0.5f64 / 32.0).powi(2)).sqrt() as f32, 1.0);
-        assert!((at(32, 32) as i32 - want[0] as i32).abs() <= 1);
+        assert!((px(32, 32) as i32 - want[0] as i32).abs() <= 1, "{} vs {}", px(32, 32), want[0]);
     }
 }

@@ -43,7 +43,8 @@ pub struct Survey {
     pub height: u32,
     pub frames: usize,
     pub strategies: Vec<StrategyStats>,
-    /// Deferred shading per frame (ms), the same work whatever was culled.
+    /// Copying the frame out as an image (ms); the lighting itself is done per vertex while
+    /// drawing, so it is inside each strategy's draw time.
     pub shade_ms_mean: f64,
     /// Every strategy's id buffer equalled `all`'s in every frame.
     pub exact: bool,
@@ -84,7 +85,7 @@ pub fn survey(mesh: &CellMesh, cells: &Cells, cameras: &[Camera], width: u32, he
     let mut shade_ms = 0.0;
     for camera in cameras {
         let view = View::new(camera, width, height);
-        let raster = Rasterizer::new(mesh, view);
+        let raster = Rasterizer::lit(mesh, view, &lighting);
         for (k, (v, st)) in vis.iter_mut().zip(stats.iter_mut()).enumerate() {
             let target = if k == 0 { &mut reference } else { &mut frame };
             let t = Instant::now();
@@ -109,7 +110,7 @@ pub fn survey(mesh: &CellMesh, cells: &Cells, cameras: &[Camera], width: u32, he
             }
         }
         let t = Instant::now();
-        std::hint::black_box(shade(&reference, &view, &lighting));
+        std::hint::black_box(shade(&reference));
         shade_ms += t.elapsed().as_secs_f64() * 1e3;
     }
     let n = cameras.len().max(1) as f64;

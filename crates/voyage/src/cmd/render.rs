@@ -152,11 +152,11 @@ impl<'a> Renderer<'a> {
     pub fn draw(&mut self, camera: &Camera) -> Result<Vec<u8>> {
         let (w, h) = (self.frame.width, self.frame.height);
         let view = View::new(camera, w, h);
-        let raster = Rasterizer::new(&self.mesh, view);
+        let raster = Rasterizer::lit(&self.mesh, view, &self.lighting);
         let drawn = self.vis.draw(&mut self.frame, &raster, &self.study.cells);
         match &mut self.gpu {
             Some(g) => Ok(g.render(camera, &drawn.cells, w, h, &self.lighting)?),
-            None => Ok(shade(&self.frame, &view, &self.lighting)),
+            None => Ok(shade(&self.frame)),
         }
     }
 }
