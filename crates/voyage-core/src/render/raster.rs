@@ -326,7 +326,7 @@ impl<'a> Rasterizer<'a> {
                     hi = f64::NEG_INFINITY;
                 }
             }
-            if !(lo <= hi) {
+            if lo.is_nan() || hi.is_nan() || lo > hi {
                 continue;
             }
             let sx0 = floor_clamped(lo - 0.5, x0, x1).max(x0);
@@ -356,8 +356,11 @@ impl<'a> Rasterizer<'a> {
 /// without a libm call (x86-64's baseline has no rounding instruction).
 #[inline]
 fn floor_clamped(x: f64, lo: i64, hi: i64) -> i64 {
-    if !(x < hi as f64 + 1.0) {
-        return if x.is_nan() { lo - 1 } else { hi };
+    if x.is_nan() {
+        return lo - 1;
+    }
+    if x >= hi as f64 + 1.0 {
+        return hi;
     }
     if x < lo as f64 {
         return lo - 1;
@@ -369,8 +372,11 @@ fn floor_clamped(x: f64, lo: i64, hi: i64) -> i64 {
 /// ⌈x⌉ clamped like [`floor_clamped`]: below lo gives lo, beyond hi gives hi + 1.
 #[inline]
 fn ceil_clamped(x: f64, lo: i64, hi: i64) -> i64 {
-    if !(x > lo as f64 - 1.0) {
-        return if x.is_nan() { hi + 1 } else { lo };
+    if x.is_nan() {
+        return hi + 1;
+    }
+    if x <= lo as f64 - 1.0 {
+        return lo;
     }
     if x > hi as f64 {
         return hi + 1;
