@@ -152,23 +152,25 @@ impl EyeXf {
     }
 }
 
-/// A vertex on screen: pixel coordinates, inverse depth and its lit colour (display values
-/// 0..1).
+/// A vertex on screen: pixel coordinates and inverse depth.
 #[derive(Clone, Copy)]
 struct ScreenVertex {
     x: f64,
     y: f64,
     w: f64,
-    c: Vec3,
 }
 
 /// A vertex transformed for one frame: relative to the eye (world axes, f32, for the
 /// facing test), in eye coordinates, and on screen (when in front of the near plane).
-#[derive(Clone, Copy)]
+#[derive(Clone)]
 struct Vertex {
     rel: Vec3,
     eye: DVec3,
-    color: Vec3,
+    normal: Vec3,
+    /// Lit colour (display values 0..1), computed the first time a triangle that covers a
+    /// pixel needs it (NaN until then): most vertices of a drawn cell face away or fall
+    /// between pixel centres.
+    color: std::cell::Cell<Vec3>,
     screen: ScreenVertex,
 }
 
@@ -230,14 +232,24 @@ impl<'a> Rasterizer<'a> {
         let xf = &self.xf;
         let rel = Vec3::from_array(self.mesh.positions[v as usize]) - xf.eye;
         let eye = DVec3::new(rel.dot(xf.right) as f64, rel.dot(xf.up) as f64, rel.dot(xf.forward) as f64);
-        // Lit at the vertex (Gouraud), like the GPU's vertex stage: the light sits at the eye.
         let normal = Vec3::from_array(self.mesh.normals[v as usize]);
-        let d2 = rel.length_squared();
-        let ndl = if d2 > 0.0 { -normal.dot(rel) / d2.sqrt() } else { 0.0 };
+        let screen = if eye.z >= self.view.near { self.screen(eye) } else { ScreenVertex { x: 0.0, y: 0.0, w: 0.0 } };
+        Vertex { rel, eye, normal, color: std::cell::Cell::new(Vec3::NAN), screen }
+    }
+
+    /// The vertex lit (Gouraud), like the GPU's vertex stage: the light sits at the eye.
+    #[inline]
+    fn color(&self, v: &Vertex) -> Vec3 {
+        let c = v.color.get();
+        if !c.x.is_nan() {
+            return c;
+        }
+        let d2 = v.rel.length_squared();
+        let ndl = if d2 > 0.0 { -v.normal.dot(v.rel) / d2.sqrt() } else { 0.0 };
         let att = 1.0 / (1.0 + d2 / (self.lighting.falloff_mm * self.lighting.falloff_mm));
-        let color = self.tables.encoded(&self.lighting, att, ndl);
-        let screen = if eye.z >= self.view.near { self.screen(eye, color) } else { ScreenVertex { x: 0.0, y: 0.0, w: 0.0, c: color } };
-        Vertex { rel, eye, color, screen }
+        let c = self.tables.encoded(&self.lighting, att, ndl);
+        v.color.set(c);
+        c
     }
 
     fn draw_triangle(&self, frame: &mut Frame, id: u32, a: &Vertex, b: &Vertex, c: &Vertex) {
@@ -251,7 +263,7 @@ impl<'a> Rasterizer<'a> {
             return;
         }
         if inside.iter().all(|&i| i) {
-            self.fill(frame, id, a.screen, b.screen, c.screen);
+            self.fill(frame, id, [a.screen, b.screen, c.screen], || [self.color(a), self.color(b), self.color(c)]);
             return;
         }
         let v = [a, b, c];
@@ -262,32 +274,34 @@ impl<'a> Rasterizer<'a> {
         for i in 0..3 {
             let (p, q) = (v[i], v[(i + 1) % 3]);
             if p.eye.z >= near {
-                poly[n] = (p.eye, p.color);
+                poly[n] = (p.eye, self.color(p));
                 n += 1;
             }
             if (p.eye.z >= near) != (q.eye.z >= near) {
                 let t = (near - p.eye.z) / (q.eye.z - p.eye.z);
                 let mut x = p.eye + (q.eye - p.eye) * t;
                 x.z = near;
-                poly[n] = (x, p.color + (q.color - p.color) * t as f32);
+                poly[n] = (x, self.color(p) + (self.color(q) - self.color(p)) * t as f32);
                 n += 1;
             }
         }
-        let s0 = self.screen(poly[0].0, poly[0].1);
+        let s0 = self.screen(poly[0].0);
         for k in 1..n - 1 {
-            self.fill(frame, id, s0, self.screen(poly[k].0, poly[k].1), self.screen(poly[k + 1].0, poly[k + 1].1));
+            self.fill(frame, id, [s0, self.screen(poly[k].0), self.screen(poly[k + 1].0)], || [poly[0].1, poly[k].1, poly[k + 1].1]);
         }
     }
 
     #[inline]
-    fn screen(&self, e: DVec3, c: Vec3) -> ScreenVertex {
+    fn screen(&self, e: DVec3) -> ScreenVertex {
         let (x, y) = self.view.project(e);
-        ScreenVertex { x, y, w: 1.0 / e.z, c }
+        ScreenVertex { x, y, w: 1.0 / e.z }
     }
 
     /// Scan-converts one triangle: pixel centres inside it (top-left rule on edges) take its
     /// id where it is nearer, or as near with a smaller id.
-    fn fill(&self, frame: &mut Frame, id: u32, v0: ScreenVertex, v1: ScreenVertex, v2: ScreenVertex) {
+    /// `colors` gives the vertices' colours; it is called only once a pixel centre is known
+    /// to lie in the bounding box.
+    fn fill(&self, frame: &mut Frame, id: u32, [v0, v1, v2]: [ScreenVertex; 3], colors: impl FnOnce() -> [Vec3; 3]) {
         let (w, h) = (frame.width as i64, frame.height as i64);
         let min_x = v0.x.min(v1.x).min(v2.x);
         let max_x = v0.x.max(v1.x).max(v2.x);
@@ -310,6 +324,7 @@ impl<'a> Rasterizer<'a> {
         let e1 = Edge::new(v2, v0, area);
         let e2 = Edge::new(v0, v1, area);
         let inv_area = 1.0 / area.abs();
+        let [c0, c1, c2] = colors();
         for py in y0..=y1 {
             let cy = py as f64 + 0.5;
             let (r0, r1, r2) = (e0.row(cy), e1.row(cy), e2.row(cy));
@@ -344,7 +359,7 @@ impl<'a> Rasterizer<'a> {
                 let px = &mut frame.pixels[i];
                 if wz > px.inv_depth || (wz == px.inv_depth && id < px.id) {
                     let inv = 1.0 / sum;
-                    let c = v0.c + (v1.c - v0.c) * (p1 * inv) as f32 + (v2.c - v0.c) * (p2 * inv) as f32;
+                    let c = c0 + (c1 - c0) * (p1 * inv) as f32 + (c2 - c0) * (p2 * inv) as f32;
                     *px = Pixel { inv_depth: wz, id, rgb: (c * 255.0 + 0.5).to_array().map(|v| v as u8) };
                 }
             }
