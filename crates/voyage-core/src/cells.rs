@@ -335,8 +335,8 @@ fn plane_axes(n: DVec3) -> (DVec3, DVec3) {
     (u, n.cross(u))
 }
 
-/// Andrew's monotone chain; counter-clockwise.
-fn convex_hull(mut pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
+/// Andrew's monotone chain; counter-clockwise (collinear points dropped).
+pub(crate) fn convex_hull(mut pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
     pts.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
     pts.dedup();
     if pts.len() < 3 {

@@ -29,7 +29,7 @@ use glam::DVec3;
 use serde::Serialize;
 
 use super::raster::{Frame, Rasterizer, View};
-use crate::cells::Cells;
+use crate::cells::{convex_hull, Cells};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
 #[serde(rename_all = "lowercase")]
@@ -416,33 +416,6 @@ fn hull_span(hull: &[(f64, f64)], y: f64) -> Option<(f64, f64)> {
         }
     }
     (lo <= hi).then_some((lo, hi))
-}
-
-/// Andrew's monotone chain (counter-clockwise; collinear points dropped).
-fn convex_hull(mut pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
-    pts.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
-    pts.dedup();
-    if pts.len() < 3 {
-        return pts;
-    }
-    let cross = |o: (f64, f64), a: (f64, f64), b: (f64, f64)| (a.0 - o.0) * (b.1 - o.1) - (a.1 - o.1) * (b.0 - o.0);
-    let mut hull: Vec<(f64, f64)> = Vec::with_capacity(pts.len() + 1);
-    for pass in 0..2 {
-        let start = hull.len();
-        let push = |p: (f64, f64), hull: &mut Vec<(f64, f64)>| {
-            while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0 {
-                hull.pop();
-            }
-            hull.push(p);
-        };
-        if pass == 0 {
-            pts.iter().for_each(|&p| push(p, &mut hull));
-        } else {
-            pts.iter().rev().for_each(|&p| push(p, &mut hull));
-        }
-        hull.pop();
-    }
-    hull
 }
 
 #[cfg(test)]
