@@ -158,21 +158,35 @@ impl GpuRenderer {
         let this = &*self;
         this.scoped(|| {
             let target = this.target.as_ref().expect("target was just made");
-            let mut encoder = this.device.create_command_encoder(&Default::default());
-            this.draw(
-                &mut encoder,
-                &target.color_view,
-                &target.depth_view,
-                camera,
-                cells,
-                width,
-                height,
-                lighting,
-            )?;
+            let mut encoder = this.encode_frame(camera, cells, width, height, lighting)?;
             target.encode_readback(&mut encoder);
             this.queue.submit([encoder.finish()]);
             target.read(&this.device).map_err(RenderError::Gpu)
         })
+    }
+
+    /// Records one frame into the cached offscreen target (made by `ensure_target`).
+    fn encode_frame(
+        &self,
+        camera: &Camera,
+        cells: &[u32],
+        width: u32,
+        height: u32,
+        lighting: &Lighting,
+    ) -> Result<wgpu::CommandEncoder, RenderError> {
+        let target = self.target.as_ref().expect("target was just made");
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        self.draw(
+            &mut encoder,
+            &target.color_view,
+            &target.depth_view,
+            camera,
+            cells,
+            width,
+            height,
+            lighting,
+        )?;
+        Ok(encoder)
     }
 
     /// Renders every frame (no readback), each submitted and waited for, after
@@ -200,19 +214,8 @@ impl GpuRenderer {
         let this = &*self;
         this.scoped(|| {
             let frame = |camera: &Camera, cells: &[u32]| -> Result<f64, RenderError> {
-                let target = this.target.as_ref().expect("target was just made");
                 let t0 = Instant::now();
-                let mut encoder = this.device.create_command_encoder(&Default::default());
-                this.draw(
-                    &mut encoder,
-                    &target.color_view,
-                    &target.depth_view,
-                    camera,
-                    cells,
-                    width,
-                    height,
-                    lighting,
-                )?;
+                let encoder = this.encode_frame(camera, cells, width, height, lighting)?;
                 let index = this.queue.submit([encoder.finish()]);
                 this.device
                     .poll(wgpu::PollType::Wait {

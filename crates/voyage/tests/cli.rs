@@ -374,32 +374,13 @@ fn render_movie_and_bench_render_on_the_small_phantom() {
     assert!(o.status.success(), "{}", text(&o));
     assert_eq!(png(&again), a);
     // Errors: a frame past the end, a bad pose, nothing written.
-    let o = voyage(&[
-        "render",
-        ct,
-        "--frame",
-        "999999",
-        "--out",
-        dir.join("x.png").to_str().unwrap(),
-    ]);
-    assert!(
-        !o.status.success() && String::from_utf8_lossy(&o.stderr).contains("frames"),
-        "{}",
-        text(&o)
-    );
-    let o = voyage(&[
-        "render",
-        ct,
-        "--pose",
-        "1,2,3",
-        "--out",
-        dir.join("x.png").to_str().unwrap(),
-    ]);
-    assert!(
-        !o.status.success() && String::from_utf8_lossy(&o.stderr).contains("seven"),
-        "{}",
-        text(&o)
-    );
+    let refused = |args: &[&str], needle: &str| {
+        let x = dir.join("x.png");
+        let o = voyage(&[&["render", ct], args, &["--out", x.to_str().unwrap()]].concat());
+        assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains(needle), "{}", text(&o));
+    };
+    refused(&["--frame", "999999"], "frames");
+    refused(&["--pose", "1,2,3"], "seven");
     assert!(!dir.join("x.png").exists());
     // A short movie.
     let movie = dir.join("movie");
