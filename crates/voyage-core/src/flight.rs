@@ -133,6 +133,94 @@ impl Guide {
     }
 }
 
+/// The autopilot of a flight, frame by frame: it watches progress toward the goal and,
+/// when the submarine stalls in a local minimum of V, pushes it toward the centerline ahead
+/// (see the module comment). [`fly`] uses it without a user; the navigator uses it while
+/// the flight plays, beside the user's own force.
+pub struct Autopilot {
+    guide: Guide,
+    stall_window_s: f64,
+    stall_progress_mm: f64,
+    escape_s: f64,
+    escape_factor: f64,
+    /// Start of the current stall window: (time, Dt then).
+    window_start: (f64, f64),
+    escape_until: f64,
+    in_a_row: usize,
+    near: usize,
+    /// The goal counts as reached when Dt is at most this (mm).
+    pub reach_mm: f64,
+    /// Stalls detected so far.
+    pub stalls: usize,
+}
+
+impl Autopilot {
+    /// An autopilot for a flight in direction `dir` starting at `x`, where Dt is `dt_now`.
+    pub fn new(cl: &Centerline, dir: Direction, opts: &FlightOptions, x: DVec3, dt_now: f64) -> Self {
+        let guide = Guide::new(cl, dir);
+        let near = guide.nearest(x);
+        let goal_radius = *guide.radius.last().unwrap_or(&0.0);
+        let reach_mm = opts.reach_mm.unwrap_or(goal_radius.max(10.0));
+        Autopilot {
+            reach_mm,
+            guide,
+            stall_window_s: opts.stall_window_s,
+            stall_progress_mm: opts.stall_progress_mm,
+            escape_s: opts.escape_s,
+            escape_factor: opts.escape_factor,
+            window_start: (0.0, dt_now),
+            escape_until: f64::NEG_INFINITY,
+            in_a_row: 0,
+            near,
+            stalls: 0,
+        }
+    }
+
+    /// The autopilot's force for the frame starting at time `t` with the submarine at `x`
+    /// and Dt = `dt_now`: zero, or an escape push scaled by Ct.
+    pub fn input(&mut self, t: f64, dt_now: f64, x: DVec3, ct: f64) -> Input {
+        // Stall: too little progress over the window (not while escaping). Each stall in a
+        // row pushes harder.
+        if t >= self.escape_until && t - self.window_start.0 >= self.stall_window_s {
+            if self.window_start.1 - dt_now < self.stall_progress_mm {
+                self.stalls += 1;
+                self.in_a_row += 1;
+                self.escape_until = t + self.escape_s;
+            } else {
+                self.in_a_row = 0;
+            }
+            self.window_start = (t, dt_now);
+        }
+        let mut input = Input::default();
+        if t < self.escape_until {
+            let boost = 1.5f64.powi(self.in_a_row.saturating_sub(1).min(8) as i32);
+            input.force = self.guide.toward_ahead(self.near, x) * self.escape_factor * boost * ct.max(1.0);
+        }
+        input
+    }
+
+    /// Restarts the stall watch (the user steered, or the submarine was moved): what happens
+    /// next is not the field's doing.
+    pub fn restart(&mut self, t: f64, dt_now: f64, x: DVec3) {
+        self.window_start = (t, dt_now);
+        self.escape_until = f64::NEG_INFINITY;
+        self.in_a_row = 0;
+        self.near = self.guide.nearest(x);
+    }
+
+    /// Follows the submarine to `x` after a frame; returns the index of the nearest point of
+    /// the guide (the centerline from the flight's start to its goal).
+    pub fn moved_to(&mut self, x: DVec3) -> usize {
+        self.near = nearest_from(&self.guide, x, self.near);
+        self.near
+    }
+
+    /// Lumen radius at the guide's point `i` (mm).
+    pub fn radius(&self, i: usize) -> f64 {
+        self.guide.radius[i]
+    }
+}
+
 /// Where a flight starts: the first centerline point from the start end that lies in the
 /// safe set, looking along the centerline, up against gravity.
 pub fn start_pose<S: DistanceStore>(field: &PotentialField<S>, cl: &Centerline, dir: Direction, opts: &FlightOptions) -> Result<Pose> {
@@ -160,8 +248,6 @@ pub fn fly<S: DistanceStore>(field: &PotentialField<S>, cl: &Centerline, dir: Di
     sub.modes = opts.modes;
     sub.direction = dir;
 
-    let goal_radius = *guide.radius.last().unwrap_or(&0.0);
-    let reach = opts.reach_mm.unwrap_or(goal_radius.max(10.0));
     let max_sim = opts.max_sim_s.unwrap_or(cl.length_mm / 5.0 + 60.0);
     let frame_dt = 1.0 / opts.fps;
 
@@ -185,11 +271,9 @@ pub fn fly<S: DistanceStore>(field: &PotentialField<S>, cl: &Centerline, dir: Di
     let dt_at = |x: DVec3| field.sample(x, dir).dt.unwrap_or(f64::INFINITY);
     let (mut wall_sum, mut radius_sum) = (0.0, 0.0);
     let mut physics_ns = 0u128;
-    let mut window_start = (0.0, dt_at(sub.state.x));
-    let mut escape_until = f64::NEG_INFINITY;
-    let mut in_a_row = 0usize;
+    let mut pilot = Autopilot::new(cl, dir, opts, sub.state.x, dt_at(sub.state.x));
+    let reach = pilot.reach_mm;
     let mut track: Vec<(DVec3, DVec3)> = Vec::new();
-    let mut near = guide.nearest(sub.state.x);
     if opts.keep_poses {
         f.poses.push(sub.pose());
     }
@@ -201,26 +285,10 @@ pub fn fly<S: DistanceStore>(field: &PotentialField<S>, cl: &Centerline, dir: Di
             f.reached = true;
             break;
         }
-        if t >= max_sim || f.stalls >= opts.max_stalls {
+        if t >= max_sim || pilot.stalls >= opts.max_stalls {
             break;
         }
-        // Stall: too little progress over the window (not while escaping). Each stall in a
-        // row pushes harder.
-        if t >= escape_until && t - window_start.0 >= opts.stall_window_s {
-            if window_start.1 - dt_now < opts.stall_progress_mm {
-                f.stalls += 1;
-                in_a_row += 1;
-                escape_until = t + opts.escape_s;
-            } else {
-                in_a_row = 0;
-            }
-            window_start = (t, dt_now);
-        }
-        let mut input = Input::default();
-        if t < escape_until {
-            let boost = 1.5f64.powi(in_a_row.saturating_sub(1).min(8) as i32);
-            input.force = guide.toward_ahead(near, sub.state.x) * opts.escape_factor * boost * sub.potential.ct.max(1.0);
-        }
+        let input = pilot.input(t, dt_now, sub.state.x, sub.potential.ct);
         let before = sub.state.x;
         let clock = Instant::now();
         let r = sub.step(field, frame_dt, &input);
@@ -234,14 +302,14 @@ pub fn fly<S: DistanceStore>(field: &PotentialField<S>, cl: &Centerline, dir: Di
         let ds = field.ds(x);
         f.min_wall_distance_mm = f.min_wall_distance_mm.min(ds);
         wall_sum += ds;
-        near = nearest_from(&guide, x, near);
-        radius_sum += guide.radius[near];
+        radius_sum += guide.radius[pilot.moved_to(x)];
         track.push((x, sub.pose().z_body()));
         if opts.keep_poses {
             f.poses.push(sub.pose());
         }
     }
     f.sim_seconds = sub.state.t;
+    f.stalls = pilot.stalls;
     if f.frames > 0 {
         f.mean_wall_distance_mm = wall_sum / f.frames as f64;
         f.mean_local_radius_mm = radius_sum / f.frames as f64;

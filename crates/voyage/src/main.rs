@@ -3,6 +3,7 @@
 //! No algorithm lives here.
 
 mod cmd;
+mod gui;
 
 use std::process::ExitCode;
 

@@ -229,7 +229,7 @@ fn prep_writes_its_exports_and_reports_json() {
 #[test]
 fn demo_makes_preprocesses_and_checks_the_phantom() {
     let dir = scratch("demo");
-    let o = voyage(&["demo", "--small", "--out", dir.to_str().unwrap()]);
+    let o = voyage(&["demo", "--headless", "--small", "--out", dir.to_str().unwrap()]);
     assert!(o.status.success(), "{}", text(&o));
     let out = String::from_utf8_lossy(&o.stdout);
     let dice: f64 = out.lines().find(|l| l.contains("Dice")).and_then(|l| l.split_whitespace().nth(4)).and_then(|d| d.parse().ok()).unwrap_or(0.0);

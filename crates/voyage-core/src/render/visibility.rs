@@ -178,6 +178,45 @@ impl Visibility {
         drawn
     }
 
+    /// The cells to draw when nobody can read the depth buffer between cells (the GPU
+    /// draws them all in one pass): the portal chains narrowed by the portals' projections
+    /// alone — rectangles for `lg`, convex outlines for `paper` and `ours`. Exact for the
+    /// same reason as [`Self::draw`] (a cell is dropped only when no pixel centre lies in
+    /// every portal's projection on the way), only less tight.
+    pub fn select(&mut self, cells: &Cells, view: &View) -> Drawn {
+        let ncells = cells.cells.len() as u32;
+        let camera_cell = cells.cell_of_point(view.eye).map(|c| c as u32);
+        let mut drawn = Drawn { camera_cell, ..Drawn::default() };
+        let Some(home) = camera_cell.filter(|_| self.strategy != Strategy::All) else {
+            drawn.cells = (0..ncells).collect();
+            return drawn;
+        };
+        drawn.cells.push(home);
+        for dir in [TOWARD_TARGET, TOWARD_SOURCE] {
+            let mut region = Region::full(view);
+            let mut cell = home;
+            loop {
+                let (portal, next) = match dir {
+                    TOWARD_TARGET if cell + 1 < ncells => (cell as usize, cell + 1),
+                    TOWARD_SOURCE if cell > 0 => (cell as usize - 1, cell - 1),
+                    _ => break,
+                };
+                drawn.portals_tested += 1;
+                let Some(outline) = project_prism(&self.portals[portal].corners, view) else { break };
+                let open = match self.strategy {
+                    Strategy::Lg => region.clip_rect(&outline, view),
+                    _ => region.clip_hull(&outline, view),
+                };
+                if !open {
+                    break;
+                }
+                drawn.cells.push(next);
+                cell = next;
+            }
+        }
+        drawn
+    }
+
     /// Narrows a sequence's region by the next portal; false when nothing can be seen
     /// through it any more.
     fn narrow(&self, region: &mut Region, portal: usize, frame: &Frame, view: &View, reads: &mut usize) -> bool {

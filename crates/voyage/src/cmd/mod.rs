@@ -8,7 +8,7 @@ mod fly;
 mod info;
 mod phantom;
 mod prep;
-mod render;
+pub mod render;
 
 use std::path::PathBuf;
 
@@ -27,14 +27,23 @@ enum Command {
     Info(info::InfoArgs),
     /// Make a synthetic phantom with ground truth (the paper's pipe, or a full colon).
     Phantom(phantom::PhantomArgs),
-    /// Make the colon phantom in ./voyage-demo and describe it (the default job).
+    /// Open the navigator window on a CT or a lumen mask (the main command).
+    View(crate::gui::ViewArgs),
+    /// Open the navigator on the built-in colon phantom, made on the fly; with --headless,
+    /// write the phantom to a folder, preprocess it and compare with its truth instead.
     Demo {
-        /// Folder to write the phantom into.
-        #[arg(long, default_value = "voyage-demo")]
-        out: PathBuf,
         /// Make the small (≈128³) phantom instead of the full-size one.
         #[arg(long)]
         small: bool,
+        /// No window: write the phantom into --out, read it back, preprocess it and compare
+        /// the result with the phantom's truth.
+        #[arg(long)]
+        headless: bool,
+        /// Folder to write the phantom into (with --headless).
+        #[arg(long, default_value = "voyage-demo")]
+        out: PathBuf,
+        #[command(flatten)]
+        window: crate::gui::WindowArgs,
     },
     /// Preprocess a CT or lumen mask: colon, distance fields, centerline, surface, cells.
     Prep(prep::PrepArgs),
@@ -52,7 +61,9 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Info(a) => info::run(&a),
         Command::Phantom(a) => phantom::run(&a),
-        Command::Demo { out, small } => phantom::demo(&out, small),
+        Command::View(a) => crate::gui::view(&a),
+        Command::Demo { small, headless: true, out, .. } => phantom::demo(&out, small),
+        Command::Demo { small, window, .. } => crate::gui::demo(&window, small),
         Command::Prep(a) => prep::run(&a),
         Command::Fly(a) => fly::run(&a),
         Command::Bench(a) => bench::run(&a),

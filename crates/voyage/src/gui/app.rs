@@ -1,0 +1,914 @@
+//! The navigator window: a control strip on the left, the endoscopic view in the middle,
+//! the scout on the right, the slices along the bottom (paper Fig. 8).
+
+use std::collections::{BTreeMap, VecDeque};
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+use egui::{Color32, Key, Modifiers, Pos2, Rect, RichText, Sense, Stroke, Vec2};
+use glam::DVec3;
+use serde_json::json;
+use voyage_core::camera::Camera;
+use voyage_core::findings::{self, Findings};
+use voyage_core::potential::Direction;
+use voyage_core::render::closeup::{render_closeup, CloseupBox, TransferFunction};
+use voyage_core::submarine::Input;
+
+use super::endoscopy::{label, ray_at, surface_point_on_screen, visible_centerline, Endoscope};
+use super::loader::{Job, Source};
+use super::scout::{ScoutMarks, ScoutView};
+use super::script::{Script, Step};
+use super::session::Session;
+use super::slices::SlicePanel;
+use super::WindowArgs;
+
+/// What a click on the endoscopic view does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Tool {
+    /// Click and hold: push the submarine toward the point (F_user).
+    Steer,
+    /// Click: a marker on the surface point.
+    Marker,
+    /// Two clicks: the distance between two surface points.
+    Measure,
+}
+
+/// What the window leaves behind for `voyage view` to report after it closes.
+#[derive(Default)]
+pub struct Outcome {
+    pub errors: Vec<String>,
+    pub report: Option<serde_json::Value>,
+}
+
+/// Input gathered for the submarine this frame.
+#[derive(Default)]
+struct Steering {
+    /// Ray toward the point held (F_user).
+    push: Option<DVec3>,
+    /// Right-drag in points this frame (τ_option).
+    look: Vec2,
+}
+
+/// The close-up volume rendering shown over the view, and the camera it was made for.
+struct Closeup {
+    texture: egui::TextureHandle,
+    camera: Camera,
+    center: DVec3,
+}
+
+const HELP: &[(&str, &str)] = &[
+    ("Space", "play / pause the automatic flight"),
+    ("R", "reverse the direction (rectum ↔ cecum)"),
+    ("Home", "back to the start of the flight"),
+    ("left button (hold)", "push the submarine toward that point"),
+    ("right button (drag)", "look around"),
+    ("M", "marker on the surface under the cursor"),
+    ("D", "measure: press on two surface points"),
+    ("1 / 2 / 3", "tool: steer / marker / measure (for the left button)"),
+    ("C / L / S", "compass / leveling / still mode"),
+    ("G", "centerline overlay (green)"),
+    ("V", "close-up volume rendering"),
+    ("[ / ]", "narrower / wider field of view"),
+    ("Ctrl+E", "export the findings"),
+    ("H or F1", "this help"),
+    ("Esc", "close the help, cancel a measurement"),
+    ("Ctrl+Q", "quit"),
+];
+
+pub struct App {
+    args: WindowArgs,
+    job: Option<Job>,
+    session: Option<Session>,
+    generation: u64,
+    error: Option<String>,
+    open_path: String,
+    endoscope: Endoscope,
+    scout: Option<ScoutView>,
+    slices: SlicePanel,
+    findings: Findings,
+    tool: Tool,
+    measure_from: Option<DVec3>,
+    note: String,
+    export_dir: String,
+    show_help: bool,
+    show_centerline: bool,
+    closeup_on: bool,
+    closeup: Option<Closeup>,
+    /// Marker whose neighbourhood the close-up shows (instead of the view centre).
+    closeup_at: Option<DVec3>,
+    status: String,
+    frame_ms: VecDeque<f64>,
+    render_ms: VecDeque<f64>,
+    last_frame: Option<Instant>,
+    /// Frames drawn since the study became ready (or failed).
+    frames: u64,
+    view_rect: Option<Rect>,
+    last_cells: Vec<u32>,
+    script: Option<Script>,
+    steer_script: Option<([f32; 2], u32)>,
+    look_script: Option<(Vec2, u32)>,
+    recorded: BTreeMap<String, [f64; 7]>,
+    screenshot_pending: bool,
+    announced: bool,
+    outcome: Arc<Mutex<Outcome>>,
+    quitting: bool,
+}
+
+impl App {
+    pub fn new(cc: &eframe::CreationContext<'_>, source: Option<Source>, args: WindowArgs, outcome: Arc<Mutex<Outcome>>) -> Self {
+        cc.egui_ctx.set_visuals(egui::Visuals::dark());
+        let endoscope = Endoscope::new(cc.wgpu_render_state.as_ref(), args.cpu);
+        let script = match args.script.as_deref().map(Script::load).transpose() {
+            Ok(s) => s,
+            Err(e) => {
+                outcome.lock().map(|mut o| o.errors.push(format!("{e:#}"))).ok();
+                None
+            }
+        };
+        let job = source.map(|s| Job::start(s, cc.egui_ctx.clone()));
+        App {
+            args,
+            job,
+            session: None,
+            generation: 0,
+            error: None,
+            open_path: String::new(),
+            endoscope,
+            scout: None,
+            slices: SlicePanel::default(),
+            findings: Findings::default(),
+            tool: Tool::Steer,
+            measure_from: None,
+            note: String::new(),
+            export_dir: "findings".into(),
+            show_help: false,
+            show_centerline: true,
+            closeup_on: false,
+            closeup: None,
+            closeup_at: None,
+            status: String::new(),
+            frame_ms: VecDeque::new(),
+            render_ms: VecDeque::new(),
+            last_frame: None,
+            frames: 0,
+            view_rect: None,
+            last_cells: Vec::new(),
+            script,
+            steer_script: None,
+            look_script: None,
+            recorded: BTreeMap::new(),
+            screenshot_pending: false,
+            announced: false,
+            outcome,
+            quitting: false,
+        }
+    }
+
+    fn open(&mut self, source: Source, ctx: &egui::Context) {
+        self.error = None;
+        self.status = format!("opening {}", source.describe());
+        self.job = Some(Job::start(source, ctx.clone()));
+    }
+
+    fn poll_job(&mut self) {
+        let Some(job) = &mut self.job else { return };
+        let Some(result) = job.poll() else { return };
+        let seconds = job.started.elapsed().as_secs_f64();
+        self.job = None;
+        match result {
+            Ok(mut s) => {
+                s.set_playing(!self.args.paused);
+                self.status = format!("{} ready in {:.1} s: centerline {:.0} mm, {} triangles in {} cells", s.name, seconds, s.study.centerline.length_mm, s.mesh.triangles.len(), s.mesh.cells());
+                self.scout = Some(ScoutView::new(s.study.ct.geometry()));
+                self.slices = SlicePanel::default();
+                self.findings = Findings::default();
+                self.closeup = None;
+                self.closeup_at = None;
+                self.measure_from = None;
+                self.session = Some(s);
+                self.generation += 1;
+                self.frames = 0;
+                self.announced = false;
+            }
+            Err(e) => {
+                let msg = format!("{e:#}");
+                self.error = Some(msg.clone());
+                self.status = "could not open the study".into();
+                self.frames = 0;
+                if let Ok(mut o) = self.outcome.lock() {
+                    o.errors.push(msg);
+                }
+            }
+        }
+    }
+
+    /// Keyboard shortcuts (not while a text field has the keyboard).
+    fn shortcuts(&mut self, ctx: &egui::Context) {
+        if ctx.egui_wants_keyboard_input() {
+            return;
+        }
+        let pressed = |k: Key| ctx.input_mut(|i| i.consume_key(Modifiers::NONE, k));
+        if ctx.input_mut(|i| i.consume_key(Modifiers::COMMAND, Key::Q)) {
+            self.quit(ctx);
+        }
+        if ctx.input_mut(|i| i.consume_key(Modifiers::COMMAND, Key::E)) {
+            self.export(PathBuf::from(self.export_dir.clone()));
+        }
+        if pressed(Key::H) || pressed(Key::F1) {
+            self.show_help = !self.show_help;
+        }
+        if pressed(Key::Escape) {
+            self.show_help = false;
+            self.measure_from = None;
+        }
+        if pressed(Key::G) {
+            self.show_centerline = !self.show_centerline;
+        }
+        if pressed(Key::V) {
+            self.closeup_on = !self.closeup_on;
+        }
+        if pressed(Key::Num1) {
+            self.tool = Tool::Steer;
+        }
+        if pressed(Key::Num2) {
+            self.tool = Tool::Marker;
+        }
+        if pressed(Key::Num3) {
+            self.tool = Tool::Measure;
+        }
+        let hover = ctx.input(|i| i.pointer.hover_pos());
+        let Some(s) = &mut self.session else { return };
+        if pressed(Key::Space) {
+            s.set_playing(!s.playing);
+        }
+        if pressed(Key::R) {
+            s.set_direction(s.direction().reversed());
+        }
+        if pressed(Key::Home) {
+            s.restart();
+        }
+        if pressed(Key::C) {
+            s.sub.modes.compass = !s.sub.modes.compass;
+        }
+        if pressed(Key::L) {
+            s.sub.modes.leveling = !s.sub.modes.leveling;
+        }
+        if pressed(Key::S) {
+            s.sub.modes.still = !s.sub.modes.still;
+        }
+        if pressed(Key::OpenBracket) {
+            s.fov = (s.fov - 5.0).max(30.0);
+        }
+        if pressed(Key::CloseBracket) {
+            s.fov = (s.fov + 5.0).min(Camera::MAX_FOV_DEG);
+        }
+        let in_view = hover.filter(|p| self.view_rect.is_some_and(|r| r.contains(*p)));
+        if pressed(Key::M)
+            && let Some(p) = in_view
+        {
+            self.drop_marker(p);
+        }
+        if pressed(Key::D)
+            && let Some(p) = in_view
+        {
+            self.measure_point(p);
+        }
+    }
+
+    fn quit(&mut self, ctx: &egui::Context) {
+        self.quitting = true;
+        self.write_report();
+        ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+    }
+
+    /// The surface point under a point of the view (searching the cells last drawn first).
+    fn pick(&self, at: Pos2) -> Option<findings::Hit> {
+        let (s, rect) = (self.session.as_ref()?, self.view_rect?);
+        let cam = s.camera();
+        let ray = ray_at(&cam, rect, at);
+        findings::pick(&s.mesh, Some(&self.last_cells), cam.pose.position, ray).or_else(|| findings::pick(&s.mesh, None, cam.pose.position, ray))
+    }
+
+    fn drop_marker(&mut self, at: Pos2) {
+        let Some(hit) = self.pick(at) else {
+            self.status = "no surface under the cursor".into();
+            return;
+        };
+        let Some(s) = &self.session else { return };
+        let note = std::mem::take(&mut self.note);
+        let label = self.findings.add_marker(hit.point, hit.normal, s.pose(), note).label.clone();
+        self.status = format!("marker {label} at {:.1} mm from the camera", hit.distance);
+    }
+
+    fn measure_point(&mut self, at: Pos2) {
+        let Some(hit) = self.pick(at) else {
+            self.status = "no surface under the cursor".into();
+            return;
+        };
+        match self.measure_from.take() {
+            None => {
+                self.measure_from = Some(hit.point);
+                self.status = "measure: now the second point".into();
+            }
+            Some(a) => {
+                let label = self.findings.add_measurement(a, hit.point).label.clone();
+                self.status = format!("{label}: {:.1} mm", a.distance(hit.point));
+            }
+        }
+    }
+
+    fn export(&mut self, dir: PathBuf) {
+        let Some(s) = &self.session else {
+            self.status = "nothing to export: no study is open".into();
+            return;
+        };
+        let geometry = s.study.ct.geometry().clone();
+        let result = findings::export_findings(&dir, &self.findings, &geometry, |_, m| {
+            let cam = Camera::new(m.view).with_fov(s.fov);
+            let cells = voyage_core::render::Visibility::new(&s.study.cells, voyage_core::render::Strategy::Lg).select(&s.study.cells, &voyage_core::render::View::new(&cam, 512, 512)).cells;
+            Ok((512, 512, voyage_core::render::render_rgba(&s.mesh, &cam, &cells, 512, 512, &voyage_core::render::Lighting::default())))
+        });
+        match result {
+            Ok(files) => self.status = format!("exported {} files to {}", files.len(), dir.display()),
+            Err(e) => {
+                self.status = format!("export failed: {e}");
+                if let Ok(mut o) = self.outcome.lock() {
+                    o.errors.push(format!("export: {e}"));
+                }
+            }
+        }
+    }
+
+    fn run_script(&mut self, ctx: &egui::Context) {
+        if self.session.is_none() {
+            return;
+        }
+        let Some(script) = &mut self.script else { return };
+        let Some(step) = script.next_step() else { return };
+        match step {
+            Step::Wait(n) => script.busy = n,
+            Step::Steer { at, frames } => {
+                self.steer_script = Some((at, frames));
+                script.busy = frames;
+            }
+            Step::Look { dx, dy, frames } => {
+                self.look_script = Some((Vec2::new(dx, dy), frames));
+                script.busy = frames;
+            }
+            Step::Play(on) => {
+                if let Some(s) = &mut self.session {
+                    s.set_playing(on);
+                }
+            }
+            Step::Direction(d) => {
+                if let Some(s) = &mut self.session {
+                    s.set_direction(if d == "backward" { Direction::Backward } else { Direction::Forward });
+                }
+            }
+            Step::Marker { at, note } => {
+                self.note = note;
+                if let Some(p) = self.view_point(at) {
+                    self.drop_marker(p);
+                }
+            }
+            Step::Measure { from, to } => {
+                if let (Some(a), Some(b)) = (self.view_point(from), self.view_point(to)) {
+                    self.measure_from = None;
+                    self.measure_point(a);
+                    self.measure_point(b);
+                }
+            }
+            Step::Jump(f) => {
+                if let Some(s) = &mut self.session {
+                    let n = s.study.centerline.points_mm.len();
+                    let i = (f.clamp(0.0, 1.0) * n.saturating_sub(1) as f64).round() as usize;
+                    if let Err(e) = s.jump_to_centerline(i) {
+                        self.status = e;
+                    }
+                    self.slices.follow();
+                }
+            }
+            Step::GoTo(label) => self.go_to_marker(&label),
+            Step::Closeup(on) => self.closeup_on = on,
+            Step::Centerline(on) => self.show_centerline = on,
+            Step::Record(name) => {
+                if let Some(s) = &self.session {
+                    self.recorded.insert(name, s.pose().to_array());
+                }
+            }
+            Step::Screenshot(path) => self.screenshot(ctx, path, false),
+            Step::Export(dir) => self.export(dir),
+            Step::Quit(_) => self.quit(ctx),
+        }
+    }
+
+    /// A point of the view given as fractions of its size.
+    fn view_point(&self, f: [f32; 2]) -> Option<Pos2> {
+        self.view_rect.map(|r| r.min + Vec2::new(f[0], f[1]) * r.size())
+    }
+
+    fn go_to_marker(&mut self, label: &str) {
+        let Some(m) = self.findings.markers.iter().find(|m| m.label == label) else {
+            self.status = format!("no marker {label}");
+            return;
+        };
+        let (view, position) = (m.view, m.position);
+        if let Some(s) = &mut self.session {
+            s.set_playing(false);
+            s.place(view);
+            self.closeup_at = Some(position);
+            self.slices.follow();
+            self.status = format!("back at {label}");
+        }
+    }
+
+    /// Saves a PNG of the whole window (the next frame's pixels); with `then_quit` the
+    /// window closes once it is written.
+    fn screenshot(&mut self, ctx: &egui::Context, path: PathBuf, then_quit: bool) {
+        let outcome = self.outcome.clone();
+        let ctx2 = ctx.clone();
+        self.screenshot_pending = then_quit;
+        ctx.send_viewport_cmd(egui::ViewportCommand::Screenshot(egui::ScreenshotCallback::new(move |image| {
+            let (w, h) = (image.size[0] as u32, image.size[1] as u32);
+            let rgba: Vec<u8> = image.pixels.iter().flat_map(|c| c.to_array()).collect();
+            if let Err(e) = crate::cmd::render::write_png(&path, &rgba, w, h)
+                && let Ok(mut o) = outcome.lock()
+            {
+                o.errors.push(format!("{}: {e:#}", path.display()));
+            }
+            if then_quit {
+                ctx2.send_viewport_cmd(egui::ViewportCommand::Close);
+            }
+            ctx2.request_repaint();
+        })));
+    }
+
+    fn write_report(&mut self) {
+        let mean = |v: &VecDeque<f64>| if v.is_empty() { 0.0 } else { v.iter().sum::<f64>() / v.len() as f64 };
+        let mut sorted: Vec<f64> = self.frame_ms.iter().copied().collect();
+        sorted.sort_by(f64::total_cmp);
+        let pct = |q: f64| sorted.get(((sorted.len() as f64 - 1.0) * q).round() as usize).copied().unwrap_or(0.0);
+        let rect = |r: Option<Rect>| r.map(|r| [r.left(), r.top(), r.right(), r.bottom()]);
+        let report = json!({
+            "ready": self.session.is_some(),
+            "error": self.error,
+            "frames": self.frames,
+            "renderer": self.endoscope.renderer_name,
+            "pose": self.session.as_ref().map(|s| s.pose().to_array()),
+            "playing": self.session.as_ref().map(|s| s.playing),
+            "recorded": self.recorded,
+            "markers": self.findings.markers.iter().map(|m| json!({"label": m.label, "note": m.note, "position_mm": m.position.to_array()})).collect::<Vec<_>>(),
+            "measurements_mm": self.findings.measurements.iter().map(|m| m.length_mm()).collect::<Vec<_>>(),
+            "frame_ms": {"mean": mean(&self.frame_ms), "median": pct(0.5), "p95": pct(0.95), "frames": self.frame_ms.len(), "fps": if mean(&self.frame_ms) > 0.0 { 1000.0 / mean(&self.frame_ms) } else { 0.0 }},
+            "render_ms": mean(&self.render_ms),
+            "view_rect": rect(self.view_rect),
+            "cells": self.endoscope.stats.cells,
+            "triangles": self.endoscope.stats.triangles,
+        });
+        if let Ok(mut o) = self.outcome.lock() {
+            o.report = Some(report);
+        }
+    }
+
+    fn top_bar(&mut self, ui: &mut egui::Ui) {
+        egui::Panel::top("top").show(ui, |ui| {
+            ui.horizontal(|ui| {
+                ui.label(RichText::new("voyage").strong());
+                if let Some(s) = &self.session {
+                    ui.label(&s.name);
+                }
+                ui.separator();
+                ui.add(egui::TextEdit::singleline(&mut self.open_path).hint_text("CT folder or file, or lumen mask").desired_width(260.0));
+                if ui.button("Open").clicked() && !self.open_path.trim().is_empty() {
+                    let path = PathBuf::from(self.open_path.trim());
+                    self.open(Source::File { path, mask: false, series: None }, ui.ctx());
+                }
+                if ui.button("Demo phantom").clicked() {
+                    self.open(Source::Phantom { small: false }, ui.ctx());
+                }
+                ui.separator();
+                if ui.button("Help (H)").clicked() {
+                    self.show_help = !self.show_help;
+                }
+                ui.label(RichText::new(&self.status).color(Color32::from_gray(170)));
+            });
+        });
+    }
+
+    fn controls(&mut self, ui: &mut egui::Ui) {
+        egui::Panel::left("controls").resizable(false).exact_size(236.0).show(ui, |ui| {
+            egui::ScrollArea::vertical().show(ui, |ui| self.control_contents(ui));
+        });
+    }
+
+    fn control_contents(&mut self, ui: &mut egui::Ui) {
+        let Some(s) = &mut self.session else {
+            ui.label("No study open.");
+            return;
+        };
+        ui.heading("Flight");
+        ui.horizontal(|ui| {
+            let text = if s.playing { "⏸ Pause" } else { "▶ Play" };
+            if ui.button(text).on_hover_text("Space").clicked() {
+                s.set_playing(!s.playing);
+            }
+            if ui.button("⏮ Start").on_hover_text("Home").clicked() {
+                s.restart();
+            }
+        });
+        let mut dir = s.direction();
+        ui.radio_value(&mut dir, Direction::Forward, "rectum → cecum");
+        ui.radio_value(&mut dir, Direction::Backward, "cecum → rectum");
+        s.set_direction(dir);
+        if s.reached {
+            ui.label(RichText::new("goal reached").color(Color32::LIGHT_GREEN));
+        }
+        ui.label(format!("to the goal: {:.0} mm", s.dt_to_goal()));
+        ui.separator();
+        ui.add(egui::Slider::new(&mut s.sub.potential.ct, 0.0..=1000.0).text("Ct (pull)"));
+        ui.add(egui::Slider::new(&mut s.sub.potential.cs, 0.0..=1000.0).text("Cs (wall)"));
+        ui.add(egui::Slider::new(&mut s.sub.potential.rho, 2.0..=60.0).text("ρ mm"));
+        ui.add(egui::Slider::new(&mut s.sub.dynamics.user_force, 0.0..=2000.0).text("|F_user|"));
+        ui.add(egui::Slider::new(&mut s.fov, 30.0..=Camera::MAX_FOV_DEG).text("FOV °"));
+        ui.checkbox(&mut s.sub.modes.compass, "compass (C)");
+        ui.checkbox(&mut s.sub.modes.leveling, "leveling (L)");
+        ui.checkbox(&mut s.sub.modes.still, "still (S)");
+        ui.checkbox(&mut self.show_centerline, "centerline (G)");
+        ui.checkbox(&mut self.closeup_on, "close-up volume (V)");
+        ui.separator();
+        ui.heading("Findings");
+        ui.horizontal(|ui| {
+            ui.selectable_value(&mut self.tool, Tool::Steer, "Steer").on_hover_text("1: hold the left button to push toward a point");
+            ui.selectable_value(&mut self.tool, Tool::Marker, "Marker").on_hover_text("2: click the surface (or M over it)");
+            ui.selectable_value(&mut self.tool, Tool::Measure, "Measure").on_hover_text("3: click two surface points (or D twice)");
+        });
+        ui.add(egui::TextEdit::singleline(&mut self.note).hint_text("note for the next marker"));
+        let mut go = None;
+        let mut remove_marker = None;
+        for (i, m) in self.findings.markers.iter().enumerate() {
+            ui.horizontal(|ui| {
+                if ui.button(&m.label).on_hover_text("fly back to this marker").clicked() {
+                    go = Some(m.label.clone());
+                }
+                ui.label(if m.note.is_empty() { "—" } else { &m.note });
+                if ui.small_button("✕").clicked() {
+                    remove_marker = Some(i);
+                }
+            });
+        }
+        let mut remove_measure = None;
+        for (i, m) in self.findings.measurements.iter().enumerate() {
+            ui.horizontal(|ui| {
+                ui.label(format!("{}: {:.1} mm", m.label, m.length_mm()));
+                if ui.small_button("✕").clicked() {
+                    remove_measure = Some(i);
+                }
+            });
+        }
+        if let Some(i) = remove_marker {
+            self.findings.markers.remove(i);
+        }
+        if let Some(i) = remove_measure {
+            self.findings.measurements.remove(i);
+        }
+        if let Some(l) = go {
+            self.go_to_marker(&l);
+        }
+        ui.horizontal(|ui| {
+            ui.add(egui::TextEdit::singleline(&mut self.export_dir).desired_width(120.0));
+            if ui.button("Export").on_hover_text("Ctrl+E: findings.json, Slicer .mrk.json and a PNG per marker").clicked() {
+                self.export(PathBuf::from(self.export_dir.clone()));
+            }
+        });
+    }
+
+    fn scout_panel(&mut self, ui: &mut egui::Ui) {
+        egui::Panel::right("scout").resizable(false).exact_size(360.0).show(ui, |ui| {
+            let (Some(s), Some(view)) = (&mut self.session, &mut self.scout) else {
+                ui.label("scout");
+                return;
+            };
+            let pose = s.pose();
+            let marks = ScoutMarks {
+                centerline: &s.study.centerline.points_mm,
+                markers: self.findings.markers.iter().map(|m| (m.label.clone(), m.position)).collect(),
+                submarine: pose.position,
+                view_dir: pose.z_body(),
+            };
+            if let Some(i) = view.show(ui, &s.scout, &marks) {
+                match s.jump_to_centerline(i) {
+                    Ok(()) => {
+                        self.slices.follow();
+                        self.status = format!("jumped to {:.0} mm along the centerline", s.study.centerline.arc_mm.get(i).copied().unwrap_or(0.0));
+                    }
+                    Err(e) => self.status = e,
+                }
+            }
+        });
+    }
+
+    fn slice_panel(&mut self, ui: &mut egui::Ui) {
+        egui::Panel::bottom("slices").resizable(false).exact_size(262.0).show(ui, |ui| {
+            let Some(s) = &mut self.session else { return };
+            let at = s.pose().position;
+            if let Some(p) = self.slices.show(ui, &s.study.ct, at) {
+                let forward = s.pose().z_body();
+                match s.jump_to(p, forward) {
+                    Ok(()) => {
+                        self.slices.follow();
+                        self.status = "moved to the point clicked".into();
+                    }
+                    Err(e) => self.status = e,
+                }
+            }
+        });
+    }
+
+    fn endoscopy_panel(&mut self, ui: &mut egui::Ui, frame: &eframe::Frame, dt: f64) {
+        egui::CentralPanel::default().frame(egui::Frame::NONE.fill(Color32::BLACK)).show(ui, |ui| {
+            if self.session.is_none() {
+                self.waiting(ui);
+                return;
+            }
+            let (rect, response) = ui.allocate_exact_size(ui.available_size(), Sense::click_and_drag());
+            self.view_rect = Some(rect);
+            let steering = self.steering(ui, rect, &response);
+            let Some(s) = &mut self.session else { return };
+            let cam = s.camera();
+            let mut input = Input::default();
+            if let Some(ray) = steering.push {
+                input.force = s.sub.push_toward(ray);
+            }
+            if steering.look != Vec2::ZERO {
+                // τ_option from the drag: the turn rate that keeps the view under the pointer
+                // (fov per view height), held against the angular friction ka.
+                let rad_per_point = s.fov.to_radians() / rect.height().max(1.0) as f64;
+                let rate = DVec3::new(steering.look.x as f64, steering.look.y as f64, 0.0) * rad_per_point / dt.max(1e-3);
+                let p = cam.pose;
+                input.torque = (-p.y_body() * rate.x + p.x_body() * rate.y) * s.sub.dynamics.ka;
+            }
+            s.step(dt, &input);
+
+            let ppp = ui.ctx().pixels_per_point();
+            let size = [((rect.width() * ppp).round() as u32).max(16), ((rect.height() * ppp).round() as u32).max(16)];
+            let rs = frame.wgpu_render_state();
+            match self.endoscope.render(ui.ctx(), rs, s, self.generation, size) {
+                Ok(id) => {
+                    ui.painter().image(id, rect, Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)), Color32::WHITE);
+                }
+                Err(e) => {
+                    self.status = format!("rendering failed: {e:#}");
+                }
+            }
+            self.last_cells = self.endoscope.last_cells.clone();
+            push_limited(&mut self.render_ms, self.endoscope.stats.render_ms);
+            self.closeup_overlay(ui, rect);
+            self.overlays(ui, rect);
+        });
+    }
+
+    /// The mouse on the view: steering, looking, markers and measurements.
+    fn steering(&mut self, ui: &egui::Ui, rect: Rect, response: &egui::Response) -> Steering {
+        let mut out = Steering::default();
+        let Some(s) = &self.session else { return out };
+        let cam = s.camera();
+        let primary_down = response.is_pointer_button_down_on() && ui.input(|i| i.pointer.primary_down());
+        if self.tool == Tool::Steer
+            && primary_down
+            && let Some(p) = ui.input(|i| i.pointer.interact_pos())
+        {
+            out.push = Some(ray_at(&cam, rect, p));
+        }
+        if response.dragged_by(egui::PointerButton::Secondary) {
+            out.look = response.drag_delta();
+        }
+        if let Some((at, frames)) = self.steer_script {
+            out.push = Some(ray_at(&cam, rect, rect.min + Vec2::new(at[0], at[1]) * rect.size()));
+            self.steer_script = (frames > 1).then_some((at, frames - 1));
+        }
+        if let Some((d, frames)) = self.look_script {
+            out.look = d;
+            self.look_script = (frames > 1).then_some((d, frames - 1));
+        }
+        if response.clicked()
+            && let Some(p) = response.interact_pointer_pos()
+        {
+            match self.tool {
+                Tool::Marker => self.drop_marker(p),
+                Tool::Measure => self.measure_point(p),
+                Tool::Steer => {}
+            }
+        }
+        out
+    }
+
+    /// The close-up volume rendering over the view: the CT ray-cast in a small box around
+    /// the marker flown back to, or around the surface point at the view's centre.
+    fn closeup_overlay(&mut self, ui: &egui::Ui, rect: Rect) {
+        if !self.closeup_on {
+            self.closeup = None;
+            return;
+        }
+        let Some(s) = &self.session else { return };
+        let cam = s.camera();
+        let center = match self.closeup_at {
+            Some(c) => Some(c),
+            None => self.pick(rect.center()).map(|h| h.point),
+        };
+        let Some(center) = center else { return };
+        let fresh = self.closeup.as_ref().is_some_and(|c| c.camera == cam && c.center == center);
+        if !fresh {
+            // Half the view's resolution at most 384 px wide: the box is small on screen and
+            // ray casting is the costly part.
+            let w = (rect.width() * 0.5).clamp(64.0, 384.0) as u32;
+            let h = ((w as f32) * rect.height() / rect.width()).max(16.0) as u32;
+            let region = CloseupBox { center, half_size_mm: 15.0 };
+            let rgba = render_closeup(&s.study.ct, &cam, &region, w, h, &TransferFunction::tissue());
+            let image = egui::ColorImage::from_rgba_unmultiplied([w as usize, h as usize], &rgba);
+            match &mut self.closeup {
+                Some(c) => {
+                    c.texture.set(image, egui::TextureOptions::LINEAR);
+                    (c.camera, c.center) = (cam, center);
+                }
+                None => self.closeup = Some(Closeup { texture: ui.ctx().load_texture("closeup", image, egui::TextureOptions::LINEAR), camera: cam, center }),
+            }
+        }
+        if let Some(c) = &self.closeup {
+            ui.painter().image(c.texture.id(), rect, Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)), Color32::WHITE);
+        }
+    }
+
+    /// Centerline, markers, measurements and the read-outs over the view.
+    fn overlays(&mut self, ui: &egui::Ui, rect: Rect) {
+        let Some(s) = &self.session else { return };
+        let cam = s.camera();
+        let painter = ui.painter_at(rect);
+        if self.show_centerline {
+            for line in visible_centerline(s, &cam, rect, 250.0) {
+                painter.add(egui::Shape::line(line, Stroke::new(2.0, Color32::from_rgb(40, 230, 60))));
+            }
+        }
+        for m in &self.findings.markers {
+            if let Some(p) = surface_point_on_screen(s, &cam, rect, m.position) {
+                painter.circle(p, 6.0, Color32::from_rgba_unmultiplied(255, 230, 0, 90), Stroke::new(2.0, Color32::YELLOW));
+                label(&painter, p + Vec2::new(8.0, -20.0), &m.label, Color32::YELLOW);
+            }
+        }
+        let measure_color = Color32::from_rgb(120, 220, 255);
+        for m in &self.findings.measurements {
+            let (a, b) = (surface_point_on_screen(s, &cam, rect, m.a), surface_point_on_screen(s, &cam, rect, m.b));
+            if let (Some(a), Some(b)) = (a, b) {
+                painter.line_segment([a, b], Stroke::new(2.0, measure_color));
+                painter.circle_filled(a, 3.0, measure_color);
+                painter.circle_filled(b, 3.0, measure_color);
+                label(&painter, a.lerp(b, 0.5) + Vec2::new(6.0, 6.0), &format!("{} {:.1} mm", m.label, m.length_mm()), measure_color);
+            }
+        }
+        if let Some(a) = self.measure_from
+            && let Some(p) = surface_point_on_screen(s, &cam, rect, a)
+        {
+            painter.circle_filled(p, 4.0, measure_color);
+        }
+        let fps = if self.frame_ms.is_empty() { 0.0 } else { 1000.0 * self.frame_ms.len() as f64 / self.frame_ms.iter().sum::<f64>() };
+        let stats = &self.endoscope.stats;
+        let readout = format!(
+            "{:.1} ms/frame ({fps:.0} fps) · view {:.1} ms · {} cells, {}k triangles · {}",
+            self.frame_ms.back().copied().unwrap_or(0.0),
+            stats.render_ms,
+            stats.cells,
+            stats.triangles / 1000,
+            if self.endoscope.is_gpu() { "GPU" } else { "CPU" }
+        );
+        label(&painter, rect.left_top() + Vec2::new(8.0, 8.0), &readout, Color32::from_gray(220));
+        let mode = format!(
+            "{} · {} · wall {:.1} mm{}{}{}",
+            if s.playing { "flying" } else { "paused" },
+            if s.direction() == Direction::Forward { "rectum → cecum" } else { "cecum → rectum" },
+            s.field.ds(s.sub.state.x),
+            if s.sub.modes.compass { " · compass" } else { "" },
+            if s.sub.modes.leveling { " · leveling" } else { "" },
+            if s.sub.modes.still { " · still" } else { "" }
+        );
+        label(&painter, rect.left_bottom() + Vec2::new(8.0, -26.0), &mode, Color32::from_gray(220));
+        let tool = match (self.tool, self.measure_from.is_some()) {
+            (Tool::Steer, _) => "hold left: steer · right-drag: look · H: help",
+            (Tool::Marker, _) => "click: marker on the surface",
+            (Tool::Measure, false) => "click: first point of the measurement",
+            (Tool::Measure, true) => "click: second point",
+        };
+        label(&painter, rect.right_bottom() + Vec2::new(-300.0, -26.0), tool, Color32::from_gray(200));
+        // A small crosshair at the view's centre: where the close-up looks by default.
+        let c = rect.center();
+        painter.line_segment([c - Vec2::new(6.0, 0.0), c + Vec2::new(6.0, 0.0)], Stroke::new(1.0, Color32::from_white_alpha(90)));
+        painter.line_segment([c - Vec2::new(0.0, 6.0), c + Vec2::new(0.0, 6.0)], Stroke::new(1.0, Color32::from_white_alpha(90)));
+    }
+
+    /// The view while nothing is open yet: progress, or the error and what to do.
+    fn waiting(&mut self, ui: &mut egui::Ui) {
+        ui.add_space(ui.available_height() * 0.35);
+        ui.vertical_centered(|ui| {
+            if let Some(job) = &self.job {
+                ui.heading(format!("Opening {}", job.source.describe()));
+                ui.add(egui::ProgressBar::new(job.fraction()).desired_width(360.0).text(format!("{} ({}/{})", job.what, job.step + 1, job.of)));
+                ui.label(format!("{:.1} s", job.started.elapsed().as_secs_f64()));
+            } else if let Some(e) = &self.error {
+                ui.heading(RichText::new("Could not open the study").color(Color32::from_rgb(255, 120, 100)));
+                ui.label(RichText::new(e).color(Color32::from_rgb(255, 170, 150)));
+                ui.label("Open another CT or mask with the field above, or the demo phantom.");
+            } else {
+                ui.heading("No study open");
+                ui.label("Give a CT folder or file (or a lumen mask) above and press Open, or open the demo phantom.");
+            }
+        });
+    }
+
+    fn help(&mut self, ctx: &egui::Context) {
+        let mut open = self.show_help;
+        egui::Window::new("Keys and mouse").open(&mut open).collapsible(false).resizable(false).anchor(egui::Align2::CENTER_CENTER, Vec2::ZERO).show(ctx, |ui| {
+            egui::Grid::new("keys").striped(true).show(ui, |ui| {
+                for (k, what) in HELP {
+                    ui.label(RichText::new(*k).strong());
+                    ui.label(*what);
+                    ui.end_row();
+                }
+            });
+        });
+        self.show_help &= open;
+    }
+
+    /// Once per study: a line on stdout saying where the view is (in window pixels), for
+    /// tools that drive the window from outside (tests with xdotool).
+    fn announce(&mut self, ctx: &egui::Context) {
+        if self.announced || self.session.is_none() || self.frames < 2 {
+            return;
+        }
+        let Some(r) = self.view_rect else { return };
+        let ppp = ctx.pixels_per_point();
+        println!("{}", json!({"ready": true, "view_px": [r.left() * ppp, r.top() * ppp, r.right() * ppp, r.bottom() * ppp]}));
+        use std::io::Write;
+        let _ = std::io::stdout().flush();
+        self.announced = true;
+    }
+}
+
+fn push_limited(v: &mut VecDeque<f64>, x: f64) {
+    if v.len() >= 240 {
+        v.pop_front();
+    }
+    v.push_back(x);
+}
+
+impl eframe::App for App {
+    fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
+        let ctx = ui.ctx().clone();
+        let now = Instant::now();
+        // Scripted runs step the physics by a fixed 1/30 s per frame, so that they do the
+        // same on every machine; interactive use follows the clock.
+        let dt = match (self.last_frame, self.script.is_some() || self.args.screenshot.is_some()) {
+            (_, true) => 1.0 / 30.0,
+            (Some(t), false) => now.duration_since(t).as_secs_f64(),
+            (None, false) => 1.0 / 30.0,
+        };
+        if let Some(t) = self.last_frame {
+            push_limited(&mut self.frame_ms, now.duration_since(t).as_secs_f64() * 1e3);
+        }
+        self.last_frame = Some(now);
+
+        self.poll_job();
+        self.shortcuts(&ctx);
+        self.run_script(&ctx);
+        let title = match &self.session {
+            Some(s) => format!("voyage — {}", s.name),
+            None => "voyage".into(),
+        };
+        ctx.send_viewport_cmd(egui::ViewportCommand::Title(title));
+
+        self.top_bar(ui);
+        self.controls(ui);
+        self.slice_panel(ui);
+        self.scout_panel(ui);
+        self.endoscopy_panel(ui, frame, dt);
+        self.help(&ctx);
+
+        if self.session.is_some() || self.error.is_some() {
+            self.frames += 1;
+        }
+        self.announce(&ctx);
+        if let Some(path) = self.args.screenshot.clone()
+            && !self.screenshot_pending
+            && self.frames >= self.args.after_frames
+            && self.script.as_ref().is_none_or(Script::finished)
+        {
+            self.write_report();
+            self.screenshot(&ctx, path, true);
+        }
+        if !self.quitting {
+            ctx.request_repaint();
+        }
+    }
+
+    fn on_exit(&mut self) {
+        self.write_report();
+    }
+}

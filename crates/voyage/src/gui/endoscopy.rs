@@ -1,0 +1,229 @@
+//! The endoscopic view inside egui: drawn by the wgpu renderer into a texture of the window's
+//! own device (shown as an egui image), or by the CPU reference renderer into an egui
+//! texture where no GPU renderer is wanted. Either way only the cells the portals let
+//! through are drawn (paper §4.3): on the GPU the portal outlines alone decide
+//! (`Visibility::select`), on the CPU also the depth buffer (`Visibility::draw`); neither
+//! changes a pixel.
+
+use std::time::Instant;
+
+use eframe::egui_wgpu;
+use egui::{Color32, ColorImage, Pos2, Rect, TextureHandle, TextureOptions, Vec2};
+use glam::DVec3;
+use voyage_core::camera::Camera;
+use voyage_core::render::{shade, Frame, Lighting, Rasterizer, View};
+use voyage_render::GpuRenderer;
+
+use super::session::Session;
+
+/// The GPU's colour and depth targets at one size, and the egui texture showing the colour.
+struct GpuTarget {
+    size: [u32; 2],
+    color_view: wgpu::TextureView,
+    depth_view: wgpu::TextureView,
+    texture_id: egui::TextureId,
+}
+
+struct GpuView {
+    renderer: GpuRenderer,
+    target: Option<GpuTarget>,
+    /// The mesh uploaded belongs to this session generation.
+    uploaded: u64,
+}
+
+/// What one frame of the view cost and drew.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct FrameStats {
+    pub cells: usize,
+    pub triangles: usize,
+    /// Wall time to choose the cells and record (GPU) or draw (CPU) the frame.
+    pub render_ms: f64,
+}
+
+pub struct Endoscope {
+    gpu: Option<GpuView>,
+    cpu_frame: Option<Frame>,
+    cpu_texture: Option<TextureHandle>,
+    lighting: Lighting,
+    pub stats: FrameStats,
+    /// The cells drawn in the last frame (picking searches them first).
+    pub last_cells: Vec<u32>,
+    /// Description of the renderer in use, for the read-out and the report.
+    pub renderer_name: String,
+}
+
+impl Endoscope {
+    /// Uses the window's wgpu device when there is one and `cpu` is false.
+    pub fn new(render_state: Option<&egui_wgpu::RenderState>, cpu: bool) -> Self {
+        let gpu = render_state.filter(|_| !cpu).map(|rs| GpuView { renderer: GpuRenderer::from_device(rs.device.clone(), rs.queue.clone()), target: None, uploaded: u64::MAX });
+        let renderer_name = match (&gpu, render_state) {
+            (Some(g), _) => format!("GPU: {}", g.renderer.adapter_summary()),
+            (None, _) => "CPU reference renderer".to_string(),
+        };
+        Endoscope { gpu, cpu_frame: None, cpu_texture: None, lighting: Lighting::default(), stats: FrameStats::default(), last_cells: Vec::new(), renderer_name }
+    }
+
+    pub fn is_gpu(&self) -> bool {
+        self.gpu.is_some()
+    }
+
+    /// Draws the view of `session`'s camera at `size` physical pixels and returns the egui
+    /// texture to show. `generation` changes whenever a new study is opened.
+    pub fn render(&mut self, ctx: &egui::Context, render_state: Option<&egui_wgpu::RenderState>, session: &mut Session, generation: u64, size: [u32; 2]) -> anyhow::Result<egui::TextureId> {
+        let clock = Instant::now();
+        let camera = session.camera();
+        let id = match (&mut self.gpu, render_state) {
+            (Some(gpu), Some(rs)) => {
+                let (id, cells) = draw_gpu(gpu, rs, session, generation, &camera, size, &self.lighting, &mut self.stats)?;
+                self.last_cells = cells;
+                id
+            }
+            _ => self.draw_cpu(ctx, session, &camera, size),
+        };
+        self.stats.render_ms = clock.elapsed().as_secs_f64() * 1e3;
+        Ok(id)
+    }
+
+    fn draw_cpu(&mut self, ctx: &egui::Context, session: &mut Session, camera: &Camera, size: [u32; 2]) -> egui::TextureId {
+        let frame = match &mut self.cpu_frame {
+            Some(f) if f.width == size[0] && f.height == size[1] => f,
+            slot => slot.insert(Frame::new(size[0], size[1])),
+        };
+        let raster = Rasterizer::lit(&session.mesh, View::new(camera, size[0], size[1]), &self.lighting);
+        let drawn = session.vis.draw(frame, &raster, &session.study.cells);
+        self.stats.cells = drawn.cells.len();
+        self.stats.triangles = drawn.triangles;
+        self.last_cells = drawn.cells;
+        let image = ColorImage::from_rgba_unmultiplied([size[0] as usize, size[1] as usize], &shade(frame));
+        match &mut self.cpu_texture {
+            Some(t) => {
+                t.set(image, TextureOptions::LINEAR);
+                t.id()
+            }
+            None => {
+                let t = ctx.load_texture("endoscope", image, TextureOptions::LINEAR);
+                let id = t.id();
+                self.cpu_texture = Some(t);
+                id
+            }
+        }
+    }
+}
+
+fn draw_gpu(gpu: &mut GpuView, rs: &egui_wgpu::RenderState, session: &mut Session, generation: u64, camera: &Camera, size: [u32; 2], lighting: &Lighting, stats: &mut FrameStats) -> anyhow::Result<(egui::TextureId, Vec<u32>)> {
+    if gpu.uploaded != generation {
+        gpu.renderer.upload(&session.mesh)?;
+        gpu.uploaded = generation;
+    }
+    if gpu.target.as_ref().is_none_or(|t| t.size != size) {
+        let old = gpu.target.take().map(|t| t.texture_id);
+        gpu.target = Some(make_target(rs, size, old));
+    }
+    let Some(target) = &gpu.target else { unreachable!("made above") };
+    let drawn = session.vis.select(&session.study.cells, &View::new(camera, size[0], size[1]));
+    stats.cells = drawn.cells.len();
+    stats.triangles = session.mesh.triangles_in(&drawn.cells);
+    let mut encoder = rs.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("voyage endoscope") });
+    gpu.renderer.draw(&mut encoder, &target.color_view, &target.depth_view, camera, &drawn.cells, size[0], size[1], lighting)?;
+    rs.queue.submit([encoder.finish()]);
+    Ok((target.texture_id, drawn.cells))
+}
+
+/// Colour and depth textures of `size`, the colour registered with egui (re-using the
+/// texture id of the previous size, so the image widget keeps pointing at it).
+fn make_target(rs: &egui_wgpu::RenderState, size: [u32; 2], old: Option<egui::TextureId>) -> GpuTarget {
+    let extent = wgpu::Extent3d { width: size[0], height: size[1], depth_or_array_layers: 1 };
+    let texture = |label, format, usage| {
+        rs.device.create_texture(&wgpu::TextureDescriptor { label: Some(label), size: extent, mip_level_count: 1, sample_count: 1, dimension: wgpu::TextureDimension::D2, format, usage, view_formats: &[] })
+    };
+    // The shader writes display-gamma values (as the CPU renderer does) and egui samples
+    // textures as gamma values, so a plain Unorm texture passes them through unchanged.
+    let color = texture("voyage endoscope colour", voyage_render::COLOR_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING);
+    let depth = texture("voyage endoscope depth", voyage_render::DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT);
+    let color_view = color.create_view(&wgpu::TextureViewDescriptor::default());
+    let depth_view = depth.create_view(&wgpu::TextureViewDescriptor::default());
+    let mut renderer = rs.renderer.write();
+    let texture_id = match old {
+        Some(id) => {
+            renderer.update_egui_texture_from_wgpu_texture(&rs.device, &color_view, wgpu::FilterMode::Linear, id);
+            id
+        }
+        None => renderer.register_native_texture(&rs.device, &color_view, wgpu::FilterMode::Linear),
+    };
+    GpuTarget { size, color_view, depth_view, texture_id }
+}
+
+/// Where a point of the colon appears in the view, as a fraction of the view's width and
+/// height from its top-left corner (None behind the camera). The inverse of
+/// `Camera::pixel_ray`.
+pub fn project(camera: &Camera, p: DVec3, aspect: f64) -> Option<Vec2> {
+    let pose = &camera.pose;
+    let e = p - pose.position;
+    let z = e.dot(pose.z_body());
+    if z <= camera.near_mm {
+        return None;
+    }
+    let t = camera.tan_half_fov();
+    let sx = e.dot(-pose.x_body()) / z / (t * aspect);
+    let sy = e.dot(pose.y_body()) / z / t;
+    Some(Vec2::new(((sx + 1.0) * 0.5) as f32, ((1.0 - sy) * 0.5) as f32))
+}
+
+/// The ray through a point of the view rectangle.
+pub fn ray_at(camera: &Camera, rect: Rect, at: Pos2) -> DVec3 {
+    let w = rect.width().max(1.0) as f64;
+    let h = rect.height().max(1.0) as f64;
+    let px = (at.x - rect.left()) as f64;
+    let py = (at.y - rect.top()) as f64;
+    // pixel_ray takes continuous pixel coordinates of a w × h image; points serve as pixels.
+    camera.pixel_ray(px, py, w.round() as u32, h.round() as u32)
+}
+
+/// The centerline seen from the camera (paper: drawn in green), as polylines of the points
+/// within `reach_mm` that the camera can see.
+pub fn visible_centerline(session: &Session, camera: &Camera, rect: Rect, reach_mm: f64) -> Vec<Vec<Pos2>> {
+    let aspect = (rect.width() / rect.height().max(1.0)) as f64;
+    let eye = camera.pose.position;
+    let mut lines: Vec<Vec<Pos2>> = Vec::new();
+    let mut current: Vec<Pos2> = Vec::new();
+    let mut last: Option<DVec3> = None;
+    for p in &session.study.centerline.points_mm {
+        let p = DVec3::from_array(*p);
+        // Thin to about one point per 2 mm: the line looks the same and costs less.
+        if last.is_some_and(|l| l.distance(p) < 2.0) {
+            continue;
+        }
+        last = Some(p);
+        let seen = p.distance(eye) <= reach_mm && project(camera, p, aspect).is_some() && session.line_of_sight(eye, p, 0.0);
+        match seen.then(|| project(camera, p, aspect)).flatten() {
+            Some(f) => current.push(rect.min + f * rect.size()),
+            None => {
+                if current.len() > 1 {
+                    lines.push(std::mem::take(&mut current));
+                }
+                current.clear();
+            }
+        }
+    }
+    if current.len() > 1 {
+        lines.push(current);
+    }
+    lines
+}
+
+/// A point on the surface is drawn when the camera sees it: the straight line to it runs
+/// through the lumen up to the last millimetre or so (the point itself sits on the wall).
+pub fn surface_point_on_screen(session: &Session, camera: &Camera, rect: Rect, p: DVec3) -> Option<Pos2> {
+    let aspect = (rect.width() / rect.height().max(1.0)) as f64;
+    let f = project(camera, p, aspect)?;
+    let skip = 1.5 * session.study.ct.geometry().spacing_vec().max_element();
+    session.line_of_sight(camera.pose.position, p, skip).then(|| rect.min + f * rect.size())
+}
+
+/// A readable label on the view: light text on a dark backing.
+pub fn label(painter: &egui::Painter, at: Pos2, text: &str, color: Color32) {
+    let galley = painter.layout_no_wrap(text.to_string(), egui::FontId::proportional(13.0), color);
+    let r = Rect::from_min_size(at, galley.size()).expand(2.0);
+    painter.rect_filled(r, 3.0, Color32::from_black_alpha(160));
+    painter.galley(at, galley, color);
+}

@@ -1,0 +1,119 @@
+//! Opening a study in the background: load, preprocess, build what the window needs, while
+//! the window stays responsive and shows the progress.
+
+use std::path::PathBuf;
+use std::sync::mpsc::{channel, Receiver, TryRecvError};
+use std::thread;
+
+use anyhow::Context as _;
+use voyage_core::io::{self, LoadOptions};
+use voyage_core::phantom::{self, ColonOptions};
+use voyage_core::prep::{prepare, PrepOptions, Stage};
+
+use super::session::Session;
+
+/// What to open.
+#[derive(Clone, Debug)]
+pub enum Source {
+    /// A CT (DICOM folder or file, NIfTI, MetaImage, NRRD) or a lumen mask.
+    File { path: PathBuf, mask: bool, series: Option<String> },
+    /// The built-in colon phantom, made on the fly.
+    Phantom { small: bool },
+}
+
+impl Source {
+    pub fn describe(&self) -> String {
+        match self {
+            Source::File { path, .. } => path.display().to_string(),
+            Source::Phantom { small: false } => "the colon phantom".into(),
+            Source::Phantom { small: true } => "the small colon phantom".into(),
+        }
+    }
+
+    /// The name shown in the title bar: the file name only (folders of DICOM files are
+    /// often named after the patient; the last component is what the user chose to open).
+    fn title(&self) -> String {
+        match self {
+            Source::File { path, .. } => path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| path.display().to_string()),
+            Source::Phantom { .. } => "colon phantom".into(),
+        }
+    }
+}
+
+enum Message {
+    Progress { step: usize, of: usize, what: String },
+    Done(Box<anyhow::Result<Session>>),
+}
+
+/// A study being opened.
+pub struct Job {
+    pub source: Source,
+    rx: Receiver<Message>,
+    pub step: usize,
+    pub of: usize,
+    pub what: String,
+    pub started: std::time::Instant,
+}
+
+/// The stages a job goes through, for the progress bar: reading (or making the phantom),
+/// the preprocessing stages, and setting up navigation and rendering.
+const EXTRA_STEPS: usize = 2;
+
+impl Job {
+    pub fn start(source: Source, ctx: egui::Context) -> Job {
+        let (tx, rx) = channel();
+        let src = source.clone();
+        thread::Builder::new()
+            .name("voyage-open".into())
+            .spawn(move || {
+                let progress = |step: usize, what: &str| {
+                    let _ = tx.send(Message::Progress { step, of: Stage::ALL.len() + EXTRA_STEPS, what: what.to_string() });
+                    ctx.request_repaint();
+                };
+                let result = open(&src, &progress);
+                let _ = tx.send(Message::Done(Box::new(result)));
+                ctx.request_repaint();
+            })
+            .expect("spawning a thread");
+        Job { source, rx, step: 0, of: Stage::ALL.len() + EXTRA_STEPS, what: "starting".into(), started: std::time::Instant::now() }
+    }
+
+    /// The session when it is ready (Some(Err) when opening failed), None while working.
+    pub fn poll(&mut self) -> Option<anyhow::Result<Session>> {
+        loop {
+            match self.rx.try_recv() {
+                Ok(Message::Progress { step, of, what }) => (self.step, self.of, self.what) = (step, of, what),
+                Ok(Message::Done(r)) => return Some(*r),
+                Err(TryRecvError::Empty) => return None,
+                Err(TryRecvError::Disconnected) => return Some(Err(anyhow::anyhow!("{}: opening stopped unexpectedly", self.source.describe()))),
+            }
+        }
+    }
+
+    pub fn fraction(&self) -> f32 {
+        self.step as f32 / self.of.max(1) as f32
+    }
+}
+
+fn open(source: &Source, progress: &dyn Fn(usize, &str)) -> anyhow::Result<Session> {
+    let mut opts = PrepOptions::default();
+    let ct = match source {
+        Source::File { path, mask, series } => {
+            progress(0, "reading");
+            let loaded = io::load(path, &LoadOptions { series_uid: series.clone() })?;
+            opts.segment.mask = mask.then_some(true);
+            loaded.volume
+        }
+        Source::Phantom { small } => {
+            progress(0, "making the colon phantom");
+            phantom::colon(&ColonOptions { small: *small, ..ColonOptions::default() })?.ct
+        }
+    };
+    let study = prepare(ct, &opts, |stage| {
+        let i = Stage::ALL.iter().position(|s| *s == stage).unwrap_or(0);
+        progress(1 + i, stage.name());
+    })
+    .with_context(|| source.describe())?;
+    progress(Stage::ALL.len() + 1, "setting up the flight");
+    Session::new(source.title(), study).with_context(|| source.describe())
+}

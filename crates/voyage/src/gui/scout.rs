@@ -1,0 +1,223 @@
+//! The scout panel (paper §5): the whole colon from outside, semi-transparent, with the
+//! centerline, the markers and the submarine; orbit and zoom; a click on the centerline
+//! moves the submarine there.
+//!
+//! The surface drawn here is the study's mesh decimated by vertex clustering (a few mm):
+//! the scout shows shape, not mucosa, and tens of thousands of triangles blend fast on any
+//! renderer, where the full mesh (over a million) would not. It is drawn through egui's
+//! painter as one alpha-blended mesh, so it needs no depth buffer and no GPU of its own.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use egui::{Color32, Pos2, Rect, Sense, Shape, Stroke, Vec2};
+use glam::{DMat3, DVec3};
+use voyage_core::surface::Mesh;
+use voyage_core::Geometry;
+
+/// The colon's surface at scout detail, in volume-local mm.
+pub struct ScoutMesh {
+    pub positions: Vec<DVec3>,
+    pub triangles: Vec<[u32; 3]>,
+    /// Per triangle, unit.
+    pub normals: Vec<DVec3>,
+    pub center: DVec3,
+    pub radius: f64,
+}
+
+impl ScoutMesh {
+    /// Clusters `mesh`'s vertices on a grid of `cell_mm` and keeps the triangles whose
+    /// corners land in three different clusters.
+    pub fn new(mesh: &Mesh, cell_mm: f64) -> Self {
+        let mut cluster: HashMap<[i32; 3], u32> = HashMap::new();
+        let mut sums: Vec<(DVec3, u32)> = Vec::new();
+        let mut vertex_cluster = Vec::with_capacity(mesh.positions.len());
+        for p in &mesh.positions {
+            let p = DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+            let key = (p / cell_mm).floor().as_ivec3().to_array();
+            let id = *cluster.entry(key).or_insert_with(|| {
+                sums.push((DVec3::ZERO, 0));
+                sums.len() as u32 - 1
+            });
+            sums[id as usize].0 += p;
+            sums[id as usize].1 += 1;
+            vertex_cluster.push(id);
+        }
+        let positions: Vec<DVec3> = sums.iter().map(|(s, n)| *s / (*n).max(1) as f64).collect();
+        let mut triangles = Vec::new();
+        let mut normals = Vec::new();
+        for t in &mesh.triangles {
+            let c = t.map(|v| vertex_cluster[v as usize]);
+            if c[0] == c[1] || c[1] == c[2] || c[0] == c[2] {
+                continue;
+            }
+            let [a, b, d] = c.map(|v| positions[v as usize]);
+            if let Some(n) = (b - a).cross(d - a).try_normalize() {
+                triangles.push(c);
+                normals.push(n);
+            }
+        }
+        let (lo, hi) = positions.iter().fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+        let center = if positions.is_empty() { DVec3::ZERO } else { 0.5 * (lo + hi) };
+        let radius = if positions.is_empty() { 1.0 } else { (0.5 * (hi - lo).length()).max(1.0) };
+        ScoutMesh { positions, triangles, normals, center, radius }
+    }
+}
+
+/// What the scout shows besides the colon.
+pub struct ScoutMarks<'a> {
+    pub centerline: &'a [[f64; 3]],
+    /// (label, position).
+    pub markers: Vec<(String, DVec3)>,
+    pub submarine: DVec3,
+    pub view_dir: DVec3,
+}
+
+/// The scout's orbit camera and its cached mesh.
+pub struct ScoutView {
+    yaw: f64,
+    pitch: f64,
+    zoom: f64,
+    /// Patient axes in the volume's local frame: left, posterior, superior.
+    anatomy: DMat3,
+    cached: Option<(CacheKey, Arc<egui::Mesh>)>,
+}
+
+#[derive(Clone, Copy, PartialEq)]
+struct CacheKey {
+    yaw: f64,
+    pitch: f64,
+    zoom: f64,
+    rect: Rect,
+}
+
+/// An orthographic view: screen right, screen up and the viewing direction in local mm.
+struct Projection {
+    right: DVec3,
+    up: DVec3,
+    forward: DVec3,
+    center: DVec3,
+    scale: f64,
+    origin: Pos2,
+}
+
+impl Projection {
+    fn to_screen(&self, p: DVec3) -> Pos2 {
+        let d = p - self.center;
+        Pos2::new(self.origin.x + (d.dot(self.right) * self.scale) as f32, self.origin.y - (d.dot(self.up) * self.scale) as f32)
+    }
+}
+
+impl ScoutView {
+    pub fn new(geometry: &Geometry) -> Self {
+        // local = Dᵀ (patient − origin): a patient axis e is Dᵀ e in the local frame.
+        let d = geometry.direction_mat().transpose();
+        ScoutView { yaw: 0.0, pitch: 0.0, zoom: 1.0, anatomy: d, cached: None }
+    }
+
+    /// Front view (from the patient's anterior, the patient's right on the screen's left,
+    /// head up), the radiologist's usual first look at a colon.
+    fn projection(&self, mesh: &ScoutMesh, rect: Rect) -> Projection {
+        let (l, p, s) = (self.anatomy.x_axis, self.anatomy.y_axis, self.anatomy.z_axis);
+        // Orbit: yaw about the body's long axis, then pitch about the screen's right.
+        let yaw = DMat3::from_axis_angle(s, self.yaw);
+        let (right0, forward0) = (yaw * l, yaw * p);
+        let pitch = DMat3::from_axis_angle(right0, self.pitch);
+        let (forward, up) = (pitch * forward0, pitch * s);
+        let scale = 0.5 * rect.width().min(rect.height()) as f64 / mesh.radius * self.zoom;
+        Projection { right: right0, up, forward, center: mesh.center, scale, origin: rect.center() }
+    }
+
+    /// Draws the scout into `ui`'s remaining space; returns the centerline point clicked,
+    /// if a click landed within a few pixels of the centerline.
+    pub fn show(&mut self, ui: &mut egui::Ui, mesh: &ScoutMesh, marks: &ScoutMarks) -> Option<usize> {
+        let (rect, response) = ui.allocate_exact_size(ui.available_size(), Sense::click_and_drag());
+        if response.dragged_by(egui::PointerButton::Primary) || response.dragged_by(egui::PointerButton::Secondary) {
+            let d = response.drag_delta();
+            self.yaw += d.x as f64 * 0.01;
+            self.pitch = (self.pitch + d.y as f64 * 0.01).clamp(-1.55, 1.55);
+        }
+        if response.hovered() {
+            let scroll = ui.input(|i| i.smooth_scroll_delta.y);
+            if scroll != 0.0 {
+                self.zoom = (self.zoom * (1.0 + scroll as f64 * 0.002)).clamp(0.3, 12.0);
+            }
+        }
+        if response.double_clicked() {
+            (self.yaw, self.pitch, self.zoom) = (0.0, 0.0, 1.0);
+        }
+        let painter = ui.painter_at(rect);
+        painter.rect_filled(rect, 0.0, Color32::from_gray(14));
+        let proj = self.projection(mesh, rect);
+        painter.add(Shape::mesh(self.surface(mesh, &proj, rect)));
+
+        let line: Vec<Pos2> = marks.centerline.iter().map(|p| proj.to_screen(DVec3::from_array(*p))).collect();
+        painter.add(Shape::line(line.clone(), Stroke::new(1.5, Color32::from_rgb(40, 220, 60))));
+        for (label, p) in &marks.markers {
+            let s = proj.to_screen(*p);
+            painter.circle_filled(s, 4.0, Color32::YELLOW);
+            painter.text(s + Vec2::new(6.0, -6.0), egui::Align2::LEFT_BOTTOM, label, egui::FontId::proportional(12.0), Color32::YELLOW);
+        }
+        draw_submarine(&painter, &proj, marks.submarine, marks.view_dir);
+        painter.text(rect.left_top() + Vec2::new(6.0, 4.0), egui::Align2::LEFT_TOP, "scout · drag: orbit · scroll: zoom · click centerline: go", egui::FontId::proportional(11.0), Color32::from_gray(150));
+
+        if response.clicked() {
+            let at = response.interact_pointer_pos()?;
+            let (mut best, mut bi) = (f32::INFINITY, None);
+            for (i, s) in line.iter().enumerate() {
+                let d = s.distance(at);
+                if d < best {
+                    (best, bi) = (d, Some(i));
+                }
+            }
+            return bi.filter(|_| best <= 8.0);
+        }
+        None
+    }
+
+    /// The decimated surface as an egui mesh, rebuilt only when the view changes. Faces seen
+    /// edge-on are more opaque than faces seen head-on: the outline and the folds of the
+    /// colon stand out while the far side shows through (an "x-ray" look).
+    fn surface(&mut self, mesh: &ScoutMesh, proj: &Projection, rect: Rect) -> Arc<egui::Mesh> {
+        let key = CacheKey { yaw: self.yaw, pitch: self.pitch, zoom: self.zoom, rect };
+        if let Some((k, m)) = &self.cached
+            && *k == key
+        {
+            return m.clone();
+        }
+        let mut out = egui::Mesh::default();
+        out.vertices.reserve(mesh.triangles.len() * 3);
+        out.indices.reserve(mesh.triangles.len() * 3);
+        for (t, n) in mesh.triangles.iter().zip(&mesh.normals) {
+            let facing = n.dot(proj.forward).abs();
+            let rim = (1.0 - facing).powi(2);
+            let alpha = 0.05 + 0.40 * rim;
+            let light = 0.55 + 0.45 * facing;
+            let color = Color32::from_rgba_unmultiplied((230.0 * light) as u8, (140.0 * light) as u8, (120.0 * light) as u8, (alpha * 255.0) as u8);
+            let base = out.vertices.len() as u32;
+            for &v in t {
+                out.vertices.push(egui::epaint::Vertex { pos: proj.to_screen(mesh.positions[v as usize]), uv: egui::epaint::WHITE_UV, color });
+            }
+            out.indices.extend_from_slice(&[base, base + 1, base + 2]);
+        }
+        let m = Arc::new(out);
+        self.cached = Some((key, m.clone()));
+        m
+    }
+}
+
+/// The submarine: a dot where it is and an arrow along its view direction.
+fn draw_submarine(painter: &egui::Painter, proj: &Projection, at: DVec3, dir: DVec3) {
+    let s = proj.to_screen(at);
+    let screen_dir = Vec2::new(dir.dot(proj.right) as f32, -dir.dot(proj.up) as f32);
+    let len = screen_dir.length();
+    let tip = if len > 1e-3 { s + screen_dir / len * (18.0 * len.max(0.35)) } else { s };
+    let color = Color32::from_rgb(60, 200, 255);
+    painter.line_segment([s, tip], Stroke::new(2.5, color));
+    if len > 1e-3 {
+        let d = (tip - s).normalized();
+        let n = Vec2::new(-d.y, d.x);
+        painter.add(Shape::convex_polygon(vec![tip + d * 6.0, tip + n * 4.0, tip - n * 4.0], color, Stroke::NONE));
+    }
+    painter.circle(s, 5.0, Color32::from_rgb(20, 60, 90), Stroke::new(2.0, color));
+}

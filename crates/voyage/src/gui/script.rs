@@ -1,0 +1,109 @@
+//! Scripted actions (`voyage view --script FILE`): what a user does with mouse and keyboard,
+//! written down, so the window can be driven the same way every time (tests, screenshots
+//! for the docs, demonstrations). The steps run once the study is ready, one after the
+//! other; positions in the endoscopic view are fractions of its width and height from its
+//! top-left corner.
+//!
+//! ```json
+//! [
+//!   {"play": false},
+//!   {"record": "before"},
+//!   {"steer": {"at": [0.85, 0.5], "frames": 40}},
+//!   {"record": "after"},
+//!   {"marker": {"at": [0.5, 0.5], "note": "sessile polyp?"}},
+//!   {"measure": {"from": [0.45, 0.5], "to": [0.55, 0.5]}},
+//!   {"screenshot": "window.png"},
+//!   {"export": "findings"},
+//!   {"quit": true}
+//! ]
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context as _;
+use serde::Deserialize;
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+pub enum Step {
+    /// Let this many frames pass.
+    Wait(u32),
+    /// Start or stop the automatic flight.
+    Play(bool),
+    /// "forward" (rectum → cecum) or "backward".
+    Direction(String),
+    /// Hold the left button on a point of the view for some frames (F_user, paper §3.3).
+    Steer { at: [f32; 2], frames: u32 },
+    /// Right-drag by (dx, dy) points per frame for some frames (τ_option).
+    Look { dx: f32, dy: f32, frames: u32 },
+    /// Drop a marker on the surface under a point of the view.
+    Marker { at: [f32; 2], note: String },
+    /// Measure between the surface points under two points of the view.
+    Measure { from: [f32; 2], to: [f32; 2] },
+    /// Jump to a point of the centerline: a fraction of its length from the rectum.
+    Jump(f64),
+    /// Fly back to a marker (by label, e.g. "M1").
+    GoTo(String),
+    /// Toggle the close-up volume rendering or the centerline overlay.
+    Closeup(bool),
+    Centerline(bool),
+    /// Save the camera's pose under a name in the report.
+    Record(String),
+    /// Save a PNG of the whole window.
+    Screenshot(PathBuf),
+    /// Export the findings into a folder.
+    Export(PathBuf),
+    /// Close the window.
+    Quit(bool),
+}
+
+pub struct Script {
+    steps: Vec<Step>,
+    next: usize,
+    /// Frames left of the step being carried out (waits, steering, looking).
+    pub busy: u32,
+}
+
+impl Script {
+    pub fn load(path: &Path) -> anyhow::Result<Script> {
+        let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read the script", path.display()))?;
+        let steps: Vec<Step> = serde_json::from_str(&text).with_context(|| format!("{}: not a list of script steps", path.display()))?;
+        Ok(Script { steps, next: 0, busy: 0 })
+    }
+
+    /// The next step to start, unless the current one still runs.
+    pub fn next_step(&mut self) -> Option<Step> {
+        if self.busy > 0 {
+            self.busy -= 1;
+            return None;
+        }
+        let s = self.steps.get(self.next).cloned();
+        self.next += 1;
+        s
+    }
+
+    pub fn finished(&self) -> bool {
+        self.busy == 0 && self.next >= self.steps.len()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_documented_example_parses() {
+        let doc = include_str!("script.rs");
+        let start = doc.find("//! ```json").unwrap() + "//! ```json".len();
+        let end = start + doc[start..].find("//! ```").unwrap();
+        let json: String = doc[start..end].lines().map(|l| l.trim_start_matches("//!")).collect::<Vec<_>>().join("\n");
+        let steps: Vec<Step> = serde_json::from_str(&json).unwrap();
+        assert_eq!(steps.len(), 9);
+        assert!(matches!(steps[2], Step::Steer { frames: 40, .. }));
+    }
+
+    #[test]
+    fn unknown_steps_are_refused() {
+        assert!(serde_json::from_str::<Vec<Step>>(r#"[{"fly_to_moon": 1}]"#).is_err());
+    }
+}

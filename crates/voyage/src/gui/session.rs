@@ -1,0 +1,209 @@
+//! One open study in the navigator: the preprocessed colon, the submarine flying in it, and
+//! what the window needs beside (the scout's light mesh, the cells' visibility state).
+//! No egui here: the panels read and steer a `Session`.
+
+use glam::DVec3;
+use voyage_core::camera::{Camera, Pose};
+use voyage_core::flight::{start_pose, Autopilot, FlightOptions};
+use voyage_core::potential::{potential_field, BrickStore, Direction, PotentialField};
+use voyage_core::prep::Study;
+use voyage_core::render::{CellMesh, Strategy, Visibility};
+use voyage_core::submarine::{Input, Submarine};
+
+use super::scout::ScoutMesh;
+
+/// Longest simulated step of one displayed frame: a slow frame must not fling the
+/// submarine (the physics sub-steps anyway; this keeps the flight's pace steady).
+const MAX_FRAME_S: f64 = 1.0 / 15.0;
+
+pub struct Session {
+    /// The file name shown in the title (never a patient name).
+    pub name: String,
+    pub study: Study,
+    pub field: PotentialField<BrickStore>,
+    pub mesh: CellMesh,
+    pub scout: ScoutMesh,
+    pub vis: Visibility,
+    pub sub: Submarine,
+    pub pilot: Autopilot,
+    pub opts: FlightOptions,
+    /// The automatic flight is running (the field's pull toward the goal is on).
+    pub playing: bool,
+    /// The goal of the current direction was reached (the flight stopped there).
+    pub reached: bool,
+    /// Vertical field of view (degrees).
+    pub fov: f64,
+    /// Where the flight of the current direction starts.
+    pub start: Pose,
+}
+
+impl Session {
+    /// Everything the window needs for a preprocessed study; the submarine waits at the
+    /// rectum, looking up the colon.
+    pub fn new(name: String, study: Study) -> anyhow::Result<Self> {
+        let opts = FlightOptions { keep_poses: false, ..FlightOptions::default() };
+        let field = potential_field(&study, opts.safety.min_wall_mm)?;
+        let mesh = CellMesh::new(&study.surface, &study.cells);
+        let scout = ScoutMesh::new(&study.surface.mesh, 4.0);
+        let vis = Visibility::new(&study.cells, Strategy::Ours);
+        let dir = Direction::Forward;
+        let start = start_pose(&field, &study.centerline, dir, &opts)?;
+        let mut sub = Submarine::new(&field, start, opts.safety)?;
+        sub.potential = opts.potential;
+        sub.dynamics = opts.dynamics;
+        sub.modes = opts.modes;
+        sub.direction = dir;
+        let dt0 = field.sample(start.position, dir).dt.unwrap_or(f64::INFINITY);
+        let pilot = Autopilot::new(&study.centerline, dir, &opts, start.position, dt0);
+        Ok(Session { name, study, field, mesh, scout, vis, sub, pilot, opts, playing: false, reached: false, fov: 90.0, start })
+    }
+
+    pub fn pose(&self) -> Pose {
+        self.sub.pose()
+    }
+
+    pub fn camera(&self) -> Camera {
+        Camera::new(self.pose()).with_fov(self.fov)
+    }
+
+    pub fn direction(&self) -> Direction {
+        self.sub.direction
+    }
+
+    /// Dt toward the current goal at the submarine (mm).
+    pub fn dt_to_goal(&self) -> f64 {
+        self.field.sample(self.sub.state.x, self.sub.direction).dt.unwrap_or(f64::INFINITY)
+    }
+
+    /// Turns the flight around (rectum → cecum or back) from where the submarine is.
+    pub fn set_direction(&mut self, dir: Direction) {
+        if dir == self.sub.direction {
+            return;
+        }
+        self.sub.direction = dir;
+        self.reached = false;
+        let x = self.sub.state.x;
+        self.pilot = Autopilot::new(&self.study.centerline, dir, &self.opts, x, self.dt_to_goal());
+        self.pilot.restart(self.sub.state.t, self.dt_to_goal(), x);
+        if let Ok(p) = start_pose(&self.field, &self.study.centerline, dir, &self.opts) {
+            self.start = p;
+        }
+    }
+
+    /// Starts or stops the automatic flight; it runs on from wherever the submarine is.
+    pub fn set_playing(&mut self, on: bool) {
+        if on && !self.playing {
+            self.reached = false;
+            self.pilot.restart(self.sub.state.t, self.dt_to_goal(), self.sub.state.x);
+        }
+        self.playing = on;
+    }
+
+    /// Advances the submarine by one displayed frame of `dt` seconds. `user` is the force of
+    /// a click-and-hold and the torque of a right-drag (paper Eq. 3–4). While paused, the
+    /// field's pull toward the goal (Ct) is off: the wall still pushes, the user steers.
+    pub fn step(&mut self, dt: f64, user: &Input) {
+        let dt = dt.clamp(0.0, MAX_FRAME_S);
+        let steering = user.force != DVec3::ZERO || user.torque != DVec3::ZERO;
+        let mut input = *user;
+        if self.playing {
+            let dt_now = self.dt_to_goal();
+            if dt_now <= self.pilot.reach_mm {
+                self.playing = false;
+                self.reached = true;
+            } else if steering {
+                self.pilot.restart(self.sub.state.t, dt_now, self.sub.state.x);
+            } else {
+                input.force += self.pilot.input(self.sub.state.t, dt_now, self.sub.state.x, self.sub.potential.ct).force;
+            }
+        }
+        let ct = self.sub.potential.ct;
+        if !self.playing {
+            self.sub.potential.ct = 0.0;
+        }
+        self.sub.step(&self.field, dt, &input);
+        self.sub.potential.ct = ct;
+        self.pilot.moved_to(self.sub.state.x);
+    }
+
+    /// Puts the submarine at `x` at rest, looking along `forward`, if `x` is in the safe
+    /// set; otherwise says why not.
+    pub fn jump_to(&mut self, x: DVec3, forward: DVec3) -> Result<(), String> {
+        if !self.sub.is_safe(&self.field, x) {
+            return Err(format!("({:.0}, {:.0}, {:.0}) mm is not inside the colon at least {} mm from the wall", x.x, x.y, x.z, self.opts.safety.min_wall_mm));
+        }
+        let up = -self.sub.dynamics.gravity;
+        let pose = Pose::looking(x, forward, up);
+        self.place(pose);
+        Ok(())
+    }
+
+    /// Puts the submarine at rest at `pose` (which must be safe: a pose it had before).
+    pub fn place(&mut self, pose: Pose) {
+        let t = self.sub.state.t;
+        self.sub.state = voyage_core::submarine::State::at(pose);
+        self.sub.state.t = t;
+        self.vis.reset();
+        self.reached = false;
+        self.pilot.restart(t, self.dt_to_goal(), pose.position);
+    }
+
+    /// Jumps to centerline point `i`, looking toward the current goal.
+    pub fn jump_to_centerline(&mut self, i: usize) -> Result<(), String> {
+        let pts = &self.study.centerline.points_mm;
+        if pts.is_empty() {
+            return Err("the centerline is empty".into());
+        }
+        let i = i.min(pts.len() - 1);
+        let p = DVec3::from_array(pts[i]);
+        let (a, b) = (i.saturating_sub(3), (i + 3).min(pts.len() - 1));
+        let mut forward = DVec3::from_array(pts[b]) - DVec3::from_array(pts[a]);
+        if self.sub.direction == Direction::Backward {
+            forward = -forward;
+        }
+        // The centerline can run closer to the wall than the safety margin where the lumen
+        // is narrow; then the nearest safe point along the local cross-section would do, but
+        // the plain answer is to refuse.
+        self.jump_to(p, forward)
+    }
+
+    /// Back to the start of the current direction's flight.
+    pub fn restart(&mut self) {
+        self.place(self.start);
+        self.playing = false;
+    }
+
+    /// Whether the straight segment `from → to` stays in the lumen, ignoring its last
+    /// `skip_end_mm` (a point on the wall is seen although its own voxel is wall).
+    pub fn line_of_sight(&self, from: DVec3, to: DVec3, skip_end_mm: f64) -> bool {
+        let lumen = &self.study.segmentation.lumen;
+        let g = lumen.geometry();
+        let len = from.distance(to);
+        let step = 0.5 * g.spacing_vec().min_element();
+        let n = ((len - skip_end_mm).max(0.0) / step).ceil() as usize;
+        let dims = lumen.dims();
+        for s in 1..n {
+            let p = from + (to - from) * (s as f64 * step / len);
+            let ijk = g.local_to_index(p).round();
+            if ijk.min_element() < 0.0 || ijk.x >= dims[0] as f64 || ijk.y >= dims[1] as f64 || ijk.z >= dims[2] as f64 {
+                return false;
+            }
+            if lumen.get(ijk.x as usize, ijk.y as usize, ijk.z as usize) == 0 {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// The index of the centerline point nearest to `x`.
+    pub fn nearest_centerline_point(&self, x: DVec3) -> usize {
+        let mut best = (f64::INFINITY, 0);
+        for (i, p) in self.study.centerline.points_mm.iter().enumerate() {
+            let d = DVec3::from_array(*p).distance_squared(x);
+            if d < best.0 {
+                best = (d, i);
+            }
+        }
+        best.1
+    }
+}

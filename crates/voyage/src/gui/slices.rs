@@ -1,0 +1,238 @@
+//! The slice panel (paper §5): axial, coronal and sagittal CT slices through the submarine,
+//! shown the way radiologists read them (the patient's right on the screen's left; anterior
+//! up on axial slices, head up on the others), with a crosshair at the submarine, window /
+//! level presets and drag, scroll through slices, and a click in the lumen to move there.
+
+use egui::{Color32, ColorImage, Pos2, Rect, Sense, Stroke, TextureHandle, TextureOptions, Vec2};
+use glam::DVec3;
+use voyage_core::{Geometry, Volume};
+
+/// Window / level presets (HU): name, width, centre.
+pub const PRESETS: [(&str, f64, f64); 3] = [("Colon", 1600.0, -300.0), ("Lung", 1500.0, -600.0), ("Soft tissue", 400.0, 40.0)];
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Plane {
+    Axial,
+    Coronal,
+    Sagittal,
+}
+
+impl Plane {
+    pub const ALL: [Plane; 3] = [Plane::Axial, Plane::Coronal, Plane::Sagittal];
+    pub fn name(self) -> &'static str {
+        match self {
+            Plane::Axial => "axial",
+            Plane::Coronal => "coronal",
+            Plane::Sagittal => "sagittal",
+        }
+    }
+}
+
+/// How a plane's image maps to voxel indices: which index axis runs along the screen's x
+/// and y (and whether reversed), and which is fixed.
+#[derive(Clone, Copy, Debug)]
+struct Layout {
+    x: (usize, bool),
+    y: (usize, bool),
+    fixed: usize,
+}
+
+/// For patient axis a (L, P, S): the index axis nearest to it and whether the index grows
+/// with the patient coordinate.
+fn patient_axes(g: &Geometry) -> [(usize, bool); 3] {
+    let d = g.direction_mat();
+    std::array::from_fn(|a| {
+        let row = [d.x_axis[a], d.y_axis[a], d.z_axis[a]];
+        let c = (0..3).max_by(|&i, &j| row[i].abs().total_cmp(&row[j].abs())).unwrap_or(a);
+        (c, row[c] >= 0.0)
+    })
+}
+
+fn layout(g: &Geometry, plane: Plane) -> Layout {
+    let [l, p, s] = patient_axes(g);
+    // (axis, patient coordinate grows toward screen +x / +y (down)).
+    let along = |(c, grows): (usize, bool), want_growing: bool| (c, grows != want_growing);
+    match plane {
+        Plane::Axial => Layout { x: along(l, true), y: along(p, true), fixed: s.0 },
+        Plane::Coronal => Layout { x: along(l, true), y: along(s, false), fixed: p.0 },
+        Plane::Sagittal => Layout { x: along(p, true), y: along(s, false), fixed: l.0 },
+    }
+}
+
+struct SliceView {
+    plane: Plane,
+    /// Slices scrolled away from the submarine's.
+    offset: i64,
+    texture: Option<(TextureHandle, (usize, f64, f64))>,
+}
+
+pub struct SlicePanel {
+    views: [SliceView; 3],
+    pub window: f64,
+    pub level: f64,
+}
+
+impl Default for SlicePanel {
+    fn default() -> Self {
+        SlicePanel { views: Plane::ALL.map(|plane| SliceView { plane, offset: 0, texture: None }), window: PRESETS[0].1, level: PRESETS[0].2 }
+    }
+}
+
+impl SlicePanel {
+    /// Back to the slices through the submarine (after it moved somewhere new).
+    pub fn follow(&mut self) {
+        for v in &mut self.views {
+            v.offset = 0;
+        }
+    }
+
+    /// The three slices side by side; returns the local-mm point clicked, if any.
+    pub fn show(&mut self, ui: &mut egui::Ui, ct: &Volume<i16>, at: DVec3) -> Option<DVec3> {
+        ui.horizontal(|ui| {
+            ui.label("W/L:");
+            for (name, w, l) in PRESETS {
+                if ui.selectable_label(self.window == w && self.level == l, name).clicked() {
+                    (self.window, self.level) = (w, l);
+                }
+            }
+            ui.label(format!("W {:.0} L {:.0}", self.window, self.level)).on_hover_text("drag on a slice: ←→ window, ↑↓ level; scroll: slices; click in the colon: go there");
+        });
+        let mut clicked = None;
+        let width = ui.available_width() / 3.0 - 6.0;
+        let height = ui.available_height();
+        ui.horizontal(|ui| {
+            for i in 0..3 {
+                let (rect, response) = ui.allocate_exact_size(Vec2::new(width, height), Sense::click_and_drag());
+                if let Some(p) = self.show_one(ui, i, ct, at, rect, &response) {
+                    clicked = Some(p);
+                }
+            }
+        });
+        clicked
+    }
+
+    fn show_one(&mut self, ui: &egui::Ui, i: usize, ct: &Volume<i16>, at: DVec3, rect: Rect, response: &egui::Response) -> Option<DVec3> {
+        let g = ct.geometry();
+        let plane = self.views[i].plane;
+        let lay = layout(g, plane);
+        let dims = ct.dims();
+        let at_index = g.local_to_index(at).round();
+        if response.dragged_by(egui::PointerButton::Primary) {
+            let d = response.drag_delta();
+            self.window = (self.window * (1.0 + d.x as f64 * 0.005)).clamp(1.0, 8000.0);
+            self.level = (self.level - d.y as f64 * 2.0).clamp(-1500.0, 3000.0);
+        }
+        if response.hovered() {
+            let scroll = ui.input(|i| i.raw_scroll_delta.y);
+            if scroll != 0.0 {
+                self.views[i].offset += if scroll > 0.0 { 1 } else { -1 };
+            }
+        }
+        let fixed = (at_index[lay.fixed] as i64 + self.views[i].offset).clamp(0, dims[lay.fixed] as i64 - 1) as usize;
+        self.views[i].offset = fixed as i64 - at_index[lay.fixed] as i64;
+        let key = (fixed, self.window, self.level);
+        let view = &mut self.views[i];
+        if view.texture.as_ref().is_none_or(|(_, k)| *k != key) {
+            let image = slice_image(ct, lay, fixed, self.window, self.level);
+            match &mut view.texture {
+                Some((t, k)) => {
+                    t.set(image, TextureOptions::LINEAR);
+                    *k = key;
+                }
+                None => view.texture = Some((ui.ctx().load_texture(format!("slice-{}", plane.name()), image, TextureOptions::LINEAR), key)),
+            }
+        }
+        let (nx, ny) = (dims[lay.x.0], dims[lay.y.0]);
+        let (sx, sy) = (g.spacing[lay.x.0], g.spacing[lay.y.0]);
+        let size_mm = Vec2::new((nx as f64 * sx) as f32, (ny as f64 * sy) as f32);
+        let scale = (rect.width() / size_mm.x).min((rect.height() - 16.0) / size_mm.y);
+        let image_rect = Rect::from_center_size(rect.center() + Vec2::new(0.0, 8.0), size_mm * scale);
+        let painter = ui.painter_at(rect);
+        painter.rect_filled(rect, 0.0, Color32::BLACK);
+        if let Some((t, _)) = &view.texture {
+            painter.image(t.id(), image_rect, Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)), Color32::WHITE);
+        }
+        // Index ↔ screen: pixel centres at (u + 0.5) / n of the image.
+        let to_screen = |ix: f64, iy: f64| {
+            let u = if lay.x.1 { nx as f64 - 1.0 - ix } else { ix };
+            let v = if lay.y.1 { ny as f64 - 1.0 - iy } else { iy };
+            Pos2::new(image_rect.left() + ((u + 0.5) / nx as f64) as f32 * image_rect.width(), image_rect.top() + ((v + 0.5) / ny as f64) as f32 * image_rect.height())
+        };
+        let c = to_screen(at_index[lay.x.0], at_index[lay.y.0]);
+        let cross = Stroke::new(1.0, Color32::from_rgba_unmultiplied(60, 220, 255, 170));
+        painter.line_segment([Pos2::new(image_rect.left(), c.y), Pos2::new(c.x - 6.0, c.y)], cross);
+        painter.line_segment([Pos2::new(c.x + 6.0, c.y), Pos2::new(image_rect.right(), c.y)], cross);
+        painter.line_segment([Pos2::new(c.x, image_rect.top()), Pos2::new(c.x, c.y - 6.0)], cross);
+        painter.line_segment([Pos2::new(c.x, c.y + 6.0), Pos2::new(c.x, image_rect.bottom())], cross);
+        let label = format!("{} {}/{}{}", plane.name(), fixed + 1, dims[lay.fixed], if view.offset != 0 { format!(" ({:+})", view.offset) } else { String::new() });
+        painter.text(rect.left_top() + Vec2::new(4.0, 2.0), egui::Align2::LEFT_TOP, label, egui::FontId::proportional(11.0), Color32::from_gray(200));
+        let (lx, rx) = match plane {
+            Plane::Sagittal => ("A", "P"),
+            _ => ("R", "L"),
+        };
+        painter.text(Pos2::new(image_rect.left() + 3.0, image_rect.center().y), egui::Align2::LEFT_CENTER, lx, egui::FontId::proportional(11.0), Color32::from_gray(160));
+        painter.text(Pos2::new(image_rect.right() - 3.0, image_rect.center().y), egui::Align2::RIGHT_CENTER, rx, egui::FontId::proportional(11.0), Color32::from_gray(160));
+
+        if response.clicked() {
+            let p = response.interact_pointer_pos()?;
+            if !image_rect.contains(p) {
+                return None;
+            }
+            let u = ((p.x - image_rect.left()) / image_rect.width()) as f64 * nx as f64 - 0.5;
+            let v = ((p.y - image_rect.top()) / image_rect.height()) as f64 * ny as f64 - 0.5;
+            let mut ijk = [0.0; 3];
+            ijk[lay.x.0] = if lay.x.1 { nx as f64 - 1.0 - u } else { u };
+            ijk[lay.y.0] = if lay.y.1 { ny as f64 - 1.0 - v } else { v };
+            ijk[lay.fixed] = fixed as f64;
+            return Some(g.index_to_local(DVec3::from_array(ijk)));
+        }
+        None
+    }
+}
+
+/// The grey image of one slice under a window / level.
+fn slice_image(ct: &Volume<i16>, lay: Layout, fixed: usize, window: f64, level: f64) -> ColorImage {
+    let dims = ct.dims();
+    let (nx, ny) = (dims[lay.x.0], dims[lay.y.0]);
+    let lo = level - 0.5 * window;
+    let k = 255.0 / window.max(1.0);
+    let mut pixels = Vec::with_capacity(nx * ny);
+    let mut ijk = [0usize; 3];
+    ijk[lay.fixed] = fixed;
+    for v in 0..ny {
+        ijk[lay.y.0] = if lay.y.1 { ny - 1 - v } else { v };
+        for u in 0..nx {
+            ijk[lay.x.0] = if lay.x.1 { nx - 1 - u } else { u };
+            let hu = ct.get(ijk[0], ijk[1], ijk[2]) as f64;
+            pixels.push(Color32::from_gray(((hu - lo) * k).clamp(0.0, 255.0) as u8));
+        }
+    }
+    ColorImage::new([nx, ny], pixels)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn identity_geometry_reads_radiologically() {
+        let g = Geometry::new([4, 5, 6], [1.0; 3], [0.0; 3]).unwrap();
+        // Axial: L grows to the screen's right (patient's right on the left), P downward.
+        let a = layout(&g, Plane::Axial);
+        assert_eq!((a.x, a.y, a.fixed), ((0, false), (1, false), 2));
+        // Coronal and sagittal: head up, so k runs upward (reversed on screen).
+        let c = layout(&g, Plane::Coronal);
+        assert_eq!((c.x, c.y, c.fixed), ((0, false), (2, true), 1));
+        let s = layout(&g, Plane::Sagittal);
+        assert_eq!((s.x, s.y, s.fixed), ((1, false), (2, true), 0));
+    }
+
+    #[test]
+    fn flipped_axes_are_undone() {
+        // A RAS-stored volume: i → right (−L), j → anterior (−P).
+        let mut g = Geometry::new([4, 5, 6], [1.0; 3], [0.0; 3]).unwrap();
+        g.set_direction_mat(glam::DMat3::from_diagonal(DVec3::new(-1.0, -1.0, 1.0)));
+        let a = layout(&g, Plane::Axial);
+        assert_eq!((a.x, a.y), ((0, true), (1, true)));
+    }
+}
