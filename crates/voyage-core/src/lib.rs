@@ -14,6 +14,7 @@ pub mod endpoints;
 pub mod error;
 pub mod export;
 pub mod field;
+pub mod findings;
 pub mod flight;
 pub mod io;
 pub mod phantom;

@@ -1,5 +1,5 @@
-//! 3D Slicer markups JSON (`.mrk.json`, schema v1.0.3): curves (the centerline) and point
-//! lists, in LPS.
+//! 3D Slicer markups JSON (`.mrk.json`, schema v1.0.3): curves (the centerline), point
+//! lists (findings' markers) and lines (findings' measurements), in LPS.
 
 use std::path::Path;
 
@@ -66,9 +66,30 @@ pub fn markups_node(kind: &str, name: &str, points: &[MarkupsPoint], color: [f64
     })
 }
 
+/// A line between two points (a measurement), carrying its length as Slicer's "length"
+/// measurement so that Slicer shows the number without recomputing it.
+pub fn markups_line_node(name: &str, a: MarkupsPoint, b: MarkupsPoint, color: [f64; 3]) -> Value {
+    let length = (glam::DVec3::from_array(a.position_lps) - glam::DVec3::from_array(b.position_lps)).length();
+    let mut node = markups_node("Line", name, &[a, b], color);
+    node["fixedNumberOfControlPoints"] = json!(true);
+    node["measurements"] = json!([{
+        "name": "length",
+        "enabled": true,
+        "value": length,
+        "units": "mm",
+        "printFormat": "%-#4.4g%s"
+    }]);
+    node
+}
+
 /// Writes a markups file holding one node.
 pub fn write_markups(path: &Path, node: Value) -> Result<()> {
-    let doc = json!({ "@schema": MARKUPS_SCHEMA, "markups": [node] });
+    write_markups_nodes(path, vec![node])
+}
+
+/// Writes a markups file holding several nodes (Slicer loads each as its own markups node).
+pub fn write_markups_nodes(path: &Path, nodes: Vec<Value>) -> Result<()> {
+    let doc = json!({ "@schema": MARKUPS_SCHEMA, "markups": nodes });
     let text = serde_json::to_string_pretty(&doc).expect("markups JSON is plain data") + "\n";
     write_atomic(path, |w| w.write_all(text.as_bytes()))
 }
