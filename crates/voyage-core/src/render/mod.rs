@@ -2,6 +2,7 @@
 //! endoscope shading both renderers share, the surface laid out by cell, and the visibility
 //! strategies that choose which cells to draw (paper §4.3).
 
+pub mod closeup;
 pub mod mesh;
 pub mod raster;
 pub mod shading;

@@ -149,7 +149,9 @@ impl ScoutView {
         let painter = ui.painter_at(rect);
         painter.rect_filled(rect, 0.0, Color32::from_gray(14));
         let proj = self.projection(mesh, rect);
-        painter.add(Shape::mesh(self.surface(mesh, &proj, rect)));
+        if std::env::var_os("VOYAGE_NO_SCOUT").is_none() {
+            painter.add(Shape::mesh(self.surface(mesh, &proj, rect)));
+        }
 
         let line: Vec<Pos2> = marks.centerline.iter().map(|p| proj.to_screen(DVec3::from_array(*p))).collect();
         painter.add(Shape::line(line.clone(), Stroke::new(1.5, Color32::from_rgb(40, 220, 60))));

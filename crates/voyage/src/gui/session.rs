@@ -194,16 +194,4 @@ impl Session {
         }
         true
     }
-
-    /// The index of the centerline point nearest to `x`.
-    pub fn nearest_centerline_point(&self, x: DVec3) -> usize {
-        let mut best = (f64::INFINITY, 0);
-        for (i, p) in self.study.centerline.points_mm.iter().enumerate() {
-            let d = DVec3::from_array(*p).distance_squared(x);
-            if d < best.0 {
-                best = (d, i);
-            }
-        }
-        best.1
-    }
 }

@@ -10,6 +10,8 @@ use voyage_core::{Geometry, Volume};
 /// Window / level presets (HU): name, width, centre.
 pub const PRESETS: [(&str, f64, f64); 3] = [("Colon", 1600.0, -300.0), ("Lung", 1500.0, -600.0), ("Soft tissue", 400.0, 40.0)];
 
+const SCROLL_PER_SLICE: f32 = 24.0;
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Plane {
     Axial,
@@ -63,6 +65,8 @@ struct SliceView {
     plane: Plane,
     /// Slices scrolled away from the submarine's.
     offset: i64,
+    /// Scrolling not yet turned into slices (points).
+    scroll: f32,
     texture: Option<(TextureHandle, (usize, f64, f64))>,
 }
 
@@ -74,7 +78,7 @@ pub struct SlicePanel {
 
 impl Default for SlicePanel {
     fn default() -> Self {
-        SlicePanel { views: Plane::ALL.map(|plane| SliceView { plane, offset: 0, texture: None }), window: PRESETS[0].1, level: PRESETS[0].2 }
+        SlicePanel { views: Plane::ALL.map(|plane| SliceView { plane, offset: 0, scroll: 0.0, texture: None }), window: PRESETS[0].1, level: PRESETS[0].2 }
     }
 }
 
@@ -123,9 +127,12 @@ impl SlicePanel {
             self.level = (self.level - d.y as f64 * 2.0).clamp(-1500.0, 3000.0);
         }
         if response.hovered() {
-            let scroll = ui.input(|i| i.raw_scroll_delta.y);
-            if scroll != 0.0 {
-                self.views[i].offset += if scroll > 0.0 { 1 } else { -1 };
+            // A wheel notch is some tens of points of smooth scrolling: one slice per notch.
+            let v = &mut self.views[i];
+            v.scroll += ui.input(|i| i.smooth_scroll_delta.y);
+            while v.scroll.abs() >= SCROLL_PER_SLICE {
+                v.offset += v.scroll.signum() as i64;
+                v.scroll -= v.scroll.signum() * SCROLL_PER_SLICE;
             }
         }
         let fixed = (at_index[lay.fixed] as i64 + self.views[i].offset).clamp(0, dims[lay.fixed] as i64 - 1) as usize;
