@@ -7,7 +7,9 @@
 //! outer side (`Back`) is never drawn; the CPU renderer keeps the same triangles.
 
 use crate::mesh::Vertex;
-use crate::target::{COLOR_FORMAT, DEPTH_FORMAT};
+use crate::target::DEPTH_FORMAT;
+#[cfg(doc)]
+use crate::target::COLOR_FORMAT;
 use crate::uniforms::Uniforms;
 
 pub(crate) struct EndoscopePipeline {
@@ -17,7 +19,10 @@ pub(crate) struct EndoscopePipeline {
 }
 
 impl EndoscopePipeline {
-    pub fn new(device: &wgpu::Device) -> Self {
+    /// The pipeline writing a colour target of `color_format` ([`COLOR_FORMAT`] offscreen,
+    /// the surface's format in a window). The shader writes display-gamma values, so the
+    /// format should not be an sRGB one.
+    pub fn with_format(device: &wgpu::Device, color_format: wgpu::TextureFormat) -> Self {
         let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("voyage endoscope.wgsl"),
             source: wgpu::ShaderSource::Wgsl(include_str!("endoscope.wgsl").into()),
@@ -85,7 +90,7 @@ impl EndoscopePipeline {
                 entry_point: Some("fs_main"),
                 compilation_options: Default::default(),
                 targets: &[Some(wgpu::ColorTargetState {
-                    format: COLOR_FORMAT,
+                    format: color_format,
                     blend: None,
                     write_mask: wgpu::ColorWrites::ALL,
                 })],

@@ -51,14 +51,34 @@ impl GpuRenderer {
     /// Uses a device someone else opened (the GUI's, so that the view can be drawn into a
     /// texture the GUI shows). The device must allow the texture sizes and buffer sizes used.
     pub fn from_device(device: wgpu::Device, queue: wgpu::Queue) -> Self {
-        let pipeline = EndoscopePipeline::new(&device);
-        GpuRenderer {
-            device,
-            queue,
-            pipeline,
-            mesh: None,
-            target: None,
-        }
+        Self::for_pass(device, queue, crate::COLOR_FORMAT)
+    }
+
+    /// Uses a device someone else opened to draw inside their render passes
+    /// ([`Self::draw_in_pass`]), whose colour target has `color_format` (not sRGB: the shader
+    /// applies the display gamma) and whose depth attachment is [`crate::DEPTH_FORMAT`].
+    /// This is how the GUI draws the view straight into the window, with no texture between.
+    pub fn for_pass(device: wgpu::Device, queue: wgpu::Queue, color_format: wgpu::TextureFormat) -> Self {
+        let pipeline = EndoscopePipeline::with_format(&device, color_format);
+        GpuRenderer { device, queue, pipeline, mesh: None, target: None }
+    }
+
+    /// Writes the camera and lighting for a following [`Self::draw_in_pass`] of a
+    /// `width × height` viewport (through the queue: call it before the pass is submitted).
+    pub fn prepare(&self, camera: &Camera, width: u32, height: u32, lighting: &Lighting) -> Result<(), RenderError> {
+        self.check_size(width, height)?;
+        let uniforms = Uniforms::new(camera, width, height, lighting);
+        self.queue.write_buffer(&self.pipeline.uniforms, 0, bytemuck::bytes_of(&uniforms));
+        Ok(())
+    }
+
+    /// Draws `cells` into a render pass someone else began (viewport and scissor set by
+    /// them), with the uniforms of the last [`Self::prepare`].
+    pub fn draw_in_pass(&self, pass: &mut wgpu::RenderPass<'_>, cells: &[u32]) -> Result<(), RenderError> {
+        let mesh = self.mesh.as_ref().ok_or(RenderError::NoMesh)?;
+        let ranges = mesh.draw_ranges(cells)?;
+        record(&self.pipeline, mesh, pass, ranges);
+        Ok(())
     }
 
     pub fn device(&self) -> &wgpu::Device {
@@ -133,13 +153,7 @@ impl GpuRenderer {
             occlusion_query_set: None,
             multiview_mask: None,
         });
-        pass.set_pipeline(&self.pipeline.pipeline);
-        pass.set_bind_group(0, &self.pipeline.bind_group, &[]);
-        pass.set_vertex_buffer(0, mesh.vertices.slice(..));
-        pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
-        for r in ranges {
-            pass.draw_indexed(r, 0, 0..1);
-        }
+        record(&self.pipeline, mesh, &mut pass, ranges);
         Ok(())
     }
 
@@ -279,5 +293,16 @@ impl GpuRenderer {
             (_, Some(e)) => Err(RenderError::Gpu(e)),
             (result, None) => result,
         }
+    }
+}
+
+/// The draw calls of one frame: the cells' index ranges with the endoscope pipeline.
+fn record(pipeline: &EndoscopePipeline, mesh: &GpuMesh, pass: &mut wgpu::RenderPass<'_>, ranges: Vec<std::ops::Range<u32>>) {
+    pass.set_pipeline(&pipeline.pipeline);
+    pass.set_bind_group(0, &pipeline.bind_group, &[]);
+    pass.set_vertex_buffer(0, mesh.vertices.slice(..));
+    pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+    for r in ranges {
+        pass.draw_indexed(r, 0, 0..1);
     }
 }

@@ -57,9 +57,12 @@ struct Closeup {
     center: DVec3,
 }
 
+/// The window's background, behind the unfilled panels.
+const PANEL_BACKGROUND: Color32 = Color32::from_gray(27);
+
 const HELP: &[(&str, &str)] = &[
     ("Space", "play / pause the automatic flight"),
-    ("R", "reverse the direction (rectum ↔ cecum)"),
+    ("R", "reverse the direction (rectum / cecum)"),
     ("Home", "back to the start of the flight"),
     ("left button (hold)", "push the submarine toward that point"),
     ("right button (drag)", "look around"),
@@ -117,7 +120,12 @@ pub struct App {
 
 impl App {
     pub fn new(cc: &eframe::CreationContext<'_>, source: Option<Source>, args: WindowArgs, outcome: Arc<Mutex<Outcome>>) -> Self {
-        cc.egui_ctx.set_visuals(egui::Visuals::dark());
+        // Panels are not filled: the frame is cleared to the panel colour instead. On a CPU
+        // Vulkan driver every shaded pixel costs, and filling the panels would shade the
+        // whole window once more each frame.
+        let mut visuals = egui::Visuals::dark();
+        visuals.panel_fill = Color32::TRANSPARENT;
+        cc.egui_ctx.set_visuals(visuals);
         let endoscope = Endoscope::new(cc.wgpu_render_state.as_ref(), args.cpu);
         let script = match args.script.as_deref().map(Script::load).transpose() {
             Ok(s) => s,
@@ -513,17 +521,17 @@ impl App {
         };
         ui.heading("Flight");
         ui.horizontal(|ui| {
-            let text = if s.playing { "⏸ Pause" } else { "▶ Play" };
+            let text = if s.playing { "Pause" } else { "Play" };
             if ui.button(text).on_hover_text("Space").clicked() {
                 s.set_playing(!s.playing);
             }
-            if ui.button("⏮ Start").on_hover_text("Home").clicked() {
+            if ui.button("Start over").on_hover_text("Home").clicked() {
                 s.restart();
             }
         });
         let mut dir = s.direction();
-        ui.radio_value(&mut dir, Direction::Forward, "rectum → cecum");
-        ui.radio_value(&mut dir, Direction::Backward, "cecum → rectum");
+        ui.radio_value(&mut dir, Direction::Forward, "rectum to cecum");
+        ui.radio_value(&mut dir, Direction::Backward, "cecum to rectum");
         s.set_direction(dir);
         if s.reached {
             ui.label(RichText::new("goal reached").color(Color32::LIGHT_GREEN));
@@ -630,7 +638,7 @@ impl App {
     }
 
     fn endoscopy_panel(&mut self, ui: &mut egui::Ui, frame: &eframe::Frame, dt: f64) {
-        egui::CentralPanel::default().frame(egui::Frame::NONE.fill(Color32::BLACK)).show(ui, |ui| {
+        egui::CentralPanel::default().frame(egui::Frame::NONE).show(ui, |ui| {
             if self.session.is_none() {
                 self.waiting(ui);
                 return;
@@ -657,13 +665,8 @@ impl App {
             let ppp = ui.ctx().pixels_per_point();
             let size = [((rect.width() * ppp).round() as u32).max(16), ((rect.height() * ppp).round() as u32).max(16)];
             let rs = frame.wgpu_render_state();
-            match self.endoscope.render(ui.ctx(), rs, s, self.generation, size) {
-                Ok(id) => {
-                    ui.painter().image(id, rect, Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)), Color32::WHITE);
-                }
-                Err(e) => {
-                    self.status = format!("rendering failed: {e:#}");
-                }
+            if let Err(e) = self.endoscope.render(ui.painter(), rect, rs, s, self.generation, size) {
+                self.status = format!("rendering failed: {e:#}");
             }
             self.last_cells = self.endoscope.last_cells.clone();
             push_limited(&mut self.render_ms, self.endoscope.stats.render_ms);
@@ -788,7 +791,7 @@ impl App {
         let mode = format!(
             "{} · {} · wall {:.1} mm{}{}{}",
             if s.playing { "flying" } else { "paused" },
-            if s.direction() == Direction::Forward { "rectum → cecum" } else { "cecum → rectum" },
+            if s.direction() == Direction::Forward { "rectum to cecum" } else { "cecum to rectum" },
             s.field.ds(s.sub.state.x),
             if s.sub.modes.compass { " · compass" } else { "" },
             if s.sub.modes.leveling { " · leveling" } else { "" },
@@ -918,6 +921,10 @@ impl eframe::App for App {
         if !self.quitting {
             ctx.request_repaint();
         }
+    }
+
+    fn clear_color(&self, _visuals: &egui::Visuals) -> [f32; 4] {
+        PANEL_BACKGROUND.to_normalized_gamma_f32()
     }
 
     fn on_exit(&mut self) {

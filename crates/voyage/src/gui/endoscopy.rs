@@ -16,19 +16,36 @@ use voyage_render::GpuRenderer;
 
 use super::session::Session;
 
-/// The GPU's colour and depth targets at one size, and the egui texture showing the colour.
-struct GpuTarget {
-    size: [u32; 2],
-    color_view: wgpu::TextureView,
-    depth_view: wgpu::TextureView,
-    texture_id: egui::TextureId,
-}
-
+/// The GPU renderer lives in egui-wgpu's callback resources, so that the paint callback can
+/// reach it while egui records the window's render pass.
 struct GpuView {
-    renderer: GpuRenderer,
-    target: Option<GpuTarget>,
     /// The mesh uploaded belongs to this session generation.
     uploaded: u64,
+}
+
+/// One frame of the endoscopic view, drawn straight into the window's render pass (no
+/// texture between: on a CPU Vulkan driver every pixel shaded twice would cost a frame).
+struct EndoscopeCallback {
+    camera: Camera,
+    cells: Vec<u32>,
+    size: [u32; 2],
+    lighting: Lighting,
+}
+
+impl egui_wgpu::CallbackTrait for EndoscopeCallback {
+    fn prepare(&self, _device: &wgpu::Device, _queue: &wgpu::Queue, _screen: &egui_wgpu::ScreenDescriptor, _encoder: &mut wgpu::CommandEncoder, resources: &mut egui_wgpu::CallbackResources) -> Vec<wgpu::CommandBuffer> {
+        if let Some(r) = resources.get::<GpuRenderer>() {
+            // A size the device refuses leaves the view empty rather than stopping the window.
+            let _ = r.prepare(&self.camera, self.size[0], self.size[1], &self.lighting);
+        }
+        Vec::new()
+    }
+
+    fn paint(&self, _info: egui::PaintCallbackInfo, pass: &mut wgpu::RenderPass<'static>, resources: &egui_wgpu::CallbackResources) {
+        if let Some(r) = resources.get::<GpuRenderer>() {
+            let _ = r.draw_in_pass(pass, &self.cells);
+        }
+    }
 }
 
 /// What one frame of the view cost and drew.
@@ -55,10 +72,15 @@ pub struct Endoscope {
 impl Endoscope {
     /// Uses the window's wgpu device when there is one and `cpu` is false.
     pub fn new(render_state: Option<&egui_wgpu::RenderState>, cpu: bool) -> Self {
-        let gpu = render_state.filter(|_| !cpu).map(|rs| GpuView { renderer: GpuRenderer::from_device(rs.device.clone(), rs.queue.clone()), target: None, uploaded: u64::MAX });
-        let renderer_name = match (&gpu, render_state) {
-            (Some(g), _) => format!("GPU: {}", g.renderer.adapter_summary()),
-            (None, _) => "CPU reference renderer".to_string(),
+        let gpu = render_state.filter(|_| !cpu).map(|rs| {
+            let renderer = GpuRenderer::for_pass(rs.device.clone(), rs.queue.clone(), rs.target_format);
+            let name = format!("GPU: {}", renderer.adapter_summary());
+            rs.renderer.write().callback_resources.insert(renderer);
+            (GpuView { uploaded: u64::MAX }, name)
+        });
+        let (gpu, renderer_name) = match gpu {
+            Some((g, name)) => (Some(g), name),
+            None => (None, "CPU reference renderer".to_string()),
         };
         Endoscope { gpu, cpu_frame: None, cpu_texture: None, lighting: Lighting::default(), stats: FrameStats::default(), last_cells: Vec::new(), renderer_name }
     }
@@ -67,21 +89,32 @@ impl Endoscope {
         self.gpu.is_some()
     }
 
-    /// Draws the view of `session`'s camera at `size` physical pixels and returns the egui
-    /// texture to show. `generation` changes whenever a new study is opened.
-    pub fn render(&mut self, ctx: &egui::Context, render_state: Option<&egui_wgpu::RenderState>, session: &mut Session, generation: u64, size: [u32; 2]) -> anyhow::Result<egui::TextureId> {
+    /// Draws the view of `session`'s camera at `size` physical pixels into `rect` of the
+    /// painter. `generation` changes whenever a new study is opened.
+    pub fn render(&mut self, painter: &egui::Painter, rect: Rect, render_state: Option<&egui_wgpu::RenderState>, session: &mut Session, generation: u64, size: [u32; 2]) -> anyhow::Result<()> {
         let clock = Instant::now();
         let camera = session.camera();
-        let id = match (&mut self.gpu, render_state) {
+        match (&mut self.gpu, render_state) {
             (Some(gpu), Some(rs)) => {
-                let (id, cells) = draw_gpu(gpu, rs, session, generation, &camera, size, &self.lighting, &mut self.stats)?;
-                self.last_cells = cells;
-                id
+                if gpu.uploaded != generation {
+                    if let Some(r) = rs.renderer.write().callback_resources.get_mut::<GpuRenderer>() {
+                        r.upload(&session.mesh)?;
+                    }
+                    gpu.uploaded = generation;
+                }
+                let drawn = session.vis.select(&session.study.cells, &View::new(&camera, size[0], size[1]));
+                self.stats.cells = drawn.cells.len();
+                self.stats.triangles = session.mesh.triangles_in(&drawn.cells);
+                self.last_cells = drawn.cells.clone();
+                painter.add(egui_wgpu::Callback::new_paint_callback(rect, EndoscopeCallback { camera, cells: drawn.cells, size, lighting: self.lighting }));
             }
-            _ => self.draw_cpu(ctx, session, &camera, size),
-        };
+            _ => {
+                let id = self.draw_cpu(painter.ctx(), session, &camera, size);
+                painter.image(id, rect, Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)), Color32::WHITE);
+            }
+        }
         self.stats.render_ms = clock.elapsed().as_secs_f64() * 1e3;
-        Ok(id)
+        Ok(())
     }
 
     fn draw_cpu(&mut self, ctx: &egui::Context, session: &mut Session, camera: &Camera, size: [u32; 2]) -> egui::TextureId {
@@ -108,49 +141,6 @@ impl Endoscope {
             }
         }
     }
-}
-
-fn draw_gpu(gpu: &mut GpuView, rs: &egui_wgpu::RenderState, session: &mut Session, generation: u64, camera: &Camera, size: [u32; 2], lighting: &Lighting, stats: &mut FrameStats) -> anyhow::Result<(egui::TextureId, Vec<u32>)> {
-    if gpu.uploaded != generation {
-        gpu.renderer.upload(&session.mesh)?;
-        gpu.uploaded = generation;
-    }
-    if gpu.target.as_ref().is_none_or(|t| t.size != size) {
-        let old = gpu.target.take().map(|t| t.texture_id);
-        gpu.target = Some(make_target(rs, size, old));
-    }
-    let Some(target) = &gpu.target else { unreachable!("made above") };
-    let drawn = session.vis.select(&session.study.cells, &View::new(camera, size[0], size[1]));
-    stats.cells = drawn.cells.len();
-    stats.triangles = session.mesh.triangles_in(&drawn.cells);
-    let mut encoder = rs.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("voyage endoscope") });
-    gpu.renderer.draw(&mut encoder, &target.color_view, &target.depth_view, camera, &drawn.cells, size[0], size[1], lighting)?;
-    rs.queue.submit([encoder.finish()]);
-    Ok((target.texture_id, drawn.cells))
-}
-
-/// Colour and depth textures of `size`, the colour registered with egui (re-using the
-/// texture id of the previous size, so the image widget keeps pointing at it).
-fn make_target(rs: &egui_wgpu::RenderState, size: [u32; 2], old: Option<egui::TextureId>) -> GpuTarget {
-    let extent = wgpu::Extent3d { width: size[0], height: size[1], depth_or_array_layers: 1 };
-    let texture = |label, format, usage| {
-        rs.device.create_texture(&wgpu::TextureDescriptor { label: Some(label), size: extent, mip_level_count: 1, sample_count: 1, dimension: wgpu::TextureDimension::D2, format, usage, view_formats: &[] })
-    };
-    // The shader writes display-gamma values (as the CPU renderer does) and egui samples
-    // textures as gamma values, so a plain Unorm texture passes them through unchanged.
-    let color = texture("voyage endoscope colour", voyage_render::COLOR_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING);
-    let depth = texture("voyage endoscope depth", voyage_render::DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT);
-    let color_view = color.create_view(&wgpu::TextureViewDescriptor::default());
-    let depth_view = depth.create_view(&wgpu::TextureViewDescriptor::default());
-    let mut renderer = rs.renderer.write();
-    let texture_id = match old {
-        Some(id) => {
-            renderer.update_egui_texture_from_wgpu_texture(&rs.device, &color_view, wgpu::FilterMode::Linear, id);
-            id
-        }
-        None => renderer.register_native_texture(&rs.device, &color_view, wgpu::FilterMode::Linear),
-    };
-    GpuTarget { size, color_view, depth_view, texture_id }
 }
 
 /// Where a point of the colon appears in the view, as a fraction of the view's width and

@@ -89,7 +89,11 @@ fn run(source: Option<Source>, w: &WindowArgs) -> anyhow::Result<()> {
     let mut options = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default().with_inner_size([w.size.0 as f32, w.size.1 as f32]).with_min_inner_size([640.0, 480.0]).with_title("voyage"),
         renderer: eframe::Renderer::Wgpu,
-        dithering: std::env::var_os("VOYAGE_DITHER").is_some(),
+        // The endoscopic view is drawn inside egui's render pass and needs a depth buffer.
+        depth_buffer: 32,
+        // Dithering costs every pixel of the window a little more shading on a CPU driver and
+        // is not needed for a flat dark interface.
+        dithering: false,
         ..Default::default()
     };
     if std::env::var_os("VOYAGE_NO_VSYNC").is_some() {

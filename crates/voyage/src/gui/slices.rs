@@ -155,7 +155,6 @@ impl SlicePanel {
         let scale = (rect.width() / size_mm.x).min((rect.height() - 16.0) / size_mm.y);
         let image_rect = Rect::from_center_size(rect.center() + Vec2::new(0.0, 8.0), size_mm * scale);
         let painter = ui.painter_at(rect);
-        painter.rect_filled(rect, 0.0, Color32::BLACK);
         if let Some((t, _)) = &view.texture {
             painter.image(t.id(), image_rect, Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)), Color32::WHITE);
         }

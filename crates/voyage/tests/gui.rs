@@ -1,0 +1,267 @@
+//! The navigator window, driven as a user drives it, on a virtual display (Xvfb) with
+//! Mesa's CPU Vulkan driver: scripted actions (`--script`) and real X events (xdotool).
+//! Without Xvfb the tests say so and pass (scripts/deps.sh installs it; CI has it).
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::{Duration, Instant};
+
+use glam::{DQuat, DVec3};
+use serde_json::Value;
+
+fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("voyage-gui-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn have(tool: &str) -> bool {
+    Command::new("sh").arg("-c").arg(format!("command -v {tool}")).output().is_ok_and(|o| o.status.success())
+}
+
+/// A private X display for one test, closed when dropped.
+struct Display {
+    server: Child,
+    name: String,
+}
+
+static NEXT_DISPLAY: AtomicU32 = AtomicU32::new(0);
+
+impl Display {
+    fn start() -> Option<Display> {
+        if !have("Xvfb") {
+            eprintln!("skipping: Xvfb not installed (bash scripts/deps.sh installs it)");
+            return None;
+        }
+        for _ in 0..20 {
+            let n = 140 + (std::process::id() % 400) * 2 + NEXT_DISPLAY.fetch_add(1, Ordering::SeqCst);
+            let name = format!(":{n}");
+            if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() {
+                continue;
+            }
+            let server = Command::new("Xvfb").args([name.as_str(), "-screen", "0", "1280x800x24", "-nolisten", "tcp"]).stdout(Stdio::null()).stderr(Stdio::null()).spawn().expect("start Xvfb");
+            let t = Instant::now();
+            while t.elapsed() < Duration::from_secs(10) {
+                if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() {
+                    return Some(Display { server, name });
+                }
+                std::thread::sleep(Duration::from_millis(50));
+            }
+        }
+        panic!("no free X display");
+    }
+}
+
+impl Drop for Display {
+    fn drop(&mut self) {
+        let _ = self.server.kill();
+        let _ = self.server.wait();
+    }
+}
+
+fn voyage(display: &Display) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_voyage"));
+    c.env("DISPLAY", &display.name).env_remove("WAYLAND_DISPLAY");
+    c
+}
+
+fn pose(v: &Value) -> (DVec3, DQuat) {
+    let a: Vec<f64> = v.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+    (DVec3::new(a[0], a[1], a[2]), DQuat::from_xyzw(a[4], a[5], a[6], a[3]).normalize())
+}
+
+/// How far the view turned toward the screen's right (degrees, negative: left), between two
+/// poses: the angle of the new view direction around the old up axis. The screen's right is
+/// −x_body (camera.rs).
+fn turned_right_deg(before: &Value, after: &Value) -> f64 {
+    let (_, q0) = pose(before);
+    let (_, q1) = pose(after);
+    let (right, forward) = (q0 * -DVec3::X, q0 * DVec3::Z);
+    let z1 = q1 * DVec3::Z;
+    z1.dot(right).atan2(z1.dot(forward)).to_degrees()
+}
+
+fn read_json(p: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))).unwrap()
+}
+
+/// Mean colour of a rectangle of the screenshot.
+fn mean_rgb(img: &image::RgbaImage, r: [f32; 4]) -> [f64; 3] {
+    let (mut sum, mut n) = ([0.0f64; 3], 0.0f64);
+    for y in r[1] as u32..(r[3] as u32).min(img.height()) {
+        for x in r[0] as u32..(r[2] as u32).min(img.width()) {
+            let p = img.get_pixel(x, y);
+            for c in 0..3 {
+                sum[c] += p[c] as f64;
+            }
+            n += 1.0;
+        }
+    }
+    sum.map(|s| s / n.max(1.0))
+}
+
+fn count(img: &image::RgbaImage, r: [f32; 4], pred: impl Fn(&image::Rgba<u8>) -> bool) -> usize {
+    let mut n = 0;
+    for y in r[1] as u32..(r[3] as u32).min(img.height()) {
+        for x in r[0] as u32..(r[2] as u32).min(img.width()) {
+            n += pred(img.get_pixel(x, y)) as usize;
+        }
+    }
+    n
+}
+
+#[test]
+fn scripted_session_steers_marks_measures_exports_and_shows_three_panels() {
+    let Some(display) = Display::start() else { return };
+    let dir = scratch("script");
+    let script = dir.join("script.json");
+    let export = dir.join("findings");
+    std::fs::write(
+        &script,
+        serde_json::json!([
+            {"wait": 5},
+            {"record": "start"},
+            {"steer": {"at": [0.9, 0.5], "frames": 30}},
+            {"record": "after_right"},
+            {"steer": {"at": [0.1, 0.5], "frames": 30}},
+            {"record": "after_left"},
+            {"marker": {"at": [0.5, 0.5], "note": "test marker"}},
+            {"measure": {"from": [0.4, 0.55], "to": [0.6, 0.55]}},
+            {"export": export},
+            {"wait": 3}
+        ])
+        .to_string(),
+    )
+    .unwrap();
+    let shot = dir.join("window.png");
+    let report = dir.join("report.json");
+    let out = voyage(&display)
+        .args(["demo", "--small", "--paused", "--after-frames", "1"])
+        .arg("--script")
+        .arg(&script)
+        .arg("--screenshot")
+        .arg(&shot)
+        .arg("--report")
+        .arg(&report)
+        .output()
+        .unwrap();
+    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "{text}");
+    let r = read_json(&report);
+    assert_eq!(r["ready"], true, "{r}");
+    let rec = &r["recorded"];
+    let right = turned_right_deg(&rec["start"], &rec["after_right"]);
+    let left = turned_right_deg(&rec["after_right"], &rec["after_left"]);
+    eprintln!("clicks right turned the view {right:.1}°, then clicks left {left:.1}°");
+    assert!(right > 3.0, "holding the button right of centre turned the camera by {right:.2}° (want right, > 3°)");
+    assert!(left < -3.0, "holding the button left of centre turned the camera by {left:.2}° (want left)");
+    assert_eq!(r["markers"].as_array().unwrap().len(), 1, "{r}");
+    assert_eq!(r["markers"][0]["note"], "test marker");
+    let lengths = r["measurements_mm"].as_array().unwrap();
+    assert_eq!(lengths.len(), 1);
+    assert!(lengths[0].as_f64().unwrap() > 0.5, "{lengths:?}");
+    for f in ["findings.json", "findings.mrk.json", "finding_M1.png"] {
+        assert!(export.join(f).is_file(), "{f} not exported");
+    }
+
+    // The screenshot: the whole window, with the three panels drawn.
+    let img = image::open(&shot).unwrap().to_rgba8();
+    assert_eq!((img.width(), img.height()), (1280, 800));
+    let view: Vec<f32> = r["view_rect"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect();
+    let view = [view[0], view[1], view[2], view[3]];
+    let pink = mean_rgb(&img, view);
+    assert!(pink[0] > 90.0 && pink[0] > pink[1] + 30.0, "endoscopic view is not mucosa-coloured: {pink:?}");
+    // Scout (right of the view): the green centerline on the dark background.
+    let scout = [view[2] + 4.0, view[1], 1280.0, view[3]];
+    let green = count(&img, scout, |p| p[1] > 150 && p[0] < 120 && p[2] < 140);
+    assert!(green > 200, "scout shows no centerline ({green} green pixels)");
+    // Slices (below the view): CT grey levels, both air (dark) and tissue (light).
+    let slices = [view[0], view[3] + 30.0, 1280.0, 800.0];
+    let dark = count(&img, slices, |p| p[0] < 40 && p[0] == p[1] && p[1] == p[2]);
+    let light = count(&img, slices, |p| p[0] > 140 && p[0] == p[1] && p[1] == p[2]);
+    assert!(dark > 2000 && light > 2000, "slices missing: {dark} dark, {light} light grey pixels");
+}
+
+#[test]
+fn mouse_and_keys_drive_the_window() {
+    let Some(display) = Display::start() else { return };
+    if !have("xdotool") {
+        eprintln!("skipping: xdotool not installed (bash scripts/deps.sh installs it)");
+        return;
+    }
+    let dir = scratch("xdotool");
+    let script = dir.join("script.json");
+    std::fs::write(&script, r#"[{"record": "start"}]"#).unwrap();
+    let report = dir.join("report.json");
+    let mut child = voyage(&display).args(["demo", "--small", "--paused"]).arg("--script").arg(&script).arg("--report").arg(&report).stdout(Stdio::piped()).stderr(Stdio::null()).spawn().unwrap();
+    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let ready: Value = loop {
+        let line = lines.next().expect("the window closed before it was ready").unwrap();
+        if let Ok(v) = serde_json::from_str::<Value>(&line)
+            && v["ready"] == true
+        {
+            break v;
+        }
+    };
+    let v: Vec<f64> = ready["view_px"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+    let xdo = |args: &[&str]| {
+        let ok = Command::new("xdotool").env("DISPLAY", &display.name).args(args).status().unwrap().success();
+        assert!(ok, "xdotool {args:?}");
+    };
+    // No window manager runs on the virtual display: give the window the keyboard focus.
+    xdo(&["search", "--name", "^voyage", "windowfocus"]);
+    let (cx, cy) = ((v[0] + v[2]) / 2.0, (v[1] + v[3]) / 2.0);
+    // Compass off (C): after the button is released, nothing but the user's push may have
+    // turned the view, however long the window takes to close.
+    xdo(&["key", "c"]);
+    let right_x = v[0] + 0.75 * (v[2] - v[0]);
+    // Hold the left button right of centre for a quarter of a second: F_user pulls right and
+    // its torque z_body × F_user (Eq. 4) turns the view toward the point held. (Held longer
+    // the view keeps turning: the point held moves with the view, as with repeated clicks.)
+    xdo(&["mousemove", &format!("{right_x:.0}"), &format!("{cy:.0}")]);
+    xdo(&["mousedown", "1"]);
+    std::thread::sleep(Duration::from_millis(250));
+    xdo(&["mouseup", "1"]);
+    // A marker on the surface under the cursor, then quit with Ctrl+Q.
+    xdo(&["mousemove", &format!("{cx:.0}"), &format!("{cy:.0}")]);
+    std::thread::sleep(Duration::from_millis(300));
+    xdo(&["key", "m"]);
+    std::thread::sleep(Duration::from_millis(500));
+    xdo(&["key", "ctrl+q"]);
+    let t = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if t.elapsed() > Duration::from_secs(60) {
+            let _ = child.kill();
+            panic!("the window did not close on Ctrl+Q");
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    assert!(status.success());
+    let r = read_json(&report);
+    let turn = turned_right_deg(&r["recorded"]["start"], &r["pose"]);
+    eprintln!("after holding the button right of centre: turned {turn:.1}°; markers {}", r["markers"]);
+    assert!(turn > 3.0, "the camera turned {turn:.2}° (want right, > 3°)");
+    assert_eq!(r["markers"].as_array().unwrap().len(), 1, "{r}");
+}
+
+#[test]
+fn an_unreadable_file_is_reported_in_the_window() {
+    let Some(display) = Display::start() else { return };
+    let dir = scratch("bad");
+    let bad = dir.join("broken.nii.gz");
+    std::fs::write(&bad, b"not a nifti file").unwrap();
+    let shot = dir.join("error.png");
+    let out = voyage(&display).arg("view").arg(&bad).arg("--screenshot").arg(&shot).args(["--after-frames", "3"]).output().unwrap();
+    // The window stayed up, showed the error and saved the screenshot; the unattended run
+    // then fails naming the file.
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("broken.nii.gz"), "{err}");
+    assert!(shot.is_file(), "no screenshot of the error");
+}
