@@ -190,6 +190,10 @@ impl App {
                 self.status = format!("{} ready in {:.1} s: centerline {:.0} mm, {} triangles in {} cells", s.name, seconds, s.study.centerline.length_mm, s.mesh.triangles.len(), s.mesh.cells());
                 self.scout = Some(ScoutView::new(s.study.ct.geometry()));
                 self.slices = SlicePanel::default();
+                if s.study.segmentation.from_mask {
+                    // A mask holds 0 and 1: show it as two greys, not as HU.
+                    (self.slices.window, self.slices.level) = (2.0, 0.5);
+                }
                 self.findings = Findings::default();
                 self.closeup = None;
                 self.closeup_at = None;

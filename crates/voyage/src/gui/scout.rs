@@ -4,11 +4,11 @@
 //!
 //! The surface drawn here is the study's mesh decimated by vertex clustering (a few mm):
 //! the scout shows shape, not mucosa, and tens of thousands of triangles blend fast on any
-//! renderer, where the full mesh (over a million) would not. It is drawn through egui's
-//! painter as one alpha-blended mesh, so it needs no depth buffer and no GPU of its own.
+//! renderer, where the full mesh (over a million) would not. It is alpha-blended on the
+//! CPU into a texture (redrawn when the view changes), so it needs no depth buffer and costs
+//! nothing per frame while the submarine flies.
 
 use std::collections::HashMap;
-use std::sync::Arc;
 
 use egui::{Color32, Pos2, Rect, Sense, Shape, Stroke, Vec2};
 use glam::{DMat3, DVec3};
@@ -80,7 +80,7 @@ pub struct ScoutView {
     zoom: f64,
     /// Patient axes in the volume's local frame: left, posterior, superior.
     anatomy: DMat3,
-    cached: Option<(CacheKey, Arc<egui::Mesh>)>,
+    cached: Option<(CacheKey, egui::TextureHandle)>,
 }
 
 #[derive(Clone, Copy, PartialEq)]
@@ -149,9 +149,9 @@ impl ScoutView {
         let painter = ui.painter_at(rect);
         painter.rect_filled(rect, 0.0, Color32::from_gray(14));
         let proj = self.projection(mesh, rect);
-        if std::env::var_os("VOYAGE_NO_SCOUT").is_none() {
-            painter.add(Shape::mesh(self.surface(mesh, &proj, rect)));
-        }
+        let ppp = ui.ctx().pixels_per_point();
+        let texture = self.surface(ui.ctx(), mesh, &proj, rect, ppp);
+        painter.image(texture, rect, Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)), Color32::WHITE);
 
         let line: Vec<Pos2> = marks.centerline.iter().map(|p| proj.to_screen(DVec3::from_array(*p))).collect();
         painter.add(Shape::line(line.clone(), Stroke::new(1.5, Color32::from_rgb(40, 220, 60))));
@@ -177,34 +177,81 @@ impl ScoutView {
         None
     }
 
-    /// The decimated surface as an egui mesh, rebuilt only when the view changes. Faces seen
-    /// edge-on are more opaque than faces seen head-on: the outline and the folds of the
-    /// colon stand out while the far side shows through (an "x-ray" look).
-    fn surface(&mut self, mesh: &ScoutMesh, proj: &Projection, rect: Rect) -> Arc<egui::Mesh> {
+    /// The decimated surface, drawn on the CPU into a texture that is redrawn only when the
+    /// view changes: the scout stands still while the submarine flies, and a CPU Vulkan
+    /// driver would otherwise blend every scout triangle again each frame. Faces seen
+    /// edge-on are more opaque than faces seen head-on: the outline and the folds stand out
+    /// while the far side shows through (an "x-ray" look).
+    fn surface(&mut self, ctx: &egui::Context, mesh: &ScoutMesh, proj: &Projection, rect: Rect, ppp: f32) -> egui::TextureId {
         let key = CacheKey { yaw: self.yaw, pitch: self.pitch, zoom: self.zoom, rect };
-        if let Some((k, m)) = &self.cached
+        if let Some((k, t)) = &self.cached
             && *k == key
         {
-            return m.clone();
+            return t.id();
         }
-        let mut out = egui::Mesh::default();
-        out.vertices.reserve(mesh.triangles.len() * 3);
-        out.indices.reserve(mesh.triangles.len() * 3);
-        for (t, n) in mesh.triangles.iter().zip(&mesh.normals) {
-            let facing = n.dot(proj.forward).abs();
-            let rim = (1.0 - facing).powi(2);
-            let alpha = 0.05 + 0.40 * rim;
-            let light = 0.55 + 0.45 * facing;
-            let color = Color32::from_rgba_unmultiplied((230.0 * light) as u8, (140.0 * light) as u8, (120.0 * light) as u8, (alpha * 255.0) as u8);
-            let base = out.vertices.len() as u32;
-            for &v in t {
-                out.vertices.push(egui::epaint::Vertex { pos: proj.to_screen(mesh.positions[v as usize]), uv: egui::epaint::WHITE_UV, color });
+        let image = rasterize(mesh, proj, rect, ppp);
+        match &mut self.cached {
+            Some((k, t)) => {
+                t.set(image, egui::TextureOptions::LINEAR);
+                *k = key;
+                t.id()
             }
-            out.indices.extend_from_slice(&[base, base + 1, base + 2]);
+            None => {
+                let t = ctx.load_texture("scout", image, egui::TextureOptions::LINEAR);
+                let id = t.id();
+                self.cached = Some((key, t));
+                id
+            }
         }
-        let m = Arc::new(out);
-        self.cached = Some((key, m.clone()));
-        m
+    }
+}
+
+/// Alpha-blends the scout's triangles, in the mesh's order, into an image of `rect` at
+/// `ppp` pixels per point (premultiplied colour, transparent where nothing is).
+fn rasterize(mesh: &ScoutMesh, proj: &Projection, rect: Rect, ppp: f32) -> egui::ColorImage {
+    let (w, h) = (((rect.width() * ppp).round() as usize).max(1), ((rect.height() * ppp).round() as usize).max(1));
+    let mut buf = vec![[0f32; 4]; w * h];
+    let to_px = |p: DVec3| {
+        let s = proj.to_screen(p);
+        [((s.x - rect.left()) * ppp) as f64, ((s.y - rect.top()) * ppp) as f64]
+    };
+    for (t, n) in mesh.triangles.iter().zip(&mesh.normals) {
+        let facing = n.dot(proj.forward).abs();
+        let alpha = (0.05 + 0.40 * (1.0 - facing).powi(2)) as f32;
+        let light = (0.55 + 0.45 * facing) as f32;
+        let color = [230.0 / 255.0 * light * alpha, 140.0 / 255.0 * light * alpha, 120.0 / 255.0 * light * alpha, alpha];
+        let v = t.map(|i| to_px(mesh.positions[i as usize]));
+        fill_triangle(&mut buf, w, h, v, color);
+    }
+    let pixels = buf.iter().map(|c| Color32::from_rgba_premultiplied((c[0] * 255.0) as u8, (c[1] * 255.0) as u8, (c[2] * 255.0) as u8, (c[3] * 255.0) as u8)).collect();
+    egui::ColorImage::new([w, h], pixels)
+}
+
+/// Blends a premultiplied colour "over" every pixel whose centre lies in the triangle
+/// (either winding: the scout shows both sides of the wall).
+fn fill_triangle(buf: &mut [[f32; 4]], w: usize, h: usize, v: [[f64; 2]; 3], c: [f32; 4]) {
+    let area = (v[1][0] - v[0][0]) * (v[2][1] - v[0][1]) - (v[1][1] - v[0][1]) * (v[2][0] - v[0][0]);
+    if area.abs() < 1e-12 {
+        return;
+    }
+    let x0 = v.iter().map(|p| p[0]).fold(f64::INFINITY, f64::min).floor().max(0.0) as usize;
+    let x1 = (v.iter().map(|p| p[0]).fold(f64::NEG_INFINITY, f64::max).ceil().max(0.0) as usize).min(w);
+    let y0 = v.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min).floor().max(0.0) as usize;
+    let y1 = (v.iter().map(|p| p[1]).fold(f64::NEG_INFINITY, f64::max).ceil().max(0.0) as usize).min(h);
+    let sign = area.signum();
+    let edge = |a: [f64; 2], b: [f64; 2], x: f64, y: f64| ((b[0] - a[0]) * (y - a[1]) - (b[1] - a[1]) * (x - a[0])) * sign;
+    for y in y0..y1 {
+        let py = y as f64 + 0.5;
+        for x in x0..x1 {
+            let px = x as f64 + 0.5;
+            if edge(v[0], v[1], px, py) >= 0.0 && edge(v[1], v[2], px, py) >= 0.0 && edge(v[2], v[0], px, py) >= 0.0 {
+                let d = &mut buf[y * w + x];
+                let k = 1.0 - c[3];
+                for i in 0..4 {
+                    d[i] = c[i] + d[i] * k;
+                }
+            }
+        }
     }
 }
 
