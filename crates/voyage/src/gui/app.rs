@@ -402,6 +402,17 @@ impl App {
                 }
             }
             Step::GoTo(label) => self.go_to_marker(&label),
+            Step::Pose(a) => {
+                if let (Some(s), Some(p)) = (&mut self.session, voyage_core::camera::Pose::from_array(a)) {
+                    if s.sub.is_safe(&s.field, p.position) {
+                        s.set_playing(false);
+                        s.place(p);
+                        self.slices.follow();
+                    } else {
+                        self.status = "the scripted pose is not inside the colon".into();
+                    }
+                }
+            }
             Step::Closeup(on) => self.closeup_on = on,
             Step::Centerline(on) => self.show_centerline = on,
             Step::Record(name) => {
@@ -409,7 +420,13 @@ impl App {
                     self.recorded.insert(name, s.pose().to_array());
                 }
             }
-            Step::Screenshot(path) => self.screenshot(ctx, path, false),
+            Step::Screenshot(path) => {
+                self.screenshot(ctx, path, false);
+                // The picture is of a frame still to come: let it come before the next step.
+                if let Some(script) = &mut self.script {
+                    script.busy = 2;
+                }
+            }
             Step::Export(dir) => self.export(dir),
             Step::Quit(now) => {
                 if now {
@@ -568,7 +585,7 @@ impl App {
                     go = Some(m.label.clone());
                 }
                 ui.label(if m.note.is_empty() { "—" } else { &m.note });
-                if ui.small_button("✕").clicked() {
+                if ui.small_button("x").clicked() {
                     remove_marker = Some(i);
                 }
             });
@@ -577,7 +594,7 @@ impl App {
         for (i, m) in self.findings.measurements.iter().enumerate() {
             ui.horizontal(|ui| {
                 ui.label(format!("{}: {:.1} mm", m.label, m.length_mm()));
-                if ui.small_button("✕").clicked() {
+                if ui.small_button("x").clicked() {
                     remove_measure = Some(i);
                 }
             });

@@ -42,6 +42,9 @@ pub enum Step {
     Measure { from: [f32; 2], to: [f32; 2] },
     /// Jump to a point of the centerline: a fraction of its length from the rectum.
     Jump(f64),
+    /// Put the camera at a pose [x, y, z, qw, qx, qy, qz] (volume-local mm, z_body = view,
+    /// y_body = up: the poses of `voyage fly --out`), if it lies inside the colon.
+    Pose([f64; 7]),
     /// Fly back to a marker (by label, e.g. "M1").
     GoTo(String),
     /// Toggle the close-up volume rendering or the centerline overlay.
