@@ -9,7 +9,7 @@ use voyage_core::flight::{fly, FlightOptions};
 use voyage_core::phantom::{self, ColonOptions, Phantom};
 use voyage_core::potential::{BrickStore, Direction, Navigable, PotentialField};
 use voyage_core::prep::{prepare, PrepOptions, Study};
-use voyage_core::render::{look_around, survey, CellMesh, Frame, Rasterizer, Strategy, View, NO_TRIANGLE};
+use voyage_core::render::{look_around, survey, CellMesh, Frame, Rasterizer, Strategy, View, Visibility, NO_TRIANGLE};
 
 /// Poses along both automatic flights (`per_flight` each, evenly spaced, in flight order so
 /// the paper's temporal coherence is exercised) and `random` look-around views.
@@ -54,6 +54,32 @@ fn check_exact_and_reduced(study: &Study, what: &str, min_paper_ratio: f64) {
     assert!(paper >= min_paper_ratio, "{what}: MC : paper = {paper:.1} : 1, want ≥ {min_paper_ratio}");
     assert!(get(Strategy::Ours) < get(Strategy::Paper), "{what}: ours draws no fewer triangles than the paper's");
     assert!(get(Strategy::Paper) < get(Strategy::Lg), "{what}: the depth test removed nothing");
+    check_select_is_exact(study, &mesh, &cameras, what);
+}
+
+/// `Visibility::select` (the GPU's cell list: portal outlines, no depth buffer) keeps every
+/// triangle that wins a pixel: the id buffer of its cells equals the one of all cells.
+fn check_select_is_exact(study: &Study, mesh: &CellMesh, cameras: &[Camera], what: &str) {
+    let all: Vec<u32> = (0..study.cells.cells.len() as u32).collect();
+    let all_triangles = mesh.triangles_in(&all) as f64;
+    for strategy in [Strategy::Lg, Strategy::Ours] {
+        let mut vis = Visibility::new(&study.cells, strategy);
+        let mut drawn = 0.0;
+        let sample: Vec<&Camera> = cameras.iter().step_by(3).collect();
+        for cam in &sample {
+            let view = View::new(cam, 256, 256);
+            let raster = Rasterizer::new(mesh, view);
+            let (mut reference, mut culled) = (Frame::new(256, 256), Frame::new(256, 256));
+            raster.draw_cells(&mut reference, &all);
+            let cells = vis.select(&study.cells, &view).cells;
+            raster.draw_cells(&mut culled, &cells);
+            assert!(reference.ids().eq(culled.ids()), "{what}: select ({strategy}) changed the image");
+            drawn += mesh.triangles_in(&cells) as f64;
+        }
+        let ratio = all_triangles * sample.len() as f64 / drawn;
+        eprintln!("{what}: select {strategy}: exact on {} frames, MC : select = {ratio:.1}", sample.len());
+        assert!(ratio > 3.0, "{what}: select ({strategy}) culled little: {ratio:.1} : 1");
+    }
 }
 
 #[test]
