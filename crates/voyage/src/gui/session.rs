@@ -100,8 +100,8 @@ impl Session {
     }
 
     /// Advances the submarine by one displayed frame of `dt` seconds. `user` is the force of
-    /// a click-and-hold and the torque of a right-drag (paper Eq. 3–4). While paused, the
-    /// field's pull toward the goal (Ct) is off: the wall still pushes, the user steers.
+    /// a click-and-hold and the torque of a right-drag (paper Eq. 3–4). While paused the
+    /// potential field is off and only the user moves the submarine.
     pub fn step(&mut self, dt: f64, user: &Input) {
         let dt = dt.clamp(0.0, MAX_FRAME_S);
         let steering = user.force != DVec3::ZERO || user.torque != DVec3::ZERO;
@@ -117,12 +117,16 @@ impl Session {
                 input.force += self.pilot.input(self.sub.state.t, dt_now, self.sub.state.x, self.sub.potential.ct).force;
             }
         }
-        let ct = self.sub.potential.ct;
+        // Paused, the field is switched off (Ct = Cs = 0): the camera stays where it is
+        // unless the user pushes it, and a push glides to rest under friction. The safe set
+        // still keeps it off the wall (Submarine::step clips every sub-step).
+        let field = self.sub.potential;
         if !self.playing {
             self.sub.potential.ct = 0.0;
+            self.sub.potential.cs = 0.0;
         }
         self.sub.step(&self.field, dt, &input);
-        self.sub.potential.ct = ct;
+        self.sub.potential = field;
         self.pilot.moved_to(self.sub.state.x);
     }
 
