@@ -42,20 +42,15 @@ pub(crate) struct GpuMesh {
 impl GpuMesh {
     pub fn new(device: &wgpu::Device, mesh: &CellMesh) -> Result<Self, RenderError> {
         check(mesh)?;
+        let (vertices, triangles) = cell_ordered(mesh);
         let max = device.limits().max_buffer_size;
-        let vertex_bytes = (mesh.positions.len() * std::mem::size_of::<Vertex>()) as u64;
+        let vertex_bytes = (vertices.len() * std::mem::size_of::<Vertex>()) as u64;
         let index_bytes = (mesh.triangles.len() * 12) as u64;
         for needed in [vertex_bytes, index_bytes] {
             if needed > max {
                 return Err(RenderError::MeshTooLarge { needed, max });
             }
         }
-        let vertices: Vec<Vertex> = mesh
-            .positions
-            .iter()
-            .zip(&mesh.normals)
-            .map(|(&position, &normal)| Vertex { position, normal })
-            .collect();
         // An empty buffer is legal but awkward to bind; a mesh without triangles still gets
         // one zero vertex and one degenerate triangle that no range ever draws.
         let vertex_data: &[u8] = if vertices.is_empty() {
@@ -63,10 +58,10 @@ impl GpuMesh {
         } else {
             bytemuck::cast_slice(&vertices)
         };
-        let index_data: &[u8] = if mesh.triangles.is_empty() {
+        let index_data: &[u8] = if triangles.is_empty() {
             &[0; 12]
         } else {
-            bytemuck::cast_slice(&mesh.triangles)
+            bytemuck::cast_slice(&triangles)
         };
         let vertices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("voyage surface vertices"),
@@ -94,6 +89,27 @@ impl GpuMesh {
     pub fn draw_ranges(&self, cells: &[u32]) -> Result<Vec<Range<u32>>, RenderError> {
         draw_ranges(&self.cell_indices, cells)
     }
+}
+
+/// The vertices and triangles laid out cell by cell: each cell's vertices contiguous (a
+/// vertex shared by two cells appears in both) and its triangles indexing only them. A draw
+/// of a run of cells then touches one short stretch of the vertex buffer; with the surface's
+/// own vertex order a cell's indices span most of the buffer, and a driver that shades the
+/// whole index range of a draw (Mesa's CPU driver does) would shade every vertex of the
+/// colon for every run of cells.
+fn cell_ordered(mesh: &CellMesh) -> (Vec<Vertex>, Vec<[u32; 3]>) {
+    let vertex = |v: u32| Vertex { position: mesh.positions[v as usize], normal: mesh.normals[v as usize] };
+    if !mesh.is_indexed() {
+        return (mesh.positions.iter().enumerate().map(|(v, _)| vertex(v as u32)).collect(), mesh.triangles.clone());
+    }
+    let vertices: Vec<Vertex> = mesh.cell_vertices.iter().map(|&v| vertex(v)).collect();
+    let mut triangles = Vec::with_capacity(mesh.triangles.len());
+    for (range, vrange) in mesh.cell_ranges.iter().zip(&mesh.cell_vertex_ranges) {
+        for t in &mesh.local_triangles[range.start as usize..range.end as usize] {
+            triangles.push(t.map(|l| vrange.start + l));
+        }
+    }
+    (vertices, triangles)
 }
 
 /// The index ranges that draw `cells`, in the order given, with consecutive cells that are

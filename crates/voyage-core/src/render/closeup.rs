@@ -29,6 +29,8 @@
 //! gamma-encoded like the surface renderer ([`super::shading::encode`]); alpha 0 and colour 0
 //! where the ray misses the box or meets only transparent values.
 
+use std::cell::RefCell;
+
 use glam::{DVec3, Vec3A, Vec4};
 use rayon::prelude::*;
 
@@ -46,6 +48,8 @@ const MIN_TRANSMITTANCE: f32 = 0.02;
 
 /// Air below, tissue above: segmentation's threshold, midway between air and soft tissue.
 const AIR_HU: f32 = -500.0;
+/// Tagged stool and fluid (and bone) above: segmentation's fluid threshold.
+const TAGGED_HU: f32 = 200.0;
 
 /// The lowest HU of the lookup table (and of CT): everything below is air.
 const TABLE_MIN_HU: i32 = -1024;
@@ -72,8 +76,6 @@ pub struct TransferFunction {
     /// (flat colour) to "on a boundary" (lit, with the surface opacity added): below the first,
     /// CT noise; above the second, a real interface.
     pub boundary_hu_per_mm: [f32; 2],
-    /// How far across a boundary (voxels) a boundary sample looks for the material it shows.
-    pub boundary_reach_voxels: f32,
     /// Extra opacity per mm on a boundary, so that surfaces show as surfaces while the tissue
     /// behind them stays translucent.
     pub surface_opacity_per_mm: f32,
@@ -104,7 +106,7 @@ impl TransferFunction {
         Ok(TransferFunction { points, ..Self::tissue() })
     }
 
-    /// The default for CT colonography: air transparent; fat faint yellow; soft tissue
+    /// The default for CT colonography: air transparent; fat (−190…−30 HU) faint yellow; soft tissue
     /// pink-red and translucent (a 1 cm polyp is a solid blob, ≈ 80 % opaque through its
     /// middle, and the wall behind it still shows); tagged stool and fluid, contrast and bone
     /// (> 200 HU) white and nearly opaque within a few mm.
@@ -117,15 +119,14 @@ impl TransferFunction {
         TransferFunction {
             points: vec![
                 p(-600.0, CLEAR, 0.0),
-                p(-220.0, FAT, 0.0),
-                p(-150.0, FAT, 0.04),
-                p(-50.0, FAT, 0.04),
-                p(-10.0, SOFT, 0.15),
+                p(-250.0, FAT, 0.0),
+                p(-190.0, FAT, 0.04),
+                p(-30.0, FAT, 0.04),
+                p(0.0, SOFT, 0.15),
                 p(100.0, SOFT, 0.15),
                 p(200.0, BRIGHT, 0.6),
             ],
             boundary_hu_per_mm: [60.0, 300.0],
-            boundary_reach_voxels: 1.0,
             surface_opacity_per_mm: 0.35,
             interior_light: 0.6,
             ambient: 0.2,
@@ -166,6 +167,12 @@ impl TransferFunction {
     }
 }
 
+/// The entry of the lookup table for `hu` (nearest HU, clamped to the table).
+#[inline]
+fn table_index(hu: f32) -> usize {
+    ((hu + 0.5) as i32 - TABLE_MIN_HU).clamp(0, TABLE_LEN as i32 - 1) as usize
+}
+
 /// Opacity of a slab `step_mm` thick of a material whose 1 mm slab has opacity `per_mm`.
 fn step_opacity(per_mm: f32, step_mm: f32) -> f32 {
     1.0 - (1.0 - per_mm.min(0.999)).powf(step_mm)
@@ -203,8 +210,14 @@ impl CloseupBox {
     }
 }
 
-/// Edge (voxels) of the blocks that record where the brick is all air, so that rays skip it.
+/// Edge (voxels) of the blocks that rays cross in one hop where all of a block is air, or
+/// all of it one uniform material.
 const BLOCK: usize = 4;
+
+/// A block's or a cell's class: every sample in it must be fetched and classified.
+const MIXED: u16 = 0;
+/// A block's class: every sample in it is transparent.
+const EMPTY: u16 = u16::MAX;
 
 /// The box's voxels as (HU, ∂HU/∂x, ∂HU/∂y, ∂HU/∂z), gradient in HU per mm, x fastest.
 struct Brick {
@@ -217,42 +230,82 @@ struct Brick {
     /// Largest coordinate a sample may take, just under dims − 1, so that a fetch's upper
     /// corner stays inside.
     hi: Vec3A,
-    /// Per block of BLOCK³ voxels: every sample whose fetch starts in it is below the
-    /// threshold given to [`Brick::mark_empty`], so transparent.
-    empty: Vec<bool>,
-    blocks: [usize; 3],
+    /// Per voxel cell (by its lowest voxel): 1 + the [`Runs`] entry every sample inside it
+    /// takes, where that is sure; else [`MIXED`].
+    cells: Vec<u16>,
+    /// Per block of BLOCK³ cells: [`EMPTY`], 1 + the run all its cells share, or [`MIXED`].
+    blocks: Vec<u16>,
+    block_dims: [usize; 3],
 }
 
 impl Brick {
     /// The voxels from `lo` to `hi` (inclusive volume indices).
     fn new(ct: &Volume<i16>, lo: [usize; 3], hi: [usize; 3]) -> Self {
         let dims = [0, 1, 2].map(|a| hi[a] - lo[a] + 1);
-        let mut data = vec![Vec4::ZERO; dims[0] * dims[1] * dims[2]];
-        data.par_chunks_mut(dims[0] * dims[1]).enumerate().for_each(|(k, slice)| {
-            for (n, v) in slice.iter_mut().enumerate() {
-                let g = [lo[0] + n % dims[0], lo[1] + n / dims[0], lo[2] + k];
-                *v = voxel_with_gradient(ct, g);
-            }
-        });
+        let data = sobel(&Grid::around(ct, lo, dims), ct.spacing());
         let [nx, ny, nz] = dims;
         let strides = [usize::from(nx > 1), nx * usize::from(ny > 1), nx * ny * usize::from(nz > 1)];
         // A one-voxel axis (a single slice) has no upper corner: samples stay on the slice.
         let hi = Vec3A::from_array(dims.map(|d| (d as f32 - 1.0 - 1e-3).max(0.0)));
-        let blocks = dims.map(|d| d.div_ceil(BLOCK));
-        Brick { dims, lo, data, strides, hi, empty: vec![false; blocks[0] * blocks[1] * blocks[2]], blocks }
+        let block_dims = dims.map(|d| d.div_ceil(BLOCK));
+        let n = data.len();
+        let (cells, blocks) = U16S.with(|p| (p.take(n, MIXED), p.take(block_dims.iter().product(), MIXED)));
+        Brick { dims, lo, data, strides, hi, cells, blocks, block_dims }
     }
 
-    /// Marks the blocks where every voxel a fetch may touch is below `hu`.
-    fn mark_empty(&mut self, hu: f32) {
-        let [bx, by, _] = self.blocks;
-        let empty: Vec<bool> = (0..self.empty.len())
+    /// Finds the cells whose every sample classifies alike: all eight corners in one run of
+    /// the table (so every value in between is), and all gradients at most √`interior_g2`
+    /// (so every interpolated gradient is: a norm is convex), which makes every sample an
+    /// unlit interior one. Rays then composite such a sample without fetching it — most of
+    /// the fat and soft tissue that the translucent transfer function lets them cross.
+    fn mark_uniform(&mut self, runs: &Runs, interior_g2: f32) {
+        const ROUGH: u16 = u16::MAX;
+        // Per voxel: its run where its gradient is small, else ROUGH.
+        let mut class = U16S.with(|p| p.take(self.data.len(), ROUGH));
+        for (c, v) in class.iter_mut().zip(&self.data) {
+            if Vec3A::new(v.y, v.z, v.w).length_squared() <= interior_g2 {
+                *c = runs.of(v.x);
+            }
+        }
+        let [dx, dy, dz] = self.strides;
+        let [nx, ny, nz] = self.dims;
+        let last = [nx - 1, ny - 1, nz - 1].map(|l| l.max(1));
+        self.cells.par_chunks_mut(nx).enumerate().for_each(|(r, row)| {
+            let (j, k) = (r % ny, r / ny);
+            if (j >= last[1] && dy > 0) || (k >= last[2] && dz > 0) {
+                return;
+            }
+            for (i, c) in row.iter_mut().enumerate().take(last[0]) {
+                let n = i + nx * r;
+                let a = class[n];
+                let same = [dx, dy, dx + dy, dz, dz + dx, dz + dy, dz + dy + dx].iter().all(|&o| class[n + o] == a);
+                *c = if same && a != ROUGH { a + 1 } else { MIXED };
+            }
+        });
+        U16S.with(|p| p.give(class));
+    }
+
+    /// Classifies the blocks (after [`Brick::mark_uniform`]): [`EMPTY`] where every voxel a
+    /// fetch in it may touch is below `clear_below` HU, one run where all its cells share it.
+    fn mark_blocks(&mut self, clear_below: f32) {
+        let [bx, by, _] = self.block_dims;
+        let [nx, ny, _] = self.dims;
+        let blocks: Vec<u16> = (0..self.blocks.len())
+            .into_par_iter()
             .map(|n| {
                 let b = [n % bx, (n / bx) % by, n / (bx * by)];
-                let range = |a: usize| b[a] * BLOCK..((b[a] + 1) * BLOCK + 1).min(self.dims[a]);
-                range(2).all(|k| range(1).all(|j| range(0).all(|i| self.data[i + self.dims[0] * (j + self.dims[1] * k)].x < hu)))
+                let cells = |a: usize| b[a] * BLOCK..((b[a] + 1) * BLOCK).min(self.dims[a]);
+                let voxels = |a: usize| b[a] * BLOCK..((b[a] + 1) * BLOCK + 1).min(self.dims[a]);
+                let all_voxels = |f: &dyn Fn(usize) -> bool| voxels(2).all(|k| voxels(1).all(|j| voxels(0).all(|i| f(i + nx * (j + ny * k)))));
+                let all_cells = |f: &dyn Fn(usize) -> bool| cells(2).all(|k| cells(1).all(|j| cells(0).all(|i| f(i + nx * (j + ny * k)))));
+                if all_voxels(&|v| self.data[v].x < clear_below) {
+                    return EMPTY;
+                }
+                let first = self.cells[b[0] * BLOCK + nx * (b[1] * BLOCK + ny * b[2] * BLOCK)];
+                if first != MIXED && all_cells(&|c| self.cells[c] == first) { first } else { MIXED }
             })
             .collect();
-        self.empty = empty;
+        self.blocks = blocks;
     }
 
     #[inline]
@@ -260,66 +313,214 @@ impl Brick {
         p.clamp(Vec3A::ZERO, self.hi)
     }
 
-    /// When a fetch at `p` is surely transparent, the number of steps `dp` that stay in its
-    /// empty block (at least 1); else 0.
-    #[inline]
-    fn empty_steps(&self, p: Vec3A, dp: Vec3A) -> usize {
-        let q = self.clamp(p);
-        let b = [q.x as u32 as usize / BLOCK, q.y as u32 as usize / BLOCK, q.z as u32 as usize / BLOCK];
-        if !self.empty[b[0] + self.blocks[0] * (b[1] + self.blocks[1] * b[2])] {
-            return 0;
-        }
-        // Steps m with p + m·dp still strictly inside the block: m < s.
-        let lo = Vec3A::new(b[0] as f32, b[1] as f32, b[2] as f32) * BLOCK as f32;
-        let hi = lo + Vec3A::splat(BLOCK as f32);
-        let to_wall = Vec3A::select(dp.cmpgt(Vec3A::ZERO), hi - p, lo - p) / dp;
-        let s = to_wall.min_element();
-        if s.is_finite() { (s.ceil() as u32 as usize).max(1) } else { 1 }
+    /// The class of the block of the cell at `ijk`.
+    #[inline(always)]
+    fn block_class(&self, ijk: [usize; 3]) -> u16 {
+        let b = ijk.map(|v| v / BLOCK);
+        self.blocks[b[0] + self.block_dims[0] * (b[1] + self.block_dims[1] * b[2])]
     }
 
-    /// Trilinear (HU, gradient) at brick coordinates `p` (voxel units from the brick's first
-    /// voxel), clamped into the brick.
+    /// How many steps `dp` from `p` stay in the block of the cell at `ijk` (at least 1);
+    /// `inv_dp` is 1/`dp`, with a huge value where `dp` is 0.
     #[inline(always)]
-    fn sample(&self, p: Vec3A) -> Vec4 {
+    fn steps_in_block(&self, ijk: [usize; 3], p: Vec3A, dp: Vec3A, inv_dp: Vec3A) -> usize {
+        let lo = Vec3A::new((ijk[0] / BLOCK) as f32, (ijk[1] / BLOCK) as f32, (ijk[2] / BLOCK) as f32) * BLOCK as f32;
+        let hi = lo + Vec3A::splat(BLOCK as f32);
+        // Steps m with p + m·dp still strictly inside: m < s.
+        let s = (Vec3A::select(dp.cmpge(Vec3A::ZERO), hi - p, lo - p) * inv_dp).min_element().max(0.0).min(1e6);
+        let m = s as u32;
+        (m + u32::from((m as f32) < s)).max(1) as usize
+    }
+
+    /// The cell holding brick coordinates `p` (voxel units from the brick's first voxel,
+    /// clamped into the brick).
+    #[inline(always)]
+    fn locate(&self, p: Vec3A) -> Spot {
         let p = self.clamp(p);
         // Non-negative after the clamp: truncation is floor, without a call to floorf.
-        let (i, j, k) = (p.x as u32 as usize, p.y as u32 as usize, p.z as u32 as usize);
-        let f = p - Vec3A::new(i as f32, j as f32, k as f32);
+        let ijk = [p.x as u32 as usize, p.y as u32 as usize, p.z as u32 as usize];
+        let n = ijk[0] + self.dims[0] * (ijk[1] + self.dims[1] * ijk[2]);
+        Spot { ijk, n, f: p - Vec3A::new(ijk[0] as f32, ijk[1] as f32, ijk[2] as f32) }
+    }
+
+    /// The sample at `p`.
+    #[inline(always)]
+    fn sample(&self, p: Vec3A) -> Sample {
+        let spot = self.locate(p);
+        self.fetch(spot.n, spot.f)
+    }
+
+    /// The sample at fraction `f` of cell `n`.
+    #[inline(always)]
+    fn fetch(&self, n: usize, f: Vec3A) -> Sample {
         let [dx, dy, dz] = self.strides;
-        let n = i + self.dims[0] * (j + self.dims[1] * k);
         let top = n + dx + dy + dz;
         // The clamp keeps every corner inside; this one check makes that plain, for the
         // unchecked reads below (eight bounds checks cost a quarter of the fetch).
         if top >= self.data.len() {
-            return Vec4::ZERO;
+            return Sample { v: Vec4::ZERO };
         }
         // SAFETY: every index read is between n and top, and top < data.len().
         let at = |o: usize| unsafe { *self.data.get_unchecked(n + o) };
-        let x00 = at(0).lerp(at(dx), f.x);
-        let x10 = at(dy).lerp(at(dy + dx), f.x);
-        let x01 = at(dz).lerp(at(dz + dx), f.x);
-        let x11 = at(dz + dy).lerp(at(dz + dy + dx), f.x);
-        x00.lerp(x10, f.y).lerp(x01.lerp(x11, f.y), f.z)
+        let c = [at(0), at(dx), at(dy), at(dy + dx), at(dz), at(dz + dx), at(dz + dy), at(dz + dy + dx)];
+        let x00 = c[0].lerp(c[1], f.x);
+        let x10 = c[2].lerp(c[3], f.x);
+        let x01 = c[4].lerp(c[5], f.x);
+        let x11 = c[6].lerp(c[7], f.x);
+        Sample { v: x00.lerp(x10, f.y).lerp(x01.lerp(x11, f.y), f.z) }
     }
 }
 
-/// HU at a voxel and its gradient by central differences (one-sided at the volume's border,
-/// zero along an axis of one voxel), in HU per mm.
-fn voxel_with_gradient(ct: &Volume<i16>, g: [usize; 3]) -> Vec4 {
-    let dims = ct.dims();
-    let s = ct.spacing();
-    let at = |g: [usize; 3]| f32::from(ct.get(g[0], g[1], g[2]));
-    let mut grad = [0.0f32; 3];
-    for a in 0..3 {
-        let (mut lo, mut hi) = (g, g);
-        lo[a] = g[a].saturating_sub(1);
-        hi[a] = (g[a] + 1).min(dims[a] - 1);
-        let span = (hi[a] - lo[a]) as f64 * s[a];
-        if span > 0.0 {
-            grad[a] = ((at(hi) - at(lo)) as f64 / span) as f32;
+/// A point in the brick: the lowest voxel of its cell, that voxel's index, and the point's
+/// fraction of the way to the opposite corner.
+struct Spot {
+    ijk: [usize; 3],
+    n: usize,
+    f: Vec3A,
+}
+
+/// What a ray reads at a point: HU and its gradient (HU/mm), interpolated.
+#[derive(Clone, Copy, Debug)]
+struct Sample {
+    v: Vec4,
+}
+
+impl Sample {
+    #[inline(always)]
+    fn hu(&self) -> f32 {
+        self.v.x
+    }
+
+    #[inline(always)]
+    fn gradient(&self) -> Vec3A {
+        Vec3A::new(self.v.y, self.v.z, self.v.w)
+    }
+}
+
+impl Drop for Brick {
+    fn drop(&mut self) {
+        VEC4S.with(|p| p.give(std::mem::take(&mut self.data)));
+        U16S.with(|p| {
+            p.give(std::mem::take(&mut self.cells));
+            p.give(std::mem::take(&mut self.blocks));
+        });
+    }
+}
+
+/// Buffers kept from one frame to the next on the thread that renders: the brick and its
+/// filters need a few MB each frame, and on the machines this runs on, memory fresh from the
+/// system costs more to touch (page faults) than the whole gradient computation.
+struct Pool<T>(RefCell<Vec<Vec<T>>>);
+
+impl<T: Copy> Pool<T> {
+    /// Buffers kept at most: as many as one frame uses at once.
+    const KEEP: usize = 8;
+
+    const fn new() -> Self {
+        Pool(RefCell::new(Vec::new()))
+    }
+
+    /// A buffer of `n` copies of `fill`.
+    fn take(&self, n: usize, fill: T) -> Vec<T> {
+        let mut v = self.0.borrow_mut().pop().unwrap_or_default();
+        v.clear();
+        v.resize(n, fill);
+        v
+    }
+
+    fn give(&self, v: Vec<T>) {
+        let mut pool = self.0.borrow_mut();
+        if pool.len() < Self::KEEP {
+            pool.push(v);
         }
     }
-    Vec4::new(at(g), grad[0], grad[1], grad[2])
+}
+
+thread_local! {
+    static F32S: Pool<f32> = const { Pool::new() };
+    static VEC4S: Pool<Vec4> = const { Pool::new() };
+    static U16S: Pool<u16> = const { Pool::new() };
+}
+
+/// HU over a box of voxels, x fastest: the input of the gradient filters.
+struct Grid {
+    dims: [usize; 3],
+    v: Vec<f32>,
+}
+
+impl Drop for Grid {
+    fn drop(&mut self) {
+        F32S.with(|p| p.give(std::mem::take(&mut self.v)));
+    }
+}
+
+impl Grid {
+    /// The `dims` voxels from `lo`, and one more on every side (the border voxel repeated
+    /// beyond the volume's edge).
+    fn around(ct: &Volume<i16>, lo: [usize; 3], dims: [usize; 3]) -> Self {
+        let d = dims.map(|n| n + 2);
+        let vd = ct.dims();
+        let at = |a: usize, n: usize| (lo[a] + n).saturating_sub(1).min(vd[a] - 1);
+        let mut v = F32S.with(|p| p.take(d[0] * d[1] * d[2], 0.0));
+        v.par_chunks_mut(d[0]).enumerate().for_each(|(r, row)| {
+            let (y, z) = (at(1, r % d[1]), at(2, r / d[1]));
+            for (x, o) in row.iter_mut().enumerate() {
+                *o = f32::from(ct.get(at(0, x), y, z));
+            }
+        });
+        Grid { dims: d, v }
+    }
+
+    /// `w`·(v[−1], v[0], v[+1]) along `axis` at every voxel that has both neighbours: the
+    /// grid shrinks by two along `axis`.
+    fn filter(&self, axis: usize, w: [f32; 3]) -> Grid {
+        let mut d = self.dims;
+        d[axis] -= 2;
+        let stride = [1, self.dims[0], self.dims[0] * self.dims[1]][axis];
+        let mut v = F32S.with(|p| p.take(d[0] * d[1] * d[2], 0.0));
+        v.par_chunks_mut(d[0]).enumerate().for_each(|(r, row)| {
+            let mut src = [0, r % d[1], r / d[1]];
+            src[axis] += 1;
+            let c = src[0] + self.dims[0] * (src[1] + self.dims[1] * src[2]);
+            let n = row.len();
+            let (a, b, e) = (&self.v[c - stride..][..n], &self.v[c..][..n], &self.v[c + stride..][..n]);
+            for (o, ((a, b), e)) in row.iter_mut().zip(a.iter().zip(b).zip(e)) {
+                *o = w[0] * a + w[1] * b + w[2] * e;
+            }
+        });
+        Grid { dims: d, v }
+    }
+}
+
+/// HU and gradient (HU/mm) at the inner voxels of `g`. The gradient is Sobel's: central
+/// differences smoothed by (¼, ½, ¼) across, which divides the noise in homogeneous tissue
+/// by about 2.7 and leaves a flat boundary's gradient as it is — so that CT noise neither
+/// lights a polyp's inside like a surface nor keeps its samples from being uniform.
+fn sobel(g: &Grid, spacing: [f64; 3]) -> Vec<Vec4> {
+    const SMOOTH: [f32; 3] = [0.25, 0.5, 0.25];
+    let (x, y, z) = (0, 1, 2);
+    // Smoothed across each axis; the differences along it are taken while assembling.
+    let sz = g.filter(z, SMOOTH);
+    let across_x = sz.filter(y, SMOOTH);
+    let across_y = sz.filter(x, SMOOTH);
+    let across_z = g.filter(x, SMOOTH).filter(y, SMOOTH);
+    let h = [0, 1, 2].map(|a| (0.5 / spacing[a]) as f32);
+    let [nx, ny, nz] = g.dims.map(|d| d - 2);
+    let mut out = VEC4S.with(|p| p.take(nx * ny * nz, Vec4::ZERO));
+    out.par_chunks_mut(nx).enumerate().for_each(|(r, row)| {
+        let (j, k) = (r % ny, r / ny);
+        fn at(g: &Grid, i: usize, j: usize, k: usize, n: usize) -> &[f32] {
+            &g.v[i + g.dims[0] * (j + g.dims[1] * k)..][..n]
+        }
+        let hu = at(g, 1, j + 1, k + 1, nx);
+        let (xm, xp) = (at(&across_x, 0, j, k, nx), at(&across_x, 2, j, k, nx));
+        let (ym, yp) = (at(&across_y, 0, j, k, nx), at(&across_y, 0, j + 2, k, nx));
+        let (zm, zp) = (at(&across_z, 0, j, k, nx), at(&across_z, 0, j, k + 2, nx));
+        for (i, o) in row.iter_mut().enumerate() {
+            *o = Vec4::new(hu[i], (xp[i] - xm[i]) * h[0], (yp[i] - ym[i]) * h[1], (zp[i] - zm[i]) * h[2]);
+        }
+    });
+    out
 }
 
 /// Where a ray `o + t·d` (t ≥ 0) is inside the box [lo, hi], by slabs; None when it misses.
@@ -366,8 +567,44 @@ impl StepTable {
 
     #[inline]
     fn get(&self, hu: f32) -> Vec4 {
-        let i = (hu + 0.5) as i32 - TABLE_MIN_HU;
-        self.rgba[i.clamp(0, TABLE_LEN as i32 - 1) as usize]
+        self.rgba[table_index(hu)]
+    }
+}
+
+/// The table cut into runs of equal entries: a cell whose values all fall in one run
+/// classifies the same wherever it is sampled.
+struct Runs {
+    /// Per table entry, its run.
+    id: Vec<u16>,
+    /// Per run: its entry, and the HU in its middle (what a ray remembers of a sample it did
+    /// not fetch).
+    entry: Vec<(Vec4, f32)>,
+}
+
+impl Runs {
+    fn new(table: &StepTable) -> Self {
+        let (mut id, mut entry) = (Vec::with_capacity(TABLE_LEN), Vec::<(Vec4, f32)>::new());
+        let mut start = 0;
+        for (i, e) in table.rgba.iter().enumerate() {
+            if i == 0 || *e != table.rgba[i - 1] {
+                if let Some(last) = entry.last_mut() {
+                    last.1 = (TABLE_MIN_HU as f32) + 0.5 * (start + i - 1) as f32;
+                }
+                entry.push((*e, 0.0));
+                start = i;
+            }
+            id.push((entry.len() - 1) as u16);
+        }
+        if let Some(last) = entry.last_mut() {
+            last.1 = (TABLE_MIN_HU as f32) + 0.5 * (start + TABLE_LEN - 1) as f32;
+        }
+        Runs { id, entry }
+    }
+
+    /// The run of the entry that `hu` looks up.
+    #[inline]
+    fn of(&self, hu: f32) -> u16 {
+        self.id[table_index(hu)]
     }
 }
 
@@ -393,27 +630,30 @@ struct Scene<'a> {
     tf: &'a TransferFunction,
     full: StepTable,
     sub: StepTable,
-    /// How far (mm) a boundary sample looks across the boundary for its material, per axis in
-    /// brick voxels.
-    reach_brick: Vec3A,
+    runs: Runs,
     /// Squared gradient magnitude (HU/mm)² up to which a sample is inside homogeneous tissue.
     interior_g2: f32,
+    /// Values below this are transparent whatever their gradient.
+    clear_below: f32,
+    /// One voxel (the smallest spacing), per axis in brick units: how far a boundary sample
+    /// looks for its dense side.
+    reach: Vec3A,
+    /// Where the boundary weight starts (HU/mm), and 1 / the width of its ramp.
+    boundary: (f32, f32),
+    /// 1 / voxel spacing: mm to brick units.
+    inv_spacing: DVec3,
     /// The clipped box (mm) rays are marched through.
     lo_mm: DVec3,
     hi_mm: DVec3,
-    spacing: DVec3,
     step_mm: f64,
 }
 
 impl Scene<'_> {
-    /// On a boundary the value is a partial-volume mix of the two sides (air and tissue
-    /// average to fat): the value a little way up the gradient (`up`, unit, mm) is the
-    /// material on the dense side, so that no yellow rim wraps every polyp and fold. Only
-    /// samples past the air threshold take it, so that surfaces sit where segmentation and
-    /// the mesh put them.
+    /// HU one voxel from `p` up the gradient (`up`, unit, mm): across a boundary, on its
+    /// dense side.
     #[inline]
-    fn dense_side(&self, p: Vec3A, hu: f32, up: Vec3A) -> f32 {
-        self.brick.sample(p + up * self.reach_brick).x.max(hu)
+    fn dense_side(&self, p: Vec3A, up: Vec3A) -> f32 {
+        self.brick.sample(p + up * self.reach).hu()
     }
 
     /// Premultiplied linear RGB and alpha seen along the ray from `eye` in direction `dir`
@@ -422,7 +662,7 @@ impl Scene<'_> {
         let Some((t0, t1)) = clip_ray(eye, dir, self.lo_mm, self.hi_mm) else { return (Vec3A::ZERO, 0.0) };
         let view = dir.as_vec3a();
         let lo_idx = DVec3::from_array(self.brick.lo.map(|v| v as f64));
-        let to_brick = |t: f64| ((eye + t * dir) / self.spacing - lo_idx).as_vec3a();
+        let to_brick = |t: f64| ((eye + t * dir) * self.inv_spacing - lo_idx).as_vec3a();
         let mut acc = Accum { color: Vec3A::ZERO, trans: 1.0 };
         // Samples on spheres around the eye, the same distances for every ray; each stands
         // for the stretch of ray before it. The first and a last one at the exit cover the
@@ -433,38 +673,75 @@ impl Scene<'_> {
             self.add_partial(&mut acc, to_brick(t1), view, (t1 - t0) / self.step_mm);
             return (acc.color, 1.0 - acc.trans);
         }
-        let mut p = to_brick(first * self.step_mm);
-        let dp = (dir * self.step_mm / self.spacing).as_vec3a();
-        let mut prev = self.brick.sample(p);
+        let p = to_brick(first * self.step_mm);
         if self.add_partial(&mut acc, p, view, first - t0 / self.step_mm) {
             return (acc.color, 1.0 - acc.trans);
         }
-        let (mut k, n) = (0, (last - first) as usize);
-        while k < n {
-            p += dp;
-            k += 1;
-            let skip = self.brick.empty_steps(p, dp);
-            if skip > 0 {
-                // Past the empty block; coming out of air, the next sample refines its stretch.
-                let m = (skip - 1).min(n - k);
-                p += dp * m as f32;
-                k += m;
-                prev = Vec4::splat(f32::NEG_INFINITY);
-                continue;
-            }
-            let s = self.brick.sample(p);
-            let done = if (s.x - prev.x).abs() > REFINE_HU { self.add_refined(&mut acc, p - dp, dp, s, view) } else { self.add(&mut acc, p, s, view, &self.full) };
-            if done {
-                return (acc.color, 1.0 - acc.trans);
-            }
-            prev = s;
+        let dp = (dir * self.step_mm * self.inv_spacing).as_vec3a();
+        if !self.march(&mut acc, p, dp, (last - first) as usize, view) {
+            self.add_partial(&mut acc, to_brick(t1), view, t1 / self.step_mm - last);
         }
-        self.add_partial(&mut acc, to_brick(t1), view, t1 / self.step_mm - last);
         (acc.color, 1.0 - acc.trans)
     }
 
-    #[inline]
-    fn add(&self, acc: &mut Accum, p: Vec3A, s: Vec4, view: Vec3A, table: &StepTable) -> bool {
+    /// The `n` whole steps `dp` after the sample at `p`; true once nothing behind can show.
+    fn march(&self, acc: &mut Accum, mut p: Vec3A, dp: Vec3A, n: usize, view: Vec3A) -> bool {
+        let inv_dp = Vec3A::select(dp.cmpeq(Vec3A::ZERO), Vec3A::splat(f32::MAX), dp.recip());
+        let mut prev_hu = self.brick.sample(p).hu();
+        let mut k = 0;
+        while k < n {
+            p += dp;
+            k += 1;
+            let spot = self.brick.locate(p);
+            let block = self.brick.block_class(spot.ijk);
+            if block == EMPTY {
+                // Past the empty block; coming out of air, the next sample refines its stretch.
+                let m = (self.brick.steps_in_block(spot.ijk, p, dp, inv_dp) - 1).min(n - k);
+                p += dp * m as f32;
+                k += m;
+                prev_hu = f32::NEG_INFINITY;
+                continue;
+            }
+            if block != MIXED {
+                let (e, hu) = self.runs.entry[block as usize - 1];
+                // Across the uniform block in one go (unless a boundary was just crossed).
+                if (hu - prev_hu).abs() <= REFINE_HU {
+                    let m = self.brick.steps_in_block(spot.ijk, p, dp, inv_dp).min(n - k + 1);
+                    p += dp * (m - 1) as f32;
+                    k += m - 1;
+                    prev_hu = hu;
+                    let alpha = 1.0 - (1.0 - e.w).powi(m as i32);
+                    if e.w > 0.0 && acc.add(Vec3A::from_vec4(e) * self.tf.interior_light, alpha) {
+                        return true;
+                    }
+                    continue;
+                }
+            }
+            if let Some(uniform) = self.brick.cells.get(spot.n).and_then(|&c| c.checked_sub(1)) {
+                let (e, hu) = self.runs.entry[uniform as usize];
+                // Unless coming from far off (a boundary just crossed: fetch and refine).
+                if (hu - prev_hu).abs() <= REFINE_HU {
+                    if e.w > 0.0 && acc.add(Vec3A::from_vec4(e) * self.tf.interior_light, e.w) {
+                        return true;
+                    }
+                    prev_hu = hu;
+                    continue;
+                }
+            }
+            let s = self.brick.fetch(spot.n, spot.f);
+            // Refine where the value jumps, unless only within air.
+            let jump = (s.hu() - prev_hu).abs() > REFINE_HU && s.hu().max(prev_hu) >= self.clear_below;
+            let done = if jump { self.add_refined(acc, p - dp, dp, s, view) } else { self.add(acc, p, s, view, &self.full) };
+            if done {
+                return true;
+            }
+            prev_hu = s.hu();
+        }
+        false
+    }
+
+    #[inline(always)]
+    fn add(&self, acc: &mut Accum, p: Vec3A, s: Sample, view: Vec3A, table: &StepTable) -> bool {
         match self.classify(p, s, view, table) {
             Some((rgb, alpha)) => acc.add(rgb, alpha),
             None => false,
@@ -473,7 +750,7 @@ impl Scene<'_> {
 
     /// The stretch from `start` to `start + dp` (brick units) in sub-steps; `end` is the
     /// sample at its end.
-    fn add_refined(&self, acc: &mut Accum, start: Vec3A, dp: Vec3A, end: Vec4, view: Vec3A) -> bool {
+    fn add_refined(&self, acc: &mut Accum, start: Vec3A, dp: Vec3A, end: Sample, view: Vec3A) -> bool {
         for k in 1..SUB_STEPS {
             let p = start + dp * (k as f32 / SUB_STEPS as f32);
             if self.add(acc, p, self.brick.sample(p), view, &self.sub) {
@@ -491,38 +768,38 @@ impl Scene<'_> {
         }
     }
 
-    /// Colour (lit where on a boundary) and opacity of the sample `s` taken at `p`; None when
-    /// transparent.
+    /// Colour (lit where on a boundary) and opacity of a sample; None when transparent.
     #[inline(always)]
-    fn classify(&self, p: Vec3A, s: Vec4, view: Vec3A, table: &StepTable) -> Option<(Vec3A, f32)> {
+    fn classify(&self, p: Vec3A, s: Sample, view: Vec3A, table: &StepTable) -> Option<(Vec3A, f32)> {
         let tf = self.tf;
-        let grad = Vec3A::new(s.y, s.z, s.w);
+        let grad = s.gradient();
         let g2 = grad.length_squared();
         // Inside homogeneous tissue (most samples that are not air): no square root needed.
         if g2 <= self.interior_g2 {
-            let e = table.get(s.x);
+            let e = table.get(s.hu());
             return (e.w > 0.0).then(|| (Vec3A::from_vec4(e) * tf.interior_light, e.w));
         }
-        if s.x < AIR_HU && table.get(s.x).w <= 0.0 {
+        if s.hu() < AIR_HU && table.get(s.hu()).w <= 0.0 {
             return None;
         }
-        let g = g2.sqrt();
-        let w = smoothstep(tf.boundary_hu_per_mm[0], tf.boundary_hu_per_mm[1], g);
-        let hu = if s.x >= AIR_HU { s.x + w * (self.dense_side(p, s.x, grad / g) - s.x) } else { s.x };
+        let inv_g = g2.sqrt().recip();
+        let t = ((g2 * inv_g - self.boundary.0) * self.boundary.1).clamp(0.0, 1.0);
+        let w = t * t * (3.0 - 2.0 * t);
+        // On a boundary the value is a partial-volume mix of the two sides (air and soft
+        // tissue average to fat; air and tagged fluid to soft tissue): past the air threshold,
+        // show the material a voxel up the gradient, so that no yellow or pink rim wraps
+        // every fold, polyp and pool, and the surface sits where segmentation and the mesh
+        // put it. (Tagged material itself needs no look: nothing above it is different.)
+        let hu = if (AIR_HU..TAGGED_HU).contains(&s.hu()) { s.hu() + w * (self.dense_side(p, grad * inv_g) - s.hu()).max(0.0) } else { s.hu() };
         let e = table.get(hu);
         if e.w <= 0.0 {
             return None;
         }
-        let ndl = (grad.dot(view) / g).abs();
+        let ndl = grad.dot(view).abs() * inv_g;
         let lit = Vec3A::from_vec4(e) * (tf.ambient + tf.diffuse * ndl) + Vec3A::splat(tf.specular * ndl.powi(16));
         let alpha = 1.0 - (1.0 - e.w) * (1.0 - w * table.surface_alpha);
         Some(((Vec3A::from_vec4(e) * tf.interior_light).lerp(lit, w), alpha))
     }
-}
-
-fn smoothstep(e0: f32, e1: f32, x: f32) -> f32 {
-    let t = ((x - e0) / (e1 - e0).max(f32::MIN_POSITIVE)).clamp(0.0, 1.0);
-    t * t * (3.0 - 2.0 * t)
 }
 
 /// The frame-constant part of a render, or None when the box misses the volume.
@@ -542,18 +819,25 @@ fn scene<'a>(ct: &Volume<i16>, region: &CloseupBox, tf: &'a TransferFunction) ->
     let hi = [0, 1, 2].map(|a| (hi_i[a] as usize + 1).min(geom.dims[a] - 1));
     let step_mm = 0.5 * spacing.min_element();
     let full = StepTable::new(tf, step_mm as f32);
+    let runs = Runs::new(&full);
+    let interior_g2 = tf.boundary_hu_per_mm[0].max(0.0).powi(2);
     let mut brick = Brick::new(ct, lo, hi);
-    brick.mark_empty(full.clear_below().min(AIR_HU));
+    brick.mark_uniform(&runs, interior_g2);
+    let clear_below = full.clear_below().min(AIR_HU);
+    brick.mark_blocks(clear_below);
     Some(Scene {
         brick,
         tf,
         full,
         sub: StepTable::new(tf, (step_mm / SUB_STEPS as f64) as f32),
-        interior_g2: tf.boundary_hu_per_mm[0].max(0.0).powi(2),
-        reach_brick: (tf.boundary_reach_voxels as f64 * spacing.min_element() / spacing).as_vec3a(),
+        runs,
+        interior_g2,
+        clear_below,
+        boundary: (tf.boundary_hu_per_mm[0], 1.0 / (tf.boundary_hu_per_mm[1] - tf.boundary_hu_per_mm[0]).max(1e-6)),
+        inv_spacing: spacing.recip(),
+        reach: (spacing.min_element() / spacing).as_vec3a(),
         lo_mm,
         hi_mm,
-        spacing,
         step_mm,
     })
 }
@@ -647,7 +931,7 @@ mod tests {
             .collect();
         let ct = Volume::from_vec(g, data).unwrap();
         let b = Brick::new(&ct, [1, 0, 1], [4, 4, 3]);
-        let s = b.sample(Vec3A::new(1.5, 2.25, 0.5));
+        let s = b.sample(Vec3A::new(1.5, 2.25, 0.5)).v;
         // Brick (1.5, 2.25, 0.5) is volume index (2.5, 2.25, 1.5): x = 1.25 mm, z = 3 mm.
         assert!((s.x - (12.5 + 9.0)).abs() < 1e-4, "{s}");
         assert!((s.y - 10.0).abs() < 1e-4 && s.z.abs() < 1e-4 && (s.w - 3.0).abs() < 1e-4, "{s}");
@@ -665,80 +949,5 @@ mod tests {
         // 6 mm of soft tissue: 1 − 0.85⁶ ≈ 62 % opaque.
         assert!(img[(8 * 16 + 8) * 4 + 3] > 140, "{:?}", &img[(8 * 16 + 8) * 4..][..4]);
         assert!(render_closeup(&ct, &cam, &near, 0, 16, &TransferFunction::tissue()).is_empty());
-    }
-}
-#[cfg(test)]
-mod debug_rim {
-    use super::*;
-    use crate::Geometry;
-    #[test]
-    fn rim() {
-        let g = Geometry::new([64; 3], [0.75; 3], [0.0; 3]).unwrap();
-        let c = DVec3::splat(24.0);
-        let data: Vec<i16> = (0..g.len()).map(|n| { let [i,j,k] = g.ijk(n); let p = DVec3::new(i as f64, j as f64, k as f64)*0.75; let f = (0.5 - ((p-c).length()-6.0)/0.75).clamp(0.0,1.0); (-1000.0 + f*1040.0).round() as i16 }).collect();
-        let ct = Volume::from_vec(g, data).unwrap();
-        let tf = TransferFunction::tissue();
-        let sc = scene(&ct, &CloseupBox::around(c, 15.0), &tf).unwrap();
-        for off in [5.0, 5.5, 5.8, 6.0] {
-            let eye = c + DVec3::new(off, 0.0, -30.0);
-            let lo_idx = DVec3::from_array(sc.brick.lo.map(|v| v as f64));
-            eprintln!("offset {off}");
-            let mut t = 22.0;
-            while t < 32.0 {
-                let pm = eye + DVec3::Z * t;
-                let p = (pm / sc.spacing - lo_idx).as_vec3a();
-                let s = sc.brick.sample(p);
-                let grad = Vec3A::new(s.y, s.z, s.w); let gl = grad.length();
-                let w = smoothstep(tf.boundary_hu_per_mm[0], tf.boundary_hu_per_mm[1], gl);
-                let dense = if w > 0.0 { sc.dense_side(p, s.x, grad / gl) } else { s.x };
-                let cl = sc.classify(p, s, Vec3A::Z, &sc.full);
-                if s.x > -900.0 { eprintln!("  t {t:.2} hu {:.0} g {gl:.0} w {w:.2} dense {dense:.0} -> {:?}", s.x, cl); }
-                t += 0.375;
-            }
-        }
-    }
-}
-#[cfg(test)]
-mod debug_bench {
-    use super::*;
-    use crate::Geometry;
-    struct Cpu(u64);
-    impl Cpu {
-        fn now() -> Self { Cpu(std::fs::read_to_string("/proc/thread-self/schedstat").unwrap().split_whitespace().next().unwrap().parse().unwrap()) }
-        fn elapsed(&self) -> std::time::Duration { std::time::Duration::from_nanos(Cpu::now().0 - self.0) }
-    }
-    #[test]
-    fn bench() {
-        let g = Geometry::new([64, 64, 48], [0.75, 0.75, 1.0], [0.0; 3]).unwrap();
-        let data: Vec<i16> = (0..g.len()).map(|n| (-100 + ((n * 2654435761) % 41) as i64 - 20) as i16).collect();
-        let ct = Volume::from_vec(g, data).unwrap();
-        let tf = TransferFunction::tissue();
-        let c = DVec3::new(24.0, 24.0, 24.0);
-        let sc = scene(&ct, &CloseupBox::around(c, 20.0), &tf).unwrap();
-        let dp = Vec3A::new(0.3, 0.2, 0.25);
-        let n = 2_700_000;
-        let t = Cpu::now();
-        let mut acc = Vec4::ZERO;
-        let mut p = Vec3A::new(2.0, 2.0, 2.0);
-        for i in 0..n { acc += sc.brick.sample(p); p += dp; if i % 100 == 99 { p = Vec3A::new(2.0 + (i % 7) as f32, 2.0 + (i % 13) as f32, 2.0); } }
-        eprintln!("fetch only: {:.1} ns/fetch {acc}", t.elapsed().as_secs_f64() * 1e9 / n as f64);
-        let t = Cpu::now();
-        let mut a = Accum { color: Vec3A::ZERO, trans: 1.0 };
-        let mut p = Vec3A::new(2.0, 2.0, 2.0);
-        for i in 0..n { let s = sc.brick.sample(p); sc.add(&mut a, p, s, Vec3A::Z, &sc.full); a.trans = 1.0; p += dp; if i % 100 == 99 { p = Vec3A::new(2.0 + (i % 7) as f32, 2.0 + (i % 13) as f32, 2.0); } }
-        eprintln!("fetch+classify: {:.1} ns/fetch {}", t.elapsed().as_secs_f64() * 1e9 / n as f64, a.color);
-        let cam = crate::camera::Camera::new(crate::camera::Pose::looking(c - DVec3::Z * 25.0, DVec3::Z, DVec3::Y));
-        let mut best = f64::MAX;
-        for _ in 0..7 {
-            let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
-            let ms = pool.install(|| {
-                let t = Cpu::now();
-                let img = render_closeup(&ct, &cam, &CloseupBox::around(c, 20.0), 256, 256, &tf);
-                std::hint::black_box(img);
-                t.elapsed().as_secs_f64() * 1e3
-            });
-            best = best.min(ms);
-        }
-        eprintln!("render: best {best:.1} ms");
     }
 }

@@ -1,6 +1,7 @@
 //! Rendering without a GPU: the reference rasterizer (depth and triangle-id buffers), the
 //! endoscope shading both renderers share, the surface laid out by cell, and the visibility
-//! strategies that choose which cells to draw (paper §4.3).
+//! strategies that choose which cells to draw (paper §4.3); and close-up volume rendering of
+//! the CT in a small box (paper Fig. 9).
 
 pub mod closeup;
 pub mod mesh;
@@ -9,6 +10,7 @@ pub mod shading;
 pub mod survey;
 pub mod visibility;
 
+pub use closeup::{render_closeup, CloseupBox, TfPoint, TransferFunction};
 pub use mesh::CellMesh;
 pub use raster::{render_rgba, shade, Frame, Pixel, Rasterizer, View, NO_TRIANGLE};
 pub use shading::Lighting;
