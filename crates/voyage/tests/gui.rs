@@ -42,7 +42,7 @@ impl Display {
             if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() {
                 continue;
             }
-            let server = Command::new("Xvfb").args([name.as_str(), "-screen", "0", "1280x800x24", "-nolisten", "tcp"]).stdout(Stdio::null()).stderr(Stdio::null()).spawn().expect("start Xvfb");
+            let mut server = Command::new("Xvfb").args([name.as_str(), "-screen", "0", "1280x800x24", "-nolisten", "tcp"]).stdout(Stdio::null()).stderr(Stdio::null()).spawn().expect("start Xvfb");
             let t = Instant::now();
             while t.elapsed() < Duration::from_secs(10) {
                 if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() {
@@ -50,6 +50,8 @@ impl Display {
                 }
                 std::thread::sleep(Duration::from_millis(50));
             }
+            let _ = server.kill();
+            let _ = server.wait();
         }
         panic!("no free X display");
     }

@@ -327,7 +327,7 @@ impl Brick {
         let lo = Vec3A::new((ijk[0] / BLOCK) as f32, (ijk[1] / BLOCK) as f32, (ijk[2] / BLOCK) as f32) * BLOCK as f32;
         let hi = lo + Vec3A::splat(BLOCK as f32);
         // Steps m with p + m·dp still strictly inside: m < s.
-        let s = (Vec3A::select(dp.cmpge(Vec3A::ZERO), hi - p, lo - p) * inv_dp).min_element().max(0.0).min(1e6);
+        let s = (Vec3A::select(dp.cmpge(Vec3A::ZERO), hi - p, lo - p) * inv_dp).min_element().clamp(0.0, 1e6);
         let m = s as u32;
         (m + u32::from((m as f32) < s)).max(1) as usize
     }

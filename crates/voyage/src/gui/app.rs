@@ -912,20 +912,12 @@ impl eframe::App for App {
         };
         ctx.send_viewport_cmd(egui::ViewportCommand::Title(title));
 
-        let t0 = Instant::now();
         self.top_bar(ui);
         self.controls(ui);
-        let t1 = Instant::now();
         self.slice_panel(ui);
-        let t2 = Instant::now();
         self.scout_panel(ui);
-        let t3 = Instant::now();
         self.endoscopy_panel(ui, frame, dt);
-        let t4 = Instant::now();
         self.help(&ctx);
-        if std::env::var_os("VOYAGE_TRACE").is_some() {
-            eprintln!("trace: controls {:.1} slices {:.1} scout {:.1} endoscopy {:.1} ms", (t1 - t0).as_secs_f64() * 1e3, (t2 - t1).as_secs_f64() * 1e3, (t3 - t2).as_secs_f64() * 1e3, (t4 - t3).as_secs_f64() * 1e3);
-        }
 
         if self.job.is_none() {
             self.frames += 1;

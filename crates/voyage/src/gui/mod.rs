@@ -86,7 +86,7 @@ pub fn demo(window: &WindowArgs, small: bool) -> anyhow::Result<()> {
 /// command fail after the window closes.
 fn run(source: Option<Source>, w: &WindowArgs) -> anyhow::Result<()> {
     let outcome = Arc::new(Mutex::new(Outcome::default()));
-    let mut options = eframe::NativeOptions {
+    let options = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default().with_inner_size([w.size.0 as f32, w.size.1 as f32]).with_min_inner_size([640.0, 480.0]).with_title("voyage"),
         renderer: eframe::Renderer::Wgpu,
         // The endoscopic view is drawn inside egui's render pass and needs a depth buffer.
@@ -96,9 +96,6 @@ fn run(source: Option<Source>, w: &WindowArgs) -> anyhow::Result<()> {
         dithering: false,
         ..Default::default()
     };
-    if std::env::var_os("VOYAGE_NO_VSYNC").is_some() {
-        options.wgpu_options.surface.present_mode = wgpu::PresentMode::AutoNoVsync;
-    }
     let (args, out) = (w.clone(), outcome.clone());
     eframe::run_native("voyage", options, Box::new(move |cc| Ok(Box::new(App::new(cc, source, args, out)))))
         .map_err(|e| anyhow::anyhow!("cannot open the window: {e} (a display is needed: set DISPLAY, or run under xvfb-run)"))?;

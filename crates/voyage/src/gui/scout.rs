@@ -80,7 +80,8 @@ pub struct ScoutView {
     zoom: f64,
     /// Patient axes in the volume's local frame: left, posterior, superior.
     anatomy: DMat3,
-    cached: Option<(CacheKey, egui::TextureHandle)>,
+    /// The drawn surface, and the part of the panel it covers (as a fraction of it).
+    cached: Option<(CacheKey, egui::TextureHandle, Rect)>,
 }
 
 #[derive(Clone, Copy, PartialEq)]
@@ -147,14 +148,15 @@ impl ScoutView {
             (self.yaw, self.pitch, self.zoom) = (0.0, 0.0, 1.0);
         }
         let painter = ui.painter_at(rect);
-        painter.rect_filled(rect, 0.0, Color32::from_gray(14));
         let proj = self.projection(mesh, rect);
         let ppp = ui.ctx().pixels_per_point();
-        let texture = self.surface(ui.ctx(), mesh, &proj, rect, ppp);
-        painter.image(texture, rect, Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)), Color32::WHITE);
+        let (texture, used) = self.surface(ui.ctx(), mesh, marks.centerline, &proj, rect, ppp);
+        // Only the part the colon covers: the rest is transparent, and on a CPU Vulkan driver
+        // every pixel drawn costs.
+        let shown = Rect::from_min_max(rect.lerp_inside(used.min.to_vec2()), rect.lerp_inside(used.max.to_vec2()));
+        painter.image(texture, shown, used, Color32::WHITE);
 
         let line: Vec<Pos2> = marks.centerline.iter().map(|p| proj.to_screen(DVec3::from_array(*p))).collect();
-        painter.add(Shape::line(line.clone(), Stroke::new(1.5, Color32::from_rgb(40, 220, 60))));
         for (label, p) in &marks.markers {
             let s = proj.to_screen(*p);
             painter.circle_filled(s, 4.0, Color32::YELLOW);
@@ -182,33 +184,52 @@ impl ScoutView {
     /// driver would otherwise blend every scout triangle again each frame. Faces seen
     /// edge-on are more opaque than faces seen head-on: the outline and the folds stand out
     /// while the far side shows through (an "x-ray" look).
-    fn surface(&mut self, ctx: &egui::Context, mesh: &ScoutMesh, proj: &Projection, rect: Rect, ppp: f32) -> egui::TextureId {
+    fn surface(&mut self, ctx: &egui::Context, mesh: &ScoutMesh, centerline: &[[f64; 3]], proj: &Projection, rect: Rect, ppp: f32) -> (egui::TextureId, Rect) {
         let key = CacheKey { yaw: self.yaw, pitch: self.pitch, zoom: self.zoom, rect };
-        if let Some((k, t)) = &self.cached
+        if let Some((k, t, used)) = &self.cached
             && *k == key
         {
-            return t.id();
+            return (t.id(), *used);
         }
-        let image = rasterize(mesh, proj, rect, ppp);
+        let image = rasterize(mesh, centerline, proj, rect, ppp);
+        let used = covered(&image);
         match &mut self.cached {
-            Some((k, t)) => {
+            Some((k, t, u)) => {
                 t.set(image, egui::TextureOptions::LINEAR);
-                *k = key;
-                t.id()
+                (*k, *u) = (key, used);
+                (t.id(), used)
             }
             None => {
                 let t = ctx.load_texture("scout", image, egui::TextureOptions::LINEAR);
                 let id = t.id();
-                self.cached = Some((key, t));
-                id
+                self.cached = Some((key, t, used));
+                (id, used)
             }
         }
     }
 }
 
+/// The smallest rectangle (in fractions of the image, as texture coordinates) holding every
+/// pixel that is not fully transparent.
+fn covered(image: &egui::ColorImage) -> Rect {
+    let [w, h] = image.size;
+    let (mut x0, mut y0, mut x1, mut y1) = (w, h, 0, 0);
+    for (i, p) in image.pixels.iter().enumerate() {
+        if p.a() > 0 {
+            let (x, y) = (i % w, i / w);
+            (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x + 1), y1.max(y + 1));
+        }
+    }
+    if x0 >= x1 {
+        return Rect::from_min_max(Pos2::ZERO, Pos2::ZERO);
+    }
+    Rect::from_min_max(Pos2::new(x0 as f32 / w as f32, y0 as f32 / h as f32), Pos2::new(x1 as f32 / w as f32, y1 as f32 / h as f32))
+}
+
 /// Alpha-blends the scout's triangles, in the mesh's order, into an image of `rect` at
-/// `ppp` pixels per point (premultiplied colour, transparent where nothing is).
-fn rasterize(mesh: &ScoutMesh, proj: &Projection, rect: Rect, ppp: f32) -> egui::ColorImage {
+/// `ppp` pixels per point (premultiplied colour, transparent where nothing is), and draws
+/// the centerline over them in green (the paper's colour).
+fn rasterize(mesh: &ScoutMesh, centerline: &[[f64; 3]], proj: &Projection, rect: Rect, ppp: f32) -> egui::ColorImage {
     let (w, h) = (((rect.width() * ppp).round() as usize).max(1), ((rect.height() * ppp).round() as usize).max(1));
     let mut buf = vec![[0f32; 4]; w * h];
     let to_px = |p: DVec3| {
@@ -223,8 +244,32 @@ fn rasterize(mesh: &ScoutMesh, proj: &Projection, rect: Rect, ppp: f32) -> egui:
         let v = t.map(|i| to_px(mesh.positions[i as usize]));
         fill_triangle(&mut buf, w, h, v, color);
     }
+    let green = [40.0 / 255.0, 220.0 / 255.0, 60.0 / 255.0, 1.0];
+    for pair in centerline.windows(2) {
+        let (a, b) = (to_px(DVec3::from_array(pair[0])), to_px(DVec3::from_array(pair[1])));
+        stroke(&mut buf, w, h, a, b, (1.5 * ppp) as f64, green);
+    }
     let pixels = buf.iter().map(|c| Color32::from_rgba_premultiplied((c[0] * 255.0) as u8, (c[1] * 255.0) as u8, (c[2] * 255.0) as u8, (c[3] * 255.0) as u8)).collect();
     egui::ColorImage::new([w, h], pixels)
+}
+
+/// Paints the pixels within `width / 2` of the segment a–b with an opaque colour.
+fn stroke(buf: &mut [[f32; 4]], w: usize, h: usize, a: [f64; 2], b: [f64; 2], width: f64, c: [f32; 4]) {
+    let r = 0.5 * width.max(1.0);
+    let (x0, x1) = ((a[0].min(b[0]) - r).floor().max(0.0) as usize, ((a[0].max(b[0]) + r).ceil().max(0.0) as usize).min(w));
+    let (y0, y1) = ((a[1].min(b[1]) - r).floor().max(0.0) as usize, ((a[1].max(b[1]) + r).ceil().max(0.0) as usize).min(h));
+    let d = [b[0] - a[0], b[1] - a[1]];
+    let len2 = (d[0] * d[0] + d[1] * d[1]).max(1e-12);
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let p = [x as f64 + 0.5 - a[0], y as f64 + 0.5 - a[1]];
+            let t = ((p[0] * d[0] + p[1] * d[1]) / len2).clamp(0.0, 1.0);
+            let (ex, ey) = (p[0] - t * d[0], p[1] - t * d[1]);
+            if ex * ex + ey * ey <= r * r {
+                buf[y * w + x] = c;
+            }
+        }
+    }
 }
 
 /// Blends a premultiplied colour "over" every pixel whose centre lies in the triangle
