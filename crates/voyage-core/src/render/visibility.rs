@@ -160,11 +160,7 @@ impl Visibility {
             let mut region = Region::full(&view);
             let mut cell = home;
             loop {
-                let (portal, next) = match dir {
-                    TOWARD_TARGET if cell + 1 < ncells => (cell as usize, cell + 1),
-                    TOWARD_SOURCE if cell > 0 => (cell as usize - 1, cell - 1),
-                    _ => break,
-                };
+                let Some((portal, next)) = beyond(dir, cell, ncells) else { break };
                 drawn.portals_tested += 1;
                 if !self.narrow(&mut region, portal, frame, &view, &mut drawn.depth_pixels_read) {
                     break;
@@ -196,11 +192,7 @@ impl Visibility {
             let mut region = Region::full(view);
             let mut cell = home;
             loop {
-                let (portal, next) = match dir {
-                    TOWARD_TARGET if cell + 1 < ncells => (cell as usize, cell + 1),
-                    TOWARD_SOURCE if cell > 0 => (cell as usize - 1, cell - 1),
-                    _ => break,
-                };
+                let Some((portal, next)) = beyond(dir, cell, ncells) else { break };
                 drawn.portals_tested += 1;
                 let Some(outline) = project_prism(&self.portals[portal].corners, view) else { break };
                 let open = match self.strategy {
@@ -230,6 +222,16 @@ impl Visibility {
             Strategy::Paper => region.clip_rect(&outline, view) && region.drop_covered_rows(frame, outline.min_depth, reads),
             Strategy::Ours => region.clip_hull(&outline, view) && region.trim_covered(frame, shape, outline.min_depth, view, reads),
         }
+    }
+}
+
+/// The portal from `cell` onward in sequence `dir`, and the cell beyond it (None at the
+/// chain's end).
+fn beyond(dir: usize, cell: u32, ncells: u32) -> Option<(usize, u32)> {
+    match dir {
+        TOWARD_TARGET if cell + 1 < ncells => Some((cell as usize, cell + 1)),
+        TOWARD_SOURCE if cell > 0 => Some((cell as usize - 1, cell - 1)),
+        _ => None,
     }
 }
 
