@@ -80,6 +80,7 @@ fn a_soft_tissue_sphere_renders_as_an_opaque_disc_of_its_projected_size() {
     let img = render_closeup(&ct, &cam, &CloseupBox::in_front_of(&cam, 30.0, 15.0), SIZE, SIZE, &TransferFunction::tissue());
     let expect = projected_radius(r, 30.0);
     let c = SIZE as f64 / 2.0;
+    // Through the middle of the disc a ray crosses ≥ 9.6 mm of tissue: ≥ 75 % opaque.
     for (x, y) in disc(c, c, 0.6 * expect) {
         let [red, g, b] = rgb(&img, x, y);
         assert!(alpha(&img, x, y) > 190, "({x}, {y}) alpha {}", alpha(&img, x, y));
@@ -89,7 +90,8 @@ fn a_soft_tissue_sphere_renders_as_an_opaque_disc_of_its_projected_size() {
     let measured = (opaque as f64 / std::f64::consts::PI).sqrt();
     eprintln!("sphere disc radius: rendered {measured:.2} px, projected {expect:.2} px");
     assert!((measured - expect).abs() <= 1.5, "rendered radius {measured:.2} px, projected {expect:.2} px");
-    let outside = disc(c, c, 1e9).into_iter().filter(|&(x, y)| (x as f64 + 0.5 - c).hypot(y as f64 + 0.5 - c) > expect + 2.0);
+    let every_pixel = disc(c, c, 1e9);
+    let outside = every_pixel.into_iter().filter(|&(x, y)| (x as f64 + 0.5 - c).hypot(y as f64 + 0.5 - c) > expect + 2.0);
     for (x, y) in outside {
         assert_eq!(alpha(&img, x, y), 0, "({x}, {y}) outside the sphere is not transparent");
     }
@@ -254,7 +256,7 @@ fn the_pipe_polyp_shows_as_an_opaque_soft_tissue_blob() {
     let view = View::new(&cam, SIZE, SIZE);
     let (x, y) = view.project(view.to_eye(c));
     assert!((x - 128.0).abs() < 1e-6 && (y - 128.0).abs() < 1e-6);
-    // The polyp's head: 3.5 mm radius at ≈ 25 mm covers ≈ 18 px; its middle third.
+    // The middle third of the polyp's head (3.5 mm radius, ≈ 31 mm away: ≈ 15 px).
     let r_px = projected_radius(polyp.diameter_mm / 2.0, (c - eye).length());
     for (px, py) in disc(x, y, r_px / 3.0) {
         let [red, g, b] = rgb(&img, px, py);

@@ -1,40 +1,50 @@
-//! Close-up volume rendering (paper §6, Fig. 9): the CT ray-cast in a small box in front of
-//! the camera, so that the radiologist sees what lies under a suspicious bump — a polyp is
-//! homogeneous soft tissue, stool is mottled with air inside, tagged stool and fluid are
-//! bright.
+//! Close-up volume rendering (paper §5, Fig. 9, the "volume render" option): the CT ray-cast
+//! in a small box in front of the camera or around a marker, so that the radiologist sees
+//! what lies under a suspicious bump — a polyp is homogeneous soft tissue, stool is mottled
+//! with air inside, tagged stool and fluid are bright.
 //!
-//! The image lines up pixel for pixel with the endoscopic view of the same [`Camera`] and size
-//! (`render_rgba`): the ray of pixel (x, y) is `camera.pixel_ray(x + 0.5, y + 0.5, ..)`, the
-//! ray through that pixel's centre in the rasterizer. So the GUI can lay the close-up over the
-//! surface image, or show it beside it.
+//! The image lines up pixel for pixel with the endoscopic view of the same [`Camera`] and
+//! size (`render_rgba`): the ray of pixel (x, y) is the rasterizer's
+//! `View::pixel_direction(x, y)` — `camera.pixel_ray(x + 0.5, y + 0.5, ..)`, through the
+//! pixel's centre. So the GUI can lay the close-up over the surface image, or beside it.
 //!
 //! How a ray is cast:
-//! - The box is axis-aligned in volume-local mm and clipped to the grid of voxel centres;
-//!   rays outside it stay transparent.
-//! - The box's voxels are copied once per frame into a brick of (HU, ∇HU) as f32, the gradient
-//!   by central differences on the voxel grid in HU/mm. One trilinear fetch of the brick then
-//!   gives the value and a smooth gradient together (interpolating the voxel gradients avoids
-//!   the facets of the trilinear interpolant's own, cell-wise gradient).
-//! - Samples lie on spheres around the eye, every `step` mm (half the smallest voxel
-//!   spacing), so neighbouring rays sample alike and no wood-grain pattern appears.
-//! - Front-to-back compositing with early termination once 98 % opaque; opacity is given per
-//!   mm and corrected for the step: α_step = 1 − (1 − α_mm)^step.
-//! - A headlight: the light sits at the eye, as in the endoscopic view. Where the gradient is
-//!   strong (a boundary) the sample is lit by |n·l| (two-sided: the far wall of an air pocket
-//!   faces the camera from inside the tissue) and made more opaque, so surfaces read in 3D;
-//!   inside homogeneous tissue the gradient is only noise, so the sample keeps its flat colour
-//!   — otherwise noise would light a polyp as mottled as stool.
+//! - The box is axis-aligned in volume-local mm (voxel i at i·spacing, as everywhere) and
+//!   clipped to the grid of voxel centres; rays outside it stay transparent.
+//! - Once per frame the box's voxels become a brick of (HU, ∇HU) in f32, the gradient by
+//!   Sobel's central differences (smoothed across) in HU/mm. One trilinear fetch then gives
+//!   the value and a smooth gradient together.
+//! - Samples lie on spheres around the eye every half of the smallest voxel spacing (the same
+//!   distances on every ray, so no wood-grain pattern), and every quarter of that where the
+//!   value jumps (a boundary is a voxel thick; sampled coarsely, flat walls show rings). The
+//!   first and last samples stand for the partial steps at the box's faces.
+//! - Front-to-back compositing, stopped once 98 % opaque; opacity is given per mm and
+//!   corrected for the step: α_step = 1 − (1 − α_mm)^step.
+//! - A headlight at the eye falling off with distance, as in the endoscopic view. Where the
+//!   gradient is strong (a boundary) a sample is lit by |n·l| (two-sided: the far wall of an
+//!   air pocket faces the camera from inside the tissue), made more opaque, and coloured as
+//!   the material on its dense side (air mixed with tissue reads as fat otherwise); inside
+//!   homogeneous tissue the gradient is noise, so the sample keeps a flat colour — otherwise
+//!   noise would light a polyp as mottled as stool.
+//! - Speed: blocks of 4³ voxels that are all air, or all one uniform material, are crossed in
+//!   one hop (together with the blocks around them of the same kind); single voxel cells of
+//!   one uniform material are composited without a fetch. Neither changes what a sample
+//!   shows (a hop takes the light's falloff once, at its middle).
 //!
 //! Output: RGBA8, row-major, top row first, **straight (not premultiplied) alpha**, colour
 //! gamma-encoded like the surface renderer ([`super::shading::encode`]); alpha 0 and colour 0
 //! where the ray misses the box or meets only transparent values.
+//!
+//! The brick and its scratch buffers (a few MB) are kept between frames on the calling
+//! thread: memory fresh from the system costs more to touch than computing the gradients.
 
 use std::cell::RefCell;
 
 use glam::{DVec3, Vec3A, Vec4};
 use rayon::prelude::*;
 
-use super::shading::encode;
+use super::raster::View;
+use super::shading::{encode, Lighting};
 use crate::camera::Camera;
 use crate::{Error, Result, Volume};
 
@@ -81,10 +91,14 @@ pub struct TransferFunction {
     pub surface_opacity_per_mm: f32,
     /// Brightness of unlit samples inside homogeneous tissue, relative to the colour.
     pub interior_light: f32,
-    /// Headlight on boundaries: ambient + diffuse·|n·l| + specular·|n·l|¹⁶ (white).
+    /// Headlight on boundaries: ambient + diffuse·|n·l| + specular·|n·l|¹⁶ (white). The
+    /// specular part is kept small: white is what tagged material looks like.
     pub ambient: f32,
     pub diffuse: f32,
     pub specular: f32,
+    /// The light falls off with distance as in the endoscopic view (`Lighting`):
+    /// 1 / (1 + (d / falloff)²); farther tissue is darker, a cue to depth.
+    pub falloff_mm: f32,
 }
 
 impl Default for TransferFunction {
@@ -94,7 +108,8 @@ impl Default for TransferFunction {
 }
 
 impl TransferFunction {
-    /// Control points sorted by HU, with finite values, colours and opacities in 0..1.
+    /// Control points sorted by HU, with finite values, colours and opacities in 0..1; the
+    /// lighting as in [`TransferFunction::tissue`] (its fields are public).
     pub fn new(points: Vec<TfPoint>) -> Result<Self> {
         let ok = |p: &TfPoint| p.hu.is_finite() && (0.0..=1.0).contains(&p.opacity_per_mm) && p.rgb.iter().all(|c| (0.0..=1.0).contains(c));
         if points.is_empty() || !points.iter().all(ok) {
@@ -106,10 +121,11 @@ impl TransferFunction {
         Ok(TransferFunction { points, ..Self::tissue() })
     }
 
-    /// The default for CT colonography: air transparent; fat (−190…−30 HU) faint yellow; soft tissue
-    /// pink-red and translucent (a 1 cm polyp is a solid blob, ≈ 80 % opaque through its
-    /// middle, and the wall behind it still shows); tagged stool and fluid, contrast and bone
-    /// (> 200 HU) white and nearly opaque within a few mm.
+    /// The default for CT colonography: air transparent; fat (−190…−30 HU) faint yellow and
+    /// nearly clear; soft tissue (0…100 HU) pink-red and translucent — a 1 cm polyp is a
+    /// solid blob, about 90 % opaque through its middle, and the wall shows through its rim
+    /// and around it; tagged stool and fluid, contrast and bone (> 200 HU) white and opaque
+    /// within a few mm. Control points in linear RGB, like `Lighting`'s albedo.
     pub fn tissue() -> Self {
         const CLEAR: [f32; 3] = [0.0; 3];
         const FAT: [f32; 3] = [0.85, 0.68, 0.22];
@@ -127,11 +143,12 @@ impl TransferFunction {
                 p(200.0, BRIGHT, 0.6),
             ],
             boundary_hu_per_mm: [60.0, 300.0],
-            surface_opacity_per_mm: 0.35,
-            interior_light: 0.6,
-            ambient: 0.2,
-            diffuse: 0.8,
-            specular: 0.12,
+            surface_opacity_per_mm: 0.5,
+            interior_light: 0.55,
+            ambient: 0.15,
+            diffuse: 0.85,
+            specular: 0.1,
+            falloff_mm: Lighting::default().falloff_mm,
         }
     }
 
@@ -236,6 +253,11 @@ struct Brick {
     /// Per block of BLOCK³ cells: [`EMPTY`], 1 + the run all its cells share, or [`MIXED`].
     blocks: Vec<u16>,
     block_dims: [usize; 3],
+    /// Index steps from block to block, as floats.
+    block_strides: Vec3A,
+    /// Per block that is not [`MIXED`]: how many blocks around it (Chebyshev distance) share
+    /// its class, so that a ray crosses them all in one hop.
+    reach: Vec<u8>,
 }
 
 impl Brick {
@@ -250,7 +272,8 @@ impl Brick {
         let block_dims = dims.map(|d| d.div_ceil(BLOCK));
         let n = data.len();
         let (cells, blocks) = U16S.with(|p| (p.take(n, MIXED), p.take(block_dims.iter().product(), MIXED)));
-        Brick { dims, lo, data, strides, hi, cells, blocks, block_dims }
+        let block_strides = Vec3A::new(1.0, block_dims[0] as f32, (block_dims[0] * block_dims[1]) as f32);
+        Brick { dims, lo, data, strides, hi, cells, blocks, block_dims, block_strides, reach: Vec::new() }
     }
 
     /// Finds the cells whose every sample classifies alike: all eight corners in one run of
@@ -305,6 +328,7 @@ impl Brick {
                 if first != MIXED && all_cells(&|c| self.cells[c] == first) { first } else { MIXED }
             })
             .collect();
+        self.reach = block_reach(&blocks, self.block_dims);
         self.blocks = blocks;
     }
 
@@ -313,34 +337,42 @@ impl Brick {
         p.clamp(Vec3A::ZERO, self.hi)
     }
 
-    /// The class of the block of the cell at `ijk`.
-    #[inline(always)]
-    fn block_class(&self, ijk: [usize; 3]) -> u16 {
-        let b = ijk.map(|v| v / BLOCK);
-        self.blocks[b[0] + self.block_dims[0] * (b[1] + self.block_dims[1] * b[2])]
+    /// Whether a sample at `p` is surely transparent (its block is empty).
+    #[inline]
+    fn is_clear(&self, p: Vec3A) -> bool {
+        let b = (self.clamp(p) * (1.0 / BLOCK as f32)).floor();
+        self.blocks[b.dot(self.block_strides) as usize] == EMPTY
     }
 
-    /// How many steps `dp` from `p` stay in the block of the cell at `ijk` (at least 1);
-    /// `inv_dp` is 1/`dp`, with a huge value where `dp` is 0.
+    /// The class of the block holding `p`, and how many steps `dp` from `p` on (`p` first)
+    /// stay among the blocks around it that share its class (all samples of a [`MIXED`]
+    /// block are its own): at least 1. `inv_dp` is 1/`dp`, with a huge value where `dp` is 0.
     #[inline(always)]
-    fn steps_in_block(&self, ijk: [usize; 3], p: Vec3A, dp: Vec3A, inv_dp: Vec3A) -> usize {
-        let lo = Vec3A::new((ijk[0] / BLOCK) as f32, (ijk[1] / BLOCK) as f32, (ijk[2] / BLOCK) as f32) * BLOCK as f32;
-        let hi = lo + Vec3A::splat(BLOCK as f32);
+    fn block_ahead(&self, p: Vec3A, dp: Vec3A, inv_dp: Vec3A) -> (u16, usize) {
+        let q = self.clamp(p);
+        let b = (q * (1.0 / BLOCK as f32)).floor();
+        let i = b.dot(self.block_strides) as usize;
+        let r = f32::from(self.reach[i]);
+        let lo = (b - Vec3A::splat(r)) * BLOCK as f32;
+        let hi = (b + Vec3A::splat(r + 1.0)) * BLOCK as f32;
         // Steps m with p + m·dp still strictly inside: m < s.
         let s = (Vec3A::select(dp.cmpge(Vec3A::ZERO), hi - p, lo - p) * inv_dp).min_element().clamp(0.0, 1e6);
         let m = s as u32;
-        (m + u32::from((m as f32) < s)).max(1) as usize
+        (self.blocks[i], (m + u32::from((m as f32) < s)).max(1) as usize)
     }
 
     /// The cell holding brick coordinates `p` (voxel units from the brick's first voxel,
     /// clamped into the brick).
     #[inline(always)]
     fn locate(&self, p: Vec3A) -> Spot {
-        let p = self.clamp(p);
-        // Non-negative after the clamp: truncation is floor, without a call to floorf.
-        let ijk = [p.x as u32 as usize, p.y as u32 as usize, p.z as u32 as usize];
-        let n = ijk[0] + self.dims[0] * (ijk[1] + self.dims[1] * ijk[2]);
-        Spot { ijk, n, f: p - Vec3A::new(ijk[0] as f32, ijk[1] as f32, ijk[2] as f32) }
+        let p = self.clamp(if p.is_finite() { p } else { Vec3A::ZERO });
+        // Finite and within [0, dims − 1] after the clamp: truncation is floor (no call to
+        // floorf), and the cast needs none of the checks of a saturating `as` (three of them
+        // cost as much as the rest of a sample's addressing).
+        // SAFETY: every lane is finite, ≥ 0 and < 2³² (see above).
+        let ijk = [p.x, p.y, p.z].map(|v| unsafe { v.to_int_unchecked::<u32>() });
+        let n = ijk[0] as usize + self.dims[0] * (ijk[1] as usize + self.dims[1] * ijk[2] as usize);
+        Spot { n, f: p - Vec3A::new(ijk[0] as f32, ijk[1] as f32, ijk[2] as f32) }
     }
 
     /// The sample at `p`.
@@ -371,10 +403,9 @@ impl Brick {
     }
 }
 
-/// A point in the brick: the lowest voxel of its cell, that voxel's index, and the point's
-/// fraction of the way to the opposite corner.
+/// A point in the brick: the index of its cell's lowest voxel, and the point's fraction of
+/// the way to the opposite corner.
 struct Spot {
-    ijk: [usize; 3],
     n: usize,
     f: Vec3A,
 }
@@ -404,6 +435,43 @@ impl Drop for Brick {
             p.give(std::mem::take(&mut self.cells));
             p.give(std::mem::take(&mut self.blocks));
         });
+    }
+}
+
+/// Per block of the given classes, the largest r such that every block within Chebyshev
+/// distance r (inside the grid) has the same class; 0 for [`MIXED`] blocks. Relaxation to
+/// the fixed point of r(b) = min over neighbours n of (r(n) + 1, or 0 where n's class
+/// differs): the cube of radius r around b is the union of the cubes of radius r − 1 around
+/// its 26 neighbours.
+fn block_reach(class: &[u16], dims: [usize; 3]) -> Vec<u8> {
+    let mut r: Vec<u8> = class.iter().map(|&c| if c == MIXED { 0 } else { u8::MAX }).collect();
+    let [bx, by, bz] = dims;
+    loop {
+        let mut changed = false;
+        for n in 0..r.len() {
+            if r[n] == 0 {
+                continue;
+            }
+            let b = [n % bx, (n / bx) % by, n / (bx * by)];
+            let mut best = r[n];
+            for o in 0..27 {
+                let d = [o % 3, (o / 3) % 3, o / 9];
+                let q = [0, 1, 2].map(|a| (b[a] + d[a]).checked_sub(1));
+                let [Some(x), Some(y), Some(z)] = q else { continue };
+                if x >= bx || y >= by || z >= bz || o == 13 {
+                    continue;
+                }
+                let m = x + bx * (y + by * z);
+                best = best.min(if class[m] == class[n] { r[m].saturating_add(1) } else { 0 });
+            }
+            if best != r[n] {
+                r[n] = best;
+                changed = true;
+            }
+        }
+        if !changed {
+            return r;
+        }
     }
 }
 
@@ -608,20 +676,40 @@ impl Runs {
     }
 }
 
-/// Front-to-back compositing state of one ray: premultiplied linear colour, transmittance.
+/// Front-to-back compositing state of one ray: premultiplied linear colour, transmittance,
+/// and the headlight's strength where the ray is.
 struct Accum {
     color: Vec3A,
     trans: f32,
+    light: f32,
+    /// 1 / the light's falloff distance (mm⁻¹).
+    inv_falloff: f32,
 }
 
 impl Accum {
+    /// Moves to `t` mm from the eye.
+    #[inline(always)]
+    fn at(&mut self, t: f32) {
+        let r = t * self.inv_falloff;
+        self.light = 1.0 / (1.0 + r * r);
+    }
+
     /// Adds a sample behind everything so far; true once nothing behind can show.
     #[inline]
     fn add(&mut self, rgb: Vec3A, alpha: f32) -> bool {
-        self.color += (self.trans * alpha) * rgb;
+        self.color += (self.trans * alpha * self.light) * rgb;
         self.trans *= 1.0 - alpha;
         self.trans < MIN_TRANSMITTANCE
     }
+}
+
+/// A ray in brick units: its step, its direction in mm (for lighting), and the distance from
+/// the eye (mm) of its first sample and between samples.
+struct Ray {
+    dp: Vec3A,
+    view: Vec3A,
+    t: f32,
+    step: f32,
 }
 
 /// Everything a ray needs that is the same for the whole frame.
@@ -663,79 +751,89 @@ impl Scene<'_> {
         let view = dir.as_vec3a();
         let lo_idx = DVec3::from_array(self.brick.lo.map(|v| v as f64));
         let to_brick = |t: f64| ((eye + t * dir) * self.inv_spacing - lo_idx).as_vec3a();
-        let mut acc = Accum { color: Vec3A::ZERO, trans: 1.0 };
+        let mut acc = Accum { color: Vec3A::ZERO, trans: 1.0, light: 1.0, inv_falloff: 1.0 / self.tf.falloff_mm.max(1e-3) };
         // Samples on spheres around the eye, the same distances for every ray; each stands
         // for the stretch of ray before it. The first and a last one at the exit cover the
         // partial stretches, so that a face of the box cut through tissue shows no rings.
         let first = (t0 / self.step_mm).ceil();
         let last = (t1 / self.step_mm).floor();
         if first > last {
+            acc.at(t1 as f32);
             self.add_partial(&mut acc, to_brick(t1), view, (t1 - t0) / self.step_mm);
             return (acc.color, 1.0 - acc.trans);
         }
         let p = to_brick(first * self.step_mm);
+        acc.at((first * self.step_mm) as f32);
         if self.add_partial(&mut acc, p, view, first - t0 / self.step_mm) {
             return (acc.color, 1.0 - acc.trans);
         }
         let dp = (dir * self.step_mm * self.inv_spacing).as_vec3a();
-        if !self.march(&mut acc, p, dp, (last - first) as usize, view) {
+        let ray = Ray { dp, view, t: (first * self.step_mm) as f32, step: self.step_mm as f32 };
+        if !self.march(&mut acc, p, &ray, (last - first) as usize) {
+            acc.at(t1 as f32);
             self.add_partial(&mut acc, to_brick(t1), view, t1 / self.step_mm - last);
         }
         (acc.color, 1.0 - acc.trans)
     }
 
-    /// The `n` whole steps `dp` after the sample at `p`; true once nothing behind can show.
-    fn march(&self, acc: &mut Accum, mut p: Vec3A, dp: Vec3A, n: usize, view: Vec3A) -> bool {
+    /// The `n` whole steps after the sample at `p`; true once nothing behind can show.
+    /// Block by block: across empty and uniform blocks in one hop, sample by sample through
+    /// the others.
+    fn march(&self, acc: &mut Accum, mut p: Vec3A, ray: &Ray, n: usize) -> bool {
+        let dp = ray.dp;
         let inv_dp = Vec3A::select(dp.cmpeq(Vec3A::ZERO), Vec3A::splat(f32::MAX), dp.recip());
-        let mut prev_hu = self.brick.sample(p).hu();
+        let mut prev_hu = if self.brick.is_clear(p) { f32::NEG_INFINITY } else { self.brick.sample(p).hu() };
         let mut k = 0;
         while k < n {
-            p += dp;
-            k += 1;
-            let spot = self.brick.locate(p);
-            let block = self.brick.block_class(spot.ijk);
+            let next = p + dp;
+            let (block, m) = self.brick.block_ahead(next, dp, inv_dp);
+            let m = m.min(n - k);
             if block == EMPTY {
-                // Past the empty block; coming out of air, the next sample refines its stretch.
-                let m = (self.brick.steps_in_block(spot.ijk, p, dp, inv_dp) - 1).min(n - k);
-                p += dp * m as f32;
-                k += m;
+                // Coming out of air, the next sample fetched refines its stretch.
                 prev_hu = f32::NEG_INFINITY;
-                continue;
-            }
-            if block != MIXED {
+            } else if block != MIXED && (self.runs.entry[block as usize - 1].1 - prev_hu).abs() <= REFINE_HU {
                 let (e, hu) = self.runs.entry[block as usize - 1];
-                // Across the uniform block in one go (unless a boundary was just crossed).
-                if (hu - prev_hu).abs() <= REFINE_HU {
-                    let m = self.brick.steps_in_block(spot.ijk, p, dp, inv_dp).min(n - k + 1);
-                    p += dp * (m - 1) as f32;
-                    k += m - 1;
-                    prev_hu = hu;
-                    let alpha = 1.0 - (1.0 - e.w).powi(m as i32);
-                    if e.w > 0.0 && acc.add(Vec3A::from_vec4(e) * self.tf.interior_light, alpha) {
-                        return true;
-                    }
-                    continue;
+                prev_hu = hu;
+                // Lit as at the middle of the hop.
+                acc.at(ray.t + (k as f32 + 0.5 * (m + 1) as f32) * ray.step);
+                if e.w > 0.0 && acc.add(Vec3A::from_vec4(e) * self.tf.interior_light, 1.0 - (1.0 - e.w).powi(m as i32)) {
+                    return true;
                 }
+            } else if self.samples(acc, p, ray, k, m, &mut prev_hu) {
+                return true;
             }
+            p += dp * m as f32;
+            k += m;
+        }
+        false
+    }
+
+    /// The `m` samples after `p` (step `k` of the ray), one by one; true once nothing behind
+    /// can show.
+    fn samples(&self, acc: &mut Accum, mut p: Vec3A, ray: &Ray, k: usize, m: usize, prev_hu: &mut f32) -> bool {
+        for j in 1..=m {
+            p += ray.dp;
+            acc.at(ray.t + (k + j) as f32 * ray.step);
+            let spot = self.brick.locate(p);
             if let Some(uniform) = self.brick.cells.get(spot.n).and_then(|&c| c.checked_sub(1)) {
                 let (e, hu) = self.runs.entry[uniform as usize];
                 // Unless coming from far off (a boundary just crossed: fetch and refine).
-                if (hu - prev_hu).abs() <= REFINE_HU {
+                if (hu - *prev_hu).abs() <= REFINE_HU {
                     if e.w > 0.0 && acc.add(Vec3A::from_vec4(e) * self.tf.interior_light, e.w) {
                         return true;
                     }
-                    prev_hu = hu;
+                    *prev_hu = hu;
                     continue;
                 }
             }
             let s = self.brick.fetch(spot.n, spot.f);
             // Refine where the value jumps, unless only within air.
-            let jump = (s.hu() - prev_hu).abs() > REFINE_HU && s.hu().max(prev_hu) >= self.clear_below;
-            let done = if jump { self.add_refined(acc, p - dp, dp, s, view) } else { self.add(acc, p, s, view, &self.full) };
+            let jump = (s.hu() - *prev_hu).abs() > REFINE_HU && s.hu().max(*prev_hu) >= self.clear_below;
+            let done = if jump { self.add_refined(acc, p - ray.dp, ray.dp, s, ray.view) } else { self.add(acc, p, s, ray.view, &self.full) };
             if done {
                 return true;
             }
-            prev_hu = s.hu();
+            *prev_hu = s.hu();
         }
         false
     }
@@ -762,6 +860,9 @@ impl Scene<'_> {
 
     /// The sample at `p` standing for `fraction` of a step.
     fn add_partial(&self, acc: &mut Accum, p: Vec3A, view: Vec3A, fraction: f64) -> bool {
+        if self.brick.is_clear(p) {
+            return false;
+        }
         match self.classify(p, self.brick.sample(p), view, &self.full) {
             Some((rgb, alpha)) => acc.add(rgb, 1.0 - (1.0 - alpha).powf(fraction.clamp(0.0, 1.0) as f32)),
             None => false,
@@ -863,10 +964,13 @@ pub fn render_closeup(ct: &Volume<i16>, camera: &Camera, region: &CloseupBox, wi
     if width == 0 || height == 0 {
         return out;
     }
+    // The rasterizer's own pixel rays (the ray through each pixel's centre), so that the two
+    // images line up pixel for pixel.
+    let view = View::new(camera, width, height);
     let eye = camera.pose.position;
     out.par_chunks_mut(width as usize * 4).enumerate().for_each(|(y, row)| {
         for (x, px) in row.chunks_exact_mut(4).enumerate() {
-            let dir = camera.pixel_ray(x as f64 + 0.5, y as f64 + 0.5, width, height);
+            let dir = view.pixel_direction(x as u32, y as u32).normalize();
             let (color, alpha) = scene.cast(eye, dir);
             px.copy_from_slice(&to_rgba8(color, alpha));
         }

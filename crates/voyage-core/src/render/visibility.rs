@@ -159,8 +159,7 @@ impl Visibility {
         for (dir, seq) in seqs.iter_mut().enumerate() {
             let mut region = Region::full(&view);
             let mut cell = home;
-            loop {
-                let Some((portal, next)) = beyond(dir, cell, ncells) else { break };
+            while let Some((portal, next)) = beyond(dir, cell, ncells) {
                 drawn.portals_tested += 1;
                 if !self.narrow(&mut region, portal, frame, &view, &mut drawn.depth_pixels_read) {
                     break;
@@ -191,8 +190,7 @@ impl Visibility {
         for dir in [TOWARD_TARGET, TOWARD_SOURCE] {
             let mut region = Region::full(view);
             let mut cell = home;
-            loop {
-                let Some((portal, next)) = beyond(dir, cell, ncells) else { break };
+            while let Some((portal, next)) = beyond(dir, cell, ncells) {
                 drawn.portals_tested += 1;
                 let Some(outline) = project_prism(&self.portals[portal].corners, view) else { break };
                 let open = match self.strategy {
