@@ -15,6 +15,7 @@ use serde_json::json;
 
 use crate::camera::Pose;
 use crate::export::markups::{markups_line_node, markups_node, write_markups_nodes, MarkupsPoint};
+use crate::export::study::write_json;
 use crate::io::atomic::write_atomic;
 use crate::render::mesh::CellMesh;
 use crate::{Error, Geometry, Result};
@@ -248,11 +249,6 @@ fn write_png(path: &Path, width: u32, height: u32, rgba: &[u8]) -> Result<()> {
         return Err(Error::format(path, format!("snapshot of {width}×{height} pixels has {} bytes, not {want}", rgba.len())));
     }
     write_atomic(path, |w| image::codecs::png::PngEncoder::new(w).write_image(rgba, width, height, image::ExtendedColorType::Rgba8).map_err(std::io::Error::other))
-}
-
-fn write_json(path: &Path, v: &serde_json::Value) -> Result<()> {
-    let text = serde_json::to_string_pretty(v).expect("plain data") + "\n";
-    write_atomic(path, |w| w.write_all(text.as_bytes()))
 }
 
 /// The report: LPS for other tools, volume-local mm and the pose for voyage itself. It

@@ -79,7 +79,8 @@ pub fn write_study(dir: &Path, study: &Study) -> Result<Vec<PathBuf>> {
     Ok(out)
 }
 
-fn write_json(path: &Path, v: &serde_json::Value) -> Result<()> {
+/// A JSON value, pretty-printed, written atomically.
+pub(crate) fn write_json(path: &Path, v: &serde_json::Value) -> Result<()> {
     let text = serde_json::to_string_pretty(v).expect("plain data") + "\n";
     write_atomic(path, |w| w.write_all(text.as_bytes()))
 }
