@@ -130,7 +130,7 @@ impl App {
         let script = match args.script.as_deref().map(Script::load).transpose() {
             Ok(s) => s,
             Err(e) => {
-                outcome.lock().map(|mut o| o.errors.push(format!("{e:#}"))).ok();
+                note_error(&outcome, format!("{e:#}"));
                 None
             }
         };
@@ -208,9 +208,7 @@ impl App {
                 self.error = Some(msg.clone());
                 self.status = "could not open the study".into();
                 self.frames = 0;
-                if let Ok(mut o) = self.outcome.lock() {
-                    o.errors.push(msg);
-                }
+                note_error(&self.outcome, msg);
             }
         }
     }
@@ -290,7 +288,6 @@ impl App {
 
     fn quit(&mut self, ctx: &egui::Context) {
         self.quitting = true;
-        self.write_report();
         ctx.send_viewport_cmd(egui::ViewportCommand::Close);
     }
 
@@ -345,9 +342,7 @@ impl App {
             Ok(files) => self.status = format!("exported {} files to {}", files.len(), dir.display()),
             Err(e) => {
                 self.status = format!("export failed: {e}");
-                if let Ok(mut o) = self.outcome.lock() {
-                    o.errors.push(format!("export: {e}"));
-                }
+                note_error(&self.outcome, format!("export: {e}"));
             }
         }
     }
@@ -465,10 +460,8 @@ impl App {
         ctx.send_viewport_cmd(egui::ViewportCommand::Screenshot(egui::ScreenshotCallback::new(move |image| {
             let (w, h) = (image.size[0] as u32, image.size[1] as u32);
             let rgba: Vec<u8> = image.pixels.iter().flat_map(|c| c.to_array()).collect();
-            if let Err(e) = crate::cmd::render::write_png(&path, &rgba, w, h)
-                && let Ok(mut o) = outcome.lock()
-            {
-                o.errors.push(format!("{}: {e:#}", path.display()));
+            if let Err(e) = crate::cmd::render::write_png(&path, &rgba, w, h) {
+                note_error(&outcome, format!("{}: {e:#}", path.display()));
             }
             if then_quit {
                 ctx2.send_viewport_cmd(egui::ViewportCommand::Close);
@@ -880,6 +873,13 @@ impl App {
     }
 }
 
+/// Keeps an error for `voyage view` to report once the window has closed.
+fn note_error(outcome: &Mutex<Outcome>, msg: String) {
+    if let Ok(mut o) = outcome.lock() {
+        o.errors.push(msg);
+    }
+}
+
 fn push_limited(v: &mut VecDeque<f64>, x: f64) {
     if v.len() >= 240 {
         v.pop_front();
@@ -928,7 +928,6 @@ impl eframe::App for App {
             && self.frames >= self.args.after_frames
             && self.script.as_ref().is_none_or(Script::finished)
         {
-            self.write_report();
             self.screenshot(&ctx, path, true);
         }
         if !self.quitting {
