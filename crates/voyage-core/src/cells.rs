@@ -211,6 +211,7 @@ struct Labels {
 fn label_voxels(dt: &Field<f32>, levels: &[f64], reach: f64) -> Labels {
     let mut counts = vec![0usize; levels.len() + 1];
     let mut near_cut = Vec::new();
+    let table = LevelTable::new(levels);
     let data = dt
         .data
         .iter()
@@ -219,7 +220,7 @@ fn label_voxels(dt: &Field<f32>, levels: &[f64], reach: f64) -> Labels {
             if !d.is_finite() {
                 return u16::MAX;
             }
-            let c = cell_of_level(levels, d) as usize;
+            let c = table.cell(d) as usize;
             counts[c] += 1;
             let d = d as f64;
             if (c < levels.len() && levels[c] - d <= reach) || (c > 0 && d - levels[c - 1] <= reach) {
@@ -229,6 +230,38 @@ fn label_voxels(dt: &Field<f32>, levels: &[f64], reach: f64) -> Labels {
         })
         .collect();
     Labels { cells: Field { grid: dt.grid.clone(), geometry: dt.geometry.clone(), data }, counts, near_cut }
+}
+
+/// [`cell_of_level`] by table: the cell at the start of each bin of Dt, bins narrower than the
+/// gap between levels, so that at most one level falls inside a bin and one comparison
+/// settles it. Same answers, without a binary search per voxel.
+struct LevelTable<'a> {
+    levels: &'a [f64],
+    start: Vec<u16>,
+    inv_bin: f64,
+}
+
+impl<'a> LevelTable<'a> {
+    fn new(levels: &'a [f64]) -> Self {
+        let gap = levels.windows(2).map(|w| w[1] - w[0]).fold(f64::INFINITY, f64::min);
+        let bin = if gap.is_finite() { (gap * 0.5).max(1e-3) } else { 1.0 };
+        let end = levels.last().copied().unwrap_or(0.0).max(0.0);
+        let n = (end / bin) as usize + 2;
+        // Half a bin early, so that rounding never starts a bin past its first voxel's cell.
+        let start = (0..n).map(|b| cell_of_level(levels, ((b as f64 - 0.5).max(0.0) * bin) as f32)).collect();
+        LevelTable { levels, start, inv_bin: 1.0 / bin }
+    }
+
+    #[inline]
+    fn cell(&self, d: f32) -> u16 {
+        let b = (d as f64 * self.inv_bin) as usize;
+        let Some(&c) = self.start.get(b) else { return self.levels.len() as u16 };
+        let mut c = c as usize;
+        while c < self.levels.len() && self.levels[c] <= d as f64 {
+            c += 1;
+        }
+        c as u16
+    }
 }
 
 fn set_spans(cells: &mut [Cell], cl_dt: &[f64], levels: &[f64]) {
@@ -277,47 +310,54 @@ fn make_portal(pts: Vec<DVec3>, c: usize, level: f64, cl: &Centerline, cl_dt: &[
 /// if they do, that is an error.
 fn boundary_points(cells: &Field<u16>, near_cut: &[u32], cuts: usize, sp: [f64; 3]) -> Result<Vec<Vec<DVec3>>> {
     let [nx, ny, nz] = cells.grid.dims;
-    // The 13 "forward" neighbour offsets: each unordered pair once.
-    let mut offs = Vec::with_capacity(13);
+    let mut offs = Vec::with_capacity(26);
     for dk in -1i64..=1 {
         for dj in -1i64..=1 {
             for di in -1i64..=1 {
-                if (dk, dj, di) > (0, 0, 0) {
+                if (dk, dj, di) != (0, 0, 0) {
                     offs.push((di, dj, dk));
                 }
             }
         }
     }
-    // Box indices per cut; a voxel is met once per neighbour across, so deduplicated after.
+    // Box indices per cut. Both voxels of a pair across a cut are near it, so each voxel
+    // looks at all its neighbours and joins the cut below and/or above it once: the lists come
+    // out in index order without duplicates.
     let mut out: Vec<Vec<u32>> = vec![Vec::new(); cuts];
     for &here in near_cut {
         let here = here as usize;
         let [i, j, k] = cells.grid.ijk(here);
         let a = cells.data[here];
+        let (mut below, mut above) = (false, false);
         for &(di, dj, dk) in &offs {
             let (qi, qj, qk) = (i as i64 + di, j as i64 + dj, k as i64 + dk);
-            if qi < 0 || qj < 0 || qi >= nx as i64 || qj >= ny as i64 || qk >= nz as i64 {
+            if qi < 0 || qj < 0 || qk < 0 || qi >= nx as i64 || qj >= ny as i64 || qk >= nz as i64 {
                 continue;
             }
-            let there = cells.grid.index(qi as usize, qj as usize, qk as usize);
-            let b = cells.data[there];
+            let b = cells.data[cells.grid.index(qi as usize, qj as usize, qk as usize)];
             if b == u16::MAX || b == a {
                 continue;
             }
             if a.abs_diff(b) != 1 {
                 return Err(Error::invalid(format!("cells {a} and {b} touch: the cuts are too close")));
             }
-            let cut = &mut out[a.min(b) as usize];
-            cut.push(here as u32);
-            cut.push(there as u32);
+            if b < a {
+                below = true;
+            } else {
+                above = true;
+            }
+        }
+        if below {
+            out[a as usize - 1].push(here as u32);
+        }
+        if above {
+            out[a as usize].push(here as u32);
         }
     }
     let lo = cells.grid.lo;
     Ok(out
         .into_iter()
-        .map(|mut v| {
-            v.sort_unstable();
-            v.dedup();
+        .map(|v| {
             v.into_iter()
                 .map(|idx| {
                     let [i, j, k] = cells.grid.ijk(idx as usize);
@@ -412,6 +452,24 @@ mod tests {
             })
             .collect();
         Volume::from_vec(g, data).unwrap()
+    }
+
+    #[test]
+    fn level_table_agrees_with_the_binary_search() {
+        let levels = [3.0, 5.9, 40.25, 41.0, 300.0];
+        let table = LevelTable::new(&levels);
+        let mut d = 0.0f32;
+        while d < 320.0 {
+            for x in [d, f32::from_bits(d.to_bits() + 1)] {
+                assert_eq!(table.cell(x), cell_of_level(&levels, x), "Dt {x}");
+            }
+            d += 0.0625;
+        }
+        for &l in &levels {
+            let l = l as f32;
+            assert_eq!(table.cell(l), cell_of_level(&levels, l));
+            assert_eq!(table.cell(l.next_down()), cell_of_level(&levels, l.next_down()));
+        }
     }
 
     #[test]

@@ -13,10 +13,15 @@
 //! voxels are taken out of the lumen, which puts a two-voxel wall where the scan could not show
 //! one: Dt follows the colon, the surface closes over the contact (no view into the next
 //! loop), and the cells stay a chain.
+//!
+//! The search runs on blocks ([`crate::blocks`]): the skeleton's 2×2×2 blocks on a large lumen,
+//! single voxels on a small one. Each block takes one label; the wall is cut along block faces
+//! between blocks of far-apart labels, one voxel deep on each side, so no pair of neighbouring
+//! lumen voxels with far-apart labels is left, as with single voxels.
 
 use glam::DVec3;
 
-use crate::centerline::Centerline;
+use crate::blocks::Blocks;
 use crate::distance::geodesic::{dial, Padded, SearchOptions};
 use crate::field::BoxGrid;
 use crate::Volume;
@@ -36,76 +41,126 @@ impl Default for ContactOptions {
 
 const NO_LABEL: u16 = u16::MAX;
 
-/// Takes the contact voxels out of the lumen mask (never `keep`, volume voxels); returns the
-/// volume indices taken, so that a caller can put them back.
-pub fn cut_contacts(lumen: &mut Volume<u8>, grid: &BoxGrid, cl: &Centerline, keep: &[[usize; 3]], opts: &ContactOptions) -> Vec<usize> {
-    if !opts.enabled || cl.points_mm.len() < 2 {
-        return Vec::new();
+/// Takes the contact voxels out of the lumen mask (none within `keep_mm` of the points
+/// `keep`, volume-local mm); returns the volume indices taken, so that a caller can put them
+/// back. `path_mm` is the colon's path from source to target; `blocks`, when given, the
+/// blocks of `grid` to search on (else single voxels).
+pub fn cut_contacts(lumen: &mut Volume<u8>, grid: &BoxGrid, path_mm: &[DVec3], blocks: Option<&Blocks>, keep: &[DVec3], keep_mm: f64, opts: &ContactOptions) -> crate::Result<Vec<usize>> {
+    if !opts.enabled || path_mm.len() < 2 {
+        return Ok(Vec::new());
     }
-    let spacing = lumen.spacing();
-    let pad = Padded::new(lumen, grid);
-    let (points, arcs) = label_points(cl);
-    let labels = label_voxels(&pad, &points, spacing);
-    let nbrs = pad.neighbours(spacing);
-    // Half the offsets: each pair once.
-    let half: Vec<isize> = nbrs.iter().map(|n| n.0).filter(|&o| o > 0).collect();
-    let mut cut = vec![false; pad.inside.len()];
-    for u in 0..pad.inside.len() {
-        let a = labels[u];
-        if a == NO_LABEL {
-            continue;
+    let own;
+    let blocks = match blocks {
+        Some(b) => b,
+        None => {
+            own = Blocks::new(lumen, grid, 1)?;
+            &own
         }
-        for &off in &half {
-            let v = (u as isize + off) as usize;
-            let b = labels[v];
-            if b == NO_LABEL || a == b {
+    };
+    let (points, arcs) = label_points(path_mm);
+    let far = |a: u16, b: u16| {
+        let (a, b) = (a as usize, b as usize);
+        let arc = (arcs[a] - arcs[b]).abs();
+        arc > opts.min_arc_mm && arc > opts.arc_ratio * points[a].distance(points[b])
+    };
+    let pad = padded_blocks(blocks);
+    let labels = label_blocks(&pad, blocks, &points);
+    let contact = contact_blocks(&pad, &labels, &far);
+    let mut cut = Vec::new();
+    let dims = lumen.dims();
+    let g = lumen.geometry().clone();
+    for (pi, _) in contact.iter().enumerate().filter(|(_, c)| **c) {
+        let a = labels[pi];
+        for u in blocks.voxels(pad.global_of_index(pi), dims) {
+            if lumen.get(u[0], u[1], u[2]) == 0 {
                 continue;
             }
-            let (a, b) = (a as usize, b as usize);
-            let arc = (arcs[a] - arcs[b]).abs();
-            if arc > opts.min_arc_mm && arc > opts.arc_ratio * points[a].distance(points[b]) {
-                cut[u] = true;
-                cut[v] = true;
+            for v in neighbour_voxels(u, dims) {
+                if lumen.get(v[0], v[1], v[2]) == 0 {
+                    continue;
+                }
+                let Some(b) = blocks.block_of_voxel(v).and_then(|c| pad.index_of_global(c)).map(|q| labels[q]) else { continue };
+                if b != NO_LABEL && b != a && far(a, b) {
+                    cut.push(g.index(u[0], u[1], u[2]));
+                    cut.push(g.index(v[0], v[1], v[2]));
+                }
             }
         }
     }
-    for &k in keep {
-        if let Some(i) = pad.index_of_global(k) {
-            cut[i] = false;
+    cut.sort_unstable();
+    cut.dedup();
+    let kept = |v: usize| {
+        let p = g.index_to_local(DVec3::from_array(g.ijk(v).map(|x| x as f64)));
+        keep.iter().any(|k| k.distance(p) <= keep_mm)
+    };
+    cut.retain(|&v| !kept(v));
+    for &v in &cut {
+        lumen.data_mut()[v] = 0;
+    }
+    Ok(cut)
+}
+
+/// Path points (at most `NO_LABEL` of them, thinned evenly) and their arc lengths.
+fn label_points(path: &[DVec3]) -> (Vec<DVec3>, Vec<f64>) {
+    let mut arc = Vec::with_capacity(path.len());
+    let mut s = 0.0;
+    for (i, p) in path.iter().enumerate() {
+        if i > 0 {
+            s += p.distance(path[i - 1]);
+        }
+        arc.push(s);
+    }
+    let stride = path.len().div_ceil(NO_LABEL as usize - 1).max(1);
+    let idx: Vec<usize> = (0..path.len()).step_by(stride).collect();
+    (idx.iter().map(|&i| path[i]).collect(), idx.iter().map(|&i| arc[i]).collect())
+}
+
+/// The full blocks with a layer of empty blocks around, for the search, and which blocks are
+/// partial, in the same layout.
+struct PaddedBlocks {
+    pad: Padded,
+    partial: Vec<bool>,
+}
+
+impl std::ops::Deref for PaddedBlocks {
+    type Target = Padded;
+    fn deref(&self) -> &Padded {
+        &self.pad
+    }
+}
+
+fn padded_blocks(blocks: &Blocks) -> PaddedBlocks {
+    let dims = blocks.dims();
+    let grid = BoxGrid { lo: [0; 3], dims };
+    let pad = Padded::new(&blocks.mask, &grid);
+    let full = (blocks.factor.pow(3)) as u8;
+    let mut partial = vec![false; pad.inside.len()];
+    for (b, &c) in blocks.count.iter().enumerate() {
+        if c > 0 && c < full {
+            let q = grid.global_of_index(b);
+            if let Some(i) = pad.index_of_global(q) {
+                partial[i] = true;
+            }
         }
     }
-    let mut taken = Vec::new();
-    for (i, _) in cut.iter().enumerate().filter(|(_, c)| **c) {
-        let g = pad.global_of_index(i);
-        let v = lumen.geometry().index(g[0], g[1], g[2]);
-        lumen.data_mut()[v] = 0;
-        taken.push(v);
-    }
-    taken
+    PaddedBlocks { pad, partial }
 }
 
-/// Centerline points (at most `NO_LABEL` of them, thinned evenly) and their arc lengths.
-fn label_points(cl: &Centerline) -> (Vec<DVec3>, Vec<f64>) {
-    let n = cl.points_mm.len();
-    let stride = n.div_ceil(NO_LABEL as usize - 1).max(1);
-    let idx: Vec<usize> = (0..n).step_by(stride).collect();
-    (idx.iter().map(|&i| DVec3::from_array(cl.points_mm[i])).collect(), idx.iter().map(|&i| cl.arc_mm[i]).collect())
-}
-
-/// Per padded voxel, the label of the geodesically nearest centerline point (NO_LABEL for
-/// walls and voxels the search does not reach).
-fn label_voxels(pad: &Padded, points: &[DVec3], spacing: [f64; 3]) -> Vec<u16> {
+/// Per padded block, the label of the geodesically nearest path point (through full blocks);
+/// partial blocks take the label of the nearest labelled block by steps (breadth first from
+/// all labelled blocks at once). NO_LABEL for empty blocks and blocks not reached.
+fn label_blocks(pad: &PaddedBlocks, blocks: &Blocks, points: &[DVec3]) -> Vec<u16> {
     let mut labels = vec![NO_LABEL; pad.inside.len()];
     let mut sources = Vec::with_capacity(points.len());
     for (l, p) in points.iter().enumerate() {
-        let v = [0, 1, 2].map(|a| (p[a] / spacing[a]).round().max(0.0) as usize);
-        if let Some(i) = pad.index_of_global(v).filter(|&i| pad.inside[i] != 0)
+        if let Some(i) = blocks.block_of_mm(*p).and_then(|c| pad.index_of_global(c)).filter(|&i| pad.inside[i] != 0)
             && labels[i] == NO_LABEL
         {
             labels[i] = l as u16;
             sources.push(i);
         }
     }
+    let spacing = blocks.mask.spacing();
     let search = dial(pad, &sources, spacing, &SearchOptions { tree: true, ..Default::default() });
     for &u in &search.order {
         let u = u as usize;
@@ -113,5 +168,51 @@ fn label_voxels(pad: &Padded, points: &[DVec3], spacing: [f64; 3]) -> Vec<u16> {
             labels[u] = labels[p];
         }
     }
+    let offsets: Vec<isize> = search.nbrs.iter().map(|n| n.0).collect();
+    let mut frontier: Vec<usize> = search.order.iter().map(|&u| u as usize).filter(|&u| offsets.iter().any(|&o| pad.partial[(u as isize + o) as usize])).collect();
+    while !frontier.is_empty() {
+        let mut next = Vec::new();
+        for &u in &frontier {
+            for &o in &offsets {
+                let v = (u as isize + o) as usize;
+                if pad.partial[v] && labels[v] == NO_LABEL {
+                    labels[v] = labels[u];
+                    next.push(v);
+                }
+            }
+        }
+        frontier = next;
+    }
     labels
+}
+
+/// Blocks with a 26-neighbour whose label is far along the path from theirs.
+fn contact_blocks(pad: &Padded, labels: &[u16], far: &dyn Fn(u16, u16) -> bool) -> Vec<bool> {
+    let half: Vec<isize> = pad.neighbours([1.0; 3]).iter().map(|n| n.0).filter(|&o| o > 0).collect();
+    let mut contact = vec![false; labels.len()];
+    for u in 0..labels.len() {
+        let a = labels[u];
+        if a == NO_LABEL {
+            continue;
+        }
+        for &off in &half {
+            let v = (u as isize + off) as usize;
+            let b = labels[v];
+            if b != NO_LABEL && a != b && far(a, b) {
+                contact[u] = true;
+                contact[v] = true;
+            }
+        }
+    }
+    contact
+}
+
+/// The 26 neighbours of voxel `u` inside a volume of `dims`.
+fn neighbour_voxels(u: [usize; 3], dims: [usize; 3]) -> impl Iterator<Item = [usize; 3]> {
+    (0..27).filter(|&o| o != 13).filter_map(move |o| {
+        let d = [o % 3, (o / 3) % 3, o / 9];
+        let v = [0, 1, 2].map(|a| (u[a] + d[a]).checked_sub(1));
+        let v = [v[0]?, v[1]?, v[2]?];
+        v.iter().zip(dims).all(|(&x, n)| x < n).then_some(v)
+    })
 }

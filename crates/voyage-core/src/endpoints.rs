@@ -13,8 +13,10 @@
 
 use glam::DVec3;
 
+use crate::blocks::Blocks;
 use crate::centerline::{cost_weight, refine_points, Centerline, CenterlineOptions};
 use crate::skeleton::{colon_path, tree_search, SkeletonOptions};
+use crate::distance::distance_to_wall;
 use crate::distance::geodesic::{dial, Geodesic, Padded, SearchOptions};
 use crate::field::{BoxGrid, Field};
 use crate::{Error, Result, Volume};
@@ -45,51 +47,80 @@ pub struct Endpoints {
     pub refine_ms: f64,
 }
 
-/// Finds (or checks) the endpoints and traces the centerline.
-///
-/// The skeleton search (every voxel of the lumen visited several times) runs on a grid of
-/// 2×2×2 blocks when the lumen is large and finely sampled: a voxel of 0.8 mm is far finer
-/// than the path needs, the coarse grid has an eighth of the voxels, and the path is then
-/// centred on the fine Ds anyway. Dt and everything after stay at full resolution.
-pub fn find_endpoints(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], opts: &EndpointOptions, cl_opts: &CenterlineOptions) -> Result<Endpoints> {
-    let clock = std::time::Instant::now();
+/// The raw colon path from the skeleton search, before it is centred on the voxels' Ds.
+pub struct Skeleton {
+    /// Source → target, volume-local mm (block centres when the search ran on blocks).
+    pub path_mm: Vec<DVec3>,
+    pub given_source: Option<[usize; 3]>,
+    pub given_target: Option<[usize; 3]>,
+    /// The blocks the search ran on, if it did.
+    pub blocks: Option<Blocks>,
+}
+
+/// Whether the skeleton search runs on 2×2×2 blocks: when the lumen is large and finely
+/// sampled (the path is then centred on the voxels' Ds anyway).
+pub fn uses_blocks(lumen: &Volume<u8>, lumen_voxels: usize, cl_opts: &CenterlineOptions) -> bool {
+    let finest = lumen.spacing().iter().cloned().fold(f64::INFINITY, f64::min);
+    finest < cl_opts.coarse_below_mm && lumen_voxels > cl_opts.coarse_above_voxels
+}
+
+/// Finds (or checks) the endpoints and traces the raw colon path through the lumen inside
+/// `grid`. On blocks ([`uses_blocks`]) the search needs only the mask (the blocks get their
+/// own Ds), so it can run before the voxels' Ds; otherwise it uses `fine_ds`, computing it
+/// when not given.
+pub fn trace_skeleton(lumen: &Volume<u8>, grid: &BoxGrid, lumen_voxels: usize, seed: [usize; 3], fine_ds: Option<&Field<f32>>, opts: &EndpointOptions, cl_opts: &CenterlineOptions) -> Result<Skeleton> {
     let given_source = opts.source_mm.map(|p| lumen_voxel(lumen, p, "source")).transpose()?;
     let given_target = opts.target_mm.map(|p| lumen_voxel(lumen, p, "target")).transpose()?;
-    let sp = lumen.spacing();
-    let lumen_voxels = ds.data.iter().filter(|&&d| d > 0.0).count();
-    let coarse = (sp.iter().cloned().fold(f64::INFINITY, f64::min) < cl_opts.coarse_below_mm && lumen_voxels > cl_opts.coarse_above_voxels)
-        .then(|| Coarse::new(lumen, ds))
-        .transpose()?;
-    let path_mm: Vec<DVec3> = match &coarse {
-        Some(c) => {
-            let to_coarse = |v: [usize; 3]| c.coarse_voxel(v);
-            let voxels = skeleton_path(&c.mask, &c.ds, to_coarse(seed)?, given_source.map(to_coarse).transpose()?, given_target.map(to_coarse).transpose()?, opts, cl_opts)?;
-            voxels.iter().map(|&v| c.fine_mm(v)).collect()
-        }
+    if uses_blocks(lumen, lumen_voxels, cl_opts) {
+        let blocks = Blocks::new(lumen, grid, 2)?;
+        let ds = distance_to_wall(&blocks.mask)?;
+        let to_block = |v: [usize; 3]| blocks.nearest_full(v);
+        let voxels = skeleton_path(&blocks.mask, &ds, to_block(seed)?, given_source.map(to_block).transpose()?, given_target.map(to_block).transpose()?, opts, cl_opts)?;
+        let path_mm = voxels.iter().map(|&v| blocks.centre_mm(v)).collect();
+        return Ok(Skeleton { path_mm, given_source, given_target, blocks: Some(blocks) });
+    }
+    let own;
+    let ds = match fine_ds {
+        Some(d) => d,
         None => {
-            let voxels = skeleton_path(lumen, ds, seed, given_source, given_target, opts, cl_opts)?;
-            voxels.iter().map(|v| mm_of(lumen, *v)).collect()
+            own = distance_to_wall(lumen)?;
+            &own
         }
     };
-    drop(coarse);
-    // The ends: the given points, else the fine lumen voxels at the path's ends.
-    let source = match given_source {
+    let voxels = skeleton_path(lumen, ds, seed, given_source, given_target, opts, cl_opts)?;
+    Ok(Skeleton { path_mm: voxels.iter().map(|v| mm_of(lumen, *v)).collect(), given_source, given_target, blocks: None })
+}
+
+/// The endpoints (the given ones, else the widest voxels at the raw path's ends) and the
+/// centerline: the raw path centred on the voxels' Ds and smoothed (paper §4.2).
+pub fn centre_skeleton(lumen: &Volume<u8>, ds: &Field<f32>, sk: &Skeleton, cl_opts: &CenterlineOptions) -> Result<Endpoints> {
+    let clock = std::time::Instant::now();
+    let path_mm = &sk.path_mm;
+    let source = match sk.given_source {
         Some(v) => v,
         None => snap(lumen, ds, path_mm[0])?,
     };
-    let target = match given_target {
+    let target = match sk.given_target {
         Some(v) => v,
         None => snap(lumen, ds, path_mm[path_mm.len() - 1])?,
     };
-    let skeleton_ms = clock.elapsed().as_secs_f64() * 1e3;
-    let clock = std::time::Instant::now();
     let mut pts: Vec<DVec3> = path_mm.iter().map(|&p| mm_of(lumen, snap(lumen, ds, p).unwrap_or(source))).collect();
     pts[0] = mm_of(lumen, source);
     let last = pts.len() - 1;
     pts[last] = mm_of(lumen, target);
     let centerline = refine_points(pts, ds, cl_opts);
     let refine_ms = clock.elapsed().as_secs_f64() * 1e3;
-    Ok(Endpoints { source, target, centerline, skeleton_ms, refine_ms })
+    Ok(Endpoints { source, target, centerline, skeleton_ms: 0.0, refine_ms })
+}
+
+/// The skeleton search and the centring in one: endpoints and centerline of the lumen whose
+/// Ds is `ds`.
+pub fn find_endpoints(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], opts: &EndpointOptions, cl_opts: &CenterlineOptions) -> Result<Endpoints> {
+    let clock = std::time::Instant::now();
+    let lumen_voxels = ds.data.iter().filter(|&&d| d > 0.0).count();
+    let sk = trace_skeleton(lumen, &ds.grid, lumen_voxels, seed, Some(ds), opts, cl_opts)?;
+    let skeleton_ms = clock.elapsed().as_secs_f64() * 1e3;
+    Ok(Endpoints { skeleton_ms, ..centre_skeleton(lumen, ds, &sk, cl_opts)? })
 }
 
 /// Dt to the target and Dt to the source over the lumen inside `grid`.
@@ -136,84 +167,6 @@ fn skeleton_path(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], given_so
     let sk_opts = SkeletonOptions { min_width: opts.min_width, ..cl_opts.skeleton.clone() };
     let (path, _stats) = colon_path(&pad, &tree, &ds_pad, sp, s, t_given, &sk_opts)?;
     Ok(path.iter().map(|&i| pad.global_of_index(i)).collect())
-}
-
-/// How far (in blocks) a point may be moved onto the coarse grid's lumen.
-const MAX_SNAP_BLOCKS: i64 = 8;
-
-/// The lumen's box in blocks of 2×2×2 voxels: a block is lumen only when all its voxels are,
-/// so that no wall, however thin, disappears (a block half lumen, half wall would open a
-/// short cut between two loops that the full grid does not have); the lumen shrinks by at most
-/// a voxel, which the narrowest colon survives. With its own Ds.
-struct Coarse {
-    mask: Volume<u8>,
-    ds: Field<f32>,
-    /// Fine voxel of the first block's first voxel.
-    lo: [usize; 3],
-    fine_spacing: [f64; 3],
-}
-
-impl Coarse {
-    fn new(lumen: &Volume<u8>, ds: &Field<f32>) -> Result<Coarse> {
-        let lo = ds.grid.lo;
-        let fine = ds.grid.dims;
-        let dims = fine.map(|n| n.div_ceil(2));
-        let sp = lumen.spacing();
-        let geom = crate::Geometry::new(dims, sp.map(|s| 2.0 * s), [0.0; 3])?;
-        let mut data = vec![0u8; dims[0] * dims[1] * dims[2]];
-        for (idx, out) in data.iter_mut().enumerate() {
-            let c = [idx % dims[0], (idx / dims[0]) % dims[1], idx / (dims[0] * dims[1])];
-            let mut n = 0;
-            for o in 0..8 {
-                let f = [lo[0] + 2 * c[0] + (o & 1), lo[1] + 2 * c[1] + ((o >> 1) & 1), lo[2] + 2 * c[2] + ((o >> 2) & 1)];
-                if f.iter().zip(lumen.dims()).all(|(&x, n)| x < n) && lumen.get(f[0], f[1], f[2]) != 0 {
-                    n += 1;
-                }
-            }
-            *out = (n == 8) as u8;
-        }
-        let mask = Volume::from_vec(geom, data)?;
-        let ds = crate::distance::distance_to_wall(&mask)?;
-        Ok(Coarse { mask, ds, lo, fine_spacing: sp })
-    }
-
-    /// The block holding fine voxel `v` when it is lumen, else the nearest lumen block (the
-    /// seed, at the tip of a rectal tube, may lie where no whole block is lumen).
-    fn coarse_voxel(&self, v: [usize; 3]) -> Result<[usize; 3]> {
-        let c = [0, 1, 2].map(|a| (v[a].saturating_sub(self.lo[a]) / 2) as i64);
-        let dims = self.mask.dims();
-        for r in 0..=MAX_SNAP_BLOCKS {
-            let mut best: Option<(i64, [usize; 3])> = None;
-            for dk in -r..=r {
-                for dj in -r..=r {
-                    for di in -r..=r {
-                        let q = [c[0] + di, c[1] + dj, c[2] + dk];
-                        if q.iter().zip(dims).any(|(&x, n)| x < 0 || x >= n as i64) {
-                            continue;
-                        }
-                        let q = q.map(|x| x as usize);
-                        let d2 = di * di + dj * dj + dk * dk;
-                        if self.mask.get(q[0], q[1], q[2]) != 0 && best.is_none_or(|b| d2 < b.0) {
-                            best = Some((d2, q));
-                        }
-                    }
-                }
-            }
-            if let Some(b) = best {
-                return Ok(b.1);
-            }
-        }
-        Err(Error::invalid(format!("the voxel {v:?} lies where the lumen is too narrow to follow")))
-    }
-
-    /// Fine volume-local mm of a block's centre.
-    fn fine_mm(&self, c: [usize; 3]) -> DVec3 {
-        DVec3::new(
-            (self.lo[0] as f64 + 2.0 * c[0] as f64 + 0.5) * self.fine_spacing[0],
-            (self.lo[1] as f64 + 2.0 * c[1] as f64 + 0.5) * self.fine_spacing[1],
-            (self.lo[2] as f64 + 2.0 * c[2] as f64 + 0.5) * self.fine_spacing[2],
-        )
-    }
 }
 
 /// The lumen voxel with the largest Ds among those around a point (the 8 corners of its

@@ -167,7 +167,7 @@ fn core_dt(study: &Study, core: f64) -> Result<Option<[Field<f32>; 2]>> {
     if !to_t.dist[s].is_finite() {
         return Ok(None);
     }
-    let field = |d: Vec<f32>| Field { grid: grid.clone(), geometry: lumen.geometry().clone(), data: pad.unpad(&d) };
+    let field = |d: Vec<f32>| Field { grid: grid.clone(), geometry: lumen.geometry().clone(), data: pad.unpad(d) };
     Ok(Some([field(to_t.dist), field(to_s.dist)]))
 }
 

@@ -11,7 +11,8 @@ use crate::cells::{build_cells, CellOptions, Cells};
 use crate::centerline::{Centerline, CenterlineOptions};
 use crate::distance::distance_to_wall;
 use crate::contacts::{cut_contacts, ContactOptions};
-use crate::endpoints::{dt_fields, find_endpoints, EndpointOptions};
+use crate::endpoints::{self, centre_skeleton, dt_fields, trace_skeleton, uses_blocks, EndpointOptions};
+use crate::field::bounding_box;
 use crate::field::Field;
 use crate::segment::{segment, SegmentOptions, Segmentation};
 use crate::surface::{extract_surface, Surface};
@@ -31,15 +32,15 @@ pub struct PrepOptions {
 #[serde(rename_all = "snake_case")]
 pub enum Stage {
     Segment,
+    Centerline,
     Ds,
     Dt,
-    Centerline,
     Surface,
     Cells,
 }
 
 impl Stage {
-    pub const ALL: [Stage; 6] = [Stage::Segment, Stage::Ds, Stage::Dt, Stage::Centerline, Stage::Surface, Stage::Cells];
+    pub const ALL: [Stage; 6] = [Stage::Segment, Stage::Centerline, Stage::Ds, Stage::Dt, Stage::Surface, Stage::Cells];
     pub fn name(self) -> &'static str {
         match self {
             Stage::Segment => "segment",
@@ -56,11 +57,11 @@ impl Stage {
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct Timings {
     pub segment: f64,
-    pub ds: f64,
     /// The skeleton search: endpoints and the raw centerline path.
     pub skeleton: f64,
-    /// Walls where loops touch (and Ds again when there were any).
+    /// Walls where loops touch.
     pub contacts: f64,
+    pub ds: f64,
     /// The two Dt fields.
     pub dt: f64,
     pub centerline: f64,
@@ -132,40 +133,47 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Sta
     let mut seg = segment(&ct, &opts.segment)?;
     lap(&mut t.segment);
 
+    // The skeleton search runs on blocks with their own Ds when the lumen is large, so the
+    // voxels' Ds waits until the contacts are cut; on a small lumen it needs Ds first.
+    progress(Stage::Centerline);
+    let grid = bounding_box(&seg.lumen, 1, |v| v != 0).ok_or_else(|| crate::Error::invalid("the lumen mask is empty"))?;
+    let early_ds = if uses_blocks(&seg.lumen, seg.lumen_voxels, &opts.centerline) { None } else { Some(distance_to_wall(&seg.lumen)?) };
+    let sk = trace_skeleton(&seg.lumen, &grid, seg.lumen_voxels, seg.seed_voxel, early_ds.as_ref(), &opts.endpoints, &opts.centerline)?;
+    lap(&mut t.skeleton);
+
+    let ends = [sk.given_source.map(|v| endpoints::mm_of(&seg.lumen, v)).unwrap_or(sk.path_mm[0]), sk.given_target.map(|v| endpoints::mm_of(&seg.lumen, v)).unwrap_or(sk.path_mm[sk.path_mm.len() - 1])];
+    let keep_mm = 2.0 * seg.lumen.spacing().iter().cloned().fold(0.0, f64::max);
+    let taken = cut_contacts(&mut seg.lumen, &grid, &sk.path_mm, sk.blocks.as_ref(), &ends, keep_mm, &opts.contacts)?;
+    lap(&mut t.contacts);
+
     progress(Stage::Ds);
-    let mut ds = distance_to_wall(&seg.lumen)?;
+    let mut ds = match early_ds {
+        Some(d) if taken.is_empty() => d,
+        _ => distance_to_wall(&seg.lumen)?,
+    };
     lap(&mut t.ds);
+    let mut ends = centre_skeleton(&seg.lumen, &ds, &sk, &opts.centerline)?;
+    lap(&mut t.centerline);
 
     progress(Stage::Dt);
-    let ends = find_endpoints(&seg.lumen, &ds, seg.seed_voxel, &opts.endpoints, &opts.centerline)?;
-    let mut ignored = 0.0;
-    lap(&mut ignored);
-    (t.skeleton, t.centerline) = (ends.skeleton_ms, ends.refine_ms);
-    let cl = ends.centerline;
-    let (source, target) = (ends.source, ends.target);
-
-    let taken = cut_contacts(&mut seg.lumen, &ds.grid, &cl, &[source, target], &opts.contacts);
-    if !taken.is_empty() {
-        // Ds must see the new walls too (the repulsion, the exports).
-        ds = distance_to_wall(&seg.lumen)?;
-    }
-    lap(&mut t.contacts);
-    let (mut dt_target, mut dt_source) = dt_fields(&seg.lumen, &ds.grid, source, target)?;
-    let joined = |dt: &crate::distance::Geodesic| dt.dist.get_global(source, f32::INFINITY).is_finite();
+    let (mut dt_target, mut dt_source) = dt_fields(&seg.lumen, &ds.grid, ends.source, ends.target)?;
+    let joined = |dt: &crate::distance::Geodesic, source: [usize; 3]| dt.dist.get_global(source, f32::INFINITY).is_finite();
     let mut contact_voxels = taken.len();
-    if contact_voxels > 0 && !joined(&dt_target) {
-        // The walls closed the colon itself (a centerline across a contact): go without.
+    if contact_voxels > 0 && !joined(&dt_target, ends.source) {
+        // The walls closed the colon itself (a path across a contact): go without.
         for &v in &taken {
             seg.lumen.data_mut()[v] = 1;
         }
         contact_voxels = 0;
         ds = distance_to_wall(&seg.lumen)?;
-        (dt_target, dt_source) = dt_fields(&seg.lumen, &ds.grid, source, target)?;
+        ends = centre_skeleton(&seg.lumen, &ds, &sk, &opts.centerline)?;
+        (dt_target, dt_source) = dt_fields(&seg.lumen, &ds.grid, ends.source, ends.target)?;
     }
-    if !joined(&dt_target) {
+    if !joined(&dt_target, ends.source) {
         return Err(crate::Error::invalid("the target cannot be reached from the source through the lumen"));
     }
     seg.lumen_voxels -= contact_voxels;
+    let (source, target, cl) = (ends.source, ends.target, ends.centerline);
     lap(&mut t.dt);
 
     progress(Stage::Surface);

@@ -102,7 +102,7 @@ impl Padded {
 
     pub fn geodesic(&self, mask: &Volume<u8>, r: Search) -> Geodesic {
         Geodesic {
-            dist: Field { grid: self.grid.clone(), geometry: mask.geometry().clone(), data: self.unpad(&r.dist) },
+            dist: Field { grid: self.grid.clone(), geometry: mask.geometry().clone(), data: self.unpad(r.dist) },
             farthest: self.global_of_index(r.far),
             max_mm: r.far_d,
             reached: r.reached,
@@ -152,17 +152,22 @@ impl Padded {
         out
     }
 
-    /// Copies a padded-layout field back to the box layout.
-    pub fn unpad(&self, v: &[f32]) -> Vec<f32> {
+    /// A padded-layout field in the box layout. In place: every row moves to a lower index
+    /// (the padding comes before it), so rows are copied forward and the tail dropped, without
+    /// a second field-sized buffer.
+    pub fn unpad(&self, mut v: Vec<f32>) -> Vec<f32> {
         let [bx, by, bz] = self.grid.dims;
-        let mut out = Vec::with_capacity(self.grid.len());
+        let mut at = 0;
         for k in 0..bz {
             for j in 0..by {
                 let s = 1 + self.dims[0] * (j + 1 + self.dims[1] * (k + 1));
-                out.extend_from_slice(&v[s..s + bx]);
+                v.copy_within(s..s + bx, at);
+                at += bx;
             }
         }
-        out
+        v.truncate(at);
+        v.shrink_to_fit();
+        v
     }
 }
 
@@ -191,17 +196,20 @@ fn dial_impl<const W: bool, const T: bool>(pad: &Padded, sources: &[usize], spac
     let shortest = nbrs.iter().map(|n| n.1).fold(f32::INFINITY, f32::min);
     let longest = nbrs.iter().map(|n| n.1).fold(0.0, f32::max);
     let width = shortest * w_min;
-    // Buckets in a ring: a relaxation never reaches more than the costliest edge beyond the
-    // current bucket.
-    let ring = (longest * w_max.max(w_min) / width).ceil() as usize + 2;
+    let inv_width = 1.0 / width;
+    // Buckets in a ring (a power of two, for the wrap): a relaxation never reaches more than
+    // the costliest edge beyond the current bucket.
+    let ring = ((longest * w_max.max(w_min) / width).ceil() as usize + 2).next_power_of_two();
+    let wrap = ring - 1;
     let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); ring];
     let n = pad.inside.len();
     // Walls start at distance 0, so that `candidate < dist[v]` is never true for them and the
     // inner loop needs no separate test of what the neighbour is; they become +∞ at the end.
     // A settled voxel is never improved either: within a bucket distances differ by less than
-    // the bucket width, and every edge is at least that long.
+    // the bucket width, and every edge is at least that long. Settling flips the sign bit
+    // (−0.0 for a source), which keeps the same test false and marks the voxel done without a
+    // second array.
     let mut dist: Vec<f32> = pad.inside.iter().map(|&m| if m != 0 { f32::INFINITY } else { 0.0 }).collect();
-    let mut settled = vec![false; n];
     let mut parent = if T { vec![NO_PARENT; n] } else { Vec::new() };
     let mut order = Vec::new();
     // Offsets back: parent code c of v means v + nbrs[c].0 is the predecessor.
@@ -219,21 +227,21 @@ fn dial_impl<const W: bool, const T: bool>(pad: &Padded, sources: &[usize], spac
     let (mut far, mut far_d, mut reached) = (sources.first().copied().unwrap_or(0), 0.0f32, 0usize);
     let mut work = Vec::new();
     'outer: while pending > 0 {
-        let slot = current % ring;
+        let slot = current & wrap;
         while !buckets[slot].is_empty() {
             std::mem::swap(&mut work, &mut buckets[slot]);
             pending -= work.len();
             for &u in &work {
                 let u = u as usize;
-                if settled[u] {
+                let du = dist[u];
+                if du.is_sign_negative() {
                     continue;
                 }
-                settled[u] = true;
+                dist[u] = -du;
                 reached += 1;
                 if T {
                     order.push(u as u32);
                 }
-                let du = dist[u];
                 if du > far_d {
                     far_d = du;
                     far = u;
@@ -245,15 +253,21 @@ fn dial_impl<const W: bool, const T: bool>(pad: &Padded, sources: &[usize], spac
                 for (c, &(off, len)) in nbrs.iter().enumerate() {
                     let v = (u as isize + off) as usize;
                     let dv = if W { du + len * 0.5 * (wu + weight[v]) } else { du + len };
-                    if dv < dist[v] {
+                    let old = dist[v];
+                    if dv < old {
                         dist[v] = dv;
                         if T {
                             parent[v] = back[c];
                         }
                         // Rounding can put dv a hair below the next bucket: never file it earlier
                         // than the one being emptied.
-                        let b = ((dv / width) as usize).max(current);
-                        buckets[b % ring].push(v as u32);
+                        let b = ((dv * inv_width) as usize).max(current);
+                        // Already waiting in that bucket (its old entry is there): it will be
+                        // taken with the new distance.
+                        if old.is_finite() && ((old * inv_width) as usize).max(current) == b {
+                            continue;
+                        }
+                        buckets[b & wrap].push(v as u32);
                         pending += 1;
                         pushes += 1;
                     }
@@ -264,9 +278,7 @@ fn dial_impl<const W: bool, const T: bool>(pad: &Padded, sources: &[usize], spac
         current += 1;
     }
     for (d, &m) in dist.iter_mut().zip(&pad.inside) {
-        if m == 0 {
-            *d = f32::INFINITY;
-        }
+        *d = if m == 0 { f32::INFINITY } else { d.abs() };
     }
     Search { dist, far, far_d, reached, pushes, parent, order, nbrs }
 }
