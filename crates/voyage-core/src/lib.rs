@@ -18,6 +18,7 @@ pub mod field;
 pub mod findings;
 pub mod flight;
 pub mod io;
+pub mod mem;
 pub mod phantom;
 pub mod potential;
 pub mod prep;

@@ -11,46 +11,18 @@
 
 use rayon::prelude::*;
 
-use crate::field::{bounding_box, crop, BoxGrid, Field};
+use crate::field::{bounding_box, BoxGrid, Field};
 use crate::{Error, Result, Volume};
 
 /// Ds over the lumen's bounding box (grown by one voxel): distance in mm to the nearest wall
 /// for lumen voxels (mask ≠ 0), 0 elsewhere.
 pub fn distance_to_wall(mask: &Volume<u8>) -> Result<Field<f32>> {
     let grid = bounding_box(mask, 1, |v| v != 0).ok_or_else(|| Error::invalid("the lumen mask is empty"))?;
-    let inside = crop(mask, &grid);
     let sp = mask.spacing();
-    let mut f: Vec<f32> = inside.par_iter().map(|&m| if m != 0 { f32::INFINITY } else { 0.0 }).collect();
-    let (has_y, has_z) = column_flags(&inside, &grid);
-    pass_x(&mut f, &grid, sp[0]);
-    pass_y(&mut f, &grid, sp[1], &has_y);
-    pass_z(&mut f, &grid, sp[2], &has_z);
-    f.par_iter_mut().zip(inside.par_iter()).for_each(|(d, &m)| *d = if m != 0 { d.sqrt() } else { 0.0 });
+    let (mut f, span_y, span_z) = pass_x(mask, &grid, sp[0]);
+    pass_y(&mut f, &grid, sp[1], &span_y);
+    pass_z(&mut f, &grid, sp[2], &span_z);
     Ok(Field { grid, geometry: mask.geometry().clone(), data: f })
-}
-
-/// Which columns hold lumen: along y, indexed i + nx·k; along z, indexed i + nx·j. After the
-/// first pass exactly the lumen is non-zero, so a column without lumen is all walls and its
-/// transform is itself: it need not even be read.
-fn column_flags(inside: &[u8], grid: &BoxGrid) -> (Vec<bool>, Vec<bool>) {
-    let [nx, ny, nz] = grid.dims;
-    let mut has_y = vec![false; nx * nz];
-    let mut has_z = vec![false; nx * ny];
-    for k in 0..nz {
-        for j in 0..ny {
-            let row = &inside[nx * (j + ny * k)..][..nx];
-            if !row.contains(&1) {
-                continue;
-            }
-            for (i, &m) in row.iter().enumerate() {
-                if m != 0 {
-                    has_y[i + nx * k] = true;
-                    has_z[i + nx * j] = true;
-                }
-            }
-        }
-    }
-    (has_y, has_z)
 }
 
 /// Scratch space for the 1D transforms: the envelope's parabola sites `v` (positions) and
@@ -134,49 +106,94 @@ fn lower_envelope(run: &mut [f32], h: f32, s: &mut Scratch) {
     }
 }
 
-/// First pass, along x: the input is only walls (0) and lumen (∞), so the squared distance
-/// to the nearer end of each run is all there is to it.
-fn pass_x(f: &mut [f32], grid: &BoxGrid, h: f64) {
-    let n = grid.dims[0];
+/// The first and last lumen voxel of a column (inclusive); `EMPTY` for a column of walls.
+/// Beyond them the column is wall, so transforming just the span gives the same values: its
+/// ends border walls (or the box's border, which counts as wall), and a column of walls is its
+/// own transform and need not even be read.
+#[derive(Clone, Copy)]
+struct Span {
+    lo: u16,
+    hi: u16,
+}
+
+const EMPTY: Span = Span { lo: u16::MAX, hi: 0 };
+
+impl Span {
+    fn add(&mut self, at: usize) {
+        self.lo = self.lo.min(at as u16);
+        self.hi = self.hi.max(at as u16);
+    }
+    fn range(self) -> Option<std::ops::RangeInclusive<usize>> {
+        (self.lo <= self.hi).then(|| self.lo as usize..=self.hi as usize)
+    }
+}
+
+/// First pass, along x, straight from the mask: the input is only walls and lumen, so the
+/// squared distance to the nearer end of each run is all there is to it. Also finds each
+/// column's lumen span: along y, indexed i + nx·k; along z, indexed i + nx·j.
+fn pass_x(mask: &Volume<u8>, grid: &BoxGrid, h: f64) -> (Vec<f32>, Vec<Span>, Vec<Span>) {
+    let [nx, ny, nz] = grid.dims;
     let h = h as f32;
-    f.par_chunks_mut(n).for_each(|row| {
-        let mut q = 0;
-        while q < n {
-            if row[q] == 0.0 {
-                q += 1;
-                continue;
+    let g = mask.geometry();
+    let mut f = crate::mem::filled(grid.len(), 0.0f32);
+    let runs: Vec<Vec<(u32, u32, u32)>> = f
+        .par_chunks_mut(nx * ny)
+        .enumerate()
+        .map(|(k, slab)| {
+            // (j, start, end) of each run of lumen in this slice.
+            let mut runs = Vec::new();
+            for (j, row) in slab.chunks_mut(nx).enumerate() {
+                let src = &mask.data()[g.index(grid.lo[0], grid.lo[1] + j, grid.lo[2] + k)..][..nx];
+                let mut q = 0;
+                while q < nx {
+                    if src[q] == 0 {
+                        q += 1;
+                        continue;
+                    }
+                    let start = q;
+                    while q < nx && src[q] != 0 {
+                        q += 1;
+                    }
+                    let len = q - start;
+                    for (t, x) in row[start..q].iter_mut().enumerate() {
+                        let d = (t + 1).min(len - t) as f32 * h;
+                        *x = d * d;
+                    }
+                    runs.push((j as u32, start as u32, q as u32));
+                }
             }
-            let start = q;
-            while q < n && row[q] != 0.0 {
-                q += 1;
-            }
-            let len = q - start;
-            for (t, x) in row[start..q].iter_mut().enumerate() {
-                let d = (t + 1).min(len - t) as f32 * h;
-                *x = d * d;
-            }
+            runs
+        })
+        .collect();
+    let mut span_y = vec![EMPTY; nx * nz];
+    let mut span_z = vec![EMPTY; nx * ny];
+    for (k, slice) in runs.iter().enumerate() {
+        for &(j, a, b) in slice {
+            let (j, a, b) = (j as usize, a as usize, b as usize);
+            span_y[nx * k + a..nx * k + b].iter_mut().for_each(|s| s.add(j));
+            span_z[nx * j + a..nx * j + b].iter_mut().for_each(|s| s.add(k));
         }
-    });
+    }
+    (f, span_y, span_z)
 }
 
 /// Second pass, along y: each z-slab is independent and fits in cache.
-fn pass_y(f: &mut [f32], grid: &BoxGrid, h: f64, has: &[bool]) {
+fn pass_y(f: &mut [f32], grid: &BoxGrid, h: f64, spans: &[Span]) {
     let [nx, ny, _] = grid.dims;
     let h = h as f32;
     f.par_chunks_mut(nx * ny).enumerate().for_each_init(
         || Scratch::new(ny),
         |s, (k, slab)| {
             for i in 0..nx {
-                if !has[i + nx * k] {
-                    continue;
-                }
-                for j in 0..ny {
-                    s.col[j] = slab[i + nx * j];
+                let Some(range) = spans[i + nx * k].range() else { continue };
+                let (lo, n) = (*range.start(), range.end() - range.start() + 1);
+                for (t, j) in range.clone().enumerate() {
+                    s.col[t] = slab[i + nx * j];
                 }
                 let mut col = std::mem::take(&mut s.col);
-                transform_column(&mut col, h, s);
-                for j in 0..ny {
-                    slab[i + nx * j] = col[j];
+                transform_column(&mut col[..n], h, s);
+                for t in 0..n {
+                    slab[i + nx * (lo + t)] = col[t];
                 }
                 s.col = col;
             }
@@ -184,32 +201,54 @@ fn pass_y(f: &mut [f32], grid: &BoxGrid, h: f64, has: &[bool]) {
     );
 }
 
-/// Third pass, along z: columns are strided by a whole slab, so each task takes one y-row
-/// of columns; the rows of different tasks never overlap.
-fn pass_z(f: &mut [f32], grid: &BoxGrid, h: f64, has: &[bool]) {
+/// Columns gathered together in the last pass: a cache line of each z-slice per load.
+const TILE: usize = 16;
+
+/// Third pass, along z, ending in millimetres (the square root). Columns are strided by a whole
+/// slab, so each task takes one y-row of columns, gathered `TILE` at a time (a piece of a row
+/// from each slice, not one float per slice per column); the rows of different tasks never
+/// overlap.
+fn pass_z(f: &mut [f32], grid: &BoxGrid, h: f64, spans: &[Span]) {
     let [nx, ny, nz] = grid.dims;
     let h = h as f32;
     let plane = nx * ny;
     let shared = SharedSlice::new(f);
     (0..ny).into_par_iter().for_each_init(
-        || Scratch::new(nz),
-        |s, j| {
-            for i in 0..nx {
-                let base = i + nx * j;
-                if !has[base] {
+        || (Scratch::new(nz), vec![0.0f32; TILE * nz]),
+        |(s, tile), j| {
+            for i0 in (0..nx).step_by(TILE) {
+                let w = TILE.min(nx - i0);
+                let base = i0 + nx * j;
+                let cols = &spans[base..base + w];
+                let (lo, hi) = cols.iter().fold((usize::MAX, 0), |(lo, hi), c| (lo.min(c.lo as usize), hi.max(c.hi as usize)));
+                if lo > hi {
                     continue;
                 }
-                for k in 0..nz {
-                    // SAFETY: task j reads and writes only indices with this j, which no other
-                    // task touches; base + plane·k < nx·ny·nz = len.
-                    s.col[k] = unsafe { shared.get(base + plane * k) };
+                for k in lo..=hi {
+                    for t in 0..w {
+                        // SAFETY: task j reads and writes only indices with this j, which no
+                        // other task touches; base + t + plane·k < nx·ny·nz = len.
+                        tile[k * TILE + t] = unsafe { shared.get(base + t + plane * k) };
+                    }
                 }
-                let mut col = std::mem::take(&mut s.col);
-                transform_column(&mut col, h, s);
-                for (k, &x) in col.iter().enumerate() {
-                    unsafe { shared.set(base + plane * k, x) };
+                for (t, c) in cols.iter().enumerate() {
+                    let Some(range) = c.range() else { continue };
+                    let (a, n) = (*range.start(), range.end() - range.start() + 1);
+                    for q in 0..n {
+                        s.col[q] = tile[(a + q) * TILE + t];
+                    }
+                    let mut col = std::mem::take(&mut s.col);
+                    transform_column(&mut col[..n], h, s);
+                    for q in 0..n {
+                        tile[(a + q) * TILE + t] = col[q].sqrt();
+                    }
+                    s.col = col;
                 }
-                s.col = col;
+                for k in lo..=hi {
+                    for t in 0..w {
+                        unsafe { shared.set(base + t + plane * k, tile[k * TILE + t]) };
+                    }
+                }
             }
         },
     );

@@ -79,7 +79,7 @@ pub struct Padded {
 impl Padded {
     pub fn new(mask: &Volume<u8>, grid: &BoxGrid) -> Self {
         let dims = grid.dims.map(|d| d + 2);
-        let mut inside = vec![0u8; dims[0] * dims[1] * dims[2]];
+        let mut inside = crate::mem::filled(dims[0] * dims[1] * dims[2], 0u8);
         let g = mask.geometry();
         for k in 0..grid.dims[2] {
             for j in 0..grid.dims[1] {
@@ -209,7 +209,7 @@ fn dial_impl<const W: bool, const T: bool>(pad: &Padded, sources: &[usize], spac
     // the bucket width, and every edge is at least that long. Settling flips the sign bit
     // (−0.0 for a source), which keeps the same test false and marks the voxel done without a
     // second array.
-    let mut dist: Vec<f32> = pad.inside.iter().map(|&m| if m != 0 { f32::INFINITY } else { 0.0 }).collect();
+    let mut dist: Vec<f32> = crate::mem::collect(n, pad.inside.iter().map(|&m| if m != 0 { f32::INFINITY } else { 0.0 }));
     let mut parent = if T { vec![NO_PARENT; n] } else { Vec::new() };
     let mut order = Vec::new();
     // Offsets back: parent code c of v means v + nbrs[c].0 is the predecessor.
