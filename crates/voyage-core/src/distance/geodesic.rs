@@ -209,7 +209,9 @@ fn dial_impl<const W: bool, const T: bool>(pad: &Padded, sources: &[usize], spac
     // the bucket width, and every edge is at least that long. Settling flips the sign bit
     // (−0.0 for a source), which keeps the same test false and marks the voxel done without a
     // second array.
-    let mut dist: Vec<f32> = crate::mem::collect(n, pad.inside.iter().map(|&m| if m != 0 { f32::INFINITY } else { 0.0 }));
+    // One spare wall at the end: the four-wide row loads read a lane past the last neighbour.
+    let mut dist: Vec<f32> = crate::mem::collect(n + 1, pad.inside.iter().map(|&m| if m != 0 { f32::INFINITY } else { 0.0 }).chain([0.0]));
+    let rows = neighbour_rows(pad, spacing);
     let mut parent = if T { vec![NO_PARENT; n] } else { Vec::new() };
     let mut order = Vec::new();
     // Offsets back: parent code c of v means v + nbrs[c].0 is the predecessor.
@@ -249,27 +251,48 @@ fn dial_impl<const W: bool, const T: bool>(pad: &Padded, sources: &[usize], spac
                 if stop.is_some_and(|f| f(u)) {
                     break 'outer;
                 }
-                let wu = if W { weight[u] } else { 1.0 };
-                for (c, &(off, len)) in nbrs.iter().enumerate() {
-                    let v = (u as isize + off) as usize;
-                    let dv = if W { du + len * 0.5 * (wu + weight[v]) } else { du + len };
-                    let old = dist[v];
-                    if dv < old {
+                // Files v at its new distance dv (it was `old`), reached through neighbour code c.
+                macro_rules! improve {
+                    ($v:expr, $dv:expr, $old:expr, $c:expr) => {{
+                        let (v, dv, old) = ($v, $dv, $old);
                         dist[v] = dv;
                         if T {
-                            parent[v] = back[c];
+                            parent[v] = back[$c];
                         }
-                        // Rounding can put dv a hair below the next bucket: never file it earlier
-                        // than the one being emptied.
+                        // Rounding can put dv a hair below the next bucket: never file it
+                        // earlier than the one being emptied.
                         let b = ((dv * inv_width) as usize).max(current);
                         // Already waiting in that bucket (its old entry is there): it will be
                         // taken with the new distance.
-                        if old.is_finite() && ((old * inv_width) as usize).max(current) == b {
-                            continue;
+                        if !(old.is_finite() && ((old * inv_width) as usize).max(current) == b) {
+                            buckets[b & wrap].push(v as u32);
+                            pending += 1;
+                            pushes += 1;
                         }
-                        buckets[b & wrap].push(v as u32);
-                        pending += 1;
-                        pushes += 1;
+                    }};
+                }
+                if W {
+                    let wu = weight[u];
+                    for (c, &(off, len)) in nbrs.iter().enumerate() {
+                        let v = (u as isize + off) as usize;
+                        let dv = du + len * 0.5 * (wu + weight[v]);
+                        let old = dist[v];
+                        if dv < old {
+                            improve!(v, dv, old, c);
+                        }
+                    }
+                } else {
+                    // The 26 neighbours are nine rows of three along x: each row is one
+                    // four-wide comparison.
+                    for (r, row) in rows.iter().enumerate() {
+                        let at = (u as isize + row.start) as usize;
+                        let (mut mask, cand) = row_improvements(&dist, at, du, &row.len);
+                        while mask != 0 {
+                            let lane = mask.trailing_zeros() as usize;
+                            mask &= mask - 1;
+                            let v = at + lane;
+                            improve!(v, cand[lane], dist[v], row_code(r, lane));
+                        }
                     }
                 }
             }
@@ -277,10 +300,67 @@ fn dial_impl<const W: bool, const T: bool>(pad: &Padded, sources: &[usize], spac
         }
         current += 1;
     }
+    dist.truncate(n);
     for (d, &m) in dist.iter_mut().zip(&pad.inside) {
         *d = if m == 0 { f32::INFINITY } else { d.abs() };
     }
     Search { dist, far, far_d, reached, pushes, parent, order, nbrs }
+}
+
+/// A row of three neighbours along x: the offset of its first (di = −1) and the four lanes'
+/// edge lengths (+∞ for the fourth lane, and for the voxel itself in the middle row).
+struct Row {
+    start: isize,
+    len: [f32; 4],
+}
+
+/// The nine rows, in the order of [`Padded::neighbours`] (dk, then dj).
+fn neighbour_rows(pad: &Padded, spacing: [f64; 3]) -> [Row; 9] {
+    let (nx, ny) = (pad.dims[0] as isize, pad.dims[1] as isize);
+    std::array::from_fn(|r| {
+        let (dj, dk) = ((r % 3) as isize - 1, (r / 3) as isize - 1);
+        let mut len = [f32::INFINITY; 4];
+        for (lane, l) in len.iter_mut().take(3).enumerate() {
+            let di = lane as isize - 1;
+            if (di, dj, dk) != (0, 0, 0) {
+                *l = ((di as f64 * spacing[0]).powi(2) + (dj as f64 * spacing[1]).powi(2) + (dk as f64 * spacing[2]).powi(2)).sqrt() as f32;
+            }
+        }
+        Row { start: -1 + nx * (dj + ny * dk), len }
+    })
+}
+
+/// The index into [`Padded::neighbours`] of lane `lane` of row `r` (the voxel itself, index 13
+/// of the 27, is not in that list).
+#[inline]
+fn row_code(r: usize, lane: usize) -> usize {
+    let i = 3 * r + lane;
+    if i > 13 { i - 1 } else { i }
+}
+
+/// Which of the four lanes at `dist[at..at + 4]` a path through the settled voxel (distance
+/// `du`) improves, as bits, and the candidate distances.
+#[inline(always)]
+fn row_improvements(dist: &[f32], at: usize, du: f32, len: &[f32; 4]) -> (u32, [f32; 4]) {
+    let d = &dist[at..at + 4];
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_add_ps, _mm_cmplt_ps, _mm_loadu_ps, _mm_movemask_ps, _mm_set1_ps, _mm_storeu_ps};
+        let mut cand = [0.0f32; 4];
+        // SAFETY: SSE is part of x86_64; `d` and `len` hold four floats, `cand` has room for four.
+        let mask = unsafe {
+            let c = _mm_add_ps(_mm_set1_ps(du), _mm_loadu_ps(len.as_ptr()));
+            _mm_storeu_ps(cand.as_mut_ptr(), c);
+            _mm_movemask_ps(_mm_cmplt_ps(c, _mm_loadu_ps(d.as_ptr()))) as u32
+        };
+        (mask, cand)
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let cand = [du + len[0], du + len[1], du + len[2], du + len[3]];
+        let mask = (0..4).filter(|&l| cand[l] < d[l]).fold(0u32, |m, l| m | 1 << l);
+        (mask, cand)
+    }
 }
 
 #[cfg(test)]
