@@ -149,7 +149,7 @@ fn report(m: &Measured, refs: Value, threads: usize) -> Value {
             row("one Dt", m.dt_single_ms, "dijkstra3d", r("dijkstra3d"), 100.0, Some(4.0)),
             row("endpoints + skeleton path", t.skeleton, "-", None, 200.0, None),
             row("centerline refinement", t.centerline, "-", None, 50.0, None),
-            row("touching loops (+ Ds again)", t.contacts, "-", None, 0.0, None),
+            row("touching loops (on the skeleton's blocks)", t.contacts, "-", None, 0.0, None),
             row("both Dt fields", t.dt, "-", None, 200.0, None),
             row("surface", t.surface, "VTK flying edges", r("vtk_flying_edges"), 80.0, Some(1.0)),
             row("surface", t.surface, "scikit-image", r("skimage_marching_cubes"), 80.0, None),
