@@ -129,7 +129,7 @@ pub fn build_cells(lumen: &Volume<u8>, dt_source: &Field<f32>, centerline: &Cent
     let min_len = opts.min_length_mm.max(2.0 * diagonal(lumen.spacing()));
     let levels = choose_levels(&cl_dt, &centerline.arc_mm, &tri_dt, opts, min_len);
     let reach = diagonal(lumen.spacing()) * 1.01;
-    let Labels { cells: voxel_cell, counts, near_cut } = label_voxels(dt_source, &levels, reach);
+    let Labels { cells: voxel_cell, counts, below_cut } = label_voxels(dt_source, &levels, reach);
     let triangle_cell: Vec<u16> = tri_dt.iter().map(|&d| cell_of_level(&levels, d)).collect();
     let ncells = levels.len() + 1;
     let mut cells: Vec<Cell> = (0..ncells)
@@ -142,7 +142,7 @@ pub fn build_cells(lumen: &Volume<u8>, dt_source: &Field<f32>, centerline: &Cent
         cell.voxels = n;
     }
     set_spans(&mut cells, &cl_dt, &levels);
-    let boundaries = boundary_points(&voxel_cell, &near_cut, levels.len(), lumen.spacing())?;
+    let boundaries = boundary_points(&voxel_cell, &below_cut, levels.len(), lumen.spacing())?;
     let portals = levels
         .iter()
         .zip(boundaries)
@@ -200,17 +200,17 @@ fn cell_of_level(levels: &[f64], d: f32) -> u16 {
 }
 
 /// Each voxel's cell, the voxels per cell, and the voxels within `reach` (a voxel diagonal)
-/// of a cut: only those can touch another cell, since Dt changes by at most a diagonal
-/// between neighbours.
+/// below a cut: only those can touch the next cell, since Dt changes by at most a diagonal
+/// between neighbours, so every pair of voxels across a cut has its lower voxel among them.
 struct Labels {
     cells: Field<u16>,
     counts: Vec<usize>,
-    near_cut: Vec<u32>,
+    below_cut: Vec<u32>,
 }
 
 fn label_voxels(dt: &Field<f32>, levels: &[f64], reach: f64) -> Labels {
     let mut counts = vec![0usize; levels.len() + 1];
-    let mut near_cut = Vec::new();
+    let mut below_cut = Vec::new();
     let table = LevelTable::new(levels);
     let data = dt
         .data
@@ -223,13 +223,13 @@ fn label_voxels(dt: &Field<f32>, levels: &[f64], reach: f64) -> Labels {
             let c = table.cell(d) as usize;
             counts[c] += 1;
             let d = d as f64;
-            if (c < levels.len() && levels[c] - d <= reach) || (c > 0 && d - levels[c - 1] <= reach) {
-                near_cut.push(idx as u32);
+            if c < levels.len() && levels[c] - d <= reach {
+                below_cut.push(idx as u32);
             }
             c as u16
         })
         .collect();
-    Labels { cells: Field { grid: dt.grid.clone(), geometry: dt.geometry.clone(), data }, counts, near_cut }
+    Labels { cells: Field { grid: dt.grid.clone(), geometry: dt.geometry.clone(), data }, counts, below_cut }
 }
 
 /// [`cell_of_level`] by table: the cell at the start of each bin of Dt, bins narrower than the
@@ -304,11 +304,10 @@ fn make_portal(pts: Vec<DVec3>, c: usize, level: f64, cl: &Centerline, cl_dt: &[
 }
 
 /// For each cut c, the centres (volume-local mm) of the voxels on either side of it: voxels
-/// of cells c and c + 1 that are 26-adjacent, found from the voxels near a cut (see
-/// [`label_voxels`]: no other voxel can touch another cell), each neighbour pair seen once.
-/// Cells further apart than one must never touch (that is the guarantee visibility needs);
-/// if they do, that is an error.
-fn boundary_points(cells: &Field<u16>, near_cut: &[u32], cuts: usize, sp: [f64; 3]) -> Result<Vec<Vec<DVec3>>> {
+/// of cells c and c + 1 that are 26-adjacent, found from the voxels just below a cut (see
+/// [`label_voxels`]), each voxel once. Cells further apart than one must never touch (that is
+/// the guarantee visibility needs); if they do, that is an error.
+fn boundary_points(cells: &Field<u16>, below_cut: &[u32], cuts: usize, sp: [f64; 3]) -> Result<Vec<Vec<DVec3>>> {
     let [nx, ny, nz] = cells.grid.dims;
     let mut offs = Vec::with_capacity(26);
     for dk in -1i64..=1 {
@@ -320,37 +319,38 @@ fn boundary_points(cells: &Field<u16>, near_cut: &[u32], cuts: usize, sp: [f64; 
             }
         }
     }
-    // Box indices per cut. Both voxels of a pair across a cut are near it, so each voxel
-    // looks at all its neighbours and joins the cut below and/or above it once: the lists come
-    // out in index order without duplicates.
+    // Box indices per cut; an upper voxel is met from several lower ones, so a bit per box
+    // voxel says whether it is listed already. (The order within a list does not matter: a
+    // portal is their convex hull.)
     let mut out: Vec<Vec<u32>> = vec![Vec::new(); cuts];
-    for &here in near_cut {
+    let mut listed = vec![0u64; cells.data.len().div_ceil(64)];
+    for &here in below_cut {
         let here = here as usize;
         let [i, j, k] = cells.grid.ijk(here);
         let a = cells.data[here];
-        let (mut below, mut above) = (false, false);
+        let mut across = false;
         for &(di, dj, dk) in &offs {
             let (qi, qj, qk) = (i as i64 + di, j as i64 + dj, k as i64 + dk);
             if qi < 0 || qj < 0 || qk < 0 || qi >= nx as i64 || qj >= ny as i64 || qk >= nz as i64 {
                 continue;
             }
-            let b = cells.data[cells.grid.index(qi as usize, qj as usize, qk as usize)];
+            let there = cells.grid.index(qi as usize, qj as usize, qk as usize);
+            let b = cells.data[there];
             if b == u16::MAX || b == a {
                 continue;
             }
             if a.abs_diff(b) != 1 {
                 return Err(Error::invalid(format!("cells {a} and {b} touch: the cuts are too close")));
             }
-            if b < a {
-                below = true;
-            } else {
-                above = true;
+            if b == a + 1 {
+                across = true;
+                if listed[there / 64] & (1 << (there % 64)) == 0 {
+                    listed[there / 64] |= 1 << (there % 64);
+                    out[a as usize].push(there as u32);
+                }
             }
         }
-        if below {
-            out[a as usize - 1].push(here as u32);
-        }
-        if above {
+        if across {
             out[a as usize].push(here as u32);
         }
     }
