@@ -124,7 +124,7 @@ impl Span {
         self.hi = self.hi.max(at as u16);
     }
     fn range(self) -> Option<std::ops::RangeInclusive<usize>> {
-        (self.lo <= self.hi).then(|| self.lo as usize..=self.hi as usize)
+        (self.lo <= self.hi).then_some(self.lo as usize..=self.hi as usize)
     }
 }
 
