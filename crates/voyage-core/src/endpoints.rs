@@ -17,7 +17,7 @@ use crate::blocks::Blocks;
 use crate::centerline::{cost_weight, refine_points, Centerline, CenterlineOptions};
 use crate::skeleton::{colon_path, tree_search, SkeletonOptions};
 use crate::distance::distance_to_wall;
-use crate::distance::geodesic::{dial, Geodesic, Padded, SearchOptions};
+use crate::distance::geodesic::{geodesic_distance, Geodesic, Padded};
 use crate::field::{BoxGrid, Field};
 use crate::{Error, Result, Volume};
 
@@ -125,14 +125,9 @@ pub fn find_endpoints(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], opt
 
 /// Dt to the target and Dt to the source over the lumen inside `grid`.
 pub fn dt_fields(lumen: &Volume<u8>, grid: &BoxGrid, source: [usize; 3], target: [usize; 3]) -> Result<(Geodesic, Geodesic)> {
-    let pad = Padded::new(lumen, grid);
-    let sp = lumen.spacing();
-    let (s, t) = (pad.lumen_index(source)?, pad.lumen_index(target)?);
     // The two fields are independent: on two cores they cost one.
-    Ok(rayon::join(
-        || pad.geodesic(lumen, dial(&pad, &[t], sp, &SearchOptions::default())),
-        || pad.geodesic(lumen, dial(&pad, &[s], sp, &SearchOptions::default())),
-    ))
+    let (to_target, to_source) = rayon::join(|| geodesic_distance(lumen, grid, target), || geodesic_distance(lumen, grid, source));
+    Ok((to_target?, to_source?))
 }
 
 /// The raw colon path (voxels of `lumen`, source → target) from the skeleton graph.

@@ -141,9 +141,10 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Sta
     let sk = trace_skeleton(&seg.lumen, &grid, seg.lumen_voxels, seg.seed_voxel, early_ds.as_ref(), &opts.endpoints, &opts.centerline)?;
     lap(&mut t.skeleton);
 
-    let ends = [sk.given_source.map(|v| endpoints::mm_of(&seg.lumen, v)).unwrap_or(sk.path_mm[0]), sk.given_target.map(|v| endpoints::mm_of(&seg.lumen, v)).unwrap_or(sk.path_mm[sk.path_mm.len() - 1])];
+    // No wall at the ends: source and target stay lumen.
+    let keep = [sk.given_source.map(|v| endpoints::mm_of(&seg.lumen, v)).unwrap_or(sk.path_mm[0]), sk.given_target.map(|v| endpoints::mm_of(&seg.lumen, v)).unwrap_or(sk.path_mm[sk.path_mm.len() - 1])];
     let keep_mm = 2.0 * seg.lumen.spacing().iter().cloned().fold(0.0, f64::max);
-    let taken = cut_contacts(&mut seg.lumen, &grid, &sk.path_mm, sk.blocks.as_ref(), &ends, keep_mm, &opts.contacts)?;
+    let taken = cut_contacts(&mut seg.lumen, &grid, &sk.path_mm, sk.blocks.as_ref(), &keep, keep_mm, &opts.contacts)?;
     lap(&mut t.contacts);
 
     progress(Stage::Ds);

@@ -23,11 +23,24 @@ pub struct Geodesic {
 
 /// Shortest-path distances from `source` (a lumen voxel) to every lumen voxel of `mask`
 /// inside `grid`.
+///
+/// The distances start straight from the mask (walls 0, lumen +∞: no padded copy of the mask
+/// is needed, the search itself tells walls by their 0) and are finished and moved to the
+/// box layout in one pass.
 pub fn geodesic_distance(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3]) -> Result<Geodesic> {
-    let pad = Padded::new(mask, grid);
-    let src = pad.lumen_index(source)?;
-    let r = dial(&pad, &[src], mask.spacing(), &SearchOptions::default());
-    Ok(pad.geodesic(mask, r))
+    let shape = Padded::shape(grid);
+    let src = shape
+        .index_of_global(source)
+        .filter(|_| mask.get(source[0], source[1], source[2]) != 0)
+        .ok_or_else(|| Error::invalid(format!("the voxel {source:?} is not in the lumen")))?;
+    let dist = shape.start_from_mask(mask);
+    let r = dial_impl::<false, false>(&shape, dist, &[src], mask.spacing(), &[], None, false);
+    Ok(Geodesic {
+        farthest: shape.global_of_index(r.far),
+        max_mm: r.far_d,
+        reached: r.reached,
+        dist: Field { grid: grid.clone(), geometry: mask.geometry().clone(), data: shape.finish_unpadded(r.dist) },
+    })
 }
 
 /// What a search over the padded grid found.
@@ -93,20 +106,57 @@ impl Padded {
         Padded { grid: grid.clone(), dims, inside }
     }
 
+    /// The padded layout of `grid` without the mask (for searches that start from
+    /// [`Padded::start_from_mask`]).
+    pub(crate) fn shape(grid: &BoxGrid) -> Self {
+        Padded { grid: grid.clone(), dims: grid.dims.map(|d| d + 2), inside: Vec::new() }
+    }
+
+    /// A search's starting distances in the padded layout straight from the mask: 0 for walls
+    /// and padding, +∞ for lumen, plus the spare wall at the end the row loads need.
+    pub(crate) fn start_from_mask(&self, mask: &Volume<u8>) -> Vec<f32> {
+        let mut dist = crate::mem::filled(self.dims[0] * self.dims[1] * self.dims[2] + 1, 0.0f32);
+        let g = mask.geometry();
+        let grid = &self.grid;
+        for k in 0..grid.dims[2] {
+            for j in 0..grid.dims[1] {
+                let src = &mask.data()[g.index(grid.lo[0], grid.lo[1] + j, grid.lo[2] + k)..][..grid.dims[0]];
+                let dst = 1 + self.dims[0] * (j + 1 + self.dims[1] * (k + 1));
+                for (d, &m) in dist[dst..dst + grid.dims[0]].iter_mut().zip(src) {
+                    if m != 0 {
+                        *d = f32::INFINITY;
+                    }
+                }
+            }
+        }
+        dist
+    }
+
+    /// Unfinished search distances ([`finish`]) in the box layout, in place, in one pass.
+    pub(crate) fn finish_unpadded(&self, mut v: Vec<f32>) -> Vec<f32> {
+        let [bx, by, bz] = self.grid.dims;
+        let mut at = 0;
+        for k in 0..bz {
+            for j in 0..by {
+                let s = 1 + self.dims[0] * (j + 1 + self.dims[1] * (k + 1));
+                // s ≥ at: each value moves down (or stays), so going forward never overwrites
+                // one not yet read.
+                for t in 0..bx {
+                    v[at + t] = finish(v[s + t]);
+                }
+                at += bx;
+            }
+        }
+        v.truncate(at);
+        v.shrink_to_fit();
+        v
+    }
+
     /// Padded index of a volume voxel that must be lumen.
     pub fn lumen_index(&self, v: [usize; 3]) -> Result<usize> {
         self.index_of_global(v)
             .filter(|&i| self.inside[i] != 0)
             .ok_or_else(|| Error::invalid(format!("the voxel {v:?} is not in the lumen")))
-    }
-
-    pub fn geodesic(&self, mask: &Volume<u8>, r: Search) -> Geodesic {
-        Geodesic {
-            dist: Field { grid: self.grid.clone(), geometry: mask.geometry().clone(), data: self.unpad(r.dist) },
-            farthest: self.global_of_index(r.far),
-            max_mm: r.far_d,
-            reached: r.reached,
-        }
     }
 
     pub fn index_of_global(&self, g: [usize; 3]) -> Option<usize> {
@@ -177,18 +227,45 @@ impl Padded {
 /// the buckets exact.
 pub fn dial(pad: &Padded, sources: &[usize], spacing: [f64; 3], opts: &SearchOptions) -> Search {
     match (opts.weight, opts.tree) {
-        (Some(w), true) => dial_impl::<true, true>(pad, sources, spacing, w, opts.stop),
-        (Some(w), false) => dial_impl::<true, false>(pad, sources, spacing, w, opts.stop),
-        (None, true) => dial_impl::<false, true>(pad, sources, spacing, &[], opts.stop),
-        (None, false) => dial_impl::<false, false>(pad, sources, spacing, &[], opts.stop),
+        (Some(w), true) => dial_impl::<true, true>(pad, start_from_inside(pad), sources, spacing, w, opts.stop, true),
+        (Some(w), false) => dial_impl::<true, false>(pad, start_from_inside(pad), sources, spacing, w, opts.stop, true),
+        (None, true) => dial_impl::<false, true>(pad, start_from_inside(pad), sources, spacing, &[], opts.stop, true),
+        (None, false) => dial_impl::<false, false>(pad, start_from_inside(pad), sources, spacing, &[], opts.stop, true),
+    }
+}
+
+/// Starting distances from the padded mask: walls 0 (so that `candidate < dist[v]` is never
+/// true for them and the inner loop needs no separate test of what the neighbour is), lumen
+/// +∞, and one spare wall at the end: the four-wide row loads read a lane past the last
+/// neighbour.
+fn start_from_inside(pad: &Padded) -> Vec<f32> {
+    crate::mem::collect(pad.inside.len() + 1, pad.inside.iter().map(|&m| if m != 0 { f32::INFINITY } else { 0.0 }).chain([0.0]))
+}
+
+/// A search's final distance from its working value: settled voxels carry their distance
+/// with the sign bit set, walls 0 (→ +∞), unreached lumen +∞, and voxels reached but not
+/// settled (a search stopped early) their tentative distance.
+#[inline]
+fn finish(d: f32) -> f32 {
+    if d.is_sign_negative() {
+        -d
+    } else if d == 0.0 {
+        f32::INFINITY
+    } else {
+        d
     }
 }
 
 /// `W`: weighted; `T`: record the tree. Monomorphised so the plain search pays for neither.
-fn dial_impl<const W: bool, const T: bool>(pad: &Padded, sources: &[usize], spacing: [f64; 3], weight: &[f32], stop: Option<&dyn Fn(usize) -> bool>) -> Search {
+///
+/// `dist`: the starting distances (see [`start_from_inside`]); with `finalize` the result's
+/// distances are finished ([`finish`]) and as long as the padded grid, else left as the search
+/// leaves them for the caller to finish.
+#[allow(clippy::too_many_arguments)]
+fn dial_impl<const W: bool, const T: bool>(pad: &Padded, mut dist: Vec<f32>, sources: &[usize], spacing: [f64; 3], weight: &[f32], stop: Option<&dyn Fn(usize) -> bool>, finalize: bool) -> Search {
     let nbrs = pad.neighbours(spacing);
     let (w_min, w_max) = if W {
-        weight.iter().zip(&pad.inside).filter(|(_, m)| **m != 0).fold((f32::INFINITY, 0.0f32), |(lo, hi), (&x, _)| (lo.min(x), hi.max(x)))
+        weight.iter().zip(&dist).filter(|(_, d)| **d != 0.0).fold((f32::INFINITY, 0.0f32), |(lo, hi), (&x, _)| (lo.min(x), hi.max(x)))
     } else {
         (1.0, 1.0)
     };
@@ -202,15 +279,11 @@ fn dial_impl<const W: bool, const T: bool>(pad: &Padded, sources: &[usize], spac
     let ring = ((longest * w_max.max(w_min) / width).ceil() as usize + 2).next_power_of_two();
     let wrap = ring - 1;
     let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); ring];
-    let n = pad.inside.len();
-    // Walls start at distance 0, so that `candidate < dist[v]` is never true for them and the
-    // inner loop needs no separate test of what the neighbour is; they become +∞ at the end.
-    // A settled voxel is never improved either: within a bucket distances differ by less than
-    // the bucket width, and every edge is at least that long. Settling flips the sign bit
-    // (−0.0 for a source), which keeps the same test false and marks the voxel done without a
-    // second array.
-    // One spare wall at the end: the four-wide row loads read a lane past the last neighbour.
-    let mut dist: Vec<f32> = crate::mem::collect(n + 1, pad.inside.iter().map(|&m| if m != 0 { f32::INFINITY } else { 0.0 }).chain([0.0]));
+    let n = dist.len() - 1;
+    // A settled voxel is never improved: within a bucket distances differ by less than the
+    // bucket width, and every edge is at least that long. Settling flips the sign bit (−0.0
+    // for a source), which keeps `candidate < dist[v]` false and marks the voxel done without
+    // a second array.
     let rows = neighbour_rows(pad, spacing);
     let mut parent = if T { vec![NO_PARENT; n] } else { Vec::new() };
     let mut order = Vec::new();
@@ -300,9 +373,9 @@ fn dial_impl<const W: bool, const T: bool>(pad: &Padded, sources: &[usize], spac
         }
         current += 1;
     }
-    dist.truncate(n);
-    for (d, &m) in dist.iter_mut().zip(&pad.inside) {
-        *d = if m == 0 { f32::INFINITY } else { d.abs() };
+    if finalize {
+        dist.truncate(n);
+        dist.iter_mut().for_each(|d| *d = finish(*d));
     }
     Search { dist, far, far_d, reached, pushes, parent, order, nbrs }
 }
