@@ -2,20 +2,13 @@
 //! touching over wide contacts). Needs `../shared/data`; skips with a message without it. Run
 //! in release mode (`cargo test --release -p voyage-core --test colon_a`).
 
-use std::path::PathBuf;
-
-use voyage_core::io::{load, LoadOptions};
 use voyage_core::prep::{prepare, PrepOptions};
+
+mod common;
 
 #[test]
 fn colon_a_centerline_runs_rectum_to_cecum() {
-    let dir = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data"));
-    let path = dir.join("masks/colon-a.nii.gz");
-    if !path.exists() {
-        eprintln!("skipping: {} not found", path.display());
-        return;
-    }
-    let ct = load(&path, &LoadOptions::default()).unwrap().volume;
+    let Some(ct) = common::colon_a_volume() else { return };
     let dims = ct.dims();
     let s = prepare(ct, &PrepOptions::default(), |_| {}).unwrap();
     let cl = &s.centerline;
@@ -39,13 +32,7 @@ fn colon_a_centerline_runs_rectum_to_cecum() {
 /// (thresholding, outside air, components) runs on it; the result must agree with the mask's.
 #[test]
 fn colon_a_as_a_pseudo_ct() {
-    let dir = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data"));
-    let path = dir.join("masks/colon-a.nii.gz");
-    if !path.exists() {
-        eprintln!("skipping: {} not found", path.display());
-        return;
-    }
-    let mask = load(&path, &LoadOptions::default()).unwrap().volume;
+    let Some(mask) = common::colon_a_volume() else { return };
     let ct = pseudo_ct(&mask);
     let s = prepare(ct, &PrepOptions::default(), |_| {}).unwrap();
     assert!(!s.segmentation.from_mask);

@@ -16,6 +16,8 @@ use voyage_core::prep::{prepare, PrepOptions, Study};
 use voyage_core::render::{CellMesh, Frame, Rasterizer, Strategy, View, Visibility, NO_TRIANGLE};
 use voyage_core::Geometry;
 
+mod common;
+
 fn temp_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("voyage-findings-test-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
@@ -226,16 +228,6 @@ fn two_clicks_measure_the_pipes_polyps_within_half_a_millimetre() {
 // ---------------------------------------------------------------------------------------
 // Picking on a real colon.
 
-fn colon_a() -> Option<Study> {
-    let path = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/masks/colon-a.nii.gz"));
-    if !path.exists() {
-        eprintln!("skipping colon-a: {} not found", path.display());
-        return None;
-    }
-    let ct = voyage_core::io::load(&path, &Default::default()).unwrap().volume;
-    Some(prepare(ct, &PrepOptions::default(), |_| {}).unwrap())
-}
-
 fn ms(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
@@ -245,7 +237,7 @@ fn ms(t: Instant) -> f64 {
 /// agree with the id buffer under the cursor.
 #[test]
 fn pick_on_colon_a_is_quick_and_lands_where_the_frame_shows() {
-    let Some(study) = colon_a() else { return };
+    let Some(study) = common::colon_a_study() else { return };
     let mesh = CellMesh::new(&study.surface, &study.cells);
     eprintln!("colon-a: {} triangles in {} cells, {} rayon threads", mesh.triangles.len(), mesh.cells(), rayon::current_num_threads());
     let cl = &study.centerline;

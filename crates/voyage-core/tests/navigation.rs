@@ -2,8 +2,6 @@
 //! integrator against hand-computed steps of Eqs. 5–9, the safety invariant under 10⁵ random
 //! steps, and automatic flights on the phantoms and on colon-a.
 
-use std::path::PathBuf;
-
 use glam::{DMat3, DQuat, DVec3};
 use voyage_core::camera::{Camera, Pose};
 use voyage_core::flight::{fly, start_pose, Flight, FlightOptions};
@@ -13,6 +11,8 @@ use voyage_core::potential::{BrickStore, Direction, DistanceStore, Navigable, Po
 use voyage_core::prep::{prepare, PrepOptions, Study};
 use voyage_core::submarine::{euler_step, Dynamics, Forces, Input, Modes, Safety, State, Submarine};
 
+mod common;
+
 fn small_colon(seed: u64) -> Study {
     let p = phantom::colon(&ColonOptions { small: true, seed, ..Default::default() }).unwrap();
     prepare(p.ct, &PrepOptions::default(), |_| {}).unwrap()
@@ -21,16 +21,6 @@ fn small_colon(seed: u64) -> Study {
 fn full_colon(seed: u64) -> Study {
     let p = phantom::colon(&ColonOptions { seed, ..Default::default() }).unwrap();
     prepare(p.ct, &PrepOptions::default(), |_| {}).unwrap()
-}
-
-fn colon_a() -> Option<Study> {
-    let path = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/masks/colon-a.nii.gz"));
-    if !path.exists() {
-        eprintln!("skipping colon-a: {} not found", path.display());
-        return None;
-    }
-    let ct = voyage_core::io::load(&path, &Default::default()).unwrap().volume;
-    Some(prepare(ct, &PrepOptions::default(), |_| {}).unwrap())
 }
 
 fn field(study: &Study, nav: &Navigable) -> PotentialField<BrickStore> {
@@ -223,7 +213,7 @@ fn random_walk(study: &Study, steps: usize, seed: u64, what: &str) {
 #[test]
 fn the_camera_never_leaves_the_lumen_under_random_input() {
     random_walk(&full_colon(1), 100_000, 11, "colon phantom");
-    if let Some(s) = colon_a() {
+    if let Some(s) = common::colon_a_study() {
         random_walk(&s, 100_000, 12, "colon-a");
     }
 }
@@ -272,7 +262,7 @@ fn automatic_flights_reach_both_ends_of_the_phantoms() {
 
 #[test]
 fn automatic_flights_reach_both_ends_of_colon_a() {
-    let Some(study) = colon_a() else { return };
+    let Some(study) = common::colon_a_study() else { return };
     for f in flights(&study, &compass_only(), "colon-a") {
         // Measured 20–21° (haustral folds make the path weave); the phantoms hold 20°.
         assert!(f.mean_heading_error_deg <= 25.0, "colon-a: heading error {:.1}°", f.mean_heading_error_deg);

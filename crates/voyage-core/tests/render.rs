@@ -1,8 +1,6 @@
 //! Rendering and visibility (paper §4): culling never changes the image, the reductions of
 //! the paper's Table 1 hold, and the pipe's polyps are in view.
 
-use std::path::PathBuf;
-
 use glam::DVec3;
 use voyage_core::camera::{Camera, Pose};
 use voyage_core::flight::{fly, FlightOptions};
@@ -10,6 +8,8 @@ use voyage_core::phantom::{self, ColonOptions, Phantom};
 use voyage_core::potential::{BrickStore, Direction, Navigable, PotentialField};
 use voyage_core::prep::{prepare, PrepOptions, Study};
 use voyage_core::render::{look_around, survey, CellMesh, Frame, Rasterizer, Strategy, View, Visibility, NO_TRIANGLE};
+
+mod common;
 
 /// Poses along both automatic flights (`per_flight` each, evenly spaced, in flight order so
 /// the paper's temporal coherence is exercised) and `random` look-around views.
@@ -91,13 +91,7 @@ fn culling_never_changes_the_image_on_the_colon_phantom() {
 
 #[test]
 fn culling_never_changes_the_image_on_colon_a() {
-    let path = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/masks/colon-a.nii.gz"));
-    if !path.exists() {
-        eprintln!("skipping colon-a: {} not found", path.display());
-        return;
-    }
-    let ct = voyage_core::io::load(&path, &Default::default()).unwrap().volume;
-    let study = prepare(ct, &PrepOptions::default(), |_| {}).unwrap();
+    let Some(study) = common::colon_a_study() else { return };
     check_exact_and_reduced(&study, "colon-a", 9.0);
 }
 
