@@ -165,6 +165,14 @@ fn smooth(pts: &[DVec3], half: usize, ds: &Field<f32>) -> Vec<DVec3> {
 }
 
 fn finish(pts: Vec<DVec3>, ds: &Field<f32>) -> Centerline {
+    let arc = arc_lengths(&pts);
+    let length_mm = arc.last().copied().unwrap_or(0.0);
+    let radius = pts.iter().map(|&p| ds.sample(p, 0.0) as f64).collect();
+    Centerline { points_mm: pts.iter().map(|p| p.to_array()).collect(), arc_mm: arc, radius_mm: radius, length_mm }
+}
+
+/// The length along a polyline from its first point to each point, mm.
+pub(crate) fn arc_lengths(pts: &[DVec3]) -> Vec<f64> {
     let mut arc = Vec::with_capacity(pts.len());
     let mut s = 0.0;
     for (i, p) in pts.iter().enumerate() {
@@ -173,8 +181,7 @@ fn finish(pts: Vec<DVec3>, ds: &Field<f32>) -> Centerline {
         }
         arc.push(s);
     }
-    let radius = pts.iter().map(|&p| ds.sample(p, 0.0) as f64).collect();
-    Centerline { points_mm: pts.iter().map(|p| p.to_array()).collect(), arc_mm: arc, radius_mm: radius, length_mm: s }
+    arc
 }
 
 #[cfg(test)]

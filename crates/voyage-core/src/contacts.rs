@@ -104,14 +104,7 @@ pub fn cut_contacts(lumen: &mut Volume<u8>, grid: &BoxGrid, path_mm: &[DVec3], b
 
 /// Path points (at most `NO_LABEL` of them, thinned evenly) and their arc lengths.
 fn label_points(path: &[DVec3]) -> (Vec<DVec3>, Vec<f64>) {
-    let mut arc = Vec::with_capacity(path.len());
-    let mut s = 0.0;
-    for (i, p) in path.iter().enumerate() {
-        if i > 0 {
-            s += p.distance(path[i - 1]);
-        }
-        arc.push(s);
-    }
+    let arc = crate::centerline::arc_lengths(path);
     let stride = path.len().div_ceil(NO_LABEL as usize - 1).max(1);
     let idx: Vec<usize> = (0..path.len()).step_by(stride).collect();
     (idx.iter().map(|&i| path[i]).collect(), idx.iter().map(|&i| arc[i]).collect())

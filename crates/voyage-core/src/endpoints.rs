@@ -41,10 +41,6 @@ pub struct Endpoints {
     pub source: [usize; 3],
     pub target: [usize; 3],
     pub centerline: Centerline,
-    /// Wall time (ms) of the parts: the skeleton search (endpoints and raw path) and the
-    /// centerline's refinement.
-    pub skeleton_ms: f64,
-    pub refine_ms: f64,
 }
 
 /// The raw colon path from the skeleton search, before it is centred on the voxels' Ds.
@@ -94,7 +90,6 @@ pub fn trace_skeleton(lumen: &Volume<u8>, grid: &BoxGrid, lumen_voxels: usize, s
 /// The endpoints (the given ones, else the widest voxels at the raw path's ends) and the
 /// centerline: the raw path centred on the voxels' Ds and smoothed (paper §4.2).
 pub fn centre_skeleton(lumen: &Volume<u8>, ds: &Field<f32>, sk: &Skeleton, cl_opts: &CenterlineOptions) -> Result<Endpoints> {
-    let clock = std::time::Instant::now();
     let path_mm = &sk.path_mm;
     let source = match sk.given_source {
         Some(v) => v,
@@ -109,18 +104,15 @@ pub fn centre_skeleton(lumen: &Volume<u8>, ds: &Field<f32>, sk: &Skeleton, cl_op
     let last = pts.len() - 1;
     pts[last] = mm_of(lumen, target);
     let centerline = refine_points(pts, ds, cl_opts);
-    let refine_ms = clock.elapsed().as_secs_f64() * 1e3;
-    Ok(Endpoints { source, target, centerline, skeleton_ms: 0.0, refine_ms })
+    Ok(Endpoints { source, target, centerline })
 }
 
 /// The skeleton search and the centring in one: endpoints and centerline of the lumen whose
 /// Ds is `ds`.
 pub fn find_endpoints(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], opts: &EndpointOptions, cl_opts: &CenterlineOptions) -> Result<Endpoints> {
-    let clock = std::time::Instant::now();
     let lumen_voxels = ds.data.iter().filter(|&&d| d > 0.0).count();
     let sk = trace_skeleton(lumen, &ds.grid, lumen_voxels, seed, Some(ds), opts, cl_opts)?;
-    let skeleton_ms = clock.elapsed().as_secs_f64() * 1e3;
-    Ok(Endpoints { skeleton_ms, ..centre_skeleton(lumen, ds, &sk, cl_opts)? })
+    centre_skeleton(lumen, ds, &sk, cl_opts)
 }
 
 /// Dt to the target and Dt to the source over the lumen inside `grid`.

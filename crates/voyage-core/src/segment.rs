@@ -157,18 +157,7 @@ fn extract_runs(vol: &Volume<i16>, is_air: impl Fn(i16) -> bool + Sync) -> Runs 
             for j in 0..ny {
                 let row = &slice[j * nx..(j + 1) * nx];
                 let before = runs.len();
-                let mut i = 0;
-                while i < nx {
-                    if !is_air(row[i]) {
-                        i += 1;
-                        continue;
-                    }
-                    let x0 = i;
-                    while i < nx && is_air(row[i]) {
-                        i += 1;
-                    }
-                    runs.push(Run { x0: x0 as u32, x1: i as u32 });
-                }
+                runs.extend(crate::volume::runs_where(row, &is_air).map(|r| Run { x0: r.start as u32, x1: r.end as u32 }));
                 counts.push((runs.len() - before) as u32);
             }
             (runs, counts)

@@ -268,6 +268,31 @@ impl<T: Copy + PartialOrd> Volume<T> {
     }
 }
 
+/// The first maximal run of consecutive entries of `s` from index `from` on where `inside`
+/// holds.
+#[inline]
+pub(crate) fn next_run<T: Copy>(s: &[T], from: usize, inside: impl Fn(T) -> bool) -> Option<std::ops::Range<usize>> {
+    let mut q = from;
+    while q < s.len() && !inside(s[q]) {
+        q += 1;
+    }
+    let start = q;
+    while q < s.len() && inside(s[q]) {
+        q += 1;
+    }
+    (q > start).then_some(start..q)
+}
+
+/// The maximal runs of consecutive entries of `s` where `inside` holds, in order.
+pub(crate) fn runs_where<T: Copy>(s: &[T], inside: impl Fn(T) -> bool) -> impl Iterator<Item = std::ops::Range<usize>> {
+    let mut q = 0;
+    std::iter::from_fn(move || {
+        let run = next_run(s, q, &inside)?;
+        q = run.end;
+        Some(run)
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -308,5 +333,13 @@ mod tests {
         let v = Volume::from_vec(g, (0..8).collect::<Vec<i16>>()).unwrap();
         assert_eq!(v.get(1, 1, 1), 7);
         assert_eq!(v.min_max(), (0, 7));
+    }
+
+    #[test]
+    fn runs_are_the_maximal_stretches_where_the_predicate_holds() {
+        let s = [0u8, 1, 1, 0, 0, 3, 0, 2, 2];
+        assert_eq!(runs_where(&s, |x| x != 0).collect::<Vec<_>>(), vec![1..3, 5..6, 7..9]);
+        assert_eq!(next_run(&s, 2, |x| x != 0), Some(2..3));
+        assert_eq!(runs_where(&[0u8; 4], |x| x != 0).count(), 0);
     }
 }

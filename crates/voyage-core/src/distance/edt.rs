@@ -12,6 +12,7 @@
 use rayon::prelude::*;
 
 use crate::field::{bounding_box, BoxGrid, Field};
+use crate::volume::{next_run, runs_where};
 use crate::{Error, Result, Volume};
 
 /// Ds over the lumen's bounding box (grown by one voxel): distance in mm to the nearest wall
@@ -47,18 +48,12 @@ impl Scratch {
 /// run of non-zero entries is transformed on its own, between its two walls (the volume's
 /// border counting as wall), and the work is proportional to the lumen, not to the box.
 fn transform_column(col: &mut [f32], h: f32, s: &mut Scratch) {
-    let n = col.len();
+    // Each run is looked up after the one before is transformed: a transform keeps its run
+    // non-zero and the walls 0, so the runs are those of the input.
     let mut q = 0;
-    while q < n {
-        if col[q] == 0.0 {
-            q += 1;
-            continue;
-        }
-        let start = q;
-        while q < n && col[q] != 0.0 {
-            q += 1;
-        }
-        lower_envelope(&mut col[start..q], h, s);
+    while let Some(run) = next_run(col, q, |x| x != 0.0) {
+        q = run.end;
+        lower_envelope(&mut col[run], h, s);
     }
 }
 
@@ -144,22 +139,13 @@ fn pass_x(mask: &Volume<u8>, grid: &BoxGrid, h: f64) -> (Vec<f32>, Vec<Span>, Ve
             let mut runs = Vec::new();
             for (j, row) in slab.chunks_mut(nx).enumerate() {
                 let src = &mask.data()[g.index(grid.lo[0], grid.lo[1] + j, grid.lo[2] + k)..][..nx];
-                let mut q = 0;
-                while q < nx {
-                    if src[q] == 0 {
-                        q += 1;
-                        continue;
-                    }
-                    let start = q;
-                    while q < nx && src[q] != 0 {
-                        q += 1;
-                    }
-                    let len = q - start;
-                    for (t, x) in row[start..q].iter_mut().enumerate() {
+                for run in runs_where(src, |m| m != 0) {
+                    let len = run.len();
+                    for (t, x) in row[run.clone()].iter_mut().enumerate() {
                         let d = (t + 1).min(len - t) as f32 * h;
                         *x = d * d;
                     }
-                    runs.push((j as u32, start as u32, q as u32));
+                    runs.push((j as u32, run.start as u32, run.end as u32));
                 }
             }
             runs

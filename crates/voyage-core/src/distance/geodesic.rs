@@ -91,19 +91,26 @@ pub struct Padded {
 
 impl Padded {
     pub fn new(mask: &Volume<u8>, grid: &BoxGrid) -> Self {
-        let dims = grid.dims.map(|d| d + 2);
-        let mut inside = crate::mem::filled(dims[0] * dims[1] * dims[2], 0u8);
-        let g = mask.geometry();
+        let mut pad = Padded::shape(grid);
+        pad.inside = pad.lay_out_mask(mask, 0, 0u8, |m| (m != 0) as u8);
+        pad
+    }
+
+    /// `mask` over the box in the padded layout, each voxel as `value` makes it, `wall` in the
+    /// padding, plus `spare` more `wall`s at the end.
+    fn lay_out_mask<T: Copy>(&self, mask: &Volume<u8>, spare: usize, wall: T, value: impl Fn(u8) -> T) -> Vec<T> {
+        let mut out = crate::mem::filled(self.dims[0] * self.dims[1] * self.dims[2] + spare, wall);
+        let (g, grid) = (mask.geometry(), &self.grid);
         for k in 0..grid.dims[2] {
             for j in 0..grid.dims[1] {
-                let src = g.index(grid.lo[0], grid.lo[1] + j, grid.lo[2] + k);
-                let dst = 1 + dims[0] * (j + 1 + dims[1] * (k + 1));
-                for (d, &m) in inside[dst..dst + grid.dims[0]].iter_mut().zip(&mask.data()[src..src + grid.dims[0]]) {
-                    *d = (m != 0) as u8;
+                let src = &mask.data()[g.index(grid.lo[0], grid.lo[1] + j, grid.lo[2] + k)..][..grid.dims[0]];
+                let dst = 1 + self.dims[0] * (j + 1 + self.dims[1] * (k + 1));
+                for (d, &m) in out[dst..dst + grid.dims[0]].iter_mut().zip(src) {
+                    *d = value(m);
                 }
             }
         }
-        Padded { grid: grid.clone(), dims, inside }
+        out
     }
 
     /// The padded layout of `grid` without the mask (for searches that start from
@@ -115,41 +122,12 @@ impl Padded {
     /// A search's starting distances in the padded layout straight from the mask: 0 for walls
     /// and padding, +∞ for lumen, plus the spare wall at the end the row loads need.
     pub(crate) fn start_from_mask(&self, mask: &Volume<u8>) -> Vec<f32> {
-        let mut dist = crate::mem::filled(self.dims[0] * self.dims[1] * self.dims[2] + 1, 0.0f32);
-        let g = mask.geometry();
-        let grid = &self.grid;
-        for k in 0..grid.dims[2] {
-            for j in 0..grid.dims[1] {
-                let src = &mask.data()[g.index(grid.lo[0], grid.lo[1] + j, grid.lo[2] + k)..][..grid.dims[0]];
-                let dst = 1 + self.dims[0] * (j + 1 + self.dims[1] * (k + 1));
-                for (d, &m) in dist[dst..dst + grid.dims[0]].iter_mut().zip(src) {
-                    if m != 0 {
-                        *d = f32::INFINITY;
-                    }
-                }
-            }
-        }
-        dist
+        self.lay_out_mask(mask, 1, 0.0f32, |m| if m != 0 { f32::INFINITY } else { 0.0 })
     }
 
     /// Unfinished search distances ([`finish`]) in the box layout, in place, in one pass.
-    pub(crate) fn finish_unpadded(&self, mut v: Vec<f32>) -> Vec<f32> {
-        let [bx, by, bz] = self.grid.dims;
-        let mut at = 0;
-        for k in 0..bz {
-            for j in 0..by {
-                let s = 1 + self.dims[0] * (j + 1 + self.dims[1] * (k + 1));
-                // s ≥ at: each value moves down (or stays), so going forward never overwrites
-                // one not yet read.
-                for t in 0..bx {
-                    v[at + t] = finish(v[s + t]);
-                }
-                at += bx;
-            }
-        }
-        v.truncate(at);
-        v.shrink_to_fit();
-        v
+    pub(crate) fn finish_unpadded(&self, v: Vec<f32>) -> Vec<f32> {
+        self.unpad_with(v, finish)
     }
 
     /// Padded index of a volume voxel that must be lumen.
@@ -205,13 +183,21 @@ impl Padded {
     /// A padded-layout field in the box layout. In place: every row moves to a lower index
     /// (the padding comes before it), so rows are copied forward and the tail dropped, without
     /// a second field-sized buffer.
-    pub fn unpad(&self, mut v: Vec<f32>) -> Vec<f32> {
+    pub fn unpad(&self, v: Vec<f32>) -> Vec<f32> {
+        self.unpad_with(v, |x| x)
+    }
+
+    /// [`Padded::unpad`], each value passed through `f` on the way.
+    fn unpad_with(&self, mut v: Vec<f32>, f: impl Fn(f32) -> f32) -> Vec<f32> {
         let [bx, by, bz] = self.grid.dims;
         let mut at = 0;
         for k in 0..bz {
             for j in 0..by {
                 let s = 1 + self.dims[0] * (j + 1 + self.dims[1] * (k + 1));
-                v.copy_within(s..s + bx, at);
+                // s ≥ at: going forward never overwrites a value not yet read.
+                for t in 0..bx {
+                    v[at + t] = f(v[s + t]);
+                }
                 at += bx;
             }
         }
@@ -226,11 +212,12 @@ impl Padded {
 /// With a weight the bucket width is the shortest edge times the smallest weight, which keeps
 /// the buckets exact.
 pub fn dial(pad: &Padded, sources: &[usize], spacing: [f64; 3], opts: &SearchOptions) -> Search {
+    let start = start_from_inside(pad);
     match (opts.weight, opts.tree) {
-        (Some(w), true) => dial_impl::<true, true>(pad, start_from_inside(pad), sources, spacing, w, opts.stop, true),
-        (Some(w), false) => dial_impl::<true, false>(pad, start_from_inside(pad), sources, spacing, w, opts.stop, true),
-        (None, true) => dial_impl::<false, true>(pad, start_from_inside(pad), sources, spacing, &[], opts.stop, true),
-        (None, false) => dial_impl::<false, false>(pad, start_from_inside(pad), sources, spacing, &[], opts.stop, true),
+        (Some(w), true) => dial_impl::<true, true>(pad, start, sources, spacing, w, opts.stop, true),
+        (Some(w), false) => dial_impl::<true, false>(pad, start, sources, spacing, w, opts.stop, true),
+        (None, true) => dial_impl::<false, true>(pad, start, sources, spacing, &[], opts.stop, true),
+        (None, false) => dial_impl::<false, false>(pad, start, sources, spacing, &[], opts.stop, true),
     }
 }
 
