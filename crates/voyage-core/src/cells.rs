@@ -20,7 +20,7 @@ use glam::DVec3;
 use serde::Serialize;
 
 use crate::centerline::Centerline;
-use crate::field::Field;
+use crate::field::Bricked;
 use crate::surface::Surface;
 use crate::{Error, Result, Volume};
 
@@ -82,8 +82,8 @@ pub struct Cells {
     pub cells: Vec<Cell>,
     /// `portals[c]` lies between `cells[c]` and `cells[c + 1]`.
     pub portals: Vec<Portal>,
-    /// Per box voxel of the Dt field: its cell, or `u16::MAX` outside the lumen.
-    pub voxel_cell: Field<u16>,
+    /// Per voxel of the Dt field's bricks: its cell, or `u16::MAX` outside the lumen.
+    pub voxel_cell: Bricked<u16>,
     /// Per triangle: its cell.
     pub triangle_cell: Vec<u16>,
 }
@@ -91,7 +91,7 @@ pub struct Cells {
 impl Cells {
     /// The cell of a volume voxel (None outside the lumen).
     pub fn cell_of_voxel(&self, v: [usize; 3]) -> Option<usize> {
-        let c = self.voxel_cell.get_global(v, u16::MAX);
+        let c = self.voxel_cell.get(v);
         (c != u16::MAX).then_some(c as usize)
     }
 
@@ -119,13 +119,13 @@ impl Cells {
     }
 }
 
-/// Splits the lumen into cells. `dt_source`: Dt from the source (box layout, +∞ outside).
-pub fn build_cells(lumen: &Volume<u8>, dt_source: &Field<f32>, centerline: &Centerline, surface: &Surface, opts: &CellOptions) -> Result<Cells> {
+/// Splits the lumen into cells. `dt_source`: Dt from the source (+∞ outside).
+pub fn build_cells(lumen: &Volume<u8>, dt_source: &Bricked<f32>, centerline: &Centerline, surface: &Surface, opts: &CellOptions) -> Result<Cells> {
     if centerline.points_mm.len() < 2 {
         return Err(Error::invalid("the centerline has fewer than two points"));
     }
     let cl_dt = centerline_levels(dt_source, centerline);
-    let tri_dt: Vec<f32> = surface.owner_voxel.iter().map(|&v| dt_source.get_global(lumen.geometry().ijk(v as usize), f32::INFINITY)).collect();
+    let tri_dt: Vec<f32> = surface.owner_voxel.iter().map(|&v| dt_source.get(lumen.geometry().ijk(v as usize))).collect();
     let min_len = opts.min_length_mm.max(2.0 * diagonal(lumen.spacing()));
     let levels = choose_levels(&cl_dt, &centerline.arc_mm, &tri_dt, opts, min_len);
     let reach = diagonal(lumen.spacing()) * 1.01;
@@ -157,13 +157,13 @@ fn diagonal(sp: [f64; 3]) -> f64 {
 }
 
 /// Dt at each centerline point, made non-decreasing (the centerline runs away from the source).
-fn centerline_levels(dt: &Field<f32>, cl: &Centerline) -> Vec<f64> {
+fn centerline_levels(dt: &Bricked<f32>, cl: &Centerline) -> Vec<f64> {
     let mut out = Vec::with_capacity(cl.points_mm.len());
     let mut last = 0.0f64;
     for p in &cl.points_mm {
         let p = DVec3::from_array(*p);
         let ijk = dt.geometry.local_to_index(p).round();
-        let d = dt.get_global([ijk.x as usize, ijk.y as usize, ijk.z as usize], f32::INFINITY) as f64;
+        let d = dt.get([ijk.x as usize, ijk.y as usize, ijk.z as usize]) as f64;
         let d = if d.is_finite() { d } else { last };
         last = last.max(d);
         out.push(last);
@@ -227,33 +227,28 @@ fn cell_of_level(levels: &[f64], d: f32) -> u16 {
 /// below a cut: only those can touch the next cell, since Dt changes by at most a diagonal
 /// between neighbours, so every pair of voxels across a cut has its lower voxel among them.
 struct Labels {
-    cells: Field<u16>,
+    cells: Bricked<u16>,
     counts: Vec<usize>,
     below_cut: Vec<u32>,
 }
 
-fn label_voxels(dt: &Field<f32>, levels: &[f64], reach: f64) -> Labels {
+fn label_voxels(dt: &Bricked<f32>, levels: &[f64], reach: f64) -> Labels {
     let mut counts = vec![0usize; levels.len() + 1];
     let mut below_cut = Vec::new();
     let table = LevelTable::new(levels);
-    let data = dt
-        .data
-        .iter()
-        .enumerate()
-        .map(|(idx, &d)| {
-            if !d.is_finite() {
-                return u16::MAX;
-            }
-            let c = table.cell(d) as usize;
-            counts[c] += 1;
-            let d = d as f64;
-            if c < levels.len() && levels[c] - d <= reach {
-                below_cut.push(idx as u32);
-            }
-            c as u16
-        })
-        .collect();
-    Labels { cells: Field { grid: dt.grid.clone(), geometry: dt.geometry.clone(), data }, counts, below_cut }
+    let cells = dt.map(u16::MAX, |at, d| {
+        if !d.is_finite() {
+            return u16::MAX;
+        }
+        let c = table.cell(d) as usize;
+        counts[c] += 1;
+        let d = d as f64;
+        if c < levels.len() && levels[c] - d <= reach {
+            below_cut.push(at as u32);
+        }
+        c as u16
+    });
+    Labels { cells, counts, below_cut }
 }
 
 /// [`cell_of_level`] by table: the cell at the start of each bin of Dt, bins narrower than the
@@ -331,35 +326,36 @@ fn make_portal(pts: Vec<DVec3>, c: usize, level: f64, cl: &Centerline, cl_dt: &[
 /// of cells c and c + 1 that are 26-adjacent, found from the voxels just below a cut (see
 /// [`label_voxels`]), each voxel once. Cells further apart than one must never touch (that is
 /// the guarantee visibility needs); if they do, that is an error.
-fn boundary_points(cells: &Field<u16>, below_cut: &[u32], cuts: usize, sp: [f64; 3]) -> Result<Vec<Vec<DVec3>>> {
-    let [nx, ny, nz] = cells.grid.dims;
+fn boundary_points(cells: &Bricked<u16>, below_cut: &[u32], cuts: usize, sp: [f64; 3]) -> Result<Vec<Vec<DVec3>>> {
+    let dims = cells.grid.dims.map(|d| d as i64);
     let mut offs = Vec::with_capacity(26);
     for dk in -1i64..=1 {
         for dj in -1i64..=1 {
             for di in -1i64..=1 {
                 if (dk, dj, di) != (0, 0, 0) {
-                    offs.push((di, dj, dk));
+                    offs.push([di, dj, dk]);
                 }
             }
         }
     }
-    // Box indices per cut; an upper voxel is met from several lower ones, so a bit per box
-    // voxel says whether it is listed already. (The order within a list does not matter: a
-    // portal is their convex hull.)
+    // Stored indices per cut; an upper voxel is met from several lower ones, so a bit per
+    // stored voxel says whether it is listed already. (The order within a list does not
+    // matter: a portal is their convex hull.)
+    let values = cells.values();
     let mut out: Vec<Vec<u32>> = vec![Vec::new(); cuts];
-    let mut listed = vec![0u64; cells.data.len().div_ceil(64)];
+    let mut listed = vec![0u64; values.len().div_ceil(64)];
     for &here in below_cut {
         let here = here as usize;
-        let [i, j, k] = cells.grid.ijk(here);
-        let a = cells.data[here];
+        let l = cells.box_voxel(here).map(|x| x as i64);
+        let a = values[here];
         let mut across = false;
-        for &(di, dj, dk) in &offs {
-            let (qi, qj, qk) = (i as i64 + di, j as i64 + dj, k as i64 + dk);
-            if qi < 0 || qj < 0 || qk < 0 || qi >= nx as i64 || qj >= ny as i64 || qk >= nz as i64 {
+        for o in &offs {
+            let q = [l[0] + o[0], l[1] + o[1], l[2] + o[2]];
+            if (0..3).any(|ax| q[ax] < 0 || q[ax] >= dims[ax]) {
                 continue;
             }
-            let there = cells.grid.index(qi as usize, qj as usize, qk as usize);
-            let b = cells.data[there];
+            let Some(there) = cells.index_of_box(q.map(|x| x as usize)) else { continue };
+            let b = values[there];
             if b == u16::MAX || b == a {
                 continue;
             }
@@ -383,8 +379,8 @@ fn boundary_points(cells: &Field<u16>, below_cut: &[u32], cuts: usize, sp: [f64;
         .into_iter()
         .map(|v| {
             v.into_iter()
-                .map(|idx| {
-                    let [i, j, k] = cells.grid.ijk(idx as usize);
+                .map(|at| {
+                    let [i, j, k] = cells.box_voxel(at as usize);
                     DVec3::new(((i + lo[0]) as f64) * sp[0], ((j + lo[1]) as f64) * sp[1], ((k + lo[2]) as f64) * sp[2])
                 })
                 .collect()
@@ -525,7 +521,7 @@ mod tests {
         assert_eq!(cells.cells.iter().map(|c| c.voxels).sum::<usize>(), lumen);
         assert_eq!(cells.cells.iter().map(|c| c.triangles.len()).sum::<usize>(), surf.mesh.triangles.len());
         // Cells touch only their neighbours in the chain.
-        let f = &cells.voxel_cell;
+        let f = &cells.voxel_cell.to_field();
         let [nx, ny, nz] = f.grid.dims;
         for k in 0..nz {
             for j in 0..ny {

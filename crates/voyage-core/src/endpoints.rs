@@ -17,8 +17,8 @@ use crate::blocks::Blocks;
 use crate::centerline::{cost_weight, refine_points, Centerline, CenterlineOptions};
 use crate::skeleton::{colon_path, tree_search, SkeletonOptions};
 use crate::distance::distance_to_wall;
-use crate::distance::geodesic::{geodesic_distance, Geodesic, Padded};
-use crate::field::{BoxGrid, Field};
+use crate::distance::geodesic::{geodesic_distance_like, Geodesic, Padded};
+use crate::field::{BoxGrid, Bricked, Field};
 use crate::{Error, Result, Volume};
 
 #[derive(Clone, Debug)]
@@ -115,11 +115,15 @@ pub fn find_endpoints(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], opt
     centre_skeleton(lumen, ds, &sk, cl_opts)
 }
 
-/// Dt to the target and Dt to the source over the lumen inside `grid`.
-pub fn dt_fields(lumen: &Volume<u8>, grid: &BoxGrid, source: [usize; 3], target: [usize; 3]) -> Result<(Geodesic, Geodesic)> {
-    // The two fields are independent: on two cores they cost one.
-    let (to_target, to_source) = rayon::join(|| geodesic_distance(lumen, grid, target), || geodesic_distance(lumen, grid, source));
-    Ok((to_target?, to_source?))
+/// Dt to the target and Dt to the source over the lumen of Ds's box, in Ds's bricks.
+///
+/// One after the other although they are independent: each search works in a box-sized
+/// array (130 MB on a full colon) before its result goes into bricks, and two at once would
+/// break preprocessing's memory budget (3× the CT) for a gain only on more than one core.
+pub fn dt_fields(lumen: &Volume<u8>, ds: &Bricked<f32>, source: [usize; 3], target: [usize; 3]) -> Result<(Geodesic, Geodesic)> {
+    let to_target = geodesic_distance_like(lumen, ds, target)?;
+    let to_source = geodesic_distance_like(lumen, ds, source)?;
+    Ok((to_target, to_source))
 }
 
 /// The raw colon path (voxels of `lumen`, source → target) from the skeleton graph.

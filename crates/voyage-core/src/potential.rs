@@ -130,9 +130,10 @@ impl Navigable {
     pub fn new(study: &Study, min_wall_mm: f64) -> Result<Self> {
         let narrowest = study.centerline.radius_mm.iter().cloned().fold(f64::INFINITY, f64::min);
         let mut core = (0.5 * narrowest).clamp(min_wall_mm, 3.0f64.max(min_wall_mm));
+        let ds = study.ds.to_field();
         loop {
-            if let Some(dt) = core_dt(study, core)? {
-                return Ok(Navigable { ds: study.ds.clone(), dt, core_mm: core });
+            if let Some(dt) = core_dt(study, &ds, core)? {
+                return Ok(Navigable { ds, dt, core_mm: core });
             }
             if core <= 1e-3 {
                 return Err(Error::invalid("the target cannot be reached from the source through the lumen"));
@@ -144,11 +145,11 @@ impl Navigable {
 
 /// Dt to both ends over voxels with Ds ≥ `core` (None when the ends are not joined). The ends
 /// are the centerline's first and last points that lie in the core.
-fn core_dt(study: &Study, core: f64) -> Result<Option<[Field<f32>; 2]>> {
+fn core_dt(study: &Study, ds: &Field<f32>, core: f64) -> Result<Option<[Field<f32>; 2]>> {
     let lumen = &study.segmentation.lumen;
-    let grid = &study.ds.grid;
+    let grid = &ds.grid;
     let mut pad = Padded::new(lumen, grid);
-    let ds = pad.pad(&study.ds.data, 0.0);
+    let ds = pad.pad(&ds.data, 0.0);
     for (m, &d) in pad.inside.iter_mut().zip(&ds) {
         if (d as f64) < core {
             *m = 0;

@@ -13,7 +13,7 @@ use crate::distance::distance_to_wall;
 use crate::contacts::{cut_contacts, ContactOptions};
 use crate::endpoints::{self, centre_skeleton, dt_fields, trace_skeleton, uses_blocks, EndpointOptions};
 use crate::field::bounding_box;
-use crate::field::Field;
+use crate::field::Bricked;
 use crate::segment::{segment, SegmentOptions, Segmentation};
 use crate::surface::{extract_surface, Surface};
 use crate::{Result, Volume};
@@ -76,11 +76,13 @@ pub struct Study {
     /// The input: HU, or a mask's labels.
     pub ct: Volume<i16>,
     pub segmentation: Segmentation,
-    /// Ds: distance to the wall (mm), over the lumen's box.
-    pub ds: Field<f32>,
-    /// Dt to the target (fly forward) and to the source (fly backward), mm; +∞ outside.
-    pub dt_target: Field<f32>,
-    pub dt_source: Field<f32>,
+    /// Ds: distance to the wall (mm), over the lumen's box, in the bricks that hold lumen
+    /// (0 elsewhere).
+    pub ds: Bricked<f32>,
+    /// Dt to the target (fly forward) and to the source (fly backward), mm; +∞ outside (and
+    /// in bricks with no lumen, which are not stored).
+    pub dt_target: Bricked<f32>,
+    pub dt_source: Bricked<f32>,
     pub source: [usize; 3],
     pub target: [usize; 3],
     /// Lumen voxels left out of Dt where loops of the colon touch ([`crate::contacts`]).
@@ -148,17 +150,20 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Sta
     lap(&mut t.contacts);
 
     progress(Stage::Ds);
-    let mut ds = match early_ds {
+    let ds_box = match early_ds {
         Some(d) if taken.is_empty() => d,
         _ => distance_to_wall(&seg.lumen)?,
     };
     lap(&mut t.ds);
-    let mut ends = centre_skeleton(&seg.lumen, &ds, &sk, &opts.centerline)?;
+    let mut ends = centre_skeleton(&seg.lumen, &ds_box, &sk, &opts.centerline)?;
+    // Ds moves into bricks before the Dt searches need their own box-sized arrays.
+    let mut ds = Bricked::from_field(&ds_box, 0.0);
+    drop(ds_box);
     lap(&mut t.centerline);
 
     progress(Stage::Dt);
-    let (mut dt_target, mut dt_source) = dt_fields(&seg.lumen, &ds.grid, ends.source, ends.target)?;
-    let joined = |dt: &crate::distance::Geodesic, source: [usize; 3]| dt.dist.get_global(source, f32::INFINITY).is_finite();
+    let (mut dt_target, mut dt_source) = dt_fields(&seg.lumen, &ds, ends.source, ends.target)?;
+    let joined = |dt: &crate::distance::Geodesic, source: [usize; 3]| dt.dist.get(source).is_finite();
     let mut contact_voxels = taken.len();
     if contact_voxels > 0 && !joined(&dt_target, ends.source) {
         // The walls closed the colon itself (a path across a contact): go without.
@@ -166,9 +171,10 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Sta
             seg.lumen.data_mut()[v] = 1;
         }
         contact_voxels = 0;
-        ds = distance_to_wall(&seg.lumen)?;
-        ends = centre_skeleton(&seg.lumen, &ds, &sk, &opts.centerline)?;
-        (dt_target, dt_source) = dt_fields(&seg.lumen, &ds.grid, ends.source, ends.target)?;
+        let ds_box = distance_to_wall(&seg.lumen)?;
+        ends = centre_skeleton(&seg.lumen, &ds_box, &sk, &opts.centerline)?;
+        ds = Bricked::from_field(&ds_box, 0.0);
+        (dt_target, dt_source) = dt_fields(&seg.lumen, &ds, ends.source, ends.target)?;
     }
     if !joined(&dt_target, ends.source) {
         return Err(crate::Error::invalid("the target cannot be reached from the source through the lumen"));

@@ -169,7 +169,7 @@ fn assert_safe(study: &Study, x: DVec3, min_wall: f64, what: &str) {
         let v = [b.x as usize + (c & 1), b.y as usize + ((c >> 1) & 1), b.z as usize + ((c >> 2) & 1)];
         assert_eq!(study.segmentation.lumen.get(v[0], v[1], v[2]), 1, "{what}: corner {v:?} of {x} is not lumen");
     }
-    let ds = study.ds.sample(x, 0.0) as f64;
+    let ds = study.ds.sample(x) as f64;
     assert!(ds >= min_wall - 1e-4, "{what}: Ds {ds} at {x} is below {min_wall}");
 }
 

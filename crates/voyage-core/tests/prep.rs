@@ -121,8 +121,10 @@ fn the_same_study_whatever_the_threads() {
     };
     let (a, b) = (run(1), run(2));
     assert_eq!(a.segmentation.lumen.data(), b.segmentation.lumen.data());
-    assert!(a.ds.data.iter().zip(&b.ds.data).all(|(x, y)| x.to_bits() == y.to_bits()), "Ds differs");
-    assert!(a.dt_target.data.iter().zip(&b.dt_target.data).all(|(x, y)| x.to_bits() == y.to_bits()), "Dt differs");
+    let same = |x: &[f32], y: &[f32]| x.len() == y.len() && x.iter().zip(y).all(|(x, y)| x.to_bits() == y.to_bits());
+    assert!(same(a.ds.values(), b.ds.values()), "Ds differs");
+    assert!(same(a.dt_target.values(), b.dt_target.values()), "Dt to the target differs");
+    assert!(same(a.dt_source.values(), b.dt_source.values()), "Dt to the source differs");
     assert_eq!(a.centerline.points_mm, b.centerline.points_mm);
     assert_eq!(a.surface.mesh.triangles, b.surface.mesh.triangles);
     assert_eq!(a.surface.mesh.positions, b.surface.mesh.positions);

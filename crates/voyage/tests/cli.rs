@@ -226,6 +226,23 @@ fn prep_writes_its_exports_and_reports_json() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// Preprocessing a full colon stays within 3× the CT's size while it runs and writes its
+/// exports. colon-a is a 512×512×321 mask, held as 16-bit values like any CT (160.5 MiB); the
+/// process's peak resident memory counts everything, the loaded input included.
+#[test]
+fn prep_of_a_full_colon_stays_within_three_times_the_ct() {
+    let Some(data) = shared_data() else { return };
+    let dir = scratch("prep-memory");
+    let input = data.join("masks/colon-a.nii.gz");
+    let o = voyage(&["prep", input.to_str().unwrap(), "--out", dir.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let ct_mib = (512 * 512 * 321 * 2) as f64 / (1u64 << 20) as f64;
+    let peak = j["peak_rss_mb"].as_f64().unwrap();
+    assert!(peak <= 3.0 * ct_mib, "peak {peak:.0} MiB, budget {:.0} MiB", 3.0 * ct_mib);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 #[test]
 fn demo_makes_preprocesses_and_checks_the_phantom() {
     let dir = scratch("demo");

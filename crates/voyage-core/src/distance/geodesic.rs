@@ -6,14 +6,15 @@
 //! may be emptied in any order and the result is the exact Dijkstra distance. Each voxel costs
 //! a push and a pop into a `Vec`, not a heap's log n.
 
-use crate::field::{BoxGrid, Field};
+use crate::field::{BoxGrid, Bricked};
 use crate::{Error, Result, Volume};
 
 /// Dt and what the search learned on the way.
 #[derive(Clone, Debug)]
 pub struct Geodesic {
-    /// Distance in mm from the source through lumen voxels; +∞ where unreachable or not lumen.
-    pub dist: Field<f32>,
+    /// Distance in mm from the source through lumen voxels; +∞ where unreachable or not lumen
+    /// (bricks with no reached voxel are not stored).
+    pub dist: Bricked<f32>,
     /// The reachable voxel farthest from the source (volume voxel index).
     pub farthest: [usize; 3],
     pub max_mm: f32,
@@ -25,9 +26,20 @@ pub struct Geodesic {
 /// inside `grid`.
 ///
 /// The distances start straight from the mask (walls 0, lumen +∞: no padded copy of the mask
-/// is needed, the search itself tells walls by their 0) and are finished and moved to the
-/// box layout in one pass.
+/// is needed, the search itself tells walls by their 0) and are finished and moved into
+/// bricks in one pass.
 pub fn geodesic_distance(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3]) -> Result<Geodesic> {
+    search_and_finish(mask, grid, source, |shape, dist| shape.finish_bricked(dist, mask.geometry()))
+}
+
+/// [`geodesic_distance`] over the box of `like` and stored in the bricks it stores, which must
+/// hold every lumen voxel of the box (Ds's bricks do): the finishing pass then reads those
+/// bricks only.
+pub fn geodesic_distance_like<U>(mask: &Volume<u8>, like: &Bricked<U>, source: [usize; 3]) -> Result<Geodesic> {
+    search_and_finish(mask, &like.grid, source, |shape, dist| Bricked::from_rows_like(like, f32::INFINITY, |j, k| shape.row(dist, j, k), finish))
+}
+
+fn search_and_finish(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3], finish_into: impl FnOnce(&Padded, &[f32]) -> Bricked<f32>) -> Result<Geodesic> {
     let shape = Padded::shape(grid);
     let src = shape
         .index_of_global(source)
@@ -35,12 +47,7 @@ pub fn geodesic_distance(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3]) 
         .ok_or_else(|| Error::invalid(format!("the voxel {source:?} is not in the lumen")))?;
     let dist = shape.start_from_mask(mask);
     let r = dial_impl::<false, false>(&shape, dist, &[src], mask.spacing(), &[], None, false);
-    Ok(Geodesic {
-        farthest: shape.global_of_index(r.far),
-        max_mm: r.far_d,
-        reached: r.reached,
-        dist: Field { grid: grid.clone(), geometry: mask.geometry().clone(), data: shape.finish_unpadded(r.dist) },
-    })
+    Ok(Geodesic { farthest: shape.global_of_index(r.far), max_mm: r.far_d, reached: r.reached, dist: finish_into(&shape, &r.dist) })
 }
 
 /// What a search over the padded grid found.
@@ -104,7 +111,7 @@ impl Padded {
         for k in 0..grid.dims[2] {
             for j in 0..grid.dims[1] {
                 let src = &mask.data()[g.index(grid.lo[0], grid.lo[1] + j, grid.lo[2] + k)..][..grid.dims[0]];
-                let dst = 1 + self.dims[0] * (j + 1 + self.dims[1] * (k + 1));
+                let dst = self.row_start(j, k);
                 for (d, &m) in out[dst..dst + grid.dims[0]].iter_mut().zip(src) {
                     *d = value(m);
                 }
@@ -125,9 +132,23 @@ impl Padded {
         self.lay_out_mask(mask, 1, 0.0f32, |m| if m != 0 { f32::INFINITY } else { 0.0 })
     }
 
-    /// Unfinished search distances ([`finish`]) in the box layout, in place, in one pass.
-    pub(crate) fn finish_unpadded(&self, v: Vec<f32>) -> Vec<f32> {
-        self.unpad_with(v, finish)
+    /// Unfinished search distances ([`finish`]) in bricks (+∞ outside).
+    pub(crate) fn finish_bricked(&self, v: &[f32], geometry: &crate::Geometry) -> Bricked<f32> {
+        // Walls (0) and unreached lumen (+∞) finish as +∞: a brick of only those is left out.
+        let reached = |d: f32| d != 0.0 && d != f32::INFINITY;
+        Bricked::from_rows(&self.grid, geometry, f32::INFINITY, |j, k| self.row(v, j, k), reached, finish)
+    }
+
+    /// Box row (j, k) of a padded-layout field.
+    #[inline]
+    fn row<'a>(&self, v: &'a [f32], j: usize, k: usize) -> &'a [f32] {
+        &v[self.row_start(j, k)..][..self.grid.dims[0]]
+    }
+
+    /// Padded index of box row (j, k)'s first voxel.
+    #[inline]
+    fn row_start(&self, j: usize, k: usize) -> usize {
+        1 + self.dims[0] * (j + 1 + self.dims[1] * (k + 1))
     }
 
     /// Padded index of a volume voxel that must be lumen.
@@ -172,7 +193,7 @@ impl Padded {
         let mut out = vec![fill; self.inside.len()];
         for k in 0..bz {
             for j in 0..by {
-                let d = 1 + self.dims[0] * (j + 1 + self.dims[1] * (k + 1));
+                let d = self.row_start(j, k);
                 let s = self.grid.index(0, j, k);
                 out[d..d + bx].copy_from_slice(&v[s..s + bx]);
             }
@@ -183,21 +204,13 @@ impl Padded {
     /// A padded-layout field in the box layout. In place: every row moves to a lower index
     /// (the padding comes before it), so rows are copied forward and the tail dropped, without
     /// a second field-sized buffer.
-    pub fn unpad(&self, v: Vec<f32>) -> Vec<f32> {
-        self.unpad_with(v, |x| x)
-    }
-
-    /// [`Padded::unpad`], each value passed through `f` on the way.
-    fn unpad_with(&self, mut v: Vec<f32>, f: impl Fn(f32) -> f32) -> Vec<f32> {
+    pub fn unpad(&self, mut v: Vec<f32>) -> Vec<f32> {
         let [bx, by, bz] = self.grid.dims;
         let mut at = 0;
         for k in 0..bz {
             for j in 0..by {
-                let s = 1 + self.dims[0] * (j + 1 + self.dims[1] * (k + 1));
-                // s ≥ at: going forward never overwrites a value not yet read.
-                for t in 0..bx {
-                    v[at + t] = f(v[s + t]);
-                }
+                // The row's start ≥ at: going forward never overwrites a value not yet read.
+                v.copy_within(self.row_start(j, k)..self.row_start(j, k) + bx, at);
                 at += bx;
             }
         }
@@ -426,6 +439,7 @@ fn row_improvements(dist: &[f32], at: usize, du: f32, len: &[f32; 4]) -> (u32, [
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::distance::distance_to_wall;
     use crate::field::bounding_box;
     use crate::Geometry;
     use std::cmp::Reverse;
@@ -492,7 +506,10 @@ mod tests {
             let grid = bounding_box(&m, 1, |v| v != 0).unwrap();
             let geo = geodesic_distance(&m, &grid, [0, 0, 0]).unwrap();
             let want = reference(&m, [0, 0, 0]);
-            let got = geo.dist.to_volume(f32::INFINITY).unwrap();
+            let got = geo.dist.to_volume().unwrap();
+            // Into Ds's bricks: the same distances.
+            let like = geodesic_distance_like(&m, &Bricked::from_field(&distance_to_wall(&m).unwrap(), 0.0), [0, 0, 0]).unwrap();
+            assert_eq!(like.dist.to_volume().unwrap(), got);
             let mut reached = 0;
             for (idx, (&a, &b)) in got.data().iter().zip(&want).enumerate() {
                 if b.is_infinite() {

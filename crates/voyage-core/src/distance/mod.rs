@@ -5,4 +5,4 @@ pub mod edt;
 pub mod geodesic;
 
 pub use edt::distance_to_wall;
-pub use geodesic::{geodesic_distance, Geodesic};
+pub use geodesic::{geodesic_distance, geodesic_distance_like, Geodesic};

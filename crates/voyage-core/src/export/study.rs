@@ -21,7 +21,7 @@ pub fn write_study(dir: &Path, study: &Study) -> Result<Vec<PathBuf>> {
         p
     };
     nifti::save(&put("lumen.nii.gz"), &study.segmentation.lumen)?;
-    nifti::save_slices(&put("ds.nii.gz"), g, |k, out: &mut [f32]| study.ds.fill_slice(k, out, 0.0))?;
+    nifti::save_slices(&put("ds.nii.gz"), g, |k, out: &mut [f32]| study.ds.fill_slice(k, out))?;
     let cl = &study.centerline;
     let lps: Vec<[f64; 3]> = cl.points_mm.iter().map(|p| g.local_to_patient(DVec3::from_array(*p)).to_array()).collect();
     let cl_json = json!({
