@@ -120,9 +120,11 @@ pub fn find_endpoints(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], opt
 /// One after the other although they are independent: each search works in a box-sized
 /// array (130 MB on a full colon) before its result goes into bricks, and two at once would
 /// break preprocessing's memory budget (3× the CT) for a gain only on more than one core.
-pub fn dt_fields(lumen: &Volume<u8>, ds: &Bricked<f32>, source: [usize; 3], target: [usize; 3]) -> Result<(Geodesic, Geodesic)> {
-    let to_target = geodesic_distance_like(lumen, ds, target)?;
-    let to_source = geodesic_distance_like(lumen, ds, source)?;
+///
+/// `scratch`: memory to search in (Ds's box array, done with): fresh memory costs page faults.
+pub fn dt_fields(lumen: &Volume<u8>, ds: &Bricked<f32>, source: [usize; 3], target: [usize; 3], scratch: Vec<f32>) -> Result<(Geodesic, Geodesic)> {
+    let (to_target, scratch) = geodesic_distance_like(lumen, ds, target, scratch)?;
+    let (to_source, _) = geodesic_distance_like(lumen, ds, source, scratch)?;
     Ok((to_target, to_source))
 }
 

@@ -57,9 +57,7 @@ pub fn bounding_box<T: Copy>(vol: &Volume<T>, margin: usize, pred: impl Fn(T) ->
     for k in 0..nz {
         let slice = vol.slice_k(k);
         for j in 0..ny {
-            let row = &slice[j * nx..(j + 1) * nx];
-            let Some(first) = row.iter().position(|&v| pred(v)) else { continue };
-            let last = row.iter().rposition(|&v| pred(v)).unwrap_or(first);
+            let Some((first, last)) = first_and_last(&slice[j * nx..(j + 1) * nx], &pred) else { continue };
             lo = [lo[0].min(first), lo[1].min(j), lo[2].min(k)];
             hi = [hi[0].max(last), hi[1].max(j), hi[2].max(k)];
         }
@@ -71,6 +69,20 @@ pub fn bounding_box<T: Copy>(vol: &Volume<T>, margin: usize, pred: impl Fn(T) ->
     let lo_m = [0, 1, 2].map(|a| lo[a].saturating_sub(margin));
     let hi_m = [0, 1, 2].map(|a| (hi[a] + margin).min(dims[a] - 1));
     Some(BoxGrid { lo: lo_m, dims: [0, 1, 2].map(|a| hi_m[a] - lo_m[a] + 1) })
+}
+
+/// The first and last positions in `row` where `pred` holds. Most rows of a scan hold no
+/// lumen: they are tested 32 values at a time without an early exit, which compiles to vector
+/// code (a byte at a time, the lumen's box of a 512×512×400 scan took 70 ms).
+fn first_and_last<T: Copy>(row: &[T], pred: &impl Fn(T) -> bool) -> Option<(usize, usize)> {
+    const W: usize = 32;
+    let hit = |c: &[T]| c.iter().fold(false, |a, &v| a | pred(v));
+    let first_chunk = row.chunks(W).position(hit)?;
+    let last_chunk = row.chunks(W).rposition(hit).unwrap_or(first_chunk);
+    let first = first_chunk * W + row[first_chunk * W..].iter().position(|&v| pred(v))?;
+    let end = (last_chunk * W + W).min(row.len());
+    let last = row[..end].iter().rposition(|&v| pred(v)).unwrap_or(first);
+    Some((first, last))
 }
 
 /// Values over a [`BoxGrid`] of a volume with the given geometry.
@@ -466,6 +478,19 @@ mod tests {
         assert_eq!(doubled.get([4, 2, 1]), 2.0 * b.get([4, 2, 1]));
         let p = glam::DVec3::new(7.3, 5.1, 9.9);
         assert_eq!(b.sample(p).to_bits(), f.sample(p, f32::INFINITY).to_bits());
+    }
+
+
+    #[test]
+    fn first_and_last_agree_with_a_plain_scan() {
+        let mut rng = crate::phantom::rng::Rng::new(4, 1);
+        for len in [0usize, 1, 31, 32, 33, 64, 100, 512] {
+            for _ in 0..50 {
+                let row: Vec<u8> = (0..len).map(|_| (rng.range(0.0, 1.0) < 0.03) as u8).collect();
+                let want = row.iter().position(|&v| v != 0).map(|f| (f, row.iter().rposition(|&v| v != 0).unwrap()));
+                assert_eq!(first_and_last(&row, &|v: u8| v != 0), want, "{row:?}");
+            }
+        }
     }
 
 }

@@ -10,7 +10,13 @@ const MIN_BYTES: usize = 8 << 20;
 
 /// A vector of `n` copies of `fill`, in huge pages where the system gives them.
 pub fn filled<T: Copy>(n: usize, fill: T) -> Vec<T> {
-    let mut v: Vec<T> = Vec::with_capacity(n);
+    filled_with_room(n, n, fill)
+}
+
+/// [`filled`] with room for `capacity` values, so that a later user of the memory with a
+/// larger layout (a search's padded box after Ds's box) needs no fresh pages.
+pub fn filled_with_room<T: Copy>(n: usize, capacity: usize, fill: T) -> Vec<T> {
+    let mut v: Vec<T> = Vec::with_capacity(n.max(capacity));
     advise_huge(&v);
     v.resize(n, fill);
     v

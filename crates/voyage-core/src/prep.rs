@@ -156,13 +156,13 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Sta
     };
     lap(&mut t.ds);
     let mut ends = centre_skeleton(&seg.lumen, &ds_box, &sk, &opts.centerline)?;
-    // Ds moves into bricks before the Dt searches need their own box-sized arrays.
+    // Ds moves into bricks, and the Dt searches work in its box array.
     let mut ds = Bricked::from_field(&ds_box, 0.0);
-    drop(ds_box);
+    let scratch = ds_box.data;
     lap(&mut t.centerline);
 
     progress(Stage::Dt);
-    let (mut dt_target, mut dt_source) = dt_fields(&seg.lumen, &ds, ends.source, ends.target)?;
+    let (mut dt_target, mut dt_source) = dt_fields(&seg.lumen, &ds, ends.source, ends.target, scratch)?;
     let joined = |dt: &crate::distance::Geodesic, source: [usize; 3]| dt.dist.get(source).is_finite();
     let mut contact_voxels = taken.len();
     if contact_voxels > 0 && !joined(&dt_target, ends.source) {
@@ -174,7 +174,7 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Sta
         let ds_box = distance_to_wall(&seg.lumen)?;
         ends = centre_skeleton(&seg.lumen, &ds_box, &sk, &opts.centerline)?;
         ds = Bricked::from_field(&ds_box, 0.0);
-        (dt_target, dt_source) = dt_fields(&seg.lumen, &ds, ends.source, ends.target)?;
+        (dt_target, dt_source) = dt_fields(&seg.lumen, &ds, ends.source, ends.target, ds_box.data)?;
     }
     if !joined(&dt_target, ends.source) {
         return Err(crate::Error::invalid("the target cannot be reached from the source through the lumen"));

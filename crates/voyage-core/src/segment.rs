@@ -129,7 +129,7 @@ pub fn segment(vol: &Volume<i16>, opts: &SegmentOptions) -> Result<Segmentation>
     comps[colon].kind = ComponentKind::Colon;
     let mut lumen = rasterize(&runs, &run_comp, colon, vol)?;
     let fluid_voxels = match (from_mask, opts.fluid_hu) {
-        (false, Some(hu)) => add_tagged_fluid(vol, &mut lumen, hu),
+        (false, Some(hu)) => add_tagged_fluid(vol, &mut lumen, &air_extents(&runs, &run_comp, colon), hu),
         _ => 0,
     };
     let seed_voxel = match opts.seed_mm {
@@ -143,7 +143,9 @@ pub fn segment(vol: &Volume<i16>, opts: &SegmentOptions) -> Result<Segmentation>
 
 /// A volume holding only 0 and 1 is a mask, not a CT.
 pub fn is_mask(vol: &Volume<i16>) -> bool {
-    vol.data().par_iter().all(|&v| v == 0 || v == 1) && vol.data().contains(&1)
+    // Chunks tested without an early exit inside (vector code); a CT fails on its first chunk.
+    let chunks = || vol.data().par_chunks(1 << 14);
+    chunks().all(|c| c.iter().fold(true, |a, &v| a & (v as u16 <= 1))) && chunks().any(|c| c.iter().fold(false, |a, &v| a | (v == 1)))
 }
 
 fn extract_runs(vol: &Volume<i16>, is_air: impl Fn(i16) -> bool + Sync) -> Runs {
@@ -392,6 +394,20 @@ fn voxel_of(vol: &Volume<i16>, mm: DVec3) -> Result<[usize; 3]> {
     Ok([ijk.x as usize, ijk.y as usize, ijk.z as usize])
 }
 
+/// Per row (j + ny·k): the x range that the colon's air spans in it (empty where none).
+fn air_extents(runs: &Runs, run_comp: &[u32], colon: usize) -> Vec<std::ops::Range<u32>> {
+    (0..runs.row_start.len() - 1)
+        .map(|row| {
+            let rs = runs.row_start[row] as usize..runs.row_start[row + 1] as usize;
+            let mut ext = u32::MAX..0;
+            for r in rs.filter(|&r| run_comp[r] == colon as u32) {
+                ext = ext.start.min(runs.runs[r].x0)..ext.end.max(runs.runs[r].x1);
+            }
+            ext
+        })
+        .collect()
+}
+
 fn rasterize(runs: &Runs, run_comp: &[u32], colon: usize, vol: &Volume<i16>) -> Result<Volume<u8>> {
     let [nx, ny, _] = vol.dims();
     let mut lumen = Volume::filled(vol.geometry().clone(), 0u8)?;
@@ -414,7 +430,7 @@ fn rasterize(runs: &Runs, run_comp: &[u32], colon: usize, vol: &Volume<i16>) -> 
 /// the colon's air, and so does the thin partial-volume layer between air and fluid (voxels
 /// beside the fluid and within two voxels of the air). Bone is as bright, but never that close to the colon's air: the wall and fat
 /// lie between. Returns the voxels added.
-fn add_tagged_fluid(vol: &Volume<i16>, lumen: &mut Volume<u8>, fluid_hu: i16) -> usize {
+fn add_tagged_fluid(vol: &Volume<i16>, lumen: &mut Volume<u8>, air_rows: &[std::ops::Range<u32>], fluid_hu: i16) -> usize {
     const AIR: u8 = 1;
     const FLUID: u8 = 2;
     const LAYER: u8 = 3;
@@ -436,11 +452,23 @@ fn add_tagged_fluid(vol: &Volume<i16>, lumen: &mut Volume<u8>, fluid_hu: i16) ->
                 .any(|&(a, b, c)| a < nx && b < ny && c < nz && lumen.get(a, b, c) == AIR)
         })
     };
+    // Most bright runs are bone, far from the colon: a run can touch air within two voxels
+    // only if its own row or a row up to two steps along y or z has air near its x range.
+    let may_touch_air = |x: std::ops::Range<u32>, j: usize, k: usize| {
+        let rows = [(j, k), (j.wrapping_sub(1), k), (j + 1, k), (j.wrapping_sub(2), k), (j + 2, k), (j, k.wrapping_sub(1)), (j, k + 1), (j, k.wrapping_sub(2)), (j, k + 2)];
+        rows.iter().any(|&(b, c)| b < ny && c < nz && {
+            let air = &air_rows[b + ny * c];
+            air.start < x.end + 2 && air.end + 2 > x.start
+        })
+    };
     let mut contacts = vec![0usize; runs.runs.len()];
     for k in 0..nz {
         for j in 0..ny {
             for r in runs.row(j, k) {
                 let run = runs.runs[r];
+                if !may_touch_air(run.x0..run.x1, j, k) {
+                    continue;
+                }
                 let n = (run.x0..run.x1).filter(|&i| air_near(lumen, i as usize, j, k)).count();
                 if n > 0 {
                     contacts[uf.find(r)] += n;
@@ -449,6 +477,7 @@ fn add_tagged_fluid(vol: &Volume<i16>, lumen: &mut Volume<u8>, fluid_hu: i16) ->
         }
     }
     let mut added = 0;
+    let mut pools = Vec::new();
     for k in 0..nz {
         for j in 0..ny {
             for r in runs.row(j, k) {
@@ -458,6 +487,7 @@ fn add_tagged_fluid(vol: &Volume<i16>, lumen: &mut Volume<u8>, fluid_hu: i16) ->
                         lumen.set(i, j, k, FLUID);
                     }
                     added += (run.x1 - run.x0) as usize;
+                    pools.push((run, j, k));
                 }
             }
         }
@@ -472,14 +502,12 @@ fn add_tagged_fluid(vol: &Volume<i16>, lumen: &mut Volume<u8>, fluid_hu: i16) ->
             .any(|&(a, b, c)| a < nx && b < ny && c < nz && lumen.get(a, b, c) == what)
     };
     let mut layer = Vec::new();
-    for idx in 0..g.len() {
-        if lumen.data()[idx] != FLUID {
-            continue;
-        }
-        let [i, j, k] = g.ijk(idx);
-        for (a, b, c) in face_neighbours(i, j, k, 1) {
-            if a < nx && b < ny && c < nz && lumen.get(a, b, c) == 0 && (beside(lumen, a, b, c, AIR) || air_near(lumen, a, b, c)) {
-                layer.push(g.index(a, b, c));
+    for (run, j, k) in pools {
+        for i in run.x0 as usize..run.x1 as usize {
+            for (a, b, c) in face_neighbours(i, j, k, 1) {
+                if a < nx && b < ny && c < nz && lumen.get(a, b, c) == 0 && (beside(lumen, a, b, c, AIR) || air_near(lumen, a, b, c)) {
+                    layer.push(g.index(a, b, c));
+                }
             }
         }
     }

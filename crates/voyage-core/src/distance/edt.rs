@@ -130,7 +130,8 @@ fn pass_x(mask: &Volume<u8>, grid: &BoxGrid, h: f64) -> (Vec<f32>, Vec<Span>, Ve
     let [nx, ny, nz] = grid.dims;
     let h = h as f32;
     let g = mask.geometry();
-    let mut f = crate::mem::filled(grid.len(), 0.0f32);
+    // Room for the Dt searches, which work in this memory after it (prep).
+    let mut f = crate::mem::filled_with_room(grid.len(), super::geodesic::Padded::shape(grid).search_len(), 0.0f32);
     let runs: Vec<Vec<(u32, u32, u32)>> = f
         .par_chunks_mut(nx * ny)
         .enumerate()

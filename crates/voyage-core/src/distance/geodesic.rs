@@ -29,25 +29,28 @@ pub struct Geodesic {
 /// is needed, the search itself tells walls by their 0) and are finished and moved into
 /// bricks in one pass.
 pub fn geodesic_distance(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3]) -> Result<Geodesic> {
-    search_and_finish(mask, grid, source, |shape, dist| shape.finish_bricked(dist, mask.geometry()))
+    search_and_finish(mask, grid, source, Vec::new(), |shape, dist| shape.finish_bricked(dist, mask.geometry())).map(|(g, _)| g)
 }
 
 /// [`geodesic_distance`] over the box of `like` and stored in the bricks it stores, which must
 /// hold every lumen voxel of the box (Ds's bricks do): the finishing pass then reads those
-/// bricks only.
-pub fn geodesic_distance_like<U>(mask: &Volume<u8>, like: &Bricked<U>, source: [usize; 3]) -> Result<Geodesic> {
-    search_and_finish(mask, &like.grid, source, |shape, dist| Bricked::from_rows_like(like, f32::INFINITY, |j, k| shape.row(dist, j, k), finish))
+/// bricks only. The search works in `scratch`'s memory (any length) and hands it back for the
+/// next one: a fresh box-sized array costs a page fault per page, which on some machines costs
+/// as much as the search itself.
+pub fn geodesic_distance_like<U>(mask: &Volume<u8>, like: &Bricked<U>, source: [usize; 3], scratch: Vec<f32>) -> Result<(Geodesic, Vec<f32>)> {
+    search_and_finish(mask, &like.grid, source, scratch, |shape, dist| Bricked::from_rows_like(like, f32::INFINITY, |j, k| shape.row(dist, j, k), finish))
 }
 
-fn search_and_finish(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3], finish_into: impl FnOnce(&Padded, &[f32]) -> Bricked<f32>) -> Result<Geodesic> {
+fn search_and_finish(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3], scratch: Vec<f32>, finish_into: impl FnOnce(&Padded, &[f32]) -> Bricked<f32>) -> Result<(Geodesic, Vec<f32>)> {
     let shape = Padded::shape(grid);
     let src = shape
         .index_of_global(source)
         .filter(|_| mask.get(source[0], source[1], source[2]) != 0)
         .ok_or_else(|| Error::invalid(format!("the voxel {source:?} is not in the lumen")))?;
-    let dist = shape.start_from_mask(mask);
+    let dist = shape.start_from_mask(mask, scratch);
     let r = dial_impl::<false, false>(&shape, dist, &[src], mask.spacing(), &[], None, false);
-    Ok(Geodesic { farthest: shape.global_of_index(r.far), max_mm: r.far_d, reached: r.reached, dist: finish_into(&shape, &r.dist) })
+    let dist = finish_into(&shape, &r.dist);
+    Ok((Geodesic { farthest: shape.global_of_index(r.far), max_mm: r.far_d, reached: r.reached, dist }, r.dist))
 }
 
 /// What a search over the padded grid found.
@@ -99,14 +102,23 @@ pub struct Padded {
 impl Padded {
     pub fn new(mask: &Volume<u8>, grid: &BoxGrid) -> Self {
         let mut pad = Padded::shape(grid);
-        pad.inside = pad.lay_out_mask(mask, 0, 0u8, |m| (m != 0) as u8);
+        pad.inside = pad.lay_out_mask(mask, 0, 0u8, |m| (m != 0) as u8, Vec::new());
         pad
     }
 
     /// `mask` over the box in the padded layout, each voxel as `value` makes it, `wall` in the
     /// padding, plus `spare` more `wall`s at the end.
-    fn lay_out_mask<T: Copy>(&self, mask: &Volume<u8>, spare: usize, wall: T, value: impl Fn(u8) -> T) -> Vec<T> {
-        let mut out = crate::mem::filled(self.dims[0] * self.dims[1] * self.dims[2] + spare, wall);
+    fn lay_out_mask<T: Copy>(&self, mask: &Volume<u8>, spare: usize, wall: T, value: impl Fn(u8) -> T, reuse: Vec<T>) -> Vec<T> {
+        let n = self.dims[0] * self.dims[1] * self.dims[2] + spare;
+        let mut out = if reuse.capacity() >= n {
+            let mut v = reuse;
+            v.clear();
+            v.resize(n, wall);
+            v
+        } else {
+            drop(reuse);
+            crate::mem::filled(n, wall)
+        };
         let (g, grid) = (mask.geometry(), &self.grid);
         for k in 0..grid.dims[2] {
             for j in 0..grid.dims[1] {
@@ -126,10 +138,16 @@ impl Padded {
         Padded { grid: grid.clone(), dims: grid.dims.map(|d| d + 2), inside: Vec::new() }
     }
 
+    /// Length of a search's distances: the padded box and one spare wall.
+    pub(crate) fn search_len(&self) -> usize {
+        self.dims[0] * self.dims[1] * self.dims[2] + 1
+    }
+
     /// A search's starting distances in the padded layout straight from the mask: 0 for walls
-    /// and padding, +∞ for lumen, plus the spare wall at the end the row loads need.
-    pub(crate) fn start_from_mask(&self, mask: &Volume<u8>) -> Vec<f32> {
-        self.lay_out_mask(mask, 1, 0.0f32, |m| if m != 0 { f32::INFINITY } else { 0.0 })
+    /// and padding, +∞ for lumen, plus the spare wall at the end the row loads need; in
+    /// `reuse`'s memory where it is large enough.
+    pub(crate) fn start_from_mask(&self, mask: &Volume<u8>, reuse: Vec<f32>) -> Vec<f32> {
+        self.lay_out_mask(mask, 1, 0.0f32, |m| if m != 0 { f32::INFINITY } else { 0.0 }, reuse)
     }
 
     /// Unfinished search distances ([`finish`]) in bricks (+∞ outside).
@@ -508,8 +526,12 @@ mod tests {
             let want = reference(&m, [0, 0, 0]);
             let got = geo.dist.to_volume().unwrap();
             // Into Ds's bricks: the same distances.
-            let like = geodesic_distance_like(&m, &Bricked::from_field(&distance_to_wall(&m).unwrap(), 0.0), [0, 0, 0]).unwrap();
-            assert_eq!(like.dist.to_volume().unwrap(), got);
+            // Into Ds's bricks, in memory left over from another search: the same distances.
+            let ds = Bricked::from_field(&distance_to_wall(&m).unwrap(), 0.0);
+            let (fresh, used) = geodesic_distance_like(&m, &ds, [0, 0, 0], vec![7.0; 10]).unwrap();
+            assert_eq!(fresh.dist.to_volume().unwrap(), got);
+            let (reused, _) = geodesic_distance_like(&m, &ds, [0, 0, 0], used).unwrap();
+            assert_eq!(reused.dist.to_volume().unwrap(), got);
             let mut reached = 0;
             for (idx, (&a, &b)) in got.data().iter().zip(&want).enumerate() {
                 if b.is_infinite() {
