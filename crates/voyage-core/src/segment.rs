@@ -394,14 +394,15 @@ fn voxel_of(vol: &Volume<i16>, mm: DVec3) -> Result<[usize; 3]> {
     Ok([ijk.x as usize, ijk.y as usize, ijk.z as usize])
 }
 
-/// Per row (j + ny·k): the x range that the colon's air spans in it (empty where none).
-fn air_extents(runs: &Runs, run_comp: &[u32], colon: usize) -> Vec<std::ops::Range<u32>> {
+/// Per row (j + ny·k): the x range [lo, hi) that the colon's air spans in it; (u32::MAX, 0)
+/// where none.
+fn air_extents(runs: &Runs, run_comp: &[u32], colon: usize) -> Vec<(u32, u32)> {
     (0..runs.row_start.len() - 1)
         .map(|row| {
             let rs = runs.row_start[row] as usize..runs.row_start[row + 1] as usize;
-            let mut ext = u32::MAX..0;
+            let mut ext = (u32::MAX, 0);
             for r in rs.filter(|&r| run_comp[r] == colon as u32) {
-                ext = ext.start.min(runs.runs[r].x0)..ext.end.max(runs.runs[r].x1);
+                ext = (ext.0.min(runs.runs[r].x0), ext.1.max(runs.runs[r].x1));
             }
             ext
         })
@@ -430,7 +431,7 @@ fn rasterize(runs: &Runs, run_comp: &[u32], colon: usize, vol: &Volume<i16>) -> 
 /// the colon's air, and so does the thin partial-volume layer between air and fluid (voxels
 /// beside the fluid and within two voxels of the air). Bone is as bright, but never that close to the colon's air: the wall and fat
 /// lie between. Returns the voxels added.
-fn add_tagged_fluid(vol: &Volume<i16>, lumen: &mut Volume<u8>, air_rows: &[std::ops::Range<u32>], fluid_hu: i16) -> usize {
+fn add_tagged_fluid(vol: &Volume<i16>, lumen: &mut Volume<u8>, air_rows: &[(u32, u32)], fluid_hu: i16) -> usize {
     const AIR: u8 = 1;
     const FLUID: u8 = 2;
     const LAYER: u8 = 3;
@@ -457,8 +458,8 @@ fn add_tagged_fluid(vol: &Volume<i16>, lumen: &mut Volume<u8>, air_rows: &[std::
     let may_touch_air = |x: std::ops::Range<u32>, j: usize, k: usize| {
         let rows = [(j, k), (j.wrapping_sub(1), k), (j + 1, k), (j.wrapping_sub(2), k), (j + 2, k), (j, k.wrapping_sub(1)), (j, k + 1), (j, k.wrapping_sub(2)), (j, k + 2)];
         rows.iter().any(|&(b, c)| b < ny && c < nz && {
-            let air = &air_rows[b + ny * c];
-            air.start < x.end + 2 && air.end + 2 > x.start
+            let (lo, hi) = air_rows[b + ny * c];
+            lo < x.end + 2 && hi + 2 > x.start
         })
     };
     let mut contacts = vec![0usize; runs.runs.len()];
