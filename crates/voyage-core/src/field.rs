@@ -103,32 +103,6 @@ impl<T: Copy> Field<T> {
     pub fn get_global(&self, g: [usize; 3], outside: T) -> T {
         self.grid.index_of_global(g).map_or(outside, |i| self.data[i])
     }
-    /// Axial slice k of the field spread over the whole volume (x fastest), `outside` beyond
-    /// the box: for writing a field without a whole volume in memory.
-    pub fn fill_slice(&self, k: usize, out: &mut [T], outside: T) {
-        out.fill(outside);
-        let lo = self.grid.lo;
-        let [bx, by, bz] = self.grid.dims;
-        if k < lo[2] || k >= lo[2] + bz {
-            return;
-        }
-        let nx = self.geometry.dims[0];
-        for j in 0..by {
-            let src = &self.data[self.grid.index(0, j, k - lo[2])..][..bx];
-            let start = lo[0] + nx * (j + lo[1]);
-            out[start..start + bx].copy_from_slice(src);
-        }
-    }
-
-    /// The field spread over the whole volume, `outside` beyond the box (for exports).
-    pub fn to_volume(&self, outside: T) -> Result<Volume<T>> {
-        let mut v = Volume::filled(self.geometry.clone(), outside)?;
-        let [nx, ny, _] = self.geometry.dims;
-        for (k, slice) in v.data_mut().chunks_mut(nx * ny).enumerate() {
-            self.fill_slice(k, slice, outside);
-        }
-        Ok(v)
-    }
 }
 
 /// The part of a volume inside a box, as a flat vector in box order.
@@ -421,21 +395,21 @@ mod tests {
         let g = Geometry::new([7, 6, 5], [1.0, 0.5, 2.0], [0.0; 3]).unwrap();
         let grid = BoxGrid { lo: [2, 1, 1], dims: [3, 4, 3] };
         let data = (0..grid.len()).map(|i| i as f32 + 1.0).collect();
-        let f = Field { grid, geometry: g.clone(), data };
-        let v = f.to_volume(-1.0).unwrap();
+        let f = Bricked::from_field(&Field { grid, geometry: g.clone(), data }, -1.0);
+        let v = f.to_volume().unwrap();
         let mut s = vec![0.0f32; 7 * 6];
         for k in 0..5 {
-            f.fill_slice(k, &mut s, -1.0);
+            f.fill_slice(k, &mut s);
             assert_eq!(&s[..], v.slice_k(k));
             for j in 0..6 {
                 for i in 0..7 {
-                    assert_eq!(v.get(i, j, k), f.get_global([i, j, k], -1.0), "voxel {i},{j},{k}");
+                    assert_eq!(v.get(i, j, k), f.get([i, j, k]), "voxel {i},{j},{k}");
                 }
             }
         }
         assert_eq!(v.data().iter().filter(|&&x| x > 0.0).count(), 36, "every box value placed once");
-        assert_eq!(f.get_global([2, 1, 1], -1.0), 1.0);
-        assert_eq!(f.get_global([0, 0, 0], -1.0), -1.0);
+        assert_eq!(f.get([2, 1, 1]), 1.0);
+        assert_eq!(f.get([0, 0, 0]), -1.0);
     }
 
     #[test]
@@ -454,7 +428,6 @@ mod tests {
         let f = Field { grid: grid.clone(), geometry: g.clone(), data };
         let b = Bricked::from_field(&f, f32::INFINITY);
         assert_eq!(b.to_field(), f);
-        assert_eq!(b.to_volume().unwrap(), f.to_volume(f32::INFINITY).unwrap());
         for k in 0..25 {
             for j in 0..27 {
                 for i in 0..30 {

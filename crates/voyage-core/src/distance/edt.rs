@@ -319,7 +319,7 @@ mod tests {
     fn matches_brute_force_anisotropic() {
         for (seed, fill) in [(1, 0.9), (2, 0.97), (3, 0.6), (4, 1.0)] {
             let m = random_mask([13, 11, 9], [0.82, 0.7, 1.25], seed, fill);
-            let ds = distance_to_wall(&m).unwrap().to_volume(0.0).unwrap();
+            let ds = crate::field::Bricked::from_field(&distance_to_wall(&m).unwrap(), 0.0).to_volume().unwrap();
             let want = brute(&m);
             for (idx, (&got, &w)) in ds.data().iter().zip(&want).enumerate() {
                 assert!((got as f64 - w).abs() < 1e-4, "seed {seed} voxel {idx}: {got} vs {w}");
