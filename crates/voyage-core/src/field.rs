@@ -254,10 +254,7 @@ impl<T: Copy + PartialEq> Bricked<T> {
     /// Value at box-local voxel `l` (which must lie in the box).
     #[inline]
     pub fn get_box(&self, l: [usize; 3]) -> T {
-        match self.layout.slot_of(l) {
-            ABSENT => self.outside,
-            slot => self.data[slot as usize * BRICK_VOXELS + within_brick(l)],
-        }
+        self.index_of_box(l).map_or(self.outside, |at| self.data[at])
     }
 
     /// Value at a volume voxel (`outside` beyond the box).
