@@ -17,8 +17,9 @@
 //! # Ok(()) }
 //! ```
 //!
-//! In the GUI, [`GpuRenderer::from_device`] takes the window's device and
-//! [`GpuRenderer::draw`] records into textures the GUI owns.
+//! In the GUI, [`GpuRenderer::for_pass`] takes the window's device and
+//! [`GpuRenderer::draw_in_pass`] draws the view straight into the window's render pass;
+//! [`PixelImages`] copies the panels' images into the same pass pixel for pixel.
 //!
 //! [`CellMesh`]: voyage_core::render::CellMesh
 
@@ -26,11 +27,13 @@ mod device;
 mod error;
 mod mesh;
 mod pipeline;
+mod pixels;
 mod renderer;
 mod target;
 mod uniforms;
 
 pub use error::RenderError;
+pub use pixels::{PIXEL_FORMAT, PixelImages};
 pub use renderer::{FrameTimes, GpuRenderer, WARM_UP_FRAMES};
 pub use target::{COLOR_FORMAT, DEPTH_FORMAT, OffscreenTarget, padded_bytes_per_row};
 pub use uniforms::Uniforms;

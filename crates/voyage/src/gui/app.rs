@@ -17,6 +17,7 @@ use voyage_core::submarine::Input;
 
 use super::endoscopy::{label, ray_at, surface_point_on_screen, visible_centerline, Endoscope};
 use super::loader::{Job, Source};
+use super::pixels::WindowGpu;
 use super::scout::{ScoutMarks, ScoutView};
 use super::script::{Script, Step};
 use super::session::Session;
@@ -60,6 +61,10 @@ struct Closeup {
 /// The window's background, behind the unfilled panels.
 const PANEL_BACKGROUND: Color32 = Color32::from_gray(27);
 
+/// The panels' images among the window's [`voyage_render::PixelImages`].
+const SLICE_IMAGES: [u64; 3] = [0, 1, 2];
+const SCOUT_IMAGE: u64 = 3;
+
 const HELP: &[(&str, &str)] = &[
     ("Space", "play / pause the automatic flight"),
     ("R", "reverse the direction (rectum / cecum)"),
@@ -89,6 +94,8 @@ pub struct App {
     endoscope: Endoscope,
     scout: Option<ScoutView>,
     slices: SlicePanel,
+    /// The window has a [`WindowGpu`] (its wgpu renderer draws the panels' images).
+    pixels_gpu: bool,
     findings: Findings,
     tool: Tool,
     measure_from: Option<DVec3>,
@@ -103,6 +110,10 @@ pub struct App {
     status: String,
     frame_ms: VecDeque<f64>,
     render_ms: VecDeque<f64>,
+    /// The process's CPU time (all threads, the CPU Vulkan driver's included) at each of the
+    /// frames in `frame_ms`, in ms: on a CPU driver the work per frame, steadier than the
+    /// wall time on a busy machine.
+    cpu_at_frame_ms: VecDeque<f64>,
     last_frame: Option<Instant>,
     /// Frames drawn since the study became ready (or failed).
     frames: u64,
@@ -126,6 +137,12 @@ impl App {
         let mut visuals = egui::Visuals::dark();
         visuals.panel_fill = Color32::TRANSPARENT;
         cc.egui_ctx.set_visuals(visuals);
+        // The view and the panels' images are drawn by the window's own renderer where it is
+        // wgpu.
+        if let Some(rs) = &cc.wgpu_render_state {
+            WindowGpu::install(rs);
+        }
+        let pixels_gpu = cc.wgpu_render_state.is_some();
         let endoscope = Endoscope::new(cc.wgpu_render_state.as_ref(), args.cpu);
         let script = match args.script.as_deref().map(Script::load).transpose() {
             Ok(s) => s,
@@ -144,7 +161,8 @@ impl App {
             open_path: String::new(),
             endoscope,
             scout: None,
-            slices: SlicePanel::default(),
+            slices: SlicePanel::new(SLICE_IMAGES, pixels_gpu),
+            pixels_gpu,
             findings: Findings::default(),
             tool: Tool::Steer,
             measure_from: None,
@@ -158,6 +176,7 @@ impl App {
             status: String::new(),
             frame_ms: VecDeque::new(),
             render_ms: VecDeque::new(),
+            cpu_at_frame_ms: VecDeque::new(),
             last_frame: None,
             frames: 0,
             view_rect: None,
@@ -188,8 +207,8 @@ impl App {
             Ok(mut s) => {
                 s.set_playing(!self.args.paused);
                 self.status = format!("{} ready in {:.1} s: centerline {:.0} mm, {} triangles in {} cells", s.name, seconds, s.study.centerline.length_mm, s.mesh.triangles.len(), s.mesh.cells());
-                self.scout = Some(ScoutView::new(s.study.ct.geometry()));
-                self.slices = SlicePanel::default();
+                self.scout = Some(ScoutView::new(s.study.ct.geometry(), PANEL_BACKGROUND, SCOUT_IMAGE, self.pixels_gpu));
+                self.slices = SlicePanel::new(SLICE_IMAGES, self.pixels_gpu);
                 if s.study.segmentation.from_mask {
                     // A mask holds 0 and 1: show it as two greys, not as HU.
                     (self.slices.window, self.slices.level) = (2.0, 0.5);
@@ -486,7 +505,7 @@ impl App {
             "recorded": self.recorded,
             "markers": self.findings.markers.iter().map(|m| json!({"label": m.label, "note": m.note, "position_mm": m.position.to_array()})).collect::<Vec<_>>(),
             "measurements_mm": self.findings.measurements.iter().map(|m| m.length_mm()).collect::<Vec<_>>(),
-            "frame_ms": {"mean": mean(&self.frame_ms), "median": pct(0.5), "p95": pct(0.95), "frames": self.frame_ms.len(), "fps": if mean(&self.frame_ms) > 0.0 { 1000.0 / mean(&self.frame_ms) } else { 0.0 }},
+            "frame_ms": {"mean": mean(&self.frame_ms), "median": pct(0.5), "p95": pct(0.95), "frames": self.frame_ms.len(), "fps": if mean(&self.frame_ms) > 0.0 { 1000.0 / mean(&self.frame_ms) } else { 0.0 }, "cpu_ms": cpu_per_frame(&self.cpu_at_frame_ms)},
             "render_ms": mean(&self.render_ms),
             "view_rect": rect(self.view_rect),
             "cells": self.endoscope.stats.cells,
@@ -880,6 +899,22 @@ fn note_error(outcome: &Mutex<Outcome>, msg: String) {
     }
 }
 
+/// User + system time of this process so far (Linux's /proc; its clock ticks are 1/100 s).
+fn process_cpu_ms() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // The fields after the command name, which is in parentheses and may hold spaces.
+    let rest = &stat[stat.rfind(')')? + 1..];
+    let mut fields = rest.split_whitespace().skip(11);
+    let (utime, stime): (f64, f64) = (fields.next()?.parse().ok()?, fields.next()?.parse().ok()?);
+    Some((utime + stime) * 10.0)
+}
+
+/// Mean CPU ms per frame over the frames `cumulative` covers.
+fn cpu_per_frame(cumulative: &VecDeque<f64>) -> Option<f64> {
+    let (first, last) = (cumulative.front()?, cumulative.back()?);
+    (cumulative.len() > 1).then(|| (last - first) / (cumulative.len() - 1) as f64)
+}
+
 fn push_limited(v: &mut VecDeque<f64>, x: f64) {
     if v.len() >= 240 {
         v.pop_front();
@@ -900,6 +935,9 @@ impl eframe::App for App {
         };
         if let Some(t) = self.last_frame {
             push_limited(&mut self.frame_ms, now.duration_since(t).as_secs_f64() * 1e3);
+            if let Some(cpu) = process_cpu_ms() {
+                push_limited(&mut self.cpu_at_frame_ms, cpu);
+            }
         }
         self.last_frame = Some(now);
 

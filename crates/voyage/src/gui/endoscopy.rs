@@ -1,6 +1,6 @@
-//! The endoscopic view inside egui: drawn by the wgpu renderer into a texture of the window's
-//! own device (shown as an egui image), or by the CPU reference renderer into an egui
-//! texture where no GPU renderer is wanted. Either way only the cells the portals let
+//! The endoscopic view inside egui: drawn by the wgpu renderer straight into the window's
+//! render pass, or by the CPU reference renderer into an egui texture where no GPU renderer
+//! is wanted. Either way only the cells the portals let
 //! through are drawn (paper §4.3): on the GPU the portal outlines alone decide
 //! (`Visibility::select`), on the CPU also the depth buffer (`Visibility::draw`); neither
 //! changes a pixel.
@@ -12,19 +12,18 @@ use egui::{Color32, ColorImage, Pos2, Rect, TextureHandle, TextureOptions, Vec2}
 use glam::DVec3;
 use voyage_core::camera::Camera;
 use voyage_core::render::{shade, Frame, Lighting, Rasterizer, View};
-use voyage_render::GpuRenderer;
-
+use super::pixels::WindowGpu;
 use super::session::Session;
 
-/// The GPU renderer lives in egui-wgpu's callback resources, so that the paint callback can
-/// reach it while egui records the window's render pass.
+/// The view on the window's GPU renderer ([`WindowGpu`]).
 struct GpuView {
     /// The mesh uploaded belongs to this session generation.
     uploaded: u64,
 }
 
 /// One frame of the endoscopic view, drawn straight into the window's render pass (no
-/// texture between: on a CPU Vulkan driver every pixel shaded twice would cost a frame).
+/// texture between: measured, a separate pass plus a copy cost lavapipe more than the
+/// window-sized depth buffer this needs).
 struct EndoscopeCallback {
     camera: Camera,
     cells: Vec<u32>,
@@ -34,16 +33,16 @@ struct EndoscopeCallback {
 
 impl egui_wgpu::CallbackTrait for EndoscopeCallback {
     fn prepare(&self, _device: &wgpu::Device, _queue: &wgpu::Queue, _screen: &egui_wgpu::ScreenDescriptor, _encoder: &mut wgpu::CommandEncoder, resources: &mut egui_wgpu::CallbackResources) -> Vec<wgpu::CommandBuffer> {
-        if let Some(r) = resources.get::<GpuRenderer>() {
+        if let Some(g) = resources.get::<WindowGpu>() {
             // A size the device refuses leaves the view empty rather than stopping the window.
-            let _ = r.prepare(&self.camera, self.size[0], self.size[1], &self.lighting);
+            let _ = g.renderer.prepare(&self.camera, self.size[0], self.size[1], &self.lighting);
         }
         Vec::new()
     }
 
     fn paint(&self, _info: egui::PaintCallbackInfo, pass: &mut wgpu::RenderPass<'static>, resources: &egui_wgpu::CallbackResources) {
-        if let Some(r) = resources.get::<GpuRenderer>() {
-            let _ = r.draw_in_pass(pass, &self.cells);
+        if let Some(g) = resources.get::<WindowGpu>() {
+            let _ = g.renderer.draw_in_pass(pass, &self.cells);
         }
     }
 }
@@ -70,13 +69,12 @@ pub struct Endoscope {
 }
 
 impl Endoscope {
-    /// Uses the window's wgpu device when there is one and `cpu` is false.
+    /// Uses the window's wgpu renderer (a [`WindowGpu`] in its callback resources) when there
+    /// is one and `cpu` is false.
     pub fn new(render_state: Option<&egui_wgpu::RenderState>, cpu: bool) -> Self {
-        let gpu = render_state.filter(|_| !cpu).map(|rs| {
-            let renderer = GpuRenderer::for_pass(rs.device.clone(), rs.queue.clone(), rs.target_format);
-            let name = format!("GPU: {}", renderer.adapter_summary());
-            rs.renderer.write().callback_resources.insert(renderer);
-            (GpuView { uploaded: u64::MAX }, name)
+        let gpu = render_state.filter(|_| !cpu).and_then(|rs| {
+            let name = rs.renderer.read().callback_resources.get::<WindowGpu>().map(|g| format!("GPU: {}", g.renderer.adapter_summary()))?;
+            Some((GpuView { uploaded: u64::MAX }, name))
         });
         let (gpu, renderer_name) = match gpu {
             Some((g, name)) => (Some(g), name),
@@ -97,8 +95,8 @@ impl Endoscope {
         match (&mut self.gpu, render_state) {
             (Some(gpu), Some(rs)) => {
                 if gpu.uploaded != generation {
-                    if let Some(r) = rs.renderer.write().callback_resources.get_mut::<GpuRenderer>() {
-                        r.upload(&session.mesh)?;
+                    if let Some(g) = rs.renderer.write().callback_resources.get_mut::<WindowGpu>() {
+                        g.renderer.upload(&session.mesh)?;
                     }
                     gpu.uploaded = generation;
                 }

@@ -5,6 +5,7 @@
 mod app;
 mod endoscopy;
 mod loader;
+mod pixels;
 mod scout;
 mod script;
 mod session;

@@ -5,8 +5,9 @@
 //! The surface drawn here is the study's mesh decimated by vertex clustering (a few mm):
 //! the scout shows shape, not mucosa, and tens of thousands of triangles blend fast on any
 //! renderer, where the full mesh (over a million) would not. It is alpha-blended on the
-//! CPU into a texture (redrawn when the view changes), so it needs no depth buffer and costs
-//! nothing per frame while the submarine flies.
+//! CPU over the panel's colour into an opaque image (redrawn when the view changes) that is
+//! shown pixel for pixel ([`PanelImage`]), so it needs no depth buffer and costs little per
+//! frame while the submarine flies.
 
 use std::collections::HashMap;
 
@@ -14,6 +15,8 @@ use egui::{Color32, Pos2, Rect, Sense, Shape, Stroke, Vec2};
 use glam::{DMat3, DVec3};
 use voyage_core::surface::Mesh;
 use voyage_core::Geometry;
+
+use super::pixels::{PanelImage, Rgba};
 
 /// The colon's surface at scout detail, in volume-local mm.
 pub struct ScoutMesh {
@@ -80,8 +83,14 @@ pub struct ScoutView {
     zoom: f64,
     /// Patient axes in the volume's local frame: left, posterior, superior.
     anatomy: DMat3,
-    /// The drawn surface, and the part of the panel it covers (as a fraction of it).
-    cached: Option<(CacheKey, egui::TextureHandle, Rect)>,
+    /// The view the image was drawn for, and where the image's top-left pixel lies in the
+    /// panel (pixels): it holds only the part the colon covers.
+    cached: Option<(CacheKey, [usize; 2])>,
+    image: PanelImage,
+    /// The window's colour behind the scout.
+    background: Color32,
+    /// The window's renderer can draw [`PanelImage`]s itself.
+    gpu: bool,
 }
 
 #[derive(Clone, Copy, PartialEq)]
@@ -110,10 +119,12 @@ impl Projection {
 }
 
 impl ScoutView {
-    pub fn new(geometry: &Geometry) -> Self {
+    /// `image_key`: the scout's slot among the window's pixel images; `gpu`: the window's
+    /// renderer holds them.
+    pub fn new(geometry: &Geometry, background: Color32, image_key: u64, gpu: bool) -> Self {
         // local = Dᵀ (patient − origin): a patient axis e is Dᵀ e in the local frame.
         let d = geometry.direction_mat().transpose();
-        ScoutView { yaw: 0.0, pitch: 0.0, zoom: 1.0, anatomy: d, cached: None }
+        ScoutView { yaw: 0.0, pitch: 0.0, zoom: 1.0, anatomy: d, cached: None, image: PanelImage::new(image_key, "scout"), background, gpu }
     }
 
     /// Front view (from the patient's anterior, the patient's right on the screen's left,
@@ -150,11 +161,11 @@ impl ScoutView {
         let painter = ui.painter_at(rect);
         let proj = self.projection(mesh, rect);
         let ppp = ui.ctx().pixels_per_point();
-        let (texture, used) = self.surface(ui.ctx(), mesh, marks.centerline, &proj, rect, ppp);
-        // Only the part the colon covers: the rest is transparent, and on a CPU Vulkan driver
-        // every pixel drawn costs.
-        let shown = Rect::from_min_max(rect.lerp_inside(used.min.to_vec2()), rect.lerp_inside(used.max.to_vec2()));
-        painter.image(texture, shown, used, Color32::WHITE);
+        // Only the part the colon covers: the rest shows the window's colour anyway, and on a
+        // CPU Vulkan driver every pixel drawn costs.
+        let offset = self.surface(mesh, marks.centerline, &proj, rect, ppp);
+        let at = ((rect.min.to_vec2() * ppp).round() + Vec2::new(offset[0] as f32, offset[1] as f32)) / ppp;
+        self.image.paint(&painter, at.to_pos2(), self.gpu);
 
         let line: Vec<Pos2> = marks.centerline.iter().map(|p| proj.to_screen(DVec3::from_array(*p))).collect();
         for (label, p) in &marks.markers {
@@ -179,58 +190,62 @@ impl ScoutView {
         None
     }
 
-    /// The decimated surface, drawn on the CPU into a texture that is redrawn only when the
+    /// The decimated surface, drawn on the CPU into an image that is redrawn only when the
     /// view changes: the scout stands still while the submarine flies, and a CPU Vulkan
     /// driver would otherwise blend every scout triangle again each frame. Faces seen
     /// edge-on are more opaque than faces seen head-on: the outline and the folds stand out
-    /// while the far side shows through (an "x-ray" look).
-    fn surface(&mut self, ctx: &egui::Context, mesh: &ScoutMesh, centerline: &[[f64; 3]], proj: &Projection, rect: Rect, ppp: f32) -> (egui::TextureId, Rect) {
+    /// while the far side shows through (an "x-ray" look). Returns where the image's
+    /// top-left pixel lies in the panel.
+    fn surface(&mut self, mesh: &ScoutMesh, centerline: &[[f64; 3]], proj: &Projection, rect: Rect, ppp: f32) -> [usize; 2] {
         let key = CacheKey { yaw: self.yaw, pitch: self.pitch, zoom: self.zoom, rect };
-        if let Some((k, t, used)) = &self.cached
+        if let Some((k, offset)) = &self.cached
             && *k == key
         {
-            return (t.id(), *used);
+            return *offset;
         }
-        let image = rasterize(mesh, centerline, proj, rect, ppp);
-        let used = covered(&image);
-        match &mut self.cached {
-            Some((k, t, u)) => {
-                t.set(image, egui::TextureOptions::LINEAR);
-                (*k, *u) = (key, used);
-                (t.id(), used)
-            }
-            None => {
-                let t = ctx.load_texture("scout", image, egui::TextureOptions::LINEAR);
-                let id = t.id();
-                self.cached = Some((key, t, used));
-                (id, used)
-            }
-        }
+        let (w, h) = (((rect.width() * ppp).round() as usize).max(1), ((rect.height() * ppp).round() as usize).max(1));
+        let buf = rasterize(mesh, centerline, proj, rect, ppp, [w, h]);
+        let (offset, image) = over_background(&buf, [w, h], self.background);
+        self.image.set(image);
+        self.cached = Some((key, offset));
+        offset
     }
 }
 
-/// The smallest rectangle (in fractions of the image, as texture coordinates) holding every
-/// pixel that is not fully transparent.
-fn covered(image: &egui::ColorImage) -> Rect {
-    let [w, h] = image.size;
+/// The premultiplied image `buf` of `size` over an opaque `background`, cropped to the
+/// pixels that are not fully transparent: (the crop's top-left pixel, the crop). An image
+/// with nothing in it gives a 0 × 0 crop.
+fn over_background(buf: &[[f32; 4]], size: [usize; 2], background: Color32) -> ([usize; 2], Rgba) {
+    let [w, h] = size;
     let (mut x0, mut y0, mut x1, mut y1) = (w, h, 0, 0);
-    for (i, p) in image.pixels.iter().enumerate() {
-        if p.a() > 0 {
+    for (i, p) in buf.iter().enumerate() {
+        if p[3] > 0.0 {
             let (x, y) = (i % w, i / w);
             (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x + 1), y1.max(y + 1));
         }
     }
     if x0 >= x1 {
-        return Rect::from_min_max(Pos2::ZERO, Pos2::ZERO);
+        return ([0, 0], Rgba { size: [0, 0], bytes: Vec::new() });
     }
-    Rect::from_min_max(Pos2::new(x0 as f32 / w as f32, y0 as f32 / h as f32), Pos2::new(x1 as f32 / w as f32, y1 as f32 / h as f32))
+    let bg = [background.r(), background.g(), background.b()].map(|c| c as f32 / 255.0);
+    let mut bytes = Vec::with_capacity((x1 - x0) * (y1 - y0) * 4);
+    for y in y0..y1 {
+        for p in &buf[y * w + x0..y * w + x1] {
+            let k = 1.0 - p[3];
+            for c in 0..3 {
+                bytes.push(((p[c] + bg[c] * k) * 255.0).round().clamp(0.0, 255.0) as u8);
+            }
+            bytes.push(255);
+        }
+    }
+    ([x0, y0], Rgba { size: [x1 - x0, y1 - y0], bytes })
 }
 
 /// Alpha-blends the scout's triangles, in the mesh's order, into an image of `rect` at
-/// `ppp` pixels per point (premultiplied colour, transparent where nothing is), and draws
-/// the centerline over them in green (the paper's colour).
-fn rasterize(mesh: &ScoutMesh, centerline: &[[f64; 3]], proj: &Projection, rect: Rect, ppp: f32) -> egui::ColorImage {
-    let (w, h) = (((rect.width() * ppp).round() as usize).max(1), ((rect.height() * ppp).round() as usize).max(1));
+/// `ppp` pixels per point, `size` pixels (premultiplied colour, transparent where nothing
+/// is), and draws the centerline over them in green (the paper's colour).
+fn rasterize(mesh: &ScoutMesh, centerline: &[[f64; 3]], proj: &Projection, rect: Rect, ppp: f32, size: [usize; 2]) -> Vec<[f32; 4]> {
+    let [w, h] = size;
     let mut buf = vec![[0f32; 4]; w * h];
     let to_px = |p: DVec3| {
         let s = proj.to_screen(p);
@@ -249,8 +264,7 @@ fn rasterize(mesh: &ScoutMesh, centerline: &[[f64; 3]], proj: &Projection, rect:
         let (a, b) = (to_px(DVec3::from_array(pair[0])), to_px(DVec3::from_array(pair[1])));
         stroke(&mut buf, w, h, a, b, (1.5 * ppp) as f64, green);
     }
-    let pixels = buf.iter().map(|c| Color32::from_rgba_premultiplied((c[0] * 255.0) as u8, (c[1] * 255.0) as u8, (c[2] * 255.0) as u8, (c[3] * 255.0) as u8)).collect();
-    egui::ColorImage::new([w, h], pixels)
+    buf
 }
 
 /// Paints the pixels within `width / 2` of the segment a–b with an opaque colour.
@@ -314,4 +328,29 @@ fn draw_submarine(painter: &egui::Painter, proj: &Projection, at: DVec3, dir: DV
         painter.add(Shape::convex_polygon(vec![tip + d * 6.0, tip + n * 4.0, tip - n * 4.0], color, Stroke::NONE));
     }
     painter.circle(s, 5.0, Color32::from_rgb(20, 60, 90), Stroke::new(2.0, color));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_scout_image_is_cropped_and_laid_over_the_background() {
+        let bg = Color32::from_gray(20);
+        // 4 × 3, nothing drawn: an empty crop.
+        let empty = vec![[0.0f32; 4]; 12];
+        assert_eq!(over_background(&empty, [4, 3], bg).1.size, [0, 0]);
+        // One opaque red pixel at (1, 1) and one half-transparent white at (2, 2).
+        let mut buf = empty.clone();
+        buf[4 + 1] = [1.0, 0.0, 0.0, 1.0];
+        buf[2 * 4 + 2] = [0.5, 0.5, 0.5, 0.5];
+        let (at, img) = over_background(&buf, [4, 3], bg);
+        assert_eq!((at, img.size), ([1, 1], [2, 2]));
+        let px = |x: usize, y: usize| img.bytes[4 * (y * 2 + x)..][..4].to_vec();
+        assert_eq!(px(0, 0), vec![255, 0, 0, 255]);
+        // Premultiplied 0.5 over 20: 127.5 + 10 → 138 (rounded), opaque.
+        assert_eq!(px(1, 1), vec![138, 138, 138, 255]);
+        // Untouched pixels inside the crop show the background.
+        assert_eq!(px(1, 0), vec![20, 20, 20, 255]);
+    }
 }

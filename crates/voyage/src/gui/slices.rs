@@ -3,9 +3,11 @@
 //! up on axial slices, head up on the others), with a crosshair at the submarine, window /
 //! level presets and drag, scroll through slices, and a click in the lumen to move there.
 
-use egui::{Color32, ColorImage, Pos2, Rect, Sense, Stroke, TextureHandle, TextureOptions, Vec2};
+use egui::{Color32, Pos2, Rect, Sense, Stroke, Vec2};
 use glam::DVec3;
 use voyage_core::{Geometry, Volume};
+
+use super::pixels::{PanelImage, Rgba};
 
 /// Window / level presets (HU): name, width, centre.
 pub const PRESETS: [(&str, f64, f64); 3] = [("Colon", 1600.0, -300.0), ("Lung", 1500.0, -600.0), ("Soft tissue", 400.0, 40.0)];
@@ -67,22 +69,27 @@ struct SliceView {
     offset: i64,
     /// Scrolling not yet turned into slices (points).
     scroll: f32,
-    texture: Option<(TextureHandle, (usize, f64, f64))>,
+    image: PanelImage,
+    /// What the image shows: slice, window, level, size in pixels.
+    shows: Option<(usize, f64, f64, [usize; 2])>,
 }
 
 pub struct SlicePanel {
     views: [SliceView; 3],
     pub window: f64,
     pub level: f64,
-}
-
-impl Default for SlicePanel {
-    fn default() -> Self {
-        SlicePanel { views: Plane::ALL.map(|plane| SliceView { plane, offset: 0, scroll: 0.0, texture: None }), window: PRESETS[0].1, level: PRESETS[0].2 }
-    }
+    /// The window's renderer draws [`PanelImage`]s itself.
+    gpu: bool,
 }
 
 impl SlicePanel {
+    /// `image_keys`: the three slices' slots among the window's pixel images; `gpu`: the
+    /// window's renderer holds them.
+    pub fn new(image_keys: [u64; 3], gpu: bool) -> Self {
+        let views = std::array::from_fn(|i| SliceView { plane: Plane::ALL[i], offset: 0, scroll: 0.0, image: PanelImage::new(image_keys[i], Plane::ALL[i].name()), shows: None });
+        SlicePanel { views, window: PRESETS[0].1, level: PRESETS[0].2, gpu }
+    }
+
     /// Back to the slices through the submarine (after it moved somewhere new).
     pub fn follow(&mut self) {
         for v in &mut self.views {
@@ -137,27 +144,23 @@ impl SlicePanel {
         }
         let fixed = (at_index[lay.fixed] as i64 + self.views[i].offset).clamp(0, dims[lay.fixed] as i64 - 1) as usize;
         self.views[i].offset = fixed as i64 - at_index[lay.fixed] as i64;
-        let key = (fixed, self.window, self.level);
-        let view = &mut self.views[i];
-        if view.texture.as_ref().is_none_or(|(_, k)| *k != key) {
-            let image = slice_image(ct, lay, fixed, self.window, self.level);
-            match &mut view.texture {
-                Some((t, k)) => {
-                    t.set(image, TextureOptions::LINEAR);
-                    *k = key;
-                }
-                None => view.texture = Some((ui.ctx().load_texture(format!("slice-{}", plane.name()), image, TextureOptions::LINEAR), key)),
-            }
-        }
         let (nx, ny) = (dims[lay.x.0], dims[lay.y.0]);
         let (sx, sy) = (g.spacing[lay.x.0], g.spacing[lay.y.0]);
         let size_mm = Vec2::new((nx as f64 * sx) as f32, (ny as f64 * sy) as f32);
         let scale = (rect.width() / size_mm.x).min((rect.height() - 16.0) / size_mm.y);
-        let image_rect = Rect::from_center_size(rect.center() + Vec2::new(0.0, 8.0), size_mm * scale);
-        let painter = ui.painter_at(rect);
-        if let Some((t, _)) = &view.texture {
-            painter.image(t.id(), image_rect, Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)), Color32::WHITE);
+        // The image at the size it is shown, on whole pixels: drawn pixel for pixel.
+        let ppp = ui.ctx().pixels_per_point();
+        let shown = Rect::from_center_size(rect.center() + Vec2::new(0.0, 8.0), size_mm * scale);
+        let px = [((shown.width() * ppp).round() as usize).max(1), ((shown.height() * ppp).round() as usize).max(1)];
+        let image_rect = Rect::from_min_size(((shown.min.to_vec2() * ppp).round() / ppp).to_pos2(), Vec2::new(px[0] as f32, px[1] as f32) / ppp);
+        let key = (fixed, self.window, self.level, px);
+        let view = &mut self.views[i];
+        if view.shows != Some(key) {
+            view.image.set(slice_image(ct, lay, fixed, self.window, self.level, px));
+            view.shows = Some(key);
         }
+        let painter = ui.painter_at(rect);
+        view.image.paint(&painter, image_rect.min, self.gpu);
         // Index ↔ screen: pixel centres at (u + 0.5) / n of the image.
         let to_screen = |ix: f64, iy: f64| {
             let u = if lay.x.1 { nx as f64 - 1.0 - ix } else { ix };
@@ -196,24 +199,43 @@ impl SlicePanel {
     }
 }
 
-/// The grey image of one slice under a window / level.
-fn slice_image(ct: &Volume<i16>, lay: Layout, fixed: usize, window: f64, level: f64) -> ColorImage {
+/// The grey image of one slice under a window / level, `size` pixels (the slice's
+/// orientation on screen), each pixel the voxel under its centre (no interpolation, as a
+/// slice viewer with interpolation off: a mask stays two-valued, and a slice shown smaller
+/// than the CT reads one voxel per pixel, not all of them).
+fn slice_image(ct: &Volume<i16>, lay: Layout, fixed: usize, window: f64, level: f64, size: [usize; 2]) -> Rgba {
     let dims = ct.dims();
-    let (nx, ny) = (dims[lay.x.0], dims[lay.y.0]);
-    let lo = level - 0.5 * window;
-    let k = 255.0 / window.max(1.0);
-    let mut pixels = Vec::with_capacity(nx * ny);
-    let mut ijk = [0usize; 3];
-    ijk[lay.fixed] = fixed;
-    for v in 0..ny {
-        ijk[lay.y.0] = if lay.y.1 { ny - 1 - v } else { v };
-        for u in 0..nx {
-            ijk[lay.x.0] = if lay.x.1 { nx - 1 - u } else { u };
-            let hu = ct.get(ijk[0], ijk[1], ijk[2]) as f64;
-            pixels.push(Color32::from_gray(((hu - lo) * k).clamp(0.0, 255.0) as u8));
+    let stride = [1, dims[0], dims[0] * dims[1]];
+    // Per image column (row): the offset in the data of the voxels under it.
+    let offsets = |m: usize, (axis, reversed): (usize, bool)| -> Vec<usize> {
+        let n = dims[axis];
+        (0..m)
+            .map(|u| {
+                let c = voxel_under(u, n, m);
+                (if reversed { n - 1 - c } else { c }) * stride[axis]
+            })
+            .collect()
+    };
+    let (xs, ys) = (offsets(size[0], lay.x), offsets(size[1], lay.y));
+    let data = ct.data();
+    let base = fixed * stride[lay.fixed];
+    let lo = (level - 0.5 * window) as f32;
+    let k = (255.0 / window.max(1.0)) as f32;
+    let mut bytes = Vec::with_capacity(size[0] * size[1] * 4);
+    for &r in &ys {
+        let row = base + r;
+        for &c in &xs {
+            let g = ((data[row + c] as f32 - lo) * k).clamp(0.0, 255.0) as u8;
+            bytes.extend_from_slice(&[g, g, g, 255]);
         }
     }
-    ColorImage::new([nx, ny], pixels)
+    Rgba { size, bytes }
+}
+
+/// The voxel (of `n` along an axis) under the centre of pixel `u` of `m` pixels spanning
+/// the `n` voxels.
+fn voxel_under(u: usize, n: usize, m: usize) -> usize {
+    (((2 * u + 1) * n) / (2 * m)).min(n - 1)
 }
 
 #[cfg(test)]
@@ -240,5 +262,47 @@ mod tests {
         g.set_direction_mat(glam::DMat3::from_diagonal(DVec3::new(-1.0, -1.0, 1.0)));
         let a = layout(&g, Plane::Axial);
         assert_eq!((a.x, a.y), ((0, true), (1, true)));
+    }
+
+    /// A volume whose voxel (i, j, k) holds i + 10 j + 100 k.
+    fn numbered(dims: [usize; 3]) -> Volume<i16> {
+        let g = Geometry::new(dims, [1.0; 3], [0.0; 3]).unwrap();
+        let data = (0..dims[2]).flat_map(|k| (0..dims[1]).flat_map(move |j| (0..dims[0]).map(move |i| (i + 10 * j + 100 * k) as i16))).collect();
+        Volume::from_vec(g, data).unwrap()
+    }
+
+    /// The value a grey pixel stands for under window 255, level 127.5 (grey = value).
+    fn value(img: &Rgba, x: usize, y: usize) -> i16 {
+        let p = &img.bytes[4 * (y * img.size[0] + x)..][..4];
+        assert_eq!((p[0], p[1], p[2], p[3]), (p[0], p[0], p[0], 255), "grey and opaque");
+        p[0] as i16
+    }
+
+    #[test]
+    fn each_pixel_shows_the_voxel_under_its_centre() {
+        // Same size: every voxel once. Half size: voxels 1, 3, 5, ... Double: each twice.
+        assert_eq!((0..6).map(|u| voxel_under(u, 6, 6)).collect::<Vec<_>>(), vec![0, 1, 2, 3, 4, 5]);
+        assert_eq!((0..3).map(|u| voxel_under(u, 6, 3)).collect::<Vec<_>>(), vec![1, 3, 5]);
+        assert_eq!((0..4).map(|u| voxel_under(u, 2, 4)).collect::<Vec<_>>(), vec![0, 0, 1, 1]);
+        assert_eq!(voxel_under(0, 5, 1), 2);
+    }
+
+    #[test]
+    fn slice_images_read_the_fixed_plane_in_screen_order() {
+        let ct = numbered([6, 5, 2]);
+        let g = ct.geometry().clone();
+        // Axial slice k = 1 at full size: x = i, y = j, values i + 10 j + 100.
+        let a = slice_image(&ct, layout(&g, Plane::Axial), 1, 255.0, 127.5, [6, 5]);
+        for (x, y) in [(0, 0), (5, 0), (2, 3), (5, 4)] {
+            assert_eq!(value(&a, x, y), (x + 10 * y + 100) as i16);
+        }
+        // Coronal slice j = 2: x = i, y = k reversed (head up): the top row is k = 1.
+        let c = slice_image(&ct, layout(&g, Plane::Coronal), 2, 255.0, 127.5, [6, 2]);
+        assert_eq!(value(&c, 4, 0), 4 + 20 + 100);
+        assert_eq!(value(&c, 4, 1), 4 + 20);
+        // Sagittal slice i = 3 at half width: x = j under each pixel's centre (1, 3), y = k reversed.
+        let s = slice_image(&ct, layout(&g, Plane::Sagittal), 3, 255.0, 127.5, [2, 2]);
+        assert_eq!(value(&s, 0, 0), 3 + 10 + 100);
+        assert_eq!(value(&s, 1, 1), 3 + 30);
     }
 }
