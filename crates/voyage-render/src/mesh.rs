@@ -1,10 +1,19 @@
 //! The surface on the GPU: one interleaved vertex buffer and one index buffer holding every
 //! triangle in cell order, so that drawing a list of cells is a list of index ranges (one
-//! `draw_indexed` per run of consecutive cells), and a new visibility result costs no upload.
+//! `draw_indexed` per run of consecutive pieces), and a new visibility result costs no
+//! upload.
+//!
+//! Each cell is laid out as chunks of at most [`CHUNK_TRIANGLES`] triangles (in the
+//! surface's order, so spatially compact), each with its own vertices and bounding box. A
+//! cell the portals let through is drawn without the chunks that lie wholly outside the
+//! view frustum: they would give no fragment, so the image is the same (exact), and a CPU
+//! Vulkan driver is spared shading and binning them.
 
 use std::ops::Range;
 
 use bytemuck::{Pod, Zeroable};
+use glam::DVec3;
+use voyage_core::camera::Camera;
 use voyage_core::render::CellMesh;
 use wgpu::util::DeviceExt;
 
@@ -31,18 +40,34 @@ impl Vertex {
     }
 }
 
-/// A [`CellMesh`] uploaded: its buffers and, per cell, its range in the index buffer
-/// (in indices, three per triangle).
+/// Triangles per chunk: small enough that the part of a cell behind or beside the camera
+/// falls away, large enough that the per-frame test and the draw calls stay few (colon-a:
+/// ~1 500 chunks in 140 cells).
+pub(crate) const CHUNK_TRIANGLES: usize = 1024;
+
+/// A run of a cell's triangles with its own vertices: its range in the index buffer and
+/// the bounding box of its vertices (mm).
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Chunk {
+    pub indices: Range<u32>,
+    pub lo: [f32; 3],
+    pub hi: [f32; 3],
+}
+
+/// A [`CellMesh`] uploaded: its buffers, its chunks, and per cell its range in the index
+/// buffer (in indices, three per triangle) and its chunks.
 pub(crate) struct GpuMesh {
     pub vertices: wgpu::Buffer,
     pub indices: wgpu::Buffer,
     pub cell_indices: Vec<Range<u32>>,
+    pub chunks: Vec<Chunk>,
+    pub cell_chunks: Vec<Range<usize>>,
 }
 
 impl GpuMesh {
     pub fn new(device: &wgpu::Device, mesh: &CellMesh) -> Result<Self, RenderError> {
         check(mesh)?;
-        let (vertices, triangles) = cell_ordered(mesh);
+        let Layout { vertices, triangles, chunks, cell_chunks } = chunked(mesh);
         let max = device.limits().max_buffer_size;
         let vertex_bytes = (vertices.len() * std::mem::size_of::<Vertex>()) as u64;
         let index_bytes = (mesh.triangles.len() * 12) as u64;
@@ -82,6 +107,8 @@ impl GpuMesh {
             vertices,
             indices,
             cell_indices,
+            chunks,
+            cell_chunks,
         })
     }
 
@@ -89,27 +116,115 @@ impl GpuMesh {
     pub fn draw_ranges(&self, cells: &[u32]) -> Result<Vec<Range<u32>>, RenderError> {
         draw_ranges(&self.cell_indices, cells)
     }
+
+    /// The index ranges that draw `cells` (order kept, as [`draw_ranges`]) without their
+    /// chunks that lie wholly outside `view`.
+    pub fn draw_ranges_in(&self, cells: &[u32], view: &Frustum) -> Result<Vec<Range<u32>>, RenderError> {
+        let mut out: Vec<Range<u32>> = Vec::with_capacity(cells.len());
+        for &c in cells {
+            let chunks = self.cell_chunks.get(c as usize).ok_or(RenderError::UnknownCell { cell: c, cells: self.cell_chunks.len() })?;
+            for chunk in &self.chunks[chunks.clone()] {
+                if chunk.indices.is_empty() || view.excludes(chunk.lo, chunk.hi) {
+                    continue;
+                }
+                match out.last_mut() {
+                    Some(last) if last.end == chunk.indices.start => last.end = chunk.indices.end,
+                    _ => out.push(chunk.indices.clone()),
+                }
+            }
+        }
+        Ok(out)
+    }
 }
 
-/// The vertices and triangles laid out cell by cell: each cell's vertices contiguous (a
-/// vertex shared by two cells appears in both) and its triangles indexing only them. A draw
-/// of a run of cells then touches one short stretch of the vertex buffer; with the surface's
-/// own vertex order a cell's indices span most of the buffer, and a driver that shades the
-/// whole index range of a draw (Mesa's CPU driver does) would shade every vertex of the
-/// colon for every run of cells.
-fn cell_ordered(mesh: &CellMesh) -> (Vec<Vertex>, Vec<[u32; 3]>) {
-    let vertex = |v: u32| Vertex { position: mesh.positions[v as usize], normal: mesh.normals[v as usize] };
-    if !mesh.is_indexed() {
-        return (mesh.positions.iter().enumerate().map(|(v, _)| vertex(v as u32)).collect(), mesh.triangles.clone());
+/// The camera's view volume, for excluding boxes that lie wholly outside it.
+pub(crate) struct Frustum {
+    eye: DVec3,
+    /// Camera axes in the world: image right (either sign: the test is symmetric), up,
+    /// forward.
+    axes: [DVec3; 3],
+    /// Half-width and half-height of the image at unit depth.
+    tan: [f64; 2],
+    near: f64,
+    far: f64,
+}
+
+impl Frustum {
+    pub fn new(camera: &Camera, width: u32, height: u32) -> Self {
+        let p = &camera.pose;
+        let t = camera.tan_half_fov();
+        Frustum { eye: p.position, axes: [p.x_body(), p.y_body(), p.z_body()], tan: [t * width as f64 / height as f64, t], near: camera.near_mm, far: camera.far_mm }
     }
-    let vertices: Vec<Vertex> = mesh.cell_vertices.iter().map(|&v| vertex(v)).collect();
-    let mut triangles = Vec::with_capacity(mesh.triangles.len());
-    for (range, vrange) in mesh.cell_ranges.iter().zip(&mesh.cell_vertex_ranges) {
-        for t in &mesh.local_triangles[range.start as usize..range.end as usize] {
-            triangles.push(t.map(|l| vrange.start + l));
+
+    /// True when every point of the box lo–hi lies outside one plane of the frustum, with a
+    /// margin (1e-3 mm plus 1e-4 of the depth) far above f32 rounding in the GPU's transform:
+    /// such a box gives no fragment.
+    pub fn excludes(&self, lo: [f32; 3], hi: [f32; 3]) -> bool {
+        // Per plane: does some corner lie inside (or within the margin)?
+        let mut inside = [false; 6];
+        for k in 0..8 {
+            let c = DVec3::new(if k & 1 == 0 { lo[0] } else { hi[0] } as f64, if k & 2 == 0 { lo[1] } else { hi[1] } as f64, if k & 4 == 0 { lo[2] } else { hi[2] } as f64) - self.eye;
+            let (x, y, z) = (c.dot(self.axes[0]), c.dot(self.axes[1]), c.dot(self.axes[2]));
+            let margin = 1e-3 + 1e-4 * z.abs();
+            let (sx, sy) = (z * self.tan[0] + margin, z * self.tan[1] + margin);
+            let tests = [x <= sx, -x <= sx, y <= sy, -y <= sy, z >= self.near - margin, z <= self.far + margin];
+            for (seen, ok) in inside.iter_mut().zip(tests) {
+                *seen |= ok;
+            }
+            if inside.iter().all(|&s| s) {
+                return false;
+            }
         }
+        true
     }
-    (vertices, triangles)
+}
+
+/// The buffers' contents in chunk order, with each chunk's range and box and each cell's
+/// chunks.
+struct Layout {
+    vertices: Vec<Vertex>,
+    triangles: Vec<[u32; 3]>,
+    chunks: Vec<Chunk>,
+    cell_chunks: Vec<Range<usize>>,
+}
+
+/// Lays the mesh out cell by cell and, within a cell, chunk by chunk: each chunk's vertices
+/// contiguous (a vertex shared by two chunks appears in both) and its triangles indexing
+/// only them. A draw of a run of chunks then touches one short stretch of the vertex buffer;
+/// with the surface's own vertex order a cell's indices span most of the buffer, and a
+/// driver that shades the whole index range of a draw (Mesa's CPU driver does) would shade
+/// every vertex of the colon for every run.
+fn chunked(mesh: &CellMesh) -> Layout {
+    let mut out = Layout { vertices: Vec::with_capacity(mesh.positions.len() * 5 / 4), triangles: Vec::with_capacity(mesh.triangles.len()), chunks: Vec::new(), cell_chunks: Vec::with_capacity(mesh.cell_ranges.len()) };
+    // Surface vertex → its index in the chunk being laid out (stamped with the chunk).
+    let mut slot = vec![(u32::MAX, 0u32); mesh.positions.len()];
+    for range in &mesh.cell_ranges {
+        let first = out.chunks.len();
+        let (start, end) = (range.start as usize, range.end as usize);
+        for lo in (start..end).step_by(CHUNK_TRIANGLES) {
+            let id = out.chunks.len() as u32;
+            let begin = out.triangles.len() as u32 * 3;
+            let (mut bl, mut bh) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+            for t in &mesh.triangles[lo..(lo + CHUNK_TRIANGLES).min(end)] {
+                out.triangles.push(t.map(|v| {
+                    let s = &mut slot[v as usize];
+                    if s.0 != id {
+                        let p = mesh.positions[v as usize];
+                        for a in 0..3 {
+                            bl[a] = bl[a].min(p[a]);
+                            bh[a] = bh[a].max(p[a]);
+                        }
+                        *s = (id, out.vertices.len() as u32);
+                        out.vertices.push(Vertex { position: p, normal: mesh.normals[v as usize] });
+                    }
+                    s.1
+                }));
+            }
+            out.chunks.push(Chunk { indices: begin..out.triangles.len() as u32 * 3, lo: bl, hi: bh });
+        }
+        out.cell_chunks.push(first..out.chunks.len());
+    }
+    out
 }
 
 /// The index ranges that draw `cells`, in the order given, with consecutive cells that are
@@ -190,5 +305,67 @@ mod tests {
             draw_ranges(&cells, &[4]),
             Err(RenderError::UnknownCell { cell: 4, cells: 4 })
         ));
+    }
+
+    use voyage_core::camera::Pose;
+
+    fn camera() -> Camera {
+        // At the origin looking along +x, up +z, 90° vertical field of view.
+        Camera::new(Pose::looking(DVec3::ZERO, DVec3::X, DVec3::Z))
+    }
+
+    #[test]
+    fn boxes_wholly_outside_one_plane_are_excluded() {
+        let f = Frustum::new(&camera(), 200, 100); // half-width 2 at unit depth, half-height 1
+        let b = |lo: [f32; 3], hi: [f32; 3]| f.excludes(lo, hi);
+        // In front, inside.
+        assert!(!b([9.0, -1.0, -1.0], [10.0, 1.0, 1.0]));
+        // Behind the eye, and in front of the near plane only.
+        assert!(b([-10.0, -1.0, -1.0], [-1.0, 1.0, 1.0]));
+        assert!(b([0.0, -1.0, -1.0], [0.05, 1.0, 1.0]));
+        // Beyond the far plane.
+        assert!(b([1001.0, -1.0, -1.0], [1002.0, 1.0, 1.0]));
+        // Above the top plane (z > x) and beside the sides (|y| > 2x), either side.
+        assert!(b([5.0, -1.0, 5.5], [5.2, 1.0, 7.0]));
+        assert!(b([5.0, 10.5, -1.0], [5.0, 12.0, 1.0]));
+        assert!(b([5.0, -12.0, -1.0], [5.0, -10.5, 1.0]));
+        // A box straddling a plane, or surrounding the eye, stays.
+        assert!(!b([5.0, -1.0, 4.0], [6.0, 1.0, 7.0]));
+        assert!(!b([-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]));
+        // Each corner outside the side or the top plane but neither wholly (a box across a
+        // corner of the view): kept, conservatively.
+        assert!(!b([5.0, 9.0, 4.0], [5.0, 11.0, 6.0]));
+    }
+
+    #[test]
+    fn chunks_tile_each_cell_with_their_own_vertices() {
+        // Three cells: 2, 2 500 and 0 triangles of a strip, so the middle cell has 3 chunks.
+        let n = 2502usize;
+        let positions: Vec<[f32; 3]> = (0..n + 2).map(|i| [i as f32, (i % 2) as f32, 0.0]).collect();
+        let triangles: Vec<[u32; 3]> = (0..n as u32).map(|i| [i, i + 1, i + 2]).collect();
+        let mesh = CellMesh { normals: vec![[0.0, 0.0, 1.0]; positions.len()], positions, surface_triangle: (0..n as u32).collect(), triangles, cell_ranges: vec![0..2, 2..2502, 2502..2502], cell_vertices: Vec::new(), cell_vertex_ranges: Vec::new(), local_triangles: Vec::new() };
+        let l = chunked(&mesh);
+        assert_eq!(l.cell_chunks, vec![0..1, 1..4, 4..4]);
+        assert_eq!(l.chunks.iter().map(|c| c.indices.len() / 3).collect::<Vec<_>>(), vec![2, 1024, 1024, 452]);
+        // The same triangles, in the same order, each chunk indexing only its own vertices.
+        let mut seen = 0;
+        for c in &l.chunks {
+            let tris = &l.triangles[c.indices.start as usize / 3..c.indices.end as usize / 3];
+            let (lo, hi) = (tris.iter().flatten().min().unwrap(), tris.iter().flatten().max().unwrap());
+            assert!(l.chunks.iter().filter(|o| o != &c).all(|o| {
+                let other = &l.triangles[o.indices.start as usize / 3..o.indices.end as usize / 3];
+                other.iter().flatten().all(|v| v < lo || v > hi)
+            }));
+            for t in tris {
+                let want = mesh.triangles[seen];
+                assert_eq!(t.map(|v| l.vertices[v as usize].position), want.map(|v| mesh.positions[v as usize]));
+                for v in t {
+                    let p = l.vertices[*v as usize].position;
+                    assert!((0..3).all(|a| c.lo[a] <= p[a] && p[a] <= c.hi[a]));
+                }
+                seen += 1;
+            }
+        }
+        assert_eq!(seen, n);
     }
 }

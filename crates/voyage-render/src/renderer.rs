@@ -11,7 +11,7 @@ use voyage_core::render::{CellMesh, Lighting};
 
 use crate::device;
 use crate::error::RenderError;
-use crate::mesh::GpuMesh;
+use crate::mesh::{Frustum, GpuMesh};
 use crate::pipeline::EndoscopePipeline;
 use crate::target::OffscreenTarget;
 use crate::uniforms::Uniforms;
@@ -26,6 +26,9 @@ pub struct GpuRenderer {
     pipeline: EndoscopePipeline,
     mesh: Option<GpuMesh>,
     target: Option<OffscreenTarget>,
+    /// Leave out the chunks of a cell that lie wholly outside the view (on by default; the
+    /// image is the same either way).
+    chunk_culling: bool,
 }
 
 /// What [`GpuRenderer::time_frames`] measured: wall time from recording a frame to the GPU
@@ -60,7 +63,7 @@ impl GpuRenderer {
     /// This is how the GUI draws the view straight into the window, with no texture between.
     pub fn for_pass(device: wgpu::Device, queue: wgpu::Queue, color_format: wgpu::TextureFormat) -> Self {
         let pipeline = EndoscopePipeline::with_format(&device, color_format);
-        GpuRenderer { device, queue, pipeline, mesh: None, target: None }
+        GpuRenderer { device, queue, pipeline, mesh: None, target: None, chunk_culling: true }
     }
 
     /// Writes the camera and lighting for a following [`Self::draw_in_pass`] of a
@@ -73,12 +76,33 @@ impl GpuRenderer {
     }
 
     /// Draws `cells` into a render pass someone else began (viewport and scissor set by
-    /// them), with the uniforms of the last [`Self::prepare`].
-    pub fn draw_in_pass(&self, pass: &mut wgpu::RenderPass<'_>, cells: &[u32]) -> Result<(), RenderError> {
+    /// them), with the uniforms of the last [`Self::prepare`], which had the same camera and
+    /// size.
+    pub fn draw_in_pass(&self, pass: &mut wgpu::RenderPass<'_>, cells: &[u32], camera: &Camera, width: u32, height: u32) -> Result<(), RenderError> {
         let mesh = self.mesh.as_ref().ok_or(RenderError::NoMesh)?;
-        let ranges = mesh.draw_ranges(cells)?;
+        let ranges = self.ranges(mesh, cells, camera, width, height)?;
         record(&self.pipeline, mesh, pass, ranges);
         Ok(())
+    }
+
+    /// Turns the leaving out of chunks outside the view on or off (for tests and benchmarks:
+    /// the image must not change).
+    pub fn set_chunk_culling(&mut self, on: bool) {
+        self.chunk_culling = on;
+    }
+
+    /// Triangles one frame of `cells` seen by `camera` draws (after chunk culling, if on).
+    pub fn triangles_drawn(&self, cells: &[u32], camera: &Camera, width: u32, height: u32) -> Result<usize, RenderError> {
+        let mesh = self.mesh.as_ref().ok_or(RenderError::NoMesh)?;
+        Ok(self.ranges(mesh, cells, camera, width, height)?.iter().map(|r| r.len() / 3).sum())
+    }
+
+    fn ranges(&self, mesh: &GpuMesh, cells: &[u32], camera: &Camera, width: u32, height: u32) -> Result<Vec<std::ops::Range<u32>>, RenderError> {
+        if self.chunk_culling {
+            mesh.draw_ranges_in(cells, &Frustum::new(camera, width, height))
+        } else {
+            mesh.draw_ranges(cells)
+        }
     }
 
     pub fn device(&self) -> &wgpu::Device {
@@ -125,8 +149,8 @@ impl GpuRenderer {
         lighting: &Lighting,
     ) -> Result<(), RenderError> {
         let mesh = self.mesh.as_ref().ok_or(RenderError::NoMesh)?;
-        let ranges = mesh.draw_ranges(cells)?;
         self.check_size(width, height)?;
+        let ranges = self.ranges(mesh, cells, camera, width, height)?;
         let uniforms = Uniforms::new(camera, width, height, lighting);
         self.queue
             .write_buffer(&self.pipeline.uniforms, 0, bytemuck::bytes_of(&uniforms));

@@ -167,3 +167,34 @@ fn frames_are_timed_on_the_pipe() {
     assert_eq!(t.frames, frames.len());
     assert!(t.mean_ms > 0.0 && t.min_ms <= t.mean_ms && t.mean_ms <= t.max_ms && t.fps > 0.0);
 }
+
+/// Leaving out the chunks outside the view changes no pixel (the GPU against itself, bit for
+/// bit), and it does leave some out: views along the pipe, a wide one, one across it, one
+/// looking back and one from a corner, every cell drawn.
+#[test]
+fn chunks_outside_the_view_change_nothing() {
+    let (study, mesh) = pipe();
+    let mut gpu = GpuRenderer::new_headless().unwrap_or_else(|e| panic!("{e}"));
+    gpu.upload(mesh).unwrap();
+    let all: Vec<u32> = (0..mesh.cells() as u32).collect();
+    let lighting = Lighting::default();
+    let (w, h) = (200, 150);
+    let mut cameras = views(study, &[0.05, 0.3, 0.5, 0.7, 0.95]);
+    cameras.push(views(study, &[0.4])[0].with_fov(140.0));
+    let c = views(study, &[0.6])[0];
+    cameras.push(Camera::new(Pose::looking(c.pose.position, c.pose.y_body(), c.pose.z_body())));
+    cameras.push(Camera::new(Pose::looking(c.pose.position, -c.pose.z_body(), DVec3::Z)));
+    let (mut kept, mut total) = (0, 0);
+    for (k, cam) in cameras.iter().enumerate() {
+        gpu.set_chunk_culling(false);
+        let whole = gpu.render(cam, &all, w, h, &lighting).unwrap();
+        total += gpu.triangles_drawn(&all, cam, w, h).unwrap();
+        gpu.set_chunk_culling(true);
+        let culled = gpu.render(cam, &all, w, h, &lighting).unwrap();
+        kept += gpu.triangles_drawn(&all, cam, w, h).unwrap();
+        assert!(whole == culled, "view {k}: {} pixels differ", whole.chunks(4).zip(culled.chunks(4)).filter(|(a, b)| a != b).count());
+    }
+    eprintln!("chunk culling kept {kept} of {total} triangles");
+    assert_eq!(total, cameras.len() * mesh.triangles.len());
+    assert!(kept < total / 2, "most of the pipe lies outside each view: kept {kept} of {total}");
+}

@@ -42,7 +42,7 @@ impl egui_wgpu::CallbackTrait for EndoscopeCallback {
 
     fn paint(&self, _info: egui::PaintCallbackInfo, pass: &mut wgpu::RenderPass<'static>, resources: &egui_wgpu::CallbackResources) {
         if let Some(g) = resources.get::<WindowGpu>() {
-            let _ = g.renderer.draw_in_pass(pass, &self.cells);
+            let _ = g.renderer.draw_in_pass(pass, &self.cells, &self.camera, self.size[0], self.size[1]);
         }
     }
 }
@@ -102,7 +102,9 @@ impl Endoscope {
                 }
                 let drawn = session.vis.select(&session.study.cells, &View::new(&camera, size[0], size[1]));
                 self.stats.cells = drawn.cells.len();
-                self.stats.triangles = session.mesh.triangles_in(&drawn.cells);
+                // What the GPU is given: the cells' triangles less their chunks outside the view.
+                let culled = rs.renderer.read().callback_resources.get::<WindowGpu>().and_then(|g| g.renderer.triangles_drawn(&drawn.cells, &camera, size[0], size[1]).ok());
+                self.stats.triangles = culled.unwrap_or_else(|| session.mesh.triangles_in(&drawn.cells));
                 self.last_cells = drawn.cells.clone();
                 painter.add(egui_wgpu::Callback::new_paint_callback(rect, EndoscopeCallback { camera, cells: drawn.cells, size, lighting: self.lighting }));
             }
