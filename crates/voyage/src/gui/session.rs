@@ -192,11 +192,13 @@ impl Session {
         let (a, b) = (g.local_to_index(from), g.local_to_index(to));
         let d = (b - a) * (step / len.max(f64::MIN_POSITIVE));
         for s in 1..n {
-            let ijk = (a + d * s as f64).round();
-            if ijk.min_element() < 0.0 || ijk.x >= dims[0] as f64 || ijk.y >= dims[1] as f64 || ijk.z >= dims[2] as f64 {
+            // The nearest voxel: + 0.5 and truncate, where `round` would be a libm call on
+            // baseline x86-64.
+            let h = a + d * s as f64 + 0.5;
+            if h.min_element() < 0.0 || h.x >= dims[0] as f64 || h.y >= dims[1] as f64 || h.z >= dims[2] as f64 {
                 return false;
             }
-            if data[ijk.x as usize * stride[0] + ijk.y as usize * stride[1] + ijk.z as usize * stride[2]] == 0 {
+            if data[h.x as usize * stride[0] + h.y as usize * stride[1] + h.z as usize * stride[2]] == 0 {
                 return false;
             }
         }
