@@ -18,7 +18,8 @@
 //! ```
 //!
 //! In the GUI, [`GpuRenderer::for_pass`] takes the window's device and
-//! [`GpuRenderer::draw_in_pass`] draws the view straight into the window's render pass;
+//! [`GpuRenderer::draw_in_pass`] draws a frame's [`DrawList`] straight into the window's
+//! render pass;
 //! [`PixelImages`] copies the panels' images into the same pass pixel for pixel.
 //!
 //! [`CellMesh`]: voyage_core::render::CellMesh
@@ -34,6 +35,6 @@ mod uniforms;
 
 pub use error::RenderError;
 pub use pixels::{PIXEL_FORMAT, PixelImages};
-pub use renderer::{FrameTimes, GpuRenderer, WARM_UP_FRAMES};
+pub use renderer::{DrawList, FrameTimes, GpuRenderer, WARM_UP_FRAMES};
 pub use target::{COLOR_FORMAT, DEPTH_FORMAT, OffscreenTarget, padded_bytes_per_row};
 pub use uniforms::Uniforms;

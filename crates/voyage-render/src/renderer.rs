@@ -16,6 +16,19 @@ use crate::pipeline::EndoscopePipeline;
 use crate::target::OffscreenTarget;
 use crate::uniforms::Uniforms;
 
+/// One frame's draws ([`GpuRenderer::draw_list`]): index ranges into the uploaded mesh.
+#[derive(Clone, Debug, Default)]
+pub struct DrawList {
+    ranges: Vec<std::ops::Range<u32>>,
+}
+
+impl DrawList {
+    /// Triangles the list draws.
+    pub fn triangles(&self) -> usize {
+        self.ranges.iter().map(|r| r.len() / 3).sum()
+    }
+}
+
 /// Frames rendered before timing starts: the first frames pay for pipeline compilation,
 /// first-touch allocation and (on lavapipe) thread start-up.
 pub const WARM_UP_FRAMES: usize = 3;
@@ -75,13 +88,19 @@ impl GpuRenderer {
         Ok(())
     }
 
-    /// Draws `cells` into a render pass someone else began (viewport and scissor set by
-    /// them), with the uniforms of the last [`Self::prepare`], which had the same camera and
-    /// size.
-    pub fn draw_in_pass(&self, pass: &mut wgpu::RenderPass<'_>, cells: &[u32], camera: &Camera, width: u32, height: u32) -> Result<(), RenderError> {
+    /// What one frame of `cells` seen by `camera` at `width × height` draws: the cells'
+    /// index ranges less their chunks outside the view (if chunk culling is on). Made once
+    /// per frame, for [`Self::draw_in_pass`] and for the frame's statistics.
+    pub fn draw_list(&self, cells: &[u32], camera: &Camera, width: u32, height: u32) -> Result<DrawList, RenderError> {
         let mesh = self.mesh.as_ref().ok_or(RenderError::NoMesh)?;
-        let ranges = self.ranges(mesh, cells, camera, width, height)?;
-        record(&self.pipeline, mesh, pass, ranges);
+        Ok(DrawList { ranges: self.ranges(mesh, cells, camera, width, height)? })
+    }
+
+    /// Draws `list` into a render pass someone else began (viewport and scissor set by
+    /// them), with the uniforms of the last [`Self::prepare`].
+    pub fn draw_in_pass(&self, pass: &mut wgpu::RenderPass<'_>, list: &DrawList) -> Result<(), RenderError> {
+        let mesh = self.mesh.as_ref().ok_or(RenderError::NoMesh)?;
+        record(&self.pipeline, mesh, pass, list.ranges.clone());
         Ok(())
     }
 
@@ -89,12 +108,6 @@ impl GpuRenderer {
     /// the image must not change).
     pub fn set_chunk_culling(&mut self, on: bool) {
         self.chunk_culling = on;
-    }
-
-    /// Triangles one frame of `cells` seen by `camera` draws (after chunk culling, if on).
-    pub fn triangles_drawn(&self, cells: &[u32], camera: &Camera, width: u32, height: u32) -> Result<usize, RenderError> {
-        let mesh = self.mesh.as_ref().ok_or(RenderError::NoMesh)?;
-        Ok(self.ranges(mesh, cells, camera, width, height)?.iter().map(|r| r.len() / 3).sum())
     }
 
     fn ranges(&self, mesh: &GpuMesh, cells: &[u32], camera: &Camera, width: u32, height: u32) -> Result<Vec<std::ops::Range<u32>>, RenderError> {

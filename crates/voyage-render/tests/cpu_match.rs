@@ -188,10 +188,10 @@ fn chunks_outside_the_view_change_nothing() {
     for (k, cam) in cameras.iter().enumerate() {
         gpu.set_chunk_culling(false);
         let whole = gpu.render(cam, &all, w, h, &lighting).unwrap();
-        total += gpu.triangles_drawn(&all, cam, w, h).unwrap();
+        total += gpu.draw_list(&all, cam, w, h).unwrap().triangles();
         gpu.set_chunk_culling(true);
         let culled = gpu.render(cam, &all, w, h, &lighting).unwrap();
-        kept += gpu.triangles_drawn(&all, cam, w, h).unwrap();
+        kept += gpu.draw_list(&all, cam, w, h).unwrap().triangles();
         assert!(whole == culled, "view {k}: {} pixels differ", whole.chunks(4).zip(culled.chunks(4)).filter(|(a, b)| a != b).count());
     }
     eprintln!("chunk culling kept {kept} of {total} triangles");

@@ -1,9 +1,9 @@
 //! The endoscopic view inside egui: drawn by the wgpu renderer straight into the window's
 //! render pass, or by the CPU reference renderer into an egui texture where no GPU renderer
-//! is wanted. Either way only the cells the portals let
-//! through are drawn (paper §4.3): on the GPU the portal outlines alone decide
-//! (`Visibility::select`), on the CPU also the depth buffer (`Visibility::draw`); neither
-//! changes a pixel.
+//! is wanted. Either way only the cells the portals let through are drawn (paper §4.3): on
+//! the GPU the portal outlines alone decide (`Visibility::select`, and the chunks of those
+//! cells outside the view are left out), on the CPU also the depth buffer
+//! (`Visibility::draw`); none of it changes a pixel.
 
 use std::time::Instant;
 
@@ -12,6 +12,7 @@ use egui::{Color32, ColorImage, Pos2, Rect, TextureHandle, TextureOptions, Vec2}
 use glam::DVec3;
 use voyage_core::camera::Camera;
 use voyage_core::render::{shade, Frame, Lighting, Rasterizer, View};
+use voyage_render::DrawList;
 use super::pixels::WindowGpu;
 use super::session::Session;
 
@@ -26,7 +27,7 @@ struct GpuView {
 /// window-sized depth buffer this needs).
 struct EndoscopeCallback {
     camera: Camera,
-    cells: Vec<u32>,
+    list: DrawList,
     size: [u32; 2],
     lighting: Lighting,
 }
@@ -42,7 +43,7 @@ impl egui_wgpu::CallbackTrait for EndoscopeCallback {
 
     fn paint(&self, _info: egui::PaintCallbackInfo, pass: &mut wgpu::RenderPass<'static>, resources: &egui_wgpu::CallbackResources) {
         if let Some(g) = resources.get::<WindowGpu>() {
-            let _ = g.renderer.draw_in_pass(pass, &self.cells, &self.camera, self.size[0], self.size[1]);
+            let _ = g.renderer.draw_in_pass(pass, &self.list);
         }
     }
 }
@@ -103,10 +104,10 @@ impl Endoscope {
                 let drawn = session.vis.select(&session.study.cells, &View::new(&camera, size[0], size[1]));
                 self.stats.cells = drawn.cells.len();
                 // What the GPU is given: the cells' triangles less their chunks outside the view.
-                let culled = rs.renderer.read().callback_resources.get::<WindowGpu>().and_then(|g| g.renderer.triangles_drawn(&drawn.cells, &camera, size[0], size[1]).ok());
-                self.stats.triangles = culled.unwrap_or_else(|| session.mesh.triangles_in(&drawn.cells));
-                self.last_cells = drawn.cells.clone();
-                painter.add(egui_wgpu::Callback::new_paint_callback(rect, EndoscopeCallback { camera, cells: drawn.cells, size, lighting: self.lighting }));
+                let list = rs.renderer.read().callback_resources.get::<WindowGpu>().map(|g| g.renderer.draw_list(&drawn.cells, &camera, size[0], size[1])).transpose()?.unwrap_or_default();
+                self.stats.triangles = list.triangles();
+                self.last_cells = drawn.cells;
+                painter.add(egui_wgpu::Callback::new_paint_callback(rect, EndoscopeCallback { camera, list, size, lighting: self.lighting }));
             }
             _ => {
                 let id = self.draw_cpu(painter.ctx(), session, &camera, size);

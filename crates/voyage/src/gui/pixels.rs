@@ -7,7 +7,7 @@
 //! "The navigator window").
 //!
 //! [`WindowGpu`] holds what the window's own wgpu renderer draws besides egui: the
-//! endoscopic view's renderer and the pixel images (the view's image among them).
+//! endoscopic view's renderer and the panels' pixel images.
 
 use std::sync::Arc;
 
