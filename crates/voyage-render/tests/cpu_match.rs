@@ -41,6 +41,13 @@ fn pipe() -> &'static (Study, CellMesh) {
     })
 }
 
+/// A headless renderer with `mesh` uploaded, and the list of all its cells.
+fn uploaded(mesh: &CellMesh) -> (GpuRenderer, Vec<u32>) {
+    let mut gpu = GpuRenderer::new_headless().unwrap_or_else(|e| panic!("{e}"));
+    gpu.upload(mesh).unwrap();
+    (gpu, (0..mesh.cells() as u32).collect())
+}
+
 /// Cameras at fractions of the centerline, looking along it.
 fn views(study: &Study, fractions: &[f64]) -> Vec<Camera> {
     let pts: Vec<DVec3> = study
@@ -70,9 +77,7 @@ fn write_ppm(path: &std::path::Path, rgba: &[u8], w: u32, h: u32) {
 #[test]
 fn gpu_matches_the_cpu_renderer_on_the_pipe() {
     let (study, mesh) = pipe();
-    let mut gpu = GpuRenderer::new_headless().unwrap_or_else(|e| panic!("{e}"));
-    gpu.upload(mesh).unwrap();
-    let all: Vec<u32> = (0..mesh.cells() as u32).collect();
+    let (mut gpu, all) = uploaded(mesh);
     let lighting = Lighting::default();
     let (w, h) = (256, 256);
     let dump = std::env::var_os("VOYAGE_RENDER_DUMP").map(std::path::PathBuf::from);
@@ -140,9 +145,7 @@ fn gpu_matches_the_cpu_renderer_on_the_pipe() {
 #[test]
 fn frames_are_timed_on_the_pipe() {
     let (study, mesh) = pipe();
-    let mut gpu = GpuRenderer::new_headless().unwrap_or_else(|e| panic!("{e}"));
-    gpu.upload(mesh).unwrap();
-    let all: Vec<u32> = (0..mesh.cells() as u32).collect();
+    let (mut gpu, all) = uploaded(mesh);
     let frames: Vec<(Camera, Vec<u32>)> = views(study, &[0.2, 0.3, 0.4, 0.5, 0.6, 0.7])
         .into_iter()
         .map(|c| (c, all.clone()))
@@ -174,9 +177,7 @@ fn frames_are_timed_on_the_pipe() {
 #[test]
 fn chunks_outside_the_view_change_nothing() {
     let (study, mesh) = pipe();
-    let mut gpu = GpuRenderer::new_headless().unwrap_or_else(|e| panic!("{e}"));
-    gpu.upload(mesh).unwrap();
-    let all: Vec<u32> = (0..mesh.cells() as u32).collect();
+    let (mut gpu, all) = uploaded(mesh);
     let lighting = Lighting::default();
     let (w, h) = (200, 150);
     let mut cameras = views(study, &[0.05, 0.3, 0.5, 0.7, 0.95]);
