@@ -186,7 +186,6 @@ impl Session {
         let step = 0.5 * g.spacing_vec().min_element();
         let n = ((len - skip_end_mm).max(0.0) / step).ceil() as usize;
         let dims = lumen.dims();
-        let (data, stride) = (lumen.data(), [1, dims[0], dims[0] * dims[1]]);
         // Index space is an affine image of local mm: march there, one multiply-add per axis
         // per sample (the overlays test hundreds of segments a frame).
         let (a, b) = (g.local_to_index(from), g.local_to_index(to));
@@ -198,7 +197,7 @@ impl Session {
             if h.min_element() < 0.0 || h.x >= dims[0] as f64 || h.y >= dims[1] as f64 || h.z >= dims[2] as f64 {
                 return false;
             }
-            if data[h.x as usize * stride[0] + h.y as usize * stride[1] + h.z as usize * stride[2]] == 0 {
+            if lumen.get(h.x as usize, h.y as usize, h.z as usize) == 0 {
                 return false;
             }
         }
