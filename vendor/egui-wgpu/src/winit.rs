@@ -9,6 +9,74 @@ use core::num::NonZeroU32;
 use egui::{Context, ViewportId, ViewportIdMap, ViewportIdSet};
 use std::sync::Arc;
 
+/// voyage: presents frames on a thread of its own, for CPU adapters only (VOYAGE.md).
+///
+/// Mesa's software drivers (lavapipe) wait in `vkQueuePresentKHR` until the frame is
+/// rendered and then copy it to the X server, on the calling thread. Presenting here lets
+/// the window's thread build the next frame meanwhile. wgpu-core serialises present with
+/// submits (`command_indices`), and the next `get_current_texture` waits for the present.
+struct Presenter {
+    frames: Option<std::sync::mpsc::Sender<wgpu::SurfaceTexture>>,
+    done: std::sync::mpsc::Receiver<()>,
+    in_flight: bool,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Presenter {
+    fn new(queue: wgpu::Queue) -> Option<Self> {
+        let (frames, todo) = std::sync::mpsc::channel::<wgpu::SurfaceTexture>();
+        let (finished, done) = std::sync::mpsc::channel();
+        let thread = std::thread::Builder::new()
+            .name("egui-wgpu present".into())
+            .spawn(move || {
+                for frame in todo {
+                    queue.present(frame);
+                    if finished.send(()).is_err() {
+                        break;
+                    }
+                }
+            })
+            .ok()?;
+        Some(Self {
+            frames: Some(frames),
+            done,
+            in_flight: false,
+            thread: Some(thread),
+        })
+    }
+
+    /// Hands `frame` to the thread; gives it back if the thread is gone.
+    fn present(&mut self, frame: wgpu::SurfaceTexture) -> Result<(), wgpu::SurfaceTexture> {
+        self.wait();
+        match self.frames.as_ref().map(|f| f.send(frame)) {
+            Some(Ok(())) => {
+                self.in_flight = true;
+                Ok(())
+            }
+            Some(Err(e)) => Err(e.0),
+            None => unreachable!("the sender lives as long as the presenter"),
+        }
+    }
+
+    /// Returns once the last frame handed over is presented.
+    fn wait(&mut self) {
+        if self.in_flight {
+            let _ = self.done.recv();
+            self.in_flight = false;
+        }
+    }
+}
+
+impl Drop for Presenter {
+    fn drop(&mut self) {
+        self.wait();
+        self.frames = None;
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
 struct SurfaceState {
     surface: wgpu::Surface<'static>,
     alpha_mode: wgpu::CompositeAlphaMode,
@@ -25,6 +93,10 @@ struct SurfaceState {
 ///
 /// NOTE: all egui viewports share the same painter.
 pub struct Painter {
+    // voyage: first, so that a frame in flight is presented before anything else is dropped.
+    presenter: Option<Presenter>,
+    /// voyage: whether the adapter was looked at for [`Presenter`] yet.
+    presenter_decided: bool,
     context: Context,
     config: WgpuConfiguration,
     options: RendererOptions,
@@ -62,6 +134,8 @@ impl Painter {
         let instance = config.wgpu_setup.new_instance().await;
 
         Self {
+            presenter: None,
+            presenter_decided: false,
             context,
             config,
             options,
@@ -95,6 +169,7 @@ impl Painter {
     ///
     /// This is cheap to call every frame.
     pub fn set_surface_config(&mut self, surface_config: SurfaceConfig) {
+        self.wait_for_present();
         if self.config.surface == surface_config {
             return;
         }
@@ -206,6 +281,7 @@ impl Painter {
         window: Option<Arc<winit::window::Window>>,
     ) -> Result<(), crate::WgpuError> {
         profiling::scope!("Painter::set_window"); // profile_function gives bad names for async functions
+        self.wait_for_present();
 
         if let Some(window) = window {
             let size = window.inner_size();
@@ -413,6 +489,7 @@ impl Painter {
     /// the chain. Used to apply platform-specific logic, e.g. OSX Metal window resize jitter fix.
     pub fn on_window_resize_state_change(&mut self, viewport_id: ViewportId, resizing: bool) {
         profiling::function_scope!();
+        self.wait_for_present();
 
         let Some(state) = self.surfaces.get_mut(&viewport_id) else {
             return;
@@ -466,6 +543,7 @@ impl Painter {
         height_in_pixels: NonZeroU32,
     ) {
         profiling::function_scope!();
+        self.wait_for_present();
 
         if self.surfaces.contains_key(&viewport_id) {
             self.resize_and_generate_depth_texture_view_and_msaa_view(
@@ -498,6 +576,7 @@ impl Painter {
         window: &Arc<winit::window::Window>,
     ) -> f32 {
         profiling::function_scope!();
+        self.wait_for_present();
 
         /// Guard to ensure that commands are always submitted to the renderer queue
         /// so that calls to [`write_buffer()`](https://docs.rs/wgpu/latest/wgpu/struct.Queue.html#method.write_buffer)
@@ -789,7 +868,21 @@ impl Painter {
             profiling::scope!("present");
             // wgpu doesn't document where vsync can happen. Maybe here?
             let start = web_time::Instant::now();
-            render_state.queue.present(output_frame);
+            // voyage: on a CPU adapter the present runs on the presenter thread.
+            if !self.presenter_decided {
+                self.presenter_decided = true;
+                if render_state.adapter.get_info().device_type == wgpu::DeviceType::Cpu {
+                    self.presenter = Presenter::new(render_state.queue.clone());
+                }
+            }
+            match &mut self.presenter {
+                Some(p) => {
+                    if let Err(frame) = p.present(output_frame) {
+                        render_state.queue.present(frame);
+                    }
+                }
+                None => render_state.queue.present(output_frame),
+            }
             vsync_sec += start.elapsed().as_secs_f32();
         }
 
@@ -797,6 +890,7 @@ impl Painter {
     }
 
     pub fn gc_viewports(&mut self, active_viewports: &ViewportIdSet) {
+        self.wait_for_present();
         self.surfaces.retain(|id, _| active_viewports.contains(id));
         self.depth_texture_view
             .retain(|id, _| active_viewports.contains(id));
@@ -804,8 +898,14 @@ impl Painter {
             .retain(|id, _| active_viewports.contains(id));
     }
 
-    #[expect(clippy::needless_pass_by_ref_mut, clippy::unused_self)]
     pub fn destroy(&mut self) {
-        // TODO(emilk): something here?
+        self.presenter = None;
+    }
+
+    /// voyage: waits for the frame handed to the presenter thread, if any.
+    fn wait_for_present(&mut self) {
+        if let Some(p) = &mut self.presenter {
+            p.wait();
+        }
     }
 }
