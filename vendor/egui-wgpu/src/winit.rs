@@ -169,10 +169,11 @@ impl Painter {
     ///
     /// This is cheap to call every frame.
     pub fn set_surface_config(&mut self, surface_config: SurfaceConfig) {
-        self.wait_for_present();
         if self.config.surface == surface_config {
             return;
         }
+        // voyage: eframe calls this every frame; only a change waits for the frame in flight.
+        self.wait_for_present();
 
         self.config.surface = surface_config;
 
@@ -890,7 +891,11 @@ impl Painter {
     }
 
     pub fn gc_viewports(&mut self, active_viewports: &ViewportIdSet) {
-        self.wait_for_present();
+        // voyage: eframe calls this after every frame; only dropping a surface waits for the
+        // frame in flight (waiting every time would put the present back in series).
+        if self.surfaces.keys().any(|id| !active_viewports.contains(id)) {
+            self.wait_for_present();
+        }
         self.surfaces.retain(|id, _| active_viewports.contains(id));
         self.depth_texture_view
             .retain(|id, _| active_viewports.contains(id));
