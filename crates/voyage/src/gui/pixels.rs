@@ -43,6 +43,8 @@ pub struct Rgba {
 pub struct PanelImage {
     key: u64,
     name: &'static str,
+    /// The window's renderer holds a [`PixelImages`] (else an egui texture shows the image).
+    gpu: bool,
     size: [usize; 2],
     /// Pixels the GPU has not had yet: handed to the next paint callback.
     pending: Option<Arc<Rgba>>,
@@ -50,8 +52,8 @@ pub struct PanelImage {
 }
 
 impl PanelImage {
-    pub fn new(key: u64, name: &'static str) -> Self {
-        PanelImage { key, name, size: [0, 0], pending: None, fallback: None }
+    pub fn new(key: u64, name: &'static str, gpu: bool) -> Self {
+        PanelImage { key, name, gpu, size: [0, 0], pending: None, fallback: None }
     }
 
     /// The image shown from now on.
@@ -62,15 +64,14 @@ impl PanelImage {
     }
 
     /// Draws the image with its top-left corner at `at` (points), one image pixel per
-    /// physical pixel, clipped to the painter's clip rectangle. `gpu`: the window's renderer
-    /// holds a [`PixelImages`].
-    pub fn paint(&mut self, painter: &egui::Painter, at: Pos2, gpu: bool) {
+    /// physical pixel, clipped to the painter's clip rectangle.
+    pub fn paint(&mut self, painter: &egui::Painter, at: Pos2) {
         if self.size[0] == 0 || self.size[1] == 0 {
             return;
         }
         let ppp = painter.ctx().pixels_per_point();
         let rect = Rect::from_min_size(at, Vec2::new(self.size[0] as f32, self.size[1] as f32) / ppp);
-        if gpu {
+        if self.gpu {
             let callback = PixelsCallback { key: self.key, upload: self.pending.take() };
             painter.add(egui_wgpu::Callback::new_paint_callback(rect, callback));
             return;

@@ -89,8 +89,6 @@ pub struct ScoutView {
     image: PanelImage,
     /// The window's colour behind the scout.
     background: Color32,
-    /// The window's renderer can draw [`PanelImage`]s itself.
-    gpu: bool,
 }
 
 #[derive(Clone, Copy, PartialEq)]
@@ -124,7 +122,7 @@ impl ScoutView {
     pub fn new(geometry: &Geometry, background: Color32, image_key: u64, gpu: bool) -> Self {
         // local = Dᵀ (patient − origin): a patient axis e is Dᵀ e in the local frame.
         let d = geometry.direction_mat().transpose();
-        ScoutView { yaw: 0.0, pitch: 0.0, zoom: 1.0, anatomy: d, cached: None, image: PanelImage::new(image_key, "scout"), background, gpu }
+        ScoutView { yaw: 0.0, pitch: 0.0, zoom: 1.0, anatomy: d, cached: None, image: PanelImage::new(image_key, "scout", gpu), background }
     }
 
     /// Front view (from the patient's anterior, the patient's right on the screen's left,
@@ -165,7 +163,7 @@ impl ScoutView {
         // CPU Vulkan driver every pixel drawn costs.
         let offset = self.surface(mesh, marks.centerline, &proj, rect, ppp);
         let at = ((rect.min.to_vec2() * ppp).round() + Vec2::new(offset[0] as f32, offset[1] as f32)) / ppp;
-        self.image.paint(&painter, at.to_pos2(), self.gpu);
+        self.image.paint(&painter, at.to_pos2());
 
         let line: Vec<Pos2> = marks.centerline.iter().map(|p| proj.to_screen(DVec3::from_array(*p))).collect();
         for (label, p) in &marks.markers {

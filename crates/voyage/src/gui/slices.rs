@@ -78,16 +78,14 @@ pub struct SlicePanel {
     views: [SliceView; 3],
     pub window: f64,
     pub level: f64,
-    /// The window's renderer draws [`PanelImage`]s itself.
-    gpu: bool,
 }
 
 impl SlicePanel {
     /// `image_keys`: the three slices' slots among the window's pixel images; `gpu`: the
     /// window's renderer holds them.
     pub fn new(image_keys: [u64; 3], gpu: bool) -> Self {
-        let views = std::array::from_fn(|i| SliceView { plane: Plane::ALL[i], offset: 0, scroll: 0.0, image: PanelImage::new(image_keys[i], Plane::ALL[i].name()), shows: None });
-        SlicePanel { views, window: PRESETS[0].1, level: PRESETS[0].2, gpu }
+        let views = std::array::from_fn(|i| SliceView { plane: Plane::ALL[i], offset: 0, scroll: 0.0, image: PanelImage::new(image_keys[i], Plane::ALL[i].name(), gpu), shows: None });
+        SlicePanel { views, window: PRESETS[0].1, level: PRESETS[0].2 }
     }
 
     /// Back to the slices through the submarine (after it moved somewhere new).
@@ -160,7 +158,7 @@ impl SlicePanel {
             view.shows = Some(key);
         }
         let painter = ui.painter_at(rect);
-        view.image.paint(&painter, image_rect.min, self.gpu);
+        view.image.paint(&painter, image_rect.min);
         // Index ↔ screen: pixel centres at (u + 0.5) / n of the image.
         let to_screen = |ix: f64, iy: f64| {
             let u = if lay.x.1 { nx as f64 - 1.0 - ix } else { ix };
