@@ -74,7 +74,7 @@ pub fn bounding_box<T: Copy>(vol: &Volume<T>, margin: usize, pred: impl Fn(T) ->
 /// The first and last positions in `row` where `pred` holds. Most rows of a scan hold no
 /// lumen: they are tested 32 values at a time without an early exit, which compiles to vector
 /// code (a byte at a time, the lumen's box of a 512×512×400 scan took 70 ms).
-fn first_and_last<T: Copy>(row: &[T], pred: &impl Fn(T) -> bool) -> Option<(usize, usize)> {
+pub(crate) fn first_and_last<T: Copy>(row: &[T], pred: &impl Fn(T) -> bool) -> Option<(usize, usize)> {
     const W: usize = 32;
     let hit = |c: &[T]| c.iter().fold(false, |a, &v| a | pred(v));
     let first_chunk = row.chunks(W).position(hit)?;

@@ -93,6 +93,38 @@ impl<'a> Scalar<'a> {
         }
     }
 
+    /// s at volume voxel `v` (not padding).
+    #[inline(always)]
+    fn value_at(&self, v: usize) -> f32 {
+        let m = self.lumen.data()[v] != 0;
+        match self.ct {
+            Some(ct) => {
+                let x = self.iso - ct.data()[v] as f32;
+                if m { x.max(0.5) } else { x.min(-1.0) }
+            }
+            None => {
+                if m { 0.5 } else { -0.5 }
+            }
+        }
+    }
+
+    /// Whether all six neighbours of padded p are box voxels (not padding), so that
+    /// [`Scalar::gradient_inside`] applies. Every vertex of a lumen that does not touch the
+    /// volume's border is such a point.
+    #[inline]
+    fn neighbours_in_box(&self, p: [usize; 3]) -> bool {
+        (0..3).all(|a| p[a] >= 2 && p[a] + 3 <= self.dims[a])
+    }
+
+    /// [`Scalar::gradient`] at padded p whose neighbours are all in the box (volume index `v`):
+    /// the same central differences, addressed by strides instead of bounds-checked positions.
+    #[inline]
+    fn gradient_inside(&self, v: usize, spacing: Vec3) -> Vec3 {
+        let [nx, ny, _] = self.lumen.dims();
+        let d = |stride: usize| (self.value_at(v + stride) - self.value_at(v - stride)) / 2.0;
+        Vec3::new(d(1) / spacing.x, d(nx) / spacing.y, d(nx * ny) / spacing.z)
+    }
+
     /// The inside bits (lumen = 1) of padded row (j, k), padding included, into `out`.
     fn row_bits(&self, j: usize, k: usize, out: &mut [u8]) {
         out.fill(0);
@@ -103,6 +135,20 @@ impl<'a> Scalar<'a> {
         let start = self.lumen.geometry().index(self.lo[0], j - 1 + self.lo[1], k - 1 + self.lo[2]);
         for (o, &m) in out[1..=n].iter_mut().zip(&self.lumen.data()[start..start + n]) {
             *o = (m != 0) as u8;
+        }
+    }
+
+    /// Padded x of the first lumen voxel of padded row (j, k) and one past its last; (0, 0)
+    /// when the row has none.
+    fn row_span(&self, j: usize, k: usize) -> (usize, usize) {
+        if j == 0 || k == 0 || j == self.dims[1] - 1 || k == self.dims[2] - 1 {
+            return (0, 0);
+        }
+        let n = self.dims[0] - 2;
+        let start = self.lumen.geometry().index(self.lo[0], j - 1 + self.lo[1], k - 1 + self.lo[2]);
+        match crate::field::first_and_last(&self.lumen.data()[start..start + n], &|m: u8| m != 0) {
+            Some((first, last)) => (first + 1, last + 2),
+            None => (0, 0),
         }
     }
 
@@ -201,22 +247,29 @@ fn triangulate_case(case: usize) -> Vec<[u8; 3]> {
     tris
 }
 
-/// Vertex ids of the edges of one plane of cubes: x- and y-edges on a z-plane, z-edges
-/// between two planes.
+/// Vertex ids of the edges of one plane of voxels: x- and y-edges on a z-plane (`zed`: the
+/// z-edges between two planes).
+///
+/// An entry is valid only if it was made since `since` (vertex ids only grow): a plane's
+/// arrays are reused for a later plane without clearing them, which for a box of 300 planes
+/// was 400 MB of memset.
 struct EdgeCache {
     nx: usize,
     x: Vec<u32>,
     y: Vec<u32>,
+    since: u32,
 }
 
 impl EdgeCache {
     fn new(nx: usize, ny: usize) -> Self {
-        EdgeCache { nx, x: vec![u32::MAX; nx * ny], y: vec![u32::MAX; nx * ny] }
+        EdgeCache { nx, x: vec![u32::MAX; nx * ny], y: vec![u32::MAX; nx * ny], since: 0 }
     }
-    fn clear(&mut self) {
-        self.x.fill(u32::MAX);
-        self.y.fill(u32::MAX);
-    }
+}
+
+/// The id an edge cache entry holds, if it is one made since `since`.
+#[inline]
+fn cached(entry: u32, since: u32) -> Option<u32> {
+    (entry != u32::MAX && entry >= since).then_some(entry)
 }
 
 fn march(s: &Scalar, spacing: Vec3, vol_dims: [usize; 3]) -> Surface {
@@ -225,29 +278,22 @@ fn march(s: &Scalar, spacing: Vec3, vol_dims: [usize; 3]) -> Surface {
     let mut out = Surface::default();
     let mut lower = EdgeCache::new(nx, ny);
     let mut upper = EdgeCache::new(nx, ny);
-    let mut zed = vec![u32::MAX; nx * ny];
+    let mut zed = EdgeCache::new(nx, ny);
     // Per row (j, k): where its lumen voxels lie (padded x, first and one past the last;
     // empty when none). A row of cubes needs work only where one of its four corner rows has
     // lumen, which skips most of the box.
-    let mut bits = vec![0u8; nx];
-    let row_span: Vec<(usize, usize)> = (0..ny * nz)
-        .map(|r| {
-            s.row_bits(r % ny, r / ny, &mut bits);
-            match bits.iter().position(|&b| b != 0) {
-                Some(first) => (first, bits.iter().rposition(|&b| b != 0).unwrap_or(first) + 1),
-                None => (0, 0),
-            }
-        })
-        .collect();
+    let row_span: Vec<(usize, usize)> = (0..ny * nz).map(|r| s.row_span(r % ny, r / ny)).collect();
     let plane_has: Vec<bool> = row_span.chunks(ny).map(|p| p.iter().any(|r| r.1 > r.0)).collect();
     let mut rowbuf = vec![vec![0u8; nx]; 4];
     for k in 0..nz - 1 {
+        // `lower` is the last layer's `upper` (valid since that layer began); `upper` and the
+        // z-edges start empty.
+        upper.since = out.mesh.positions.len() as u32;
+        zed.since = upper.since;
         if !(plane_has[k] || plane_has[k + 1]) {
             std::mem::swap(&mut lower, &mut upper);
-            upper.clear();
             continue;
         }
-        zed.fill(u32::MAX);
         for j in 0..ny - 1 {
             let rows = [j + ny * k, j + 1 + ny * k, j + ny * (k + 1), j + 1 + ny * (k + 1)];
             let spans: Vec<(usize, usize)> = rows.iter().map(|&r| row_span[r]).filter(|sp| sp.1 > sp.0).collect();
@@ -290,7 +336,6 @@ fn march(s: &Scalar, spacing: Vec3, vol_dims: [usize; 3]) -> Surface {
             }
         }
         std::mem::swap(&mut lower, &mut upper);
-        upper.clear();
     }
     out
 }
@@ -313,7 +358,7 @@ fn owner_voxel(s: &Scalar, c: [usize; 3], case: usize, vol_dims: [usize; 3]) -> 
 
 /// The vertex on cube edge `e` of the cube at padded `c`, made once and shared.
 #[allow(clippy::too_many_arguments)]
-fn edge_vertex(s: &Scalar, spacing: Vec3, c: [usize; 3], e: usize, lower: &mut EdgeCache, upper: &mut EdgeCache, zed: &mut [u32], mesh: &mut Mesh) -> u32 {
+fn edge_vertex(s: &Scalar, spacing: Vec3, c: [usize; 3], e: usize, lower: &mut EdgeCache, upper: &mut EdgeCache, zed: &mut EdgeCache, mesh: &mut Mesh) -> u32 {
     let (a, b) = EDGES[e];
     let pa = corner(a).map(|o| o);
     let pb = corner(b);
@@ -321,23 +366,28 @@ fn edge_vertex(s: &Scalar, spacing: Vec3, c: [usize; 3], e: usize, lower: &mut E
     let gb = [c[0] + pb[0], c[1] + pb[1], c[2] + pb[2]];
     let nx = lower.nx;
     let slot = ga[0] + nx * ga[1];
-    let cache: &mut u32 = match e {
-        0..=3 => if ga[2] == c[2] { &mut lower.x[slot] } else { &mut upper.x[slot] },
-        4..=7 => if ga[2] == c[2] { &mut lower.y[slot] } else { &mut upper.y[slot] },
-        _ => &mut zed[slot],
+    let (cache, since): (&mut u32, u32) = match e {
+        0..=3 => if ga[2] == c[2] { (&mut lower.x[slot], lower.since) } else { (&mut upper.x[slot], upper.since) },
+        4..=7 => if ga[2] == c[2] { (&mut lower.y[slot], lower.since) } else { (&mut upper.y[slot], upper.since) },
+        _ => (&mut zed.x[slot], zed.since),
     };
-    if *cache != u32::MAX {
-        return *cache;
+    if let Some(id) = cached(*cache, since) {
+        return id;
     }
-    let va = s.value(ga);
-    let vb = s.value(gb);
+    let fast = s.neighbours_in_box(ga) && s.neighbours_in_box(gb);
+    let (va, vb, grad_a, grad_b) = if fast {
+        let (a, b) = (s.voxel(ga).unwrap_or(0), s.voxel(gb).unwrap_or(0));
+        (s.value_at(a), s.value_at(b), s.gradient_inside(a, spacing), s.gradient_inside(b, spacing))
+    } else {
+        (s.value(ga), s.value(gb), s.gradient(ga, spacing), s.gradient(gb, spacing))
+    };
     let t = (va / (va - vb)).clamp(0.0, 1.0);
     let fa = Vec3::new(ga[0] as f32, ga[1] as f32, ga[2] as f32);
     let fb = Vec3::new(gb[0] as f32, gb[1] as f32, gb[2] as f32);
     // Padded index 1 is volume index lo; positions in volume-local mm.
     let lo = Vec3::new(s.lo[0] as f32, s.lo[1] as f32, s.lo[2] as f32) - Vec3::ONE;
     let p = (fa + (fb - fa) * t + lo) * spacing;
-    let n = s.gradient(ga, spacing) * (1.0 - t) + s.gradient(gb, spacing) * t;
+    let n = grad_a * (1.0 - t) + grad_b * t;
     let id = mesh.positions.len() as u32;
     mesh.positions.push(p.to_array());
     mesh.normals.push(n.normalize_or_zero().to_array());
@@ -433,6 +483,34 @@ mod tests {
             assert!(max_err < bound, "surface off the sphere by {max_err} mm");
             // Owners are lumen voxels.
             assert!(s.owner_voxel.iter().all(|&v| m.data()[v as usize] == 1));
+        }
+    }
+
+    #[test]
+    fn stride_gradient_equals_the_checked_one() {
+        let (c, r) = ([12.0, 11.0, 13.0], 8.0);
+        let m = ball([32, 30, 26], [0.8, 0.8, 1.1], c, r);
+        let ct = ball_ct(&m, c, r);
+        let grid = bounding_box(&m, 1, |v| v != 0).unwrap();
+        let sp = Vec3::new(0.8, 0.8, 1.1);
+        for ct in [None, Some(&ct)] {
+            let s = Scalar::new(&m, ct, &grid, -500.0);
+            let mut inside = 0;
+            for k in 0..s.dims[2] {
+                for j in 0..s.dims[1] {
+                    for i in 0..s.dims[0] {
+                        let p = [i, j, k];
+                        if !s.neighbours_in_box(p) {
+                            continue;
+                        }
+                        let v = s.voxel(p).unwrap();
+                        assert_eq!(s.value_at(v), s.value(p));
+                        assert_eq!(s.gradient_inside(v, sp), s.gradient(p, sp), "at {p:?}");
+                        inside += 1;
+                    }
+                }
+            }
+            assert!(inside > 1000);
         }
     }
 
