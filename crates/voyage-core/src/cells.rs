@@ -395,8 +395,13 @@ fn plane_axes(n: DVec3) -> (DVec3, DVec3) {
     (u, n.cross(u))
 }
 
-/// Andrew's monotone chain; counter-clockwise (collinear points dropped).
-pub(crate) fn convex_hull(mut pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
+/// The convex hull, counter-clockwise (collinear points dropped).
+pub(crate) fn convex_hull(pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
+    monotone_chain(drop_interior(pts))
+}
+
+/// Andrew's monotone chain.
+fn monotone_chain(mut pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
     pts.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
     pts.dedup();
     if pts.len() < 3 {
@@ -416,6 +421,39 @@ pub(crate) fn convex_hull(mut pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
         hull.pop();
     }
     hull
+}
+
+/// Akl–Toussaint: the points extreme in eight directions span a convex polygon inside the
+/// hull; a point strictly inside it is no hull vertex, so leaving it out changes nothing but
+/// the sort that follows (a portal's boundary has thousands of voxels, its hull dozens).
+fn drop_interior(pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
+    if pts.len() < 64 {
+        return pts;
+    }
+    // Directions counter-clockwise from +x: the polygon through their extreme points is then
+    // counter-clockwise too.
+    const DIRS: [(f64, f64); 8] = [(1.0, 0.0), (1.0, 1.0), (0.0, 1.0), (-1.0, 1.0), (-1.0, 0.0), (-1.0, -1.0), (0.0, -1.0), (1.0, -1.0)];
+    let mut ext = [pts[0]; 8];
+    for &p in &pts {
+        for (e, d) in ext.iter_mut().zip(DIRS) {
+            if p.0 * d.0 + p.1 * d.1 > e.0 * d.0 + e.1 * d.1 {
+                *e = p;
+            }
+        }
+    }
+    let mut poly: Vec<(f64, f64)> = Vec::with_capacity(8);
+    for e in ext {
+        if poly.last() != Some(&e) && poly.first() != Some(&e) {
+            poly.push(e);
+        }
+    }
+    if poly.len() < 3 {
+        return pts;
+    }
+    let cross = |o: (f64, f64), a: (f64, f64), b: (f64, f64)| (a.0 - o.0) * (b.1 - o.1) - (a.1 - o.1) * (b.0 - o.0);
+    let n = poly.len();
+    let strictly_inside = |p: (f64, f64)| (0..n).all(|i| cross(poly[i], poly[(i + 1) % n], p) > 0.0);
+    pts.into_iter().filter(|&p| !strictly_inside(p)).collect()
 }
 
 /// Moves each hull vertex outward by `r` along its bisector (enough that every point within
@@ -455,6 +493,30 @@ mod tests {
     use crate::field::bounding_box;
     use crate::surface::extract_surface;
     use crate::Geometry;
+
+    #[test]
+    fn leaving_out_interior_points_keeps_the_hull() {
+        let mut x = 88172645463325252u64;
+        let mut rnd = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x % 10_000) as f64 / 100.0
+        };
+        for shape in 0..4 {
+            // A disc, a square and a thin slanted strip of random points, and a voxel grid
+            // (many collinear and tied points).
+            let pts: Vec<(f64, f64)> = match shape {
+                0 => (0..3000).map(|_| (rnd() - 50.0, rnd() - 50.0)).filter(|p| p.0 * p.0 + p.1 * p.1 < 2500.0).collect(),
+                1 => (0..3000).map(|_| (rnd(), rnd())).collect(),
+                2 => (0..3000).map(|_| (rnd(), rnd(), rnd())).map(|(t, a, b)| (t + a * 0.02, 0.5 * t - b * 0.03)).collect(),
+                _ => (0..40).flat_map(|i| (0..30).map(move |j| (i as f64 * 0.8, j as f64 * 1.25))).collect(),
+            };
+            let hull = convex_hull(pts.clone());
+            assert!(drop_interior(pts.clone()).len() < pts.len(), "shape {shape}: nothing left out");
+            assert_eq!(hull, monotone_chain(pts), "shape {shape}");
+        }
+    }
 
     /// A U-shaped tube whose two legs run side by side 4 mm apart (wall between), as where the
     /// sigmoid folds back: a plane cut across one leg would also cut the other.
