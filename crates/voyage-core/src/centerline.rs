@@ -89,8 +89,30 @@ pub fn refine_points(raw: Vec<DVec3>, ds: &Field<f32>, opts: &CenterlineOptions)
 pub fn cost_weight(pad: &Padded, ds: &Field<f32>, opts: &CenterlineOptions) -> Vec<f32> {
     let dmax = ds.data.iter().cloned().fold(0.0f32, f32::max).max(1e-3);
     let k = opts.penalty_scale as f32;
-    let p = opts.penalty_power as i32;
-    pad.pad(&ds.data, 0.0).into_iter().map(|d| 1.0 + k * ((dmax - d) / dmax).max(0.0).powi(p)).collect()
+    let p = opts.penalty_power;
+    // Walls (Ds 0) all weigh 1 + K; only the lumen's voxels need the power.
+    let mut w = pad.pad(&ds.data, 0.0);
+    for x in &mut w {
+        *x = if *x == 0.0 { 1.0 + k } else { 1.0 + k * power(((dmax - *x) / dmax).max(0.0), p) };
+    }
+    w
+}
+
+/// `x` to the power `n` by squaring, as `f32::powi` computes it (the same products in the same
+/// order, so the same result), without its call into the runtime library for every voxel.
+#[inline]
+fn power(mut x: f32, mut n: u32) -> f32 {
+    let mut out = 1.0f32;
+    loop {
+        if n & 1 != 0 {
+            out *= x;
+        }
+        n >>= 1;
+        if n == 0 {
+            return out;
+        }
+        x *= x;
+    }
 }
 
 /// Points every `step` mm along the polyline (first and last kept).
@@ -186,6 +208,15 @@ pub(crate) fn arc_lengths(pts: &[DVec3]) -> Vec<f64> {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn power_by_squaring_is_powi() {
+        for n in [0u32, 1, 2, 3, 7, 16, 17] {
+            for x in [0.0f32, 0.1, 0.37, 0.5, 0.93, 0.999, 1.0] {
+                assert_eq!(super::power(x, n).to_bits(), x.powi(n as i32).to_bits(), "{x}^{n}");
+            }
+        }
+    }
+
     use super::*;
     use crate::distance::distance_to_wall;
     use crate::Geometry;
