@@ -125,16 +125,25 @@ impl<'a> Scalar<'a> {
         Vec3::new(d(1) / spacing.x, d(nx) / spacing.y, d(nx * ny) / spacing.z)
     }
 
-    /// The inside bits (lumen = 1) of padded row (j, k), padding included, into `out`.
-    fn row_bits(&self, j: usize, k: usize, out: &mut [u8]) {
-        out.fill(0);
-        if j == 0 || k == 0 || j == self.dims[1] - 1 || k == self.dims[2] - 1 {
-            return;
-        }
-        let n = self.dims[0] - 2;
-        let start = self.lumen.geometry().index(self.lo[0], j - 1 + self.lo[1], k - 1 + self.lo[2]);
-        for (o, &m) in out[1..=n].iter_mut().zip(&self.lumen.data()[start..start + n]) {
-            *o = (m != 0) as u8;
+    /// The cube-face codes of padded x `lo..=hi` into `out[lo..=hi]`: bit b set where padded
+    /// row `rows[b]` = (j, k) is lumen at that x (padding is not).
+    fn face_codes(&self, rows: [usize; 4], lo: usize, hi: usize, out: &mut [u8]) {
+        out[lo..=hi].fill(0);
+        let (ny, n) = (self.dims[1], self.dims[0] - 2);
+        for (bit, &r) in rows.iter().enumerate() {
+            let (j, k) = (r % ny, r / ny);
+            if j == 0 || k == 0 || j == self.dims[1] - 1 || k == self.dims[2] - 1 {
+                continue;
+            }
+            let start = self.lumen.geometry().index(self.lo[0], j - 1 + self.lo[1], k - 1 + self.lo[2]);
+            // Padded x is data x + 1; the padding columns 0 and n + 1 stay 0.
+            let (a, b) = (lo.max(1), hi.min(n));
+            if a > b {
+                continue;
+            }
+            for (o, &m) in out[a..=b].iter_mut().zip(&self.lumen.data()[start + a - 1..start + b]) {
+                *o |= ((m != 0) as u8) << bit;
+            }
         }
     }
 
@@ -284,7 +293,7 @@ fn march(s: &Scalar, spacing: Vec3, vol_dims: [usize; 3]) -> Surface {
     // lumen, which skips most of the box.
     let row_span: Vec<(usize, usize)> = (0..ny * nz).map(|r| s.row_span(r % ny, r / ny)).collect();
     let plane_has: Vec<bool> = row_span.chunks(ny).map(|p| p.iter().any(|r| r.1 > r.0)).collect();
-    let mut rowbuf = vec![vec![0u8; nx]; 4];
+    let mut faces = vec![0u8; nx];
     for k in 0..nz - 1 {
         // `lower` is the last layer's `upper` (valid since that layer began); `upper` and the
         // z-edges start empty.
@@ -296,28 +305,33 @@ fn march(s: &Scalar, spacing: Vec3, vol_dims: [usize; 3]) -> Surface {
         }
         for j in 0..ny - 1 {
             let rows = [j + ny * k, j + 1 + ny * k, j + ny * (k + 1), j + 1 + ny * (k + 1)];
-            let spans: Vec<(usize, usize)> = rows.iter().map(|&r| row_span[r]).filter(|sp| sp.1 > sp.0).collect();
-            if spans.is_empty() {
+            let (lo, hi) = rows.iter().map(|&r| row_span[r]).filter(|sp| sp.1 > sp.0).fold((usize::MAX, 0), |(lo, hi), sp| (lo.min(sp.0), hi.max(sp.1)));
+            if lo > hi {
                 continue;
             }
             // Cubes i with a lumen corner at x = i or i + 1.
-            let i_lo = spans.iter().map(|sp| sp.0).min().unwrap_or(0).saturating_sub(1);
-            let i_hi = spans.iter().map(|sp| sp.1).max().unwrap_or(0).min(nx - 1);
-            for (buf, &r) in rowbuf.iter_mut().zip(&rows) {
-                s.row_bits(r % ny, r / ny, buf);
-            }
-            let [r0, r1, r2, r3] = [&rowbuf[0], &rowbuf[1], &rowbuf[2], &rowbuf[3]];
-            // Corner bits of the cube's x = 0 face; the x = 1 face becomes the next cube's x = 0.
-            let face = |i: usize| (r0[i] | r1[i] << 1 | r2[i] << 2 | r3[i] << 3) as usize;
-            let mut left = face(i_lo);
-            for i in i_lo..i_hi {
-                let right = face(i + 1);
+            let (i_lo, i_hi) = (lo.saturating_sub(1), hi.min(nx - 1));
+            // Corner bits of each cube's x = 0 face; the x = 1 face is the next cube's x = 0.
+            s.face_codes(rows, i_lo, i_hi, &mut faces);
+            let mut i = i_lo;
+            while i < i_hi {
+                // Eight cubes at once where nine faces in a row are all wall or all lumen (the
+                // inside of a wide lumen, the gap between two loops of the colon).
+                if i + 8 <= i_hi {
+                    let word = |at: usize| u64::from_le_bytes(faces[at..at + 8].try_into().unwrap_or([1; 8]));
+                    let w = word(i);
+                    if w == word(i + 1) && (w == 0 || w == 0x0F0F_0F0F_0F0F_0F0F) {
+                        i += 8;
+                        continue;
+                    }
+                }
                 // Corner c = x + 2y + 4z: x = 0 corners are bits 0, 2, 4, 6.
-                let case = spread(left) | spread(right) << 1;
-                left = right;
+                let case = spread(faces[i] as usize) | spread(faces[i + 1] as usize) << 1;
+                i += 1;
                 if case == 0 || case == 255 {
                     continue;
                 }
+                let i = i - 1;
                 let tris = &table[case];
                 let mut vid = [u32::MAX; 12];
                 for tri in tris {
