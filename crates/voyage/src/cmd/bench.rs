@@ -88,6 +88,11 @@ struct PrepBench {
     /// Timed repeats (after one warm-up).
     #[arg(long, default_value_t = 3)]
     repeats: usize,
+    /// Rounds per case, voyage and the references taking turns; ratios are paired within a
+    /// round and the median round is reported with the range (a noisy machine drifts over
+    /// the minutes one round takes).
+    #[arg(long, default_value_t = 1)]
+    rounds: usize,
     /// Skip the reference libraries.
     #[arg(long)]
     no_reference: bool,
@@ -127,7 +132,7 @@ struct LoadBench {
 pub fn run(a: &BenchArgs) -> Result<()> {
     match &a.what {
         BenchWhat::Load(l) => load(l),
-        BenchWhat::Prep(p) => super::bench_prep::run(p.inputs.clone(), !p.no_phantom, &p.dir, p.repeats, !p.no_reference, &p.common),
+        BenchWhat::Prep(p) => super::bench_prep::run(p.inputs.clone(), !p.no_phantom, &p.dir, p.repeats, p.rounds, !p.no_reference, &p.common),
         BenchWhat::Fly(f) => super::bench_fly::run(&f.inputs, !f.no_phantom, f.samples, &f.common),
         BenchWhat::Render(r) => {
             anyhow::ensure!((16..=4096).contains(&r.size), "--size must lie in 16..4096");

@@ -17,7 +17,7 @@ use super::bench::{find_python, median, Common};
 
 const PREP_REFERENCE_PY: &str = include_str!("../../../../bench/prep_reference.py");
 
-pub fn run(inputs: Vec<PathBuf>, phantom: bool, dir: &Path, repeats: usize, reference: bool, common: &Common) -> Result<()> {
+pub fn run(inputs: Vec<PathBuf>, phantom: bool, dir: &Path, repeats: usize, rounds: usize, reference: bool, common: &Common) -> Result<()> {
     let (threads, python, json_out) = (common.threads, common.python.as_deref(), common.json);
     rayon::ThreadPoolBuilder::new().num_threads(threads).build_global().ok();
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create folder", dir.display()))?;
@@ -33,23 +33,30 @@ pub fn run(inputs: Vec<PathBuf>, phantom: bool, dir: &Path, repeats: usize, refe
         bail!("nothing to measure: give an input or leave the phantom in");
     }
     let mut results = Vec::new();
+    let rounds = rounds.max(1);
     for (i, (name, ct)) in cases.into_iter().enumerate() {
-        eprintln!("measuring {name} ...");
-        let r = measure(&name, ct, repeats)?;
-        let refs = if reference {
-            let mask = dir.join(format!("case{i}-lumen.nii.gz"));
-            nifti::save(&mask, &r.study.segmentation.lumen)?;
-            match run_reference(python, dir, &mask, r.study.source, repeats) {
-                Ok(v) => v,
-                Err(e) => {
-                    eprintln!("reference not run: {e:#}");
-                    Value::Null
+        let mut done: Vec<(Measured, Value)> = Vec::new();
+        for round in 0..rounds {
+            eprintln!("measuring {name} (round {} of {rounds}) ...", round + 1);
+            let r = measure(&name, ct.clone(), repeats)?;
+            let refs = if reference {
+                let mask = dir.join(format!("case{i}-lumen.nii.gz"));
+                if round == 0 {
+                    nifti::save(&mask, &r.study.segmentation.lumen)?;
                 }
-            }
-        } else {
-            Value::Null
-        };
-        results.push(report(&r, refs, threads));
+                match run_reference(python, dir, &mask, r.study.source, repeats) {
+                    Ok(v) => v,
+                    Err(e) => {
+                        eprintln!("reference not run: {e:#}");
+                        Value::Null
+                    }
+                }
+            } else {
+                Value::Null
+            };
+            done.push((r, refs));
+        }
+        results.push(report(&done, threads));
     }
     if json_out {
         println!("{}", serde_json::to_string_pretty(&json!({"bench": "prep", "threads": threads, "repeats": repeats, "cases": results}))?);
@@ -120,14 +127,25 @@ fn run_reference(python: Option<&Path>, dir: &Path, mask: &Path, source: [usize;
     serde_json::from_slice(&out.stdout).context("reference printed no JSON")
 }
 
-fn report(m: &Measured, refs: Value, threads: usize) -> Value {
-    let t = &m.timings;
+/// One case's rows from its rounds: per stage the median over rounds of voyage's and the
+/// reference's medians, and the median and range of the speedups paired within each round.
+fn report(rounds: &[(Measured, Value)], threads: usize) -> Value {
+    let (m, refs) = &rounds[rounds.len() - 1];
     let s = &m.study;
-    let r = |k: &str| refs.get(k).and_then(|v| v["ms"].as_f64());
-    let row = |stage: &str, ours: f64, reference: &str, ref_ms: Option<f64>, target_ms: f64, target_ratio: Option<f64>| {
+    let row = |stage: &str, ours: fn(&Measured) -> f64, reference: &str, key: &str, target_ms: f64, target_ratio: Option<f64>| {
+        let ours_ms = median(&mut rounds.iter().map(|(m, _)| ours(m)).collect::<Vec<_>>());
+        let ref_of = |refs: &Value| refs.get(key).and_then(|v| v["ms"].as_f64());
+        let mut ref_ms: Vec<f64> = rounds.iter().filter_map(|(_, r)| ref_of(r)).collect();
+        let mut speedups: Vec<f64> = rounds.iter().filter_map(|(m, r)| ref_of(r).map(|x| x / ours(m))).collect();
+        let (lo, hi) = speedups.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &x| (lo.min(x), hi.max(x)));
+        let has = !speedups.is_empty();
         json!({
-            "stage": stage, "voyage_ms": ours, "reference": reference, "reference_ms": ref_ms,
-            "speedup": ref_ms.map(|x| x / ours), "target_ms": target_ms, "target_speedup": target_ratio,
+            "stage": stage, "voyage_ms": ours_ms, "reference": reference,
+            "reference_ms": has.then(|| median(&mut ref_ms)),
+            "speedup": has.then(|| median(&mut speedups)),
+            "speedup_range": has.then_some([lo, hi]),
+            "rounds": rounds.len(),
+            "target_ms": target_ms, "target_speedup": target_ratio,
         })
     };
     json!({
@@ -143,18 +161,18 @@ fn report(m: &Measured, refs: Value, threads: usize) -> Value {
         "peak_rss_mb": m.peak_rss_mb,
         "reference_triangles": refs.get("vtk_flying_edges").and_then(|v| v.get("triangles")).cloned(),
         "rows": [
-            row("segment", t.segment, "-", None, 60.0, None),
-            row("ds", t.ds, "edt (1 thread)", r("edt"), 100.0, Some(5.0)),
-            row("ds", t.ds, "scipy.ndimage EDT", r("scipy_edt"), 100.0, None),
-            row("one Dt", m.dt_single_ms, "dijkstra3d", r("dijkstra3d"), 100.0, Some(4.0)),
-            row("endpoints + skeleton path", t.skeleton, "-", None, 200.0, None),
-            row("centerline refinement", t.centerline, "-", None, 50.0, None),
-            row("touching loops (on the skeleton's blocks)", t.contacts, "-", None, 0.0, None),
-            row("both Dt fields", t.dt, "-", None, 200.0, None),
-            row("surface", t.surface, "VTK flying edges", r("vtk_flying_edges"), 80.0, Some(1.0)),
-            row("surface", t.surface, "scikit-image", r("skimage_marching_cubes"), 80.0, None),
-            row("cells", t.cells, "-", None, 50.0, None),
-            row("total after load", t.total_after_load, "-", None, 500.0, None),
+            row("segment", |m| m.timings.segment, "-", "", 60.0, None),
+            row("ds", |m| m.timings.ds, "edt (1 thread)", "edt", 100.0, Some(5.0)),
+            row("ds", |m| m.timings.ds, "scipy.ndimage EDT", "scipy_edt", 100.0, None),
+            row("one Dt", |m| m.dt_single_ms, "dijkstra3d", "dijkstra3d", 100.0, Some(4.0)),
+            row("endpoints + skeleton path", |m| m.timings.skeleton, "-", "", 200.0, None),
+            row("centerline refinement", |m| m.timings.centerline, "-", "", 50.0, None),
+            row("touching loops (on the skeleton's blocks)", |m| m.timings.contacts, "-", "", 0.0, None),
+            row("both Dt fields", |m| m.timings.dt, "-", "", 200.0, None),
+            row("surface", |m| m.timings.surface, "VTK flying edges", "vtk_flying_edges", 80.0, Some(1.0)),
+            row("surface", |m| m.timings.surface, "scikit-image", "skimage_marching_cubes", 80.0, None),
+            row("cells", |m| m.timings.cells, "-", "", 50.0, None),
+            row("total after load", |m| m.timings.total_after_load, "-", "", 500.0, None),
         ],
     })
 }
@@ -171,17 +189,22 @@ fn print_case(c: &Value) {
         c["peak_rss_mb"].as_f64().unwrap_or(0.0),
         c["ct_mb"].as_f64().unwrap_or(0.0)
     );
-    println!("  {:<38} {:>10} {:<20} {:>10} {:>8} {:>10} {:>8}", "stage", "voyage ms", "reference", "ref ms", "speedup", "target ms", "target×");
+    println!("  {:<38} {:>10} {:<20} {:>10} {:>8} {:>13} {:>10} {:>8}", "stage", "voyage ms", "reference", "ref ms", "speedup", "(range)", "target ms", "target×");
     let empty = vec![];
     for r in c["rows"].as_array().unwrap_or(&empty) {
         let f = |v: &Value, p: usize| v.as_f64().map(|x| format!("{x:.p$}")).unwrap_or_else(|| "-".into());
+        let range = match r["speedup_range"].as_array() {
+            Some(a) if a.len() == 2 => format!("{}–{}", f(&a[0], 2), f(&a[1], 2)),
+            _ => "-".into(),
+        };
         println!(
-            "  {:<38} {:>10} {:<20} {:>10} {:>7}× {:>10} {:>7}",
+            "  {:<38} {:>10} {:<20} {:>10} {:>7}× {:>13} {:>10} {:>7}",
             r["stage"].as_str().unwrap_or(""),
             f(&r["voyage_ms"], 1),
             r["reference"].as_str().unwrap_or(""),
             f(&r["reference_ms"], 1),
             f(&r["speedup"], 2),
+            range,
             f(&r["target_ms"], 0),
             r["target_speedup"].as_f64().map(|x| format!("{x:.0}×")).unwrap_or_else(|| "-".into()),
         );
