@@ -42,9 +42,9 @@ pub fn run(inputs: Vec<PathBuf>, phantom: bool, dir: &Path, repeats: usize, roun
             let refs = if reference {
                 let mask = dir.join(format!("case{i}-lumen.nii.gz"));
                 if round == 0 {
-                    nifti::save(&mask, &r.study.segmentation.lumen)?;
+                    nifti::save(&mask, &r.study()?.segmentation.lumen)?;
                 }
-                match run_reference(python, dir, &mask, r.study.source, repeats) {
+                match run_reference(python, dir, &mask, r.study()?.source, repeats) {
                     Ok(v) => v,
                     Err(e) => {
                         eprintln!("reference not run: {e:#}");
@@ -54,6 +54,10 @@ pub fn run(inputs: Vec<PathBuf>, phantom: bool, dir: &Path, repeats: usize, roun
             } else {
                 Value::Null
             };
+            // Only the last round's study is reported: the others' memory goes back.
+            for (earlier, _) in &mut done {
+                earlier.study = None;
+            }
             done.push((r, refs));
         }
         results.push(report(&done, threads));
@@ -70,11 +74,18 @@ pub fn run(inputs: Vec<PathBuf>, phantom: bool, dir: &Path, repeats: usize, roun
 
 struct Measured {
     name: String,
-    study: Study,
+    /// The study of the last run (None once a later round has its own).
+    study: Option<Study>,
     timings: Timings,
     dt_single_ms: f64,
     ct_mb: f64,
     peak_rss_mb: Option<f64>,
+}
+
+impl Measured {
+    fn study(&self) -> Result<&Study> {
+        self.study.as_ref().context("the study of this round was already let go")
+    }
 }
 
 /// Median per stage over `repeats` runs after a warm-up, and one plain Dt alone.
@@ -106,7 +117,7 @@ fn measure(name: &str, ct: Volume<i16>, repeats: usize) -> Result<Measured> {
         geodesic_distance(lumen, &study.ds.grid, study.source)?;
         single.push(t.elapsed().as_secs_f64() * 1e3);
     }
-    Ok(Measured { name: name.into(), dt_single_ms: median(&mut single), study, timings, ct_mb, peak_rss_mb: super::prep::peak_rss_mb() })
+    Ok(Measured { name: name.into(), dt_single_ms: median(&mut single), study: Some(study), timings, ct_mb, peak_rss_mb: super::prep::peak_rss_mb() })
 }
 
 fn run_reference(python: Option<&Path>, dir: &Path, mask: &Path, source: [usize; 3], repeats: usize) -> Result<Value> {
@@ -131,7 +142,7 @@ fn run_reference(python: Option<&Path>, dir: &Path, mask: &Path, source: [usize;
 /// reference's medians, and the median and range of the speedups paired within each round.
 fn report(rounds: &[(Measured, Value)], threads: usize) -> Value {
     let (m, refs) = &rounds[rounds.len() - 1];
-    let s = &m.study;
+    let Ok(s) = m.study() else { return Value::Null };
     let row = |stage: &str, ours: fn(&Measured) -> f64, reference: &str, key: &str, target_ms: f64, target_ratio: Option<f64>| {
         let ours_ms = median(&mut rounds.iter().map(|(m, _)| ours(m)).collect::<Vec<_>>());
         let ref_of = |refs: &Value| refs.get(key).and_then(|v| v["ms"].as_f64());
