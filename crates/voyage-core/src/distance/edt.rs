@@ -26,18 +26,24 @@ pub fn distance_to_wall(mask: &Volume<u8>) -> Result<Field<f32>> {
     Ok(Field { grid, geometry: mask.geometry().clone(), data: f })
 }
 
-/// Scratch space for the 1D transforms: the envelope's parabola sites `v` (positions) and
-/// their values `f`, and the boundaries `z` between them.
+/// Scratch space for the 1D transforms: the envelope's parabolas and a column.
 struct Scratch {
-    v: Vec<f32>,
-    f: Vec<f32>,
-    z: Vec<f32>,
+    sites: Vec<Site>,
     col: Vec<f32>,
+}
+
+/// One parabola of the lower envelope: its site's position `v` and value `f`, and `z`, where
+/// it starts to be the lowest (one record, so that a step of the envelope is one load).
+#[derive(Clone, Copy, Default)]
+struct Site {
+    v: f32,
+    f: f32,
+    z: f32,
 }
 
 impl Scratch {
     fn new(n: usize) -> Self {
-        Scratch { v: vec![0.0; n + 2], f: vec![0.0; n + 2], z: vec![0.0; n + 3], col: vec![0.0; n] }
+        Scratch { sites: vec![Site::default(); n + 3], col: vec![0.0; n] }
     }
 }
 
@@ -61,28 +67,25 @@ fn transform_column(col: &mut [f32], h: f32, s: &mut Scratch) {
 /// positions are relative to the run, in mm, so that squares stay small and f32 suffices.
 fn lower_envelope(run: &mut [f32], h: f32, s: &mut Scratch) {
     let n = run.len();
-    let (v, f, z) = (&mut s.v, &mut s.f, &mut s.z);
+    let sites = &mut s.sites[..n + 3];
     // Site 0 is the wall before the run, at position −h.
-    v[0] = -h;
-    f[0] = 0.0;
-    z[0] = f32::NEG_INFINITY;
-    z[1] = f32::INFINITY;
+    sites[0] = Site { v: -h, f: 0.0, z: f32::NEG_INFINITY };
+    sites[1].z = f32::INFINITY;
     let mut k = 0usize;
     let mut push = |pq: f32, fq: f32, k: &mut usize| {
         let mut sct;
         loop {
+            let sk = sites[*k];
             // z[0] = −∞: the first (wall) parabola is never dropped.
-            sct = ((fq + pq * pq) - (f[*k] + v[*k] * v[*k])) / (2.0 * (pq - v[*k]));
-            if sct > z[*k] {
+            sct = ((fq + pq * pq) - (sk.f + sk.v * sk.v)) / (2.0 * (pq - sk.v));
+            if sct > sk.z {
                 break;
             }
             *k -= 1;
         }
         *k += 1;
-        v[*k] = pq;
-        f[*k] = fq;
-        z[*k] = sct;
-        z[*k + 1] = f32::INFINITY;
+        sites[*k] = Site { v: pq, f: fq, z: sct };
+        sites[*k + 1].z = f32::INFINITY;
     };
     for (q, &fq) in run.iter().enumerate() {
         if fq.is_finite() {
@@ -93,11 +96,11 @@ fn lower_envelope(run: &mut [f32], h: f32, s: &mut Scratch) {
     let mut k = 0usize;
     for (q, out) in run.iter_mut().enumerate() {
         let pq = q as f32 * h;
-        while z[k + 1] < pq {
+        while sites[k + 1].z < pq {
             k += 1;
         }
-        let d = pq - v[k];
-        *out = d * d + f[k];
+        let d = pq - sites[k].v;
+        *out = d * d + sites[k].f;
     }
 }
 
