@@ -80,17 +80,7 @@ impl<'a> Scalar<'a> {
     /// s at a padded position: positive (≥ 0.5) in the lumen, ≤ −1 elsewhere.
     #[inline]
     fn value(&self, p: [usize; 3]) -> f32 {
-        let Some(v) = self.voxel(p) else { return -1.0 };
-        let m = self.lumen.data()[v] != 0;
-        match self.ct {
-            Some(ct) => {
-                let x = self.iso - ct.data()[v] as f32;
-                if m { x.max(0.5) } else { x.min(-1.0) }
-            }
-            None => {
-                if m { 0.5 } else { -0.5 }
-            }
-        }
+        self.voxel(p).map_or(-1.0, |v| self.value_at(v))
     }
 
     /// s at volume voxel `v` (not padding).
@@ -129,19 +119,15 @@ impl<'a> Scalar<'a> {
     /// row `rows[b]` = (j, k) is lumen at that x (padding is not).
     fn face_codes(&self, rows: [usize; 4], lo: usize, hi: usize, out: &mut [u8]) {
         out[lo..=hi].fill(0);
-        let (ny, n) = (self.dims[1], self.dims[0] - 2);
+        let ny = self.dims[1];
         for (bit, &r) in rows.iter().enumerate() {
-            let (j, k) = (r % ny, r / ny);
-            if j == 0 || k == 0 || j == self.dims[1] - 1 || k == self.dims[2] - 1 {
-                continue;
-            }
-            let start = self.lumen.geometry().index(self.lo[0], j - 1 + self.lo[1], k - 1 + self.lo[2]);
-            // Padded x is data x + 1; the padding columns 0 and n + 1 stay 0.
-            let (a, b) = (lo.max(1), hi.min(n));
+            let Some(row) = self.mask_row(r % ny, r / ny) else { continue };
+            // Padded x is mask x + 1; the padding columns 0 and n + 1 stay 0.
+            let (a, b) = (lo.max(1), hi.min(row.len()));
             if a > b {
                 continue;
             }
-            for (o, &m) in out[a..=b].iter_mut().zip(&self.lumen.data()[start + a - 1..start + b]) {
+            for (o, &m) in out[a..=b].iter_mut().zip(&row[a - 1..b]) {
                 *o |= ((m != 0) as u8) << bit;
             }
         }
@@ -150,15 +136,18 @@ impl<'a> Scalar<'a> {
     /// Padded x of the first lumen voxel of padded row (j, k) and one past its last; (0, 0)
     /// when the row has none.
     fn row_span(&self, j: usize, k: usize) -> (usize, usize) {
+        let found = self.mask_row(j, k).and_then(|row| crate::field::first_and_last(row, &|m: u8| m != 0));
+        found.map_or((0, 0), |(first, last)| (first + 1, last + 2))
+    }
+
+    /// The lumen mask along padded row (j, k) without its two padding columns; None for a
+    /// row of padding.
+    fn mask_row(&self, j: usize, k: usize) -> Option<&'a [u8]> {
         if j == 0 || k == 0 || j == self.dims[1] - 1 || k == self.dims[2] - 1 {
-            return (0, 0);
+            return None;
         }
-        let n = self.dims[0] - 2;
         let start = self.lumen.geometry().index(self.lo[0], j - 1 + self.lo[1], k - 1 + self.lo[2]);
-        match crate::field::first_and_last(&self.lumen.data()[start..start + n], &|m: u8| m != 0) {
-            Some((first, last)) => (first + 1, last + 2),
-            None => (0, 0),
-        }
+        Some(&self.lumen.data()[start..start + self.dims[0] - 2])
     }
 
     /// Central-difference gradient at padded voxel p, one-sided at the padding's edge.
