@@ -510,6 +510,11 @@ mod tests {
 
     /// Textbook Dijkstra with a binary heap in f64, over the whole volume.
     fn reference(mask: &Volume<u8>, src: [usize; 3]) -> Vec<f64> {
+        reference_weighted(mask, src, |_| 1.0)
+    }
+
+    /// The same with an edge u–v costing its length times (w(u) + w(v)) / 2 (volume indices).
+    fn reference_weighted(mask: &Volume<u8>, src: [usize; 3], w: impl Fn(usize) -> f64) -> Vec<f64> {
         let g = mask.geometry();
         let [nx, ny, nz] = g.dims;
         let s = g.spacing;
@@ -536,9 +541,10 @@ mod tests {
                             continue;
                         }
                         let len = ((di as f64 * s[0]).powi(2) + (dj as f64 * s[1]).powi(2) + (dk as f64 * s[2]).powi(2)).sqrt();
-                        if du + len < d[v] {
-                            d[v] = du + len;
-                            heap.push(Reverse(((du + len).to_bits(), v)));
+                        let dv = du + len * 0.5 * (w(u) + w(v));
+                        if dv < d[v] {
+                            d[v] = dv;
+                            heap.push(Reverse((dv.to_bits(), v)));
                         }
                     }
                 }
@@ -589,6 +595,53 @@ mod tests {
             assert_eq!(geo.reached, reached);
             let far = want.iter().cloned().filter(|d| d.is_finite()).fold(0.0, f64::max);
             assert!((geo.max_mm as f64 - far).abs() < 1e-3);
+        }
+    }
+
+    #[test]
+    fn weighted_tree_search_matches_reference_dijkstra() {
+        for seed in [4u64, 9] {
+            let mut m = maze([22, 17, 14], [0.82, 0.82, 1.25], seed);
+            m.set(0, 0, 0, 1);
+            let grid = bounding_box(&m, 1, |v| v != 0).unwrap();
+            let pad = Padded::new(&m, &grid);
+            // Weights from 1 to 50, per volume voxel, laid out like the search.
+            let w_of = |v: usize| 1.0 + ((v * 2654435761) % 50) as f32;
+            let mut weight = vec![1.0f32; pad.inside.len()];
+            for (i, slot) in weight.iter_mut().enumerate() {
+                if pad.inside[i] != 0 {
+                    let g = pad.global_of_index(i);
+                    *slot = w_of(m.geometry().index(g[0], g[1], g[2]));
+                }
+            }
+            let src = pad.lumen_index([0, 0, 0]).unwrap();
+            let r = dial(&pad, &[src], m.spacing(), &SearchOptions { weight: Some(&weight), tree: true, stop: None });
+            let want = reference_weighted(&m, [0, 0, 0], |v| w_of(v) as f64);
+            let mut reached = 0;
+            for (i, &inside) in pad.inside.iter().enumerate() {
+                if inside == 0 {
+                    continue;
+                }
+                let g = pad.global_of_index(i);
+                let b = want[m.geometry().index(g[0], g[1], g[2])];
+                let a = r.dist[i] as f64;
+                if b.is_infinite() {
+                    assert!(a.is_infinite(), "seed {seed} voxel {g:?}: reached {a}, reference unreachable");
+                    continue;
+                }
+                reached += 1;
+                assert!((a - b).abs() <= 1e-5 * b + 1e-4, "seed {seed} voxel {g:?}: {a} vs {b}");
+                // The tree: each voxel's distance is its parent's plus the edge between them.
+                if let Some(p) = r.parent_of(i) {
+                    let (gp, gi) = (pad.global_of_index(p), g);
+                    let len = (0..3).map(|a| ((gp[a] as f64 - gi[a] as f64) * m.spacing()[a]).powi(2)).sum::<f64>().sqrt();
+                    let edge = len * 0.5 * (weight[p] as f64 + weight[i] as f64);
+                    assert!((r.dist[p] as f64 + edge - a).abs() <= 1e-4 * a + 1e-3, "seed {seed}: tree edge to {g:?}");
+                } else {
+                    assert_eq!(i, src);
+                }
+            }
+            assert_eq!(r.reached, reached);
         }
     }
 
