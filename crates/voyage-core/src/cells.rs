@@ -407,7 +407,6 @@ fn monotone_chain(mut pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
     if pts.len() < 3 {
         return pts;
     }
-    let cross = |o: (f64, f64), a: (f64, f64), b: (f64, f64)| (a.0 - o.0) * (b.1 - o.1) - (a.1 - o.1) * (b.0 - o.0);
     let mut hull: Vec<(f64, f64)> = Vec::with_capacity(2 * pts.len());
     for pass in 0..2 {
         let start = hull.len();
@@ -421,6 +420,11 @@ fn monotone_chain(mut pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
         hull.pop();
     }
     hull
+}
+
+/// (a − o) × (b − o): positive when o, a, b turn counter-clockwise.
+fn cross(o: (f64, f64), a: (f64, f64), b: (f64, f64)) -> f64 {
+    (a.0 - o.0) * (b.1 - o.1) - (a.1 - o.1) * (b.0 - o.0)
 }
 
 /// Akl–Toussaint: the points extreme in eight directions span a convex polygon inside the
@@ -450,7 +454,6 @@ fn drop_interior(pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
     if poly.len() < 3 {
         return pts;
     }
-    let cross = |o: (f64, f64), a: (f64, f64), b: (f64, f64)| (a.0 - o.0) * (b.1 - o.1) - (a.1 - o.1) * (b.0 - o.0);
     let n = poly.len();
     let strictly_inside = |p: (f64, f64)| (0..n).all(|i| cross(poly[i], poly[(i + 1) % n], p) > 0.0);
     pts.into_iter().filter(|&p| !strictly_inside(p)).collect()

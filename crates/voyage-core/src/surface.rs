@@ -245,8 +245,8 @@ fn triangulate_case(case: usize) -> Vec<[u8; 3]> {
     tris
 }
 
-/// Vertex ids of the edges of one plane of voxels: x- and y-edges on a z-plane (`zed`: the
-/// z-edges between two planes).
+/// Vertex ids of the edges of one plane of voxels: x- and y-edges on a z-plane (the z-edges
+/// between two planes are kept in the `x` array of one more).
 ///
 /// An entry is valid only if it was made since `since` (vertex ids only grow): a plane's
 /// arrays are reused for a later plane without clearing them, which for a box of 300 planes
@@ -316,11 +316,12 @@ fn march(s: &Scalar, spacing: Vec3, vol_dims: [usize; 3]) -> Surface {
                 }
                 // Corner c = x + 2y + 4z: x = 0 corners are bits 0, 2, 4, 6.
                 let case = spread(faces[i] as usize) | spread(faces[i + 1] as usize) << 1;
+                let cube = i;
                 i += 1;
                 if case == 0 || case == 255 {
                     continue;
                 }
-                let i = i - 1;
+                let i = cube;
                 let tris = &table[case];
                 let mut vid = [u32::MAX; 12];
                 for tri in tris {
