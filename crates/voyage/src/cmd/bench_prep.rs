@@ -141,7 +141,7 @@ fn run_reference(python: Option<&Path>, dir: &Path, mask: &Path, source: [usize;
 /// One case's rows from its rounds: per stage the median over rounds of voyage's and the
 /// reference's medians, and the median and range of the speedups paired within each round.
 fn report(rounds: &[(Measured, Value)], threads: usize) -> Value {
-    let (m, refs) = &rounds[rounds.len() - 1];
+    let Some((m, refs)) = rounds.last() else { return Value::Null };
     let Ok(s) = m.study() else { return Value::Null };
     let row = |stage: &str, ours: fn(&Measured) -> f64, reference: &str, key: &str, target_ms: f64, target_ratio: Option<f64>| {
         let ours_ms = median(&mut rounds.iter().map(|(m, _)| ours(m)).collect::<Vec<_>>());
