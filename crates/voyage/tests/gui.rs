@@ -217,12 +217,15 @@ fn mouse_and_keys_drive_the_window() {
     xdo(&["search", "--name", "^voyage", "windowfocus"]);
     let (cx, cy) = ((v[0] + v[2]) / 2.0, (v[1] + v[3]) / 2.0);
     let right_x = v[0] + 0.75 * (v[2] - v[0]);
-    // Hold the left button right of centre for 0.6 s: F_user pulls right and
+    // Hold the left button right of centre for 0.3 s: F_user pulls right and
     // its torque z_body × F_user (Eq. 4) turns the view toward the point held. (Held longer
-    // the view keeps turning: the point held moves with the view, as with repeated clicks.)
+    // the view keeps turning: the point held moves with the view, as with repeated clicks;
+    // 0.6 s turned it ~112°, so a late mouseup on a busy machine could carry it past 180°,
+    // where the angle reads as a turn to the left. The script is done by then, so the
+    // physics follows the clock, not the frame count.)
     xdo(&["mousemove", &format!("{right_x:.0}"), &format!("{cy:.0}")]);
     xdo(&["mousedown", "1"]);
-    std::thread::sleep(Duration::from_millis(600));
+    std::thread::sleep(Duration::from_millis(300));
     xdo(&["mouseup", "1"]);
     // A marker on the surface under the cursor, then quit with Ctrl+Q.
     xdo(&["mousemove", &format!("{cx:.0}"), &format!("{cy:.0}")]);

@@ -926,9 +926,12 @@ impl eframe::App for App {
     fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
         let ctx = ui.ctx().clone();
         let now = Instant::now();
-        // Scripted runs step the physics by a fixed 1/30 s per frame, so that they do the
-        // same on every machine; interactive use follows the clock.
-        let dt = match (self.last_frame, self.script.is_some() || self.args.screenshot.is_some()) {
+        // Scripted runs step the physics by a fixed 1/30 s per frame while the script runs, so
+        // that they do the same on every machine; interactive use, and a window whose script
+        // is done, follows the clock (a mouse held for 0.6 s turns the view as far at 30 as at
+        // 100 frames/s).
+        let scripted = self.script.as_ref().is_some_and(|s| !s.finished());
+        let dt = match (self.last_frame, scripted || self.args.screenshot.is_some()) {
             (_, true) => 1.0 / 30.0,
             (Some(t), false) => now.duration_since(t).as_secs_f64(),
             (None, false) => 1.0 / 30.0,
