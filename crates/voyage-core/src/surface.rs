@@ -434,6 +434,15 @@ mod tests {
         Volume::from_vec(g, data).unwrap()
     }
 
+    /// A ball of radius `r` mm around `c` (0.8 × 0.8 × 1.1 mm voxels), its CT, and the
+    /// lumen's box.
+    fn ball_study(c: [f64; 3], r: f64) -> (Volume<u8>, Volume<i16>, BoxGrid) {
+        let m = ball([32, 30, 26], [0.8, 0.8, 1.1], c, r);
+        let ct = ball_ct(&m, c, r);
+        let grid = bounding_box(&m, 1, |v| v != 0).unwrap();
+        (m, ct, grid)
+    }
+
     #[test]
     fn every_case_gives_closed_polygons() {
         for case in 1..255 {
@@ -452,9 +461,7 @@ mod tests {
     #[test]
     fn ball_surface_is_watertight_inward_and_on_the_sphere() {
         let (c, r) = ([12.0, 11.0, 13.0], 8.0);
-        let m = ball([32, 30, 26], [0.8, 0.8, 1.1], c, r);
-        let ct = ball_ct(&m, c, r);
-        let grid = bounding_box(&m, 1, |v| v != 0).unwrap();
+        let (m, ct, grid) = ball_study(c, r);
         for ct in [None, Some(&ct)] {
             let s = extract_surface(&m, ct, &grid, -500.0).unwrap();
             let mesh = &s.mesh;
@@ -493,9 +500,7 @@ mod tests {
     #[test]
     fn stride_gradient_equals_the_checked_one() {
         let (c, r) = ([12.0, 11.0, 13.0], 8.0);
-        let m = ball([32, 30, 26], [0.8, 0.8, 1.1], c, r);
-        let ct = ball_ct(&m, c, r);
-        let grid = bounding_box(&m, 1, |v| v != 0).unwrap();
+        let (m, ct, grid) = ball_study(c, r);
         let sp = Vec3::new(0.8, 0.8, 1.1);
         for ct in [None, Some(&ct)] {
             let s = Scalar::new(&m, ct, &grid, -500.0);
