@@ -116,11 +116,10 @@ impl Runs {
 /// Segments the colon lumen from a CT (or takes it from a mask).
 pub fn segment(vol: &Volume<i16>, opts: &SegmentOptions) -> Result<Segmentation> {
     let from_mask = opts.mask.unwrap_or_else(|| is_mask(vol));
-    let mut runs = if from_mask { extract_runs(vol, |v| v != 0) } else { extract_runs(vol, |v| v < opts.air_hu) };
+    let fluid_hu = opts.fluid_hu.filter(|_| !from_mask);
+    // Air, its statistics and the bright runs of tagged fluid, all in one pass over the values.
+    let (runs, bright) = if from_mask { extract_runs(vol, Test::NonZero, None) } else { extract_runs(vol, Test::Below(opts.air_hu), fluid_hu) };
     let inside = if from_mask { vec![true; runs.runs.len()] } else { inside_body(&runs, vol.dims()) };
-    if !from_mask {
-        fill_stats(&mut runs, &inside, vol);
-    }
     let mut labels = UnionFind::new(runs.runs.len());
     connect_3d(&runs, &inside, vol.dims(), &mut labels);
     let (mut comps, run_comp) = component_stats(&runs, &inside, vol, &mut labels, from_mask);
@@ -128,9 +127,9 @@ pub fn segment(vol: &Volume<i16>, opts: &SegmentOptions) -> Result<Segmentation>
     let colon = choose_colon(&comps, &runs, &run_comp, vol, opts)?;
     comps[colon].kind = ComponentKind::Colon;
     let mut lumen = rasterize(&runs, &run_comp, colon, vol)?;
-    let fluid_voxels = match (from_mask, opts.fluid_hu) {
-        (false, Some(hu)) => add_tagged_fluid(vol, &mut lumen, &air_extents(&runs, &run_comp, colon), hu),
-        _ => 0,
+    let fluid_voxels = match bright {
+        Some(bright) => add_tagged_fluid(&bright, &mut lumen, &air_extents(&runs, &run_comp, colon)),
+        None => 0,
     };
     let seed_voxel = match opts.seed_mm {
         Some(mm) => voxel_of(vol, mm)?,
@@ -148,62 +147,189 @@ pub fn is_mask(vol: &Volume<i16>) -> bool {
     chunks().all(|c| c.iter().fold(true, |a, &v| a & (v as u16 <= 1))) && chunks().any(|c| c.iter().fold(false, |a, &v| a | (v == 1)))
 }
 
-fn extract_runs(vol: &Volume<i16>, is_air: impl Fn(i16) -> bool + Sync) -> Runs {
-    let [nx, ny, nz] = vol.dims();
-    // One task per slice; concatenated in slice order so the result is thread-independent.
-    let per_slice: Vec<(Vec<Run>, Vec<u32>)> = (0..nz)
-        .into_par_iter()
-        .map(|k| {
-            let slice = vol.slice_k(k);
-            let (mut runs, mut counts) = (Vec::new(), Vec::with_capacity(ny));
-            for j in 0..ny {
-                let row = &slice[j * nx..(j + 1) * nx];
-                let before = runs.len();
-                runs.extend(crate::volume::runs_where(row, &is_air).map(|r| Run { x0: r.start as u32, x1: r.end as u32 }));
-                counts.push((runs.len() - before) as u32);
-            }
-            (runs, counts)
-        })
-        .collect();
-    let total: usize = per_slice.iter().map(|s| s.0.len()).sum();
-    let mut out = Runs { runs: Vec::with_capacity(total), row_start: Vec::with_capacity(ny * nz + 1), hu_sum: vec![0; total], dark: vec![0; total], ny };
-    out.row_start.push(0);
-    for (runs, counts) in per_slice {
-        for c in counts {
-            let last = *out.row_start.last().unwrap_or(&0);
-            out.row_start.push(last + c);
-        }
-        out.runs.extend(runs);
-    }
-    out
+/// Which values a pass collects runs of.
+#[derive(Clone, Copy, Debug)]
+enum Test {
+    /// Below the threshold: air in a CT.
+    Below(i16),
+    /// At or above the threshold: tagged fluid (and bone).
+    AtLeast(i16),
+    /// Not 0: a mask's labels.
+    NonZero,
 }
 
-/// HU sum and count of voxels darker than −950 HU, for the runs inside the body only (the
-/// outside air is most of a scan's air and needs none).
-fn fill_stats(runs: &mut Runs, inside: &[bool], vol: &Volume<i16>) {
+impl Test {
+    #[inline(always)]
+    fn holds(self, v: i16) -> bool {
+        match self {
+            Test::Below(t) => v < t,
+            Test::AtLeast(t) => v >= t,
+            Test::NonZero => v != 0,
+        }
+    }
+}
+
+/// The runs of `test` (the air, with HU statistics when it is `Below`) and, with `bright`, the
+/// runs at or above it, from one read of the values.
+fn extract_runs(vol: &Volume<i16>, test: Test, bright: Option<i16>) -> (Runs, Option<Runs>) {
     let [nx, ny, nz] = vol.dims();
-    let per_slice: Vec<Vec<(i64, u32)>> = (0..nz)
+    let stats = matches!(test, Test::Below(_));
+    // One task per slice; concatenated in slice order so the result is thread-independent.
+    let per_slice: Vec<(SliceRuns, Option<SliceRuns>)> = (0..nz)
         .into_par_iter()
-        .map(|k| {
-            let slice = vol.slice_k(k);
-            let mut out = Vec::with_capacity(runs.row(ny - 1, k).end - runs.row(0, k).start);
-            for j in 0..ny {
-                for r in runs.row(j, k) {
-                    let run = runs.runs[r];
-                    out.push(if inside[r] {
-                        let seg = &slice[j * nx + run.x0 as usize..j * nx + run.x1 as usize];
-                        (seg.iter().map(|&v| v as i64).sum(), seg.iter().filter(|&&v| v < -950).count() as u32)
-                    } else {
-                        (0, 0)
-                    });
+        .map_init(
+            || (vec![0u64; nx.div_ceil(64)], vec![0u64; nx.div_ceil(64)]),
+            |words, k| {
+                let slice = vol.slice_k(k);
+                let mut air = SliceRuns::with_rows(ny);
+                let mut fluid = bright.map(|_| SliceRuns::with_rows(ny));
+                for row in slice.chunks_exact(nx) {
+                    let tests = (test, bright.map(Test::AtLeast));
+                    row_bits(row, tests, words);
+                    air.add_row(&words.0, |x0, x1| if stats { run_stats(row, x0, x1) } else { None });
+                    if let Some(f) = &mut fluid {
+                        f.add_row(&words.1, |_, _| None);
+                    }
                 }
-            }
-            out
-        })
+                (air, fluid)
+            },
+        )
         .collect();
-    for (r, (sum, dark)) in per_slice.into_iter().flatten().enumerate() {
-        runs.hu_sum[r] = sum;
-        runs.dark[r] = dark;
+    let (air, fluid): (Vec<SliceRuns>, Vec<Option<SliceRuns>>) = per_slice.into_iter().unzip();
+    let fluid = bright.map(|_| Runs::concat(fluid.into_iter().flatten(), ny));
+    (Runs::concat(air, ny), fluid)
+}
+
+/// One slice's runs, row by row.
+struct SliceRuns {
+    runs: Vec<Run>,
+    counts: Vec<u32>,
+    hu_sum: Vec<i64>,
+    dark: Vec<u32>,
+}
+
+impl SliceRuns {
+    fn with_rows(ny: usize) -> Self {
+        SliceRuns { runs: Vec::new(), counts: Vec::with_capacity(ny), hu_sum: Vec::new(), dark: Vec::new() }
+    }
+
+    /// The runs of one row's bits, each with `stats(x0, x1)` ((0, 0) where it gives none).
+    fn add_row(&mut self, words: &[u64], stats: impl Fn(u32, u32) -> Option<(i64, u32)>) {
+        let before = self.runs.len();
+        runs_of_bits(words, |x0, x1| {
+            self.runs.push(Run { x0, x1 });
+            let (sum, dark) = stats(x0, x1).unwrap_or((0, 0));
+            self.hu_sum.push(sum);
+            self.dark.push(dark);
+        });
+        self.counts.push((self.runs.len() - before) as u32);
+    }
+}
+
+impl Runs {
+    fn concat(slices: impl IntoIterator<Item = SliceRuns>, ny: usize) -> Runs {
+        let mut out = Runs { runs: Vec::new(), row_start: vec![0], hu_sum: Vec::new(), dark: Vec::new(), ny };
+        for s in slices {
+            for c in s.counts {
+                let last = *out.row_start.last().unwrap_or(&0);
+                out.row_start.push(last + c);
+            }
+            out.runs.extend(s.runs);
+            out.hu_sum.extend(s.hu_sum);
+            out.dark.extend(s.dark);
+        }
+        out
+    }
+}
+
+/// HU sum and count of voxels darker than −950 HU of an air run, for telling bowel gas from
+/// lung. Runs reaching the row's ends lie outside the body (step 2 drops them) and the air
+/// outside is most of a scan's air: they get none.
+fn run_stats(row: &[i16], x0: u32, x1: u32) -> Option<(i64, u32)> {
+    if x0 == 0 || x1 as usize == row.len() {
+        return None;
+    }
+    let seg = &row[x0 as usize..x1 as usize];
+    // i32 holds the sum of a row (at most 65 536 values of magnitude ≤ 32 768).
+    let sum: i32 = seg.iter().map(|&v| v as i32).sum();
+    let dark = seg.iter().map(|&v| (v < -950) as u32).sum();
+    Some((sum as i64, dark))
+}
+
+/// Bit x % 64 of word x / 64 of `words.0`: whether `tests.0` holds for `row[x]`; the same of
+/// `words.1` for `tests.1`, if any (one read of the row for both); bits past the row are 0.
+fn row_bits(row: &[i16], tests: (Test, Option<Test>), words: &mut (Vec<u64>, Vec<u64>)) {
+    let (chunks, rest) = row.as_chunks::<64>();
+    let (a, b) = (&mut words.0, &mut words.1);
+    match tests {
+        (t, None) => a.iter_mut().zip(chunks).for_each(|(w, c)| *w = word_bits(c, t)),
+        (t, Some(u)) => {
+            for ((wa, wb), c) in a.iter_mut().zip(b.iter_mut()).zip(chunks) {
+                (*wa, *wb) = (word_bits(c, t), word_bits(c, u));
+            }
+        }
+    }
+    if !rest.is_empty() {
+        let bits = |t: Test| rest.iter().enumerate().fold(0u64, |w, (i, &v)| w | (t.holds(v) as u64) << i);
+        a[row.len() / 64] = bits(tests.0);
+        if let Some(u) = tests.1 {
+            b[row.len() / 64] = bits(u);
+        }
+    }
+}
+
+/// The 64 bits of one word of [`row_bits`]: SSE2 compares, 16 voxels per mask.
+#[inline(always)]
+fn word_bits(v: &[i16; 64], test: Test) -> u64 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::*;
+        // SAFETY: SSE2 is part of x86_64; each load reads 8 of the 64 values.
+        unsafe {
+            let (t, invert) = match test {
+                Test::Below(t) => (_mm_set1_epi16(t), 0),
+                Test::AtLeast(t) => (_mm_set1_epi16(t), 0xFFFF),
+                Test::NonZero => (_mm_setzero_si128(), 0xFFFF),
+            };
+            let cmp = |at: usize| {
+                let x = _mm_loadu_si128(v.as_ptr().add(at) as *const __m128i);
+                match test {
+                    Test::NonZero => _mm_cmpeq_epi16(x, t),
+                    _ => _mm_cmplt_epi16(x, t),
+                }
+            };
+            (0..4).fold(0u64, |w, q| {
+                let m = _mm_movemask_epi8(_mm_packs_epi16(cmp(16 * q), cmp(16 * q + 8))) as u32 ^ invert;
+                w | (m as u64) << (16 * q)
+            })
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        v.iter().enumerate().fold(0u64, |w, (b, &x)| w | (test.holds(x) as u64) << b)
+    }
+}
+
+/// Calls `f(x0, x1)` for each run [x0, x1) of set bits, in order.
+fn runs_of_bits(words: &[u64], mut f: impl FnMut(u32, u32)) {
+    let (mut carry, mut start) = (0u64, 0u32);
+    for (w, &word) in words.iter().enumerate() {
+        // A bit of `edges` marks where the row changes: a run starts or ends there.
+        let mut edges = word ^ (word << 1 | carry);
+        carry = word >> 63;
+        while edges != 0 {
+            let b = edges.trailing_zeros();
+            edges &= edges - 1;
+            let x = 64 * w as u32 + b;
+            if word >> b & 1 == 1 {
+                start = x;
+            } else {
+                f(start, x);
+            }
+        }
+    }
+    if carry == 1 {
+        f(start, 64 * words.len() as u32);
     }
 }
 
@@ -431,20 +557,19 @@ fn rasterize(runs: &Runs, run_comp: &[u32], colon: usize, vol: &Volume<i16>) -> 
 /// the colon's air, and so does the thin partial-volume layer between air and fluid (voxels
 /// beside the fluid and within two voxels of the air). Bone is as bright, but never that close to the colon's air: the wall and fat
 /// lie between. Returns the voxels added.
-fn add_tagged_fluid(vol: &Volume<i16>, lumen: &mut Volume<u8>, air_rows: &[(u32, u32)], fluid_hu: i16) -> usize {
+fn add_tagged_fluid(runs: &Runs, lumen: &mut Volume<u8>, air_rows: &[(u32, u32)]) -> usize {
     const AIR: u8 = 1;
     const FLUID: u8 = 2;
     const LAYER: u8 = 3;
     /// Fewer contacts than this is a brush past the wall, not a pool.
     const MIN_CONTACTS: usize = 20;
-    let runs = extract_runs(vol, |v| v >= fluid_hu);
     if runs.runs.is_empty() {
         return 0;
     }
     let all = vec![true; runs.runs.len()];
     let mut uf = UnionFind::new(runs.runs.len());
-    connect_3d(&runs, &all, vol.dims(), &mut uf);
-    let g = vol.geometry().clone();
+    connect_3d(runs, &all, lumen.dims(), &mut uf);
+    let g = lumen.geometry().clone();
     let [nx, ny, nz] = g.dims;
     let air_near = |lumen: &Volume<u8>, i: usize, j: usize, k: usize| {
         (1..=2).any(|d| {
@@ -503,7 +628,7 @@ fn add_tagged_fluid(vol: &Volume<i16>, lumen: &mut Volume<u8>, air_rows: &[(u32,
             .any(|&(a, b, c)| a < nx && b < ny && c < nz && lumen.get(a, b, c) == what)
     };
     let mut layer = Vec::new();
-    for (run, j, k) in pools {
+    for &(run, j, k) in &pools {
         for i in run.x0 as usize..run.x1 as usize {
             for (a, b, c) in face_neighbours(i, j, k, 1) {
                 if a < nx && b < ny && c < nz && lumen.get(a, b, c) == 0 && (beside(lumen, a, b, c, AIR) || air_near(lumen, a, b, c)) {
@@ -512,14 +637,19 @@ fn add_tagged_fluid(vol: &Volume<i16>, lumen: &mut Volume<u8>, air_rows: &[(u32,
             }
         }
     }
-    for idx in layer {
+    for &idx in &layer {
         if lumen.data()[idx] == 0 {
             lumen.data_mut()[idx] = LAYER;
             added += 1;
         }
     }
-    for v in lumen.data_mut() {
-        *v = (*v != 0) as u8;
+    // Back to 0/1: only the pools and the layer hold other labels.
+    for (run, j, k) in pools {
+        let at = g.index(run.x0 as usize, j, k);
+        lumen.data_mut()[at..at + (run.x1 - run.x0) as usize].fill(1);
+    }
+    for idx in layer {
+        lumen.data_mut()[idx] = 1;
     }
     added
 }
@@ -597,6 +727,46 @@ impl UnionFind {
 mod tests {
     use super::*;
     use crate::Geometry;
+
+    /// The runs of one row found through its bits, for both tests at once, are the runs of the
+    /// plain per-voxel test: rows of many lengths (whole words and a remainder), runs at both
+    /// ends and across word boundaries, values at and beside the thresholds.
+    #[test]
+    fn row_bits_give_the_runs_of_each_test() {
+        let mut x = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let values = [-1000i16, -501, -500, -499, 0, 1, 199, 200, 201, 1500, i16::MIN, i16::MAX];
+        for len in [1usize, 5, 63, 64, 65, 127, 128, 130, 200, 512, 517] {
+            for _ in 0..20 {
+                // Stretches of one value, so that runs are long enough to cross words.
+                let mut row = Vec::with_capacity(len);
+                while row.len() < len {
+                    let v = values[(next() % values.len() as u64) as usize];
+                    let n = 1 + (next() % 90) as usize;
+                    row.extend(std::iter::repeat_n(v, n.min(len - row.len())));
+                }
+                for tests in [(Test::Below(-500), Some(Test::AtLeast(200))), (Test::NonZero, None), (Test::AtLeast(-500), Some(Test::NonZero))] {
+                    let mut words = (vec![u64::MAX; len.div_ceil(64)], vec![u64::MAX; len.div_ceil(64)]);
+                    row_bits(&row, tests, &mut words);
+                    let found = |w: &[u64]| {
+                        let mut v = Vec::new();
+                        runs_of_bits(w, |a, b| v.push(a as usize..b as usize));
+                        v
+                    };
+                    let want = |t: Test| crate::volume::runs_where(&row, |v| t.holds(v)).collect::<Vec<_>>();
+                    assert_eq!(found(&words.0), want(tests.0), "{tests:?} {row:?}");
+                    if let Some(u) = tests.1 {
+                        assert_eq!(found(&words.1), want(u), "{tests:?} {row:?}");
+                    }
+                }
+            }
+        }
+    }
 
     /// A body of tissue (40 HU) in outside air, with a big gas tube, a small gas pocket, and
     /// a "lung" of −850 HU.

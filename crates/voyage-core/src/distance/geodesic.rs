@@ -409,17 +409,9 @@ const PREFETCH_AHEAD: usize = 16;
 /// Asks the cache for the nine neighbour rows of voxel `u`.
 #[inline(always)]
 fn prefetch_rows(dist: &[f32], u: usize, rows: &[Row; 9]) {
-    #[cfg(target_arch = "x86_64")]
     for row in rows {
-        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        let at = (u as isize + row.start) as usize;
-        if at + 4 <= dist.len() {
-            // SAFETY: `at` is within `dist` (checked); prefetching has no other effect.
-            unsafe { _mm_prefetch(dist.as_ptr().add(at) as *const i8, _MM_HINT_T0) };
-        }
+        crate::mem::prefetch(dist, (u as isize + row.start) as usize);
     }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = (dist, u, rows);
 }
 
 /// A row of three neighbours along x: the offset of its first (di = −1) and the four lanes'
