@@ -130,7 +130,8 @@ pub fn build_cells(lumen: &Volume<u8>, dt_source: &Bricked<f32>, centerline: &Ce
     let levels = choose_levels(&cl_dt, &centerline.arc_mm, &tri_dt, opts, min_len);
     let reach = diagonal(lumen.spacing()) * 1.01;
     let Labels { cells: voxel_cell, counts, below_cut } = label_voxels(dt_source, &levels, reach);
-    let triangle_cell: Vec<u16> = tri_dt.iter().map(|&d| cell_of_level(&levels, d)).collect();
+    let table = LevelTable::new(&levels);
+    let triangle_cell: Vec<u16> = tri_dt.iter().map(|&d| table.cell(d)).collect();
     let ncells = levels.len() + 1;
     let mut cells: Vec<Cell> = (0..ncells)
         .map(|c| Cell { triangles: Vec::new(), voxels: 0, centerline_span: (0, 0), portal_back: c.checked_sub(1), portal_front: (c + 1 < ncells).then_some(c) })
