@@ -53,11 +53,11 @@ impl Default for CenterlineOptions {
 /// path between them through the skeleton graph, centred and smoothed.
 pub fn centerline(mask: &Volume<u8>, ds: &Field<f32>, source: [usize; 3], target: [usize; 3], opts: &CenterlineOptions) -> Result<Centerline> {
     let pad = Padded::new(mask, &ds.grid);
-    let weight = cost_weight(&pad, ds, opts);
+    let ds_pad = pad.pad(&ds.data, 0.0);
+    let weight = cost_weight(&ds_pad, opts);
     let src = pad.lumen_index(source)?;
     let dst = pad.lumen_index(target)?;
     let tree = tree_search(&pad, &[src], mask.spacing(), Some(&weight), None);
-    let ds_pad = pad.pad(&ds.data, 0.0);
     let (path, _) = colon_path(&pad, &tree, &ds_pad, mask.spacing(), src, Some(dst), &opts.skeleton)?;
     let voxels: Vec<[usize; 3]> = path.iter().map(|&i| pad.global_of_index(i)).collect();
     Ok(refine(&voxels, mask, ds, opts))
@@ -85,17 +85,15 @@ pub fn refine_points(raw: Vec<DVec3>, ds: &Field<f32>, opts: &CenterlineOptions)
 /// per mm: w = 1 + K·((Dmax − Ds)/Dmax)^p (padded layout). With p = 1 this is the paper's
 /// cost plus the length; a high power (Bitter et al. 2001 use 16) makes narrow places so dear
 /// that the path never takes a short cut where two loops of the colon touch, as they do in
-/// real scans, while in the middle of the lumen it is nearly the plain length.
-pub fn cost_weight(pad: &Padded, ds: &Field<f32>, opts: &CenterlineOptions) -> Vec<f32> {
-    let dmax = ds.data.iter().cloned().fold(0.0f32, f32::max).max(1e-3);
+/// real scans, while in the middle of the lumen it is nearly the plain length. `ds_pad`: Ds
+/// in the padded layout.
+pub fn cost_weight(ds_pad: &[f32], opts: &CenterlineOptions) -> Vec<f32> {
+    let dmax = ds_pad.iter().cloned().fold(0.0f32, f32::max).max(1e-3);
     let k = opts.penalty_scale as f32;
     let p = opts.penalty_power;
     // Walls (Ds 0) all weigh 1 + K; only the lumen's voxels need the power.
-    let mut w = pad.pad(&ds.data, 0.0);
-    for x in &mut w {
-        *x = if *x == 0.0 { 1.0 + k } else { 1.0 + k * power(((dmax - *x) / dmax).max(0.0), p) };
-    }
-    w
+    let weight = |d: f32| if d == 0.0 { 1.0 + k } else { 1.0 + k * power(((dmax - d) / dmax).max(0.0), p) };
+    crate::mem::collect(ds_pad.len(), ds_pad.iter().map(|&d| weight(d)))
 }
 
 /// `x` to the power `n` by squaring, as `f32::powi` computes it (the same products in the same

@@ -132,8 +132,8 @@ pub fn dt_fields(lumen: &Volume<u8>, ds: &Bricked<f32>, source: [usize; 3], targ
 fn skeleton_path(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], given_source: Option<[usize; 3]>, given_target: Option<[usize; 3]>, opts: &EndpointOptions, cl_opts: &CenterlineOptions) -> Result<Vec<[usize; 3]>> {
     let pad = Padded::new(lumen, &ds.grid);
     let sp = lumen.spacing();
-    let weight = cost_weight(&pad, ds, cl_opts);
     let ds_pad = pad.pad(&ds.data, 0.0);
+    let weight = cost_weight(&ds_pad, cl_opts);
     let dmax = ds.data.iter().cloned().fold(0.0f32, f32::max);
     let floor = (opts.min_width as f32 * dmax).min(dmax);
     let source = match given_source {

@@ -213,6 +213,15 @@ impl<T: Copy + PartialEq> Bricked<T> {
         Bricked::fill(grid, geometry, layout, outside, row, map)
     }
 
+    /// [`Bricked::from_rows`] with the bricks chosen from the rows of another field of the same
+    /// box (`keep` holds for one of its values there): a mask is a quarter of the bytes of an
+    /// f32 field to read. Values in the bricks left out must map to `outside`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn from_rows_where<'a, 'b, K: Copy + 'b, S: Copy + 'a>(grid: &BoxGrid, geometry: &Geometry, outside: T, where_rows: impl Fn(usize, usize) -> &'b [K], keep: impl Fn(K) -> bool, row: impl Fn(usize, usize) -> &'a [S], map: impl Fn(S) -> T) -> Self {
+        let layout = Layout::of_rows(grid, &where_rows, keep);
+        Bricked::fill(grid, geometry, layout, outside, row, map)
+    }
+
     /// From box rows of the same box as `like`, into the bricks `like` stores (so one pass,
     /// over those bricks only); values in the other bricks must map to `outside`.
     pub fn from_rows_like<'a, U, S: Copy + 'a>(like: &Bricked<U>, outside: T, row: impl Fn(usize, usize) -> &'a [S], map: impl Fn(S) -> T) -> Self {

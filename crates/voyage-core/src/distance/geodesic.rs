@@ -29,7 +29,7 @@ pub struct Geodesic {
 /// is needed, the search itself tells walls by their 0) and are finished and moved into
 /// bricks in one pass.
 pub fn geodesic_distance(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3]) -> Result<Geodesic> {
-    search_and_finish(mask, grid, source, Vec::new(), |shape, dist| shape.finish_bricked(dist, mask.geometry())).map(|(g, _)| g)
+    search_and_finish(mask, grid, source, Vec::new(), |shape, dist| shape.finish_bricked(dist, mask)).map(|(g, _)| g)
 }
 
 /// [`geodesic_distance`] over the box of `like` and stored in the bricks it stores, which must
@@ -150,11 +150,13 @@ impl Padded {
         self.lay_out_mask(mask, 1, 0.0f32, |m| if m != 0 { f32::INFINITY } else { 0.0 }, reuse)
     }
 
-    /// Unfinished search distances ([`finish`]) in bricks (+∞ outside).
-    pub(crate) fn finish_bricked(&self, v: &[f32], geometry: &crate::Geometry) -> Bricked<f32> {
-        // Walls (0) and unreached lumen (+∞) finish as +∞: a brick of only those is left out.
-        let reached = |d: f32| d != 0.0 && d != f32::INFINITY;
-        Bricked::from_rows(&self.grid, geometry, f32::INFINITY, |j, k| self.row(v, j, k), reached, finish)
+    /// Unfinished search distances ([`finish`]) in bricks (+∞ outside): the bricks that hold
+    /// lumen of `mask`, found from the mask (a quarter of the bytes of the distances). Walls
+    /// finish as +∞, so a brick without lumen holds nothing else.
+    pub(crate) fn finish_bricked(&self, v: &[f32], mask: &Volume<u8>) -> Bricked<f32> {
+        let (g, grid) = (mask.geometry(), &self.grid);
+        let mask_row = |j: usize, k: usize| &mask.data()[g.index(grid.lo[0], grid.lo[1] + j, grid.lo[2] + k)..][..grid.dims[0]];
+        Bricked::from_rows_where(grid, g, f32::INFINITY, mask_row, |m| m != 0, |j, k| self.row(v, j, k), finish)
     }
 
     /// Box row (j, k) of a padded-layout field.
