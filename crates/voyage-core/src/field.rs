@@ -161,23 +161,49 @@ struct Layout {
     bricks: Vec<u32>,
 }
 
+/// Which bricks of a box hold a value worth keeping, marked row by row while the rows are
+/// read for something else (a search's start from the mask), for
+/// [`Bricked::from_rows_marked`]: no second pass over the box.
+pub struct BrickMarks {
+    dims: [usize; 3],
+    nb: [usize; 3],
+    table: Vec<u32>,
+}
+
+impl BrickMarks {
+    pub fn new(grid: &BoxGrid) -> Self {
+        let nb = grid.dims.map(|d| d.div_ceil(BRICK));
+        BrickMarks { dims: grid.dims, nb, table: vec![0u32; nb[0] * nb[1] * nb[2]] }
+    }
+
+    /// Marks the bricks of box row (j, k) where `keep` holds for one of its values.
+    #[inline]
+    pub fn mark_row<S: Copy>(&mut self, j: usize, k: usize, row: &[S], keep: impl Fn(S) -> bool) {
+        let base = self.nb[0] * ((j >> BRICK_SHIFT) + self.nb[1] * (k >> BRICK_SHIFT));
+        for (c, chunk) in row[..self.dims[0]].chunks(BRICK).enumerate() {
+            // No early exit: the fold compiles to branch-free vector code.
+            if self.table[base + c] == 0 && chunk.iter().fold(false, |a, &s| a | keep(s)) {
+                self.table[base + c] = 1;
+            }
+        }
+    }
+}
+
 impl Layout {
     /// The bricks where `keep` holds for one of the values of the box rows `row(j, k)`.
     fn of_rows<'a, S: Copy + 'a>(grid: &BoxGrid, row: &impl Fn(usize, usize) -> &'a [S], keep: impl Fn(S) -> bool) -> Self {
-        let nb = grid.dims.map(|d| d.div_ceil(BRICK));
-        let [bx, by, bz] = grid.dims;
-        let mut table = vec![0u32; nb[0] * nb[1] * nb[2]];
-        for k in 0..bz {
-            for j in 0..by {
-                let base = nb[0] * ((j >> BRICK_SHIFT) + nb[1] * (k >> BRICK_SHIFT));
-                for (c, chunk) in row(j, k)[..bx].chunks(BRICK).enumerate() {
-                    // No early exit: the fold compiles to branch-free vector code.
-                    if table[base + c] == 0 && chunk.iter().fold(false, |a, &s| a | keep(s)) {
-                        table[base + c] = 1;
-                    }
-                }
+        let mut marks = BrickMarks::new(grid);
+        for k in 0..grid.dims[2] {
+            for j in 0..grid.dims[1] {
+                marks.mark_row(j, k, row(j, k), &keep);
             }
         }
+        Layout::of_marks(marks)
+    }
+
+    /// The marked bricks, numbered in order.
+    fn of_marks(marks: BrickMarks) -> Self {
+        let BrickMarks { nb, mut table, .. } = marks;
         let mut bricks = Vec::new();
         for (b, t) in table.iter_mut().enumerate() {
             if *t != 0 {
@@ -213,13 +239,10 @@ impl<T: Copy + PartialEq> Bricked<T> {
         Bricked::fill(grid, geometry, layout, outside, row, map)
     }
 
-    /// [`Bricked::from_rows`] with the bricks chosen from the rows of another field of the same
-    /// box (`keep` holds for one of its values there): a mask is a quarter of the bytes of an
-    /// f32 field to read. Values in the bricks left out must map to `outside`.
-    #[allow(clippy::too_many_arguments)]
-    pub fn from_rows_where<'a, 'b, K: Copy + 'b, S: Copy + 'a>(grid: &BoxGrid, geometry: &Geometry, outside: T, where_rows: impl Fn(usize, usize) -> &'b [K], keep: impl Fn(K) -> bool, row: impl Fn(usize, usize) -> &'a [S], map: impl Fn(S) -> T) -> Self {
-        let layout = Layout::of_rows(grid, &where_rows, keep);
-        Bricked::fill(grid, geometry, layout, outside, row, map)
+    /// [`Bricked::from_rows`] into the bricks `marks` marked (values in the others must map to
+    /// `outside`).
+    pub fn from_rows_marked<'a, S: Copy + 'a>(grid: &BoxGrid, geometry: &Geometry, outside: T, marks: BrickMarks, row: impl Fn(usize, usize) -> &'a [S], map: impl Fn(S) -> T) -> Self {
+        Bricked::fill(grid, geometry, Layout::of_marks(marks), outside, row, map)
     }
 
     /// From box rows of the same box as `like`, into the bricks `like` stores (so one pass,

@@ -6,7 +6,7 @@
 //! may be emptied in any order and the result is the exact Dijkstra distance. Each voxel costs
 //! a push and a pop into a `Vec`, not a heap's log n.
 
-use crate::field::{BoxGrid, Bricked};
+use crate::field::{BoxGrid, BrickMarks, Bricked};
 use crate::{Error, Result, Volume};
 
 /// Dt and what the search learned on the way.
@@ -29,7 +29,10 @@ pub struct Geodesic {
 /// is needed, the search itself tells walls by their 0) and are finished and moved into
 /// bricks in one pass.
 pub fn geodesic_distance(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3]) -> Result<Geodesic> {
-    search_and_finish(mask, grid, source, Vec::new(), |shape, dist| shape.finish_bricked(dist, mask)).map(|(g, _)| g)
+    let mut marks = BrickMarks::new(grid);
+    let (shape, r) = search_from(mask, grid, source, Vec::new(), Some(&mut marks))?;
+    let dist = shape.finish_bricked(&r.dist, mask.geometry(), marks);
+    Ok(Geodesic { farthest: shape.global_of_index(r.far), max_mm: r.far_d, reached: r.reached, dist })
 }
 
 /// [`geodesic_distance`] over the box of `like` and stored in the bricks it stores, which must
@@ -38,19 +41,22 @@ pub fn geodesic_distance(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3]) 
 /// next one: a fresh box-sized array costs a page fault per page, which on some machines costs
 /// as much as the search itself.
 pub fn geodesic_distance_like<U>(mask: &Volume<u8>, like: &Bricked<U>, source: [usize; 3], scratch: Vec<f32>) -> Result<(Geodesic, Vec<f32>)> {
-    search_and_finish(mask, &like.grid, source, scratch, |shape, dist| Bricked::from_rows_like(like, f32::INFINITY, |j, k| shape.row(dist, j, k), finish))
+    let (shape, r) = search_from(mask, &like.grid, source, scratch, None)?;
+    let dist = Bricked::from_rows_like(like, f32::INFINITY, |j, k| shape.row(&r.dist, j, k), finish);
+    Ok((Geodesic { farthest: shape.global_of_index(r.far), max_mm: r.far_d, reached: r.reached, dist }, r.dist))
 }
 
-fn search_and_finish(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3], scratch: Vec<f32>, finish_into: impl FnOnce(&Padded, &[f32]) -> Bricked<f32>) -> Result<(Geodesic, Vec<f32>)> {
+/// The plain search from `source` over `grid`, its distances left unfinished ([`finish`]);
+/// `marks`, when given, hears of the bricks that hold lumen as the mask is read.
+fn search_from(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3], scratch: Vec<f32>, marks: Option<&mut BrickMarks>) -> Result<(Padded, Search)> {
     let shape = Padded::shape(grid);
     let src = shape
         .index_of_global(source)
         .filter(|_| mask.get(source[0], source[1], source[2]) != 0)
         .ok_or_else(|| Error::invalid(format!("the voxel {source:?} is not in the lumen")))?;
-    let dist = shape.start_from_mask(mask, scratch);
+    let dist = shape.start_from_mask(mask, scratch, marks);
     let r = dial_impl::<false, false>(&shape, dist, &[src], mask.spacing(), &[], None, false);
-    let dist = finish_into(&shape, &r.dist);
-    Ok((Geodesic { farthest: shape.global_of_index(r.far), max_mm: r.far_d, reached: r.reached, dist }, r.dist))
+    Ok((shape, r))
 }
 
 /// What a search over the padded grid found.
@@ -102,13 +108,13 @@ pub struct Padded {
 impl Padded {
     pub fn new(mask: &Volume<u8>, grid: &BoxGrid) -> Self {
         let mut pad = Padded::shape(grid);
-        pad.inside = pad.lay_out_mask(mask, 0, 0u8, |m| (m != 0) as u8, Vec::new());
+        pad.inside = pad.lay_out_mask(mask, 0, 0u8, |m| (m != 0) as u8, Vec::new(), None);
         pad
     }
 
     /// `mask` over the box in the padded layout, each voxel as `value` makes it, `wall` in the
-    /// padding, plus `spare` more `wall`s at the end.
-    fn lay_out_mask<T: Copy>(&self, mask: &Volume<u8>, spare: usize, wall: T, value: impl Fn(u8) -> T, reuse: Vec<T>) -> Vec<T> {
+    /// padding, plus `spare` more `wall`s at the end; `marks` hears of the bricks holding lumen.
+    fn lay_out_mask<T: Copy>(&self, mask: &Volume<u8>, spare: usize, wall: T, value: impl Fn(u8) -> T, reuse: Vec<T>, mut marks: Option<&mut BrickMarks>) -> Vec<T> {
         let n = self.dims[0] * self.dims[1] * self.dims[2] + spare;
         let mut out = if reuse.capacity() >= n {
             let mut v = reuse;
@@ -123,6 +129,9 @@ impl Padded {
         for k in 0..grid.dims[2] {
             for j in 0..grid.dims[1] {
                 let src = &mask.data()[g.index(grid.lo[0], grid.lo[1] + j, grid.lo[2] + k)..][..grid.dims[0]];
+                if let Some(m) = marks.as_deref_mut() {
+                    m.mark_row(j, k, src, |m| m != 0);
+                }
                 let dst = self.row_start(j, k);
                 for (d, &m) in out[dst..dst + grid.dims[0]].iter_mut().zip(src) {
                     *d = value(m);
@@ -145,18 +154,16 @@ impl Padded {
 
     /// A search's starting distances in the padded layout straight from the mask: 0 for walls
     /// and padding, +∞ for lumen, plus the spare wall at the end the row loads need; in
-    /// `reuse`'s memory where it is large enough.
-    pub(crate) fn start_from_mask(&self, mask: &Volume<u8>, reuse: Vec<f32>) -> Vec<f32> {
-        self.lay_out_mask(mask, 1, 0.0f32, |m| if m != 0 { f32::INFINITY } else { 0.0 }, reuse)
+    /// `reuse`'s memory where it is large enough; `marks` hears of the bricks holding lumen.
+    pub(crate) fn start_from_mask(&self, mask: &Volume<u8>, reuse: Vec<f32>, marks: Option<&mut BrickMarks>) -> Vec<f32> {
+        self.lay_out_mask(mask, 1, 0.0f32, |m| if m != 0 { f32::INFINITY } else { 0.0 }, reuse, marks)
     }
 
     /// Unfinished search distances ([`finish`]) in bricks (+∞ outside): the bricks that hold
-    /// lumen of `mask`, found from the mask (a quarter of the bytes of the distances). Walls
-    /// finish as +∞, so a brick without lumen holds nothing else.
-    pub(crate) fn finish_bricked(&self, v: &[f32], mask: &Volume<u8>) -> Bricked<f32> {
-        let (g, grid) = (mask.geometry(), &self.grid);
-        let mask_row = |j: usize, k: usize| &mask.data()[g.index(grid.lo[0], grid.lo[1] + j, grid.lo[2] + k)..][..grid.dims[0]];
-        Bricked::from_rows_where(grid, g, f32::INFINITY, mask_row, |m| m != 0, |j, k| self.row(v, j, k), finish)
+    /// lumen, as marked when the search's start was read from the mask (no pass over the
+    /// distances to find them). Walls finish as +∞, so a brick without lumen holds nothing else.
+    pub(crate) fn finish_bricked(&self, v: &[f32], geometry: &crate::Geometry, marks: BrickMarks) -> Bricked<f32> {
+        Bricked::from_rows_marked(&self.grid, geometry, f32::INFINITY, marks, |j, k| self.row(v, j, k), finish)
     }
 
     /// Box row (j, k) of a padded-layout field.
