@@ -114,7 +114,7 @@ fn label_points(path: &[DVec3]) -> (Vec<DVec3>, Vec<f64>) {
 /// partial, in the same layout.
 struct PaddedBlocks {
     pad: Padded,
-    /// 1 for a partial block, 0 else; three spare 0s at the end for [`beside_partial`]'s
+    /// 1 for a partial block, 0 else; three spare 0s at the end for [`partial_around`]'s
     /// four-byte loads.
     partial: Vec<u8>,
 }
@@ -165,7 +165,7 @@ fn label_blocks(pad: &PaddedBlocks, blocks: &Blocks, points: &[DVec3]) -> Vec<u1
             labels[u] = labels[p];
         }
     }
-    let rows = neighbour_row_starts(pad);
+    let rows = pad.neighbour_row_starts();
     let mut frontier: Vec<usize> = search.order.iter().map(|&u| u as usize).filter(|&u| partial_around(&pad.partial, u, &rows) != 0).collect();
     while !frontier.is_empty() {
         let mut next = Vec::new();
@@ -188,16 +188,9 @@ fn label_blocks(pad: &PaddedBlocks, blocks: &Blocks, points: &[DVec3]) -> Vec<u1
     labels
 }
 
-/// Offsets from a padded index to the first of each of the nine rows of three that hold its
-/// 26 neighbours (and itself), in the order of [`Padded::neighbours`].
-fn neighbour_row_starts(pad: &Padded) -> [isize; 9] {
-    let (nx, ny) = (pad.dims[0] as isize, pad.dims[1] as isize);
-    std::array::from_fn(|r| -1 + nx * ((r % 3) as isize - 1 + ny * ((r / 3) as isize - 1)))
-}
-
 /// Which of the 27 blocks around padded index `u` (itself included) are partial: bit
-/// 3·row + lane, rows as [`neighbour_row_starts`]. Each row of three is one four-byte load:
-/// nine loads instead of 26 tests.
+/// 3·row + lane, rows as [`Padded::neighbour_row_starts`]. Each row of three is one
+/// four-byte load: nine loads instead of 26 tests.
 #[inline]
 fn partial_around(partial: &[u8], u: usize, rows: &[isize; 9]) -> u32 {
     rows.iter().enumerate().fold(0u32, |acc, (r, &start)| {
@@ -253,7 +246,7 @@ mod tests {
         let mut rng = crate::phantom::rng::Rng::new(11, 2);
         let mut partial: Vec<u8> = (0..n).map(|_| (rng.range(0.0, 1.0) < 0.3) as u8).collect();
         partial.extend([0; 3]);
-        let rows = neighbour_row_starts(&pad);
+        let rows = pad.neighbour_row_starts();
         let offsets: Vec<isize> = pad.neighbours([1.0; 3]).iter().map(|o| o.0).collect();
         let [nx, ny, nz] = pad.dims;
         for k in 1..nz - 1 {

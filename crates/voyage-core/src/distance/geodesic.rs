@@ -196,6 +196,13 @@ impl Padded {
         [0, 1, 2].map(|a| p[a] - 1 + self.grid.lo[a])
     }
 
+    /// Offsets from an index to the first of each of the nine rows of three (along x) that
+    /// hold its 26 neighbours and itself, in the order of [`Padded::neighbours`] (z, then y).
+    pub(crate) fn neighbour_row_starts(&self) -> [isize; 9] {
+        let (nx, ny) = (self.dims[0] as isize, self.dims[1] as isize);
+        std::array::from_fn(|r| -1 + nx * ((r % 3) as isize - 1 + ny * ((r / 3) as isize - 1)))
+    }
+
     /// 26 neighbour offsets and their lengths in mm.
     pub fn neighbours(&self, spacing: [f64; 3]) -> Vec<(isize, f32)> {
         let (nx, ny) = (self.dims[0] as isize, self.dims[1] as isize);
@@ -432,7 +439,7 @@ struct Row {
 
 /// The nine rows, in the order of [`Padded::neighbours`] (dk, then dj).
 fn neighbour_rows(pad: &Padded, spacing: [f64; 3]) -> [Row; 9] {
-    let (nx, ny) = (pad.dims[0] as isize, pad.dims[1] as isize);
+    let starts = pad.neighbour_row_starts();
     std::array::from_fn(|r| {
         let (dj, dk) = ((r % 3) as isize - 1, (r / 3) as isize - 1);
         let mut len = [f32::INFINITY; 4];
@@ -442,7 +449,7 @@ fn neighbour_rows(pad: &Padded, spacing: [f64; 3]) -> [Row; 9] {
                 *l = ((di as f64 * spacing[0]).powi(2) + (dj as f64 * spacing[1]).powi(2) + (dk as f64 * spacing[2]).powi(2)).sqrt() as f32;
             }
         }
-        Row { start: -1 + nx * (dj + ny * dk), len }
+        Row { start: starts[r], len }
     })
 }
 
