@@ -12,6 +12,14 @@ pub struct BoxGrid {
 }
 
 impl BoxGrid {
+    /// The box from voxel `extent[0]` to voxel `extent[1]` (both inside), grown by `margin`
+    /// voxels on every side as far as the volume (of `dims`) reaches.
+    pub fn around(extent: [[usize; 3]; 2], margin: usize, dims: [usize; 3]) -> BoxGrid {
+        let [lo, hi] = extent;
+        let lo_m = [0, 1, 2].map(|a| lo[a].saturating_sub(margin));
+        let hi_m = [0, 1, 2].map(|a| (hi[a] + margin).min(dims[a] - 1));
+        BoxGrid { lo: lo_m, dims: [0, 1, 2].map(|a| hi_m[a] - lo_m[a] + 1) }
+    }
     pub fn len(&self) -> usize {
         self.dims[0] * self.dims[1] * self.dims[2]
     }
@@ -65,10 +73,7 @@ pub fn bounding_box<T: Copy>(vol: &Volume<T>, margin: usize, pred: impl Fn(T) ->
     if lo[0] == usize::MAX {
         return None;
     }
-    let dims = vol.dims();
-    let lo_m = [0, 1, 2].map(|a| lo[a].saturating_sub(margin));
-    let hi_m = [0, 1, 2].map(|a| (hi[a] + margin).min(dims[a] - 1));
-    Some(BoxGrid { lo: lo_m, dims: [0, 1, 2].map(|a| hi_m[a] - lo_m[a] + 1) })
+    Some(BoxGrid::around([lo, hi], margin, vol.dims()))
 }
 
 /// The first and last positions in `row` where `pred` holds. Most rows of a scan hold no

@@ -9,10 +9,10 @@ use serde::Serialize;
 
 use crate::cells::{build_cells, CellOptions, Cells};
 use crate::centerline::{Centerline, CenterlineOptions};
-use crate::distance::distance_to_wall;
+use crate::distance::distance_to_wall_in;
 use crate::contacts::{cut_contacts, ContactOptions};
 use crate::endpoints::{self, centre_skeleton, dt_fields, trace_skeleton, uses_blocks, EndpointOptions};
-use crate::field::bounding_box;
+use crate::field::BoxGrid;
 use crate::field::Bricked;
 use crate::segment::{segment, SegmentOptions, Segmentation};
 use crate::surface::{extract_surface, Surface};
@@ -138,8 +138,10 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Sta
     // The skeleton search runs on blocks with their own Ds when the lumen is large, so the
     // voxels' Ds waits until the contacts are cut; on a small lumen it needs Ds first.
     progress(Stage::Centerline);
-    let grid = bounding_box(&seg.lumen, 1, |v| v != 0).ok_or_else(|| crate::Error::invalid("the lumen mask is empty"))?;
-    let early_ds = if uses_blocks(&seg.lumen, seg.lumen_voxels, &opts.centerline) { None } else { Some(distance_to_wall(&seg.lumen)?) };
+    // Every Ds below is over this box: cutting contacts only takes lumen away, and a box
+    // larger than the lumen's own changes no distance.
+    let grid = BoxGrid::around(seg.extent, 1, seg.lumen.dims());
+    let early_ds = if uses_blocks(&seg.lumen, seg.lumen_voxels, &opts.centerline) { None } else { Some(distance_to_wall_in(&seg.lumen, grid.clone())) };
     let sk = trace_skeleton(&seg.lumen, &grid, seg.lumen_voxels, seg.seed_voxel, early_ds.as_ref(), &opts.endpoints, &opts.centerline)?;
     lap(&mut t.skeleton);
 
@@ -152,7 +154,7 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Sta
     progress(Stage::Ds);
     let ds_box = match early_ds {
         Some(d) if taken.is_empty() => d,
-        _ => distance_to_wall(&seg.lumen)?,
+        _ => distance_to_wall_in(&seg.lumen, grid.clone()),
     };
     lap(&mut t.ds);
     let mut ends = centre_skeleton(&seg.lumen, &ds_box, &sk, &opts.centerline)?;
@@ -171,7 +173,7 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Sta
             seg.lumen.data_mut()[v] = 1;
         }
         contact_voxels = 0;
-        let ds_box = distance_to_wall(&seg.lumen)?;
+        let ds_box = distance_to_wall_in(&seg.lumen, grid.clone());
         ends = centre_skeleton(&seg.lumen, &ds_box, &sk, &opts.centerline)?;
         ds = Bricked::from_field(&ds_box, 0.0);
         (dt_target, dt_source) = dt_fields(&seg.lumen, &ds, ends.source, ends.target, ds_box.data)?;

@@ -87,6 +87,8 @@ pub struct Segmentation {
     pub from_mask: bool,
     /// Voxel of air (from the seed, or the colon's lowest voxel) the colon was grown from.
     pub seed_voxel: [usize; 3],
+    /// The lumen's first and last voxel along each axis (its bounding box, both ends inside).
+    pub extent: [[usize; 3]; 2],
 }
 
 /// One stretch of lumen candidates along x: voxels x0..x1 of row (j, k).
@@ -135,9 +137,15 @@ pub fn segment(vol: &Volume<i16>, opts: &SegmentOptions) -> Result<Segmentation>
         Some(mm) => voxel_of(vol, mm)?,
         None => lowest_voxel(&runs, &run_comp, colon, vol.dims()),
     };
+    // Fluid may reach beyond the air's box; the mask is read again only then.
+    let extent = match fluid_voxels {
+        0 => colon_extent(&runs, &run_comp, colon, vol.dims()),
+        _ => crate::field::bounding_box(&lumen, 0, |v| v != 0).map(|b| [b.lo, [0, 1, 2].map(|a| b.lo[a] + b.dims[a] - 1)]),
+    }
+    .ok_or_else(|| Error::invalid("the colon holds no voxels"))?;
     let lumen_voxels = comps[colon].voxels + fluid_voxels;
     let (components, small) = report(comps, colon, opts.min_report_ml);
-    Ok(Segmentation { lumen, lumen_voxels, components, small_components: small, fluid_voxels, from_mask, seed_voxel })
+    Ok(Segmentation { lumen, lumen_voxels, components, small_components: small, fluid_voxels, from_mask, seed_voxel, extent })
 }
 
 /// A volume holding only 0 and 1 is a mask, not a CT.
@@ -675,6 +683,22 @@ fn lowest_voxel(runs: &Runs, run_comp: &[u32], colon: usize, dims: [usize; 3]) -
         }
     }
     [0, 0, 0]
+}
+
+/// The first and last voxel along each axis of the colon's runs.
+fn colon_extent(runs: &Runs, run_comp: &[u32], colon: usize, dims: [usize; 3]) -> Option<[[usize; 3]; 2]> {
+    let [_, ny, nz] = dims;
+    let (mut lo, mut hi) = ([usize::MAX; 3], [0usize; 3]);
+    for k in 0..nz {
+        for j in 0..ny {
+            for r in runs.row(j, k).filter(|&r| run_comp[r] == colon as u32) {
+                let run = runs.runs[r];
+                lo = [lo[0].min(run.x0 as usize), lo[1].min(j), lo[2].min(k)];
+                hi = [hi[0].max(run.x1 as usize - 1), hi[1].max(j), hi[2].max(k)];
+            }
+        }
+    }
+    (lo[0] != usize::MAX).then_some([lo, hi])
 }
 
 /// Largest first, the colon marked; tiny components are only counted.

@@ -786,3 +786,16 @@ fn full_colon_invariants() {
         assert!(crossed_wall, "the {} mm polyp at arc {:.0} is in plain view", q.diameter_mm, q.arc_mm);
     }
 }
+
+#[test]
+fn segmentation_extent_is_the_lumen_bounding_box_with_and_without_fluid() {
+    // Later stages take the lumen's box from the segmentation instead of reading the mask.
+    for fluid in [false, true] {
+        let p = small(ColonOptions { tagged_fluid: fluid, ..ColonOptions::default() });
+        let seg = voyage_core::segment::segment(&p.ct, &Default::default()).expect("segment");
+        assert_eq!(seg.fluid_voxels > 0, fluid, "fluid taken: {}", seg.fluid_voxels);
+        let b = voyage_core::field::bounding_box(&seg.lumen, 0, |v| v != 0).expect("lumen");
+        let last = [0, 1, 2].map(|a| b.lo[a] + b.dims[a] - 1);
+        assert_eq!(seg.extent, [b.lo, last], "fluid {fluid}");
+    }
+}

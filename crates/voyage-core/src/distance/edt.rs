@@ -21,11 +21,17 @@ use crate::{Error, Result, Volume};
 /// for lumen voxels (mask ≠ 0), 0 elsewhere.
 pub fn distance_to_wall(mask: &Volume<u8>) -> Result<Field<f32>> {
     let grid = bounding_box(mask, 1, |v| v != 0).ok_or_else(|| Error::invalid("the lumen mask is empty"))?;
+    Ok(distance_to_wall_in(mask, grid))
+}
+
+/// [`distance_to_wall`] over a box the caller knows holds all the lumen and a voxel of wall
+/// around it (or the volume's border): the mask is then read only inside it.
+pub fn distance_to_wall_in(mask: &Volume<u8>, grid: BoxGrid) -> Field<f32> {
     let sp = mask.spacing();
     let (mut f, span_y, span_z) = pass_x(mask, &grid, sp[0]);
     pass_y(&mut f, &grid, sp[1], &span_y);
     pass_z(&mut f, &grid, sp[2], &span_z);
-    Ok(Field { grid, geometry: mask.geometry().clone(), data: f })
+    Field { grid, geometry: mask.geometry().clone(), data: f }
 }
 
 /// Scratch space for the 1D transforms: the envelope's parabolas and a column.
