@@ -17,7 +17,7 @@ use crate::blocks::Blocks;
 use crate::centerline::{cost_weight, refine_points, Centerline, CenterlineOptions};
 use crate::skeleton::{colon_path, tree_search, SkeletonOptions};
 use crate::distance::distance_to_wall;
-use crate::distance::geodesic::{geodesic_distance_like, Geodesic, Padded};
+use crate::distance::geodesic::{geodesic_distance_pair_like, Geodesic, Padded};
 use crate::field::{BoxGrid, Bricked, Field};
 use crate::{Error, Result, Volume};
 
@@ -123,8 +123,7 @@ pub fn find_endpoints(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], opt
 ///
 /// `scratch`: memory to search in (Ds's box array, done with): fresh memory costs page faults.
 pub fn dt_fields(lumen: &Volume<u8>, ds: &Bricked<f32>, source: [usize; 3], target: [usize; 3], scratch: Vec<f32>) -> Result<(Geodesic, Geodesic)> {
-    let (to_target, scratch) = geodesic_distance_like(lumen, ds, target, scratch)?;
-    let (to_source, _) = geodesic_distance_like(lumen, ds, source, scratch)?;
+    let [to_target, to_source] = geodesic_distance_pair_like(lumen, ds, [target, source], scratch)?;
     Ok((to_target, to_source))
 }
 

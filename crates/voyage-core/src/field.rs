@@ -256,7 +256,29 @@ impl<T: Copy + PartialEq> Bricked<T> {
         Bricked::fill(&like.grid, &like.geometry, like.layout.clone(), outside, row, map)
     }
 
+    /// [`Bricked::from_rows_like`] from a box-layout array whose row (j, k) starts at
+    /// `src[row_start(j, k)]`, each value read through `take`, which may also change it: one
+    /// pass both stores a field and readies its array for other use (a second search).
+    pub fn from_rows_like_taking<U, S>(like: &Bricked<U>, outside: T, src: &mut [S], row_start: impl Fn(usize, usize) -> usize, take: impl Fn(&mut S) -> T) -> Self {
+        Bricked::fill_with(&like.grid, &like.geometry, like.layout.clone(), outside, |j, k, ci, dst| {
+            for (d, s) in dst.iter_mut().zip(&mut src[row_start(j, k) + ci..]) {
+                *d = take(s);
+            }
+        })
+    }
+
     fn fill<'a, S: Copy + 'a>(grid: &BoxGrid, geometry: &Geometry, layout: Layout, outside: T, row: impl Fn(usize, usize) -> &'a [S], map: impl Fn(S) -> T) -> Self {
+        Bricked::fill_with(grid, geometry, layout, outside, |j, k, ci, dst| {
+            let n = dst.len();
+            for (d, &s) in dst.iter_mut().zip(&row(j, k)[ci..ci + n]) {
+                *d = map(s);
+            }
+        })
+    }
+
+    /// The bricks of `layout`, each row of each brick written by `row(j, k, ci, dst)`: box
+    /// row (j, k) from x = ci on, into `dst` (as long as the brick's part of the row).
+    fn fill_with(grid: &BoxGrid, geometry: &Geometry, layout: Layout, outside: T, mut row: impl FnMut(usize, usize, usize, &mut [T])) -> Self {
         let [bx, by, bz] = grid.dims;
         let mut data = crate::mem::filled(layout.bricks.len() * BRICK_VOXELS, outside);
         for (slot, bricks) in data.chunks_mut(BRICK_VOXELS).enumerate() {
@@ -264,11 +286,7 @@ impl<T: Copy + PartialEq> Bricked<T> {
             let n = BRICK.min(bx - ci);
             for z in 0..BRICK.min(bz - ck) {
                 for y in 0..BRICK.min(by - cj) {
-                    let src = &row(cj + y, ck + z)[ci..ci + n];
-                    let dst = &mut bricks[BRICK * (y + BRICK * z)..][..n];
-                    for (d, &s) in dst.iter_mut().zip(src) {
-                        *d = map(s);
-                    }
+                    row(cj + y, ck + z, ci, &mut bricks[BRICK * (y + BRICK * z)..][..n]);
                 }
             }
         }

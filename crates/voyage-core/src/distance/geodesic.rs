@@ -46,17 +46,40 @@ pub fn geodesic_distance_like<U>(mask: &Volume<u8>, like: &Bricked<U>, source: [
     Ok((Geodesic { farthest: shape.global_of_index(r.far), max_mm: r.far_d, reached: r.reached, dist }, r.dist))
 }
 
+/// [`geodesic_distance_like`] from two sources in turn (Dt to the target, and to the source).
+/// The pass that moves the first search's distances into bricks also turns its array back
+/// into a start (every lumen voxel of the box lies in those bricks), so the second search
+/// needs no new one from the mask.
+pub fn geodesic_distance_pair_like<U>(mask: &Volume<u8>, like: &Bricked<U>, sources: [[usize; 3]; 2], scratch: Vec<f32>) -> Result<[Geodesic; 2]> {
+    let (shape, mut first) = search_from(mask, &like.grid, sources[0], scratch, None)?;
+    let second_src = source_index(mask, &shape, sources[1])?;
+    let first_dist = Bricked::from_rows_like_taking(like, f32::INFINITY, &mut first.dist, |j, k| shape.row_start(j, k), |d| {
+        let done = finish(*d);
+        *d = restart(*d);
+        done
+    });
+    let second = dial_impl::<false, false>(&shape, std::mem::take(&mut first.dist), &[second_src], mask.spacing(), &[], None, false);
+    let second_dist = Bricked::from_rows_like(like, f32::INFINITY, |j, k| shape.row(&second.dist, j, k), finish);
+    let geodesic = |r: &Search, dist| Geodesic { farthest: shape.global_of_index(r.far), max_mm: r.far_d, reached: r.reached, dist };
+    Ok([geodesic(&first, first_dist), geodesic(&second, second_dist)])
+}
+
 /// The plain search from `source` over `grid`, its distances left unfinished ([`finish`]);
 /// `marks`, when given, hears of the bricks that hold lumen as the mask is read.
 fn search_from(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3], scratch: Vec<f32>, marks: Option<&mut BrickMarks>) -> Result<(Padded, Search)> {
     let shape = Padded::shape(grid);
-    let src = shape
-        .index_of_global(source)
-        .filter(|_| mask.get(source[0], source[1], source[2]) != 0)
-        .ok_or_else(|| Error::invalid(format!("the voxel {source:?} is not in the lumen")))?;
+    let src = source_index(mask, &shape, source)?;
     let dist = shape.start_from_mask(mask, scratch, marks);
     let r = dial_impl::<false, false>(&shape, dist, &[src], mask.spacing(), &[], None, false);
     Ok((shape, r))
+}
+
+/// The padded index of `source`, which must be lumen.
+fn source_index(mask: &Volume<u8>, shape: &Padded, source: [usize; 3]) -> Result<usize> {
+    shape
+        .index_of_global(source)
+        .filter(|_| mask.get(source[0], source[1], source[2]) != 0)
+        .ok_or_else(|| Error::invalid(format!("the voxel {source:?} is not in the lumen")))
 }
 
 /// What a search over the padded grid found.
@@ -288,6 +311,14 @@ fn finish(d: f32) -> f32 {
     } else {
         d
     }
+}
+
+/// A finished search's working value turned back into a start ([`start_from_inside`]): walls
+/// (exactly +0.0, never written) stay 0, every lumen voxel (settled, with the sign bit set,
+/// −0.0 for the source, or unreached, +∞) becomes +∞.
+#[inline]
+fn restart(d: f32) -> f32 {
+    if d.to_bits() == 0 { 0.0 } else { f32::INFINITY }
 }
 
 /// `W`: weighted; `T`: record the tree. Monomorphised so the plain search pays for neither.
@@ -589,8 +620,15 @@ mod tests {
             let ds = Bricked::from_field(&distance_to_wall(&m).unwrap(), 0.0);
             let (fresh, used) = geodesic_distance_like(&m, &ds, [0, 0, 0], vec![7.0; 10]).unwrap();
             assert_eq!(fresh.dist.to_volume().unwrap(), got);
-            let (reused, _) = geodesic_distance_like(&m, &ds, [0, 0, 0], used).unwrap();
+            let (reused, used) = geodesic_distance_like(&m, &ds, [0, 0, 0], used).unwrap();
             assert_eq!(reused.dist.to_volume().unwrap(), got);
+            // Two searches in one array, the second started from what the first left: each as
+            // if alone (the second from the first's farthest voxel, the source's own −0 included).
+            let (alone, _) = geodesic_distance_like(&m, &ds, geo.farthest, Vec::new()).unwrap();
+            let [a, b] = geodesic_distance_pair_like(&m, &ds, [[0, 0, 0], geo.farthest], used).unwrap();
+            assert_eq!(a.dist.to_volume().unwrap(), got);
+            assert_eq!(b.dist.to_volume().unwrap(), alone.dist.to_volume().unwrap());
+            assert_eq!((b.reached, b.farthest, b.max_mm), (alone.reached, alone.farthest, alone.max_mm));
             let mut reached = 0;
             for (idx, (&a, &b)) in got.data().iter().zip(&want).enumerate() {
                 if b.is_infinite() {
