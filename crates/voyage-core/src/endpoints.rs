@@ -15,9 +15,9 @@ use glam::DVec3;
 
 use crate::blocks::Blocks;
 use crate::centerline::{cost_weight, refine_points, Centerline, CenterlineOptions};
-use crate::skeleton::{colon_path, tree_search, SkeletonOptions};
+use crate::skeleton::{colon_path, SkeletonOptions};
 use crate::distance::distance_to_wall;
-use crate::distance::geodesic::{geodesic_distance_pair_like, Geodesic, Padded};
+use crate::distance::geodesic::{geodesic_distance_pair_like, Geodesic, Padded, TreeStart};
 use crate::field::{BoxGrid, Bricked, Field};
 use crate::{Error, Result, Volume};
 
@@ -135,17 +135,18 @@ fn skeleton_path(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], given_so
     let weight = cost_weight(&ds_pad, cl_opts);
     let dmax = ds.data.iter().cloned().fold(0.0f32, f32::max);
     let floor = (opts.min_width as f32 * dmax).min(dmax);
-    let source = match given_source {
-        Some(s) => s,
+    let start = TreeStart::new(&pad, &weight);
+    let (source, start) = match given_source {
+        Some(s) => (s, start),
         None => {
             // The search stops at the first wide voxel it settles: the nearest.
             let wide = |v: usize| ds_pad[v] > 0.0 && ds_pad[v] >= floor;
-            let from_seed = tree_search(&pad, &[pad.lumen_index(seed)?], sp, Some(&weight), Some(&wide as &dyn Fn(usize) -> bool));
-            pad.global_of_index(*from_seed.order.last().unwrap() as usize)
+            let (nearest, start) = start.nearest(&pad, &[pad.lumen_index(seed)?], sp, &weight, &wide);
+            (pad.global_of_index(nearest.ok_or_else(|| Error::invalid("the search from the seed settled nothing"))?), start)
         }
     };
     let s = pad.lumen_index(source)?;
-    let tree = tree_search(&pad, &[s], sp, Some(&weight), None);
+    let tree = start.search(&pad, &[s], sp, &weight);
     let t_given = given_target.map(|t| pad.lumen_index(t)).transpose()?;
     if let (Some(t), Some(tv)) = (t_given, given_target)
         && !tree.dist[t].is_finite()

@@ -58,7 +58,7 @@ pub fn geodesic_distance_pair_like<U>(mask: &Volume<u8>, like: &Bricked<U>, sour
         *d = restart(*d);
         done
     });
-    let second = dial_impl::<false, false>(&shape, std::mem::take(&mut first.dist), &[second_src], mask.spacing(), &[], None, false);
+    let second = dial_impl::<false, false>(&shape, std::mem::take(&mut first.dist), Vec::new(), &[second_src], mask.spacing(), &[], None, None, false);
     let second_dist = Bricked::from_rows_like(like, f32::INFINITY, |j, k| shape.row(&second.dist, j, k), finish);
     let geodesic = |r: &Search, dist| Geodesic { farthest: shape.global_of_index(r.far), max_mm: r.far_d, reached: r.reached, dist };
     Ok([geodesic(&first, first_dist), geodesic(&second, second_dist)])
@@ -70,7 +70,7 @@ fn search_from(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3], scratch: V
     let shape = Padded::shape(grid);
     let src = source_index(mask, &shape, source)?;
     let dist = shape.start_from_mask(mask, scratch, marks);
-    let r = dial_impl::<false, false>(&shape, dist, &[src], mask.spacing(), &[], None, false);
+    let r = dial_impl::<false, false>(&shape, dist, Vec::new(), &[src], mask.spacing(), &[], None, None, false);
     Ok((shape, r))
 }
 
@@ -283,11 +283,58 @@ impl Padded {
 /// the buckets exact.
 pub fn dial(pad: &Padded, sources: &[usize], spacing: [f64; 3], opts: &SearchOptions) -> Search {
     let start = start_from_inside(pad);
+    let parent = if opts.tree { vec![NO_PARENT; pad.inside.len()] } else { Vec::new() };
     match (opts.weight, opts.tree) {
-        (Some(w), true) => dial_impl::<true, true>(pad, start, sources, spacing, w, opts.stop, true),
-        (Some(w), false) => dial_impl::<true, false>(pad, start, sources, spacing, w, opts.stop, true),
-        (None, true) => dial_impl::<false, true>(pad, start, sources, spacing, &[], opts.stop, true),
-        (None, false) => dial_impl::<false, false>(pad, start, sources, spacing, &[], opts.stop, true),
+        (Some(w), true) => dial_impl::<true, true>(pad, start, parent, sources, spacing, w, None, opts.stop, true),
+        (Some(w), false) => dial_impl::<true, false>(pad, start, parent, sources, spacing, w, None, opts.stop, true),
+        (None, true) => dial_impl::<false, true>(pad, start, parent, sources, spacing, &[], None, opts.stop, true),
+        (None, false) => dial_impl::<false, false>(pad, start, parent, sources, spacing, &[], None, opts.stop, true),
+    }
+}
+
+/// The working arrays of weighted tree searches over one padded grid at their start
+/// (distances as [`start_from_inside`], no predecessors) and the weight's range over the lumen,
+/// which sets the buckets: made once for several searches, as a search that stops after a few
+/// voxels ([`TreeStart::nearest`]) hands them back rewound in time proportional to what it
+/// touched, not to the grid.
+pub(crate) struct TreeStart {
+    dist: Vec<f32>,
+    parent: Vec<u8>,
+    range: (f32, f32),
+}
+
+impl TreeStart {
+    pub(crate) fn new(pad: &Padded, weight: &[f32]) -> Self {
+        let range = weight.iter().zip(&pad.inside).filter(|(_, m)| **m != 0).fold((f32::INFINITY, 0.0f32), |(lo, hi), (&x, _)| (lo.min(x), hi.max(x)));
+        TreeStart { dist: start_from_inside(pad), parent: vec![NO_PARENT; pad.inside.len()], range }
+    }
+
+    /// The weighted search from `sources` to its end.
+    pub(crate) fn search(self, pad: &Padded, sources: &[usize], spacing: [f64; 3], weight: &[f32]) -> Search {
+        dial_impl::<true, true>(pad, self.dist, self.parent, sources, spacing, weight, Some(self.range), None, true)
+    }
+
+    /// The last voxel the weighted search from `sources` settles: the first where `stop` holds
+    /// (else the farthest), and the arrays back at their start.
+    pub(crate) fn nearest(self, pad: &Padded, sources: &[usize], spacing: [f64; 3], weight: &[f32], stop: &dyn Fn(usize) -> bool) -> (Option<usize>, TreeStart) {
+        let range = self.range;
+        let r = dial_impl::<true, true>(pad, self.dist, self.parent, sources, spacing, weight, Some(range), Some(stop), false);
+        let (mut dist, mut parent) = (r.dist, r.parent);
+        // Every value the search wrote belongs to a voxel it settled or to one of their
+        // neighbours (improved from them): walls, never written, are exactly +0.
+        let rows = pad.neighbour_row_starts();
+        for &u in &r.order {
+            for start in rows {
+                let at = (u as isize + start) as usize;
+                for v in at..at + 3 {
+                    if dist[v].to_bits() != 0 {
+                        dist[v] = f32::INFINITY;
+                        parent[v] = NO_PARENT;
+                    }
+                }
+            }
+        }
+        (r.order.last().map(|&u| u as usize), TreeStart { dist, parent, range })
     }
 }
 
@@ -323,16 +370,18 @@ fn restart(d: f32) -> f32 {
 
 /// `W`: weighted; `T`: record the tree. Monomorphised so the plain search pays for neither.
 ///
-/// `dist`: the starting distances (see [`start_from_inside`]); with `finalize` the result's
-/// distances are finished ([`finish`]) and as long as the padded grid, else left as the search
-/// leaves them for the caller to finish.
+/// `dist`: the starting distances (see [`start_from_inside`]); `parent`, with `T`: all
+/// [`NO_PARENT`], as long as the padded grid; `range`: the weight's smallest and largest value
+/// over the lumen, when the caller knows it. With `finalize` the result's distances are
+/// finished ([`finish`]) and as long as the padded grid, else left as the search leaves them
+/// for the caller to finish.
 #[allow(clippy::too_many_arguments)]
-fn dial_impl<const W: bool, const T: bool>(pad: &Padded, mut dist: Vec<f32>, sources: &[usize], spacing: [f64; 3], weight: &[f32], stop: Option<&dyn Fn(usize) -> bool>, finalize: bool) -> Search {
+fn dial_impl<const W: bool, const T: bool>(pad: &Padded, mut dist: Vec<f32>, mut parent: Vec<u8>, sources: &[usize], spacing: [f64; 3], weight: &[f32], range: Option<(f32, f32)>, stop: Option<&dyn Fn(usize) -> bool>, finalize: bool) -> Search {
     let nbrs = pad.neighbours(spacing);
-    let (w_min, w_max) = if W {
-        weight.iter().zip(&dist).filter(|(_, d)| **d != 0.0).fold((f32::INFINITY, 0.0f32), |(lo, hi), (&x, _)| (lo.min(x), hi.max(x)))
-    } else {
-        (1.0, 1.0)
+    let (w_min, w_max) = match range {
+        _ if !W => (1.0, 1.0),
+        Some(r) => r,
+        None => weight.iter().zip(&dist).filter(|(_, d)| **d != 0.0).fold((f32::INFINITY, 0.0f32), |(lo, hi), (&x, _)| (lo.min(x), hi.max(x))),
     };
     let w_min = if w_min.is_finite() { w_min.max(1e-6) } else { 1.0 };
     let shortest = nbrs.iter().map(|n| n.1).fold(f32::INFINITY, f32::min);
@@ -350,7 +399,6 @@ fn dial_impl<const W: bool, const T: bool>(pad: &Padded, mut dist: Vec<f32>, sou
     // for a source), which keeps `candidate < dist[v]` false and marks the voxel done without
     // a second array.
     let rows = neighbour_rows(pad, spacing);
-    let mut parent = if T { vec![NO_PARENT; n] } else { Vec::new() };
     let mut order = Vec::new();
     // Offsets back: parent code c of v means v + nbrs[c].0 is the predecessor.
     let back: Vec<u8> = nbrs.iter().map(|&(off, _)| nbrs.iter().position(|&(o, _)| o == -off).unwrap_or(0) as u8).collect();
@@ -688,6 +736,22 @@ mod tests {
                 }
             }
             assert_eq!(r.reached, reached);
+            // From arrays handed back by searches stopped after 1, 20 and 200 voxels: the
+            // same search, bit for bit (a value left behind would change distances or tree).
+            let mut start = TreeStart::new(&pad, &weight);
+            for settle in [1usize, 20, 200] {
+                let count = std::cell::Cell::new(0usize);
+                let stop = |_: usize| {
+                    count.set(count.get() + 1);
+                    count.get() == settle
+                };
+                let (last, back) = start.nearest(&pad, &[src], m.spacing(), &weight, &stop);
+                assert_eq!(last, Some(r.order[settle - 1] as usize), "seed {seed}: settled {settle}");
+                start = back;
+            }
+            let again = start.search(&pad, &[src], m.spacing(), &weight);
+            assert!(again.dist.iter().zip(&r.dist).all(|(a, b)| a.to_bits() == b.to_bits()), "seed {seed}: distances");
+            assert_eq!((again.parent, again.order), (r.parent.clone(), r.order.clone()));
         }
     }
 
