@@ -128,6 +128,12 @@ pub fn dt_fields(lumen: &Volume<u8>, ds: &Bricked<f32>, source: [usize; 3], targ
 }
 
 /// The raw colon path (voxels of `lumen`, source → target) from the skeleton graph.
+///
+/// Given endpoints are placed on the whole colon's path (automatic rectum to cecum) and the
+/// path between them is kept: the longest simple path between two given points is not the
+/// colon between them (from a point in the middle it would wander through contacts to gain
+/// length), and neither is the shortest. Only an endpoint that lies off that path (farther
+/// from it than the lumen is wide there) falls back to the longest path from the source.
 fn skeleton_path(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], given_source: Option<[usize; 3]>, given_target: Option<[usize; 3]>, opts: &EndpointOptions, cl_opts: &CenterlineOptions) -> Result<Vec<[usize; 3]>> {
     let pad = Padded::new(lumen, &ds.grid);
     let sp = lumen.spacing();
@@ -135,18 +141,41 @@ fn skeleton_path(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], given_so
     let weight = cost_weight(&ds_pad, cl_opts);
     let dmax = ds.data.iter().cloned().fold(0.0f32, f32::max);
     let floor = (opts.min_width as f32 * dmax).min(dmax);
+    let sk_opts = SkeletonOptions { min_width: opts.min_width, ..cl_opts.skeleton.clone() };
     let start = TreeStart::new(&pad, &weight);
-    let (source, start) = match given_source {
-        Some(s) => (s, start),
-        None => {
-            // The search stops at the first wide voxel it settles: the nearest.
-            let wide = |v: usize| ds_pad[v] > 0.0 && ds_pad[v] >= floor;
-            let (nearest, start) = start.nearest(&pad, &[pad.lumen_index(seed)?], sp, &weight, &wide);
-            (pad.global_of_index(nearest.ok_or_else(|| Error::invalid("the search from the seed settled nothing"))?), start)
+    // The search stops at the first wide voxel it settles: the nearest.
+    let wide = |v: usize| ds_pad[v] > 0.0 && ds_pad[v] >= floor;
+    let (nearest, start) = start.nearest(&pad, &[pad.lumen_index(seed)?], sp, &weight, &wide);
+    let rectum = nearest.ok_or_else(|| Error::invalid("the search from the seed settled nothing"))?;
+    let tree = start.search(&pad, &[rectum], sp, &weight);
+    let unreachable = |v: [usize; 3], what: &str| Error::invalid(format!("the {what} {} mm cannot be reached from the rectum {} mm through the lumen", mm_of(lumen, v), mm_of(lumen, pad.global_of_index(rectum))));
+    for (v, what) in [(given_source, "source"), (given_target, "target")] {
+        if let Some(v) = v
+            && !tree.dist[pad.lumen_index(v)?].is_finite()
+        {
+            return Err(unreachable(v, what));
         }
+    }
+    let (colon, _stats) = colon_path(&pad, &tree, &ds_pad, sp, rectum, None, &sk_opts)?;
+    let colon: Vec<[usize; 3]> = colon.iter().map(|&i| pad.global_of_index(i)).collect();
+    let place = |v: Option<[usize; 3]>, default: usize| match v {
+        None => Some(default),
+        Some(v) => place_on_path(&colon, v, &pad, &ds_pad, sp),
     };
+    if let (Some(a), Some(b)) = (place(given_source, 0), place(given_target, colon.len() - 1))
+        && a != b
+    {
+        let mut path: Vec<[usize; 3]> = if a < b { colon[a..=b].to_vec() } else { colon[b..=a].iter().rev().copied().collect() };
+        // The given points themselves are the ends (the centring puts them there too).
+        let last = path.len() - 1;
+        path[0] = given_source.unwrap_or(path[0]);
+        path[last] = given_target.unwrap_or(path[last]);
+        return Ok(path);
+    }
+    // Off the colon's path: the longest path from the source (to the target, when given).
+    let source = given_source.unwrap_or(pad.global_of_index(rectum));
     let s = pad.lumen_index(source)?;
-    let tree = start.search(&pad, &[s], sp, &weight);
+    let tree = TreeStart::new(&pad, &weight).search(&pad, &[s], sp, &weight);
     let t_given = given_target.map(|t| pad.lumen_index(t)).transpose()?;
     if let (Some(t), Some(tv)) = (t_given, given_target)
         && !tree.dist[t].is_finite()
@@ -157,9 +186,18 @@ fn skeleton_path(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], given_so
             mm_of(lumen, source)
         )));
     }
-    let sk_opts = SkeletonOptions { min_width: opts.min_width, ..cl_opts.skeleton.clone() };
     let (path, _stats) = colon_path(&pad, &tree, &ds_pad, sp, s, t_given, &sk_opts)?;
     Ok(path.iter().map(|&i| pad.global_of_index(i)).collect())
+}
+
+/// The index of the point of `path` nearest to voxel `v`, if `v` lies within the lumen's
+/// width of it (twice the point's Ds, plus two voxels): a point in the tube around the path.
+fn place_on_path(path: &[[usize; 3]], v: [usize; 3], pad: &Padded, ds_pad: &[f32], sp: [f64; 3]) -> Option<usize> {
+    let dist2 = |p: &[usize; 3]| (0..3).map(|a| ((p[a] as f64 - v[a] as f64) * sp[a]).powi(2)).sum::<f64>();
+    let (at, d2) = path.iter().enumerate().map(|(i, p)| (i, dist2(p))).min_by(|x, y| x.1.total_cmp(&y.1))?;
+    let width = pad.index_of_global(path[at]).map_or(0.0, |i| ds_pad[i] as f64);
+    let reach = 2.0 * width + 2.0 * sp.iter().map(|x| x * x).sum::<f64>().sqrt();
+    (d2 <= reach * reach).then_some(at)
 }
 
 /// The lumen voxel with the largest Ds among those around a point (the 8 corners of its
@@ -193,11 +231,11 @@ fn snap(lumen: &Volume<u8>, ds: &Field<f32>, p: DVec3) -> Result<[usize; 3]> {
 fn lumen_voxel(lumen: &Volume<u8>, mm: DVec3, what: &str) -> Result<[usize; 3]> {
     let ijk = lumen.geometry().local_to_index(mm).round();
     if !lumen.geometry().contains_index(ijk) {
-        return Err(Error::invalid(format!("the {what} {mm} mm lies outside the volume")));
+        return Err(Error::invalid(format!("the {what} {} lies outside the volume", lumen.geometry().describe_point(mm))));
     }
     let v = [ijk.x as usize, ijk.y as usize, ijk.z as usize];
     if lumen.get(v[0], v[1], v[2]) == 0 {
-        return Err(Error::invalid(format!("the {what} {mm} mm is not inside the colon lumen")));
+        return Err(Error::invalid(format!("the {what} {} is not inside the colon lumen", lumen.geometry().describe_point(mm))));
     }
     Ok(v)
 }
