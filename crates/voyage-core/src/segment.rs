@@ -491,14 +491,15 @@ fn classify_lungs(comps: &mut [Component], from_mask: bool) {
 fn choose_colon(comps: &[Component], runs: &Runs, run_comp: &[u32], vol: &Volume<i16>, opts: &SegmentOptions) -> Result<usize> {
     if let Some(mm) = opts.seed_mm {
         let [i, j, k] = voxel_of(vol, mm)?;
+        let at = vol.geometry().describe_point(mm);
         let row = runs.row(j, k);
         let hit = row.clone().find(|&r| runs.runs[r].x0 as usize <= i && i < runs.runs[r].x1 as usize);
         return match hit.map(|r| run_comp[r]) {
             Some(c) if c != u32::MAX && comps[c as usize].kind != ComponentKind::Lung => Ok(c as usize),
-            Some(c) if c != u32::MAX => Err(Error::invalid(format!("the seed {mm} mm lies in a lung, not in the colon"))),
-            Some(_) => Err(Error::invalid(format!("the seed {mm} mm lies in air outside the body"))),
+            Some(c) if c != u32::MAX => Err(Error::invalid(format!("the seed {at} lies in a lung, not in the colon"))),
+            Some(_) => Err(Error::invalid(format!("the seed {at} lies in air outside the body"))),
             None => Err(Error::invalid(format!(
-                "the seed {mm} mm is not in air (HU {} ≥ {})",
+                "the seed {at} is not in air (HU {} ≥ {})",
                 vol.get(i, j, k),
                 opts.air_hu
             ))),
@@ -523,7 +524,7 @@ fn choose_colon(comps: &[Component], runs: &Runs, run_comp: &[u32], vol: &Volume
 fn voxel_of(vol: &Volume<i16>, mm: DVec3) -> Result<[usize; 3]> {
     let ijk = vol.geometry().local_to_index(mm).round();
     if !vol.geometry().contains_index(ijk) {
-        return Err(Error::invalid(format!("the seed {mm} mm lies outside the volume")));
+        return Err(Error::invalid(format!("the seed {} lies outside the volume", vol.geometry().describe_point(mm))));
     }
     Ok([ijk.x as usize, ijk.y as usize, ijk.z as usize])
 }

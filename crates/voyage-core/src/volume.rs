@@ -104,6 +104,14 @@ impl Geometry {
         mm / self.spacing_vec()
     }
 
+    /// A volume-local point as messages give it: in patient LPS mm, the frame viewers and the
+    /// command line use, and as the nearest voxel (which may lie outside the volume).
+    pub fn describe_point(&self, mm: DVec3) -> String {
+        let p = self.local_to_patient(mm);
+        let v = self.local_to_index(mm).round();
+        format!("at LPS ({:.1}, {:.1}, {:.1}) mm, voxel ({}, {}, {})", p.x, p.y, p.z, v.x as i64, v.y as i64, v.z as i64)
+    }
+
     /// Volume-local millimetres → patient LPS millimetres.
     pub fn local_to_patient(&self, mm: DVec3) -> DVec3 {
         DVec3::from_array(self.origin) + self.direction_mat() * mm

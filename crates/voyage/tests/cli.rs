@@ -121,6 +121,7 @@ fn broken_inputs_fail_with_one_line_naming_the_file() {
         assert!(err.starts_with("error: ") && err.contains(name.as_ref()), "{}: {err}", p.display());
         assert_eq!(err.trim().lines().count(), 1, "{err}");
         assert!(!err.contains("panicked"), "{err}");
+        assert!(err.matches("os error").count() <= 1, "the reason twice: {err}");
         assert_private(&o);
     }
     std::fs::remove_dir_all(&dir).unwrap();
@@ -223,6 +224,21 @@ fn prep_writes_its_exports_and_reports_json() {
     assert!(!bad.status.success());
     let err = String::from_utf8_lossy(&bad.stderr);
     assert!(err.contains("seed") && err.trim().lines().count() == 1, "{err}");
+    // Negative coordinates are coordinates, not options; the error gives the point in LPS.
+    let below = voyage(&["prep", ct.to_str().unwrap(), "--out", out.to_str().unwrap(), "--seed", "-5000,1,1"]);
+    let err = String::from_utf8_lossy(&below.stderr);
+    assert!(!below.status.success() && err.contains("the seed at LPS (-5000.0, 1.0, 1.0) mm") && err.contains("outside the volume"), "{err}");
+    // All or nothing: a folder where an export goes fails the whole write, naming it, and the
+    // files already there stay as they were.
+    let blocked = dir.join("blocked");
+    std::fs::create_dir_all(blocked.join("surface.stl")).unwrap();
+    std::fs::write(blocked.join("lumen.nii.gz"), b"old").unwrap();
+    let o = voyage(&["prep", ct.to_str().unwrap(), "--out", blocked.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("surface.stl") && err.trim().lines().count() == 1, "{err}");
+    assert_eq!(std::fs::read(blocked.join("lumen.nii.gz")).unwrap(), b"old");
+    let left: Vec<_> = std::fs::read_dir(&blocked).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(left.len(), 2, "left behind: {left:?}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -11,14 +11,45 @@ use crate::prep::Study;
 use crate::Result;
 
 /// Writes every export of a study into `dir`; returns the paths written.
+///
+/// All or nothing: the files are written into a staging folder inside `dir` and moved into
+/// place only when every one of them is complete, so a failure (a full disk, a folder in the
+/// way) leaves `dir` as it was, never a new lumen beside an old surface. A `dir` this call
+/// created is removed again.
 pub fn write_study(dir: &Path, study: &Study) -> Result<Vec<PathBuf>> {
+    let created = !dir.exists();
     std::fs::create_dir_all(dir).map_err(|e| crate::Error::io(dir, e))?;
+    let staging = dir.join(format!(".voyage-prep-{}", std::process::id()));
+    let result = std::fs::create_dir(&staging)
+        .map_err(|e| crate::Error::io(&staging, e))
+        .and_then(|()| write_files(&staging, study))
+        .and_then(|names| move_into(dir, &staging, &names));
+    let _ = std::fs::remove_dir_all(&staging);
+    if result.is_err() && created {
+        let _ = std::fs::remove_dir(dir);
+    }
+    result
+}
+
+/// Moves the staged files into `dir`, after checking that none would land on a folder.
+fn move_into(dir: &Path, staging: &Path, names: &[&str]) -> Result<Vec<PathBuf>> {
+    let paths: Vec<PathBuf> = names.iter().map(|n| dir.join(n)).collect();
+    if let Some(p) = paths.iter().find(|p| p.is_dir()) {
+        return Err(crate::Error::format(p, "a folder is in the way of this export"));
+    }
+    for (name, p) in names.iter().zip(&paths) {
+        std::fs::rename(staging.join(name), p).map_err(|e| crate::Error::io(p, e))?;
+    }
+    Ok(paths)
+}
+
+/// Writes the exports into `dir`; returns their file names.
+fn write_files(dir: &Path, study: &Study) -> Result<Vec<&'static str>> {
     let g = study.ct.geometry();
     let mut out = Vec::new();
-    let mut put = |name: &str| {
-        let p = dir.join(name);
-        out.push(p.clone());
-        p
+    let mut put = |name: &'static str| {
+        out.push(name);
+        dir.join(name)
     };
     nifti::save(&put("lumen.nii.gz"), &study.segmentation.lumen)?;
     nifti::save_slices(&put("ds.nii.gz"), g, |k, out: &mut [f32]| study.ds.fill_slice(k, out))?;

@@ -708,7 +708,7 @@ pub(crate) mod shared {
         move |e| {
             let msg = match e {
                 Error::Format { msg, .. } | Error::Invalid(msg) => msg,
-                Error::Io { source, .. } => source.to_string(),
+                Error::Io { err, .. } => err.to_string(),
             };
             Error::format(header, format!("data file {}: {msg}", data.display()))
         }

@@ -33,13 +33,13 @@ pub struct InputArgs {
     #[arg(long)]
     pub mask: bool,
     /// A point in the colon's air to grow from (mm, see --coords).
-    #[arg(long, value_parser = parse_point)]
+    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
     pub seed: Option<DVec3>,
     /// The rectum end of the flight (mm, see --coords).
-    #[arg(long, value_parser = parse_point)]
+    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
     pub source: Option<DVec3>,
     /// The cecum end of the flight (mm, see --coords).
-    #[arg(long, value_parser = parse_point)]
+    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
     pub target: Option<DVec3>,
     /// The coordinate frame of --seed, --source and --target.
     #[arg(long, value_enum, default_value_t = Frame::Lps)]
