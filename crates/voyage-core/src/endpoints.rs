@@ -67,6 +67,11 @@ pub fn uses_blocks(lumen: &Volume<u8>, lumen_voxels: usize, cl_opts: &Centerline
 pub fn trace_skeleton(lumen: &Volume<u8>, grid: &BoxGrid, lumen_voxels: usize, seed: [usize; 3], fine_ds: Option<&Field<f32>>, opts: &EndpointOptions, cl_opts: &CenterlineOptions) -> Result<Skeleton> {
     let given_source = opts.source_mm.map(|p| lumen_voxel(lumen, p, "source")).transpose()?;
     let given_target = opts.target_mm.map(|p| lumen_voxel(lumen, p, "target")).transpose()?;
+    if let (Some(s), Some(t)) = (given_source, given_target)
+        && s == t
+    {
+        return Err(Error::invalid(format!("the source and the target are the same voxel ({})", lumen.geometry().describe_point(mm_of(lumen, s)))));
+    }
     if uses_blocks(lumen, lumen_voxels, cl_opts) {
         let blocks = Blocks::new(lumen, grid, 2)?;
         let ds = distance_to_wall(&blocks.mask)?;

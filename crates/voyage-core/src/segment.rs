@@ -126,6 +126,9 @@ pub fn segment(vol: &Volume<i16>, opts: &SegmentOptions) -> Result<Segmentation>
     connect_3d(&runs, &inside, vol.dims(), &mut labels);
     let (mut comps, run_comp) = component_stats(&runs, &inside, vol, &mut labels, from_mask);
     classify_lungs(&mut comps, from_mask);
+    if from_mask && opts.seed_mm.is_none() && runs.runs.is_empty() {
+        return Err(Error::invalid("the mask holds no lumen: every voxel is 0"));
+    }
     let colon = choose_colon(&comps, &runs, &run_comp, vol, opts)?;
     comps[colon].kind = ComponentKind::Colon;
     let mut lumen = rasterize(&runs, &run_comp, colon, vol)?;

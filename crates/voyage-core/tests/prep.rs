@@ -130,3 +130,26 @@ fn the_same_study_whatever_the_threads() {
     assert_eq!(a.surface.mesh.positions, b.surface.mesh.positions);
     assert_eq!(a.cells.triangle_cell, b.cells.triangle_cell);
 }
+
+/// Given endpoints: the rectum and the cecum swapped give the same colon backwards, close to
+/// the true centerline; one voxel as both ends, and a mask with no lumen, are clear errors.
+#[test]
+fn given_endpoints_and_their_errors() {
+    let p = phantom::colon(&ColonOptions { small: true, seed: 2, ..Default::default() }).unwrap();
+    let mut opts = PrepOptions::default();
+    opts.endpoints.source_mm = Some(DVec3::from_array(p.truth.target_mm));
+    opts.endpoints.target_mm = Some(DVec3::from_array(p.truth.source_mm));
+    let s = prepare(p.ct.clone(), &opts, |_| {}).unwrap();
+    let mean = mean_distance_to_truth(&s.centerline.points_mm, &p.truth.centerline_mm);
+    assert!(mean <= 2.0, "swapped ends: mean distance {mean:.2} mm");
+    let truth_len = p.truth.centerline_mm.windows(2).map(|w| DVec3::from_array(w[0]).distance(DVec3::from_array(w[1]))).sum::<f64>();
+    assert!((s.centerline.length_mm - truth_len).abs() < 0.1 * truth_len, "swapped ends: {:.0} mm, truth {truth_len:.0} mm", s.centerline.length_mm);
+    opts.endpoints.target_mm = opts.endpoints.source_mm;
+    let e = prepare(p.ct.clone(), &opts, |_| {}).unwrap_err().to_string();
+    assert!(e.contains("the source and the target are the same voxel"), "{e}");
+    let empty = p.lumen.map(|_| 0i16);
+    let mut as_mask = PrepOptions::default();
+    as_mask.segment.mask = Some(true);
+    let e = prepare(empty, &as_mask, |_| {}).unwrap_err().to_string();
+    assert!(e.contains("the mask holds no lumen"), "{e}");
+}

@@ -92,9 +92,12 @@ impl Measured {
 fn measure(name: &str, ct: Volume<i16>, repeats: usize) -> Result<Measured> {
     let ct_mb = (ct.data().len() * 2) as f64 / 1e6;
     let opts = PrepOptions::default();
+    reset_peak_rss();
     let mut study = prepare(ct.clone(), &opts, |_| {})?;
     let mut runs: Vec<Timings> = Vec::new();
     for _ in 0..repeats.max(1) {
+        // One study at a time, so that the peak is one run's (plus the CT the bench keeps).
+        drop(study);
         study = prepare(ct.clone(), &opts, |_| {})?;
         runs.push(study.timings.clone());
     }
@@ -118,6 +121,12 @@ fn measure(name: &str, ct: Volume<i16>, repeats: usize) -> Result<Measured> {
         single.push(t.elapsed().as_secs_f64() * 1e3);
     }
     Ok(Measured { name: name.into(), dt_single_ms: median(&mut single), study: Some(study), timings, ct_mb, peak_rss_mb: super::prep::peak_rss_mb() })
+}
+
+/// Starts the process's peak resident memory afresh (Linux; elsewhere nothing happens), so
+/// that each case reports its own.
+fn reset_peak_rss() {
+    let _ = std::fs::write("/proc/self/clear_refs", "5");
 }
 
 fn run_reference(python: Option<&Path>, dir: &Path, mask: &Path, source: [usize; 3], repeats: usize) -> Result<Value> {
@@ -178,7 +187,7 @@ fn report(rounds: &[(Measured, Value)], threads: usize) -> Value {
             row("one Dt", |m| m.dt_single_ms, "dijkstra3d", "dijkstra3d", 100.0, Some(4.0)),
             row("endpoints + skeleton path", |m| m.timings.skeleton, "-", "", 200.0, None),
             row("centerline refinement", |m| m.timings.centerline, "-", "", 50.0, None),
-            row("touching loops (on the skeleton's blocks)", |m| m.timings.contacts, "-", "", 0.0, None),
+            row("touching loops (on the skeleton's blocks)", |m| m.timings.contacts, "-", "", f64::NAN, None),
             row("both Dt fields", |m| m.timings.dt, "-", "", 200.0, None),
             row("surface", |m| m.timings.surface, "VTK flying edges", "vtk_flying_edges", 80.0, Some(1.0)),
             row("surface", |m| m.timings.surface, "scikit-image", "skimage_marching_cubes", 80.0, None),
@@ -188,9 +197,20 @@ fn report(rounds: &[(Measured, Value)], threads: usize) -> Value {
     })
 }
 
+/// Whether a row meets its targets: "yes", "NO", or "-" where it has none.
+fn met(r: &Value) -> &'static str {
+    let time = r["target_ms"].as_f64().filter(|&t| t > 0.0).zip(r["voyage_ms"].as_f64()).map(|(t, ms)| ms <= t);
+    let ratio = r["target_speedup"].as_f64().zip(r["speedup"].as_f64()).map(|(t, x)| x >= t);
+    match (time, ratio) {
+        (None, None) => "-",
+        (a, b) if a.unwrap_or(true) && b.unwrap_or(true) => "yes",
+        _ => "NO",
+    }
+}
+
 fn print_case(c: &Value) {
     println!(
-        "{}: {} lumen voxels, box {}, {} triangles, centerline {:.0} mm, {} cells; peak {:.0} MB for a {:.0} MB CT",
+        "{}: {} lumen voxels, box {}, {} triangles, centerline {:.0} mm, {} cells; process peak {:.0} MB while it ran, for a {:.0} MB CT (the bench holds more than one prep does; `voyage prep --json` gives one run's)",
         c["case"].as_str().unwrap_or(""),
         c["lumen_voxels"],
         c["box"],
@@ -200,7 +220,7 @@ fn print_case(c: &Value) {
         c["peak_rss_mb"].as_f64().unwrap_or(0.0),
         c["ct_mb"].as_f64().unwrap_or(0.0)
     );
-    println!("  {:<38} {:>10} {:<20} {:>10} {:>8} {:>13} {:>10} {:>8}", "stage", "voyage ms", "reference", "ref ms", "speedup", "(range)", "target ms", "target×");
+    println!("  {:<42} {:>10} {:<20} {:>10} {:>8} {:>13} {:>10} {:>8}  {}", "stage", "voyage ms", "reference", "ref ms", "speedup", "(range)", "target ms", "target×", "met");
     let empty = vec![];
     for r in c["rows"].as_array().unwrap_or(&empty) {
         let f = |v: &Value, p: usize| v.as_f64().map(|x| format!("{x:.p$}")).unwrap_or_else(|| "-".into());
@@ -209,7 +229,7 @@ fn print_case(c: &Value) {
             _ => "-".into(),
         };
         println!(
-            "  {:<38} {:>10} {:<20} {:>10} {:>7}× {:>13} {:>10} {:>7}",
+            "  {:<42} {:>10} {:<20} {:>10} {:>7}× {:>13} {:>10} {:>7}  {}",
             r["stage"].as_str().unwrap_or(""),
             f(&r["voyage_ms"], 1),
             r["reference"].as_str().unwrap_or(""),
@@ -218,6 +238,7 @@ fn print_case(c: &Value) {
             range,
             f(&r["target_ms"], 0),
             r["target_speedup"].as_f64().map(|x| format!("{x:.0}×")).unwrap_or_else(|| "-".into()),
+            met(r),
         );
     }
 }
