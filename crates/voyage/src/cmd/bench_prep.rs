@@ -220,7 +220,7 @@ fn print_case(c: &Value) {
         c["peak_rss_mb"].as_f64().unwrap_or(0.0),
         c["ct_mb"].as_f64().unwrap_or(0.0)
     );
-    println!("  {:<42} {:>10} {:<20} {:>10} {:>8} {:>13} {:>10} {:>8}  {}", "stage", "voyage ms", "reference", "ref ms", "speedup", "(range)", "target ms", "target×", "met");
+    println!("  {:<42} {:>10} {:<20} {:>10} {:>8} {:>13} {:>10} {:>8}  met", "stage", "voyage ms", "reference", "ref ms", "speedup", "(range)", "target ms", "target×");
     let empty = vec![];
     for r in c["rows"].as_array().unwrap_or(&empty) {
         let f = |v: &Value, p: usize| v.as_f64().map(|x| format!("{x:.p$}")).unwrap_or_else(|| "-".into());
