@@ -178,19 +178,10 @@ fn skeleton_path(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], given_so
         return Ok(path);
     }
     // Off the colon's path: the longest path from the source (to the target, when given).
-    let source = given_source.unwrap_or(pad.global_of_index(rectum));
-    let s = pad.lumen_index(source)?;
+    // Both were reached from the rectum above, so they reach each other.
+    let s = pad.lumen_index(given_source.unwrap_or(pad.global_of_index(rectum)))?;
     let tree = TreeStart::new(&pad, &weight).search(&pad, &[s], sp, &weight);
     let t_given = given_target.map(|t| pad.lumen_index(t)).transpose()?;
-    if let (Some(t), Some(tv)) = (t_given, given_target)
-        && !tree.dist[t].is_finite()
-    {
-        return Err(Error::invalid(format!(
-            "the target {} mm cannot be reached from the source {} mm through the lumen",
-            mm_of(lumen, tv),
-            mm_of(lumen, source)
-        )));
-    }
     let (path, _stats) = colon_path(&pad, &tree, &ds_pad, sp, s, t_given, &sk_opts)?;
     Ok(path.iter().map(|&i| pad.global_of_index(i)).collect())
 }

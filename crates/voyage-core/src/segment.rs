@@ -126,10 +126,7 @@ pub fn segment(vol: &Volume<i16>, opts: &SegmentOptions) -> Result<Segmentation>
     connect_3d(&runs, &inside, vol.dims(), &mut labels);
     let (mut comps, run_comp) = component_stats(&runs, &inside, vol, &mut labels, from_mask);
     classify_lungs(&mut comps, from_mask);
-    if from_mask && opts.seed_mm.is_none() && runs.runs.is_empty() {
-        return Err(Error::invalid("the mask holds no lumen: every voxel is 0"));
-    }
-    let colon = choose_colon(&comps, &runs, &run_comp, vol, opts)?;
+    let colon = choose_colon(&comps, &runs, &run_comp, vol, opts, from_mask)?;
     comps[colon].kind = ComponentKind::Colon;
     let mut lumen = rasterize(&runs, &run_comp, colon, vol)?;
     let fluid_voxels = match bright {
@@ -491,7 +488,7 @@ fn classify_lungs(comps: &mut [Component], from_mask: bool) {
 }
 
 /// Step 5: the seed's component, or the largest component that is not lung.
-fn choose_colon(comps: &[Component], runs: &Runs, run_comp: &[u32], vol: &Volume<i16>, opts: &SegmentOptions) -> Result<usize> {
+fn choose_colon(comps: &[Component], runs: &Runs, run_comp: &[u32], vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> Result<usize> {
     if let Some(mm) = opts.seed_mm {
         let [i, j, k] = voxel_of(vol, mm)?;
         let at = vol.geometry().describe_point(mm);
@@ -517,6 +514,13 @@ fn choose_colon(comps: &[Component], runs: &Runs, run_comp: &[u32], vol: &Volume
         .filter(|&i| comps[i].volume_ml >= opts.min_colon_ml)
         .ok_or_else(|| {
             let biggest = comps.iter().filter(|c| c.kind != ComponentKind::Lung).map(|c| c.volume_ml).fold(0.0, f64::max);
+            if from_mask {
+                return Error::invalid(if comps.is_empty() {
+                    "the mask holds no lumen: every voxel is 0".to_string()
+                } else {
+                    format!("the mask's largest lumen region is {biggest:.1} ml, too small for a colon (at least {} ml expected)", opts.min_colon_ml)
+                });
+            }
             Error::invalid(format!(
                 "no colon lumen found: the largest gas inside the body, lungs left out, is {biggest:.1} ml (at least {} ml expected; is this a CT colonography? a --seed picks any gas)",
                 opts.min_colon_ml
