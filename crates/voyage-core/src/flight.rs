@@ -61,6 +61,14 @@ impl Default for FlightOptions {
     }
 }
 
+impl FlightOptions {
+    /// The defaults, with gravity from the study's patient position.
+    pub fn for_study(study: &crate::prep::Study) -> FlightOptions {
+        let d = FlightOptions::default();
+        FlightOptions { dynamics: d.dynamics.with_gravity_along(study.gravity_local()), ..d }
+    }
+}
+
 /// The outcome of one automatic flight.
 #[derive(Clone, Debug, Serialize)]
 pub struct Flight {

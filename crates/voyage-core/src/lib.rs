@@ -5,6 +5,7 @@
 //! navigation) take values and return values. `phantom` makes synthetic scans with ground
 //! truth for tests and benchmarks.
 
+pub mod anatomy;
 pub mod blocks;
 pub mod camera;
 pub mod cells;

@@ -88,12 +88,25 @@ pub struct Study {
     /// Lumen voxels left out of Dt where loops of the colon touch ([`crate::contacts`]).
     pub contact_voxels: usize,
     pub centerline: Centerline,
+    /// Stretches of the centerline (arc mm from the source, start and end) that cross a
+    /// bridged gap: collapsed or fluid-filled bowel, no air.
+    pub collapsed_spans: Vec<[f64; 2]>,
     pub surface: Surface,
     pub cells: Cells,
     pub timings: Timings,
 }
 
 impl Study {
+    /// Gravity as a volume-local unit vector (from the patient's position).
+    pub fn gravity_local(&self) -> DVec3 {
+        crate::anatomy::PatientFrame::of(self.ct.geometry()).local(self.segmentation.orientation.gravity())
+    }
+
+    /// The collapsed span holding arc length `arc` (mm from the source), if any.
+    pub fn collapsed_at(&self, arc: f64) -> Option<[f64; 2]> {
+        self.collapsed_spans.iter().copied().find(|s| s[0] <= arc && arc <= s[1])
+    }
+
     pub fn source_mm(&self) -> DVec3 {
         self.ct.geometry().index_to_local(DVec3::new(self.source[0] as f64, self.source[1] as f64, self.source[2] as f64))
     }
@@ -194,6 +207,7 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Sta
     let cells = build_cells(&seg.lumen, &dt_source.dist, &cl, &surface, &opts.cells)?;
     lap(&mut t.cells);
 
+    let collapsed_spans = collapsed_spans(&cl, &seg);
     t.total_after_load = start.elapsed().as_secs_f64() * 1e3;
     Ok(Study {
         ct,
@@ -205,8 +219,31 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Sta
         target,
         contact_voxels,
         centerline: cl,
+        collapsed_spans,
         surface,
         cells,
         timings: t,
     })
+}
+
+/// The centerline's stretches through bridged gaps: points nearer a bridge's path than its
+/// tube's radius (plus a voxel) and not in the air of either segment.
+fn collapsed_spans(cl: &Centerline, seg: &Segmentation) -> Vec<[f64; 2]> {
+    let g = seg.lumen.geometry();
+    let reach = seg.bridge_radius_mm + g.spacing.iter().cloned().fold(0.0, f64::max);
+    let mut spans: Vec<[f64; 2]> = Vec::new();
+    for gap in &seg.gaps {
+        let mut span: Option<[f64; 2]> = None;
+        for (p, &arc) in cl.points_mm.iter().zip(&cl.arc_mm) {
+            let p = DVec3::from_array(*p);
+            if gap.path_mm.iter().any(|q| q.distance(p) <= reach) {
+                span = Some(span.map_or([arc, arc], |s| [s[0].min(arc), s[1].max(arc)]));
+            }
+        }
+        if let Some(s) = span {
+            spans.push(s);
+        }
+    }
+    spans.sort_by(|a, b| a[0].total_cmp(&b[0]));
+    spans
 }

@@ -37,6 +37,14 @@ pub struct Dynamics {
     pub max_spin: f64,
 }
 
+impl Dynamics {
+    /// The same dynamics with gravity pulling along `dir` (volume-local; its strength kept):
+    /// leveling keeps the view's up against the patient's real gravity (prone, decubitus).
+    pub fn with_gravity_along(self, dir: DVec3) -> Dynamics {
+        Dynamics { gravity: dir.normalize_or(self.gravity.normalize_or_zero()) * self.gravity.length(), ..self }
+    }
+}
+
 impl Default for Dynamics {
     fn default() -> Self {
         Dynamics { kf: 6.0, ka: 35.0, radius_mm: 2.0, length_mm: 6.0, user_force: 240.0, gravity: DVec3::new(0.0, 150.0, 0.0), max_speed: 150.0, max_spin: 3.0 }

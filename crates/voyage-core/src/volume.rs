@@ -259,6 +259,50 @@ impl<T: Copy> Volume<T> {
     }
 }
 
+impl<T: Copy + Send + Sync> Volume<T> {
+    /// The same voxels stored another way: new axis `a` is old axis `perm[a]`, reversed where
+    /// `flip[a]`. The geometry changes with it, so every voxel keeps its patient position: the
+    /// same scan as another scanner or converter would have stored it.
+    pub fn reoriented(&self, perm: [usize; 3], flip: [bool; 3]) -> Result<Volume<T>> {
+        let mut sorted = perm;
+        sorted.sort_unstable();
+        if sorted != [0, 1, 2] {
+            return Err(Error::invalid(format!("axis order {perm:?} is not a permutation of 0, 1, 2")));
+        }
+        use rayon::prelude::*;
+        let old = &self.geom;
+        let dims = perm.map(|a| old.dims[a]);
+        let strides = [1, old.dims[0], old.dims[0] * old.dims[1]];
+        // Old index of new voxel (0, 0, 0) and its step per new axis.
+        let mut base = 0isize;
+        let mut step = [0isize; 3];
+        for a in 0..3 {
+            let s = strides[perm[a]] as isize;
+            if flip[a] {
+                base += s * (dims[a] as isize - 1);
+                step[a] = -s;
+            } else {
+                step[a] = s;
+            }
+        }
+        let mut data = Vec::with_capacity(old.len());
+        data.par_extend((0..dims[1] * dims[2]).into_par_iter().flat_map_iter(|row| {
+            let (j, k) = (row % dims[1], row / dims[1]);
+            let start = base + step[1] * j as isize + step[2] * k as isize;
+            (0..dims[0]).map(move |i| self.data[(start + step[0] * i as isize) as usize])
+        }));
+        let mut corner = [0.0; 3];
+        for a in 0..3 {
+            corner[perm[a]] = if flip[a] { (dims[a] - 1) as f64 } else { 0.0 };
+        }
+        let m = old.direction_mat();
+        let cols = [0, 1, 2].map(|a| m.col(perm[a]) * if flip[a] { -1.0 } else { 1.0 });
+        let mut geom = Geometry { dims, spacing: perm.map(|a| old.spacing[a]), origin: old.index_to_patient(DVec3::from_array(corner)).to_array(), direction: IDENTITY };
+        geom.set_direction_mat(glam::DMat3::from_cols(cols[0], cols[1], cols[2]));
+        Volume::from_vec(geom, data)
+    }
+}
+
 impl<T: Copy + PartialOrd> Volume<T> {
     /// (min, max) of all voxels.
     pub fn min_max(&self) -> (T, T) {
@@ -336,6 +380,28 @@ mod tests {
         let back = g.patient_to_index(p);
         assert!((back - DVec3::new(1.0, 2.0, 3.0)).length() < 1e-12);
         assert_eq!(g.orientation_code(), "PRS");
+    }
+
+    #[test]
+    fn reoriented_keeps_every_voxel_at_its_patient_position() {
+        let mut g = Geometry::new([3, 4, 5], [0.5, 0.7, 2.0], [1.0, 2.0, 3.0]).unwrap();
+        g.direction = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
+        let v = Volume::from_vec(g.clone(), (0..60).collect::<Vec<i32>>()).unwrap();
+        for perm in [[0, 1, 2], [2, 0, 1], [1, 2, 0], [0, 2, 1]] {
+            for f in 0..8 {
+                let flip = [f & 1 != 0, f & 2 != 0, f & 4 != 0];
+                let r = v.reoriented(perm, flip).unwrap();
+                assert_eq!(r.dims(), perm.map(|a| g.dims[a]));
+                for idx in 0..60 {
+                    let [i, j, k] = r.geometry().ijk(idx);
+                    let p = r.geometry().index_to_patient(DVec3::new(i as f64, j as f64, k as f64));
+                    let o = g.patient_to_index(p).round();
+                    assert!((g.patient_to_index(p) - o).length() < 1e-9);
+                    assert_eq!(r.data()[idx], v.get(o.x as usize, o.y as usize, o.z as usize), "{perm:?} {flip:?}");
+                }
+            }
+        }
+        assert!(v.reoriented([0, 0, 1], [false; 3]).is_err());
     }
 
     #[test]

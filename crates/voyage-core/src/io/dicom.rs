@@ -158,6 +158,8 @@ struct Header {
     gantry_tilt_deg: Option<f64>,
     /// LossyImageCompression is "01": the pixels went through lossy compression at some point.
     lossy: bool,
+    /// PatientPosition (0018,5100) as written ("HFS", "FFP", ...).
+    position: Option<String>,
 }
 
 /// How stored pixel values are laid out.
@@ -296,6 +298,7 @@ fn parse_header(path: &Path, obj: &DefaultDicomObject) -> std::result::Result<Pr
         slice_step,
         gantry_tilt_deg: float(obj, tags::GANTRY_DETECTOR_TILT, "GantryDetectorTilt")?,
         lossy: text(obj, tags::LOSSY_IMAGE_COMPRESSION).as_deref() == Some("01"),
+        position: text(obj, tags::PATIENT_POSITION),
     })))
 }
 
@@ -902,6 +905,11 @@ fn load_series(headers: Vec<Header>) -> Result<Loaded> {
         ));
     }
     let volume = Volume::from_vec(geometry, data).map_err(super::at(&first.path))?;
+    let position = first.position.as_deref().filter(|p| !p.trim().is_empty());
+    let known = position.and_then(crate::anatomy::PatientPosition::parse);
+    if let (Some(code), None) = (position, known) {
+        notes.push(format!("PatientPosition {code:?} is not one of HFS, HFP, FFS, FFP, HFDR, HFDL, FFDR, FFDL: ignored"));
+    }
     let meta = Meta {
         format: Some(Format::Dicom),
         modality: first.modality.clone(),
@@ -911,6 +919,7 @@ fn load_series(headers: Vec<Header>) -> Result<Loaded> {
         files: headers.len(),
         other_series: Vec::new(),
         notes,
+        position: known,
     };
     Ok(Loaded { volume, meta })
 }

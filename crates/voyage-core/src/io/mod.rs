@@ -50,6 +50,9 @@ pub struct Meta {
     pub other_series: Vec<SeriesSummary>,
     /// Things the loader did that the user should know (series chosen, tilt corrected...).
     pub notes: Vec<String>,
+    /// DICOM PatientPosition (0018,5100), when the file says and the code is known.
+    #[serde(skip)]
+    pub position: Option<crate::anatomy::PatientPosition>,
 }
 
 #[derive(Clone, Debug, Serialize)]

@@ -48,7 +48,7 @@ pub fn run(inputs: &[PathBuf], phantoms: bool, samples: usize, common: &Common) 
 }
 
 fn measure(name: &str, study: &Study, samples: usize) -> Result<Value> {
-    let opts = FlightOptions::default();
+    let opts = FlightOptions::for_study(study);
     let nav = Navigable::new(study, opts.safety.min_wall_mm)?;
     let points = study.random_lumen_points(samples, 5);
     let g = study.ct.geometry();

@@ -71,7 +71,7 @@ pub fn run(plan: &Plan, common: &Common) -> Result<()> {
 }
 
 fn measure(name: &str, study: &Study, plan: &Plan, gpu: Option<&mut GpuRenderer>) -> Result<Value> {
-    let opts = FlightOptions::default();
+    let opts = FlightOptions::for_study(study);
     let field = potential_field(study, opts.safety.min_wall_mm)?;
     let mut cameras: Vec<Camera> = Vec::new();
     let mut all_poses: Vec<Pose> = Vec::new();

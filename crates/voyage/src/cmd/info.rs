@@ -33,6 +33,11 @@ pub struct Info {
     pub hu_min: i16,
     pub hu_max: i16,
     pub megabytes: f64,
+    /// DICOM PatientPosition ("HFS", ...); None when the file does not say (NIfTI,
+    /// MetaImage, NRRD): `prep` then reads gravity from the air–fluid levels.
+    pub position: Option<&'static str>,
+    /// Where gravity pulls (LPS unit vector), from the position.
+    pub gravity_lps: Option<[f64; 3]>,
     #[serde(flatten)]
     pub meta: io::Meta,
 }
@@ -53,6 +58,8 @@ impl Info {
             hu_min: lo,
             hu_max: hi,
             megabytes: (g.len() * 2) as f64 / 1e6,
+            position: loaded.meta.position.map(|p| p.code()),
+            gravity_lps: loaded.meta.position.map(|p| p.gravity_lps().to_array()),
             meta: loaded.meta.clone(),
         }
     }
@@ -87,6 +94,10 @@ impl Info {
         let [ox, oy, oz] = self.origin_lps_mm;
         println!("  origin       ({ox:.2}, {oy:.2}, {oz:.2}) mm LPS");
         println!("  HU range     {} .. {}", self.hu_min, self.hu_max);
+        match self.position {
+            Some(p) => println!("  position     {p} (gravity {:?} LPS)", self.gravity_lps.unwrap_or_default()),
+            None => println!("  position     not in the file (prep reads it from the air–fluid levels, or --position)"),
+        }
         for s in &m.other_series {
             println!(
                 "  other series {} ({} slices{})",

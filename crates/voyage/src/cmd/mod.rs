@@ -7,7 +7,7 @@ mod bench_render;
 mod fly;
 mod info;
 mod phantom;
-mod prep;
+pub mod prep;
 pub mod render;
 
 use std::path::PathBuf;

@@ -12,6 +12,7 @@ use serde_json::json;
 use voyage_core::export::study::write_study;
 use voyage_core::io::{self, LoadOptions};
 use voyage_core::prep::{prepare, PrepOptions, Stage, Study};
+use voyage_core::anatomy::{PatientPosition, PositionSource};
 use voyage_core::segment::ComponentKind;
 use voyage_core::Geometry;
 
@@ -32,7 +33,38 @@ pub struct InputArgs {
     /// Treat the input as a lumen mask (default: detected, values only 0 and 1).
     #[arg(long)]
     pub mask: bool,
-    /// A point in the colon's air to grow from (mm, see --coords).
+    #[command(flatten)]
+    pub points: PointArgs,
+    /// DICOM: which series to load when the folder holds several.
+    #[arg(long)]
+    pub series: Option<String>,
+}
+
+/// DICOM PatientPosition codes, for `--position`.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum PositionArg {
+    Hfs,
+    Hfp,
+    Ffs,
+    Ffp,
+    Hfdr,
+    Hfdl,
+    Ffdr,
+    Ffdl,
+}
+
+impl PositionArg {
+    fn position(self) -> PatientPosition {
+        PatientPosition::parse(&format!("{self:?}")).unwrap_or(PatientPosition::Hfs)
+    }
+}
+
+/// Corrections to the automatic choices: which gas is colon, where the flight starts and
+/// ends, how the patient lay.
+#[derive(Args, Debug, Clone, Default)]
+pub struct PointArgs {
+    /// A point in gas that is colon (mm, see --coords): its gas joins the colon. It does not
+    /// move the start; --source does.
     #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
     pub seed: Option<DVec3>,
     /// The rectum end of the flight (mm, see --coords).
@@ -44,9 +76,28 @@ pub struct InputArgs {
     /// The coordinate frame of --seed, --source and --target.
     #[arg(long, value_enum, default_value_t = Frame::Lps)]
     pub coords: Frame,
-    /// DICOM: which series to load when the folder holds several.
-    #[arg(long)]
-    pub series: Option<String>,
+    /// How the patient lay (DICOM PatientPosition code), overriding the file and the
+    /// air–fluid levels: decides on which side fluid lies and which way is up in the view.
+    #[arg(long, value_enum, ignore_case = true)]
+    pub position: Option<PositionArg>,
+}
+
+impl PointArgs {
+    /// Puts the choices into `opts` for a volume of geometry `g` whose loader found `meta`.
+    pub fn apply(&self, g: &Geometry, meta: &io::Meta, opts: &mut PrepOptions) {
+        let to_local = |p: DVec3| match self.coords {
+            Frame::Lps => g.patient_to_local(p),
+            Frame::Local => p,
+        };
+        opts.segment.seed_mm = self.seed.map(to_local);
+        opts.endpoints.source_mm = self.source.map(to_local);
+        opts.endpoints.target_mm = self.target.map(to_local);
+        opts.segment.position = match (self.position, meta.position) {
+            (Some(p), _) => Some((p.position(), PositionSource::Given)),
+            (None, Some(p)) => Some((p, PositionSource::Dicom)),
+            (None, None) => None,
+        };
+    }
 }
 
 #[derive(Args, Debug)]
@@ -82,15 +133,9 @@ pub fn load_and_prepare(a: &InputArgs) -> Result<Prepared> {
     let loaded = io::load(&a.input, &LoadOptions { series_uid: a.series.clone() })?;
     let load_ms = t0.elapsed().as_secs_f64() * 1e3;
     let g = loaded.volume.geometry().clone();
-    let to_local = |p: DVec3| match a.coords {
-        Frame::Lps => g.patient_to_local(p),
-        Frame::Local => p,
-    };
     let mut opts = PrepOptions::default();
-    opts.segment.seed_mm = a.seed.map(to_local);
+    a.points.apply(&g, &loaded.meta, &mut opts);
     opts.segment.mask = a.mask.then_some(true);
-    opts.endpoints.source_mm = a.source.map(to_local);
-    opts.endpoints.target_mm = a.target.map(to_local);
 
     let bar = progress_bar();
     let study = prepare(loaded.volume, &opts, |stage| {
@@ -105,6 +150,9 @@ pub fn load_and_prepare(a: &InputArgs) -> Result<Prepared> {
     }
     if study.centerline.points_mm.len() < 2 {
         bail!("{}: the centerline is empty", a.input.display());
+    }
+    for w in &study.segmentation.warnings {
+        eprintln!("warning: {}: {w}", a.input.display());
     }
     Ok(Prepared { study, geometry: g, load_ms })
 }
@@ -145,6 +193,12 @@ fn summary(s: &Study, g: &Geometry, load_ms: f64) -> serde_json::Value {
         "source_lps_mm": g.local_to_patient(s.source_mm()).to_array(),
         "target_lps_mm": g.local_to_patient(s.target_mm()).to_array(),
         "centerline_length_mm": s.centerline.length_mm,
+        "position": s.segmentation.orientation.position.code(),
+        "position_source": s.segmentation.orientation.source,
+        "gravity_lps": s.segmentation.orientation.gravity_lps,
+        "segments": s.segmentation.segments,
+        "gaps": gaps(s),
+        "warnings": s.segmentation.warnings,
         "contact_voxels": s.contact_voxels,
         "cells": s.cells.cells.len(),
         "triangles": s.surface.mesh.triangles.len(),
@@ -164,6 +218,26 @@ fn summary(s: &Study, g: &Geometry, load_ms: f64) -> serde_json::Value {
     })
 }
 
+/// Each bridged gap with its span on the centerline.
+fn gaps(s: &Study) -> Vec<serde_json::Value> {
+    s.segmentation
+        .gaps
+        .iter()
+        .enumerate()
+        .map(|(i, g)| {
+            let span = s.collapsed_spans.get(i);
+            json!({
+                "between": g.between,
+                "length_mm": g.length_mm,
+                "from_lps_mm": g.from_lps_mm,
+                "to_lps_mm": g.to_lps_mm,
+                "mean_cost": g.mean_cost,
+                "centerline_arc_mm": span,
+            })
+        })
+        .collect()
+}
+
 fn print_text(s: &Study, g: &Geometry, load_ms: f64) {
     let seg = &s.segmentation;
     let colon_ml = seg.components.iter().find(|c| c.kind == ComponentKind::Colon).map_or(0.0, |c| c.volume_ml);
@@ -173,6 +247,23 @@ fn print_text(s: &Study, g: &Geometry, load_ms: f64) {
     }
     if seg.small_components > 0 {
         println!("  gas       {} smaller pockets", seg.small_components);
+    }
+    let o = &seg.orientation;
+    println!("position    {} ({}; {})", o.position.code(), o.position.describe(), match o.source {
+        PositionSource::Dicom => "from the DICOM header",
+        PositionSource::Given => "given",
+        PositionSource::AirFluidLevels => "from the air–fluid levels",
+        PositionSource::Assumed => "assumed",
+    });
+    for (i, sg) in seg.segments.iter().filter(|x| x.kept).enumerate() {
+        println!("  colon     {}. {:<36} {:>7.1} ml gas {:>7.1} ml fluid", i + 1, sg.label, sg.gas_ml, sg.fluid_ml);
+    }
+    for (gap, span) in seg.gaps.iter().zip(s.collapsed_spans.iter().map(Some).chain(std::iter::repeat(None))) {
+        let at = span.map_or(String::new(), |a| format!(", centerline {:.0}–{:.0} mm", a[0], a[1]));
+        println!("  gap       {}→{}: {:.0} mm bridged{at}", gap.between[0] + 1, gap.between[1] + 1, gap.length_mm);
+    }
+    for sg in seg.segments.iter().filter(|x| !x.kept && x.gas_ml >= 5.0) {
+        println!("  left out  {:<36} {:>7.1} ml gas: {}", sg.label, sg.gas_ml, sg.reason.as_deref().unwrap_or(""));
     }
     let lps = |p: DVec3| g.local_to_patient(p);
     println!("source      {:.1?} mm LPS (rectum)", lps(s.source_mm()).to_array());

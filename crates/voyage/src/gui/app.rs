@@ -527,7 +527,7 @@ impl App {
                 ui.add(egui::TextEdit::singleline(&mut self.open_path).hint_text("CT folder or file, or lumen mask").desired_width(260.0));
                 if ui.button("Open").clicked() && !self.open_path.trim().is_empty() {
                     let path = PathBuf::from(self.open_path.trim());
-                    self.open(Source::File { path, mask: false, series: None }, ui.ctx());
+                    self.open(Source::File { path, mask: false, series: None, points: Default::default() }, ui.ctx());
                 }
                 if ui.button("Demo phantom").clicked() {
                     self.open(Source::Phantom { small: false }, ui.ctx());

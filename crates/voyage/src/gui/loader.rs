@@ -11,12 +11,13 @@ use voyage_core::phantom::{self, ColonOptions};
 use voyage_core::prep::{prepare, PrepOptions, Stage};
 
 use super::session::Session;
+use crate::cmd::prep::PointArgs;
 
 /// What to open.
 #[derive(Clone, Debug)]
 pub enum Source {
     /// A CT (DICOM folder or file, NIfTI, MetaImage, NRRD) or a lumen mask.
-    File { path: PathBuf, mask: bool, series: Option<String> },
+    File { path: PathBuf, mask: bool, series: Option<String>, points: PointArgs },
     /// The built-in colon phantom, made on the fly.
     Phantom { small: bool },
 }
@@ -98,10 +99,11 @@ impl Job {
 fn open(source: &Source, progress: &dyn Fn(usize, &str)) -> anyhow::Result<Session> {
     let mut opts = PrepOptions::default();
     let ct = match source {
-        Source::File { path, mask, series } => {
+        Source::File { path, mask, series, points } => {
             progress(0, "reading");
             let loaded = io::load(path, &LoadOptions { series_uid: series.clone() })?;
             opts.segment.mask = mask.then_some(true);
+            points.apply(loaded.volume.geometry(), &loaded.meta, &mut opts);
             loaded.volume
         }
         Source::Phantom { small } => {

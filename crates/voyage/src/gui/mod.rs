@@ -70,11 +70,13 @@ pub struct ViewArgs {
     #[arg(long)]
     pub series: Option<String>,
     #[command(flatten)]
+    pub points: crate::cmd::prep::PointArgs,
+    #[command(flatten)]
     pub window: WindowArgs,
 }
 
 pub fn view(a: &ViewArgs) -> anyhow::Result<()> {
-    let source = a.input.clone().map(|path| Source::File { path, mask: a.mask, series: a.series.clone() });
+    let source = a.input.clone().map(|path| Source::File { path, mask: a.mask, series: a.series.clone(), points: a.points.clone() });
     run(source, &a.window)
 }
 

@@ -41,7 +41,7 @@ impl Session {
     /// Everything the window needs for a preprocessed study; the submarine waits at the
     /// rectum, looking up the colon.
     pub fn new(name: String, study: Study) -> anyhow::Result<Self> {
-        let opts = FlightOptions { keep_poses: false, ..FlightOptions::default() };
+        let opts = FlightOptions { keep_poses: false, ..FlightOptions::for_study(&study) };
         let field = potential_field(&study, opts.safety.min_wall_mm)?;
         let mesh = CellMesh::new(&study.surface, &study.cells);
         let scout = ScoutMesh::new(&study.surface.mesh, 4.0);

@@ -1,0 +1,198 @@
+//! Bridging a collapsed or fluid-filled stretch: the cheapest path through the CT between the
+//! facing ends of two colon gas segments.
+//!
+//! The cost of a voxel comes from its HU: collapsed bowel is soft tissue (its walls lie on
+//! each other) or tagged fluid, both cheap; fat around the bowel is dear, bone and other gas
+//! dearer, so the path follows the collapsed bowel rather than cutting across the mesentery.
+//! The search runs on a box around both ends, on blocks when that box is large.
+
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
+use glam::DVec3;
+
+use super::work::Bbox;
+use crate::Volume;
+
+/// A search box with more voxels than this is searched on blocks.
+const MAX_BOX_VOXELS: usize = 1 << 21;
+
+/// Cost per mm of passing a voxel of `hu` (None: a mask, no CT).
+pub fn hu_cost(hu: Option<i16>) -> f32 {
+    match hu {
+        None => 1.0,
+        Some(h) if h < -600 => 30.0, // gas that belongs to neither segment
+        Some(h) if h < -150 => 10.0,
+        Some(h) if h < -30 => 6.0, // fat
+        Some(h) if h < 200 => 1.0, // collapsed bowel wall (and organs)
+        Some(h) if h < 1200 => 1.5, // tagged fluid (and cancellous bone)
+        Some(_) => 40.0,           // cortical bone
+    }
+}
+
+/// Cost per mm inside one of the two segments being joined.
+const OWN_COST: f32 = 0.3;
+
+/// The cheapest path between two voxels.
+#[derive(Clone, Debug)]
+pub struct Path {
+    /// Voxels, `a` first, 26-connected.
+    pub voxels: Vec<[usize; 3]>,
+    pub length_mm: f64,
+    /// Mean cost per mm outside the two segments (1 = soft tissue all the way).
+    pub mean_cost: f64,
+}
+
+/// The cheapest path from `a` to `b` through `ct` (or a mask's background when None), where
+/// `own(v)` says that voxel `v` lies in one of the two segments being joined and
+/// `other_gas(v)` that it is another gas region.
+pub fn cheapest_path(ct: Option<&Volume<i16>>, dims: [usize; 3], spacing: [f64; 3], a: [usize; 3], b: [usize; 3], own: impl Fn([usize; 3]) -> bool, other_gas: impl Fn([usize; 3]) -> bool) -> Option<Path> {
+    let dist_mm = (0..3).map(|x| ((a[x] as f64 - b[x] as f64) * spacing[x]).powi(2)).sum::<f64>().sqrt();
+    let pad_mm = 15.0 + 0.3 * dist_mm;
+    let pad = spacing.map(|s| (pad_mm / s).ceil() as usize);
+    let bx = Bbox { lo: [0, 1, 2].map(|x| a[x].min(b[x])), hi: [0, 1, 2].map(|x| a[x].max(b[x])) }.grown(pad, dims);
+    let w = bx.widths();
+    let n: usize = w.iter().product();
+    // Blocks of f³ voxels when the box is large.
+    let f = ((n as f64 / MAX_BOX_VOXELS as f64).cbrt().ceil() as usize).max(1);
+    let cw = w.map(|x| x.div_ceil(f));
+    let cn = cw[0] * cw[1] * cw[2];
+    let centre = |c: [usize; 3]| [0, 1, 2].map(|x| (bx.lo[x] + c[x] * f + f / 2).min(bx.hi[x]));
+    let cost: Vec<f32> = (0..cn)
+        .map(|i| {
+            let c = [i % cw[0], (i / cw[0]) % cw[1], i / (cw[0] * cw[1])];
+            let v = centre(c);
+            if own(v) {
+                OWN_COST
+            } else if other_gas(v) {
+                hu_cost(Some(-1000))
+            } else {
+                hu_cost(ct.map(|ct| ct.get(v[0], v[1], v[2])))
+            }
+        })
+        .collect();
+    let block_of = |v: [usize; 3]| [0, 1, 2].map(|x| ((v[x] - bx.lo[x]) / f).min(cw[x] - 1));
+    let idx = |c: [usize; 3]| c[0] + cw[0] * (c[1] + cw[1] * c[2]);
+    let (sa, sb) = (idx(block_of(a)), idx(block_of(b)));
+    let step = spacing.map(|s| s * f as f64);
+    let mut dist = vec![f32::INFINITY; cn];
+    let mut prev = vec![u32::MAX; cn];
+    let mut heap = BinaryHeap::new();
+    dist[sa] = 0.0;
+    heap.push(Reverse((Key(0.0), sa as u32)));
+    while let Some(Reverse((Key(d), u))) = heap.pop() {
+        let u = u as usize;
+        if d > dist[u] {
+            continue;
+        }
+        if u == sb {
+            break;
+        }
+        let c = [u % cw[0], (u / cw[0]) % cw[1], u / (cw[0] * cw[1])];
+        for dz in -1i64..=1 {
+            for dy in -1i64..=1 {
+                for dx in -1i64..=1 {
+                    if dx == 0 && dy == 0 && dz == 0 {
+                        continue;
+                    }
+                    let q = [c[0] as i64 + dx, c[1] as i64 + dy, c[2] as i64 + dz];
+                    if (0..3).any(|x| q[x] < 0 || q[x] >= cw[x] as i64) {
+                        continue;
+                    }
+                    let q = q.map(|x| x as usize);
+                    let v = idx(q);
+                    let len = ((dx as f64 * step[0]).powi(2) + (dy as f64 * step[1]).powi(2) + (dz as f64 * step[2]).powi(2)).sqrt() as f32;
+                    let nd = d + len * 0.5 * (cost[u] + cost[v]);
+                    if nd < dist[v] {
+                        dist[v] = nd;
+                        prev[v] = u as u32;
+                        heap.push(Reverse((Key(nd), v as u32)));
+                    }
+                }
+            }
+        }
+    }
+    if !dist[sb].is_finite() {
+        return None;
+    }
+    let mut blocks = vec![sb];
+    while *blocks.last()? != sa {
+        blocks.push(prev[*blocks.last()?] as usize);
+    }
+    blocks.reverse();
+    // Back to voxels: a straight line between consecutive block centres, ends exact.
+    let mut pts: Vec<[usize; 3]> = blocks.iter().map(|&i| centre([i % cw[0], (i / cw[0]) % cw[1], i / (cw[0] * cw[1])])).collect();
+    pts[0] = a;
+    let last = pts.len() - 1;
+    pts[last] = b;
+    let voxels = line_voxels(&pts);
+    let mut length_mm = 0.0;
+    let mut outside = (0.0, 0.0);
+    for p in voxels.windows(2) {
+        let l = (0..3).map(|x| ((p[1][x] as f64 - p[0][x] as f64) * spacing[x]).powi(2)).sum::<f64>().sqrt();
+        length_mm += l;
+        if !own(p[1]) {
+            let c = if other_gas(p[1]) { hu_cost(Some(-1000)) } else { hu_cost(ct.map(|ct| ct.get(p[1][0], p[1][1], p[1][2]))) };
+            outside.0 += l * c as f64;
+            outside.1 += l;
+        }
+    }
+    let mean_cost = if outside.1 > 0.0 { outside.0 / outside.1 } else { 1.0 };
+    Some(Path { voxels, length_mm, mean_cost })
+}
+
+/// The voxels on straight lines through `pts` (26-connected, no repeats).
+fn line_voxels(pts: &[[usize; 3]]) -> Vec<[usize; 3]> {
+    let mut out: Vec<[usize; 3]> = vec![pts[0]];
+    for w in pts.windows(2) {
+        let (p, q) = (DVec3::from_array(w[0].map(|x| x as f64)), DVec3::from_array(w[1].map(|x| x as f64)));
+        let n = (q - p).abs().max_element().ceil() as usize;
+        for t in 1..=n {
+            let r = p + (q - p) * (t as f64 / n as f64);
+            let v = [r.x.round() as usize, r.y.round() as usize, r.z.round() as usize];
+            if out.last() != Some(&v) {
+                out.push(v);
+            }
+        }
+    }
+    out
+}
+
+/// An f32 ordered for the heap (costs are finite and non-negative).
+#[derive(Clone, Copy, PartialEq, PartialOrd)]
+struct Key(f32);
+impl Eq for Key {}
+impl Ord for Key {
+    fn cmp(&self, o: &Self) -> std::cmp::Ordering {
+        self.0.total_cmp(&o.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Geometry;
+
+    /// Fat everywhere, with a soft-tissue cord bending around: the path follows the cord,
+    /// not the straight line through fat.
+    #[test]
+    fn the_path_follows_the_collapsed_bowel() {
+        let g = Geometry::new([40, 30, 10], [1.0; 3], [0.0; 3]).unwrap();
+        let mut ct = Volume::filled(g, -100i16).unwrap();
+        // A U-shaped cord: x = 5 from y = 5 to 25, y = 25 from x = 5 to 35, x = 35 back up.
+        for k in 4..7 {
+            for t in 5..=25 {
+                ct.set(5, t, k, 40);
+                ct.set(35, t, k, 40);
+            }
+            for t in 5..=35 {
+                ct.set(t, 25, k, 40);
+            }
+        }
+        let p = cheapest_path(Some(&ct), ct.dims(), ct.spacing(), [5, 5, 5], [35, 5, 5], |_| false, |_| false).unwrap();
+        assert!(p.voxels.iter().all(|v| ct.get(v[0], v[1], v[2]) == 40), "left the cord");
+        assert!(p.length_mm > 65.0 && p.mean_cost < 1.01, "{} mm, cost {}", p.length_mm, p.mean_cost);
+        // Blocks when the box is big: the same ends, a connected path.
+        assert!(p.voxels.windows(2).all(|w| (0..3).all(|x| w[0][x].abs_diff(w[1][x]) <= 1)));
+    }
+}

@@ -1,0 +1,323 @@
+//! The colon as a chain of gas segments, rectum → cecum.
+//!
+//! A real exam's colon is often in several gas segments: a collapsed or fluid-filled stretch
+//! splits it. Each *compartment* (a gas region with the tagged fluid under its level) is
+//! reduced to a coarse grid of ~4 mm blocks, where its two ends are found by a double sweep
+//! of geodesic distance. The chain starts at the rectum (the compartment holding the lowest
+//! gas in the patient frame), leaves each compartment at its end farthest from where it
+//! entered, and goes on to the nearest free end of another compartment, bridged by the
+//! cheapest path through the CT ([`super::bridge`]), while one lies within `max_gap_mm`.
+
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
+use glam::DVec3;
+
+use super::bridge::Path;
+use super::work::Bbox;
+
+/// Block size of the coarse grid (mm).
+const BLOCK_MM: f64 = 4.0;
+
+/// One gas region with its fluid.
+#[derive(Clone, Debug)]
+pub struct Compartment {
+    pub voxels: usize,
+    pub gas_voxels: usize,
+    /// Sum of voxel positions (volume-local mm), for the centroid.
+    pub sum_mm: DVec3,
+    pub bbox: Bbox,
+    /// Its lowest gas voxel in the patient frame (see [`lowest_in`]).
+    pub lowest: [usize; 3],
+    pub lowest_height: f64,
+}
+
+impl Compartment {
+    pub fn centroid_mm(&self) -> DVec3 {
+        self.sum_mm / self.voxels.max(1) as f64
+    }
+}
+
+/// Compartments on blocks of about [`BLOCK_MM`]: each block takes the compartment of the
+/// first candidate voxel seen in it.
+pub struct Coarse {
+    f: [usize; 3],
+    dims: [usize; 3],
+    step_mm: [f64; 3],
+    label: Vec<u32>,
+}
+
+impl Coarse {
+    pub fn new(dims: [usize; 3], spacing: [f64; 3]) -> Coarse {
+        let f = spacing.map(|s| ((BLOCK_MM / s).round() as usize).max(1));
+        let cd = [0, 1, 2].map(|a| dims[a].div_ceil(f[a]));
+        Coarse { f, dims: cd, step_mm: [0, 1, 2].map(|a| spacing[a] * f[a] as f64), label: vec![u32::MAX; cd[0] * cd[1] * cd[2]] }
+    }
+
+    /// Marks voxels x0..x1 of row (j, k) as compartment `c`.
+    pub fn mark_run(&mut self, x0: usize, x1: usize, j: usize, k: usize, c: u32) {
+        let (bj, bk) = (j / self.f[1], k / self.f[2]);
+        for bi in x0 / self.f[0]..=(x1 - 1) / self.f[0] {
+            let at = bi + self.dims[0] * (bj + self.dims[1] * bk);
+            if self.label[at] == u32::MAX {
+                self.label[at] = c;
+            }
+        }
+    }
+
+    pub fn block_of(&self, v: [usize; 3]) -> usize {
+        let b = [0, 1, 2].map(|a| v[a] / self.f[a]);
+        b[0] + self.dims[0] * (b[1] + self.dims[1] * b[2])
+    }
+
+    fn coords(&self, b: usize) -> [usize; 3] {
+        [b % self.dims[0], (b / self.dims[0]) % self.dims[1], b / (self.dims[0] * self.dims[1])]
+    }
+
+    /// The voxel range of block `b`, for finding a voxel of it.
+    pub fn voxels_of(&self, b: usize, vol_dims: [usize; 3]) -> Bbox {
+        let c = self.coords(b);
+        Bbox { lo: [0, 1, 2].map(|a| c[a] * self.f[a]), hi: [0, 1, 2].map(|a| ((c[a] + 1) * self.f[a]).min(vol_dims[a]) - 1) }
+    }
+
+    /// Geodesic distances (mm, 26-neighbours) from block `from` over the blocks of
+    /// compartment `c`; returns the farthest block and its distance.
+    pub fn farthest(&self, c: u32, from: usize) -> (usize, f64) {
+        let mut dist: std::collections::HashMap<usize, f64> = std::collections::HashMap::new();
+        let mut heap = BinaryHeap::new();
+        dist.insert(from, 0.0);
+        heap.push(Reverse((Key(0.0), from)));
+        let mut best = (from, 0.0);
+        while let Some(Reverse((Key(d), u))) = heap.pop() {
+            if dist.get(&u).is_some_and(|&x| d > x) {
+                continue;
+            }
+            // Ties: the block first in patient-independent terms would need geometry; the
+            // distance itself decides, and equal distances are rare on mm edge lengths.
+            if d > best.1 {
+                best = (u, d);
+            }
+            let p = self.coords(u);
+            for dz in -1i64..=1 {
+                for dy in -1i64..=1 {
+                    for dx in -1i64..=1 {
+                        let q = [p[0] as i64 + dx, p[1] as i64 + dy, p[2] as i64 + dz];
+                        if (dx, dy, dz) == (0, 0, 0) || (0..3).any(|a| q[a] < 0 || q[a] >= self.dims[a] as i64) {
+                            continue;
+                        }
+                        let v = q[0] as usize + self.dims[0] * (q[1] as usize + self.dims[1] * q[2] as usize);
+                        if self.label[v] != c {
+                            continue;
+                        }
+                        let len = ((dx as f64 * self.step_mm[0]).powi(2) + (dy as f64 * self.step_mm[1]).powi(2) + (dz as f64 * self.step_mm[2]).powi(2)).sqrt();
+                        let nd = d + len;
+                        if dist.get(&v).is_none_or(|&x| nd < x) {
+                            dist.insert(v, nd);
+                            heap.push(Reverse((Key(nd), v)));
+                        }
+                    }
+                }
+            }
+        }
+        best
+    }
+
+    /// Centre of block `b`, volume-local mm.
+    pub fn centre_mm(&self, b: usize) -> DVec3 {
+        let c = self.coords(b);
+        DVec3::new((c[0] as f64 + 0.5) * self.step_mm[0], (c[1] as f64 + 0.5) * self.step_mm[1], (c[2] as f64 + 0.5) * self.step_mm[2])
+    }
+}
+
+#[derive(Clone, Copy, PartialEq, PartialOrd)]
+struct Key(f64);
+impl Eq for Key {}
+impl Ord for Key {
+    fn cmp(&self, o: &Self) -> std::cmp::Ordering {
+        self.0.total_cmp(&o.0)
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct ChainOptions {
+    /// A compartment with less gas than this (ml) is not a colon segment by itself.
+    pub min_segment_ml: f64,
+    /// Segments farther apart than this (mm, end to end) are not joined.
+    pub max_gap_mm: f64,
+    /// A bridge whose mean cost per mm outside the segments is above this goes through fat
+    /// or bone, not collapsed bowel.
+    pub max_bridge_cost: f64,
+}
+
+impl Default for ChainOptions {
+    fn default() -> Self {
+        ChainOptions { min_segment_ml: 5.0, max_gap_mm: 100.0, max_bridge_cost: 4.0 }
+    }
+}
+
+/// One link of the chain: a compartment, where it is entered and left (blocks).
+#[derive(Clone, Debug)]
+pub struct Link {
+    pub comp: u32,
+    pub entry: usize,
+    pub exit: usize,
+}
+
+/// Why a compartment is not in the chain.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Left {
+    TooSmall,
+    TooFar(f64),
+    BridgeTooDear { gap_mm: f64, cost: f64 },
+}
+
+pub struct Chain {
+    pub links: Vec<Link>,
+    /// `gaps[i]` joins `links[i]` and `links[i + 1]`.
+    pub gaps: Vec<Path>,
+    pub left: Vec<(u32, Left)>,
+}
+
+/// Orders the colon's compartments from `rectum` on. `candidate(c)`: big enough to be a
+/// segment; `bridge(from_block, to_block, a, b)`: the cheapest path between two blocks of
+/// compartments a and b.
+pub fn chain(coarse: &Coarse, comps: &[Compartment], rectum: u32, candidate: impl Fn(u32) -> bool, opts: &ChainOptions, mut bridge: impl FnMut(usize, usize, u32, u32) -> Option<Path>) -> Chain {
+    let entry = coarse.block_of(comps[rectum as usize].lowest);
+    let mut links = vec![Link { comp: rectum, entry, exit: coarse.farthest(rectum, entry).0 }];
+    let mut gaps = Vec::new();
+    let mut left: Vec<(u32, Left)> = Vec::new();
+    // Both ends of every candidate: a double sweep from its lowest voxel.
+    let ends: Vec<Option<[usize; 2]>> = (0..comps.len() as u32)
+        .map(|c| {
+            (c != rectum && candidate(c)).then(|| {
+                let a = coarse.farthest(c, coarse.block_of(comps[c as usize].lowest)).0;
+                [a, coarse.farthest(c, a).0]
+            })
+        })
+        .collect();
+    let mut free: Vec<u32> = (0..comps.len() as u32).filter(|&c| ends[c as usize].is_some()).collect();
+    loop {
+        let here = links.last().map(|l| (l.comp, coarse.centre_mm(l.exit), l.exit));
+        let Some((at_comp, at, exit)) = here else { break };
+        let mut options: Vec<(f64, u32, usize)> = free
+            .iter()
+            .flat_map(|&c| ends[c as usize].into_iter().flatten().map(move |e| (c, e)))
+            .map(|(c, e)| (coarse.centre_mm(e).distance(at), c, e))
+            .collect();
+        options.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+        let mut joined = false;
+        let mut tried: Vec<u32> = Vec::new();
+        for (d, c, e) in options {
+            if tried.contains(&c) {
+                continue;
+            }
+            tried.push(c);
+            if d > opts.max_gap_mm {
+                break;
+            }
+            match bridge(exit, e, at_comp, c) {
+                Some(p) if p.mean_cost <= opts.max_bridge_cost => {
+                    links.push(Link { comp: c, entry: e, exit: coarse.farthest(c, e).0 });
+                    gaps.push(p);
+                    free.retain(|&x| x != c);
+                    joined = true;
+                    break;
+                }
+                Some(p) => {
+                    left.retain(|(x, _)| *x != c);
+                    left.push((c, Left::BridgeTooDear { gap_mm: p.length_mm, cost: p.mean_cost }));
+                }
+                None => {}
+            }
+        }
+        if !joined {
+            break;
+        }
+    }
+    // Whatever stayed free: too far from the chain's end (or its bridge too dear).
+    for &c in &free {
+        if !left.iter().any(|(x, _)| *x == c) {
+            let at = links.last().map_or(DVec3::ZERO, |l| coarse.centre_mm(l.exit));
+            let d = ends[c as usize].map_or(f64::INFINITY, |e| e.iter().map(|&b| coarse.centre_mm(b).distance(at)).fold(f64::INFINITY, f64::min));
+            left.push((c, Left::TooFar(d)));
+        }
+    }
+    left.retain(|(c, _)| !links.iter().any(|l| l.comp == *c));
+    for c in 0..comps.len() as u32 {
+        if c != rectum && !candidate(c) {
+            left.push((c, Left::TooSmall));
+        }
+    }
+    Chain { links, gaps, left }
+}
+
+/// Height toward the feet (mm) of a volume-local point: larger is lower in the patient.
+pub fn height(inferior: DVec3, p: DVec3) -> f64 {
+    inferior.dot(p)
+}
+
+/// Anatomical name of a place in the colon, from where it lies in the colon's box in the
+/// patient frame (u: right 0 → left 1; v: inferior 0 → superior 1).
+pub fn region(u: f64, v: f64) -> &'static str {
+    if u > 0.68 {
+        if v > 0.8 { "splenic flexure" } else { "descending" }
+    } else if u < 0.32 {
+        if v > 0.8 {
+            "hepatic flexure"
+        } else if v < 0.4 {
+            "cecum"
+        } else {
+            "ascending"
+        }
+    } else if v < 0.35 {
+        "rectosigmoid"
+    } else if v < 0.55 {
+        "sigmoid"
+    } else {
+        "transverse"
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Three gas tubes along x in a row with gaps of 10 and 30 blocks' worth; the chain goes
+    /// from the first (the "rectum") to the nearest next, then the last, entering each at its
+    /// near end.
+    #[test]
+    fn chain_goes_end_to_end() {
+        let dims = [200, 20, 20];
+        let mut coarse = Coarse::new(dims, [1.0; 3]);
+        let spans = [(0usize, 40usize), (60, 100), (130, 190)];
+        let comps: Vec<Compartment> = spans
+            .iter()
+            .map(|&(a, b)| Compartment { voxels: 1, gas_voxels: 1, sum_mm: DVec3::ZERO, bbox: Bbox { lo: [a, 8, 8], hi: [b - 1, 11, 11] }, lowest: [a, 9, 9], lowest_height: 0.0 })
+            .collect();
+        for (c, &(a, b)) in spans.iter().enumerate() {
+            for k in 8..12 {
+                for j in 8..12 {
+                    coarse.mark_run(a, b, j, k, c as u32);
+                }
+            }
+        }
+        let mut asked = Vec::new();
+        let ch = chain(&coarse, &comps, 0, |_| true, &ChainOptions::default(), |from, to, a, b| {
+            asked.push((a, b));
+            let (p, q) = (coarse.centre_mm(from), coarse.centre_mm(to));
+            Some(Path { voxels: vec![], length_mm: p.distance(q), mean_cost: 1.0 })
+        });
+        assert_eq!(ch.links.iter().map(|l| l.comp).collect::<Vec<_>>(), vec![0, 1, 2]);
+        assert_eq!(asked, vec![(0, 1), (1, 2)]);
+        assert!((ch.gaps[0].length_mm - 20.0).abs() < 8.5 && (ch.gaps[1].length_mm - 30.0).abs() < 8.5);
+        // A bridge through fat leaves the segment out, and says why.
+        let ch = chain(&coarse, &comps, 0, |_| true, &ChainOptions::default(), |_, _, _, _| Some(Path { voxels: vec![], length_mm: 20.0, mean_cost: 6.0 }));
+        assert_eq!(ch.links.len(), 1);
+        assert!(ch.left.iter().any(|(c, l)| *c == 1 && matches!(l, Left::BridgeTooDear { .. })));
+        // Too far apart: not joined.
+        let far = ChainOptions { max_gap_mm: 10.0, ..Default::default() };
+        let ch = chain(&coarse, &comps, 0, |_| true, &far, |_, _, _, _| None);
+        assert_eq!(ch.links.len(), 1);
+        assert!(ch.left.iter().all(|(_, l)| matches!(l, Left::TooFar(_))));
+    }
+}

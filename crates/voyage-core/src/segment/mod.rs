@@ -1,0 +1,1325 @@
+//! Segmentation of the colon's air (paper §3.2: "the voxels inside the colon are easily
+//! extracted with a region growing method"), made to hold on real CT colonography exams: the
+//! colon in several gas segments, tagged fluid, opacified small bowel, any patient position
+//! and any storage order.
+//!
+//! Everything starts on *runs*: maximal stretches of air along x in one row. A CT of
+//! 512×512×400 voxels holds a few hundred thousand air runs, so connected components,
+//! outside-air removal and region growing cost a pass over the HU values plus work on the runs.
+//!
+//! 1. Threshold: air is HU < `air_hu` (−500, midway between air and soft tissue, where the
+//!    partial-volume boundary lies).
+//! 2. Outside air: in each *axial* slice (the patient frame's, whatever the storage order),
+//!    air connected (4-neighbours) to the slice's border lies outside the body. Slice by slice
+//!    and not in 3D, because a rectal tube carries air from the colon out of the body.
+//! 3. Components: the remaining air, 6-connected in 3D (diagonal contact through a thin wall
+//!    does not join two loops of the colon).
+//! 4. Lungs: large components whose air is not dark enough to be gas (lung parenchyma lies
+//!    around −850 HU, bowel gas at −1000).
+//! 5. Gravity: DICOM PatientPosition or `--position`; else from the air–fluid levels; else
+//!    supine, assumed and said ([`crate::anatomy`]).
+//! 6. Tagged fluid: bright voxels in the column under a gas region's air, across the level
+//!    ([`fluid`]); gas regions and their pools form *compartments* (air split by a level
+//!    stays one compartment).
+//! 7. The colon: a chain of compartments from the rectum (the lowest gas in the patient
+//!    frame) to the cecum, end to end, each gap bridged by the cheapest path through the CT
+//!    ([`chain`], [`bridge`]). What is left out is listed with the reason.
+//!
+//! A lumen mask (0/1 labels from another segmenter) skips steps 1, 2, 4 and 6; its pieces are
+//! chained like gas segments.
+
+mod bridge;
+mod chain;
+mod fluid;
+mod work;
+
+use glam::DVec3;
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::anatomy::{Orientation, PatientFrame, PatientPosition, PositionSource};
+use crate::{Error, Result, Volume};
+use chain::{Chain, ChainOptions, Coarse, Compartment, Left};
+use work::{Bbox, BRIDGE, BRIGHT, GAS, LAYER, POOL};
+
+#[derive(Clone, Debug)]
+pub struct SegmentOptions {
+    /// Air is HU below this.
+    pub air_hu: i16,
+    /// A point in gas that is colon (volume-local mm): its region joins the colon even if the
+    /// automatic chain would leave it out. It is not the source.
+    pub seed_mm: Option<DVec3>,
+    /// Treat the input as a lumen mask (non-zero = lumen). None: detect (values only 0 and 1).
+    pub mask: Option<bool>,
+    /// Components smaller than this (ml) are not reported one by one.
+    pub min_report_ml: f64,
+    /// Without a seed, the colon must hold at least this much gas (ml): a few millilitres
+    /// of gas are bowel gas or noise, not a colon to fly through.
+    pub min_colon_ml: f64,
+    /// Tagged fluid is HU at or above this; None: no fluid is added to the lumen.
+    pub fluid_hu: Option<i16>,
+    /// The patient's position and where it came from (DICOM, the user); None: inferred.
+    pub position: Option<(PatientPosition, PositionSource)>,
+    /// How gas segments are chained into one colon.
+    pub chain: ChainOptions,
+}
+
+impl Default for SegmentOptions {
+    fn default() -> Self {
+        SegmentOptions { air_hu: -500, seed_mm: None, mask: None, min_report_ml: 0.5, min_colon_ml: 10.0, fluid_hu: Some(200), position: None, chain: ChainOptions::default() }
+    }
+}
+
+pub use chain::ChainOptions as SegmentChainOptions;
+
+/// What a gas component is taken to be.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ComponentKind {
+    Colon,
+    Lung,
+    /// Narrow or small gas not joined to the colon.
+    SmallBowel,
+    /// Large gas high on the patient's left, not joined to the colon.
+    Stomach,
+    Other,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Component {
+    pub voxels: usize,
+    pub volume_ml: f64,
+    /// Mean position, volume-local mm.
+    pub centroid_mm: [f64; 3],
+    pub bbox_lo: [usize; 3],
+    pub bbox_hi: [usize; 3],
+    /// Mean HU (None for mask input).
+    pub mean_hu: Option<f64>,
+    /// Fraction of voxels darker than −950 HU: bowel gas is mostly that dark, lung is not.
+    pub dark_fraction: Option<f64>,
+    pub kind: ComponentKind,
+}
+
+/// A gas region with the tagged fluid under its level, as the report lists it.
+#[derive(Clone, Debug, Serialize)]
+pub struct SegmentReport {
+    /// Where it lies ("rectosigmoid", "descending–splenic flexure", ...) for colon segments;
+    /// the class for the rest ("small bowel", "stomach", "other").
+    pub label: String,
+    pub kind: ComponentKind,
+    /// Position in the colon, rectum first (None: not colon).
+    pub order: Option<usize>,
+    pub gas_ml: f64,
+    pub fluid_ml: f64,
+    /// Bounding box in patient LPS mm.
+    pub extent_lps_mm: [[f64; 3]; 2],
+    pub kept: bool,
+    /// Why it was left out.
+    pub reason: Option<String>,
+}
+
+/// A gap between two consecutive colon segments, bridged through the CT.
+#[derive(Clone, Debug, Serialize)]
+pub struct Gap {
+    /// Indices into the colon order (`SegmentReport::order`): from `between[0]` to `between[1]`.
+    pub between: [usize; 2],
+    pub length_mm: f64,
+    pub from_lps_mm: [f64; 3],
+    pub to_lps_mm: [f64; 3],
+    /// Mean cost per mm of the path (1: soft tissue, i.e. collapsed bowel, all the way).
+    pub mean_cost: f64,
+    /// The bridge's path, volume-local mm.
+    #[serde(skip)]
+    pub path_mm: Vec<DVec3>,
+}
+
+#[derive(Clone, Debug)]
+pub struct Segmentation {
+    /// 1 = colon lumen.
+    pub lumen: Volume<u8>,
+    pub lumen_voxels: usize,
+    /// Internal gas components, largest first (those above `min_report_ml`).
+    pub components: Vec<Component>,
+    /// Smaller components not listed one by one.
+    pub small_components: usize,
+    /// Voxels of tagged fluid (and of the air–fluid interface) counted in the lumen.
+    pub fluid_voxels: usize,
+    /// Whether the input was taken as a mask.
+    pub from_mask: bool,
+    /// The colon's lowest voxel in the patient frame (middle of its lowest 2 mm): where the
+    /// rectum is looked for.
+    pub seed_voxel: [usize; 3],
+    /// The lumen's first and last voxel along each axis (its bounding box, both ends inside).
+    pub extent: [[usize; 3]; 2],
+    pub orientation: Orientation,
+    /// Gas regions (with their fluid): the colon's in order, then the rest.
+    pub segments: Vec<SegmentReport>,
+    /// Gaps bridged between consecutive colon segments.
+    pub gaps: Vec<Gap>,
+    /// Doubtful results the user must hear of (an assumed position, a bridged gap, large gas
+    /// left out, ...).
+    pub warnings: Vec<String>,
+    /// Radius (mm) of the tube laid along each bridge.
+    pub bridge_radius_mm: f64,
+}
+
+/// One stretch of lumen candidates along x: voxels x0..x1 of row (j, k).
+#[derive(Clone, Copy, Debug)]
+struct Run {
+    x0: u32,
+    x1: u32,
+}
+
+/// All runs, row by row: the runs of row r = j + ny*k are `runs[row_start[r]..row_start[r+1]]`.
+struct Runs {
+    runs: Vec<Run>,
+    row_start: Vec<u32>,
+    /// Per run: sum of HU and count of voxels below −950 (zero for masks).
+    hu_sum: Vec<i64>,
+    dark: Vec<u32>,
+    ny: usize,
+}
+
+impl Runs {
+    fn row(&self, j: usize, k: usize) -> std::ops::Range<usize> {
+        let r = j + self.ny * k;
+        self.row_start[r] as usize..self.row_start[r + 1] as usize
+    }
+
+    /// The run holding voxel v, if any.
+    fn at(&self, v: [usize; 3]) -> Option<usize> {
+        let row = self.row(v[1], v[2]);
+        let rs = &self.runs[row.clone()];
+        let p = rs.partition_point(|r| (r.x1 as usize) <= v[0]);
+        (p < rs.len() && rs[p].x0 as usize <= v[0]).then_some(row.start + p)
+    }
+}
+
+/// Segments the colon lumen from a CT (or takes it from a mask).
+///
+/// Outside air is found in axial slices: when the scan's axial planes are not its k slices
+/// (a coronal or sagittal stack, or a volume stored another way round), the scan is first
+/// stored with its axial planes as slices, and the result stored back.
+pub fn segment(vol: &Volume<i16>, opts: &SegmentOptions) -> Result<Segmentation> {
+    let from_mask = opts.mask.unwrap_or_else(|| is_mask(vol));
+    let (axial, _) = PatientFrame::of(vol.geometry()).nearest_axis(DVec3::Z);
+    if from_mask || axial == 2 {
+        return segment_axial(vol, opts, from_mask);
+    }
+    let mut perm = [0, 1, 2];
+    perm.swap(axial, 2);
+    let stored = vol.reoriented(perm, [false; 3])?;
+    let swap = |p: DVec3| DVec3::new(p[perm[0]], p[perm[1]], p[perm[2]]);
+    let o = SegmentOptions { seed_mm: opts.seed_mm.map(swap), ..opts.clone() };
+    let s = segment_axial(&stored, &o, false)?;
+    s.stored_back(perm, vol.geometry())
+}
+
+impl Segmentation {
+    /// The segmentation of a scan stored with axes `perm` (a swap), in the original storage.
+    fn stored_back(mut self, perm: [usize; 3], geom: &crate::Geometry) -> Result<Segmentation> {
+        let p = |v: [usize; 3]| [v[perm[0]], v[perm[1]], v[perm[2]]];
+        let mut lumen = self.lumen.reoriented(perm, [false; 3])?;
+        *lumen.geometry_mut() = geom.clone();
+        self.lumen = lumen;
+        self.seed_voxel = p(self.seed_voxel);
+        self.extent = [p(self.extent[0]), p(self.extent[1])];
+        for c in &mut self.components {
+            c.centroid_mm = [c.centroid_mm[perm[0]], c.centroid_mm[perm[1]], c.centroid_mm[perm[2]]];
+            (c.bbox_lo, c.bbox_hi) = (p(c.bbox_lo), p(c.bbox_hi));
+        }
+        for g in &mut self.gaps {
+            g.path_mm.iter_mut().for_each(|q| *q = DVec3::new(q[perm[0]], q[perm[1]], q[perm[2]]));
+        }
+        Ok(self)
+    }
+}
+
+fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> Result<Segmentation> {
+    let fluid_hu = opts.fluid_hu.filter(|_| !from_mask);
+    // Air, its statistics and the bright runs of tagged fluid, all in one pass over the values.
+    let (runs, bright) = if from_mask { extract_runs(vol, Test::NonZero, None) } else { extract_runs(vol, Test::Below(opts.air_hu), fluid_hu) };
+    let inside = if from_mask { vec![true; runs.runs.len()] } else { inside_body(&runs, vol.dims()) };
+    let mut labels = UnionFind::new(runs.runs.len());
+    connect_3d(&runs, &inside, vol.dims(), &mut labels);
+    let (mut comps, run_comp) = component_stats(&runs, &inside, vol, &mut labels, from_mask);
+    classify_lungs(&mut comps, from_mask);
+    let seed_comp = opts.seed_mm.map(|mm| seed_component(&comps, &runs, &run_comp, vol, mm, opts)).transpose()?;
+    let mut warnings = Vec::new();
+
+    // Working labels in the volume that becomes the lumen.
+    let mut work = Volume::filled(vol.geometry().clone(), 0u8)?;
+    let is_gas = |c: u32| c != u32::MAX && comps[c as usize].kind != ComponentKind::Lung;
+    paint(&mut work, &runs, |r| is_gas(run_comp[r]).then_some(GAS));
+    let Some(gas_box) = runs_box(&runs, vol.dims(), |r| is_gas(run_comp[r])) else {
+        return Err(no_colon(&comps, opts, from_mask));
+    };
+    let orientation = match opts.position {
+        Some((p, src)) => Orientation::new(p, src),
+        None => Orientation::new(PatientPosition::Hfs, PositionSource::Assumed),
+    };
+    let mut orientation = orientation;
+    if let Some(bright) = &bright {
+        // Fluid lies below the gas, at most a pool's depth away.
+        let depth = vol.spacing().map(|s| (fluid::MAX_DEPTH_MM / s).ceil() as usize + 2);
+        let bx = gas_box.grown(depth, vol.dims());
+        paint_in(&mut work, bright, &bx, BRIGHT);
+        if opts.position.is_none()
+            && let Some(g) = fluid::gravity_from_levels(&work, &bx)
+        {
+            orientation = Orientation::new(PatientPosition::from_gravity(g), PositionSource::AirFluidLevels);
+        }
+        fluid::mark_pools(&mut work, &bx, orientation.gravity());
+    }
+    if orientation.source == PositionSource::Assumed {
+        warnings.push(if from_mask {
+            "patient position unknown (a mask has no fluid levels): supine assumed; give --position if not".to_string()
+        } else {
+            "patient position unknown (no PatientPosition, no air–fluid level seen): supine assumed; give --position if not".to_string()
+        });
+    }
+
+    // Compartments: gas with its pools and layers.
+    let cbox = runs_box(&runs, vol.dims(), |r| is_gas(run_comp[r])).map(|b| b.grown(vol.spacing().map(|s| (fluid::MAX_DEPTH_MM / s).ceil() as usize + 2), vol.dims())).unwrap_or(gas_box);
+    let cruns = work_runs(&work, &cbox, |x| x == GAS || x == POOL || x == LAYER);
+    let mut cuf = UnionFind::new(cruns.runs.len());
+    connect_3d(&cruns, &vec![true; cruns.runs.len()], vol.dims(), &mut cuf);
+    let frame = PatientFrame::of(vol.geometry());
+    let (compartments, crun_comp) = compartment_stats(&cruns, &work, &mut cuf, vol.geometry(), frame.inferior());
+    let voxel_ml = vol.spacing().iter().product::<f64>() / 1000.0;
+    let comp_at = |v: [usize; 3]| cruns.at(v).map(|r| crun_comp[r]).filter(|&c| c != u32::MAX);
+    // Every gas component's compartment.
+    let mut gas_compartment: Vec<Option<u32>> = vec![None; comps.len()];
+    for (r, &c) in run_comp.iter().enumerate() {
+        if is_gas(c) && gas_compartment[c as usize].is_none() {
+            let (j, k) = row_of(&runs, r);
+            gas_compartment[c as usize] = comp_at([runs.runs[r].x0 as usize, j, k]);
+        }
+    }
+    let seed_compartment = seed_comp.and_then(|c| gas_compartment[c]);
+    let candidate = |c: u32| compartments[c as usize].gas_voxels as f64 * voxel_ml >= opts.chain.min_segment_ml;
+    // The rectum: the candidate holding the lowest voxel in the patient frame.
+    let rectum = (0..compartments.len() as u32)
+        .filter(|&c| candidate(c))
+        .max_by(|&a, &b| compartments[a as usize].lowest_height.total_cmp(&compartments[b as usize].lowest_height).then(b.cmp(&a)))
+        .or(seed_compartment)
+        .ok_or_else(|| no_colon(&comps, opts, from_mask))?;
+
+    let mut coarse = Coarse::new(vol.dims(), vol.spacing());
+    for k in cbox.lo[2]..=cbox.hi[2] {
+        for j in cbox.lo[1]..=cbox.hi[1] {
+            for r in cruns.row(j, k) {
+                let c = crun_comp[r];
+                if c == rectum || candidate(c) || Some(c) == seed_compartment {
+                    coarse.mark_run(cruns.runs[r].x0 as usize, cruns.runs[r].x1 as usize, j, k, c);
+                }
+            }
+        }
+    }
+    let dims = vol.dims();
+    let ct = (!from_mask).then_some(vol);
+    let voxel_in = |block: usize, c: u32| {
+        let bx = coarse.voxels_of(block, dims);
+        let mid = [0, 1, 2].map(|a| (bx.lo[a] + bx.hi[a]) / 2);
+        let mut best: Option<(usize, [usize; 3])> = None;
+        for k in bx.lo[2]..=bx.hi[2] {
+            for j in bx.lo[1]..=bx.hi[1] {
+                for i in bx.lo[0]..=bx.hi[0] {
+                    if comp_at([i, j, k]) == Some(c) {
+                        let d = (0..3).map(|a| mid[a].abs_diff([i, j, k][a]).pow(2)).sum::<usize>();
+                        if best.is_none_or(|b| d < b.0) {
+                            best = Some((d, [i, j, k]));
+                        }
+                    }
+                }
+            }
+        }
+        best.map(|b| b.1)
+    };
+    let bridge = |from: usize, to: usize, a: u32, b: u32| {
+        let (va, vb) = (voxel_in(from, a)?, voxel_in(to, b)?);
+        let own = |v: [usize; 3]| comp_at(v).is_some_and(|c| c == a || c == b);
+        let other = |v: [usize; 3]| matches!(work.get(v[0], v[1], v[2]), GAS | POOL | LAYER) && !own(v);
+        bridge::cheapest_path(ct, dims, vol.spacing(), va, vb, own, other)
+    };
+    let mut ch: Chain = chain::chain(&coarse, &compartments, rectum, |c| candidate(c) || Some(c) == seed_compartment, &opts.chain, &bridge);
+    // A seed's gas is colon, wherever the chain went: joined at the chain's end.
+    if let Some(s) = seed_compartment
+        && !ch.links.iter().any(|l| l.comp == s)
+    {
+        let last = ch.links.last().map_or(0, |l| l.exit);
+        let at = coarse.centre_mm(last);
+        let entry = [coarse.block_of(compartments[s as usize].lowest)].into_iter().chain([coarse.farthest(s, coarse.block_of(compartments[s as usize].lowest)).0]).min_by(|&x, &y| coarse.centre_mm(x).distance(at).total_cmp(&coarse.centre_mm(y).distance(at))).unwrap_or(0);
+        let from = ch.links.last().map(|l| l.comp).unwrap_or(rectum);
+        if let Some(p) = bridge(last, entry, from, s) {
+            warnings.push(format!("the seed's gas was not joined to the colon by itself: joined to its end through {:.0} mm of tissue", p.length_mm));
+            ch.links.push(chain::Link { comp: s, entry, exit: coarse.farthest(s, entry).0 });
+            ch.gaps.push(p);
+            ch.left.retain(|(c, _)| *c != s);
+        }
+    }
+
+    let colon_gas_ml: f64 = ch.links.iter().map(|l| compartments[l.comp as usize].gas_voxels as f64 * voxel_ml).sum();
+    if seed_compartment.is_none() && colon_gas_ml < opts.min_colon_ml {
+        return Err(no_colon(&comps, opts, from_mask));
+    }
+
+    // The lumen: chained compartments, bridges and the fluid filling the stretches they cross.
+    let geom = vol.geometry().clone();
+    let bridge_radius_mm = 3.0f64.max(1.5 * vol.spacing().iter().cloned().fold(0.0, f64::max));
+    let mut added = Vec::new();
+    for p in &ch.gaps {
+        if ct.is_some() {
+            fill_fluid(&mut work, &p.voxels, FILL_MM, &mut added);
+        }
+        lay_bridge(&mut work, &p.voxels, bridge_radius_mm, &mut added);
+    }
+    let in_colon: Vec<bool> = {
+        let mut v = vec![false; compartments.len()];
+        ch.links.iter().for_each(|l| v[l.comp as usize] = true);
+        v
+    };
+    let mut fluid_voxels = 0;
+    let mut colon_voxels = 0;
+    let mut lumen_box: Option<Bbox> = None;
+    for (r, &c) in crun_comp.iter().enumerate() {
+        if c != u32::MAX && in_colon[c as usize] {
+            let (j, k) = row_of(&cruns, r);
+            let run = cruns.runs[r];
+            let row = geom.index(0, j, k);
+            fluid_voxels += work.data()[row + run.x0 as usize..row + run.x1 as usize].iter().filter(|&&x| x == POOL || x == LAYER).count();
+            colon_voxels += (run.x1 - run.x0) as usize;
+            let b = Bbox { lo: [run.x0 as usize, j, k], hi: [run.x1 as usize - 1, j, k] };
+            lumen_box = Some(lumen_box.map_or(b, |x| x.union(&b)));
+        }
+    }
+    for &v in &added {
+        let ijk = geom.ijk(v);
+        let b = Bbox { lo: ijk, hi: ijk };
+        lumen_box = Some(lumen_box.map_or(b, |x| x.union(&b)));
+    }
+    let bridge_voxels = added.len();
+    if ct.is_some() {
+        fluid_voxels += added.iter().filter(|&&v| vol.data()[v] >= fluid_hu.unwrap_or(i16::MAX)).count();
+    }
+    // Back to 0/1.
+    work.data_mut().par_iter_mut().for_each(|x| *x = (*x == BRIDGE) as u8);
+    paint(&mut work, &cruns, |r| (crun_comp[r] != u32::MAX && in_colon[crun_comp[r] as usize]).then_some(1));
+    let lumen = work;
+    let lumen_box = lumen_box.ok_or_else(|| Error::invalid("the colon holds no voxels"))?;
+
+    // The source side: the middle of the rectum's lowest 2 mm.
+    let seed_voxel = lowest_middle(&cruns, &crun_comp, &compartments[rectum as usize], rectum, &geom, frame.inferior());
+
+    // Reports.
+    let colon_lps = lps_box(&geom, &ch.links.iter().map(|l| compartments[l.comp as usize].bbox).fold(compartments[rectum as usize].bbox, |a, b| a.union(&b)));
+    let order_of = |c: u32| ch.links.iter().position(|l| l.comp == c);
+    let mut classes = vec![ComponentKind::Other; compartments.len()];
+    for (c, comp) in compartments.iter().enumerate() {
+        classes[c] = if order_of(c as u32).is_some() { ComponentKind::Colon } else { classify(comp, &geom, &colon_lps, voxel_ml) };
+    }
+    let mut segments: Vec<SegmentReport> = Vec::new();
+    for (i, l) in ch.links.iter().enumerate() {
+        let comp = &compartments[l.comp as usize];
+        let names: Vec<&str> = [coarse.centre_mm(l.entry), comp.centroid_mm(), coarse.centre_mm(l.exit)]
+            .iter()
+            .map(|&p| region_of(&geom, p, &colon_lps))
+            .fold(Vec::new(), |mut v, n| {
+                if v.last() != Some(&n) {
+                    v.push(n);
+                }
+                v
+            });
+        segments.push(segment_report(comp, &geom, names.join("–"), ComponentKind::Colon, Some(i), None, voxel_ml));
+    }
+    let mut others: Vec<(u32, Left)> = ch.left.clone();
+    others.sort_by(|a, b| compartments[b.0 as usize].gas_voxels.cmp(&compartments[a.0 as usize].gas_voxels).then(a.0.cmp(&b.0)));
+    for (c, why) in others {
+        let comp = &compartments[c as usize];
+        if (comp.gas_voxels as f64 * voxel_ml) < opts.min_report_ml {
+            continue;
+        }
+        let kind = classes[c as usize];
+        let reason = match why {
+            Left::TooSmall => format!("{:.1} ml of gas, less than a colon segment's {} ml", comp.gas_voxels as f64 * voxel_ml, opts.chain.min_segment_ml),
+            Left::TooFar(d) if d.is_finite() => format!("its nearest end is {d:.0} mm from the colon's end (more than {:.0} mm)", opts.chain.max_gap_mm),
+            Left::TooFar(_) => "not reached from the colon's end".to_string(),
+            Left::BridgeTooDear { gap_mm, cost } => format!("the way to it ({gap_mm:.0} mm) crosses fat or bone, not collapsed bowel (cost {cost:.1} per mm)"),
+        };
+        let label = match kind {
+            ComponentKind::SmallBowel => "small bowel",
+            ComponentKind::Stomach => "stomach",
+            _ => "other",
+        };
+        segments.push(segment_report(comp, &geom, label.to_string(), kind, None, Some(reason), voxel_ml));
+    }
+    let mut gaps = Vec::new();
+    for (i, p) in ch.gaps.iter().enumerate() {
+        let ends = (p.voxels[0], p.voxels[p.voxels.len() - 1]);
+        let lps = |v: [usize; 3]| geom.index_to_patient(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64)).to_array();
+        // The part of the path outside both segments: the gap itself.
+        let path_mm = p.voxels.iter().filter(|&&v| comp_at(v).is_none()).map(|v| geom.index_to_local(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64))).collect();
+        gaps.push(Gap { between: [i, i + 1], length_mm: p.length_mm, from_lps_mm: lps(ends.0), to_lps_mm: lps(ends.1), mean_cost: p.mean_cost, path_mm });
+        warnings.push(format!(
+            "collapsed or fluid-filled stretch bridged: {:.0} mm between the {} and the {} segment, from LPS ({:.0}, {:.0}, {:.0})",
+            p.length_mm,
+            segments[i].label,
+            segments[i + 1].label,
+            lps(ends.0)[0],
+            lps(ends.0)[1],
+            lps(ends.0)[2]
+        ));
+    }
+    for s in segments.iter().filter(|s| !s.kept && s.gas_ml >= LARGE_LEFT_ML) {
+        warnings.push(format!("{:.0} ml of gas ({}) left out of the colon: {}", s.gas_ml, s.label, s.reason.as_deref().unwrap_or("")));
+    }
+    // Gas components, labelled by their compartment.
+    for (c, comp) in comps.iter_mut().enumerate() {
+        if comp.kind == ComponentKind::Lung {
+            continue;
+        }
+        comp.kind = gas_compartment[c].map_or(ComponentKind::Other, |x| classes[x as usize]);
+    }
+    let lumen_voxels = colon_voxels + bridge_voxels;
+    let (components, small) = report(comps, opts.min_report_ml);
+    Ok(Segmentation {
+        lumen,
+        lumen_voxels,
+        components,
+        small_components: small,
+        fluid_voxels,
+        from_mask,
+        seed_voxel,
+        extent: [lumen_box.lo, lumen_box.hi],
+        orientation,
+        segments,
+        gaps,
+        warnings,
+        bridge_radius_mm,
+    })
+}
+
+/// Gas left out of the colon from this size on (ml) gets a warning.
+const LARGE_LEFT_ML: f64 = 20.0;
+/// Fluid filling a bridged stretch is taken this far (mm) from the bridge's path.
+const FILL_MM: f64 = 25.0;
+
+/// A volume holding only 0 and 1 is a mask, not a CT.
+pub fn is_mask(vol: &Volume<i16>) -> bool {
+    // Chunks tested without an early exit inside (vector code); a CT fails on its first chunk.
+    let chunks = || vol.data().par_chunks(1 << 14);
+    chunks().all(|c| c.iter().fold(true, |a, &v| a & (v as u16 <= 1))) && chunks().any(|c| c.iter().fold(false, |a, &v| a | (v == 1)))
+}
+
+/// Which values a pass collects runs of.
+#[derive(Clone, Copy, Debug)]
+enum Test {
+    /// Below the threshold: air in a CT.
+    Below(i16),
+    /// At or above the threshold: tagged fluid (and bone).
+    AtLeast(i16),
+    /// Not 0: a mask's labels.
+    NonZero,
+}
+
+impl Test {
+    #[inline(always)]
+    fn holds(self, v: i16) -> bool {
+        match self {
+            Test::Below(t) => v < t,
+            Test::AtLeast(t) => v >= t,
+            Test::NonZero => v != 0,
+        }
+    }
+}
+
+/// The runs of `test` (the air, with HU statistics when it is `Below`) and, with `bright`, the
+/// runs at or above it, from one read of the values.
+fn extract_runs(vol: &Volume<i16>, test: Test, bright: Option<i16>) -> (Runs, Option<Runs>) {
+    let [nx, ny, nz] = vol.dims();
+    let stats = matches!(test, Test::Below(_));
+    // One task per slice; concatenated in slice order so the result is thread-independent.
+    let per_slice: Vec<(SliceRuns, Option<SliceRuns>)> = (0..nz)
+        .into_par_iter()
+        .map_init(
+            || (vec![0u64; nx.div_ceil(64)], vec![0u64; nx.div_ceil(64)]),
+            |words, k| {
+                let slice = vol.slice_k(k);
+                let mut air = SliceRuns::with_rows(ny);
+                let mut fluid = bright.map(|_| SliceRuns::with_rows(ny));
+                for row in slice.chunks_exact(nx) {
+                    let tests = (test, bright.map(Test::AtLeast));
+                    row_bits(row, tests, words);
+                    air.add_row(&words.0, |x0, x1| if stats { run_stats(row, x0, x1) } else { None });
+                    if let Some(f) = &mut fluid {
+                        f.add_row(&words.1, |_, _| None);
+                    }
+                }
+                (air, fluid)
+            },
+        )
+        .collect();
+    let (air, fluid): (Vec<SliceRuns>, Vec<Option<SliceRuns>>) = per_slice.into_iter().unzip();
+    let fluid = bright.map(|_| Runs::concat(fluid.into_iter().flatten(), ny));
+    (Runs::concat(air, ny), fluid)
+}
+
+/// One slice's runs, row by row.
+struct SliceRuns {
+    runs: Vec<Run>,
+    counts: Vec<u32>,
+    hu_sum: Vec<i64>,
+    dark: Vec<u32>,
+}
+
+impl SliceRuns {
+    fn with_rows(ny: usize) -> Self {
+        SliceRuns { runs: Vec::new(), counts: Vec::with_capacity(ny), hu_sum: Vec::new(), dark: Vec::new() }
+    }
+
+    /// The runs of one row's bits, each with `stats(x0, x1)` ((0, 0) where it gives none).
+    fn add_row(&mut self, words: &[u64], stats: impl Fn(u32, u32) -> Option<(i64, u32)>) {
+        let before = self.runs.len();
+        runs_of_bits(words, |x0, x1| {
+            self.runs.push(Run { x0, x1 });
+            let (sum, dark) = stats(x0, x1).unwrap_or((0, 0));
+            self.hu_sum.push(sum);
+            self.dark.push(dark);
+        });
+        self.counts.push((self.runs.len() - before) as u32);
+    }
+}
+
+impl Runs {
+    fn concat(slices: impl IntoIterator<Item = SliceRuns>, ny: usize) -> Runs {
+        let mut out = Runs { runs: Vec::new(), row_start: vec![0], hu_sum: Vec::new(), dark: Vec::new(), ny };
+        for s in slices {
+            for c in s.counts {
+                let last = *out.row_start.last().unwrap_or(&0);
+                out.row_start.push(last + c);
+            }
+            out.runs.extend(s.runs);
+            out.hu_sum.extend(s.hu_sum);
+            out.dark.extend(s.dark);
+        }
+        out
+    }
+}
+
+/// HU sum and count of voxels darker than −950 HU of an air run, for telling bowel gas from
+/// lung. Runs reaching the row's ends lie outside the body (step 2 drops them) and the air
+/// outside is most of a scan's air: they get none.
+fn run_stats(row: &[i16], x0: u32, x1: u32) -> Option<(i64, u32)> {
+    if x0 == 0 || x1 as usize == row.len() {
+        return None;
+    }
+    let seg = &row[x0 as usize..x1 as usize];
+    // i32 holds the sum of a row (at most 65 536 values of magnitude ≤ 32 768).
+    let sum: i32 = seg.iter().map(|&v| v as i32).sum();
+    let dark = seg.iter().map(|&v| (v < -950) as u32).sum();
+    Some((sum as i64, dark))
+}
+
+/// Bit x % 64 of word x / 64 of `words.0`: whether `tests.0` holds for `row[x]`; the same of
+/// `words.1` for `tests.1`, if any (one read of the row for both); bits past the row are 0.
+fn row_bits(row: &[i16], tests: (Test, Option<Test>), words: &mut (Vec<u64>, Vec<u64>)) {
+    let (chunks, rest) = row.as_chunks::<64>();
+    let (a, b) = (&mut words.0, &mut words.1);
+    match tests {
+        (t, None) => a.iter_mut().zip(chunks).for_each(|(w, c)| *w = word_bits(c, t)),
+        (t, Some(u)) => {
+            for ((wa, wb), c) in a.iter_mut().zip(b.iter_mut()).zip(chunks) {
+                (*wa, *wb) = (word_bits(c, t), word_bits(c, u));
+            }
+        }
+    }
+    if !rest.is_empty() {
+        let bits = |t: Test| rest.iter().enumerate().fold(0u64, |w, (i, &v)| w | (t.holds(v) as u64) << i);
+        a[row.len() / 64] = bits(tests.0);
+        if let Some(u) = tests.1 {
+            b[row.len() / 64] = bits(u);
+        }
+    }
+}
+
+/// The 64 bits of one word of [`row_bits`]: SSE2 compares, 16 voxels per mask.
+#[inline(always)]
+fn word_bits(v: &[i16; 64], test: Test) -> u64 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::*;
+        // SAFETY: SSE2 is part of x86_64; each load reads 8 of the 64 values.
+        unsafe {
+            let (t, invert) = match test {
+                Test::Below(t) => (_mm_set1_epi16(t), 0),
+                Test::AtLeast(t) => (_mm_set1_epi16(t), 0xFFFF),
+                Test::NonZero => (_mm_setzero_si128(), 0xFFFF),
+            };
+            let cmp = |at: usize| {
+                let x = _mm_loadu_si128(v.as_ptr().add(at) as *const __m128i);
+                match test {
+                    Test::NonZero => _mm_cmpeq_epi16(x, t),
+                    _ => _mm_cmplt_epi16(x, t),
+                }
+            };
+            (0..4).fold(0u64, |w, q| {
+                let m = _mm_movemask_epi8(_mm_packs_epi16(cmp(16 * q), cmp(16 * q + 8))) as u32 ^ invert;
+                w | (m as u64) << (16 * q)
+            })
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        v.iter().enumerate().fold(0u64, |w, (b, &x)| w | (test.holds(x) as u64) << b)
+    }
+}
+
+/// Calls `f(x0, x1)` for each run [x0, x1) of set bits, in order.
+fn runs_of_bits(words: &[u64], mut f: impl FnMut(u32, u32)) {
+    let (mut carry, mut start) = (0u64, 0u32);
+    for (w, &word) in words.iter().enumerate() {
+        // A bit of `edges` marks where the row changes: a run starts or ends there.
+        let mut edges = word ^ (word << 1 | carry);
+        carry = word >> 63;
+        while edges != 0 {
+            let b = edges.trailing_zeros();
+            edges &= edges - 1;
+            let x = 64 * w as u32 + b;
+            if word >> b & 1 == 1 {
+                start = x;
+            } else {
+                f(start, x);
+            }
+        }
+    }
+    if carry == 1 {
+        f(start, 64 * words.len() as u32);
+    }
+}
+
+/// Calls `f(a, b)` for every pair of runs, one in row `ra` and one in row `rb`, that share an x.
+fn for_overlaps(runs: &Runs, ra: std::ops::Range<usize>, rb: std::ops::Range<usize>, mut f: impl FnMut(usize, usize)) {
+    let (mut a, mut b) = (ra.start, rb.start);
+    while a < ra.end && b < rb.end {
+        let (p, q) = (runs.runs[a], runs.runs[b]);
+        if p.x0 < q.x1 && q.x0 < p.x1 {
+            f(a, b);
+        }
+        if p.x1 < q.x1 {
+            a += 1;
+        } else {
+            b += 1;
+        }
+    }
+}
+
+/// Step 2: per slice, runs 4-connected to the slice's border are outside air.
+fn inside_body(runs: &Runs, dims: [usize; 3]) -> Vec<bool> {
+    let [nx, ny, nz] = dims;
+    let per_slice: Vec<Vec<bool>> = (0..nz)
+        .into_par_iter()
+        .map(|k| {
+            let first = runs.row(0, k).start;
+            let last = runs.row(ny - 1, k).end;
+            let mut uf = UnionFind::new(last - first);
+            for j in 1..ny {
+                for_overlaps(runs, runs.row(j - 1, k), runs.row(j, k), |a, b| uf.union(a - first, b - first));
+            }
+            let mut outside = vec![false; last - first];
+            for j in 0..ny {
+                for r in runs.row(j, k) {
+                    let run = runs.runs[r];
+                    if j == 0 || j == ny - 1 || run.x0 == 0 || run.x1 as usize == nx {
+                        let root = uf.find(r - first);
+                        outside[root] = true;
+                    }
+                }
+            }
+            (0..last - first).map(|r| !outside[uf.find(r)]).collect()
+        })
+        .collect();
+    per_slice.into_iter().flatten().collect()
+}
+
+/// Step 3: 6-connected components of the inside runs.
+fn connect_3d(runs: &Runs, inside: &[bool], dims: [usize; 3], uf: &mut UnionFind) {
+    let [_, ny, nz] = dims;
+    for k in 0..nz {
+        for j in 0..ny {
+            let here = runs.row(j, k);
+            if here.is_empty() {
+                continue;
+            }
+            if j > 0 {
+                for_overlaps(runs, runs.row(j - 1, k), here.clone(), |a, b| {
+                    if inside[a] && inside[b] {
+                        uf.union(a, b)
+                    }
+                });
+            }
+            if k > 0 {
+                for_overlaps(runs, runs.row(j, k - 1), here.clone(), |a, b| {
+                    if inside[a] && inside[b] {
+                        uf.union(a, b)
+                    }
+                });
+            }
+        }
+    }
+}
+
+/// Per component statistics; returns the components and, per run, its component (or MAX).
+fn component_stats(runs: &Runs, inside: &[bool], vol: &Volume<i16>, uf: &mut UnionFind, from_mask: bool) -> (Vec<Component>, Vec<u32>) {
+    let [_, ny, nz] = vol.dims();
+    let sp = vol.spacing();
+    let mut comp_of_root = vec![u32::MAX; runs.runs.len()];
+    let mut run_comp = vec![u32::MAX; runs.runs.len()];
+    #[derive(Default, Clone)]
+    struct Acc {
+        n: usize,
+        sum: [f64; 3],
+        lo: [usize; 3],
+        hi: [usize; 3],
+        hu: i64,
+        dark: u64,
+    }
+    let mut acc: Vec<Acc> = Vec::new();
+    for k in 0..nz {
+        for j in 0..ny {
+            for r in runs.row(j, k) {
+                if !inside[r] {
+                    continue;
+                }
+                let root = uf.find(r);
+                if comp_of_root[root] == u32::MAX {
+                    comp_of_root[root] = acc.len() as u32;
+                    acc.push(Acc { lo: [usize::MAX; 3], ..Default::default() });
+                }
+                let c = comp_of_root[root];
+                run_comp[r] = c;
+                let a = &mut acc[c as usize];
+                let run = runs.runs[r];
+                let len = (run.x1 - run.x0) as usize;
+                a.n += len;
+                a.sum[0] += (run.x0 as f64 + run.x1 as f64 - 1.0) * 0.5 * len as f64;
+                a.sum[1] += (j * len) as f64;
+                a.sum[2] += (k * len) as f64;
+                a.lo = [a.lo[0].min(run.x0 as usize), a.lo[1].min(j), a.lo[2].min(k)];
+                a.hi = [a.hi[0].max(run.x1 as usize - 1), a.hi[1].max(j), a.hi[2].max(k)];
+                a.hu += runs.hu_sum[r];
+                a.dark += runs.dark[r] as u64;
+            }
+        }
+    }
+    let voxel_ml = sp[0] * sp[1] * sp[2] / 1000.0;
+    let comps = acc
+        .into_iter()
+        .map(|a| {
+            let n = a.n as f64;
+            Component {
+                voxels: a.n,
+                volume_ml: n * voxel_ml,
+                centroid_mm: [a.sum[0] / n * sp[0], a.sum[1] / n * sp[1], a.sum[2] / n * sp[2]],
+                bbox_lo: a.lo,
+                bbox_hi: a.hi,
+                mean_hu: (!from_mask).then(|| a.hu as f64 / n),
+                dark_fraction: (!from_mask).then(|| a.dark as f64 / n),
+                kind: ComponentKind::Other,
+            }
+        })
+        .collect();
+    (comps, run_comp)
+}
+
+/// Step 4: lung parenchyma is air mixed with tissue; bowel gas is nearly pure air.
+fn classify_lungs(comps: &mut [Component], from_mask: bool) {
+    if from_mask {
+        return;
+    }
+    for c in comps.iter_mut() {
+        if c.volume_ml > 1.0 && c.dark_fraction.unwrap_or(1.0) < 0.3 {
+            c.kind = ComponentKind::Lung;
+        }
+    }
+}
+
+/// The gas component holding the seed (an error that says why when there is none).
+fn seed_component(comps: &[Component], runs: &Runs, run_comp: &[u32], vol: &Volume<i16>, mm: DVec3, opts: &SegmentOptions) -> Result<usize> {
+    let [i, j, k] = voxel_of(vol, mm)?;
+    let at = vol.geometry().describe_point(mm);
+    match runs.at([i, j, k]).map(|r| run_comp[r]) {
+        Some(c) if c != u32::MAX && comps[c as usize].kind != ComponentKind::Lung => Ok(c as usize),
+        Some(c) if c != u32::MAX => Err(Error::invalid(format!("the seed {at} lies in a lung, not in the colon"))),
+        Some(_) => Err(Error::invalid(format!("the seed {at} lies in air outside the body"))),
+        None => Err(Error::invalid(format!("the seed {at} is not in air (HU {} ≥ {})", vol.get(i, j, k), opts.air_hu))),
+    }
+}
+
+/// The error when no gas is big enough to be a colon.
+fn no_colon(comps: &[Component], opts: &SegmentOptions, from_mask: bool) -> Error {
+    let biggest = comps.iter().filter(|c| c.kind != ComponentKind::Lung).map(|c| c.volume_ml).fold(0.0, f64::max);
+    if from_mask {
+        return Error::invalid(if comps.is_empty() {
+            "the mask holds no lumen: every voxel is 0".to_string()
+        } else {
+            format!("the mask's largest lumen region is {biggest:.1} ml, too small for a colon (at least {} ml expected)", opts.min_colon_ml)
+        });
+    }
+    Error::invalid(format!(
+        "no colon lumen found: the largest gas inside the body, lungs left out, is {biggest:.1} ml (at least {} ml expected; is this a CT colonography? a --seed picks any gas)",
+        opts.min_colon_ml
+    ))
+}
+
+fn voxel_of(vol: &Volume<i16>, mm: DVec3) -> Result<[usize; 3]> {
+    let ijk = vol.geometry().local_to_index(mm).round();
+    if !vol.geometry().contains_index(ijk) {
+        return Err(Error::invalid(format!("the seed {} lies outside the volume", vol.geometry().describe_point(mm))));
+    }
+    Ok([ijk.x as usize, ijk.y as usize, ijk.z as usize])
+}
+
+/// (j, k) of run `r`'s row.
+fn row_of(runs: &Runs, r: usize) -> (usize, usize) {
+    let row = runs.row_start.partition_point(|&s| s as usize <= r) - 1;
+    (row % runs.ny, row / runs.ny)
+}
+
+/// Writes `value(run)` over each run that has one, slice by slice in parallel.
+fn paint(work: &mut Volume<u8>, runs: &Runs, value: impl Fn(usize) -> Option<u8> + Sync) {
+    let [nx, ny, _] = work.dims();
+    work.data_mut().par_chunks_mut(nx * ny).enumerate().for_each(|(k, slab)| {
+        for j in 0..ny {
+            for r in runs.row(j, k) {
+                if let Some(v) = value(r) {
+                    let run = runs.runs[r];
+                    slab[j * nx + run.x0 as usize..j * nx + run.x1 as usize].fill(v);
+                }
+            }
+        }
+    });
+}
+
+/// Writes `value` over the parts of `runs` inside `bx` where nothing is written yet.
+fn paint_in(work: &mut Volume<u8>, runs: &Runs, bx: &Bbox, value: u8) {
+    let [nx, ny, _] = work.dims();
+    work.data_mut().par_chunks_mut(nx * ny).enumerate().filter(|(k, _)| bx.lo[2] <= *k && *k <= bx.hi[2]).for_each(|(k, slab)| {
+        for j in bx.lo[1]..=bx.hi[1] {
+            for r in runs.row(j, k) {
+                let run = runs.runs[r];
+                let (a, b) = ((run.x0 as usize).max(bx.lo[0]), (run.x1 as usize).min(bx.hi[0] + 1));
+                for x in &mut slab[(j * nx + a).min(j * nx + b)..j * nx + b] {
+                    if *x == 0 {
+                        *x = value;
+                    }
+                }
+            }
+        }
+    });
+}
+
+/// The box of the runs where `keep(run)`.
+fn runs_box(runs: &Runs, dims: [usize; 3], keep: impl Fn(usize) -> bool) -> Option<Bbox> {
+    let [_, ny, nz] = dims;
+    let mut b: Option<Bbox> = None;
+    for k in 0..nz {
+        for j in 0..ny {
+            for r in runs.row(j, k).filter(|&r| keep(r)) {
+                let run = runs.runs[r];
+                let x = Bbox { lo: [run.x0 as usize, j, k], hi: [run.x1 as usize - 1, j, k] };
+                b = Some(b.map_or(x, |y| y.union(&x)));
+            }
+        }
+    }
+    b
+}
+
+/// Runs of the working labels where `keep(label)`, inside `bx` (rows outside it are empty).
+fn work_runs(work: &Volume<u8>, bx: &Bbox, keep: impl Fn(u8) -> bool + Sync) -> Runs {
+    let [nx, ny, nz] = work.dims();
+    let per_slice: Vec<SliceRuns> = (0..nz)
+        .into_par_iter()
+        .map(|k| {
+            let mut s = SliceRuns::with_rows(ny);
+            for j in 0..ny {
+                let before = s.runs.len();
+                if (bx.lo[1]..=bx.hi[1]).contains(&j) && (bx.lo[2]..=bx.hi[2]).contains(&k) {
+                    let row = &work.data()[nx * (j + ny * k)..nx * (j + ny * k + 1)];
+                    for r in crate::volume::runs_where(&row[bx.lo[0]..=bx.hi[0]], &keep) {
+                        s.runs.push(Run { x0: (r.start + bx.lo[0]) as u32, x1: (r.end + bx.lo[0]) as u32 });
+                        s.hu_sum.push(0);
+                        s.dark.push(0);
+                    }
+                }
+                s.counts.push((s.runs.len() - before) as u32);
+            }
+            s
+        })
+        .collect();
+    Runs::concat(per_slice, ny)
+}
+
+/// Compartments (6-connected runs of gas, pool and layer) with their statistics, and each
+/// run's compartment.
+fn compartment_stats(runs: &Runs, work: &Volume<u8>, uf: &mut UnionFind, geom: &crate::Geometry, inferior: DVec3) -> (Vec<Compartment>, Vec<u32>) {
+    let [nx, ny, nz] = geom.dims;
+    let sp = geom.spacing;
+    let mut of_root = vec![u32::MAX; runs.runs.len()];
+    let mut run_comp = vec![u32::MAX; runs.runs.len()];
+    let mut out: Vec<Compartment> = Vec::new();
+    for k in 0..nz {
+        for j in 0..ny {
+            for r in runs.row(j, k) {
+                let root = uf.find(r);
+                if of_root[root] == u32::MAX {
+                    of_root[root] = out.len() as u32;
+                    out.push(Compartment { voxels: 0, gas_voxels: 0, sum_mm: DVec3::ZERO, bbox: Bbox { lo: [usize::MAX; 3], hi: [0; 3] }, lowest: [0; 3], lowest_height: f64::NEG_INFINITY });
+                }
+                let c = of_root[root];
+                run_comp[r] = c;
+                let run = runs.runs[r];
+                let (x0, x1) = (run.x0 as usize, run.x1 as usize);
+                let cm = &mut out[c as usize];
+                let n = x1 - x0;
+                cm.voxels += n;
+                cm.gas_voxels += work.data()[nx * (j + ny * k) + x0..nx * (j + ny * k) + x1].iter().filter(|&&x| x == GAS).count();
+                cm.sum_mm += DVec3::new((x0 + x1 - 1) as f64 * 0.5 * sp[0] * n as f64, (j * n) as f64 * sp[1], (k * n) as f64 * sp[2]);
+                cm.bbox = Bbox { lo: [cm.bbox.lo[0].min(x0), cm.bbox.lo[1].min(j), cm.bbox.lo[2].min(k)], hi: [cm.bbox.hi[0].max(x1 - 1), cm.bbox.hi[1].max(j), cm.bbox.hi[2].max(k)] };
+                // The lowest voxel of the run lies at one of its ends.
+                for x in [x0, x1 - 1] {
+                    let h = chain::height(inferior, geom.index_to_local(DVec3::new(x as f64, j as f64, k as f64)));
+                    if h > cm.lowest_height {
+                        cm.lowest_height = h;
+                        cm.lowest = [x, j, k];
+                    }
+                }
+            }
+        }
+    }
+    (out, run_comp)
+}
+
+/// The voxel of compartment `c` nearest the middle of its lowest 2 mm (patient frame): the
+/// same place whatever the storage order, where the lowest single voxel would be picked by
+/// ties.
+fn lowest_middle(runs: &Runs, run_comp: &[u32], comp: &Compartment, c: u32, geom: &crate::Geometry, inferior: DVec3) -> [usize; 3] {
+    const SLAB_MM: f64 = 2.0;
+    let floor = comp.lowest_height - SLAB_MM;
+    let mut voxels = Vec::new();
+    for k in comp.bbox.lo[2]..=comp.bbox.hi[2] {
+        for j in comp.bbox.lo[1]..=comp.bbox.hi[1] {
+            for r in runs.row(j, k).filter(|&r| run_comp[r] == c) {
+                let run = runs.runs[r];
+                for x in run.x0 as usize..run.x1 as usize {
+                    if chain::height(inferior, geom.index_to_local(DVec3::new(x as f64, j as f64, k as f64))) >= floor {
+                        voxels.push([x, j, k]);
+                    }
+                }
+            }
+        }
+    }
+    let mm = |v: [usize; 3]| geom.index_to_local(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64));
+    let mid = voxels.iter().map(|&v| mm(v)).sum::<DVec3>() / voxels.len().max(1) as f64;
+    voxels.into_iter().min_by(|&a, &b| mm(a).distance(mid).total_cmp(&mm(b).distance(mid)).then_with(|| {
+        let (p, q) = (geom.index_to_patient(DVec3::new(a[0] as f64, a[1] as f64, a[2] as f64)), geom.index_to_patient(DVec3::new(b[0] as f64, b[1] as f64, b[2] as f64)));
+        p.x.total_cmp(&q.x).then(p.y.total_cmp(&q.y)).then(p.z.total_cmp(&q.z))
+    })).unwrap_or(comp.lowest)
+}
+
+/// A tube of `radius_mm` around a bridge's path: BRIDGE where there is neither gas nor a pool.
+fn lay_bridge(work: &mut Volume<u8>, path: &[[usize; 3]], radius_mm: f64, added: &mut Vec<usize>) {
+    let g = work.geometry().clone();
+    let r = g.spacing.map(|s| (radius_mm / s).floor() as i64);
+    let mut ball = Vec::new();
+    for dz in -r[2]..=r[2] {
+        for dy in -r[1]..=r[1] {
+            for dx in -r[0]..=r[0] {
+                let d2 = (dx as f64 * g.spacing[0]).powi(2) + (dy as f64 * g.spacing[1]).powi(2) + (dz as f64 * g.spacing[2]).powi(2);
+                if d2 <= radius_mm * radius_mm {
+                    ball.push([dx, dy, dz]);
+                }
+            }
+        }
+    }
+    for v in path {
+        for o in &ball {
+            let q = [v[0] as i64 + o[0], v[1] as i64 + o[1], v[2] as i64 + o[2]];
+            if (0..3).any(|a| q[a] < 0 || q[a] >= g.dims[a] as i64) {
+                continue;
+            }
+            let i = g.index(q[0] as usize, q[1] as usize, q[2] as usize);
+            let x = &mut work.data_mut()[i];
+            if *x == 0 || *x == BRIGHT {
+                *x = BRIDGE;
+                added.push(i);
+            }
+        }
+    }
+}
+
+/// Fluid filling a bridged stretch: the bright voxels reached from the path's bright voxels
+/// within `reach_mm`, through bright voxels.
+fn fill_fluid(work: &mut Volume<u8>, path: &[[usize; 3]], reach_mm: f64, added: &mut Vec<usize>) {
+    let g = work.geometry().clone();
+    let step = g.spacing.iter().cloned().fold(f64::INFINITY, f64::min);
+    let layers = (reach_mm / step).ceil() as usize;
+    let mut front: Vec<usize> = path.iter().map(|v| g.index(v[0], v[1], v[2])).filter(|&i| work.data()[i] == BRIGHT).collect();
+    for &i in &front {
+        work.data_mut()[i] = BRIDGE;
+        added.push(i);
+    }
+    let [nx, ny, nz] = g.dims;
+    for _ in 0..layers {
+        let mut next = Vec::new();
+        for &i in &front {
+            let [x, y, z] = g.ijk(i);
+            let n = [(x > 0).then(|| i - 1), (x + 1 < nx).then(|| i + 1), (y > 0).then(|| i - nx), (y + 1 < ny).then(|| i + nx), (z > 0).then(|| i - nx * ny), (z + 1 < nz).then(|| i + nx * ny)];
+            for q in n.into_iter().flatten() {
+                if work.data()[q] == BRIGHT {
+                    work.data_mut()[q] = BRIDGE;
+                    added.push(q);
+                    next.push(q);
+                }
+            }
+        }
+        if next.is_empty() {
+            break;
+        }
+        front = next;
+    }
+}
+
+/// The LPS box of a voxel box (all eight corners: the direction may turn the axes).
+fn lps_box(geom: &crate::Geometry, b: &Bbox) -> [DVec3; 2] {
+    let mut lo = DVec3::splat(f64::INFINITY);
+    let mut hi = DVec3::splat(f64::NEG_INFINITY);
+    for c in 0..8 {
+        let v = [0, 1, 2].map(|a| if c >> a & 1 == 1 { b.hi[a] } else { b.lo[a] } as f64);
+        let p = geom.index_to_patient(DVec3::from_array(v));
+        lo = lo.min(p);
+        hi = hi.max(p);
+    }
+    [lo, hi]
+}
+
+/// The anatomical region of a volume-local point within the colon's LPS box.
+fn region_of(geom: &crate::Geometry, p: DVec3, colon: &[DVec3; 2]) -> &'static str {
+    let q = geom.local_to_patient(p);
+    let span = (colon[1] - colon[0]).max(DVec3::splat(1.0));
+    let u = (q.x - colon[0].x) / span.x;
+    let v = (q.z - colon[0].z) / span.z;
+    chain::region(u, v)
+}
+
+/// Gas left out of the colon: stomach (high on the left), small bowel (small or narrow), or
+/// other.
+fn classify(comp: &Compartment, geom: &crate::Geometry, colon: &[DVec3; 2], voxel_ml: f64) -> ComponentKind {
+    let ml = comp.gas_voxels as f64 * voxel_ml;
+    let c = geom.local_to_patient(comp.centroid_mm());
+    let span = colon[1] - colon[0];
+    let high_left = c.z > colon[0].z + 0.7 * span.z && c.x > colon[0].x + 0.5 * span.x;
+    if high_left && ml >= LARGE_LEFT_ML {
+        return ComponentKind::Stomach;
+    }
+    // Its length from its box's diagonal; narrow when the mean cross-section is under 25 mm.
+    let b = lps_box(geom, &comp.bbox);
+    let length = (b[1] - b[0]).length().max(1.0);
+    let width = 2.0 * (ml * 1000.0 / (std::f64::consts::PI * length)).sqrt();
+    if ml < LARGE_LEFT_ML || width <= 25.0 { ComponentKind::SmallBowel } else { ComponentKind::Other }
+}
+
+fn segment_report(comp: &Compartment, geom: &crate::Geometry, label: String, kind: ComponentKind, order: Option<usize>, reason: Option<String>, voxel_ml: f64) -> SegmentReport {
+    let b = lps_box(geom, &comp.bbox);
+    SegmentReport {
+        label,
+        kind,
+        order,
+        gas_ml: comp.gas_voxels as f64 * voxel_ml,
+        fluid_ml: (comp.voxels - comp.gas_voxels) as f64 * voxel_ml,
+        extent_lps_mm: [b[0].to_array(), b[1].to_array()],
+        kept: order.is_some(),
+        reason,
+    }
+}
+
+/// Largest first; tiny components are only counted.
+fn report(comps: Vec<Component>, min_ml: f64) -> (Vec<Component>, usize) {
+    let mut listed: Vec<Component> = Vec::new();
+    let mut small = 0;
+    for c in comps {
+        if c.kind == ComponentKind::Colon || c.volume_ml >= min_ml {
+            listed.push(c);
+        } else {
+            small += 1;
+        }
+    }
+    listed.sort_by_key(|c| std::cmp::Reverse(c.voxels));
+    (listed, small)
+}
+
+/// Union-find over run indices, with path halving and union by size.
+struct UnionFind {
+    parent: Vec<u32>,
+    size: Vec<u32>,
+}
+
+impl UnionFind {
+    fn new(n: usize) -> Self {
+        UnionFind { parent: (0..n as u32).collect(), size: vec![1; n] }
+    }
+    fn find(&mut self, mut x: usize) -> usize {
+        while self.parent[x] as usize != x {
+            let p = self.parent[x] as usize;
+            self.parent[x] = self.parent[p];
+            x = p;
+        }
+        x
+    }
+    fn union(&mut self, a: usize, b: usize) {
+        let (mut ra, mut rb) = (self.find(a), self.find(b));
+        if ra == rb {
+            return;
+        }
+        if self.size[ra] < self.size[rb] {
+            std::mem::swap(&mut ra, &mut rb);
+        }
+        self.parent[rb] = ra as u32;
+        self.size[ra] += self.size[rb];
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Geometry;
+
+    /// The runs of one row found through its bits, for both tests at once, are the runs of the
+    /// plain per-voxel test: rows of many lengths (whole words and a remainder), runs at both
+    /// ends and across word boundaries, values at and beside the thresholds.
+    #[test]
+    fn row_bits_give_the_runs_of_each_test() {
+        let mut x = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let values = [-1000i16, -501, -500, -499, 0, 1, 199, 200, 201, 1500, i16::MIN, i16::MAX];
+        for len in [1usize, 5, 63, 64, 65, 127, 128, 130, 200, 512, 517] {
+            for _ in 0..20 {
+                // Stretches of one value, so that runs are long enough to cross words.
+                let mut row = Vec::with_capacity(len);
+                while row.len() < len {
+                    let v = values[(next() % values.len() as u64) as usize];
+                    let n = 1 + (next() % 90) as usize;
+                    row.extend(std::iter::repeat_n(v, n.min(len - row.len())));
+                }
+                for tests in [(Test::Below(-500), Some(Test::AtLeast(200))), (Test::NonZero, None), (Test::AtLeast(-500), Some(Test::NonZero))] {
+                    let mut words = (vec![u64::MAX; len.div_ceil(64)], vec![u64::MAX; len.div_ceil(64)]);
+                    row_bits(&row, tests, &mut words);
+                    let found = |w: &[u64]| {
+                        let mut v = Vec::new();
+                        runs_of_bits(w, |a, b| v.push(a as usize..b as usize));
+                        v
+                    };
+                    let want = |t: Test| crate::volume::runs_where(&row, |v| t.holds(v)).collect::<Vec<_>>();
+                    assert_eq!(found(&words.0), want(tests.0), "{tests:?} {row:?}");
+                    if let Some(u) = tests.1 {
+                        assert_eq!(found(&words.1), want(u), "{tests:?} {row:?}");
+                    }
+                }
+            }
+        }
+    }
+
+    /// A body of tissue (40 HU) in outside air, with a big gas tube, a small gas pocket, and
+    /// a "lung" of −850 HU.
+    fn toy() -> Volume<i16> {
+        let g = Geometry::new([60, 50, 40], [1.0, 1.0, 1.5], [0.0; 3]).unwrap();
+        let mut v = Volume::filled(g, -1000i16).unwrap();
+        for k in 0..40 {
+            for j in 0..50 {
+                for i in 0..60 {
+                    let body = ((i as f64 - 30.0) / 27.0).powi(2) + ((j as f64 - 25.0) / 22.0).powi(2) < 1.0;
+                    if !body {
+                        continue;
+                    }
+                    let tube = (i as f64 - 20.0).powi(2) + (j as f64 - 25.0).powi(2) < 36.0 && (3..37).contains(&k);
+                    let pocket = (i as f64 - 40.0).powi(2) + (j as f64 - 20.0).powi(2) + (k as f64 - 10.0).powi(2) < 6.0;
+                    let lung = (i as f64 - 40.0).powi(2) + (j as f64 - 30.0).powi(2) < 30.0 && k >= 30;
+                    let hu = if tube || pocket { -1000 } else if lung { -850 } else { 40 };
+                    v.set(i, j, k, hu);
+                }
+            }
+        }
+        v
+    }
+
+    /// The toy's tube holds 5.6 ml of gas: below the default minimum for a colon.
+    fn toy_options() -> SegmentOptions {
+        SegmentOptions { min_colon_ml: 1.0, ..Default::default() }
+    }
+
+    #[test]
+    fn too_little_gas_is_no_colon() {
+        let e = segment(&toy(), &SegmentOptions::default()).unwrap_err().to_string();
+        assert!(e.contains("no colon lumen") && e.contains("5.6 ml"), "{e}");
+    }
+
+    #[test]
+    fn finds_the_tube_not_the_pocket_lung_or_outside() {
+        let v = toy();
+        let s = segment(&v, &toy_options()).unwrap();
+        assert!(!s.from_mask);
+        assert_eq!(s.lumen.get(20, 25, 20), 1);
+        assert_eq!(s.lumen.get(40, 20, 10), 0, "small pocket taken");
+        assert_eq!(s.lumen.get(40, 30, 35), 0, "lung taken");
+        assert_eq!(s.lumen.get(0, 0, 0), 0, "outside air taken");
+        assert_eq!(s.lumen_voxels, s.lumen.data().iter().filter(|&&m| m == 1).count());
+        assert!(s.components.iter().any(|c| c.kind == ComponentKind::Lung));
+        assert_eq!(s.components[0].kind, ComponentKind::Colon);
+        assert_eq!(s.seed_voxel[2], 3, "automatic seed at the lowest slice of the colon");
+    }
+
+    #[test]
+    fn seed_makes_its_gas_colon_and_bad_seeds_fail() {
+        let v = toy();
+        // Without a seed the small pocket is left out (and the tube is too small alone).
+        let s = segment(&v, &toy_options()).unwrap();
+        assert_eq!(s.lumen.get(40, 20, 10), 0);
+        // A seed in the pocket says it is colon: it joins, and so does the tube beside it
+        // (a segment big enough, within reach), bridged, with a warning; the rectum side is
+        // still the lowest colon gas, not the seed.
+        let seeded = SegmentOptions { seed_mm: Some(DVec3::new(40.0, 20.0, 15.0)), ..Default::default() };
+        let s = segment(&v, &seeded).unwrap();
+        assert_eq!(s.lumen.get(40, 20, 10), 1);
+        assert_eq!(s.lumen.get(20, 25, 20), 1);
+        assert_eq!(s.gaps.len(), 1);
+        assert!(s.warnings.iter().any(|w| w.contains("bridged")), "{:?}", s.warnings);
+        assert_eq!(s.seed_voxel[2], 3, "the source side is the lowest colon gas, not the seed");
+        let in_tissue = SegmentOptions { seed_mm: Some(DVec3::new(30.0, 10.0, 30.0)), ..Default::default() };
+        assert!(segment(&v, &in_tissue).unwrap_err().to_string().contains("not in air"));
+        let outside = SegmentOptions { seed_mm: Some(DVec3::new(0.0, 0.0, 0.0)), ..Default::default() };
+        assert!(segment(&v, &outside).unwrap_err().to_string().contains("outside the body"));
+        let beyond = SegmentOptions { seed_mm: Some(DVec3::new(500.0, 0.0, 0.0)), ..Default::default() };
+        assert!(segment(&v, &beyond).is_err());
+    }
+
+    #[test]
+    fn mask_input_is_detected_and_used() {
+        let v = toy();
+        let s = segment(&v, &toy_options()).unwrap();
+        let mask = s.lumen.map(|m| m as i16);
+        let again = segment(&mask, &toy_options()).unwrap();
+        assert!(again.from_mask);
+        assert_eq!(again.lumen, s.lumen);
+    }
+
+    #[test]
+    fn no_gas_is_an_error() {
+        let g = Geometry::new([10, 10, 10], [1.0; 3], [0.0; 3]).unwrap();
+        let v = Volume::filled(g, 40i16).unwrap();
+        assert!(segment(&v, &SegmentOptions::default()).unwrap_err().to_string().contains("no colon"));
+    }
+}

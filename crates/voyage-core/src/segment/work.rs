@@ -1,0 +1,42 @@
+//! The segmentation's working labels, one byte per voxel (in the volume that becomes the
+//! lumen), and the box they are confined to.
+
+/// Internal gas of a candidate component (not lung, not outside the body).
+pub const GAS: u8 = 1;
+/// Tagged-fluid bright voxels (≥ the fluid threshold) that may belong to the colon.
+pub const BRIGHT: u8 = 2;
+/// Bright voxels in the column under a colon segment's gas: the segment's fluid.
+pub const POOL: u8 = 3;
+/// The partial-volume layer between a segment's gas and its pool.
+pub const LAYER: u8 = 4;
+/// Added to the colon where a gap between two gas segments was bridged (the cheapest path
+/// through the CT, widened to a narrow tube, and the fluid filling a stretch it crosses).
+pub const BRIDGE: u8 = 5;
+
+/// An inclusive voxel box.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Bbox {
+    pub lo: [usize; 3],
+    pub hi: [usize; 3],
+}
+
+impl Bbox {
+    pub fn widths(&self) -> [usize; 3] {
+        [0, 1, 2].map(|a| self.hi[a] + 1 - self.lo[a])
+    }
+
+    /// Lines along `axis` through the box.
+    pub fn lines(&self, axis: usize) -> usize {
+        let w = self.widths();
+        w[0] * w[1] * w[2] / w[axis]
+    }
+
+    /// The box grown by `by` voxels per axis, within `dims`.
+    pub fn grown(&self, by: [usize; 3], dims: [usize; 3]) -> Bbox {
+        Bbox { lo: [0, 1, 2].map(|a| self.lo[a].saturating_sub(by[a])), hi: [0, 1, 2].map(|a| (self.hi[a] + by[a]).min(dims[a] - 1)) }
+    }
+
+    pub fn union(&self, o: &Bbox) -> Bbox {
+        Bbox { lo: [0, 1, 2].map(|a| self.lo[a].min(o.lo[a])), hi: [0, 1, 2].map(|a| self.hi[a].max(o.hi[a])) }
+    }
+}
