@@ -39,6 +39,10 @@ pub struct FlightOptions {
     pub max_stalls: usize,
     /// Keep every frame's pose (for trajectories and movies).
     pub keep_poses: bool,
+    /// Stretches of the centerline (arc mm from the source) through bridged gaps, which the
+    /// flight glides along at `glide_mm_s` (see [`Autopilot::glide`]).
+    pub collapsed_spans: Vec<[f64; 2]>,
+    pub glide_mm_s: f64,
 }
 
 impl Default for FlightOptions {
@@ -57,15 +61,21 @@ impl Default for FlightOptions {
             escape_factor: 1.5,
             max_stalls: 60,
             keep_poses: true,
+            collapsed_spans: Vec::new(),
+            glide_mm_s: 10.0,
         }
     }
 }
 
 impl FlightOptions {
-    /// The defaults, with gravity from the study's patient position.
+    /// The defaults, fitted to the study (see [`FlightOptions::fitted_to`]).
     pub fn for_study(study: &crate::prep::Study) -> FlightOptions {
-        let d = FlightOptions::default();
-        FlightOptions { dynamics: d.dynamics.with_gravity_along(study.gravity_local()), ..d }
+        FlightOptions::default().fitted_to(study)
+    }
+
+    /// These options with gravity from the study's patient position and its bridged gaps.
+    pub fn fitted_to(self, study: &crate::prep::Study) -> FlightOptions {
+        FlightOptions { dynamics: self.dynamics.with_gravity_along(study.gravity_local()), collapsed_spans: study.collapsed_spans.clone(), ..self }
     }
 }
 
@@ -99,17 +109,29 @@ pub struct Flight {
 struct Guide {
     points: Vec<DVec3>,
     radius: Vec<f64>,
+    /// Arc length from the flight's start (mm).
+    arc: Vec<f64>,
 }
 
 impl Guide {
     fn new(cl: &Centerline, dir: Direction) -> Self {
         let mut points: Vec<DVec3> = cl.points_mm.iter().map(|p| DVec3::from_array(*p)).collect();
         let mut radius = cl.radius_mm.clone();
+        let mut arc: Vec<f64> = cl.arc_mm.clone();
         if dir == Direction::Backward {
             points.reverse();
             radius.reverse();
+            arc = arc.iter().rev().map(|a| cl.length_mm - a).collect();
         }
-        Guide { points, radius }
+        Guide { points, radius, arc }
+    }
+
+    /// The point at arc length `s` (mm from the flight's start) and the index after it.
+    fn at_arc(&self, s: f64) -> (DVec3, usize) {
+        let i = self.arc.partition_point(|&a| a < s).clamp(1, self.points.len() - 1);
+        let (a, b) = (self.arc[i - 1], self.arc[i]);
+        let t = if b > a { ((s - a) / (b - a)).clamp(0.0, 1.0) } else { 1.0 };
+        (self.points[i - 1].lerp(self.points[i], t), i)
     }
     fn nearest(&self, x: DVec3) -> usize {
         let mut best = (f64::INFINITY, 0);
@@ -160,7 +182,22 @@ pub struct Autopilot {
     pub reach_mm: f64,
     /// Stalls detected so far.
     pub stalls: usize,
+    /// Arc ranges (mm from the flight's start) glided along: bridged gaps with the narrowing
+    /// before them, where the wall term of V would hold the submarine back.
+    glides: Vec<[f64; 2]>,
+    glide_mm_s: f64,
+    /// Where the glide has got to (arc mm), while gliding.
+    glide_arc: Option<f64>,
+    /// The glide that last reached its end: not glided again from inside it.
+    glided: Option<usize>,
+    up: DVec3,
 }
+
+/// A glide starts this far (mm) before a bridged gap: the lumen narrows toward it and the
+/// wall term would stop the submarine there.
+const GLIDE_BEFORE_MM: f64 = 25.0;
+/// ... and ends this far past it.
+const GLIDE_AFTER_MM: f64 = 5.0;
 
 impl Autopilot {
     /// An autopilot for a flight in direction `dir` starting at `x`, where Dt is `dt_now`.
@@ -169,7 +206,21 @@ impl Autopilot {
         let near = guide.nearest(x);
         let goal_radius = *guide.radius.last().unwrap_or(&0.0);
         let reach_mm = opts.reach_mm.unwrap_or(goal_radius.max(10.0));
+        let glides = opts
+            .collapsed_spans
+            .iter()
+            .map(|s| match dir {
+                Direction::Forward => [s[0], s[1]],
+                Direction::Backward => [cl.length_mm - s[1], cl.length_mm - s[0]],
+            })
+            .map(|s| [s[0] - GLIDE_BEFORE_MM, s[1] + GLIDE_AFTER_MM])
+            .collect();
         Autopilot {
+            glides,
+            glide_mm_s: opts.glide_mm_s,
+            glide_arc: None,
+            glided: None,
+            up: -opts.dynamics.gravity,
             reach_mm,
             guide,
             stall_window_s: opts.stall_window_s,
@@ -210,10 +261,17 @@ impl Autopilot {
     /// Restarts the stall watch (the user steered, or the submarine was moved): what happens
     /// next is not the field's doing.
     pub fn restart(&mut self, t: f64, dt_now: f64, x: DVec3) {
+        self.watch_from(t, dt_now);
+        self.near = self.guide.nearest(x);
+        self.glide_arc = None;
+        self.glided = None;
+    }
+
+    /// Starts the stall watch afresh (a glide is progress, not a stall).
+    pub fn watch_from(&mut self, t: f64, dt_now: f64) {
         self.window_start = (t, dt_now);
         self.escape_until = f64::NEG_INFINITY;
         self.in_a_row = 0;
-        self.near = self.guide.nearest(x);
     }
 
     /// Follows the submarine to `x` after a frame; returns the index of the nearest point of
@@ -221,6 +279,29 @@ impl Autopilot {
     pub fn moved_to(&mut self, x: DVec3) -> usize {
         self.near = nearest_from(&self.guide, x, self.near);
         self.near
+    }
+
+    /// In a bridged gap (or the narrowing before it): the pose `dt` seconds further along the
+    /// centerline at the glide speed, looking ahead; None elsewhere. There is no air in the
+    /// gap for the field to act in: the flight keeps to the path, slowly.
+    pub fn glide(&mut self, x: DVec3, dt: f64) -> Option<Pose> {
+        let i = self.moved_to(x);
+        let here = self.glide_arc.unwrap_or(self.guide.arc[i]).max(self.guide.arc[i]);
+        let k = self.glides.iter().position(|g| g[0] <= here && here < g[1])?;
+        if self.glided == Some(k) && self.glide_arc.is_none() {
+            return None;
+        }
+        let end = self.glides[k][1].min(*self.guide.arc.last()?);
+        let next = (here + self.glide_mm_s * dt).min(end);
+        self.glide_arc = (next < end).then_some(next);
+        self.glided = Some(k);
+        let (p, j) = self.guide.at_arc(next);
+        Some(Pose::looking(p, self.guide.ahead(j.saturating_sub(1)), self.up))
+    }
+
+    /// Whether a glide is under way.
+    pub fn gliding(&self) -> bool {
+        self.glide_arc.is_some()
     }
 
     /// Lumen radius at the guide's point `i` (mm).
@@ -296,13 +377,20 @@ pub fn fly<S: DistanceStore>(field: &PotentialField<S>, cl: &Centerline, dir: Di
         if t >= max_sim || pilot.stalls >= opts.max_stalls {
             break;
         }
-        let input = pilot.input(t, dt_now, sub.state.x, sub.potential.ct);
         let before = sub.state.x;
         let clock = Instant::now();
-        let r = sub.step(field, frame_dt, &input);
+        match pilot.glide(sub.state.x, frame_dt) {
+            Some(pose) if sub.glide_to(field, pose, frame_dt) => {
+                pilot.watch_from(sub.state.t, dt_at(sub.state.x));
+            }
+            _ => {
+                let input = pilot.input(t, dt_now, sub.state.x, sub.potential.ct);
+                let r = sub.step(field, frame_dt, &input);
+                f.substeps += r.substeps;
+                f.clipped_substeps += r.clipped;
+            }
+        }
         physics_ns += clock.elapsed().as_nanos();
-        f.substeps += r.substeps;
-        f.clipped_substeps += r.clipped;
         f.frames += 1;
 
         let x = sub.state.x;

@@ -231,6 +231,19 @@ impl Submarine {
         self.state.pose()
     }
 
+    /// Puts the submarine at `pose`, at rest, `dt` seconds later, if `pose` is in the safe
+    /// set (else leaves it where it was and returns false): the autopilot's glide through a
+    /// bridged gap, where the colon holds no air for the field to act in.
+    pub fn glide_to<S: DistanceStore>(&mut self, field: &PotentialField<S>, pose: Pose, dt: f64) -> bool {
+        if !self.is_safe(field, pose.position) {
+            return false;
+        }
+        let t = self.state.t + dt;
+        self.state = State::at(pose);
+        self.state.t = t;
+        true
+    }
+
     /// Whether `x` is in the safe set.
     #[inline]
     pub fn is_safe<S: DistanceStore>(&self, field: &PotentialField<S>, x: DVec3) -> bool {

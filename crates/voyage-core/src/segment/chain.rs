@@ -83,13 +83,13 @@ impl Coarse {
     /// Geodesic distances (mm, 26-neighbours) from block `from` over the blocks of
     /// compartment `c`; returns the farthest block and its distance.
     pub fn farthest(&self, c: u32, from: usize) -> (usize, f64) {
-        let mut dist: std::collections::HashMap<usize, f64> = std::collections::HashMap::new();
+        let mut dist = vec![f64::INFINITY; self.label.len()];
         let mut heap = BinaryHeap::new();
-        dist.insert(from, 0.0);
+        dist[from] = 0.0;
         heap.push(Reverse((Key(0.0), from)));
         let mut best = (from, 0.0);
         while let Some(Reverse((Key(d), u))) = heap.pop() {
-            if dist.get(&u).is_some_and(|&x| d > x) {
+            if d > dist[u] {
                 continue;
             }
             // Ties: the block first in patient-independent terms would need geometry; the
@@ -111,8 +111,8 @@ impl Coarse {
                         }
                         let len = ((dx as f64 * self.step_mm[0]).powi(2) + (dy as f64 * self.step_mm[1]).powi(2) + (dz as f64 * self.step_mm[2]).powi(2)).sqrt();
                         let nd = d + len;
-                        if dist.get(&v).is_none_or(|&x| nd < x) {
-                            dist.insert(v, nd);
+                        if nd < dist[v] {
+                            dist[v] = nd;
                             heap.push(Reverse((Key(nd), v)));
                         }
                     }

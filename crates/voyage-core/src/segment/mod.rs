@@ -186,6 +186,23 @@ impl Runs {
         self.row_start[r] as usize..self.row_start[r + 1] as usize
     }
 
+    /// The runs where `keep(run)`, in the same rows.
+    fn filtered(&self, keep: impl Fn(usize) -> bool) -> Runs {
+        let mut out = Runs { runs: Vec::new(), row_start: Vec::with_capacity(self.row_start.len()), hu_sum: Vec::new(), dark: Vec::new(), ny: self.ny };
+        out.row_start.push(0);
+        for row in 0..self.row_start.len() - 1 {
+            for r in self.row_start[row] as usize..self.row_start[row + 1] as usize {
+                if keep(r) {
+                    out.runs.push(self.runs[r]);
+                    out.hu_sum.push(self.hu_sum[r]);
+                    out.dark.push(self.dark[r]);
+                }
+            }
+            out.row_start.push(out.runs.len() as u32);
+        }
+        out
+    }
+
     /// The run holding voxel v, if any.
     fn at(&self, v: [usize; 3]) -> Option<usize> {
         let row = self.row(v[1], v[2]);
@@ -259,17 +276,21 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
         None => Orientation::new(PatientPosition::Hfs, PositionSource::Assumed),
     };
     let mut orientation = orientation;
+    // Fluid lies below the gas, at most a pool's depth away: everything from here on happens
+    // in this box.
+    let cbox = match bright {
+        Some(_) => gas_box.grown(vol.spacing().map(|s| (fluid::MAX_DEPTH_MM / s).ceil() as usize + 2), vol.dims()),
+        None => gas_box,
+    };
+    let mut pooled = 0;
     if let Some(bright) = &bright {
-        // Fluid lies below the gas, at most a pool's depth away.
-        let depth = vol.spacing().map(|s| (fluid::MAX_DEPTH_MM / s).ceil() as usize + 2);
-        let bx = gas_box.grown(depth, vol.dims());
-        paint_in(&mut work, bright, &bx, BRIGHT);
+        paint_in(&mut work, bright, &cbox, BRIGHT);
         if opts.position.is_none()
-            && let Some(g) = fluid::gravity_from_levels(&work, &bx)
+            && let Some(g) = fluid::gravity_from_levels(&work, &cbox)
         {
             orientation = Orientation::new(PatientPosition::from_gravity(g), PositionSource::AirFluidLevels);
         }
-        fluid::mark_pools(&mut work, &bx, orientation.gravity());
+        pooled = fluid::mark_pools(&mut work, &cbox, orientation.gravity());
     }
     if orientation.source == PositionSource::Assumed {
         warnings.push(if from_mask {
@@ -280,12 +301,12 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
     }
 
     // Compartments: gas with its pools and layers.
-    let cbox = runs_box(&runs, vol.dims(), |r| is_gas(run_comp[r])).map(|b| b.grown(vol.spacing().map(|s| (fluid::MAX_DEPTH_MM / s).ceil() as usize + 2), vol.dims())).unwrap_or(gas_box);
-    let cruns = work_runs(&work, &cbox, |x| x == GAS || x == POOL || x == LAYER);
+    // Without pools they are the gas components, from their runs; with pools, from the labels.
+    let cruns = if pooled > 0 { work_runs(&work, &cbox, |x| x == GAS || x == POOL || x == LAYER) } else { runs.filtered(|r| is_gas(run_comp[r])) };
     let mut cuf = UnionFind::new(cruns.runs.len());
     connect_3d(&cruns, &vec![true; cruns.runs.len()], vol.dims(), &mut cuf);
     let frame = PatientFrame::of(vol.geometry());
-    let (compartments, crun_comp) = compartment_stats(&cruns, &work, &mut cuf, vol.geometry(), frame.inferior());
+    let (compartments, crun_comp) = compartment_stats(&cruns, (pooled > 0).then_some(&work), &mut cuf, vol.geometry(), frame.inferior());
     let voxel_ml = vol.spacing().iter().product::<f64>() / 1000.0;
     let comp_at = |v: [usize; 3]| cruns.at(v).map(|r| crun_comp[r]).filter(|&c| c != u32::MAX);
     // Every gas component's compartment.
@@ -402,9 +423,18 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
     if ct.is_some() {
         fluid_voxels += added.iter().filter(|&&v| vol.data()[v] >= fluid_hu.unwrap_or(i16::MAX)).count();
     }
-    // Back to 0/1.
-    work.data_mut().par_iter_mut().for_each(|x| *x = (*x == BRIDGE) as u8);
-    paint(&mut work, &cruns, |r| (crun_comp[r] != u32::MAX && in_colon[crun_comp[r] as usize]).then_some(1));
+    // Back to 0/1: labels other than 0 lie in the box, or on a bridge. Without bright voxels
+    // only the gas left out needs clearing.
+    let kept = |r: usize| crun_comp[r] != u32::MAX && in_colon[crun_comp[r] as usize];
+    if bright.is_some() {
+        clear_box(&mut work, &cbox);
+        paint(&mut work, &cruns, |r| kept(r).then_some(1));
+    } else {
+        paint(&mut work, &cruns, |r| (!kept(r)).then_some(0));
+    }
+    for &v in &added {
+        work.data_mut()[v] = 1;
+    }
     let lumen = work;
     let lumen_box = lumen_box.ok_or_else(|| Error::invalid("the colon holds no voxels"))?;
 
@@ -961,7 +991,8 @@ fn work_runs(work: &Volume<u8>, bx: &Bbox, keep: impl Fn(u8) -> bool + Sync) -> 
 
 /// Compartments (6-connected runs of gas, pool and layer) with their statistics, and each
 /// run's compartment.
-fn compartment_stats(runs: &Runs, work: &Volume<u8>, uf: &mut UnionFind, geom: &crate::Geometry, inferior: DVec3) -> (Vec<Compartment>, Vec<u32>) {
+/// `work`: the labels, to count gas among pools (None: every voxel is gas).
+fn compartment_stats(runs: &Runs, work: Option<&Volume<u8>>, uf: &mut UnionFind, geom: &crate::Geometry, inferior: DVec3) -> (Vec<Compartment>, Vec<u32>) {
     let [nx, ny, nz] = geom.dims;
     let sp = geom.spacing;
     let mut of_root = vec![u32::MAX; runs.runs.len()];
@@ -982,7 +1013,7 @@ fn compartment_stats(runs: &Runs, work: &Volume<u8>, uf: &mut UnionFind, geom: &
                 let cm = &mut out[c as usize];
                 let n = x1 - x0;
                 cm.voxels += n;
-                cm.gas_voxels += work.data()[nx * (j + ny * k) + x0..nx * (j + ny * k) + x1].iter().filter(|&&x| x == GAS).count();
+                cm.gas_voxels += work.map_or(n, |w| w.data()[nx * (j + ny * k) + x0..nx * (j + ny * k) + x1].iter().filter(|&&x| x == GAS).count());
                 cm.sum_mm += DVec3::new((x0 + x1 - 1) as f64 * 0.5 * sp[0] * n as f64, (j * n) as f64 * sp[1], (k * n) as f64 * sp[2]);
                 cm.bbox = Bbox { lo: [cm.bbox.lo[0].min(x0), cm.bbox.lo[1].min(j), cm.bbox.lo[2].min(k)], hi: [cm.bbox.hi[0].max(x1 - 1), cm.bbox.hi[1].max(j), cm.bbox.hi[2].max(k)] };
                 // The lowest voxel of the run lies at one of its ends.
@@ -1006,8 +1037,15 @@ fn lowest_middle(runs: &Runs, run_comp: &[u32], comp: &Compartment, c: u32, geom
     const SLAB_MM: f64 = 2.0;
     let floor = comp.lowest_height - SLAB_MM;
     let mut voxels = Vec::new();
+    // The height along a row changes by inferior.x·sx per voxel: a row whose highest
+    // possible value is below the slab is passed over.
+    let (x_lo, x_hi) = (comp.bbox.lo[0] as f64 * geom.spacing[0], comp.bbox.hi[0] as f64 * geom.spacing[0]);
+    let best_x = (inferior.x * x_lo).max(inferior.x * x_hi);
     for k in comp.bbox.lo[2]..=comp.bbox.hi[2] {
         for j in comp.bbox.lo[1]..=comp.bbox.hi[1] {
+            if best_x + inferior.y * j as f64 * geom.spacing[1] + inferior.z * k as f64 * geom.spacing[2] < floor {
+                continue;
+            }
             for r in runs.row(j, k).filter(|&r| run_comp[r] == c) {
                 let run = runs.runs[r];
                 for x in run.x0 as usize..run.x1 as usize {
@@ -1024,6 +1062,16 @@ fn lowest_middle(runs: &Runs, run_comp: &[u32], comp: &Compartment, c: u32, geom
         let (p, q) = (geom.index_to_patient(DVec3::new(a[0] as f64, a[1] as f64, a[2] as f64)), geom.index_to_patient(DVec3::new(b[0] as f64, b[1] as f64, b[2] as f64)));
         p.x.total_cmp(&q.x).then(p.y.total_cmp(&q.y)).then(p.z.total_cmp(&q.z))
     })).unwrap_or(comp.lowest)
+}
+
+/// Zero over the box, slice by slice.
+fn clear_box(work: &mut Volume<u8>, bx: &Bbox) {
+    let [nx, ny, _] = work.dims();
+    work.data_mut().par_chunks_mut(nx * ny).enumerate().filter(|(k, _)| bx.lo[2] <= *k && *k <= bx.hi[2]).for_each(|(_, slab)| {
+        for j in bx.lo[1]..=bx.hi[1] {
+            slab[j * nx + bx.lo[0]..=j * nx + bx.hi[0]].fill(0);
+        }
+    });
 }
 
 /// A tube of `radius_mm` around a bridge's path: BRIDGE where there is neither gas nor a pool.

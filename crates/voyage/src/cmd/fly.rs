@@ -108,9 +108,9 @@ pub struct FlyArgs {
 }
 
 pub fn run(a: &FlyArgs) -> Result<()> {
-    let mut opts = a.physics.options()?;
+    let opts = a.physics.options()?;
     let Prepared { study, geometry, .. } = load_and_prepare(&a.input)?;
-    opts.dynamics = opts.dynamics.with_gravity_along(study.gravity_local());
+    let opts = opts.fitted_to(&study);
     let field = potential_field(&study, opts.safety.min_wall_mm).with_context(|| format!("{}", a.input.input.display()))?;
     let mut flights: Vec<Flight> = Vec::new();
     for dir in a.direction.list() {

@@ -170,8 +170,7 @@ pub fn write_png(path: &Path, rgba: &[u8], width: u32, height: u32) -> Result<()
 }
 
 fn flight(study: &Study, physics: &PhysicsArgs, dir: OneDirection, input: &Path) -> Result<Flight> {
-    let mut opts = physics.options()?;
-    opts.dynamics = opts.dynamics.with_gravity_along(study.gravity_local());
+    let opts = physics.options()?.fitted_to(study);
     let field = potential_field(study, opts.safety.min_wall_mm).with_context(|| input.display().to_string())?;
     fly(&field, &study.centerline, dir.direction(), &opts).with_context(|| format!("{}: {} flight", input.display(), dir.direction().name()))
 }

@@ -570,6 +570,7 @@ impl App {
             ui.label(RichText::new("goal reached").color(Color32::LIGHT_GREEN));
         }
         ui.label(format!("to the goal: {:.0} mm", s.dt_to_goal()));
+        colon_summary(ui, &s.study);
         ui.separator();
         ui.add(egui::Slider::new(&mut s.sub.potential.ct, 0.0..=1000.0).text("Ct (pull)"));
         ui.add(egui::Slider::new(&mut s.sub.potential.cs, 0.0..=1000.0).text("Cs (wall)"));
@@ -831,6 +832,10 @@ impl App {
             if s.sub.modes.still { " · still" } else { "" }
         );
         label(&painter, rect.left_bottom() + Vec2::new(8.0, -26.0), &mode, Color32::from_gray(220));
+        if let Some(span) = s.collapsed_here() {
+            let text = format!("collapsed segment, {:.0} mm: no air here, the flight keeps to the path", span[1] - span[0]);
+            label(&painter, rect.left_top() + Vec2::new(8.0, 30.0), &text, Color32::from_rgb(255, 190, 120));
+        }
         let tool = match (self.tool, self.measure_from.is_some()) {
             (Tool::Steer, _) => "hold left: steer · right-drag: look · H: help",
             (Tool::Marker, _) => "click: marker on the surface",
@@ -982,5 +987,35 @@ impl eframe::App for App {
 
     fn on_exit(&mut self) {
         self.write_report();
+    }
+}
+
+/// The colon's segments, bridged gaps, the patient's position and the warnings, as
+/// preprocessing reported them.
+fn colon_summary(ui: &mut egui::Ui, study: &voyage_core::prep::Study) {
+    let seg = &study.segmentation;
+    let o = &seg.orientation;
+    let kept = seg.segments.iter().filter(|s| s.kept).count();
+    let how = match o.source {
+        voyage_core::anatomy::PositionSource::Dicom => "from the header",
+        voyage_core::anatomy::PositionSource::Given => "given",
+        voyage_core::anatomy::PositionSource::AirFluidLevels => "from the fluid levels",
+        voyage_core::anatomy::PositionSource::Assumed => "assumed",
+    };
+    ui.label(format!("{} ({}, {how})", o.position.code(), o.position.describe()));
+    ui.label(format!("{kept} colon segment{}", if kept == 1 { "" } else { "s" }));
+    for (gap, span) in seg.gaps.iter().zip(study.collapsed_spans.iter().map(Some).chain(std::iter::repeat(None))) {
+        let names = |i: usize| seg.segments.iter().find(|s| s.order == Some(i)).map_or("?", |s| s.label.as_str());
+        let at = span.map_or(String::new(), |a| format!(" at {:.0} mm", a[0]));
+        ui.label(format!("{} – {} gap {:.0} mm bridged{at}", names(gap.between[0]), names(gap.between[1]), gap.length_mm));
+    }
+    if !seg.warnings.is_empty() {
+        egui::CollapsingHeader::new(RichText::new(format!("{} warning{}", seg.warnings.len(), if seg.warnings.len() == 1 { "" } else { "s" })).color(Color32::from_rgb(255, 190, 120)))
+            .id_salt("warnings")
+            .show(ui, |ui| {
+                for w in &seg.warnings {
+                    ui.label(RichText::new(w).small());
+                }
+            });
     }
 }

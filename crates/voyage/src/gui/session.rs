@@ -38,6 +38,14 @@ pub struct Session {
 }
 
 impl Session {
+    /// The bridged gap (arc span along the centerline) the submarine is in, if any.
+    pub fn collapsed_here(&self) -> Option<[f64; 2]> {
+        let x = self.sub.state.x;
+        let cl = &self.study.centerline;
+        let (i, _) = cl.points_mm.iter().enumerate().map(|(i, p)| (i, glam::DVec3::from_array(*p).distance_squared(x))).min_by(|a, b| a.1.total_cmp(&b.1))?;
+        self.study.collapsed_at(cl.arc_mm[i])
+    }
+
     /// Everything the window needs for a preprocessed study; the submarine waits at the
     /// rectum, looking up the colon.
     pub fn new(name: String, study: Study) -> anyhow::Result<Self> {
@@ -113,6 +121,12 @@ impl Session {
                 self.reached = true;
             } else if steering {
                 self.pilot.restart(self.sub.state.t, dt_now, self.sub.state.x);
+            } else if let Some(pose) = self.pilot.glide(self.sub.state.x, dt)
+                && self.sub.glide_to(&self.field, pose, dt)
+            {
+                // A bridged gap holds no air for the field: the flight keeps to the path.
+                self.pilot.watch_from(self.sub.state.t, self.dt_to_goal());
+                return;
             } else {
                 input.force += self.pilot.input(self.sub.state.t, dt_now, self.sub.state.x, self.sub.potential.ct).force;
             }
