@@ -1,0 +1,98 @@
+//! The colon in several pieces: every piece is kept, in order, each gap bridged and reported;
+//! a seed adds gas to the colon but never moves its start; the patient's position decides
+//! on which side fluid lies.
+
+use glam::DVec3;
+use voyage_core::anatomy::{PatientPosition, PositionSource};
+use voyage_core::phantom::{self, ColonOptions, Phantom};
+use voyage_core::prep::{prepare, PrepOptions};
+use voyage_core::segment::{segment, SegmentOptions};
+use voyage_core::Volume;
+
+fn small(opts: ColonOptions) -> Phantom {
+    phantom::colon(&ColonOptions { small: true, ..opts }).unwrap()
+}
+
+/// The truth lumen as a 0/1 mask with a disc `half_mm` thick cut out across the colon at
+/// arc length `arc` (a collapsed stretch another segmenter would leave out).
+fn cut_mask(p: &Phantom, arc: f64, half_mm: f64) -> Volume<i16> {
+    let t = &p.truth;
+    let i = t.centerline_arc_mm.partition_point(|&a| a < arc).min(t.centerline_mm.len() - 2);
+    let c = DVec3::from_array(t.centerline_mm[i]);
+    let tangent = (DVec3::from_array(t.centerline_mm[i + 1]) - c).normalize();
+    let reach = t.centerline_radius_mm[i] + 6.0;
+    let g = p.lumen.geometry().clone();
+    let mut m = p.lumen.map(|v| v as i16);
+    for idx in 0..g.len() {
+        if m.data()[idx] == 0 {
+            continue;
+        }
+        let [x, y, z] = g.ijk(idx);
+        let q = g.index_to_local(DVec3::new(x as f64, y as f64, z as f64));
+        if (q - c).dot(tangent).abs() <= half_mm && (q - c).length() <= reach {
+            m.data_mut()[idx] = 0;
+        }
+    }
+    m
+}
+
+#[test]
+fn a_mask_in_two_pieces_keeps_both_in_order_with_the_gap_bridged() {
+    let p = small(ColonOptions::default());
+    let t = &p.truth;
+    let desc = t.segments.iter().find(|s| s.name == "descending").unwrap();
+    let mask = cut_mask(&p, 0.5 * (desc.start_arc_mm + desc.end_arc_mm), 5.0);
+    let whole = prepare(p.lumen.map(|v| v as i16), &PrepOptions::default(), |_| {}).unwrap();
+    let s = segment(&mask, &SegmentOptions::default()).unwrap();
+    let kept: Vec<_> = s.segments.iter().filter(|x| x.kept).collect();
+    assert_eq!(kept.len(), 2, "{:?}", s.segments);
+    assert_eq!(s.gaps.len(), 1);
+    assert!((8.0..30.0).contains(&s.gaps[0].length_mm), "gap {} mm", s.gaps[0].length_mm);
+    assert!(s.warnings.iter().any(|w| w.contains("bridged")), "{:?}", s.warnings);
+    // Both pieces are lumen: nothing of the mask is lost but crumbs the cut left (a few
+    // voxels, too small to be a segment).
+    let lost = mask.data().iter().zip(s.lumen.data()).filter(|&(&m, &l)| m != 0 && l == 0).count();
+    assert!(lost <= 10, "{lost} mask voxels left out");
+    // The whole colon is flown: the centerline crosses the gap, which is marked on it.
+    let study = prepare(mask, &PrepOptions::default(), |_| {}).unwrap();
+    let rel = study.centerline.length_mm / whole.centerline.length_mm;
+    assert!((0.97..1.03).contains(&rel), "centerline {:.0} mm against {:.0} mm uncut", study.centerline.length_mm, whole.centerline.length_mm);
+    assert_eq!(study.collapsed_spans.len(), 1);
+    let span = study.collapsed_spans[0];
+    assert!(span[1] - span[0] >= 5.0 && span[1] - span[0] <= 40.0, "span {span:?}");
+    let src = study.ct.geometry().index_to_local(DVec3::new(study.source[0] as f64, study.source[1] as f64, study.source[2] as f64));
+    assert!(src.distance(DVec3::from_array(t.centerline_mm[0])) <= 15.0, "source {src} is not at the rectum");
+}
+
+#[test]
+fn a_seed_adds_gas_to_the_colon_but_does_not_move_the_start() {
+    let p = small(ColonOptions::default());
+    let t = &p.truth;
+    let plain = prepare(p.ct.clone(), &PrepOptions::default(), |_| {}).unwrap();
+    // A seed in the cecum: the colon's own gas, so nothing changes, least of all the source.
+    let mut opts = PrepOptions::default();
+    opts.segment.seed_mm = Some(DVec3::from_array(t.target_mm));
+    let seeded = prepare(p.ct.clone(), &opts, |_| {}).unwrap();
+    assert_eq!(seeded.source, plain.source, "the seed moved the source");
+    assert_eq!(seeded.target, plain.target);
+    assert!((seeded.centerline.length_mm - plain.centerline.length_mm).abs() < 1e-9);
+}
+
+#[test]
+fn the_position_given_decides_where_fluid_lies() {
+    let p = small(ColonOptions { tagged_fluid: true, ..ColonOptions::default() });
+    // Supine, as the levels say: the pools join the colon.
+    let s = segment(&p.ct, &SegmentOptions::default()).unwrap();
+    assert_eq!(s.orientation.source, PositionSource::AirFluidLevels);
+    assert!(s.fluid_voxels > 0);
+    let truth_fluid = p.labels.data().iter().filter(|&&l| l == phantom::label::LUMEN_FLUID).count();
+    let found = p.labels.data().iter().zip(s.lumen.data()).filter(|&(&l, &m)| l == phantom::label::LUMEN_FLUID && m != 0).count();
+    assert!(found as f64 >= 0.95 * truth_fluid as f64, "{found} of {truth_fluid} fluid voxels");
+    // Told (wrongly) that the patient was prone, the fluid is above the gas: none of it is
+    // the colon's, and the user hears the position came from them.
+    let prone = SegmentOptions { position: Some((PatientPosition::Hfp, PositionSource::Given)), ..Default::default() };
+    let s = segment(&p.ct, &prone).unwrap();
+    assert_eq!(s.orientation.gravity_lps, [0.0, -1.0, 0.0]);
+    let found = p.labels.data().iter().zip(s.lumen.data()).filter(|&(&l, &m)| l == phantom::label::LUMEN_FLUID && m != 0).count();
+    assert!((found as f64) < 0.05 * truth_fluid as f64, "{found} of {truth_fluid} fluid voxels taken above the gas");
+}
