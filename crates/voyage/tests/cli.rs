@@ -204,9 +204,25 @@ fn prep_writes_its_exports_and_reports_json() {
     let o = voyage(&["prep", ct.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"]);
     assert!(o.status.success(), "{}", text(&o));
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    for key in ["lumen_voxels", "components", "source_mm", "target_mm", "centerline_length_mm", "cells", "triangles", "timings_ms", "peak_rss_mb"] {
+    for key in ["lumen_voxels", "components", "source_mm", "target_mm", "centerline_length_mm", "cells", "triangles", "timings_ms", "peak_rss_mb", "position", "position_source", "gravity_lps", "segments", "gaps", "warnings"] {
         assert!(!j[key].is_null(), "{key} missing from {j}");
     }
+    // No fluid, no DICOM header: supine is assumed, and said, in the JSON and on stderr.
+    assert_eq!(j["position"], "HFS");
+    assert_eq!(j["position_source"], "assumed");
+    assert_eq!(j["gravity_lps"], serde_json::json!([0.0, 1.0, 0.0]));
+    assert!(j["warnings"][0].as_str().unwrap().contains("supine assumed"), "{j}");
+    assert!(String::from_utf8_lossy(&o.stderr).lines().any(|l| l.starts_with("warning:") && l.contains("supine assumed")));
+    assert_eq!(j["segments"][0]["kept"], true);
+    assert_eq!(j["segments"][0]["order"], 0);
+    assert_eq!(j["gaps"], serde_json::json!([]));
+    // --position overrides: the view's up and the fluid side follow it.
+    let prone = voyage(&["prep", ct.to_str().unwrap(), "--out", dir.join("prone").to_str().unwrap(), "--json", "--position", "hfp"]);
+    assert!(prone.status.success(), "{}", text(&prone));
+    let p: serde_json::Value = serde_json::from_slice(&prone.stdout).unwrap();
+    assert_eq!((p["position"].as_str(), p["position_source"].as_str()), (Some("HFP"), Some("given")));
+    assert_eq!(p["gravity_lps"], serde_json::json!([0.0, -1.0, 0.0]));
+    assert!(p["warnings"].as_array().unwrap().iter().all(|w| !w.as_str().unwrap().contains("assumed")), "{p}");
     for key in ["load", "segment", "ds", "dt", "centerline", "cells", "surface", "total_after_load"] {
         assert!(j["timings_ms"][key].as_f64().is_some(), "timings_ms.{key} missing");
     }
@@ -235,7 +251,8 @@ fn prep_writes_its_exports_and_reports_json() {
     std::fs::write(blocked.join("lumen.nii.gz"), b"old").unwrap();
     let o = voyage(&["prep", ct.to_str().unwrap(), "--out", blocked.to_str().unwrap()]);
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success() && err.contains("surface.stl") && err.trim().lines().count() == 1, "{err}");
+    let errors: Vec<&str> = err.lines().filter(|l| !l.starts_with("warning:")).collect();
+    assert!(!o.status.success() && err.contains("surface.stl") && errors.len() == 1, "{err}");
     assert_eq!(std::fs::read(blocked.join("lumen.nii.gz")).unwrap(), b"old");
     let left: Vec<_> = std::fs::read_dir(&blocked).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert_eq!(left.len(), 2, "left behind: {left:?}");
