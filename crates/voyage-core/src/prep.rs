@@ -208,6 +208,10 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Sta
     lap(&mut t.cells);
 
     let collapsed_spans = collapsed_spans(&cl, &seg);
+    if opts.endpoints.source_mm.is_none() || opts.endpoints.target_mm.is_none() {
+        let w = anatomical_checks(&seg, source, target, opts.endpoints.source_mm.is_none(), opts.endpoints.target_mm.is_none());
+        seg.warnings.extend(w);
+    }
     t.total_after_load = start.elapsed().as_secs_f64() * 1e3;
     Ok(Study {
         ct,
@@ -246,4 +250,40 @@ fn collapsed_spans(cl: &Centerline, seg: &Segmentation) -> Vec<[f64; 2]> {
     }
     spans.sort_by(|a, b| a[0].total_cmp(&b[0]));
     spans
+}
+
+/// Where the automatic ends lie in the colon's box in the patient frame: the rectum low and
+/// near the middle (else the rectum is collapsed, fluid-filled or out of the scan, and the
+/// flight starts at the lowest segment's lower end), the cecum on the patient's right and low.
+fn anatomical_checks(seg: &Segmentation, source: [usize; 3], target: [usize; 3], check_source: bool, check_target: bool) -> Vec<String> {
+    let g = seg.lumen.geometry();
+    let [lo, hi] = seg.extent;
+    let (mut a, mut b) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+    for c in 0..8 {
+        let v = DVec3::from_array([0, 1, 2].map(|x| if c >> x & 1 == 1 { hi[x] } else { lo[x] } as f64));
+        let p = g.index_to_patient(v);
+        (a, b) = (a.min(p), b.max(p));
+    }
+    let span = (b - a).max(DVec3::splat(1.0));
+    // u: 0 at the patient's right of the colon's box, 1 at its left; v: 0 lowest, 1 highest.
+    let place = |v: [usize; 3]| {
+        let p = g.index_to_patient(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64));
+        ((p.x - a.x) / span.x, (p.z - a.z) / span.z, p)
+    };
+    let mut out = Vec::new();
+    let (u, v, p) = place(source);
+    if check_source && ((u - 0.5).abs() > 0.25 || v > 0.3) {
+        out.push(format!(
+            "the colon's lowest gas, where the flight starts, is not low in the middle of the pelvis (LPS {:.0}, {:.0}, {:.0}): the rectum may be collapsed, fluid-filled or outside the scan; give --source to start elsewhere",
+            p.x, p.y, p.z
+        ));
+    }
+    let (u, v, p) = place(target);
+    if check_target && (u > 0.5 || v > 0.6) {
+        out.push(format!(
+            "the colon's far end (LPS {:.0}, {:.0}, {:.0}) is not in the right lower quadrant, where the cecum lies: part of the colon may be missing; give --target to end elsewhere",
+            p.x, p.y, p.z
+        ));
+    }
+    out
 }
