@@ -4,7 +4,12 @@
 //!
 //! `cargo run --release -p voyage-core --example phantom_look [pipe|colon|small|all]`;
 //! `... phantom_look time` times the generators; `... phantom_look anatomy` prints the
-//! colon's course (lengths, tightest bend, closest loops) for tuning it.
+//! colon's course (lengths, tightest bend, closest loops) for tuning it; `... variant NAME
+//! small prone opacified tube fluid collapsed=SEG filled=SEG quantize=HU seed=N` draws
+//! slices through what the newer options add (the ileocaecal valve, the rectal catheter,
+//! each gap in the gas) and lists the truth; `... free Z0 Z1` maps the room around the colon
+//! and `... room` (knots on stdin) checks a small-bowel course, for placing the loops;
+//! `... save OUT.nii [small] [fluid] [collapsed] [seed=N]` writes the CT as the CLI does.
 
 use std::io::Write;
 use std::path::Path;
@@ -29,6 +34,58 @@ fn main() -> Res<()> {
     if which == "time" {
         return time();
     }
+    if which == "free" {
+        let from: f64 = std::env::args().nth(2).and_then(|a| a.parse().ok()).unwrap_or(20.0);
+        let to: f64 = std::env::args().nth(3).and_then(|a| a.parse().ok()).unwrap_or(260.0);
+        print!("{}", phantom::colon::free_space_map(from, to)?);
+        return Ok(());
+    }
+    if which == "room" {
+        // Knots "x,y,z x,y,z ..." on stdin (one loop per line, radius first).
+        for line in std::io::stdin().lines() {
+            let line = line?;
+            let mut it = line.split_whitespace();
+            let Some(r) = it.next().and_then(|r| r.parse::<f64>().ok()) else { continue };
+            let knots: Vec<[f64; 3]> = it
+                .map(|k| {
+                    let v: Vec<f64> = k.split(',').filter_map(|x| x.parse().ok()).collect();
+                    [v[0], v[1], v[2]]
+                })
+                .collect();
+            print!("{}", phantom::colon::loop_room_report(&knots, r)?);
+        }
+        return Ok(());
+    }
+    if which == "save" {
+        // `save OUT.nii [small] [collapsed] [fluid] [seed=N]`: the CT as the CLI writes it.
+        let args: Vec<String> = std::env::args().skip(2).collect();
+        let has = |w: &str| args.iter().any(|a| a == w);
+        let seed = args.iter().find_map(|a| a.strip_prefix("seed=")?.parse().ok()).unwrap_or(1);
+        let opts = ColonOptions {
+            seed,
+            small: has("small"),
+            tagged_fluid: has("fluid"),
+            collapsed: if has("collapsed") { vec!["descending".into()] } else { Vec::new() },
+            ..ColonOptions::default()
+        };
+        let t = Instant::now();
+        let p = phantom::colon(&opts)?;
+        eprintln!("made in {:.2} s", t.elapsed().as_secs_f64());
+        voyage_core::io::nifti::save(Path::new(&args[0]), &p.ct)?;
+        voyage_core::io::nifti::save(Path::new(&format!("{}.lumen.nii.gz", args[0])), &p.lumen)?;
+        return Ok(());
+    }
+    if which == "variant" {
+        // `variant NAME [small] [fluid] [prone] [opacified] [tube] [collapsed=SEG]...
+        // [filled=SEG]... [quantize=HU] [seed=N]`: pictures of one variant.
+        let args: Vec<String> = std::env::args().skip(2).collect();
+        let opts = variant_options(&args[1..]);
+        let t = Instant::now();
+        let p = phantom::colon(&opts)?;
+        eprintln!("{}: made in {:.2} s", args[0], t.elapsed().as_secs_f64());
+        look_variant(&p, dir, &args[0])?;
+        return Ok(());
+    }
     if which == "anatomy" {
         print!("{}", phantom::colon::anatomy_report(false)?);
         return Ok(());
@@ -44,7 +101,7 @@ fn main() -> Res<()> {
         let p = phantom::colon(&ColonOptions { small: true, tagged_fluid: true, ..ColonOptions::default() })?;
         eprintln!("small colon: {:.2} s", t.elapsed().as_secs_f64());
         look(&p, dir, "small")?;
-        let p = phantom::colon(&ColonOptions { small: true, collapsed_segment: true, ..ColonOptions::default() })?;
+        let p = phantom::colon(&ColonOptions { small: true, collapsed: vec!["descending".into()], ..ColonOptions::default() })?;
         look(&p, dir, "small-collapsed")?;
     }
     if which == "colon" || which == "all" {
@@ -55,6 +112,89 @@ fn main() -> Res<()> {
         let p = phantom::colon(&ColonOptions { tagged_fluid: true, ..ColonOptions::default() })?;
         look(&p, dir, "colon-fluid")?;
     }
+    Ok(())
+}
+
+/// Options from words: small, fluid, prone, opacified, tube, collapsed=SEG, filled=SEG,
+/// quantize=HU, seed=N, noise=HU.
+fn variant_options(args: &[String]) -> ColonOptions {
+    let mut o = ColonOptions::default();
+    for a in args {
+        match a.split_once('=') {
+            Some(("collapsed", v)) => o.collapsed.push(v.into()),
+            Some(("filled", v)) => o.fluid_filled.push(v.into()),
+            Some(("quantize", v)) => o.quantize_hu = v.parse().ok(),
+            Some(("seed", v)) => o.seed = v.parse().unwrap_or(1),
+            Some(("noise", v)) => o.noise_hu = v.parse().unwrap_or(20.0),
+            _ => match a.as_str() {
+                "small" => o.small = true,
+                "fluid" => o.tagged_fluid = true,
+                "prone" => o.prone = true,
+                "opacified" => o.opacified_small_bowel = true,
+                "tube" => o.rectal_tube = true,
+                _ => eprintln!("ignored: {a}"),
+            },
+        }
+    }
+    o
+}
+
+/// Slices through what the newer options add: the ileocaecal valve (axial, coronal,
+/// sagittal), the rectal catheter (sagittal, coronal), each gap in the gas (coronal through
+/// its middle), and counts of the labels.
+fn look_variant(p: &Phantom, dir: &Path, name: &str) -> Res<()> {
+    let t = &p.truth;
+    let s = p.ct.spacing();
+    // Small phantoms are drawn three times larger.
+    let f = if p.ct.dims()[0] <= 128 { 3 } else { 1 };
+    let save = |img: &Image, path: &Path| save(&zoom(img, f), path);
+    let dims = p.ct.dims();
+    let vox = |x: [f64; 3]| [0, 1, 2].map(|a| ((x[a] / s[a]).round().max(0.0) as usize).min(dims[a] - 1));
+    let counts = phantom::label_counts(&p.labels);
+    let names = phantom::label::legend();
+    let listed: Vec<String> = names.iter().filter(|(v, _)| counts[*v as usize] > 0).map(|(v, n)| format!("{n} {}", counts[*v as usize])).collect();
+    eprintln!("{name}: {} ({}), labels: {}", t.position, if t.scale < 1.0 { "small" } else { "full" }, listed.join(", "));
+    for pl in &t.fluid_pools {
+        eprintln!("  pool {} arcs {:.0}..{:.0}, level y = {:.1}, gravity {:?}, {:.0} HU", pl.segment, pl.start_arc_mm, pl.end_arc_mm, pl.level_y_mm, pl.gravity_lps, pl.hu);
+    }
+    for g in &t.gas_gaps {
+        eprintln!("  gap {} in the {} arcs {:.0}..{:.0}", g.kind, g.segment, g.start_arc_mm, g.end_arc_mm);
+    }
+    for l in &t.small_bowel_loops {
+        eprintln!("  loop r {:.1} mm, {:.0} mm long, {:.0} HU{}{}", l.radius_mm, l.length_mm, l.hu, if l.enters_cecum { ", into the caecum" } else { "" }, if l.touches_colon { ", touches the colon" } else { "" });
+    }
+    if let Some(v) = t.ileocecal_valve_mm {
+        let [i, j, k] = vox(v);
+        eprintln!("  valve at {v:.1?} (voxel {i} {j} {k})");
+        save(&axial(&p.ct, k), &dir.join(format!("{name}-valve-axial.png")))?;
+        save(&coronal(&p.ct, j), &dir.join(format!("{name}-valve-coronal.png")))?;
+        save(&sagittal(&p.ct, i), &dir.join(format!("{name}-valve-sagittal.png")))?;
+        for f in [0.15, 0.3, 0.45, 0.6] {
+            let k = ((dims[2] as f64 * f) as usize).min(dims[2] - 1);
+            save(&axial(&p.ct, k), &dir.join(format!("{name}-axial-{k:03}.png")))?;
+        }
+    }
+    if let Some(c) = &t.rectal_tube {
+        let [i, j, _] = vox(c.tip_mm);
+        eprintln!("  rectal tube tip {:.1?} exit {:.1?}", c.tip_mm, c.exit_mm);
+        save(&sagittal(&p.ct, i), &dir.join(format!("{name}-tube-sagittal.png")))?;
+        save(&coronal(&p.ct, vox(c.exit_mm)[1]), &dir.join(format!("{name}-tube-coronal.png")))?;
+        let _ = j;
+        for k in [0, 1, 2, 3, 5, 8] {
+            let k = k.min(dims[2] - 1);
+            save(&zoom(&crop(&axial(&p.ct, k), vox(c.exit_mm)[0], vox(c.exit_mm)[1], 24), 4), &dir.join(format!("{name}-tube-axial-{k:03}.png")))?;
+        }
+    }
+    for (n, g) in t.gas_gaps.iter().enumerate() {
+        let mid = 0.5 * (g.start_arc_mm + g.end_arc_mm);
+        let at = t.centerline_arc_mm.partition_point(|&a| a < mid).min(t.centerline_mm.len() - 1);
+        let [_, j, _] = vox(t.centerline_mm[at]);
+        save(&coronal(&p.ct, j), &dir.join(format!("{name}-gap{n}-{}-{}-coronal.png", g.kind, g.segment)))?;
+    }
+    save(&coronal(&p.ct, dims[1] / 2), &dir.join(format!("{name}-coronal-mid.png")))?;
+    save(&project(&p.lumen, 1), &dir.join(format!("{name}-lumen-coronal-projection.png")))?;
+    let bright = Volume::from_vec(p.ct.geometry().clone(), p.ct.data().iter().map(|&v| u8::from(v >= 200)).collect())?;
+    save(&project(&bright, 1), &dir.join(format!("{name}-bright-coronal-projection.png")))?;
     Ok(())
 }
 
@@ -74,6 +214,20 @@ fn time() -> Res<()> {
     let full = best(&|| phantom::colon(&ColonOptions::default()).map(drop).map_err(Into::into))?;
     let pipe = best(&|| phantom::pipe(1).map(drop).map_err(Into::into))?;
     println!("{threads} threads: small colon {small:.3} s, full colon {full:.3} s, pipe {pipe:.3} s");
+    let every = |small: bool| ColonOptions {
+        small,
+        prone: true,
+        tagged_fluid: true,
+        opacified_small_bowel: true,
+        collapsed: vec!["sigmoid".into(), "descending".into()],
+        fluid_filled: vec!["transverse".into()],
+        rectal_tube: true,
+        quantize_hu: Some(8.0),
+        ..ColonOptions::default()
+    };
+    let small_all = best(&|| phantom::colon(&every(true)).map(drop).map_err(Into::into))?;
+    let full_all = best(&|| phantom::colon(&every(false)).map(drop).map_err(Into::into))?;
+    println!("every option: small colon {small_all:.3} s, full colon {full_all:.3} s");
     Ok(())
 }
 

@@ -539,13 +539,13 @@ fn two_series_pick_the_bigger_unless_told() {
     write_series_with(
         a.path(),
         &big,
-        &SeriesWriteOptions { series_description: "big".into(), series_number: 2, uid_seed: 1 },
+        &SeriesWriteOptions { series_description: "big".into(), series_number: 2, uid_seed: 1, ..Default::default() },
     )
     .unwrap();
     write_series_with(
         b.path(),
         &small,
-        &SeriesWriteOptions { series_description: "small".into(), series_number: 3, uid_seed: 2 },
+        &SeriesWriteOptions { series_description: "small".into(), series_number: 3, uid_seed: 2, ..Default::default() },
     )
     .unwrap();
     for (prefix, dir) in [("a", &a), ("b", &b)] {

@@ -229,7 +229,7 @@ fn check_colon(p: &Phantom, collapsed: bool) {
     assert!((t.segments.last().map_or(0.0, |g| g.end_arc_mm) - t.centerline_length_mm).abs() < 1e-9);
     // Every centerline point is lumen (except where the colon is collapsed).
     let skip = |a: f64| {
-        collapsed && t.collapsed.as_ref().is_some_and(|c| a > c.start_arc_mm - c.taper_mm && a < c.end_arc_mm + c.taper_mm)
+        collapsed && t.collapsed.iter().any(|c| a > c.start_arc_mm - c.taper_mm && a < c.end_arc_mm + c.taper_mm)
     };
     for (pt, &a) in t.centerline_mm.iter().zip(&t.centerline_arc_mm) {
         if !skip(a) {
@@ -266,8 +266,8 @@ fn check_folds(p: &Phantom) {
         let gap = w[1].arc_mm - w[0].arc_mm;
         (20.0 * s - 1e-9..=30.0 * s + 1e-9).contains(&gap)
     });
-    // Only a collapsed stretch may leave a longer gap.
-    let allowed = if t.collapsed.is_some() { 1 } else { 0 };
+    // Only a collapsed stretch may leave a longer gap (one per collapse).
+    let allowed = t.collapsed.len();
     assert!(gaps_ok.count() + allowed >= t.folds - 1, "fold spacing outside 20–30 mm");
     for f in &t.fold_list {
         assert!(f.depth_mm.iter().all(|&d| (3.0 * s - 1e-9..=8.0 * s + 1e-9).contains(&d)), "fold depth {:?}", f.depth_mm);
@@ -673,10 +673,10 @@ fn small_colon_tagged_fluid_lies_flat_in_the_lumen() {
 
 #[test]
 fn small_colon_collapsed_segment_splits_the_gas() {
-    let p = small(ColonOptions { collapsed_segment: true, ..ColonOptions::default() });
+    let p = small(ColonOptions { collapsed: vec!["descending".into()], ..ColonOptions::default() });
     let t = &p.truth;
     check_colon(&p, true);
-    let c = t.collapsed.as_ref().expect("collapsed stretch in the truth");
+    let c = t.collapsed.first().expect("collapsed stretch in the truth");
     let len = (c.end_arc_mm - c.start_arc_mm) / t.scale;
     assert!((20.0..=40.0).contains(&len), "collapsed over {len} mm (full size)");
     let mid = arc_point(t, 0.5 * (c.start_arc_mm + c.end_arc_mm));
@@ -695,10 +695,10 @@ fn small_colon_collapsed_segment_splits_the_gas() {
 
 #[test]
 fn small_colon_fluid_and_collapse_together() {
-    let p = small(ColonOptions { tagged_fluid: true, collapsed_segment: true, seed: 3, ..ColonOptions::default() });
+    let p = small(ColonOptions { tagged_fluid: true, collapsed: vec!["descending".into()], seed: 3, ..ColonOptions::default() });
     check_colon(&p, true);
     let t = &p.truth;
-    let c = t.collapsed.as_ref().expect("collapse");
+    let c = t.collapsed.first().expect("collapse");
     assert!(!t.fluid_pools.is_empty());
     for pl in &t.fluid_pools {
         assert!(pl.end_arc_mm <= c.start_arc_mm - c.taper_mm || pl.start_arc_mm >= c.end_arc_mm + c.taper_mm);

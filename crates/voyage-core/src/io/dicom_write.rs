@@ -31,11 +31,14 @@ pub struct SeriesWriteOptions {
     /// Mixed into every UID: two series written from the same volume with different seeds get
     /// different UIDs; the same seed gives the same UIDs.
     pub uid_seed: u64,
+    /// PatientPosition (0018,5100), e.g. "HFS" (head first, supine) or "HFP" (prone), which
+    /// tells a reader which way gravity pointed; `None` leaves the element out.
+    pub patient_position: Option<String>,
 }
 
 impl Default for SeriesWriteOptions {
     fn default() -> Self {
-        SeriesWriteOptions { series_description: "voyage volume".into(), series_number: 1, uid_seed: 0 }
+        SeriesWriteOptions { series_description: "voyage volume".into(), series_number: 1, uid_seed: 0, patient_position: None }
     }
 }
 
@@ -177,6 +180,9 @@ fn encode_slice(vol: &Volume<i16>, k: usize, uids: &SeriesUids, opts: &SeriesWri
     e.text(0x0018, 0x0050, b"DS", &ds(g.spacing[2]));
     e.text(0x0018, 0x0060, b"DS", "");
     e.text(0x0018, 0x0088, b"DS", &ds(g.spacing[2]));
+    if let Some(position) = &opts.patient_position {
+        e.text(0x0018, 0x5100, b"CS", position);
+    }
     e.uid(0x0020, 0x000D, &uids.study);
     e.uid(0x0020, 0x000E, &uids.series);
     e.text(0x0020, 0x0010, b"SH", "");

@@ -5,6 +5,10 @@
 //! bodies with cortex, cancellous bone and discs, and a posterior arch), and optionally the
 //! bases of both lungs in the top slices: domes of aerated lung that reach lowest at their
 //! lateral and posterior edges (the costophrenic recesses), as in a real CT colonography.
+//!
+//! Optionally the body ends below in a flat perineum (`floor`): the slices under it are air
+//! outside the body, and the spine stops a rim's thickness above it. The colon phantom gives
+//! the body this bottom only when it has a rectal catheter, which leaves the body there.
 
 use glam::{DVec2, DVec3};
 
@@ -79,6 +83,9 @@ pub struct Body {
     pub rim: f64,
     pub spine: Spine,
     pub lungs: Vec<Lung>,
+    /// Height (z, mm) of the skin of a flat perineum under which there is only outside air;
+    /// `None`: the body fills every slice.
+    pub floor: Option<f64>,
     /// 1 / voxel size, for the partial-volume ramp.
     pub inv_w: f64,
 }
@@ -104,9 +111,23 @@ fn ramp(sdf: f64, inv_w: f64) -> f64 {
 }
 
 impl Body {
-    /// Signed distance to the skin (approximate).
+    /// Signed distance to the skin (approximate), the perineum included.
     pub fn skin_sdf(&self, p: DVec3) -> f64 {
+        let side = self.side_sdf(p);
+        match self.floor {
+            None => side,
+            Some(f) => side.max(f - p.z),
+        }
+    }
+
+    /// Signed distance to the skin of the body's sides (the elliptic cylinder) only.
+    pub fn side_sdf(&self, p: DVec3) -> f64 {
         ellipse_sdf(DVec2::new(p.x, p.y) - self.center, self.semi).0
+    }
+
+    /// Where the spine ends below (the coccyx), a rim's thickness above the perineum.
+    fn spine_bottom(&self) -> Option<f64> {
+        self.floor.map(|f| f + self.rim)
     }
 
     fn spine_hu(&self, p: DVec3, hu: f64) -> (f64, bool) {
@@ -115,13 +136,15 @@ impl Body {
         if (q - s.center).length() > s.reach() + 2.0 {
             return (hu, false);
         }
-        let vb = (q - s.center).length() - s.radius;
+        let mut vb = (q - s.center).length() - s.radius;
+        let bottom = self.spine_bottom().map_or(f64::NEG_INFINITY, |b| b - p.z);
+        vb = vb.max(bottom);
         // Discs: slabs of thickness `disc` centred every `period` mm.
         let dz = (p.z.rem_euclid(s.period) - 0.5 * s.period).abs();
         let disc = dz - 0.5 * s.disc;
         let in_disc = ramp(-disc, self.inv_w); // 1 between discs (bone), 0 in a disc
         let r = (q - s.arch_center).length();
-        let arch = (r - s.arch_outer).max(s.arch_inner - r);
+        let arch = (r - s.arch_outer).max(s.arch_inner - r).max(bottom);
         let mut h = hu + ramp(arch, self.inv_w) * (CORTEX - hu);
         let body = ramp(vb, self.inv_w);
         let bone = CORTEX + ramp(vb + s.cortex, self.inv_w) * (CANCELLOUS - CORTEX);
@@ -171,7 +194,19 @@ impl Background for Body {
         // |x − cx| beyond which the row is surely outside (skin > w), and within which it is
         // surely fat (skin + rim ≤ −w/2); one voxel of slack on each for safety.
         let air_from = self.row_crossing(dy, w) + sx;
-        let fat_until = self.row_crossing(dy, -self.rim - 0.5 * w) - sx;
+        let mut fat_until = self.row_crossing(dy, -self.rim - 0.5 * w) - sx;
+        if let Some(f) = self.floor {
+            if f - z > w {
+                // Under the perineum: all outside air.
+                hu.fill(AIR);
+                labels.fill(label::OUTSIDE_AIR);
+                return;
+            }
+            if z < f + self.rim + w {
+                // Near the perineum (skin, rim, the spine's end): no shortcut to fat.
+                fat_until = f64::NEG_INFINITY;
+            }
+        }
         let lungs_here = !self.below_lungs(z);
         let s = &self.spine;
         let spine_r2 = (s.reach() + 2.0 + sx).powi(2);

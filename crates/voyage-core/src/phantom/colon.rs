@@ -1,6 +1,7 @@
 //! A synthetic colon at a real scan's size, with haustral folds, polyps of known size and
-//! the things that make real CT colonography hard (tagged fluid, a collapsed stretch,
-//! small-bowel gas, lung bases).
+//! the things that make real CT colonography hard (tagged fluid, collapsed and fluid-filled
+//! stretches, small-bowel gas and opacified small bowel, lung bases, a prone patient, a
+//! rectal catheter, quantised grey levels; see [`ColonOptions`]).
 //!
 //! Full size: 512×512×400 voxels of 0.75×0.75×1.0 mm (384×384×400 mm), like a clinical
 //! scan. Small (for fast tests): 128×128×125 voxels of 1.5×1.5×1.6 mm with the whole
@@ -21,6 +22,21 @@
 //! between the taeniae, each 3–8 mm deep (at most 45 % of the radius) and ≈ 2–4 mm thick
 //! (see [`Fold`]). Eight polyps of 3–12 mm in six segments, three hidden just behind a fold
 //! (see `POLYPS`). The truth records everything (see [`Truth`]).
+//!
+//! Options (all combine):
+//! - prone: gravity −y; tagged fluid pools in the sigmoid's and transverse colon's anterior
+//!   loops and at the caecal pole instead of posteriorly in the rectum, descending and
+//!   ascending colon. Each pool is anchored at its segment's most dependent point, so its
+//!   level is flat and gas remains above it.
+//! - collapsed: 30 mm of the sigmoid (55 % along), descending (60 %) and/or transverse (50 %)
+//!   down to a tissue cord.
+//! - fluid-filled: 40–60 mm of a segment filled to the brim (+400..+700 HU), 20–35 % along
+//!   it (65–80 % if that meets a collapse).
+//! - opacified small bowel: see [`super::small_bowel`]; it brings its own caecal pool.
+//! - rectal tube: a catheter from 35 mm up the rectum out through a perineum, which the body
+//!   gets only then (4 mm above the first slice, full size): the rectum's end stays ≥ 5 mm
+//!   from its skin, its muscle wraps the rectum's end as the pelvic floor does.
+//! - quantise: the CT rounded to multiples of a step after the noise.
 
 use glam::{DVec2, DVec3};
 
@@ -30,10 +46,11 @@ use super::polyp::{PolypSpec, place};
 use super::raster::{Materials, Scene};
 use super::rng::{Rng, stream_key};
 use super::truth::{
-    COORDINATES_NOTE, CollapsedTruth, DistractorTruth, FoldTruth, PolypTruth, PoolTruth, RoiTruth, SegmentTruth,
-    Truth,
+    COORDINATES_NOTE, CollapsedTruth, DistractorTruth, FilledTruth, FoldTruth, GapTruth, PolypTruth, PoolTruth,
+    RectalTubeTruth, RoiTruth, SegmentTruth, Truth,
 };
-use super::tube::{Blob, BlobKind, Collapse, Ends, Fold, FoldSector, Pool, Tube};
+use super::small_bowel::{self, Valve};
+use super::tube::{Blob, BlobKind, Catheter, Collapse, Ends, Filled, Fold, FoldSector, Pool, Tube, segment_distance};
 use super::{Phantom, arr, label, label_counts};
 use crate::{Error, Geometry, Result};
 
@@ -44,16 +61,37 @@ pub struct ColonOptions {
     /// ≈128³ at 1.5–1.6 mm with the anatomy scaled by ½, for fast tests.
     pub small: bool,
     /// Pools of tagged fluid (+400..+700 HU) with flat air–fluid levels in the dependent
-    /// (posterior) parts of the rectum, descending and ascending colon.
+    /// parts of the colon: the rectum, descending and ascending colon supine (posterior);
+    /// the sigmoid, transverse colon and caecum prone (anterior).
     pub tagged_fluid: bool,
-    /// A 30 mm stretch of the descending colon collapsed to a tissue cord: two gas parts.
-    pub collapsed_segment: bool,
+    /// The patient lies face down (DICOM "HFP"): gravity points anterior (−y), so tagged
+    /// fluid pools anteriorly. The volume's geometry does not change.
+    pub prone: bool,
+    /// Segments (sigmoid, descending, transverse; each at most once) in which a 30 mm
+    /// stretch (full size) is collapsed to a tissue cord: N collapses leave the gas in N + 1
+    /// pieces.
+    pub collapsed: Vec<String>,
+    /// Segments (rectum, sigmoid, descending, transverse, ascending, caecum; each at most
+    /// once) with a 40–60 mm stretch (full size) filled to the brim with tagged fluid: lumen,
+    /// but no gas, so the gas is split there while the lumen goes on.
+    pub fluid_filled: Vec<String>,
+    /// Loops of small bowel filled with oral contrast (+300..+600 HU, no gas) in the right
+    /// and central lower abdomen and pelvis, some touching the colon near the descending
+    /// colon, the terminal ileum opening into the caecum under the level of a caecal pool
+    /// (made even without `tagged_fluid`): one bright region with the caecal fluid.
+    pub opacified_small_bowel: bool,
+    /// A rectal catheter from the lower rectum out of the body through a perineum (the body
+    /// then ends 4 mm above the first slice): colon gas joins the air outside in 3D.
+    pub rectal_tube: bool,
     /// A few separate small-bowel gas pockets (not colon).
     pub small_bowel_gas: bool,
     /// The bases of both lungs in the top slices (not colon).
     pub lung_bases: bool,
     /// Standard deviation of the CT noise (HU).
     pub noise_hu: f64,
+    /// Round the CT (after the noise) to multiples of this many HU, as a windowed 8-bit
+    /// export leaves it.
+    pub quantize_hu: Option<f64>,
 }
 
 impl Default for ColonOptions {
@@ -62,13 +100,23 @@ impl Default for ColonOptions {
             seed: 1,
             small: false,
             tagged_fluid: false,
-            collapsed_segment: false,
+            prone: false,
+            collapsed: Vec::new(),
+            fluid_filled: Vec::new(),
+            opacified_small_bowel: false,
+            rectal_tube: false,
             small_bowel_gas: true,
             lung_bases: true,
             noise_hu: 20.0,
+            quantize_hu: None,
         }
     }
 }
+
+/// Segments that `ColonOptions::collapsed` may name.
+pub const COLLAPSIBLE: &[&str] = &["sigmoid", "descending", "transverse"];
+/// Segments that `ColonOptions::fluid_filled` may name.
+pub const FILLABLE: &[&str] = &["rectum", "sigmoid", "descending", "transverse", "ascending", "cecum"];
 
 pub const FULL_DIMS: [usize; 3] = [512, 512, 400];
 pub const FULL_SPACING: [f64; 3] = [0.75, 0.75, 1.0];
@@ -95,6 +143,20 @@ const STREAM_FOLDS: u64 = 0xC010_0002;
 const STREAM_POLYPS: u64 = 0xC010_0003;
 const STREAM_POOLS: u64 = 0xC010_0004;
 const STREAM_GAS: u64 = 0xC010_0005;
+// Streams of the newer options: drawn only when the option is on, so the older phantoms
+// stay bit for bit what they were.
+const STREAM_FILLED: u64 = 0xC010_0006;
+pub(super) const STREAM_BOWEL: u64 = 0xC010_0007;
+const STREAM_VALVE_POOL: u64 = 0xC010_0008;
+
+/// Full-size height (z, mm) of the perineum's skin when the body has one (rectal tube): the
+/// rectum's wall ends ≈ 10.5 mm above the first slice, so this keeps ≥ 5 mm of tissue.
+const FLOOR_Z: f64 = 4.0;
+/// Where (full-size arc, mm) and how far off the axis (fraction of the radius) the rectal
+/// catheter's tip lies, and its plastic's HU.
+const CATHETER_TIP_ARC: f64 = 35.0;
+const CATHETER_OFFSET: f64 = 0.6;
+const CATHETER_HU: f64 = 100.0;
 
 /// The colon's course at full size, in volume-local mm of the 384×384×400 mm volume:
 /// (x, y, z), radius, and the name of the segment that starts at the knot.
@@ -158,14 +220,18 @@ const POLYPS: &[(&str, f64, bool, Option<f64>)] = &[
     ("cecum", 7.0, false, None),
 ];
 
-/// Segments where tagged fluid pools (the posterior, dependent ones for a supine patient).
+/// Segments where tagged fluid pools: the posterior, dependent ones for a supine patient,
+/// and for a prone one the anterior ones (the sigmoid's and transverse colon's anterior
+/// loops and the caecal pole), each of which is a local low point under gravity, so its pool
+/// has a flat level and leaves gas above it.
 const POOL_SEGMENTS: &[&str] = &["rectum", "descending", "ascending"];
+const PRONE_POOL_SEGMENTS: &[&str] = &["sigmoid", "transverse", "cecum"];
 
 /// Size, spacing and the map from full-size anatomy to this volume.
 #[derive(Clone, Debug)]
-struct Frame {
-    geom: Geometry,
-    scale: f64,
+pub(super) struct Frame {
+    pub(super) geom: Geometry,
+    pub(super) scale: f64,
     offset: DVec3,
 }
 
@@ -181,41 +247,58 @@ impl Frame {
     }
 
     /// Full-size anatomy position → this volume's local mm.
-    fn pos(&self, p: [f64; 3]) -> DVec3 {
+    pub(super) fn pos(&self, p: [f64; 3]) -> DVec3 {
         DVec3::from_array(p) * self.scale + self.offset
     }
 
-    fn max_spacing(&self) -> f64 {
+    pub(super) fn max_spacing(&self) -> f64 {
         self.geom.spacing.iter().cloned().fold(0.0, f64::max)
     }
 
     /// A full-size length scaled, but not below `voxels` voxels.
-    fn thin(&self, mm: f64, voxels: f64) -> f64 {
+    pub(super) fn thin(&self, mm: f64, voxels: f64) -> f64 {
         (mm * self.scale).max(voxels * self.max_spacing())
     }
 }
 
 /// Makes the colon phantom.
 pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
-    if !(opts.noise_hu >= 0.0 && opts.noise_hu.is_finite()) {
-        return Err(Error::invalid(format!("noise {} HU is not a non-negative number", opts.noise_hu)));
-    }
+    check_options(opts)?;
     let frame = Frame::new(opts.small)?;
-    let body = make_body(&frame, opts.lung_bases);
+    let floor = opts.rectal_tube.then(|| frame.pos([0.0, 0.0, FLOOR_Z]).z);
+    let body = make_body(&frame, opts.lung_bases, floor);
     let axis = make_axis(&frame)?;
     let segments = segments(&axis);
     check_anatomy(&frame, &axis, &body)?;
+    let gravity = if opts.prone { DVec3::NEG_Y } else { DVec3::Y };
     let mut tube = Tube::new(axis, frame.thin(WALL, 1.0), Ends::Round);
-    let collapse = opts.collapsed_segment.then(|| make_collapse(&frame, &segments));
-    tube.collapse = collapse.as_ref().map(|(c, _)| c.clone());
+    let collapses = make_collapses(&frame, &segments, &opts.collapsed)?;
+    tube.collapse = collapses.iter().map(|(c, _)| c.clone()).collect();
     let folds = make_folds(&frame, &tube, &segments, opts.seed);
     tube.set_folds(folds);
     let (mut blobs, polyps) = make_polyps(&frame, &mut tube, &segments, opts.seed)?;
-    let pools = if opts.tagged_fluid { make_pools(&tube, &segments, opts.seed) } else { Vec::new() };
+    let filled = make_filled(&frame, &tube, &segments, &opts.fluid_filled, opts.seed)?;
+    tube.filled = filled.iter().map(|(f, _)| f.clone()).collect();
+    let catheter = if opts.rectal_tube { Some(make_catheter(&frame, &tube, &blobs, floor.unwrap_or(0.0))?) } else { None };
+    let bowel = if opts.opacified_small_bowel {
+        Some(small_bowel::make(&frame, &tube, &body, &segments, gravity, &blobs, catheter.as_ref(), opts.seed)?)
+    } else {
+        None
+    };
+    let pools = make_pools(&tube, &segments, opts, gravity, bowel.as_ref().map(|b| &b.valve));
     tube.pools = pools.iter().map(|(p, _)| p.clone()).collect();
+    // Pockets keep clear of the loops and the catheter as they do of the colon; without
+    // either the list is empty and they land where they always did.
+    let mut obstacles: Vec<(DVec3, DVec3, f64)> = Vec::new();
+    if let Some(b) = &bowel {
+        obstacles.extend(b.blobs.iter().filter_map(|l| l.stalk.map(|(p, q, r)| (p, q, r + l.wall_mm))));
+    }
+    if let Some(c) = &catheter {
+        obstacles.extend(c.points.windows(2).map(|w| (w[0], w[1], c.outer_radius())));
+    }
     let mut distractors = Vec::new();
     if opts.small_bowel_gas {
-        let pockets = make_pockets(&frame, &tube, &body, opts.seed);
+        let pockets = make_pockets(&frame, &tube, &body, &obstacles, opts.seed);
         distractors.extend(pockets.iter().map(|b| DistractorTruth {
             kind: "small_bowel_gas".into(),
             center_mm: arr(b.center),
@@ -224,37 +307,69 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
         }));
         blobs.extend(pockets);
     }
+    if let Some(b) = &bowel {
+        distractors.extend(b.loops.iter().map(|l| {
+            let (lo, hi) = l.axis_mm.iter().fold(([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]), |(lo, hi), p| {
+                ([0, 1, 2].map(|a| lo[a].min(p[a])), [0, 1, 2].map(|a| hi[a].max(p[a])))
+            });
+            DistractorTruth {
+                kind: "opacified_small_bowel".into(),
+                center_mm: [0, 1, 2].map(|a| 0.5 * (lo[a] + hi[a])),
+                semi_axes_mm: [0, 1, 2].map(|a| 0.5 * (hi[a] - lo[a]) + l.radius_mm + l.wall_mm),
+                hu: l.hu,
+            }
+        }));
+        blobs.extend(b.blobs.iter().cloned());
+    }
     distractors.extend(body.lungs.iter().map(|l| DistractorTruth {
         kind: "lung".into(),
         center_mm: [l.center.x, l.center.y, 0.5 * (l.recess + frame.geom.extent_mm().z)],
         semi_axes_mm: [l.semi.x, l.semi.y, 0.5 * (frame.geom.extent_mm().z - l.recess)],
         hu: body::LUNG,
     }));
-    let noise_roi = fat_roi(&frame, &tube, &blobs, &body);
+    let noise_roi = fat_roi(&frame, &tube, &blobs, &body, catheter.as_ref());
     let scene = Scene {
         geom: frame.geom.clone(),
         tube: &tube,
         blobs: &blobs,
+        catheter: catheter.as_ref(),
         materials: Materials { lumen_air: body::AIR, wall: body::SOFT_TISSUE, polyp: body::SOFT_TISSUE, pocket_air: body::AIR },
         background: &body,
         noise_sigma: opts.noise_hu,
         noise_key: stream_key(opts.seed, STREAM_NOISE),
+        quantize: opts.quantize_hu,
     };
     let r = scene.render()?;
     let counts = label_counts(&r.labels);
     let ax = &tube.axis;
     let inset = END_INSET * frame.scale;
     let (source_arc, target_arc) = (inset, ax.length - inset);
+    let collapsed: Vec<CollapsedTruth> = collapses.into_iter().map(|(_, t)| t).collect();
+    let fluid_filled: Vec<FilledTruth> = filled.into_iter().map(|(_, t)| t).collect();
+    let mut gas_gaps: Vec<GapTruth> = collapsed
+        .iter()
+        .map(|c| GapTruth { kind: "collapsed".into(), segment: c.segment.clone(), start_arc_mm: c.start_arc_mm, end_arc_mm: c.end_arc_mm })
+        .chain(fluid_filled.iter().map(|f| GapTruth {
+            kind: "fluid_filled".into(),
+            segment: f.segment.clone(),
+            start_arc_mm: f.start_arc_mm,
+            end_arc_mm: f.end_arc_mm,
+        }))
+        .collect();
+    gas_gaps.sort_by(|a, b| a.start_arc_mm.total_cmp(&b.start_arc_mm));
     let truth = Truth {
         kind: "colon".into(),
         seed: opts.seed,
         coordinates: COORDINATES_NOTE.into(),
+        position: if opts.prone { "HFP" } else { "HFS" }.into(),
+        gravity_lps: arr(gravity),
         dims: frame.geom.dims,
         spacing_mm: frame.geom.spacing,
         origin_lps_mm: frame.geom.origin,
         direction: frame.geom.direction,
         scale: frame.scale,
         noise_hu: opts.noise_hu,
+        quantize_hu: opts.quantize_hu,
         centerline_mm: ax.points.iter().map(|p| arr(*p)).collect(),
         centerline_arc_mm: ax.arc.clone(),
         centerline_radius_mm: ax.radius.clone(),
@@ -272,17 +387,54 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
         segments: segments.clone(),
         fluid_pools: pools.into_iter().map(|(_, t)| t).collect(),
         fluid_voxels: counts[label::LUMEN_FLUID as usize],
-        collapsed: collapse.map(|(_, t)| t),
+        collapsed,
+        fluid_filled,
+        gas_gaps,
         distractors,
+        small_bowel_loops: bowel.as_ref().map_or_else(Vec::new, |b| b.loops.clone()),
+        ileocecal_valve_mm: bowel.as_ref().map(|b| arr(b.valve.point)),
+        rectal_tube: catheter.as_ref().map(|c| RectalTubeTruth {
+            tip_mm: arr(c.points[0]),
+            exit_mm: arr(c.points[c.points.len() - 1]),
+            inner_radius_mm: c.inner_radius,
+            outer_radius_mm: c.outer_radius(),
+            wall_hu: c.hu,
+        }),
+        body_floor_z_mm: floor,
         noise_roi,
-        materials_hu: materials(),
+        materials_hu: materials(opts),
         labels: label::legend(),
     };
     Ok(Phantom { ct: r.ct, lumen: r.lumen, labels: r.labels, truth })
 }
 
-fn materials() -> Vec<(String, f64)> {
-    [
+/// Refuses options that cannot make a phantom, with a message that says why.
+fn check_options(opts: &ColonOptions) -> Result<()> {
+    if !(opts.noise_hu >= 0.0 && opts.noise_hu.is_finite()) {
+        return Err(Error::invalid(format!("noise {} HU is not a non-negative number", opts.noise_hu)));
+    }
+    if let Some(q) = opts.quantize_hu
+        && !(q > 0.0 && q.is_finite())
+    {
+        return Err(Error::invalid(format!("quantisation step {q} HU is not a positive number")));
+    }
+    let names = |what: &str, list: &[String], allowed: &[&str]| -> Result<()> {
+        for (i, n) in list.iter().enumerate() {
+            if !allowed.contains(&n.as_str()) {
+                return Err(Error::invalid(format!("{what} segment '{n}': choose from {}", allowed.join(", "))));
+            }
+            if list[..i].contains(n) {
+                return Err(Error::invalid(format!("{what} segment '{n}' named twice")));
+            }
+        }
+        Ok(())
+    };
+    names("collapsed", &opts.collapsed, COLLAPSIBLE)?;
+    names("fluid-filled", &opts.fluid_filled, FILLABLE)
+}
+
+fn materials(opts: &ColonOptions) -> Vec<(String, f64)> {
+    let mut m: Vec<(String, f64)> = [
         ("air", body::AIR),
         ("fat", body::FAT),
         ("colon_wall", body::SOFT_TISSUE),
@@ -295,12 +447,16 @@ fn materials() -> Vec<(String, f64)> {
     ]
     .into_iter()
     .map(|(n, v)| (n.to_string(), v))
-    .collect()
+    .collect();
+    if opts.rectal_tube {
+        m.push(("catheter_plastic".into(), CATHETER_HU));
+    }
+    m
 }
 
 /// The abdomen: a 340×260 mm ellipse (full size) with a 10 mm rim, the spine posteriorly
-/// and, optionally, the lung bases in the top 24 slices.
-fn make_body(frame: &Frame, lungs: bool) -> Body {
+/// and, optionally, the lung bases in the top 24 slices and a perineum at height `floor`.
+fn make_body(frame: &Frame, lungs: bool, floor: Option<f64>) -> Body {
     let s = frame.scale;
     let c = |x: f64, y: f64| {
         let p = frame.pos([x, y, 0.0]);
@@ -327,6 +483,7 @@ fn make_body(frame: &Frame, lungs: bool) -> Body {
             arch_outer: 11.0 * s,
         },
         lungs: if lungs { vec![lung(192.0 - 88.0), lung(192.0 + 88.0)] } else { Vec::new() },
+        floor,
         inv_w: 3.0 / frame.geom.spacing.iter().sum::<f64>(),
     }
 }
@@ -382,8 +539,14 @@ fn check_anatomy(frame: &Frame, axis: &Axis, body: &Body) -> Result<()> {
         if (0..3).any(|a| p[a] - reach < 3.0 * s || p[a] + reach > ext[a] - 3.0 * s) {
             return bad(format!("colon at {p:?} touches the volume border"));
         }
-        if body.skin_sdf(*p) + reach + 5.0 * s > -body.rim {
+        if body.side_sdf(*p) + reach + 5.0 * s > -body.rim {
             return bad(format!("colon at {p:?} reaches the abdominal wall"));
+        }
+        // The perineum's muscle may wrap the rectum's end (it does in life), its skin not.
+        if let Some(f) = body.floor
+            && p.z - reach - f < 5.0 * s
+        {
+            return bad(format!("colon at {p:?} within 5 mm of the perineum"));
         }
         if body.spine.sdf_xy(*p) < reach + 5.0 * s {
             return bad(format!("colon at {p:?} touches the spine"));
@@ -395,16 +558,68 @@ fn check_anatomy(frame: &Frame, axis: &Axis, body: &Body) -> Result<()> {
     Ok(())
 }
 
-/// 30 mm of the descending colon, 60 % of the way up, collapses to a tissue cord.
-fn make_collapse(frame: &Frame, segments: &[SegmentTruth]) -> (Collapse, CollapsedTruth) {
+/// 30 mm (full size) of each named segment collapses to a tissue cord: the descending colon
+/// 60 % of the way up (where it always did), the sigmoid at 55 % of its length (the top of
+/// its anterior loop), the transverse colon at half its length. Sorted along the colon.
+fn make_collapses(frame: &Frame, segments: &[SegmentTruth], names: &[String]) -> Result<Vec<(Collapse, CollapsedTruth)>> {
     let s = frame.scale;
-    let (a, b) = segment(segments, "descending").map_or((0.0, 0.0), |g| (g.start_arc_mm, g.end_arc_mm));
-    let mid = a + 0.6 * (b - a);
-    let half = 15.0 * s;
-    let taper = 8.0 * s;
-    let c = Collapse { start: mid - half, end: mid + half, taper, cord_radius: 2.0 * frame.thin(WALL, 1.0) };
-    let t = CollapsedTruth { segment: "descending".into(), start_arc_mm: c.start, end_arc_mm: c.end, taper_mm: taper };
-    (c, t)
+    let mut out = Vec::new();
+    for name in names {
+        let g = segment(segments, name)?;
+        let frac = match name.as_str() {
+            "sigmoid" => 0.55,
+            "transverse" => 0.5,
+            _ => 0.6,
+        };
+        let (a, b) = (g.start_arc_mm, g.end_arc_mm);
+        let mid = a + frac * (b - a);
+        let half = 15.0 * s;
+        let taper = 8.0 * s;
+        let c = Collapse { start: mid - half, end: mid + half, taper, cord_radius: 2.0 * frame.thin(WALL, 1.0) };
+        let t = CollapsedTruth { segment: name.clone(), start_arc_mm: c.start, end_arc_mm: c.end, taper_mm: taper };
+        out.push((c, t));
+    }
+    out.sort_by(|x, y| x.0.start.total_cmp(&y.0.start));
+    Ok(out)
+}
+
+/// Whether arc `s` lies within `margin` of a collapsed stretch (tapers included).
+fn near_collapse(tube: &Tube, s: f64, margin: f64) -> bool {
+    tube.collapse.iter().any(|c| s > c.start - c.taper - margin && s < c.end + c.taper + margin)
+}
+
+/// A 40–60 mm stretch (full size) of each named segment filled to the brim with tagged
+/// fluid (+400..+700 HU), centred 20–35 % of the way along the segment (or 65–80 % if that
+/// would meet a collapse), clear of the colon's ends. Sorted along the colon.
+fn make_filled(frame: &Frame, tube: &Tube, segments: &[SegmentTruth], names: &[String], seed: u64) -> Result<Vec<(Filled, FilledTruth)>> {
+    let s = frame.scale;
+    let mut rng = Rng::new(seed, STREAM_FILLED);
+    let mut out: Vec<(Filled, FilledTruth)> = Vec::new();
+    for name in names {
+        let g = segment(segments, name)?;
+        let len = rng.range(40.0, 60.0) * s;
+        let hu = rng.range(400.0, 700.0);
+        let early = rng.range(0.2, 0.35);
+        let late = rng.range(0.65, 0.8);
+        let (a, b) = (g.start_arc_mm, g.end_arc_mm);
+        let margin = 10.0 * s;
+        let fits = |mid: f64| {
+            let (lo, hi) = (mid - 0.5 * len, mid + 0.5 * len);
+            lo >= (END_INSET + 5.0) * s
+                && hi <= tube.axis.length - (END_INSET + 5.0) * s
+                && !tube.collapse.iter().any(|c| lo < c.end + c.taper + margin && hi > c.start - c.taper - margin)
+                && !out.iter().any(|(f, _)| lo < f.end + margin && hi > f.start - margin)
+        };
+        let mid = [early, late, 0.5].into_iter().map(|f| a + f * (b - a)).find(|&m| fits(m));
+        let Some(mid) = mid else {
+            return Err(Error::invalid(format!("colon phantom: no room for a fluid-filled stretch in the {name}")));
+        };
+        let f = Filled { start: mid - 0.5 * len, end: mid + 0.5 * len, hu };
+        let t = FilledTruth { segment: name.clone(), start_arc_mm: f.start, end_arc_mm: f.end, hu };
+        out.push((f, t));
+    }
+    out.sort_by(|x, y| x.0.start.total_cmp(&y.0.start));
+    Ok(out)
 }
 
 /// Haustral folds every 20–30 mm from the sigmoid to the cecal pole (none in the rectum,
@@ -419,7 +634,7 @@ fn make_folds(frame: &Frame, tube: &Tube, segments: &[SegmentTruth], seed: u64) 
     let mut folds = Vec::new();
     let mut arc = start;
     while arc < end {
-        let collapsed = tube.collapse.as_ref().is_some_and(|c| arc > c.start - c.taper - 3.0 * hw && arc < c.end + c.taper + 3.0 * hw);
+        let collapsed = near_collapse(tube, arc, 3.0 * hw);
         let r = tube.axis.radius_at(arc);
         let mut sector = || FoldSector {
             offset: rng.range(-1.5, 1.5) * s,
@@ -484,7 +699,7 @@ fn make_polyps(frame: &Frame, tube: &mut Tube, segments: &[SegmentTruth], seed: 
                 at = 0.5 * (a + b);
             }
             let d = fit_diameter(wanted, stalk, tube.axis.radius_at(at));
-            let clear_collapse = tube.collapse.as_ref().is_none_or(|c| at + d < c.start - c.taper || at - d > c.end + c.taper);
+            let clear_collapse = tube.collapse.iter().all(|c| at + d < c.start - c.taper || at - d > c.end + c.taper);
             let clear_polyps = specs.iter().all(|o| (o.arc - at).abs() > 20.0 * s);
             if clear_collapse && clear_polyps && at > seg.start_arc_mm && at < seg.end_arc_mm {
                 spec = Some(PolypSpec { arc: at, angle, diameter: d, stalk, segment: seg_name.into(), behind_fold: behind });
@@ -553,36 +768,66 @@ fn folds_around(tube: &Tube, arc: f64) -> Option<(f64, f64)> {
 }
 
 /// Pools of tagged fluid in the dependent parts of some segments. Each pool sits at the
-/// most posterior point of its segment; its level lies 30–50 % of the radius above the
-/// lumen's floor there, and it extends along the colon as long as the lumen's floor
-/// (axis y + radius) is below the level — where the colon rises above the level, the pool
-/// ends by itself, so the level is flat and the fluid physically plausible.
-fn make_pools(tube: &Tube, segments: &[SegmentTruth], seed: u64) -> Vec<(Pool, PoolTruth)> {
-    let mut rng = Rng::new(seed, STREAM_POOLS);
+/// most dependent point of its segment (largest `p · gravity + radius`: posterior supine,
+/// anterior prone); its level lies 30–50 % of the radius above the lumen's floor there,
+/// and it extends along the colon as long as the lumen's floor is below the level — where
+/// the colon rises above the level, the pool ends by itself, so the level is flat and the
+/// fluid physically plausible.
+///
+/// With opacified small bowel a pool also fills the caecum's dependent side around the
+/// ileocaecal valve, deep enough to cover the valve's opening (even without tagged fluid);
+/// it comes first, and the usual pool of that part of the colon (ascending supine, caecum
+/// prone), which it would overlap, is left out.
+fn make_pools(tube: &Tube, segments: &[SegmentTruth], opts: &ColonOptions, gravity: DVec3, valve: Option<&Valve>) -> Vec<(Pool, PoolTruth)> {
     let ax = &tube.axis;
-    let floor = |i: usize| ax.points[i].y + ax.radius[i];
+    let floor = |i: usize| ax.points[i].dot(gravity) + ax.radius[i];
     let mut pools: Vec<(Pool, PoolTruth)> = Vec::new();
-    for &name in POOL_SEGMENTS {
-        let Ok(seg) = segment(segments, name) else { continue };
-        let (a, b) = (ax.vertex_at(seg.start_arc_mm), ax.vertex_at(seg.end_arc_mm));
-        let open = |i: &usize| tube.collapse.as_ref().is_none_or(|c| ax.arc[*i] < c.start - c.taper || ax.arc[*i] > c.end + c.taper);
-        let Some(anchor) = (a..=b).filter(open).max_by(|&i, &j| floor(i).total_cmp(&floor(j))) else { continue };
-        let depth = rng.range(0.3, 0.5) * ax.radius[anchor];
-        let level = floor(anchor) - depth;
+    if let Some(v) = valve {
+        let mut rng = Rng::new(opts.seed, STREAM_VALVE_POOL);
+        let depth = (rng.range(0.35, 0.5) * ax.radius[v.vertex]).max(v.min_depth);
         let hu = rng.range(400.0, 700.0);
-        let mut lo = anchor;
-        while lo > 0 && floor(lo - 1) > level {
-            lo -= 1;
+        let name = segment_name(segments, ax.arc[v.vertex]);
+        if let Some(p) = pool_from(tube, v.vertex, floor(v.vertex) - depth, gravity, hu, &name) {
+            pools.push(p);
         }
-        let mut hi = anchor;
-        while hi + 1 < ax.len() && floor(hi + 1) > level {
-            hi += 1;
+    }
+    if opts.tagged_fluid {
+        let mut rng = Rng::new(opts.seed, STREAM_POOLS);
+        for &name in if opts.prone { PRONE_POOL_SEGMENTS } else { POOL_SEGMENTS } {
+            let Ok(seg) = segment(segments, name) else { continue };
+            let (a, b) = (ax.vertex_at(seg.start_arc_mm), ax.vertex_at(seg.end_arc_mm));
+            let open = |i: &usize| !near_collapse(tube, ax.arc[*i], 0.0);
+            let Some(anchor) = (a..=b).filter(open).max_by(|&i, &j| floor(i).total_cmp(&floor(j))) else { continue };
+            let depth = rng.range(0.3, 0.5) * ax.radius[anchor];
+            let hu = rng.range(400.0, 700.0);
+            let Some(p) = pool_from(tube, anchor, floor(anchor) - depth, gravity, hu, name) else { continue };
+            if pools.iter().any(|(q, _)| p.0.start < q.end && p.0.end > q.start) {
+                continue;
+            }
+            pools.push(p);
         }
-        let (mut start, mut end) = (ax.arc[lo] - ax.radius[lo], ax.arc[hi] + ax.radius[hi]);
-        if let Some(c) = &tube.collapse
-            && start < c.end + c.taper
-            && end > c.start - c.taper
-        {
+    }
+    pools.sort_by(|x, y| x.0.start.total_cmp(&y.0.start));
+    pools
+}
+
+/// The pool with level `level` (along `gravity`) around axis vertex `anchor`: as far along
+/// the colon both ways as the lumen's floor lies below the level, never across a collapsed
+/// cord (the anchor's side is kept).
+fn pool_from(tube: &Tube, anchor: usize, level: f64, gravity: DVec3, hu: f64, name: &str) -> Option<(Pool, PoolTruth)> {
+    let ax = &tube.axis;
+    let floor = |i: usize| ax.points[i].dot(gravity) + ax.radius[i];
+    let mut lo = anchor;
+    while lo > 0 && floor(lo - 1) > level {
+        lo -= 1;
+    }
+    let mut hi = anchor;
+    while hi + 1 < ax.len() && floor(hi + 1) > level {
+        hi += 1;
+    }
+    let (mut start, mut end) = (ax.arc[lo] - ax.radius[lo], ax.arc[hi] + ax.radius[hi]);
+    for c in &tube.collapse {
+        if start < c.end + c.taper && end > c.start - c.taper {
             // Fluid does not cross the collapsed cord: keep the anchor's side.
             if ax.arc[anchor] < c.start {
                 end = end.min(c.start - c.taper);
@@ -590,20 +835,29 @@ fn make_pools(tube: &Tube, segments: &[SegmentTruth], seed: u64) -> Vec<(Pool, P
                 start = start.max(c.end + c.taper);
             }
         }
-        if pools.iter().any(|(p, _)| start < p.end && end > p.start) {
-            continue;
-        }
-        let pool = Pool { start, end, level_y: level, hu };
-        let truth = PoolTruth { segment: name.into(), start_arc_mm: start, end_arc_mm: end, level_y_mm: level, hu };
-        pools.push((pool, truth));
     }
-    pools
+    if start >= end {
+        return None;
+    }
+    let pool = Pool { start, end, gravity, level, hu };
+    // The level is the plane y = level·g_y (gravity is ±y).
+    let truth = PoolTruth {
+        segment: name.into(),
+        start_arc_mm: start,
+        end_arc_mm: end,
+        level_y_mm: level * gravity.y,
+        gravity_lps: arr(gravity),
+        hu,
+    };
+    Some((pool, truth))
 }
 
 /// A few small-bowel gas pockets (10–20 mm) in the central abdomen, each at least 10 mm
-/// (full size) from the colon's lumen, the spine, the lungs, the abdominal wall and each
-/// other. Rejection sampling with a fixed number of tries: deterministic.
-fn make_pockets(frame: &Frame, tube: &Tube, body: &Body, seed: u64) -> Vec<Blob> {
+/// (full size) from the colon's lumen, the spine, the lungs, the abdominal wall, each
+/// other and the `obstacles` (capsules: ends and radius; opacified loops, the catheter).
+/// Rejection sampling with a fixed number of tries and draws: deterministic, and where they
+/// always were when there are no obstacles.
+fn make_pockets(frame: &Frame, tube: &Tube, body: &Body, obstacles: &[(DVec3, DVec3, f64)], seed: u64) -> Vec<Blob> {
     let s = frame.scale;
     let mut rng = Rng::new(seed, STREAM_GAS);
     let wall = frame.thin(1.5, 0.8);
@@ -626,16 +880,55 @@ fn make_pockets(frame: &Frame, tube: &Tube, body: &Body, seed: u64) -> Vec<Blob>
             && body.spine.sdf_xy(c) >= r + wall + clear
             && body.lungs.iter().all(|l| l.sdf(c) >= r + wall + clear);
         let apart = pockets.iter().all(|o| o.center.distance(c) - o.radius - r - 2.0 * wall >= clear);
-        if colon_ok && body_ok && apart {
-            pockets.push(Blob { kind: BlobKind::Pocket, center: c, radius: r, stalk: None, wall_mm: wall });
+        let free = obstacles.iter().all(|&(a, b, ro)| segment_distance(c, a, b) - ro - r - wall >= clear);
+        if colon_ok && body_ok && apart && free {
+            pockets.push(Blob { kind: BlobKind::Pocket, center: c, radius: r, stalk: None, wall_mm: wall, content_hu: 0.0 });
         }
     }
     pockets
 }
 
-/// A 12-voxel box of pure fat (far from colon, pockets, spine, lungs and the rim) for
+/// The rectal catheter (full size: air channel 3 mm in radius, 1 mm plastic wall; kept ≥ a
+/// voxel in the small phantom). Its open tip lies `CATHETER_TIP_ARC` mm up the rectum,
+/// `CATHETER_OFFSET` of the radius off the axis (so the true centerline stays in the
+/// lumen), on the side (posterior first, then left, right, anterior) that keeps clear of
+/// the polyps; it runs down beside the axis to the rectum's lower end, bends there and runs
+/// on inferiorly and a little posteriorly (like the anal canal) through the pelvic floor to
+/// its open end half a slice below the perineum's skin, in the outside air.
+fn make_catheter(frame: &Frame, tube: &Tube, polyps: &[Blob], floor: f64) -> Result<Catheter> {
+    let s = frame.scale;
+    let ax = &tube.axis;
+    let inner = frame.thin(3.0, 1.1);
+    let wall = frame.thin(1.0, 0.75);
+    let (tip_arc, low_arc) = (CATHETER_TIP_ARC * s, 5.0 * s);
+    let end_z = floor - 0.5 * frame.geom.spacing[2];
+    let sides = [DVec3::Y, DVec3::X, DVec3::NEG_X, DVec3::NEG_Y];
+    for side in sides {
+        let off = |arc: f64| {
+            let t = ax.tangent[ax.vertex_at(arc)];
+            (side - t * side.dot(t)).normalize_or_zero() * CATHETER_OFFSET * ax.radius_at(arc)
+        };
+        let tip = ax.point_at(tip_arc) + off(tip_arc);
+        let low = ax.point_at(low_arc) + off(low_arc);
+        // Below the rectum: inferior and a little posterior.
+        let dir = DVec3::new(0.0, 0.25, -1.0).normalize();
+        let exit = low + dir * ((low.z - end_z) / -dir.z);
+        let mid = low + dir * (0.5 * (low.z - end_z) / -dir.z);
+        let knots = [tip, low, mid, exit].map(|pos| Knot { pos, radius: inner });
+        let path = Axis::through(&knots, 1.0 * s)?;
+        let c = Catheter { points: path.points, inner_radius: inner, wall_mm: wall, hu: CATHETER_HU };
+        let clear = polyps.iter().all(|b| c.distance(b.center) - c.outer_radius() - b.reach() >= frame.max_spacing());
+        if clear {
+            return Ok(c);
+        }
+    }
+    Err(Error::invalid("colon phantom: no room for the rectal catheter beside the rectal polyp"))
+}
+
+/// A 12-voxel box of pure fat (far from colon, pockets, loops, catheter, spine, lungs and
+/// the rim) for
 /// measuring the noise, found by a fixed scan.
-fn fat_roi(frame: &Frame, tube: &Tube, blobs: &[Blob], body: &Body) -> Option<RoiTruth> {
+fn fat_roi(frame: &Frame, tube: &Tube, blobs: &[Blob], body: &Body, catheter: Option<&Catheter>) -> Option<RoiTruth> {
     let g = &frame.geom;
     let half_vox = 6usize;
     let half = DVec3::from_array(g.spacing) * half_vox as f64;
@@ -650,7 +943,8 @@ fn fat_roi(frame: &Frame, tube: &Tube, blobs: &[Blob], body: &Body) -> Option<Ro
                     && body.spine.sdf_xy(c) >= margin
                     && body.lungs.iter().all(|l| l.sdf(c) >= margin)
                     && ax.points.iter().zip(&ax.radius).all(|(p, r)| p.distance(c) - r - tube.wall_mm >= margin)
-                    && blobs.iter().all(|b| b.center.distance(c) - b.reach() >= margin);
+                    && blobs.iter().all(|b| b.center.distance(c) - b.reach() >= margin)
+                    && catheter.is_none_or(|t| t.distance(c) - t.outer_radius() >= margin);
                 if ok {
                     return Some(RoiTruth {
                         min_ijk: [i - half_vox, j - half_vox, k - half_vox],
@@ -680,6 +974,97 @@ pub fn anatomy_report(small: bool) -> Result<String> {
     for g in segments(&axis) {
         out += &format!("  {:<16} {:6.0} .. {:6.0} mm ({:.0} mm)\n", g.name, g.start_arc_mm, g.end_arc_mm, g.end_arc_mm - g.start_arc_mm);
     }
-    let verdict = check_anatomy(&frame, &axis, &make_body(&frame, true)).map_or_else(|e| e.to_string(), |_| "checks pass".into());
+    let verdict = check_anatomy(&frame, &axis, &make_body(&frame, true, None)).map_or_else(|e| e.to_string(), |_| "checks pass".into());
     Ok(out + &verdict + "\n")
+}
+
+/// Development aid (for placing the small-bowel loops): for axial levels every 10 mm, a map
+/// (full-size mm, 6 mm cells) of the room around each point: the distance to the colon's
+/// outer wall, the spine, the lungs and the muscle under the skin, in 4 mm steps (0–9);
+/// `#` the colon itself, ` ` outside the body's fat.
+#[doc(hidden)]
+pub fn free_space_map(z_from: f64, z_to: f64) -> Result<String> {
+    let frame = Frame::new(false)?;
+    let axis = make_axis(&frame)?;
+    let body = make_body(&frame, true, None);
+    let wall = frame.thin(WALL, 1.0);
+    let mut out = String::new();
+    let mut z = z_from;
+    while z <= z_to {
+        out += &format!("z = {z:.0}   x 60..330 →, y 70..330 ↓ (digit = room / 4 mm)\n");
+        let mut y = 70.0;
+        while y <= 330.0 {
+            let mut row = format!("{y:4.0} ");
+            let mut x = 60.0;
+            while x <= 330.0 {
+                let p = DVec3::new(x, y, z);
+                let colon = axis.points.iter().zip(&axis.radius).map(|(a, r)| a.distance(p) - r - wall).fold(f64::INFINITY, f64::min);
+                let skin = -body.skin_sdf(p) - body.rim;
+                let room = colon.min(skin).min(body.spine.sdf_xy(p)).min(body.lungs.iter().map(|l| l.sdf(p)).fold(f64::INFINITY, f64::min));
+                row.push(if colon < 0.0 {
+                    '#'
+                } else if skin < 0.0 {
+                    ' '
+                } else {
+                    char::from(b'0' + (room / 4.0).clamp(0.0, 9.0) as u8)
+                });
+                x += 6.0;
+            }
+            out += &row;
+            out.push('\n');
+            y += 6.0;
+        }
+        z += 10.0;
+    }
+    Ok(out)
+}
+
+/// Development aid (for placing the small-bowel loops): for a loop of radius `r` (plus a
+/// 1.5 mm wall) through full-size `knots`, the smallest room left between its wall and the
+/// colon's outer wall / the rim under the skin / the spine / the lungs along each span.
+#[doc(hidden)]
+pub fn loop_room_report(knots: &[[f64; 3]], r: f64) -> Result<String> {
+    let frame = Frame::new(false)?;
+    let axis = make_axis(&frame)?;
+    let body = make_body(&frame, true, None);
+    let wall = frame.thin(WALL, 1.0);
+    let ks: Vec<Knot> = knots.iter().map(|k| Knot { pos: DVec3::from_array(*k), radius: r }).collect();
+    let path = Axis::through(&ks, 1.0)?;
+    let reach = r + 1.5;
+    let mut out = format!("length {:.0} mm, tightest bend {:.2}\n", path.length, path.min_bend_ratio(1.5).0);
+    for span in 0..ks.len() - 1 {
+        let (a, b) = (path.knot_arc[span], path.knot_arc[span + 1]);
+        let mut worst = (f64::INFINITY, "", 0.0, DVec3::ZERO);
+        let mut bend = f64::INFINITY;
+        for (i, (p, s)) in path.points.iter().zip(&path.arc).enumerate().filter(|(_, (_, s))| **s >= a && **s <= b) {
+            if i >= 3 && i + 3 < path.len() {
+                let turn = path.tangent[i - 3].angle_between(path.tangent[i + 3]);
+                let ds = path.arc[i + 3] - path.arc[i - 3];
+                bend = bend.min(if turn > 1e-9 { ds / turn / (r + 1.5) } else { f64::INFINITY });
+            }
+            let (colon, at) = axis
+                .points
+                .iter()
+                .zip(&axis.radius)
+                .zip(&axis.arc)
+                .map(|((c, rc), arc)| (c.distance(*p) - rc - wall, *arc))
+                .fold((f64::INFINITY, 0.0), |x, y| if y.0 < x.0 { y } else { x });
+            let cands = [
+                (colon - reach, "colon"),
+                (-body.skin_sdf(*p) - body.rim - reach, "skin"),
+                (body.spine.sdf_xy(*p) - reach, "spine"),
+                (body.lungs.iter().map(|l| l.sdf(*p)).fold(f64::INFINITY, f64::min) - reach, "lung"),
+            ];
+            for (v, what) in cands {
+                if v < worst.0 {
+                    worst = (v, what, if what == "colon" { at } else { *s }, *p);
+                }
+            }
+        }
+        out += &format!(
+            "  {:?} -> {:?}: room {:.1} mm ({} at {:.0}, near {:.0?}), bend {bend:.2}\n",
+            knots[span], knots[span + 1], worst.0, worst.1, worst.2, worst.3.to_array()
+        );
+    }
+    Ok(out)
 }

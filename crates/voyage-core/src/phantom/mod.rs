@@ -8,6 +8,17 @@
 //! and the lumen mask is the set of voxels whose centre lies inside the lumen (equivalently,
 //! whose noise-free air fraction exceeds ½).
 //!
+//! The colon's options reproduce what real CT colonography exams do, each with its truth
+//! (see [`ColonOptions`]): a prone patient (gravity anterior: the pools move to the other
+//! side of the lumen, the levels stay flat); collapsed stretches (the gas in N + 1 pieces);
+//! stretches filled with fluid (no gas, but lumen); opacified small-bowel loops (oral
+//! contrast, no gas) whose terminal ileum opens into a caecal pool, so that they and the
+//! pool are one bright region; a rectal catheter that joins the colon's gas to the air
+//! outside the body; grey levels quantised as an 8-bit export leaves them. The true
+//! centerline runs on through every gap in the gas. Without the options the phantoms are
+//! bit for bit what they were before the options existed (the new choices draw from their
+//! own random streams).
+//!
 //! Everything is deterministic from the seed, whatever the number of threads.
 //!
 //! Coordinates: volume-local millimetres (x = i·sx, y = j·sy, z = k·sz) with the identity
@@ -20,13 +31,15 @@ pub mod pipe;
 pub mod polyp;
 pub mod raster;
 pub mod rng;
+pub mod small_bowel;
 pub mod truth;
 pub mod tube;
 
 pub use colon::{ColonOptions, colon};
 pub use pipe::pipe;
 pub use truth::{
-    CollapsedTruth, DistractorTruth, FoldTruth, PolypTruth, PoolTruth, RoiTruth, SegmentTruth, Truth,
+    CollapsedTruth, DistractorTruth, FilledTruth, FoldTruth, GapTruth, LoopTruth, PolypTruth, PoolTruth,
+    RectalTubeTruth, RoiTruth, SegmentTruth, Truth,
 };
 
 use crate::Volume;
@@ -42,13 +55,18 @@ pub mod label {
     /// Tagged fluid inside the colon: lumen.
     pub const LUMEN_FLUID: u8 = 3;
     pub const POLYP: u8 = 4;
-    /// Colon wall, folds, the collapsed cord, a gas pocket's wall; the pipe's plastic wall.
+    /// Colon wall, folds, the collapsed cord, a gas pocket's or small-bowel loop's wall, the
+    /// rectal catheter's plastic; the pipe's plastic wall.
     pub const WALL: u8 = 5;
     /// Small-bowel gas: a distractor, not lumen.
     pub const SMALL_BOWEL_GAS: u8 = 6;
     /// Lung base: a distractor, not lumen.
     pub const LUNG: u8 = 7;
     pub const BONE: u8 = 8;
+    /// Oral contrast in small-bowel loops: a bright distractor, not lumen.
+    pub const SMALL_BOWEL_FLUID: u8 = 9;
+    /// Air inside the rectal catheter: joins colon gas and outside air, not lumen.
+    pub const RECTAL_TUBE: u8 = 10;
 
     /// (value, name) of every label, for the truth JSON.
     pub fn legend() -> Vec<(u8, String)> {
@@ -62,6 +80,8 @@ pub mod label {
             (SMALL_BOWEL_GAS, "small_bowel_gas"),
             (LUNG, "lung"),
             (BONE, "bone"),
+            (SMALL_BOWEL_FLUID, "small_bowel_fluid"),
+            (RECTAL_TUBE, "rectal_tube"),
         ]
         .into_iter()
         .map(|(v, n)| (v, n.to_string()))
@@ -74,7 +94,8 @@ pub mod label {
 pub struct Phantom {
     /// Hounsfield units, with partial volume and noise.
     pub ct: Volume<i16>,
-    /// Ground-truth lumen: 1 = colon (or pipe) air or tagged fluid, 0 = anything else.
+    /// Ground-truth lumen: 1 = colon (or pipe) air or tagged fluid (pools and filled
+    /// stretches), 0 = anything else (small-bowel contrast and the catheter's air included).
     pub lumen: Volume<u8>,
     /// What each voxel is; see [`label`].
     pub labels: Volume<u8>,

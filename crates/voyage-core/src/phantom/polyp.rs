@@ -39,7 +39,7 @@ pub fn place(tube: &Tube, spec: &PolypSpec) -> (Blob, PolypTruth) {
             (center, Some((root, center, r_stalk)), len + 2.0 * rp, len)
         }
     };
-    let blob = Blob { kind: BlobKind::Polyp, center, radius: rp, stalk, wall_mm: 0.0 };
+    let blob = Blob { kind: BlobKind::Polyp, center, radius: rp, stalk, wall_mm: 0.0, content_hu: 0.0 };
     let truth = PolypTruth {
         center_mm: arr(center),
         diameter_mm: spec.diameter,

@@ -14,7 +14,7 @@ use rayon::prelude::*;
 
 use super::label;
 use super::rng::voxel_noise;
-use super::tube::{Blob, BlobKind, Tube, TubeHit};
+use super::tube::{Blob, BlobKind, Catheter, Tube, TubeHit};
 use crate::{Geometry, Result, Volume};
 
 /// The tissue outside the tube and blobs: HU and label at a point (volume-local mm).
@@ -44,10 +44,14 @@ pub struct Scene<'a, B: Background> {
     pub geom: Geometry,
     pub tube: &'a Tube,
     pub blobs: &'a [Blob],
+    /// A rectal catheter (drawn over everything else).
+    pub catheter: Option<&'a Catheter>,
     pub materials: Materials,
     pub background: &'a B,
     pub noise_sigma: f64,
     pub noise_key: u64,
+    /// Round the noisy HU to multiples of this step (a windowed 8-bit export's grey levels).
+    pub quantize: Option<f64>,
 }
 
 /// The rasterised phantom.
@@ -73,6 +77,8 @@ struct BrickData {
     /// The whole brick is plain lumen content of one run: no search needed.
     inside: bool,
     blobs: Vec<u16>,
+    /// The catheter may reach into the brick.
+    catheter: bool,
 }
 
 struct BrickIndex {
@@ -185,18 +191,33 @@ impl<B: Background> Scene<'_, B> {
                 }
             });
         }
+        let mut catheter = vec![false; nbricks];
+        if let Some(c) = self.catheter {
+            let reach = c.outer_radius() + margin;
+            for w in c.points.windows(2) {
+                let Some((a, b)) = self.brick_range(w[0].min(w[1]) - reach, w[0].max(w[1]) + reach, nb) else { continue };
+                for_each_brick(a, b, |bi| {
+                    let (center, h) = self.brick_center_and_half_diagonal(bi);
+                    if seg_distance(center, w[0], w[1]) <= reach + h {
+                        catheter[bi[0] + nb[0] * (bi[1] + nb[1] * bi[2])] = true;
+                    }
+                });
+            }
+        }
         let bricks = chunks
             .into_par_iter()
             .zip(blobs.into_par_iter())
+            .zip(catheter.into_par_iter())
             .enumerate()
-            .map(|(id, (ch, bl))| {
-                if ch.is_empty() && bl.is_empty() {
+            .map(|(id, ((ch, bl), cath))| {
+                if ch.is_empty() && bl.is_empty() && !cath {
                     return None;
                 }
                 let bi = [id % nb[0], (id / nb[0]) % nb[1], id / (nb[0] * nb[1])];
                 let (center, h) = self.brick_center_and_half_diagonal(bi);
                 let mut data = self.prune_runs(&ch, center, h);
                 data.blobs = bl;
+                data.catheter = cath;
                 Some(Box::new(data))
             })
             .collect();
@@ -262,8 +283,18 @@ impl<B: Background> Scene<'_, B> {
                 }
             }
             let first = (row + nx * ny * k) as u64;
-            for (i, (c, hu)) in ct[row..row + nx].iter_mut().zip(&bg).enumerate() {
-                *c = round_to_i16(hu + sigma * voxel_noise(self.noise_key, first + i as u64) as f64);
+            match self.quantize {
+                None => {
+                    for (i, (c, hu)) in ct[row..row + nx].iter_mut().zip(&bg).enumerate() {
+                        *c = round_to_i16(hu + sigma * voxel_noise(self.noise_key, first + i as u64) as f64);
+                    }
+                }
+                Some(q) => {
+                    for (i, (c, hu)) in ct[row..row + nx].iter_mut().zip(&bg).enumerate() {
+                        let v = hu + sigma * voxel_noise(self.noise_key, first + i as u64) as f64;
+                        *c = round_to_i16(round_half_away(v / q) * q);
+                    }
+                }
             }
         }
     }
@@ -284,14 +315,23 @@ impl<B: Background> Scene<'_, B> {
         }
         let (mut polyp, mut pocket) = (f64::INFINITY, f64::INFINITY);
         let mut pocket_outer = f64::INFINITY;
+        // Small-bowel loop: content, wall and the content's HU.
+        let (mut sb, mut sb_outer, mut sb_hu) = (f64::INFINITY, f64::INFINITY, 0.0);
         for &bl in &b.blobs {
             let blob = &self.blobs[bl as usize];
-            let d = blob.sdf(p);
             match blob.kind {
-                BlobKind::Polyp => polyp = polyp.min(d),
+                BlobKind::Polyp => polyp = polyp.min(blob.sdf(p)),
                 BlobKind::Pocket => {
+                    let d = blob.sdf(p);
                     pocket = pocket.min(d);
                     pocket_outer = pocket_outer.min(d - blob.wall_mm);
+                }
+                BlobKind::Loop => {
+                    let d = blob.sdf(p);
+                    if d < sb {
+                        (sb, sb_hu) = (d, blob.content_hu);
+                    }
+                    sb_outer = sb_outer.min(d - blob.wall_mm);
                 }
             }
         }
@@ -299,24 +339,70 @@ impl<B: Background> Scene<'_, B> {
         let m = &self.materials;
         let a = ramp(lumen, inv_w);
         let q = ramp(pocket, inv_w);
-        let tissue = ramp(outer.min(polyp).min(pocket_outer), inv_w).max((a + q).min(1.0));
         let fluid_frac = if hit.fluid.is_finite() { ramp(hit.fluid, inv_w) } else { 0.0 };
         let content = m.lumen_air + fluid_frac * (hit.fluid_hu - m.lumen_air);
         let tissue_hu = m.wall + ramp(polyp, inv_w) * (m.polyp - m.wall);
-        let hu = a * content + q * m.pocket_air + (tissue - a - q).max(0.0) * tissue_hu + (1.0 - tissue) * bg;
-        let (lum, lab) = if lumen < 0.0 {
-            (1, if hit.fluid < 0.0 { label::LUMEN_FLUID } else { label::LUMEN_AIR })
-        } else if pocket < 0.0 {
-            (0, label::SMALL_BOWEL_GAS)
-        } else if polyp < 0.0 {
-            (0, label::POLYP)
-        } else if outer.min(pocket_outer) < 0.0 {
-            (0, label::WALL)
+        let (mut hu, mut lum, mut lab);
+        if sb == f64::INFINITY && sb_outer == f64::INFINITY {
+            // The colon, polyps and gas pockets only (every phantom without the newer
+            // options): exactly the arithmetic it always had.
+            let tissue = ramp(outer.min(polyp).min(pocket_outer), inv_w).max((a + q).min(1.0));
+            hu = a * content + q * m.pocket_air + (tissue - a - q).max(0.0) * tissue_hu + (1.0 - tissue) * bg;
+            (lum, lab) = if lumen < 0.0 {
+                (1, if hit.fluid < 0.0 { label::LUMEN_FLUID } else { label::LUMEN_AIR })
+            } else if pocket < 0.0 {
+                (0, label::SMALL_BOWEL_GAS)
+            } else if polyp < 0.0 {
+                (0, label::POLYP)
+            } else if outer.min(pocket_outer) < 0.0 {
+                (0, label::WALL)
+            } else {
+                (0, bg_label)
+            };
         } else {
-            (0, bg_label)
-        };
+            // With small-bowel loops: where a loop's content and the colon's lumen overlap
+            // (the ileocaecal valve) the colon's content wins, and each one's wall gives way
+            // to the other's content, so the two open into each other there.
+            let l = ramp(sb, inv_w).min(1.0 - a);
+            let tissue = ramp(outer.min(polyp).min(pocket_outer).min(sb_outer), inv_w).max((a + q + l).min(1.0));
+            hu = a * content + q * m.pocket_air + l * sb_hu + (tissue - a - q - l).max(0.0) * tissue_hu + (1.0 - tissue) * bg;
+            (lum, lab) = if lumen < 0.0 {
+                (1, if hit.fluid < 0.0 { label::LUMEN_FLUID } else { label::LUMEN_AIR })
+            } else if sb < 0.0 {
+                (0, label::SMALL_BOWEL_FLUID)
+            } else if pocket < 0.0 {
+                (0, label::SMALL_BOWEL_GAS)
+            } else if polyp < 0.0 {
+                (0, label::POLYP)
+            } else if outer.min(pocket_outer).min(sb_outer) < 0.0 {
+                (0, label::WALL)
+            } else {
+                (0, bg_label)
+            };
+        }
+        if let Some(c) = self.catheter.filter(|_| b.catheter) {
+            // The catheter displaces whatever is there: colon content, wall, tissue, outside
+            // air. Its air is not colon lumen.
+            let (air, plastic) = c.sdfs(p);
+            let plastic_hu = c.hu;
+            let ca = ramp(air, inv_w);
+            let cp = ramp(plastic, inv_w).min(1.0 - ca);
+            hu = ca * m.pocket_air + cp * plastic_hu + (1.0 - ca - cp) * hu;
+            if air < 0.0 {
+                (lum, lab) = (0, label::RECTAL_TUBE);
+            } else if plastic < 0.0 {
+                (lum, lab) = (0, label::WALL);
+            }
+        }
         (hu, lum, lab)
     }
+}
+
+/// Nearest integer (halves away from zero) as f64, without a libm call.
+#[inline]
+fn round_half_away(v: f64) -> f64 {
+    let v = v.clamp(-1e15, 1e15);
+    (if v >= 0.0 { v + 0.5 } else { v - 0.5 }) as i64 as f64
 }
 
 /// Nearest i16 (halves away from zero), saturating; `f64::round` is a libm call on

@@ -18,6 +18,14 @@ pub struct Truth {
     pub kind: String,
     pub seed: u64,
     pub coordinates: String,
+    /// Patient position as DICOM (0018,5100) says it: "HFS" (head first, supine) or "HFP"
+    /// (prone). The volume's geometry is the same for both (identity LPS).
+    #[serde(default = "hfs")]
+    pub position: String,
+    /// Unit vector of gravity in LPS: [0, 1, 0] (posterior) supine, [0, −1, 0] prone. Tagged
+    /// fluid pools on that side of each air–fluid level.
+    #[serde(default = "supine_gravity")]
+    pub gravity_lps: [f64; 3],
     pub dims: [usize; 3],
     pub spacing_mm: [f64; 3],
     pub origin_lps_mm: [f64; 3],
@@ -26,7 +34,11 @@ pub struct Truth {
     /// Size of the anatomy relative to the full-size model (0.5 for the small colon).
     pub scale: f64,
     pub noise_hu: f64,
-    /// The tube's axis, source end first, vertices at most 1 mm apart.
+    /// The CT's values are rounded to multiples of this step (after the noise), if given.
+    #[serde(default)]
+    pub quantize_hu: Option<f64>,
+    /// The tube's axis, source end first, vertices at most 1 mm apart. It runs on through
+    /// collapsed and fluid-filled stretches: the true path through every gap in the gas.
     pub centerline_mm: Vec<[f64; 3]>,
     pub centerline_arc_mm: Vec<f64>,
     /// Nominal lumen radius at each centerline point (without folds, collapse or polyps).
@@ -51,9 +63,34 @@ pub struct Truth {
     pub fluid_pools: Vec<PoolTruth>,
     /// Lumen voxels filled with tagged fluid (label 3).
     pub fluid_voxels: usize,
-    pub collapsed: Option<CollapsedTruth>,
-    /// Gas that is not colon: small-bowel pockets and lung bases.
+    /// Collapsed stretches (no lumen), in order along the centerline. Older files with one
+    /// object or null here read as a list of one or none.
+    #[serde(default, deserialize_with = "one_or_many")]
+    pub collapsed: Vec<CollapsedTruth>,
+    /// Stretches filled to the brim with tagged fluid (lumen, but no gas), in order.
+    #[serde(default)]
+    pub fluid_filled: Vec<FilledTruth>,
+    /// Where the colon's gas is interrupted while its path goes on (collapsed and
+    /// fluid-filled stretches), sorted by arc length.
+    #[serde(default)]
+    pub gas_gaps: Vec<GapTruth>,
+    /// Things that are not colon: small-bowel gas pockets and opacified small-bowel loops
+    /// (kind "opacified_small_bowel", one entry per loop: the box around it), lung bases.
     pub distractors: Vec<DistractorTruth>,
+    /// Opacified small-bowel loops (label 9): each loop's axis and radii.
+    #[serde(default)]
+    pub small_bowel_loops: Vec<LoopTruth>,
+    /// Where the terminal ileum opens into the caecum (on the caecal lumen's surface, on the
+    /// dependent side, under the caecal pool's level), with opacified small bowel.
+    #[serde(default)]
+    pub ileocecal_valve_mm: Option<[f64; 3]>,
+    /// The rectal catheter, if any (its air is label 10).
+    #[serde(default)]
+    pub rectal_tube: Option<RectalTubeTruth>,
+    /// Height (z, mm) of the skin of the perineum under which there is only outside air, if
+    /// the body has one (with a rectal catheter); otherwise the body fills every slice.
+    #[serde(default)]
+    pub body_floor_z_mm: Option<f64>,
     /// A box of homogeneous tissue (inclusive voxel ranges) for measuring noise.
     pub noise_roi: Option<RoiTruth>,
     /// Noise-free HU of the materials.
@@ -112,9 +149,57 @@ pub struct PoolTruth {
     pub segment: String,
     pub start_arc_mm: f64,
     pub end_arc_mm: f64,
-    /// The air–fluid level: fluid where y > level (posterior, dependent for a supine patient).
+    /// The air–fluid level, the plane y = level_y_mm. The fluid lies on the side gravity
+    /// points to: y > level for a supine patient (posterior), y < level prone (anterior).
     pub level_y_mm: f64,
+    /// Gravity (LPS unit vector) for this pool: fluid where (y − level_y_mm)·gravity_lps[1] > 0.
+    #[serde(default = "supine_gravity")]
+    pub gravity_lps: [f64; 3],
     pub hu: f64,
+}
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct FilledTruth {
+    pub segment: String,
+    /// Lumen filled with fluid (label 3, truth lumen) between these arc lengths: no gas.
+    pub start_arc_mm: f64,
+    pub end_arc_mm: f64,
+    pub hu: f64,
+}
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct GapTruth {
+    /// "collapsed" (no lumen) or "fluid_filled" (lumen full of fluid).
+    pub kind: String,
+    pub segment: String,
+    pub start_arc_mm: f64,
+    pub end_arc_mm: f64,
+}
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct LoopTruth {
+    /// The loop's axis (a polyline; the loop is every point within `radius_mm` of it).
+    pub axis_mm: Vec<[f64; 3]>,
+    pub radius_mm: f64,
+    pub wall_mm: f64,
+    pub hu: f64,
+    pub length_mm: f64,
+    /// The terminal ileum: its last point lies inside the caecum.
+    pub enters_cecum: bool,
+    /// Touches the colon's outer wall (wall to wall, no opening).
+    pub touches_colon: bool,
+}
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct RectalTubeTruth {
+    /// The open tip inside the rectum.
+    pub tip_mm: [f64; 3],
+    /// The open outer end, just outside the skin of the perineum.
+    pub exit_mm: [f64; 3],
+    pub inner_radius_mm: f64,
+    pub outer_radius_mm: f64,
+    /// HU of its plastic wall.
+    pub wall_hu: f64,
 }
 
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
@@ -129,7 +214,7 @@ pub struct CollapsedTruth {
 
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
 pub struct DistractorTruth {
-    /// "small_bowel_gas" or "lung".
+    /// "small_bowel_gas", "opacified_small_bowel" or "lung".
     pub kind: String,
     pub center_mm: [f64; 3],
     /// Semi-axes of its bounding ellipsoid (a sphere for gas pockets).
@@ -142,6 +227,30 @@ pub struct RoiTruth {
     pub min_ijk: [usize; 3],
     pub max_ijk: [usize; 3],
     pub expected_hu: f64,
+}
+
+fn hfs() -> String {
+    "HFS".into()
+}
+
+fn supine_gravity() -> [f64; 3] {
+    [0.0, 1.0, 0.0]
+}
+
+/// `collapsed` as a list, also from the older single object or null.
+fn one_or_many<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<CollapsedTruth>, D::Error> {
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum OneOrMany {
+        Many(Vec<CollapsedTruth>),
+        One(CollapsedTruth),
+        None(()),
+    }
+    Ok(match OneOrMany::deserialize(d)? {
+        OneOrMany::Many(v) => v,
+        OneOrMany::One(c) => vec![c],
+        OneOrMany::None(()) => Vec::new(),
+    })
 }
 
 impl Truth {

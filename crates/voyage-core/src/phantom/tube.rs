@@ -1,5 +1,6 @@
 //! The continuous geometry of a tube phantom: a lumen around an [`Axis`] with a wall, folds,
-//! a collapsed stretch and fluid pools, plus round "blobs" (polyps, gas pockets).
+//! collapsed stretches, fluid pools and stretches filled with fluid, plus "blobs" (polyps, gas
+//! pockets, pieces of opacified small bowel, a rectal catheter).
 //!
 //! Everything is a signed distance in mm (negative inside), evaluated at voxel centres by
 //! the rasteriser. The lumen is built from the *nearest* axis segment (not a union of
@@ -101,13 +102,25 @@ impl Collapse {
     }
 }
 
-/// A pool of tagged fluid over an arc range: lumen content with y > `level_y` is fluid
-/// (+y is posterior, "down" for a supine patient, so the level is the plane y = const).
+/// A pool of tagged fluid over an arc range: lumen content with `p · gravity > level` is
+/// fluid. Gravity is a unit vector in volume-local mm: +y (posterior) for a supine patient,
+/// −y for a prone one; the air–fluid level is the plane `p · gravity = level` (y = const for
+/// both, since gravity is ±y).
 #[derive(Clone, Debug)]
 pub struct Pool {
     pub start: f64,
     pub end: f64,
-    pub level_y: f64,
+    pub gravity: DVec3,
+    pub level: f64,
+    pub hu: f64,
+}
+
+/// A stretch of the lumen filled to the brim with tagged fluid (no gas at all between
+/// `start` and `end`). Its ends are cut across the axis, with the usual one-voxel ramp.
+#[derive(Clone, Debug)]
+pub struct Filled {
+    pub start: f64,
+    pub end: f64,
     pub hu: f64,
 }
 
@@ -119,7 +132,7 @@ pub enum Ends {
     Flat,
 }
 
-/// The tube: axis + wall + folds + collapse + pools.
+/// The tube: axis + wall + folds + collapses + pools + filled stretches.
 #[derive(Clone, Debug)]
 pub struct Tube {
     pub axis: Axis,
@@ -131,8 +144,11 @@ pub struct Tube {
     pub folds: Vec<Fold>,
     /// Per segment (vertex i → i+1), the fold that can reach it, or `u32::MAX`.
     fold_at: Vec<u32>,
-    pub collapse: Option<Collapse>,
+    /// Collapsed stretches, disjoint (their tapers included).
+    pub collapse: Vec<Collapse>,
     pub pools: Vec<Pool>,
+    /// Stretches filled with fluid, disjoint.
+    pub filled: Vec<Filled>,
     /// Per segment: start point, direction (end − start) and 1 / |end − start|², for the
     /// nearest-segment search that dominates the rasterisation time.
     seg_a: Vec<DVec3>,
@@ -172,8 +188,9 @@ impl Tube {
             end_margin: 0.0,
             folds: Vec::new(),
             fold_at: vec![u32::MAX; nseg],
-            collapse: None,
+            collapse: Vec::new(),
             pools: Vec::new(),
+            filled: Vec::new(),
             seg_a,
             seg_ab,
             seg_inv_len2,
@@ -201,7 +218,7 @@ impl Tube {
     /// Largest distance from the axis at which the tube still changes anything.
     pub fn reach(&self, seg: usize) -> f64 {
         let r = self.axis.radius[seg].max(self.axis.radius[seg + 1]);
-        let cord = self.collapse.as_ref().map_or(0.0, |c| c.cord_radius);
+        let cord = self.collapse.iter().map(|c| c.cord_radius).fold(0.0, f64::max);
         r.max(cord) + self.wall_mm
     }
 
@@ -234,10 +251,10 @@ impl Tube {
     }
 
     /// Whether every point within `h` of a point at distance `d_axis` from the run `segs` is
-    /// surely plain lumen content (no wall, fold, collapse, cap or pool nearby), so that the
-    /// rasteriser can skip the search.
+    /// surely plain lumen content (no wall, fold, collapse, cap, pool or filled stretch
+    /// nearby), so that the rasteriser can skip the search.
     pub fn surely_inside(&self, segs: &[u32], d_axis: f64, h: f64, margin: f64) -> bool {
-        if !self.pools.is_empty() || self.collapse.is_some() {
+        if !self.pools.is_empty() || !self.collapse.is_empty() || !self.filled.is_empty() {
             return false;
         }
         let last = self.segments() - 1;
@@ -277,8 +294,12 @@ impl Tube {
             return TubeHit::NONE;
         }
         let (mut r_lumen, mut r_outer) = (r, r + self.wall_mm);
-        if let Some(c) = &self.collapse {
-            let f = c.factor(s);
+        // The collapse that narrows the lumen most here (they are disjoint, so at most one
+        // is below 1; the first wins a tie, which keeps a single collapse as it always was).
+        let narrowest = self.collapse.iter().map(|c| (c.factor(s), c)).fold(None, |best: Option<(f64, &Collapse)>, (f, c)| {
+            if best.is_none_or(|(b, _)| f < b) { Some((f, c)) } else { best }
+        });
+        if let Some((f, c)) = narrowest {
             // A small negative margin makes the core solid even on the axis itself.
             r_lumen = r * f - (1.0 - f) * 2.0 * self.wall_mm;
             r_outer = (r * f + self.wall_mm).max(c.cord_radius);
@@ -301,11 +322,18 @@ impl Tube {
             lumen = capped(lumen, axial);
             outer = capped(outer, axial - self.wall_mm);
         }
-        let (fluid, fluid_hu) = self
+        let (mut fluid, mut fluid_hu) = self
             .pools
             .iter()
             .find(|pl| s >= pl.start && s <= pl.end)
-            .map_or((f64::INFINITY, 0.0), |pl| (pl.level_y - p.y, pl.hu));
+            .map_or((f64::INFINITY, 0.0), |pl| (pl.level - p.dot(pl.gravity), pl.hu));
+        // A filled stretch: fluid across the whole lumen, its ends cut across the axis.
+        for f in &self.filled {
+            let d = (f.start - s).max(s - f.end);
+            if d < fluid {
+                (fluid, fluid_hu) = (d, f.hu);
+            }
+        }
         TubeHit { lumen, outer, fluid, fluid_hu }
     }
 }
@@ -324,18 +352,24 @@ pub enum BlobKind {
     Polyp,
     /// A separate pocket of gas with its own thin wall (small bowel).
     Pocket,
+    /// A piece of an opacified small-bowel loop: a capsule of fluid (`content_hu`) with its
+    /// own wall. A loop is a chain of them (equal radii, so their union is the exact tube);
+    /// where one reaches into the colon's lumen (the ileocaecal valve) the colon wins.
+    Loop,
 }
 
 /// A sphere, optionally on a stalk (a capsule from `stalk.0` to `stalk.1`, radius
-/// `stalk.2`): polyps (sessile or pedunculated) and gas pockets.
+/// `stalk.2`): polyps (sessile or pedunculated), gas pockets, pieces of small-bowel loops.
 #[derive(Clone, Debug)]
 pub struct Blob {
     pub kind: BlobKind,
     pub center: DVec3,
     pub radius: f64,
     pub stalk: Option<(DVec3, DVec3, f64)>,
-    /// Wall around a pocket (mm); 0 for polyps.
+    /// Wall around a pocket or loop (mm); 0 for polyps.
     pub wall_mm: f64,
+    /// HU of a loop's content; unused by polyps and pockets.
+    pub content_hu: f64,
 }
 
 impl Blob {
@@ -361,4 +395,52 @@ fn capsule(p: DVec3, a: DVec3, b: DVec3) -> f64 {
     let ab = b - a;
     let t = ((p - a).dot(ab) / ab.length_squared().max(1e-12)).clamp(0.0, 1.0);
     p.distance(a + ab * t)
+}
+
+/// Distance from `p` to the segment [a, b] (for clearance checks).
+#[inline]
+pub fn segment_distance(p: DVec3, a: DVec3, b: DVec3) -> f64 {
+    capsule(p, a, b)
+}
+
+/// A rectal catheter: a plastic tube around a polyline, tip first (inside the rectum), its
+/// other end outside the body. Unlike a chain of capsules it is cut flat and open at both
+/// ends, so its air channel joins the colon's gas at the tip and the air outside at the end.
+#[derive(Clone, Debug)]
+pub struct Catheter {
+    pub points: Vec<DVec3>,
+    /// Radius of the air channel.
+    pub inner_radius: f64,
+    /// Thickness of the plastic.
+    pub wall_mm: f64,
+    /// HU of the plastic.
+    pub hu: f64,
+}
+
+impl Catheter {
+    pub fn outer_radius(&self) -> f64 {
+        self.inner_radius + self.wall_mm
+    }
+
+    /// Distance from `p` to the axis.
+    pub fn distance(&self, p: DVec3) -> f64 {
+        self.points.windows(2).map(|w| capsule(p, w[0], w[1])).fold(f64::INFINITY, f64::min)
+    }
+
+    /// Signed distances (negative inside) to the air channel and to the plastic, both cut by
+    /// the planes across the axis at the two ends.
+    #[inline]
+    pub fn sdfs(&self, p: DVec3) -> (f64, f64) {
+        let n = self.points.len();
+        if n < 2 {
+            return (f64::INFINITY, f64::INFINITY);
+        }
+        let d = self.distance(p);
+        let u0 = (self.points[1] - self.points[0]).normalize_or_zero();
+        let u1 = (self.points[n - 1] - self.points[n - 2]).normalize_or_zero();
+        let cut = (self.points[0] - p).dot(u0).max((p - self.points[n - 1]).dot(u1));
+        let air = (d - self.inner_radius).max(cut);
+        let plastic = (d - self.outer_radius()).max(self.inner_radius - d).max(cut);
+        (air, plastic)
+    }
 }

@@ -40,9 +40,32 @@ pub struct PhantomArgs {
     /// Colon only: pools of tagged fluid with flat air–fluid levels.
     #[arg(long)]
     pub tagged_fluid: bool,
-    /// Colon only: a collapsed stretch that splits the gas in two.
+    /// Colon only: the patient lies prone (face down), so tagged fluid pools anteriorly; a
+    /// DICOM series says so (PatientPosition HFP), NIfTI/MetaImage/NRRD cannot.
     #[arg(long)]
-    pub collapsed: bool,
+    pub prone: bool,
+    /// Colon only: a 30 mm stretch of SEGMENT (sigmoid, descending or transverse; without a
+    /// value: descending) collapsed to a tissue cord. Repeatable: N collapses leave the gas in
+    /// N + 1 pieces.
+    #[arg(long, value_name = "SEGMENT", num_args = 0..=1, default_missing_value = "descending",
+          value_parser = ["sigmoid", "descending", "transverse"])]
+    pub collapsed: Vec<String>,
+    /// Colon only: a 40–60 mm stretch of SEGMENT filled to the brim with tagged fluid (no gas,
+    /// but lumen). Repeatable.
+    #[arg(long, value_name = "SEGMENT", value_parser = ["rectum", "sigmoid", "descending", "transverse", "ascending", "cecum"])]
+    pub fluid_filled: Vec<String>,
+    /// Colon only: small-bowel loops full of oral contrast (no gas), the terminal ileum opening
+    /// into a caecal pool of tagged fluid: one bright region with it.
+    #[arg(long)]
+    pub opacified_small_bowel: bool,
+    /// Colon only: a rectal catheter that joins the colon's gas to the air outside the body
+    /// (the body then ends in a perineum just above the first slice).
+    #[arg(long)]
+    pub rectal_tube: bool,
+    /// Colon only: round the CT's values to multiples of HU (after the noise), as a windowed
+    /// 8-bit export leaves them.
+    #[arg(long, value_name = "HU")]
+    pub quantize: Option<f64>,
     /// Colon only: leave out the small-bowel gas pockets.
     #[arg(long)]
     pub no_small_bowel_gas: bool,
@@ -69,16 +92,22 @@ fn make(a: &PhantomArgs) -> Result<Phantom> {
             seed: a.seed,
             small: a.small,
             tagged_fluid: a.tagged_fluid,
-            collapsed_segment: a.collapsed,
+            prone: a.prone,
+            collapsed: a.collapsed.clone(),
+            fluid_filled: a.fluid_filled.clone(),
+            opacified_small_bowel: a.opacified_small_bowel,
+            rectal_tube: a.rectal_tube,
             small_bowel_gas: !a.no_small_bowel_gas,
             lung_bases: !a.no_lungs,
             noise_hu: a.noise,
+            quantize_hu: a.quantize,
         })?,
     })
 }
 
 /// Writes the CT (any writable format, by extension), the truth JSON with its lumen mask,
-/// and optionally a DICOM series. Every file is written atomically.
+/// and optionally a DICOM series, which carries the patient's position (HFS, HFP). Every
+/// file is written atomically.
 pub fn write_outputs(p: &Phantom, out: &Path, truth: Option<&Path>, mask: Option<&Path>, dicom: Option<&Path>) -> Result<()> {
     save_volume(out, &p.ct)?;
     eprintln!("wrote {}", out.display());
@@ -93,7 +122,8 @@ pub fn write_outputs(p: &Phantom, out: &Path, truth: Option<&Path>, mask: Option
         eprintln!("wrote {}", truth.display());
     }
     if let Some(dir) = dicom {
-        io::dicom_write::write_series(dir, &p.ct)?;
+        let opts = io::dicom_write::SeriesWriteOptions { patient_position: Some(p.truth.position.clone()), ..Default::default() };
+        io::dicom_write::write_series_with(dir, &p.ct, &opts)?;
         eprintln!("wrote {} DICOM slices to {}", p.ct.dims()[2], dir.display());
     }
     Ok(())
