@@ -10,157 +10,197 @@
 //! So fluid is taken line by line along gravity (the voxel axis nearest to it), from the top
 //! down: a bright voxel joins the colon when the line came down through gas, then at most a
 //! partial-volume layer of a couple of millimetres, then only bright voxels, and has not gone
-//! deeper than `MAX_DEPTH_MM` below the level. A loop under the colon is behind two walls
+//! deeper than `MAX_DEPTH_MM` below the gas. A loop under the colon is behind two walls
 //! (more than the layer allows); a loop beside it has no gas above.
+//!
+//! The lines are walked through their labelled voxels only (gas and bright runs, row by
+//! row), never through the empty voxels between: a scan's bone is bright too, and the box
+//! around the gas is most of the volume.
 
-use super::work::{Bbox, BRIGHT, GAS, LAYER, POOL};
-use crate::anatomy::PatientFrame;
-use crate::Volume;
 use glam::DVec3;
+use rayon::prelude::*;
 
-/// A pool deeper than this below its level is not one colon segment's fluid.
+use super::work::{Bbox, GAS, LAYER, POOL};
+use crate::anatomy::PatientFrame;
+use crate::Geometry;
+
+/// A pool deeper than this below its gas is not one colon segment's fluid.
 pub const MAX_DEPTH_MM: f64 = 60.0;
 
 /// Between air and fluid the partial-volume layer is at most this thick (mm; at least one
 /// voxel).
 const MAX_LAYER_MM: f64 = 2.0;
 
+/// Bright (tagged fluid or bone) in [`LabelRows`].
+pub const BRIGHT: u8 = 2;
+
 /// The layer's thickness in voxels along an axis of spacing `step`.
-fn max_gap(step: f64) -> u32 {
-    ((MAX_LAYER_MM / step).round() as u32).clamp(1, 3)
+fn max_gap(step: f64) -> i64 {
+    ((MAX_LAYER_MM / step).round() as i64).clamp(1, 3)
 }
 
-/// Visits the voxels of `bx` so that each line along `axis` is walked in the direction
-/// `sign`: `f(line, index)` gets the line's number (0..lines) and the voxel's volume index.
-fn sweep(dims: [usize; 3], bx: &Bbox, axis: usize, sign: i32, mut f: impl FnMut(usize, usize)) {
-    let w = bx.widths();
-    let others: Vec<usize> = (0..3).filter(|&a| a != axis).collect();
-    let (b, c) = (others[0], others[1]);
-    let range = |a: usize| -> Box<dyn Iterator<Item = usize>> {
-        if a == axis && sign < 0 { Box::new((bx.lo[a]..=bx.hi[a]).rev()) } else { Box::new(bx.lo[a]..=bx.hi[a]) }
-    };
-    for k in range(2) {
-        for j in range(1) {
-            let row = dims[0] * (j + dims[1] * k);
-            for i in range(0) {
-                let p = [i, j, k];
-                let line = (p[b] - bx.lo[b]) + (p[c] - bx.lo[c]) * w[b];
-                f(line, row + i);
-            }
-        }
+/// Gas and bright runs, row by row (row = j + ny·k), in x order: `(x0, x1, label)`.
+pub struct LabelRows {
+    pub runs: Vec<(u32, u32, u8)>,
+    pub row_start: Vec<u32>,
+    pub dims: [usize; 3],
+}
+
+impl LabelRows {
+    fn row(&self, j: usize, k: usize) -> &[(u32, u32, u8)] {
+        let r = j + self.dims[1] * k;
+        &self.runs[self.row_start[r] as usize..self.row_start[r + 1] as usize]
     }
 }
 
-/// Marks the colon's tagged fluid in `work` (GAS and BRIGHT set): bright voxels in the column
-/// under gas become POOL, the layer between them LAYER. Gravity: LPS unit vector. Returns the
-/// voxels marked.
-pub fn mark_pools(work: &mut Volume<u8>, bx: &Bbox, gravity_lps: DVec3) -> usize {
-    let frame = PatientFrame::of(work.geometry());
-    let (axis, sign) = frame.nearest_axis(gravity_lps);
-    let step = work.spacing()[axis];
-    let gap_max = max_gap(step);
-    let depth_max = (MAX_DEPTH_MM / step).round() as u32;
-    let dims = work.dims();
-    let stride = [1isize, dims[0] as isize, (dims[0] * dims[1]) as isize][axis] * sign as isize;
-    let lines = bx.lines(axis);
-    // Per line: 0 closed, 1 below gas (counting the layer), 2 in fluid; voxels since the gas.
-    let mut state = vec![0u8; lines];
-    let mut gap = vec![0u32; lines];
-    let mut depth = vec![0u32; lines];
-    let data = work.data_mut();
-    let mut marked = 0;
-    sweep(dims, bx, axis, sign, |line, v| match data[v] {
-        GAS => {
-            state[line] = 1;
-            gap[line] = 0;
-            depth[line] = 0;
+/// What one line (a column along gravity) has seen so far.
+#[derive(Clone, Copy, Default)]
+struct Line {
+    /// 0: nothing open; 1: below gas; 2: in fluid under gas.
+    state: u8,
+    /// Position of the last labelled voxel, and of the last gas voxel.
+    last: i64,
+    gas: i64,
+}
+
+/// A mark to write: voxel index and label.
+type Mark = (usize, u8);
+
+impl Line {
+    /// The line meets `label` at position `pos` (voxel `idx`; a step along the line is
+    /// `stride` in the volume's index). Pushes the pool's and the layer's voxels.
+    #[inline]
+    fn visit(&mut self, pos: i64, label: u8, idx: usize, stride: isize, limits: (i64, i64), marks: &mut Vec<Mark>) {
+        let (gap_max, depth_max) = limits;
+        let gap = (pos - self.last).abs() - 1;
+        match label {
+            GAS => {
+                self.state = 1;
+                self.gas = pos;
+            }
+            _ if self.state == 1 && gap <= gap_max && (pos - self.gas).abs() <= depth_max => {
+                for t in 1..=gap as isize {
+                    marks.push(((idx as isize - t * stride) as usize, LAYER));
+                }
+                marks.push((idx, POOL));
+                self.state = 2;
+            }
+            _ if self.state == 2 && gap == 0 && (pos - self.gas).abs() <= depth_max => marks.push((idx, POOL)),
+            _ => self.state = 0,
         }
-        BRIGHT | POOL if state[line] != 0 && depth[line] < depth_max => {
-            if state[line] == 1 {
-                // The layer just walked through lies between the air and this fluid.
-                for t in 1..=gap[line] as isize {
-                    let u = (v as isize - t * stride) as usize;
-                    if data[u] == 0 {
-                        data[u] = LAYER;
-                        marked += 1;
-                    }
+        self.last = pos;
+    }
+}
+
+/// Calls `f(line, pos, idx, label)` for every labelled voxel of `rows` inside `bx` on lines
+/// along `axis`, each line in the direction `sign`, lines of one slice together: slices are
+/// independent for `axis` 0 and 1 (run in parallel, one state per slice), not for 2.
+fn walk<S: Send>(rows: &LabelRows, bx: &Bbox, axis: usize, sign: i32, state: impl Fn() -> S + Sync, f: impl Fn(&mut S, usize, i64, usize, u8) + Sync) -> Vec<S> {
+    let [nx, ny, _] = rows.dims;
+    let ks: Vec<usize> = if axis == 2 && sign < 0 { (bx.lo[2]..=bx.hi[2]).rev().collect() } else { (bx.lo[2]..=bx.hi[2]).collect() };
+    let slice = |s: &mut S, k: usize| {
+        let js: Vec<usize> = if axis == 1 && sign < 0 { (bx.lo[1]..=bx.hi[1]).rev().collect() } else { (bx.lo[1]..=bx.hi[1]).collect() };
+        for j in js {
+            let row = rows.row(j, k);
+            let base = nx * (j + ny * k);
+            let mut visit = |x: usize, label: u8| {
+                let (line, pos) = match axis {
+                    0 => (j - bx.lo[1], x as i64),
+                    1 => (x - bx.lo[0], j as i64),
+                    _ => ((x - bx.lo[0]) + (j - bx.lo[1]) * (bx.hi[0] + 1 - bx.lo[0]), k as i64),
+                };
+                f(s, line, pos, base + x, label);
+            };
+            let clip = |&(x0, x1, l): &(u32, u32, u8)| (x0.max(bx.lo[0] as u32), x1.min(bx.hi[0] as u32 + 1), l);
+            if axis == 0 && sign < 0 {
+                for (x0, x1, l) in row.iter().rev().map(clip) {
+                    (x0..x1).rev().for_each(|x| visit(x as usize, l));
+                }
+            } else {
+                for (x0, x1, l) in row.iter().map(clip) {
+                    (x0..x1).for_each(|x| visit(x as usize, l));
                 }
             }
-            if data[v] == BRIGHT {
-                data[v] = POOL;
-                marked += 1;
-            }
-            state[line] = 2;
-            depth[line] += 1;
         }
-        _ => {
-            if state[line] == 1 && gap[line] < gap_max {
-                gap[line] += 1;
-                depth[line] += 1;
-            } else {
-                state[line] = 0;
-            }
-        }
+    };
+    if axis == 2 {
+        let mut s = state();
+        ks.into_iter().for_each(|k| slice(&mut s, k));
+        vec![s]
+    } else {
+        ks.into_par_iter()
+            .map(|k| {
+                let mut s = state();
+                slice(&mut s, k);
+                s
+            })
+            .collect()
+    }
+}
+
+/// The colon's tagged fluid: the voxels (volume indices) of bright runs in the column under
+/// gas (POOL), and of the layer between them (LAYER). Gravity: LPS unit vector.
+pub fn pools(rows: &LabelRows, geom: &Geometry, bx: &Bbox, gravity_lps: DVec3) -> Vec<Mark> {
+    let (axis, sign) = PatientFrame::of(geom).nearest_axis(gravity_lps);
+    let step = geom.spacing[axis];
+    let limits = (max_gap(step), (MAX_DEPTH_MM / step).round() as i64);
+    let w = bx.widths();
+    let lines = if axis == 2 { w[0] * w[1] } else { w[[1, 0, 0][axis]] };
+    let stride = [1isize, geom.dims[0] as isize, (geom.dims[0] * geom.dims[1]) as isize][axis] * sign as isize;
+    let per = walk(rows, bx, axis, sign, || (vec![Line { last: i64::MIN / 2, ..Default::default() }; lines], Vec::new()), |(state, marks), line, pos, idx, label| {
+        state[line].visit(pos, label, idx, stride, limits, marks);
     });
-    marked
+    per.into_iter().flat_map(|(_, m)| m).collect()
 }
 
 /// Air–fluid interfaces seen along each voxel axis: `[axis][0]` counts lines going from gas
-/// down into fluid along +axis, `[axis][1]` along −axis.
-pub fn level_counts(work: &Volume<u8>, bx: &Bbox) -> [[usize; 2]; 3] {
-    let dims = work.dims();
-    let data = work.data();
+/// down into fluid along +axis, `[axis][1]` along −axis (within the layer's thickness).
+pub fn level_counts(rows: &LabelRows, geom: &Geometry, bx: &Bbox) -> [[usize; 2]; 3] {
     let mut out = [[0usize; 2]; 3];
+    let w = bx.widths();
     for (axis, counts) in out.iter_mut().enumerate() {
-        let gap_max = max_gap(work.spacing()[axis]);
-        let lines = bx.lines(axis);
-        // Per line: what was last seen (0 nothing, GAS, BRIGHT) and the voxels since.
-        let mut last = vec![0u8; lines];
-        let mut gap = vec![0u32; lines];
-        sweep(dims, bx, axis, 1, |line, v| {
-            let x = data[v];
-            if x == GAS || x == BRIGHT {
-                let near = gap[line] <= gap_max;
-                if x == BRIGHT && last[line] == GAS && near {
-                    counts[0] += 1;
-                } else if x == GAS && last[line] == BRIGHT && near {
-                    counts[1] += 1;
+        let gap_max = max_gap(geom.spacing[axis]);
+        let lines = if axis == 2 { w[0] * w[1] } else { w[[1, 0, 0][axis]] };
+        let per = walk(rows, bx, axis, 1, || (vec![(0u8, i64::MIN / 2); lines], [0usize; 2]), |(state, c), line, pos, _, label| {
+            let (last, at) = state[line];
+            if pos - at - 1 <= gap_max {
+                if label == BRIGHT && last == GAS {
+                    c[0] += 1;
+                } else if label == GAS && last == BRIGHT {
+                    c[1] += 1;
                 }
-                last[line] = x;
-                gap[line] = 0;
-            } else {
-                gap[line] = gap[line].saturating_add(1);
             }
+            state[line] = (label, pos);
         });
+        for (_, c) in per {
+            counts[0] += c[0];
+            counts[1] += c[1];
+        }
     }
     out
 }
 
 /// Gravity from the levels: the axis direction with by far the most air-over-fluid
 /// interfaces, as an LPS unit vector (None when no clear level is seen).
-pub fn gravity_from_levels(work: &Volume<u8>, bx: &Bbox) -> Option<DVec3> {
+pub fn gravity_from_levels(rows: &LabelRows, geom: &Geometry, bx: &Bbox) -> Option<DVec3> {
     /// A level smaller than this (voxels of interface) is not evidence.
     const MIN_INTERFACE: usize = 40;
-    let counts = level_counts(work, bx);
+    let counts = level_counts(rows, geom, bx);
     let mut dirs: Vec<(usize, usize, i32)> = (0..3).flat_map(|a| [(counts[a][0], a, 1), (counts[a][1], a, -1)]).collect();
     dirs.sort_by(|x, y| y.0.cmp(&x.0).then(x.1.cmp(&y.1)).then(y.2.cmp(&x.2)));
     let (best, axis, sign) = dirs[0];
-    let runner_up = dirs[1].0;
-    if best < MIN_INTERFACE || best < 3 * runner_up {
+    if best < MIN_INTERFACE || best < 3 * dirs[1].0 {
         return None;
     }
-    let col = PatientFrame::of(work.geometry()).lps(DVec3::from_array({
-        let mut e = [0.0; 3];
-        e[axis] = sign as f64;
-        e
-    }));
-    Some(col.normalize())
+    let mut e = [0.0; 3];
+    e[axis] = sign as f64;
+    Some(PatientFrame::of(geom).lps(DVec3::from_array(e)).normalize())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Geometry;
+    use crate::Volume;
 
     /// A box of gas over a pool (gravity +y), and beside it a bright "loop" with no gas above,
     /// and under the gas, behind a 4-voxel wall, another bright loop.
@@ -190,32 +230,58 @@ mod tests {
         v
     }
 
+    fn rows_of(v: &Volume<u8>) -> LabelRows {
+        let [nx, ny, nz] = v.dims();
+        let mut rows = LabelRows { runs: Vec::new(), row_start: vec![0], dims: v.dims() };
+        for k in 0..nz {
+            for j in 0..ny {
+                let row = &v.data()[nx * (j + ny * k)..nx * (j + ny * k + 1)];
+                let mut x = 0;
+                while x < nx {
+                    let l = row[x];
+                    let start = x;
+                    while x < nx && row[x] == l {
+                        x += 1;
+                    }
+                    if l != 0 {
+                        rows.runs.push((start as u32, x as u32, l));
+                    }
+                }
+                rows.row_start.push(rows.runs.len() as u32);
+            }
+        }
+        rows
+    }
+
+    fn all(v: &Volume<u8>) -> Bbox {
+        let d = v.dims();
+        Bbox { lo: [0; 3], hi: [d[0] - 1, d[1] - 1, d[2] - 1] }
+    }
+
     #[test]
     fn fluid_under_the_gas_joins_and_loops_stay_out() {
-        let mut v = scene();
-        let bx = Bbox { lo: [0; 3], hi: [29, 29, 5] };
-        let n = mark_pools(&mut v, &bx, DVec3::Y);
-        assert_eq!(v.get(5, 8, 2), LAYER);
-        assert_eq!(v.get(5, 11, 2), POOL);
-        assert_eq!(v.get(5, 20, 2), BRIGHT, "a loop behind two walls");
-        assert_eq!(v.get(18, 11, 2), BRIGHT, "a loop with no gas above");
-        assert_eq!(n, 10 * 6 * 6);
+        let v = scene();
+        let marks = pools(&rows_of(&v), v.geometry(), &all(&v), DVec3::Y);
+        let at = |i, j, k| marks.iter().find(|m| m.0 == v.geometry().index(i, j, k)).map(|m| m.1);
+        assert_eq!(at(5, 8, 2), Some(LAYER));
+        assert_eq!(at(5, 11, 2), Some(POOL));
+        assert_eq!(at(5, 20, 2), None, "a loop behind two walls");
+        assert_eq!(at(18, 11, 2), None, "a loop with no gas above");
+        assert_eq!(marks.len(), 10 * 6 * 6);
         // Prone: gravity anterior, the fluid is above the gas: none joins.
-        let mut w = scene();
-        assert_eq!(mark_pools(&mut w, &bx, -DVec3::Y), 0);
+        assert!(pools(&rows_of(&v), v.geometry(), &all(&v), -DVec3::Y).is_empty());
     }
 
     #[test]
     fn gravity_is_read_from_the_level_in_any_storage_order() {
         let v = scene();
-        let bx = Bbox { lo: [0; 3], hi: [29, 29, 5] };
-        assert_eq!(gravity_from_levels(&v, &bx), Some(DVec3::Y));
-        for (perm, flip) in [([1, 0, 2], [true, false, false]), ([2, 1, 0], [false, true, true])] {
+        assert_eq!(gravity_from_levels(&rows_of(&v), v.geometry(), &all(&v)), Some(DVec3::Y));
+        for (perm, flip) in [([1, 0, 2], [true, false, false]), ([2, 1, 0], [false, true, true]), ([0, 2, 1], [false, false, true])] {
             let r = v.reoriented(perm, flip).unwrap();
-            let d = r.dims();
-            let bx = Bbox { lo: [0; 3], hi: [d[0] - 1, d[1] - 1, d[2] - 1] };
-            let g = gravity_from_levels(&r, &bx).unwrap();
+            let g = gravity_from_levels(&rows_of(&r), r.geometry(), &all(&r)).unwrap();
             assert!((g - DVec3::Y).length() < 1e-9, "{perm:?} {flip:?}: {g}");
+            // And the same pool, whichever way the lines run in memory.
+            assert_eq!(pools(&rows_of(&r), r.geometry(), &all(&r), DVec3::Y).len(), 10 * 6 * 6, "{perm:?} {flip:?}");
         }
     }
 }

@@ -40,7 +40,7 @@ use serde::Serialize;
 use crate::anatomy::{Orientation, PatientFrame, PatientPosition, PositionSource};
 use crate::{Error, Result, Volume};
 use chain::{Chain, ChainOptions, Coarse, Compartment, Left};
-use work::{Bbox, BRIDGE, BRIGHT, GAS, LAYER, POOL};
+use work::{Bbox, BRIDGE, GAS, LAYER, POOL};
 
 #[derive(Clone, Debug)]
 pub struct SegmentOptions {
@@ -283,14 +283,31 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
         None => gas_box,
     };
     let mut pooled = 0;
+    let mut pool_rows = Vec::new();
     if let Some(bright) = &bright {
-        paint_in(&mut work, bright, &cbox, BRIGHT);
+        let rows = label_rows(&runs, |r| is_gas(run_comp[r]), bright, &cbox, vol.dims()[0], |_, _, _| true);
+        // A level lies within a layer's thickness of gas: only gas near bright runs and bright
+        // runs near gas (not bone, most of them) are looked at for it.
+        let all = |_: usize| true;
+        let near_gas = |x: (u32, u32), j: usize, k: usize| runs_near(&runs, &|r| is_gas(run_comp[r]), x, j, k, 3);
+        let gas_near_bright = |r: usize| is_gas(run_comp[r]) && {
+            let (j, k) = row_of(&runs, r);
+            runs_near(bright, &all, (runs.runs[r].x0, runs.runs[r].x1), j, k, 3)
+        };
+        let near = || label_rows(&runs, gas_near_bright, bright, &cbox, vol.dims()[0], near_gas);
         if opts.position.is_none()
-            && let Some(g) = fluid::gravity_from_levels(&work, &cbox)
+            && let Some(g) = fluid::gravity_from_levels(&near(), vol.geometry(), &cbox)
         {
             orientation = Orientation::new(PatientPosition::from_gravity(g), PositionSource::AirFluidLevels);
         }
-        pooled = fluid::mark_pools(&mut work, &cbox, orientation.gravity());
+        let marks = fluid::pools(&rows, vol.geometry(), &cbox, orientation.gravity());
+        pooled = marks.len();
+        pool_rows = vec![false; vol.dims()[1] * vol.dims()[2]];
+        let nx = vol.dims()[0];
+        for (idx, label) in marks {
+            work.data_mut()[idx] = label;
+            pool_rows[idx / nx] = true;
+        }
     }
     if orientation.source == PositionSource::Assumed {
         warnings.push(if from_mask {
@@ -302,7 +319,12 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
 
     // Compartments: gas with its pools and layers.
     // Without pools they are the gas components, from their runs; with pools, from the labels.
-    let cruns = if pooled > 0 { work_runs(&work, &cbox, |x| x == GAS || x == POOL || x == LAYER) } else { runs.filtered(|r| is_gas(run_comp[r])) };
+    let cruns = if pooled > 0 {
+        let scan = |j: usize, k: usize| pool_rows[j + vol.dims()[1] * k] || runs.row(j, k).any(|r| is_gas(run_comp[r]));
+        work_runs(&work, &cbox, scan, |x| x == GAS || x == POOL || x == LAYER)
+    } else {
+        runs.filtered(|r| is_gas(run_comp[r]))
+    };
     let mut cuf = UnionFind::new(cruns.runs.len());
     connect_3d(&cruns, &vec![true; cruns.runs.len()], vol.dims(), &mut cuf);
     let frame = PatientFrame::of(vol.geometry());
@@ -390,8 +412,8 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
     let bridge_radius_mm = 3.0f64.max(1.5 * vol.spacing().iter().cloned().fold(0.0, f64::max));
     let mut added = Vec::new();
     for p in &ch.gaps {
-        if ct.is_some() {
-            fill_fluid(&mut work, &p.voxels, FILL_MM, &mut added);
+        if let (Some(ct), Some(t)) = (ct, fluid_hu) {
+            fill_fluid(&mut work, &p.voxels, FILL_MM, |i| ct.data()[i] >= t, &mut added);
         }
         lay_bridge(&mut work, &p.voxels, bridge_radius_mm, &mut added);
     }
@@ -423,15 +445,9 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
     if ct.is_some() {
         fluid_voxels += added.iter().filter(|&&v| vol.data()[v] >= fluid_hu.unwrap_or(i16::MAX)).count();
     }
-    // Back to 0/1: labels other than 0 lie in the box, or on a bridge. Without bright voxels
-    // only the gas left out needs clearing.
+    // Back to 0/1: every label lies in a compartment's runs, or on a bridge.
     let kept = |r: usize| crun_comp[r] != u32::MAX && in_colon[crun_comp[r] as usize];
-    if bright.is_some() {
-        clear_box(&mut work, &cbox);
-        paint(&mut work, &cruns, |r| kept(r).then_some(1));
-    } else {
-        paint(&mut work, &cruns, |r| (!kept(r)).then_some(0));
-    }
+    paint(&mut work, &cruns, |r| Some(kept(r) as u8));
     for &v in &added {
         work.data_mut()[v] = 1;
     }
@@ -930,22 +946,49 @@ fn paint(work: &mut Volume<u8>, runs: &Runs, value: impl Fn(usize) -> Option<u8>
     });
 }
 
-/// Writes `value` over the parts of `runs` inside `bx` where nothing is written yet.
-fn paint_in(work: &mut Volume<u8>, runs: &Runs, bx: &Bbox, value: u8) {
-    let [nx, ny, _] = work.dims();
-    work.data_mut().par_chunks_mut(nx * ny).enumerate().filter(|(k, _)| bx.lo[2] <= *k && *k <= bx.hi[2]).for_each(|(k, slab)| {
-        for j in bx.lo[1]..=bx.hi[1] {
-            for r in runs.row(j, k) {
-                let run = runs.runs[r];
-                let (a, b) = ((run.x0 as usize).max(bx.lo[0]), (run.x1 as usize).min(bx.hi[0] + 1));
-                for x in &mut slab[(j * nx + a).min(j * nx + b)..j * nx + b] {
-                    if *x == 0 {
-                        *x = value;
-                    }
+/// The gas runs (where `gas(run)`) and the bright runs inside `bx`, merged row by row in x
+/// order, for the fluid's line walks.
+/// Bright runs only where `keep_bright((x0, x1), j, k)`.
+fn label_rows(runs: &Runs, gas: impl Fn(usize) -> bool + Sync, bright: &Runs, bx: &Bbox, nx: usize, keep_bright: impl Fn((u32, u32), usize, usize) -> bool + Sync) -> fluid::LabelRows {
+    let ny = runs.ny;
+    let nz = (runs.row_start.len() - 1) / ny;
+    let per_slice: Vec<(Vec<(u32, u32, u8)>, Vec<u32>)> = (0..nz)
+        .into_par_iter()
+        .map(|k| {
+            let (mut out, mut counts) = (Vec::new(), Vec::with_capacity(ny));
+            for j in 0..ny {
+                let before = out.len();
+                if (bx.lo[1]..=bx.hi[1]).contains(&j) && (bx.lo[2]..=bx.hi[2]).contains(&k) {
+                    let g = runs.row(j, k).filter(|&r| gas(r)).map(|r| (runs.runs[r].x0, runs.runs[r].x1, GAS));
+                    let b = bright.row(j, k).map(|r| (bright.runs[r].x0, bright.runs[r].x1, fluid::BRIGHT)).filter(|r| keep_bright((r.0, r.1), j, k));
+                    out.extend(g.chain(b));
+                    out[before..].sort_unstable_by_key(|r| r.0);
                 }
+                counts.push((out.len() - before) as u32);
             }
+            (out, counts)
+        })
+        .collect();
+    let mut rows = fluid::LabelRows { runs: Vec::new(), row_start: vec![0], dims: [nx, ny, nz] };
+    for (r, c) in per_slice {
+        for n in c {
+            let last = *rows.row_start.last().unwrap_or(&0);
+            rows.row_start.push(last + n);
         }
-    });
+        rows.runs.extend(r);
+    }
+    rows
+}
+
+/// Whether a run where `keep(run)` lies within `d` voxels of x range `x` in row (j, k) or a
+/// row up to `d` steps away along y or z.
+fn runs_near(runs: &Runs, keep: &(impl Fn(usize) -> bool + Sync), x: (u32, u32), j: usize, k: usize, d: usize) -> bool {
+    let nz = (runs.row_start.len() - 1) / runs.ny;
+    let near = |b: usize, c: usize| runs.row(b, c).any(|r| keep(r) && runs.runs[r].x0 < x.1 + d as u32 && runs.runs[r].x1 + d as u32 > x.0);
+    (0..=d).any(|s| {
+        let rows = [(j.wrapping_sub(s), k), (j + s, k), (j, k.wrapping_sub(s)), (j, k + s)];
+        rows.iter().any(|&(b, c)| b < runs.ny && c < nz && near(b, c))
+    })
 }
 
 /// The box of the runs where `keep(run)`.
@@ -965,7 +1008,8 @@ fn runs_box(runs: &Runs, dims: [usize; 3], keep: impl Fn(usize) -> bool) -> Opti
 }
 
 /// Runs of the working labels where `keep(label)`, inside `bx` (rows outside it are empty).
-fn work_runs(work: &Volume<u8>, bx: &Bbox, keep: impl Fn(u8) -> bool + Sync) -> Runs {
+/// Only rows where `scan(j, k)` are read.
+fn work_runs(work: &Volume<u8>, bx: &Bbox, scan: impl Fn(usize, usize) -> bool + Sync, keep: impl Fn(u8) -> bool + Sync) -> Runs {
     let [nx, ny, nz] = work.dims();
     let per_slice: Vec<SliceRuns> = (0..nz)
         .into_par_iter()
@@ -973,7 +1017,7 @@ fn work_runs(work: &Volume<u8>, bx: &Bbox, keep: impl Fn(u8) -> bool + Sync) -> 
             let mut s = SliceRuns::with_rows(ny);
             for j in 0..ny {
                 let before = s.runs.len();
-                if (bx.lo[1]..=bx.hi[1]).contains(&j) && (bx.lo[2]..=bx.hi[2]).contains(&k) {
+                if (bx.lo[1]..=bx.hi[1]).contains(&j) && (bx.lo[2]..=bx.hi[2]).contains(&k) && scan(j, k) {
                     let row = &work.data()[nx * (j + ny * k)..nx * (j + ny * k + 1)];
                     for r in crate::volume::runs_where(&row[bx.lo[0]..=bx.hi[0]], &keep) {
                         s.runs.push(Run { x0: (r.start + bx.lo[0]) as u32, x1: (r.end + bx.lo[0]) as u32 });
@@ -1064,16 +1108,6 @@ fn lowest_middle(runs: &Runs, run_comp: &[u32], comp: &Compartment, c: u32, geom
     })).unwrap_or(comp.lowest)
 }
 
-/// Zero over the box, slice by slice.
-fn clear_box(work: &mut Volume<u8>, bx: &Bbox) {
-    let [nx, ny, _] = work.dims();
-    work.data_mut().par_chunks_mut(nx * ny).enumerate().filter(|(k, _)| bx.lo[2] <= *k && *k <= bx.hi[2]).for_each(|(_, slab)| {
-        for j in bx.lo[1]..=bx.hi[1] {
-            slab[j * nx + bx.lo[0]..=j * nx + bx.hi[0]].fill(0);
-        }
-    });
-}
-
 /// A tube of `radius_mm` around a bridge's path: BRIDGE where there is neither gas nor a pool.
 fn lay_bridge(work: &mut Volume<u8>, path: &[[usize; 3]], radius_mm: f64, added: &mut Vec<usize>) {
     let g = work.geometry().clone();
@@ -1097,7 +1131,7 @@ fn lay_bridge(work: &mut Volume<u8>, path: &[[usize; 3]], radius_mm: f64, added:
             }
             let i = g.index(q[0] as usize, q[1] as usize, q[2] as usize);
             let x = &mut work.data_mut()[i];
-            if *x == 0 || *x == BRIGHT {
+            if *x == 0 {
                 *x = BRIDGE;
                 added.push(i);
             }
@@ -1107,11 +1141,11 @@ fn lay_bridge(work: &mut Volume<u8>, path: &[[usize; 3]], radius_mm: f64, added:
 
 /// Fluid filling a bridged stretch: the bright voxels reached from the path's bright voxels
 /// within `reach_mm`, through bright voxels.
-fn fill_fluid(work: &mut Volume<u8>, path: &[[usize; 3]], reach_mm: f64, added: &mut Vec<usize>) {
+fn fill_fluid(work: &mut Volume<u8>, path: &[[usize; 3]], reach_mm: f64, bright: impl Fn(usize) -> bool, added: &mut Vec<usize>) {
     let g = work.geometry().clone();
     let step = g.spacing.iter().cloned().fold(f64::INFINITY, f64::min);
     let layers = (reach_mm / step).ceil() as usize;
-    let mut front: Vec<usize> = path.iter().map(|v| g.index(v[0], v[1], v[2])).filter(|&i| work.data()[i] == BRIGHT).collect();
+    let mut front: Vec<usize> = path.iter().map(|v| g.index(v[0], v[1], v[2])).filter(|&i| work.data()[i] == 0 && bright(i)).collect();
     for &i in &front {
         work.data_mut()[i] = BRIDGE;
         added.push(i);
@@ -1123,7 +1157,7 @@ fn fill_fluid(work: &mut Volume<u8>, path: &[[usize; 3]], reach_mm: f64, added: 
             let [x, y, z] = g.ijk(i);
             let n = [(x > 0).then(|| i - 1), (x + 1 < nx).then(|| i + 1), (y > 0).then(|| i - nx), (y + 1 < ny).then(|| i + nx), (z > 0).then(|| i - nx * ny), (z + 1 < nz).then(|| i + nx * ny)];
             for q in n.into_iter().flatten() {
-                if work.data()[q] == BRIGHT {
+                if work.data()[q] == 0 && bright(q) {
                     work.data_mut()[q] = BRIDGE;
                     added.push(q);
                     next.push(q);

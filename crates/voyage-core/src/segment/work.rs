@@ -3,8 +3,6 @@
 
 /// Internal gas of a candidate component (not lung, not outside the body).
 pub const GAS: u8 = 1;
-/// Tagged-fluid bright voxels (≥ the fluid threshold) that may belong to the colon.
-pub const BRIGHT: u8 = 2;
 /// Bright voxels in the column under a colon segment's gas: the segment's fluid.
 pub const POOL: u8 = 3;
 /// The partial-volume layer between a segment's gas and its pool.
@@ -23,12 +21,6 @@ pub struct Bbox {
 impl Bbox {
     pub fn widths(&self) -> [usize; 3] {
         [0, 1, 2].map(|a| self.hi[a] + 1 - self.lo[a])
-    }
-
-    /// Lines along `axis` through the box.
-    pub fn lines(&self, axis: usize) -> usize {
-        let w = self.widths();
-        w[0] * w[1] * w[2] / w[axis]
     }
 
     /// The box grown by `by` voxels per axis, within `dims`.
