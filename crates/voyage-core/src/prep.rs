@@ -230,17 +230,19 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Sta
     })
 }
 
-/// The centerline's stretches through bridged gaps: points nearer a bridge's path than its
-/// tube's radius (plus a voxel) and not in the air of either segment.
+/// The centerline's stretches through bridged gaps: points whose voxel the bridge added (its
+/// tube, or the fluid filling the stretch).
 fn collapsed_spans(cl: &Centerline, seg: &Segmentation) -> Vec<[f64; 2]> {
     let g = seg.lumen.geometry();
-    let reach = seg.bridge_radius_mm + g.spacing.iter().cloned().fold(0.0, f64::max);
     let mut spans: Vec<[f64; 2]> = Vec::new();
     for gap in &seg.gaps {
         let mut span: Option<[f64; 2]> = None;
         for (p, &arc) in cl.points_mm.iter().zip(&cl.arc_mm) {
-            let p = DVec3::from_array(*p);
-            if gap.path_mm.iter().any(|q| q.distance(p) <= reach) {
+            let v = g.local_to_index(DVec3::from_array(*p)).round();
+            if !g.contains_index(v) {
+                continue;
+            }
+            if gap.voxels.binary_search(&g.index(v.x as usize, v.y as usize, v.z as usize)).is_ok() {
                 span = Some(span.map_or([arc, arc], |s| [s[0].min(arc), s[1].max(arc)]));
             }
         }

@@ -28,7 +28,7 @@ pub fn hu_cost(hu: Option<i16>) -> f32 {
         Some(h) if h < -150 => 10.0,
         Some(h) if h < -30 => 6.0, // fat
         Some(h) if h < 200 => 1.0, // collapsed bowel wall (and organs)
-        Some(h) if h < 1200 => 1.5, // tagged fluid (and cancellous bone)
+        Some(h) if h < 1200 => 0.7, // tagged fluid filling the bowel (and cancellous bone)
         Some(_) => 40.0,           // cortical bone
     }
 }

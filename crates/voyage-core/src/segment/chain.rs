@@ -16,6 +16,9 @@ use glam::DVec3;
 use super::bridge::Path;
 use super::work::Bbox;
 
+/// How many of the nearest free compartments are bridged to at each step.
+const CANDIDATES: usize = 3;
+
 /// Block size of the coarse grid (mm).
 const BLOCK_MM: f64 = 4.0;
 
@@ -205,23 +208,24 @@ pub fn chain(coarse: &Coarse, comps: &[Compartment], rectum: u32, candidate: imp
             .map(|(c, e)| (coarse.centre_mm(e).distance(at), c, e))
             .collect();
         options.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
-        let mut joined = false;
+        // The nearest few ends are bridged and the cheapest bridge wins: the nearest end by
+        // straight distance may lie across fat, while the collapsed bowel leads to another.
         let mut tried: Vec<u32> = Vec::new();
+        let mut best: Option<(f64, u32, usize, Path)> = None;
         for (d, c, e) in options {
             if tried.contains(&c) {
                 continue;
             }
-            tried.push(c);
-            if d > opts.max_gap_mm {
+            if d > opts.max_gap_mm || tried.len() == CANDIDATES {
                 break;
             }
+            tried.push(c);
             match bridge(exit, e, at_comp, c) {
                 Some(p) if p.mean_cost <= opts.max_bridge_cost => {
-                    links.push(Link { comp: c, entry: e, exit: coarse.farthest(c, e).0 });
-                    gaps.push(p);
-                    free.retain(|&x| x != c);
-                    joined = true;
-                    break;
+                    let cost = p.length_mm * p.mean_cost;
+                    if best.as_ref().is_none_or(|b| cost < b.0) {
+                        best = Some((cost, c, e, p));
+                    }
                 }
                 Some(p) => {
                     left.retain(|(x, _)| *x != c);
@@ -230,9 +234,11 @@ pub fn chain(coarse: &Coarse, comps: &[Compartment], rectum: u32, candidate: imp
                 None => {}
             }
         }
-        if !joined {
-            break;
-        }
+        let Some((_, c, e, p)) = best else { break };
+        links.push(Link { comp: c, entry: e, exit: coarse.farthest(c, e).0 });
+        gaps.push(p);
+        free.retain(|&x| x != c);
+        left.retain(|(x, _)| *x != c);
     }
     // Whatever stayed free: too far from the chain's end (or its bridge too dear).
     for &c in &free {
@@ -308,8 +314,16 @@ mod tests {
             Some(Path { voxels: vec![], length_mm: p.distance(q), mean_cost: 1.0 })
         });
         assert_eq!(ch.links.iter().map(|l| l.comp).collect::<Vec<_>>(), vec![0, 1, 2]);
-        assert_eq!(asked, vec![(0, 1), (1, 2)]);
+        assert_eq!(asked, vec![(0, 1), (0, 2), (1, 2)], "the nearest few are bridged to");
         assert!((ch.gaps[0].length_mm - 20.0).abs() < 8.5 && (ch.gaps[1].length_mm - 30.0).abs() < 8.5);
+        // The cheapest bridge wins, not the nearest end: through fat to 1 (20 mm at 6 per
+        // mm), along collapsed bowel to 2 (90 mm at 1).
+        let lax = ChainOptions { max_bridge_cost: 10.0, ..Default::default() };
+        let ch = chain(&coarse, &comps, 0, |_| true, &lax, |from, to, _, b| {
+            let (p, q) = (coarse.centre_mm(from), coarse.centre_mm(to));
+            Some(Path { voxels: vec![], length_mm: p.distance(q), mean_cost: if b == 1 { 6.0 } else { 1.0 } })
+        });
+        assert_eq!(ch.links.iter().map(|l| l.comp).collect::<Vec<_>>(), vec![0, 2, 1]);
         // A bridge through fat leaves the segment out, and says why.
         let ch = chain(&coarse, &comps, 0, |_| true, &ChainOptions::default(), |_, _, _, _| Some(Path { voxels: vec![], length_mm: 20.0, mean_cost: 6.0 }));
         assert_eq!(ch.links.len(), 1);

@@ -31,6 +31,12 @@ pub const MAX_DEPTH_MM: f64 = 60.0;
 /// voxel).
 const MAX_LAYER_MM: f64 = 2.0;
 
+/// Deeper than this below the gas, fluid stays the colon's only where it is wide: fluid on
+/// both horizontal axes within [`WIDE_MM`] (a pool spreads under its level; a loop leaving
+/// it downward, as the ileum through the ileocecal valve, is a narrow tube).
+const NARROW_BELOW_MM: f64 = 4.0;
+const WIDE_MM: f64 = 6.0;
+
 /// Bright (tagged fluid or bone) in [`LabelRows`].
 pub const BRIGHT: u8 = 2;
 
@@ -70,8 +76,8 @@ impl Line {
     /// The line meets `label` at position `pos` (voxel `idx`; a step along the line is
     /// `stride` in the volume's index). Pushes the pool's and the layer's voxels.
     #[inline]
-    fn visit(&mut self, pos: i64, label: u8, idx: usize, stride: isize, limits: (i64, i64), marks: &mut Vec<Mark>) {
-        let (gap_max, depth_max) = limits;
+    fn visit(&mut self, pos: i64, label: u8, idx: usize, stride: isize, limits: (i64, i64, i64), wide: impl Fn() -> bool, marks: &mut Vec<Mark>) {
+        let (gap_max, depth_max, narrow_below) = limits;
         let gap = (pos - self.last).abs() - 1;
         match label {
             GAS => {
@@ -85,7 +91,7 @@ impl Line {
                 marks.push((idx, POOL));
                 self.state = 2;
             }
-            _ if self.state == 2 && gap == 0 && (pos - self.gas).abs() <= depth_max => marks.push((idx, POOL)),
+            _ if self.state == 2 && gap == 0 && (pos - self.gas).abs() <= depth_max && ((pos - self.gas).abs() <= narrow_below || wide()) => marks.push((idx, POOL)),
             _ => self.state = 0,
         }
         self.last = pos;
@@ -139,16 +145,27 @@ fn walk<S: Send>(rows: &LabelRows, bx: &Bbox, axis: usize, sign: i32, state: imp
 }
 
 /// The colon's tagged fluid: the voxels (volume indices) of bright runs in the column under
-/// gas (POOL), and of the layer between them (LAYER). Gravity: LPS unit vector.
-pub fn pools(rows: &LabelRows, geom: &Geometry, bx: &Bbox, gravity_lps: DVec3) -> Vec<Mark> {
+/// gas (POOL), and of the layer between them (LAYER). Gravity: LPS unit vector; `bright(v)`:
+/// whether voxel v is bright.
+pub fn pools(rows: &LabelRows, geom: &Geometry, bx: &Bbox, gravity_lps: DVec3, bright: impl Fn(usize) -> bool + Sync) -> Vec<Mark> {
     let (axis, sign) = PatientFrame::of(geom).nearest_axis(gravity_lps);
     let step = geom.spacing[axis];
-    let limits = (max_gap(step), (MAX_DEPTH_MM / step).round() as i64);
+    let limits = (max_gap(step), (MAX_DEPTH_MM / step).round() as i64, (NARROW_BELOW_MM / step).round() as i64);
+    // Fluid on both horizontal axes within WIDE_MM of voxel v.
+    let strides = [1usize, geom.dims[0], geom.dims[0] * geom.dims[1]];
+    let horizontal: Vec<(usize, usize)> = (0..3).filter(|&a| a != axis).map(|a| (strides[a], ((WIDE_MM / geom.spacing[a]).round() as usize).max(1))).collect();
+    let wide = |v: usize| {
+        horizontal.iter().all(|&(s, r)| {
+            let ijk = geom.ijk(v);
+            let a = (0..3).find(|&a| strides[a] == s).unwrap_or(0);
+            (ijk[a] >= r && bright(v - s * r)) || (ijk[a] + r < geom.dims[a] && bright(v + s * r))
+        })
+    };
     let w = bx.widths();
     let lines = if axis == 2 { w[0] * w[1] } else { w[[1, 0, 0][axis]] };
     let stride = [1isize, geom.dims[0] as isize, (geom.dims[0] * geom.dims[1]) as isize][axis] * sign as isize;
     let per = walk(rows, bx, axis, sign, || (vec![Line { last: i64::MIN / 2, ..Default::default() }; lines], Vec::new()), |(state, marks), line, pos, idx, label| {
-        state[line].visit(pos, label, idx, stride, limits, marks);
+        state[line].visit(pos, label, idx, stride, limits, || wide(idx), marks);
     });
     per.into_iter().flat_map(|(_, m)| m).collect()
 }
@@ -205,10 +222,10 @@ mod tests {
     /// A box of gas over a pool (gravity +y), and beside it a bright "loop" with no gas above,
     /// and under the gas, behind a 4-voxel wall, another bright loop.
     fn scene() -> Volume<u8> {
-        let g = Geometry::new([30, 30, 6], [1.0; 3], [0.0; 3]).unwrap();
+        let g = Geometry::new([40, 30, 20], [1.0; 3], [0.0; 3]).unwrap();
         let mut v = Volume::filled(g, 0u8).unwrap();
-        for k in 0..6 {
-            for i in 2..12 {
+        for k in 0..20 {
+            for i in 2..22 {
                 for j in 2..8 {
                     v.set(i, j, k, GAS);
                 }
@@ -221,7 +238,7 @@ mod tests {
                     v.set(i, j, k, BRIGHT);
                 }
             }
-            for i in 14..24 {
+            for i in 26..36 {
                 for j in 9..14 {
                     v.set(i, j, k, BRIGHT);
                 }
@@ -261,15 +278,29 @@ mod tests {
     #[test]
     fn fluid_under_the_gas_joins_and_loops_stay_out() {
         let v = scene();
-        let marks = pools(&rows_of(&v), v.geometry(), &all(&v), DVec3::Y);
+        let bright = |i: usize| v.data()[i] == BRIGHT;
+        let marks = pools(&rows_of(&v), v.geometry(), &all(&v), DVec3::Y, bright);
         let at = |i, j, k| marks.iter().find(|m| m.0 == v.geometry().index(i, j, k)).map(|m| m.1);
         assert_eq!(at(5, 8, 2), Some(LAYER));
         assert_eq!(at(5, 11, 2), Some(POOL));
         assert_eq!(at(5, 20, 2), None, "a loop behind two walls");
-        assert_eq!(at(18, 11, 2), None, "a loop with no gas above");
-        assert_eq!(marks.len(), 10 * 6 * 6);
+        assert_eq!(at(30, 11, 2), None, "a loop with no gas above");
+        assert_eq!(marks.len(), 20 * 6 * 20);
+        // A narrow loop leaving the pool downward (the ileum through the ileocecal valve)
+        // stays out below the pool, and so does the loop it leads to.
+        let mut w = v.clone();
+        for k in 9..12 {
+            for i in 10..13 {
+                for j in 14..18 {
+                    w.set(i, j, k, BRIGHT);
+                }
+            }
+        }
+        let marks = pools(&rows_of(&w), w.geometry(), &all(&w), DVec3::Y, |i| w.data()[i] == BRIGHT);
+        let at = |i, j, k| marks.iter().find(|m| m.0 == w.geometry().index(i, j, k)).map(|m| m.1);
+        assert_eq!((at(11, 13, 10), at(11, 15, 10), at(11, 20, 10)), (Some(POOL), None, None));
         // Prone: gravity anterior, the fluid is above the gas: none joins.
-        assert!(pools(&rows_of(&v), v.geometry(), &all(&v), -DVec3::Y).is_empty());
+        assert!(pools(&rows_of(&v), v.geometry(), &all(&v), -DVec3::Y, bright).is_empty());
     }
 
     #[test]
@@ -281,7 +312,7 @@ mod tests {
             let g = gravity_from_levels(&rows_of(&r), r.geometry(), &all(&r)).unwrap();
             assert!((g - DVec3::Y).length() < 1e-9, "{perm:?} {flip:?}: {g}");
             // And the same pool, whichever way the lines run in memory.
-            assert_eq!(pools(&rows_of(&r), r.geometry(), &all(&r), DVec3::Y).len(), 10 * 6 * 6, "{perm:?} {flip:?}");
+            assert_eq!(pools(&rows_of(&r), r.geometry(), &all(&r), DVec3::Y, |i| r.data()[i] == BRIGHT).len(), 20 * 6 * 20, "{perm:?} {flip:?}");
         }
     }
 }

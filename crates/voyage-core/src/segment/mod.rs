@@ -131,6 +131,10 @@ pub struct Gap {
     /// The bridge's path, volume-local mm.
     #[serde(skip)]
     pub path_mm: Vec<DVec3>,
+    /// The lumen voxels (volume indices, sorted) the bridge added: its tube and the fluid
+    /// filling the stretch it crosses.
+    #[serde(skip)]
+    pub voxels: Vec<usize>,
 }
 
 #[derive(Clone, Debug)]
@@ -247,6 +251,13 @@ impl Segmentation {
         }
         for g in &mut self.gaps {
             g.path_mm.iter_mut().for_each(|q| *q = DVec3::new(q[perm[0]], q[perm[1]], q[perm[2]]));
+            // Indices of the stored volume (dims permuted) into this one's.
+            let sd = [0, 1, 2].map(|a| geom.dims[perm[a]]);
+            g.voxels = g.voxels.iter().map(|&i| {
+                let v = crate::volume::grid_ijk(sd, i);
+                geom.index(v[perm[0]], v[perm[1]], v[perm[2]])
+            }).collect();
+            g.voxels.sort_unstable();
         }
         Ok(self)
     }
@@ -300,7 +311,8 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
         {
             orientation = Orientation::new(PatientPosition::from_gravity(g), PositionSource::AirFluidLevels);
         }
-        let marks = fluid::pools(&rows, vol.geometry(), &cbox, orientation.gravity());
+        let threshold = fluid_hu.unwrap_or(i16::MAX);
+        let marks = fluid::pools(&rows, vol.geometry(), &cbox, orientation.gravity(), |v| vol.data()[v] >= threshold);
         pooled = marks.len();
         pool_rows = vec![false; vol.dims()[1] * vol.dims()[2]];
         let nx = vol.dims()[0];
@@ -411,11 +423,16 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
     let geom = vol.geometry().clone();
     let bridge_radius_mm = 3.0f64.max(1.5 * vol.spacing().iter().cloned().fold(0.0, f64::max));
     let mut added = Vec::new();
+    let mut gap_voxels: Vec<Vec<usize>> = Vec::new();
     for p in &ch.gaps {
+        let from = added.len();
         if let (Some(ct), Some(t)) = (ct, fluid_hu) {
             fill_fluid(&mut work, &p.voxels, FILL_MM, |i| ct.data()[i] >= t, &mut added);
         }
         lay_bridge(&mut work, &p.voxels, bridge_radius_mm, &mut added);
+        let mut v = added[from..].to_vec();
+        v.sort_unstable();
+        gap_voxels.push(v);
     }
     let in_colon: Vec<bool> = {
         let mut v = vec![false; compartments.len()];
@@ -505,7 +522,8 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
         let lps = |v: [usize; 3]| geom.index_to_patient(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64)).to_array();
         // The part of the path outside both segments: the gap itself.
         let path_mm = p.voxels.iter().filter(|&&v| comp_at(v).is_none()).map(|v| geom.index_to_local(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64))).collect();
-        gaps.push(Gap { between: [i, i + 1], length_mm: p.length_mm, from_lps_mm: lps(ends.0), to_lps_mm: lps(ends.1), mean_cost: p.mean_cost, path_mm });
+        let voxels = std::mem::take(&mut gap_voxels[i]);
+        gaps.push(Gap { between: [i, i + 1], length_mm: p.length_mm, from_lps_mm: lps(ends.0), to_lps_mm: lps(ends.1), mean_cost: p.mean_cost, path_mm, voxels });
         warnings.push(format!(
             "collapsed or fluid-filled stretch bridged: {:.0} mm between the {} and the {} segment, from LPS ({:.0}, {:.0}, {:.0})",
             p.length_mm,
