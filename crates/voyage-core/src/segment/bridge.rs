@@ -11,7 +11,7 @@ use std::collections::BinaryHeap;
 
 use glam::DVec3;
 
-use super::work::Bbox;
+use super::work::{Bbox, Key};
 use crate::Volume;
 
 /// A search box with more voxels than this is searched on coarser blocks.
@@ -97,7 +97,7 @@ pub fn cheapest_path(ct: Option<&Volume<i16>>, dims: [usize; 3], spacing: [f64; 
     dist[sa] = 0.0;
     heap.push(Reverse((Key(0.0), sa as u32)));
     while let Some(Reverse((Key(d), u))) = heap.pop() {
-        let u = u as usize;
+        let (u, d) = (u as usize, d as f32);
         if d > dist[u] {
             continue;
         }
@@ -122,7 +122,7 @@ pub fn cheapest_path(ct: Option<&Volume<i16>>, dims: [usize; 3], spacing: [f64; 
                     if nd < dist[v] {
                         dist[v] = nd;
                         prev[v] = u as u32;
-                        heap.push(Reverse((Key(nd), v as u32)));
+                        heap.push(Reverse((Key(nd as f64), v as u32)));
                     }
                 }
             }
@@ -175,14 +175,6 @@ fn line_voxels(pts: &[[usize; 3]]) -> Vec<[usize; 3]> {
 }
 
 /// An f32 ordered for the heap (costs are finite and non-negative).
-#[derive(Clone, Copy, PartialEq, PartialOrd)]
-struct Key(f32);
-impl Eq for Key {}
-impl Ord for Key {
-    fn cmp(&self, o: &Self) -> std::cmp::Ordering {
-        self.0.total_cmp(&o.0)
-    }
-}
 
 #[cfg(test)]
 mod tests {

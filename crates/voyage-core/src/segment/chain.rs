@@ -14,7 +14,7 @@ use std::collections::BinaryHeap;
 use glam::DVec3;
 
 use super::bridge::Path;
-use super::work::Bbox;
+use super::work::{Bbox, Key};
 
 /// How many of the nearest free compartments are bridged to at each step.
 const CANDIDATES: usize = 3;
@@ -132,14 +132,6 @@ impl Coarse {
     }
 }
 
-#[derive(Clone, Copy, PartialEq, PartialOrd)]
-struct Key(f64);
-impl Eq for Key {}
-impl Ord for Key {
-    fn cmp(&self, o: &Self) -> std::cmp::Ordering {
-        self.0.total_cmp(&o.0)
-    }
-}
 
 #[derive(Clone, Debug)]
 pub struct ChainOptions {

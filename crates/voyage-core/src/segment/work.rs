@@ -32,3 +32,13 @@ impl Bbox {
         Bbox { lo: [0, 1, 2].map(|a| self.lo[a].min(o.lo[a])), hi: [0, 1, 2].map(|a| self.hi[a].max(o.hi[a])) }
     }
 }
+
+/// A distance ordered for a binary heap (distances are finite and non-negative).
+#[derive(Clone, Copy, PartialEq, PartialOrd)]
+pub struct Key(pub f64);
+impl Eq for Key {}
+impl Ord for Key {
+    fn cmp(&self, o: &Self) -> std::cmp::Ordering {
+        self.0.total_cmp(&o.0)
+    }
+}

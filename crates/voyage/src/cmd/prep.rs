@@ -40,23 +40,9 @@ pub struct InputArgs {
     pub series: Option<String>,
 }
 
-/// DICOM PatientPosition codes, for `--position`.
-#[derive(Clone, Copy, Debug, ValueEnum)]
-pub enum PositionArg {
-    Hfs,
-    Hfp,
-    Ffs,
-    Ffp,
-    Hfdr,
-    Hfdl,
-    Ffdr,
-    Ffdl,
-}
-
-impl PositionArg {
-    fn position(self) -> PatientPosition {
-        PatientPosition::parse(&format!("{self:?}")).unwrap_or(PatientPosition::Hfs)
-    }
+/// A DICOM PatientPosition code, any case.
+fn parse_position(s: &str) -> Result<PatientPosition, String> {
+    PatientPosition::parse(s).ok_or_else(|| format!("{s}: expected one of HFS, HFP, FFS, FFP, HFDR, HFDL, FFDR, FFDL"))
 }
 
 /// Corrections to the automatic choices: which gas is colon, where the flight starts and
@@ -76,10 +62,11 @@ pub struct PointArgs {
     /// The coordinate frame of --seed, --source and --target.
     #[arg(long, value_enum, default_value_t = Frame::Lps)]
     pub coords: Frame,
-    /// How the patient lay (DICOM PatientPosition code), overriding the file and the
-    /// air–fluid levels: decides on which side fluid lies and which way is up in the view.
-    #[arg(long, value_enum, ignore_case = true)]
-    pub position: Option<PositionArg>,
+    /// How the patient lay, as a DICOM PatientPosition code (HFS, HFP, FFS, FFP, HFDR, HFDL,
+    /// FFDR, FFDL), overriding the file and the air–fluid levels: decides on which side fluid
+    /// lies and which way is up in the view.
+    #[arg(long, value_parser = parse_position)]
+    pub position: Option<PatientPosition>,
 }
 
 impl PointArgs {
@@ -93,7 +80,7 @@ impl PointArgs {
         opts.endpoints.source_mm = self.source.map(to_local);
         opts.endpoints.target_mm = self.target.map(to_local);
         opts.segment.position = match (self.position, meta.position) {
-            (Some(p), _) => Some((p.position(), PositionSource::Given)),
+            (Some(p), _) => Some((p, PositionSource::Given)),
             (None, Some(p)) => Some((p, PositionSource::Dicom)),
             (None, None) => None,
         };
