@@ -54,10 +54,11 @@ impl PatientPosition {
     /// change it: the patient frame turns with the patient.
     pub fn gravity_lps(self) -> DVec3 {
         match self {
-            Self::Hfs | Self::Ffs => DVec3::Y,  // posterior
-            Self::Hfp | Self::Ffp => -DVec3::Y, // anterior
-            Self::Hfdr | Self::Ffdr => -DVec3::X, // the patient's right
-            Self::Hfdl | Self::Ffdl => DVec3::X,
+            // Written out: `-DVec3::Y` would carry −0.0 into the reports.
+            Self::Hfs | Self::Ffs => DVec3::new(0.0, 1.0, 0.0),   // posterior
+            Self::Hfp | Self::Ffp => DVec3::new(0.0, -1.0, 0.0),  // anterior
+            Self::Hfdr | Self::Ffdr => DVec3::new(-1.0, 0.0, 0.0), // the patient's right
+            Self::Hfdl | Self::Ffdl => DVec3::new(1.0, 0.0, 0.0),
         }
     }
 
