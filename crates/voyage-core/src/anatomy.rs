@@ -91,6 +91,18 @@ pub enum PositionSource {
     Assumed,
 }
 
+impl PositionSource {
+    /// Where the position came from, for read-outs.
+    pub fn describe(self) -> &'static str {
+        match self {
+            PositionSource::Dicom => "from the DICOM header",
+            PositionSource::Given => "given",
+            PositionSource::AirFluidLevels => "from the air–fluid levels",
+            PositionSource::Assumed => "assumed",
+        }
+    }
+}
+
 /// The patient's position and gravity, and how they are known.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Orientation {

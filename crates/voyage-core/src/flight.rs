@@ -299,11 +299,6 @@ impl Autopilot {
         Some(Pose::looking(p, self.guide.ahead(j.saturating_sub(1)), self.up))
     }
 
-    /// Whether a glide is under way.
-    pub fn gliding(&self) -> bool {
-        self.glide_arc.is_some()
-    }
-
     /// Lumen radius at the guide's point `i` (mm).
     pub fn radius(&self, i: usize) -> f64 {
         self.guide.radius[i]

@@ -259,13 +259,7 @@ fn collapsed_spans(cl: &Centerline, seg: &Segmentation) -> Vec<[f64; 2]> {
 /// flight starts at the lowest segment's lower end), the cecum on the patient's right and low.
 fn anatomical_checks(seg: &Segmentation, source: [usize; 3], target: [usize; 3], check_source: bool, check_target: bool) -> Vec<String> {
     let g = seg.lumen.geometry();
-    let [lo, hi] = seg.extent;
-    let (mut a, mut b) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
-    for c in 0..8 {
-        let v = DVec3::from_array([0, 1, 2].map(|x| if c >> x & 1 == 1 { hi[x] } else { lo[x] } as f64));
-        let p = g.index_to_patient(v);
-        (a, b) = (a.min(p), b.max(p));
-    }
+    let [a, b] = g.patient_box(seg.extent[0], seg.extent[1]);
     let span = (b - a).max(DVec3::splat(1.0));
     // u: 0 at the patient's right of the colon's box, 1 at its left; v: 0 lowest, 1 highest.
     let place = |v: [usize; 3]| {

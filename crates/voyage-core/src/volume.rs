@@ -130,6 +130,18 @@ impl Geometry {
         self.local_to_index(self.patient_to_local(lps))
     }
 
+    /// The patient-LPS box (min, max corners) of the voxel box `lo..=hi`: all eight corners,
+    /// as the direction may turn the axes.
+    pub fn patient_box(&self, lo: [usize; 3], hi: [usize; 3]) -> [DVec3; 2] {
+        let (mut a, mut b) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        for c in 0..8 {
+            let v = [0, 1, 2].map(|x| if c >> x & 1 == 1 { hi[x] } else { lo[x] } as f64);
+            let p = self.index_to_patient(DVec3::from_array(v));
+            (a, b) = (a.min(p), b.max(p));
+        }
+        [a, b]
+    }
+
     /// Size of the volume in mm (from first to last voxel centre, plus one voxel).
     pub fn extent_mm(&self) -> DVec3 {
         DVec3::new(self.dims[0] as f64, self.dims[1] as f64, self.dims[2] as f64) * self.spacing_vec()

@@ -494,27 +494,10 @@ fn quantised_ct_takes_multiples_of_the_step() {
 // ---------------------------------------------------------------------------------------
 // Everything at once, and bad names.
 
-#[test]
-fn all_options_combine_for_several_seeds() {
-    for seed in 1..=5 {
-        let p = small(ColonOptions {
-            seed,
-            prone: true,
-            tagged_fluid: true,
-            opacified_small_bowel: true,
-            collapsed: names(&["sigmoid", "descending"]),
-            fluid_filled: names(&["transverse"]),
-            rectal_tube: true,
-            quantize_hu: Some(8.0),
-            ..ColonOptions::default()
-        });
-        check_small_bowel(&p);
-        assert!(p.ct.data().iter().all(|&v| v % 8 == 0));
-        assert_eq!(p.truth.gas_gaps.len(), 3);
-        assert!(p.labels.data().iter().any(|&l| l == label::RECTAL_TUBE));
-    }
-    // Also at full size (one seed): the same checks of the truth.
-    let p = phantom::colon(&ColonOptions {
+/// Every new option at once (full size unless `small` is set).
+fn every_option(seed: u64) -> ColonOptions {
+    ColonOptions {
+        seed,
         prone: true,
         tagged_fluid: true,
         opacified_small_bowel: true,
@@ -523,10 +506,22 @@ fn all_options_combine_for_several_seeds() {
         rectal_tube: true,
         quantize_hu: Some(8.0),
         ..ColonOptions::default()
-    })
-    .expect("full-size phantom with every option");
+    }
+}
+
+#[test]
+fn all_options_combine_for_several_seeds() {
+    for seed in 1..=5 {
+        let p = small(every_option(seed));
+        check_small_bowel(&p);
+        assert!(p.ct.data().iter().all(|&v| v % 8 == 0));
+        assert_eq!(p.truth.gas_gaps.len(), 3);
+        assert!(p.labels.data().contains(&label::RECTAL_TUBE));
+    }
+    // Also at full size (one seed): the same checks of the truth.
+    let p = phantom::colon(&every_option(1)).expect("full-size phantom with every option");
     check_basics(&p);
-    assert!(p.labels.data().iter().any(|&l| l == label::SMALL_BOWEL_FLUID));
+    assert!(p.labels.data().contains(&label::SMALL_BOWEL_FLUID));
 }
 
 #[test]

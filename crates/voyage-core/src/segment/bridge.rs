@@ -174,8 +174,6 @@ fn line_voxels(pts: &[[usize; 3]]) -> Vec<[usize; 3]> {
     out
 }
 
-/// An f32 ordered for the heap (costs are finite and non-negative).
-
 #[cfg(test)]
 mod tests {
     use super::*;

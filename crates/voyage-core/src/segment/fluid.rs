@@ -45,15 +45,18 @@ fn max_gap(step: f64) -> i64 {
     ((MAX_LAYER_MM / step).round() as i64).clamp(1, 3)
 }
 
-/// Gas and bright runs, row by row (row = j + ny·k), in x order: `(x0, x1, label)`.
+/// A run of one label: voxels x0..x1 of a row, and the label.
+pub type LabelRun = (u32, u32, u8);
+
+/// Gas and bright runs, row by row (row = j + ny·k), in x order.
 pub struct LabelRows {
-    pub runs: Vec<(u32, u32, u8)>,
+    pub runs: Vec<LabelRun>,
     pub row_start: Vec<u32>,
     pub dims: [usize; 3],
 }
 
 impl LabelRows {
-    fn row(&self, j: usize, k: usize) -> &[(u32, u32, u8)] {
+    fn row(&self, j: usize, k: usize) -> &[LabelRun] {
         let r = j + self.dims[1] * k;
         &self.runs[self.row_start[r] as usize..self.row_start[r + 1] as usize]
     }
@@ -72,12 +75,22 @@ struct Line {
 /// A mark to write: voxel index and label.
 type Mark = (usize, u8);
 
+/// What stays fixed along every line of a walk: a step's stride in the volume's index, and
+/// the limits (layer's thickness, pool's depth, depth from which fluid must be wide) in steps.
+#[derive(Clone, Copy)]
+struct Walk {
+    stride: isize,
+    gap_max: i64,
+    depth_max: i64,
+    narrow_below: i64,
+}
+
 impl Line {
     /// The line meets `label` at position `pos` (voxel `idx`; a step along the line is
     /// `stride` in the volume's index). Pushes the pool's and the layer's voxels.
     #[inline]
-    fn visit(&mut self, pos: i64, label: u8, idx: usize, stride: isize, limits: (i64, i64, i64), wide: impl Fn() -> bool, marks: &mut Vec<Mark>) {
-        let (gap_max, depth_max, narrow_below) = limits;
+    fn visit(&mut self, pos: i64, label: u8, idx: usize, walk: &Walk, wide: impl Fn() -> bool, marks: &mut Vec<Mark>) {
+        let Walk { stride, gap_max, depth_max, narrow_below } = *walk;
         let gap = (pos - self.last).abs() - 1;
         match label {
             GAS => {
@@ -150,7 +163,8 @@ fn walk<S: Send>(rows: &LabelRows, bx: &Bbox, axis: usize, sign: i32, state: imp
 pub fn pools(rows: &LabelRows, geom: &Geometry, bx: &Bbox, gravity_lps: DVec3, bright: impl Fn(usize) -> bool + Sync) -> Vec<Mark> {
     let (axis, sign) = PatientFrame::of(geom).nearest_axis(gravity_lps);
     let step = geom.spacing[axis];
-    let limits = (max_gap(step), (MAX_DEPTH_MM / step).round() as i64, (NARROW_BELOW_MM / step).round() as i64);
+    let stride = [1isize, geom.dims[0] as isize, (geom.dims[0] * geom.dims[1]) as isize][axis] * sign as isize;
+    let limits = Walk { stride, gap_max: max_gap(step), depth_max: (MAX_DEPTH_MM / step).round() as i64, narrow_below: (NARROW_BELOW_MM / step).round() as i64 };
     // Fluid on both horizontal axes within WIDE_MM of voxel v.
     let strides = [1usize, geom.dims[0], geom.dims[0] * geom.dims[1]];
     let horizontal: Vec<(usize, usize)> = (0..3).filter(|&a| a != axis).map(|a| (strides[a], ((WIDE_MM / geom.spacing[a]).round() as usize).max(1))).collect();
@@ -163,9 +177,8 @@ pub fn pools(rows: &LabelRows, geom: &Geometry, bx: &Bbox, gravity_lps: DVec3, b
     };
     let w = bx.widths();
     let lines = if axis == 2 { w[0] * w[1] } else { w[[1, 0, 0][axis]] };
-    let stride = [1isize, geom.dims[0] as isize, (geom.dims[0] * geom.dims[1]) as isize][axis] * sign as isize;
     let per = walk(rows, bx, axis, sign, || (vec![Line { last: i64::MIN / 2, ..Default::default() }; lines], Vec::new()), |(state, marks), line, pos, idx, label| {
-        state[line].visit(pos, label, idx, stride, limits, || wide(idx), marks);
+        state[line].visit(pos, label, idx, &limits, || wide(idx), marks);
     });
     per.into_iter().flat_map(|(_, m)| m).collect()
 }

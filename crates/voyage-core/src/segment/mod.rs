@@ -128,9 +128,6 @@ pub struct Gap {
     pub to_lps_mm: [f64; 3],
     /// Mean cost per mm of the path (1: soft tissue, i.e. collapsed bowel, all the way).
     pub mean_cost: f64,
-    /// The bridge's path, volume-local mm.
-    #[serde(skip)]
-    pub path_mm: Vec<DVec3>,
     /// The lumen voxels (volume indices, sorted) the bridge added: its tube and the fluid
     /// filling the stretch it crosses.
     #[serde(skip)]
@@ -250,7 +247,6 @@ impl Segmentation {
             (c.bbox_lo, c.bbox_hi) = (p(c.bbox_lo), p(c.bbox_hi));
         }
         for g in &mut self.gaps {
-            g.path_mm.iter_mut().for_each(|q| *q = DVec3::new(q[perm[0]], q[perm[1]], q[perm[2]]));
             // Indices of the stored volume (dims permuted) into this one's.
             let sd = [0, 1, 2].map(|a| geom.dims[perm[a]]);
             g.voxels = g.voxels.iter().map(|&i| {
@@ -282,11 +278,10 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
     let Some(gas_box) = runs_box(&runs, vol.dims(), |r| is_gas(run_comp[r])) else {
         return Err(no_colon(&comps, opts, from_mask));
     };
-    let orientation = match opts.position {
+    let mut orientation = match opts.position {
         Some((p, src)) => Orientation::new(p, src),
         None => Orientation::new(PatientPosition::Hfs, PositionSource::Assumed),
     };
-    let mut orientation = orientation;
     // Fluid lies below the gas, at most a pool's depth away: everything from here on happens
     // in this box.
     let cbox = match bright {
@@ -439,20 +434,11 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
         ch.links.iter().for_each(|l| v[l.comp as usize] = true);
         v
     };
-    let mut fluid_voxels = 0;
-    let mut colon_voxels = 0;
-    let mut lumen_box: Option<Bbox> = None;
-    for (r, &c) in crun_comp.iter().enumerate() {
-        if c != u32::MAX && in_colon[c as usize] {
-            let (j, k) = row_of(&cruns, r);
-            let run = cruns.runs[r];
-            let row = geom.index(0, j, k);
-            fluid_voxels += work.data()[row + run.x0 as usize..row + run.x1 as usize].iter().filter(|&&x| x == POOL || x == LAYER).count();
-            colon_voxels += (run.x1 - run.x0) as usize;
-            let b = Bbox { lo: [run.x0 as usize, j, k], hi: [run.x1 as usize - 1, j, k] };
-            lumen_box = Some(lumen_box.map_or(b, |x| x.union(&b)));
-        }
-    }
+    // A compartment's voxels that are not gas are its pool and layer.
+    let colon = || ch.links.iter().map(|l| &compartments[l.comp as usize]);
+    let mut fluid_voxels: usize = colon().map(|c| c.voxels - c.gas_voxels).sum();
+    let colon_voxels: usize = colon().map(|c| c.voxels).sum();
+    let mut lumen_box: Option<Bbox> = colon().map(|c| c.bbox).reduce(|a, b| a.union(&b));
     for &v in &added {
         let ijk = geom.ijk(v);
         let b = Bbox { lo: ijk, hi: ijk };
@@ -520,10 +506,8 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
     for (i, p) in ch.gaps.iter().enumerate() {
         let ends = (p.voxels[0], p.voxels[p.voxels.len() - 1]);
         let lps = |v: [usize; 3]| geom.index_to_patient(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64)).to_array();
-        // The part of the path outside both segments: the gap itself.
-        let path_mm = p.voxels.iter().filter(|&&v| comp_at(v).is_none()).map(|v| geom.index_to_local(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64))).collect();
         let voxels = std::mem::take(&mut gap_voxels[i]);
-        gaps.push(Gap { between: [i, i + 1], length_mm: p.length_mm, from_lps_mm: lps(ends.0), to_lps_mm: lps(ends.1), mean_cost: p.mean_cost, path_mm, voxels });
+        gaps.push(Gap { between: [i, i + 1], length_mm: p.length_mm, from_lps_mm: lps(ends.0), to_lps_mm: lps(ends.1), mean_cost: p.mean_cost, voxels });
         warnings.push(format!(
             "collapsed or fluid-filled stretch bridged: {:.0} mm between the {} and the {} segment, from LPS ({:.0}, {:.0}, {:.0})",
             p.length_mm,
@@ -970,7 +954,7 @@ fn paint(work: &mut Volume<u8>, runs: &Runs, value: impl Fn(usize) -> Option<u8>
 fn label_rows(runs: &Runs, gas: impl Fn(usize) -> bool + Sync, bright: &Runs, bx: &Bbox, nx: usize, keep_bright: impl Fn((u32, u32), usize, usize) -> bool + Sync) -> fluid::LabelRows {
     let ny = runs.ny;
     let nz = (runs.row_start.len() - 1) / ny;
-    let per_slice: Vec<(Vec<(u32, u32, u8)>, Vec<u32>)> = (0..nz)
+    let per_slice: Vec<(Vec<fluid::LabelRun>, Vec<u32>)> = (0..nz)
         .into_par_iter()
         .map(|k| {
             let (mut out, mut counts) = (Vec::new(), Vec::with_capacity(ny));
@@ -1191,15 +1175,7 @@ fn fill_fluid(work: &mut Volume<u8>, path: &[[usize; 3]], reach_mm: f64, bright:
 
 /// The LPS box of a voxel box (all eight corners: the direction may turn the axes).
 fn lps_box(geom: &crate::Geometry, b: &Bbox) -> [DVec3; 2] {
-    let mut lo = DVec3::splat(f64::INFINITY);
-    let mut hi = DVec3::splat(f64::NEG_INFINITY);
-    for c in 0..8 {
-        let v = [0, 1, 2].map(|a| if c >> a & 1 == 1 { b.hi[a] } else { b.lo[a] } as f64);
-        let p = geom.index_to_patient(DVec3::from_array(v));
-        lo = lo.min(p);
-        hi = hi.max(p);
-    }
-    [lo, hi]
+    geom.patient_box(b.lo, b.hi)
 }
 
 /// The anatomical region of a volume-local point within the colon's LPS box.

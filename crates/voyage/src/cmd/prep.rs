@@ -236,12 +236,7 @@ fn print_text(s: &Study, g: &Geometry, load_ms: f64) {
         println!("  gas       {} smaller pockets", seg.small_components);
     }
     let o = &seg.orientation;
-    println!("position    {} ({}; {})", o.position.code(), o.position.describe(), match o.source {
-        PositionSource::Dicom => "from the DICOM header",
-        PositionSource::Given => "given",
-        PositionSource::AirFluidLevels => "from the air–fluid levels",
-        PositionSource::Assumed => "assumed",
-    });
+    println!("position    {} ({}; {})", o.position.code(), o.position.describe(), o.source.describe());
     for (i, sg) in seg.segments.iter().filter(|x| x.kept).enumerate() {
         println!("  colon     {}. {:<36} {:>7.1} ml gas {:>7.1} ml fluid", i + 1, sg.label, sg.gas_ml, sg.fluid_ml);
     }

@@ -996,13 +996,7 @@ fn colon_summary(ui: &mut egui::Ui, study: &voyage_core::prep::Study) {
     let seg = &study.segmentation;
     let o = &seg.orientation;
     let kept = seg.segments.iter().filter(|s| s.kept).count();
-    let how = match o.source {
-        voyage_core::anatomy::PositionSource::Dicom => "from the header",
-        voyage_core::anatomy::PositionSource::Given => "given",
-        voyage_core::anatomy::PositionSource::AirFluidLevels => "from the fluid levels",
-        voyage_core::anatomy::PositionSource::Assumed => "assumed",
-    };
-    ui.label(format!("{} ({}, {how})", o.position.code(), o.position.describe()));
+    ui.label(format!("{} ({}, {})", o.position.code(), o.position.describe(), o.source.describe()));
     ui.label(format!("{kept} colon segment{}", if kept == 1 { "" } else { "s" }));
     for (gap, span) in seg.gaps.iter().zip(study.collapsed_spans.iter().map(Some).chain(std::iter::repeat(None))) {
         let names = |i: usize| seg.segments.iter().find(|s| s.order == Some(i)).map_or("?", |s| s.label.as_str());
