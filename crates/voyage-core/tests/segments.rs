@@ -1,6 +1,6 @@
 //! The colon in several pieces: every piece is kept, in order, each gap bridged and reported;
-//! a seed adds gas to the colon but never moves its start; the patient's position decides
-//! on which side fluid lies.
+//! a seed adds gas to the colon but never moves its start, an excluded point takes its gas
+//! out; the patient's position decides on which side fluid lies.
 
 use glam::DVec3;
 use voyage_core::anatomy::{PatientPosition, PositionSource};
@@ -71,7 +71,7 @@ fn a_seed_adds_gas_to_the_colon_but_does_not_move_the_start() {
     let plain = prepare(p.ct.clone(), &PrepOptions::default(), |_| {}).unwrap();
     // A seed in the cecum: the colon's own gas, so nothing changes, least of all the source.
     let mut opts = PrepOptions::default();
-    opts.segment.seed_mm = Some(DVec3::from_array(t.target_mm));
+    opts.segment.seeds_mm = vec![DVec3::from_array(t.target_mm)];
     let seeded = prepare(p.ct.clone(), &opts, |_| {}).unwrap();
     assert_eq!(seeded.source, plain.source, "the seed moved the source");
     assert_eq!(seeded.target, plain.target);
@@ -95,4 +95,43 @@ fn the_position_given_decides_where_fluid_lies() {
     assert_eq!(s.orientation.gravity_lps, [0.0, -1.0, 0.0]);
     let found = p.labels.data().iter().zip(s.lumen.data()).filter(|&(&l, &m)| l == phantom::label::LUMEN_FLUID && m != 0).count();
     assert!((found as f64) < 0.05 * truth_fluid as f64, "{found} of {truth_fluid} fluid voxels taken above the gas");
+}
+
+/// The user's corrections: a segment left out by a point in its gas (even the rectum's), and
+/// taken back; a point both in and out is refused.
+#[test]
+fn excluded_gas_leaves_the_colon_and_the_rectum_moves_to_the_lowest_of_the_rest() {
+    let p = small(ColonOptions { collapsed: vec!["descending".into()], ..ColonOptions::default() });
+    let g = p.ct.geometry();
+    let auto = segment(&p.ct, &SegmentOptions::default()).unwrap();
+    let kept: Vec<_> = auto.segments.iter().filter(|s| s.kept).collect();
+    assert_eq!(kept.len(), 2);
+    let anchor = |o: usize| g.patient_to_local(DVec3::from_array(auto.segments.iter().find(|s| s.order == Some(o)).unwrap().anchor_lps_mm));
+    let count = |s: &voyage_core::segment::Segmentation| s.lumen.data().iter().filter(|&&m| m != 0).count();
+
+    // The far segment out: only the rectum's side is left, no gap, and it says why.
+    let far_out = segment(&p.ct, &SegmentOptions { exclude_mm: vec![anchor(1)], ..Default::default() }).unwrap();
+    assert_eq!(far_out.segments.iter().filter(|s| s.kept).count(), 1);
+    assert!(far_out.gaps.is_empty());
+    assert!(far_out.segments.iter().any(|s| !s.kept && s.reason.as_deref() == Some("excluded by the user")));
+    assert_eq!(far_out.seed_voxel, auto.seed_voxel, "the rectum stays");
+    assert!(count(&far_out) < count(&auto) / 2 + count(&auto) / 4);
+
+    // The rectum's segment out: the rectum is the lowest of the rest.
+    let near_out = segment(&p.ct, &SegmentOptions { exclude_mm: vec![anchor(0)], ..Default::default() }).unwrap();
+    assert_eq!(near_out.segments.iter().filter(|s| s.kept).count(), 1);
+    let lowest = |s: &voyage_core::segment::Segmentation| g.index_to_patient(DVec3::from_array(s.seed_voxel.map(|x| x as f64)));
+    assert!(lowest(&near_out).z > lowest(&auto).z + 10.0, "rectum side {} (was {})", lowest(&near_out), lowest(&auto));
+
+    // Both in: a seed in the far segment with no exclusion is the automatic colon.
+    let both = segment(&p.ct, &SegmentOptions { seeds_mm: vec![anchor(0), anchor(1)], ..Default::default() }).unwrap();
+    assert_eq!(both.lumen, auto.lumen);
+    // In and out at once: refused, naming the seed.
+    let e = segment(&p.ct, &SegmentOptions { seeds_mm: vec![anchor(1)], exclude_mm: vec![anchor(1)], ..Default::default() }).unwrap_err().to_string();
+    assert!(e.contains("the seed") && e.contains("also excluded"), "{e}");
+    // A point to exclude in tissue: refused, saying what it is.
+    // (3 mm below the rectum's lowest gas voxel.)
+    let below = g.patient_to_local(g.local_to_patient(anchor(0)) - DVec3::new(0.0, 0.0, 3.0));
+    let e = segment(&p.ct, &SegmentOptions { exclude_mm: vec![below], ..Default::default() }).unwrap_err().to_string();
+    assert!(e.contains("the point to exclude") && e.contains("not in gas"), "{e}");
 }

@@ -267,3 +267,63 @@ fn an_unreadable_file_is_reported_in_the_window() {
     assert!(err.contains("broken.nii.gz"), "{err}");
     assert!(shot.is_file(), "no screenshot of the error");
 }
+
+/// The window's corrections of the colon found (slice menu, segment list): each reruns the
+/// preprocessing in the background, and the colon shown follows; one that cannot be done is
+/// shown and leaves the open colon as it was.
+#[test]
+fn corrections_rerun_the_preprocessing_and_the_colon_follows() {
+    let Some(display) = Display::start() else { return };
+    let dir = scratch("correct");
+    let ct = dir.join("collapsed.nii.gz");
+    let made = voyage(&display).args(["phantom", "colon", "--small", "--collapsed", "descending", "--out"]).arg(&ct).output().unwrap();
+    assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+    // The automatic colon: two segments, rectum first; each with a point in its gas.
+    let prep = voyage(&display).arg("prep").arg(&ct).arg("--out").arg(dir.join("prep")).arg("--json").output().unwrap();
+    assert!(prep.status.success(), "{}", String::from_utf8_lossy(&prep.stderr));
+    let auto: Value = serde_json::from_slice(&prep.stdout).unwrap();
+    let segs = auto["segments"].as_array().unwrap();
+    assert_eq!(segs.iter().filter(|s| s["kept"] == true).count(), 2, "{auto}");
+    let anchor = |order: u64| -> Vec<f64> { segs.iter().find(|s| s["order"] == order).unwrap()["anchor_lps_mm"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect() };
+    let far = anchor(1);
+    let full = auto["centerline_length_mm"].as_f64().unwrap();
+
+    let run = |name: &str, steps: Value| -> Value {
+        let script = dir.join(format!("{name}.json"));
+        std::fs::write(&script, steps.to_string()).unwrap();
+        let report = dir.join(format!("{name}.report.json"));
+        let out = voyage(&display).arg("view").arg(&ct).args(["--paused", "--after-frames", "1"]).arg("--script").arg(&script).arg("--report").arg(&report).output().unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        read_json(&report)
+    };
+    // Leaving the far segment out: one segment, a shorter flight; then a point in tissue
+    // said to be colon: refused with the reason, the colon stays.
+    // (The rectum's lowest gas voxel, 3 mm further down: soft tissue.)
+    let rectum = anchor(0);
+    let tissue = [rectum[0], rectum[1], rectum[2] - 3.0];
+    let r = run("exclude", serde_json::json!([{"correct": {"exclude": far}}, {"correct": {"include": tissue}}, {"quit": true}]));
+    let colon = &r["colon"];
+    let kept = |c: &Value| c["segments"].as_array().unwrap().iter().filter(|s| s["kept"] == true).count();
+    assert_eq!(kept(colon), 1, "{colon}");
+    assert!(colon["segments"].as_array().unwrap().iter().any(|s| s["reason"] == "excluded by the user"), "{colon}");
+    let len = colon["centerline_mm"].as_f64().unwrap();
+    assert!(len < 0.7 * full, "centerline {len:.0} mm after leaving out the far segment, {full:.0} mm before");
+    assert!(r["correction_error"].as_str().is_some_and(|e| e.contains("not in gas")), "{}", r["correction_error"]);
+    assert_eq!(colon["corrections"]["exclude"].as_array().unwrap().len(), 1);
+
+    // Taken back in, and the flight started higher up the rectosigmoid (a point on the
+    // automatic centerline 40 mm along).
+    let pts = std::fs::read_to_string(dir.join("prep").join("centerline.json")).unwrap();
+    let cl: Value = serde_json::from_str(&pts).unwrap();
+    let start = cl["points_lps_mm"].as_array().map(|p| p[p.len() / 20].clone()).unwrap_or(Value::Null);
+    assert!(!start.is_null(), "centerline.json has points_lps_mm: {}", &pts[..200.min(pts.len())]);
+    let r = run("include", serde_json::json!([{"correct": {"exclude": far}}, {"correct": {"include": far}}, {"correct": {"source": start}}, {"quit": true}]));
+    let colon = &r["colon"];
+    assert_eq!(kept(colon), 2, "{colon}");
+    let at = |v: &Value| DVec3::from_array([0, 1, 2].map(|i| v[i].as_f64().unwrap()));
+    let d = at(&colon["start_lps_mm"]).distance(at(&start));
+    assert!(d < 3.0, "the flight starts {d:.1} mm from the point chosen");
+    let len = colon["centerline_mm"].as_f64().unwrap();
+    assert!(len < full - 20.0 && len > 0.8 * full, "centerline {len:.0} mm starting higher, {full:.0} mm before");
+    assert!(r["correction_error"].is_null());
+}

@@ -164,6 +164,8 @@ pub enum Left {
     TooSmall,
     TooFar(f64),
     BridgeTooDear { gap_mm: f64, cost: f64 },
+    /// The user said it is not colon.
+    Excluded,
 }
 
 pub struct Chain {

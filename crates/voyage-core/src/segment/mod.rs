@@ -46,9 +46,12 @@ use work::{Bbox, BRIDGE, GAS, LAYER, POOL};
 pub struct SegmentOptions {
     /// Air is HU below this.
     pub air_hu: i16,
-    /// A point in gas that is colon (volume-local mm): its region joins the colon even if the
-    /// automatic chain would leave it out. It is not the source.
-    pub seed_mm: Option<DVec3>,
+    /// Points in gas that is colon (volume-local mm): their regions join the colon even if
+    /// the automatic chain would leave them out. None of them is the source.
+    pub seeds_mm: Vec<DVec3>,
+    /// Points in gas that is not colon (volume-local mm): their regions are left out of the
+    /// colon, even the lowest (the rectum is then the lowest of the rest).
+    pub exclude_mm: Vec<DVec3>,
     /// Treat the input as a lumen mask (non-zero = lumen). None: detect (values only 0 and 1).
     pub mask: Option<bool>,
     /// Components smaller than this (ml) are not reported one by one.
@@ -66,7 +69,7 @@ pub struct SegmentOptions {
 
 impl Default for SegmentOptions {
     fn default() -> Self {
-        SegmentOptions { air_hu: -500, seed_mm: None, mask: None, min_report_ml: 0.5, min_colon_ml: 10.0, fluid_hu: Some(200), position: None, chain: ChainOptions::default() }
+        SegmentOptions { air_hu: -500, seeds_mm: Vec::new(), exclude_mm: Vec::new(), mask: None, min_report_ml: 0.5, min_colon_ml: 10.0, fluid_hu: Some(200), position: None, chain: ChainOptions::default() }
     }
 }
 
@@ -113,6 +116,9 @@ pub struct SegmentReport {
     pub fluid_ml: f64,
     /// Bounding box in patient LPS mm.
     pub extent_lps_mm: [[f64; 3]; 2],
+    /// A point in its gas (its lowest gas voxel, patient LPS mm): give it to `--seed` to
+    /// take the segment in, to `--exclude` to leave it out.
+    pub anchor_lps_mm: [f64; 3],
     pub kept: bool,
     /// Why it was left out.
     pub reason: Option<String>,
@@ -228,7 +234,7 @@ pub fn segment(vol: &Volume<i16>, opts: &SegmentOptions) -> Result<Segmentation>
     perm.swap(axial, 2);
     let stored = vol.reoriented(perm, [false; 3])?;
     let swap = |p: DVec3| DVec3::new(p[perm[0]], p[perm[1]], p[perm[2]]);
-    let o = SegmentOptions { seed_mm: opts.seed_mm.map(swap), ..opts.clone() };
+    let o = SegmentOptions { seeds_mm: opts.seeds_mm.iter().map(|&p| swap(p)).collect(), exclude_mm: opts.exclude_mm.iter().map(|&p| swap(p)).collect(), ..opts.clone() };
     let s = segment_axial(&stored, &o, false)?;
     s.stored_back(perm, vol.geometry())
 }
@@ -268,7 +274,9 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
     connect_3d(&runs, &inside, vol.dims(), &mut labels);
     let (mut comps, run_comp) = component_stats(&runs, &inside, vol, &mut labels, from_mask);
     classify_lungs(&mut comps, from_mask);
-    let seed_comp = opts.seed_mm.map(|mm| seed_component(&comps, &runs, &run_comp, vol, mm, opts)).transpose()?;
+    let gas_at = |what: &str, mm: &DVec3| gas_component(&comps, &runs, &run_comp, vol, *mm, what, opts);
+    let seed_comps = opts.seeds_mm.iter().map(|mm| gas_at("the seed", mm)).collect::<Result<Vec<_>>>()?;
+    let exclude_comps = opts.exclude_mm.iter().map(|mm| gas_at("the point to exclude", mm)).collect::<Result<Vec<_>>>()?;
     let mut warnings = Vec::new();
 
     // Working labels in the volume that becomes the lumen.
@@ -346,13 +354,18 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
             gas_compartment[c as usize] = comp_at([runs.runs[r].x0 as usize, j, k]);
         }
     }
-    let seed_compartment = seed_comp.and_then(|c| gas_compartment[c]);
-    let candidate = |c: u32| compartments[c as usize].gas_voxels as f64 * voxel_ml >= opts.chain.min_segment_ml;
-    // The rectum: the candidate holding the lowest voxel in the patient frame.
+    let seeded: Vec<u32> = seed_comps.iter().filter_map(|&c| gas_compartment[c]).collect();
+    let excluded: Vec<u32> = exclude_comps.iter().filter_map(|&c| gas_compartment[c]).collect();
+    if let Some(i) = seeded.iter().position(|c| excluded.contains(c)) {
+        return Err(Error::invalid(format!("the seed {} lies in gas also excluded (by another point)", vol.geometry().describe_point(opts.seeds_mm[i]))));
+    }
+    // A segment: big enough, or seeded; never excluded.
+    let candidate = |c: u32| !excluded.contains(&c) && (compartments[c as usize].gas_voxels as f64 * voxel_ml >= opts.chain.min_segment_ml || seeded.contains(&c));
+    // The rectum: the candidate holding the lowest voxel in the patient frame (a seed makes
+    // its gas a candidate; where it lies, not the seed, decides the rectum).
     let rectum = (0..compartments.len() as u32)
         .filter(|&c| candidate(c))
         .max_by(|&a, &b| compartments[a as usize].lowest_height.total_cmp(&compartments[b as usize].lowest_height).then(b.cmp(&a)))
-        .or(seed_compartment)
         .ok_or_else(|| no_colon(&comps, opts, from_mask))?;
 
     let mut coarse = Coarse::new(vol.dims(), vol.spacing());
@@ -360,7 +373,7 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
         for j in cbox.lo[1]..=cbox.hi[1] {
             for r in cruns.row(j, k) {
                 let c = crun_comp[r];
-                if c == rectum || candidate(c) || Some(c) == seed_compartment {
+                if c == rectum || candidate(c) {
                     coarse.mark_run(cruns.runs[r].x0 as usize, cruns.runs[r].x1 as usize, j, k, c);
                 }
             }
@@ -392,11 +405,12 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
         let other = |v: [usize; 3]| matches!(work.get(v[0], v[1], v[2]), GAS | POOL | LAYER) && !own(v);
         bridge::cheapest_path(ct, dims, vol.spacing(), va, vb, own, other)
     };
-    let mut ch: Chain = chain::chain(&coarse, &compartments, rectum, |c| candidate(c) || Some(c) == seed_compartment, &opts.chain, &bridge);
+    let mut ch: Chain = chain::chain(&coarse, &compartments, rectum, candidate, &opts.chain, &bridge);
     // A seed's gas is colon, wherever the chain went: joined at the chain's end.
-    if let Some(s) = seed_compartment
-        && !ch.links.iter().any(|l| l.comp == s)
-    {
+    for &s in &seeded {
+        if ch.links.iter().any(|l| l.comp == s) {
+            continue;
+        }
         let last = ch.links.last().map_or(0, |l| l.exit);
         let at = coarse.centre_mm(last);
         let entry = [coarse.block_of(compartments[s as usize].lowest)].into_iter().chain([coarse.farthest(s, coarse.block_of(compartments[s as usize].lowest)).0]).min_by(|&x, &y| coarse.centre_mm(x).distance(at).total_cmp(&coarse.centre_mm(y).distance(at))).unwrap_or(0);
@@ -406,11 +420,19 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
             ch.links.push(chain::Link { comp: s, entry, exit: coarse.farthest(s, entry).0 });
             ch.gaps.push(p);
             ch.left.retain(|(c, _)| *c != s);
+        } else {
+            warnings.push(format!("the seed's gas ({:.0} ml) could not be joined to the colon: no way to it through the CT", compartments[s as usize].gas_voxels as f64 * voxel_ml));
+        }
+    }
+
+    for (c, why) in &mut ch.left {
+        if excluded.contains(c) {
+            *why = Left::Excluded;
         }
     }
 
     let colon_gas_ml: f64 = ch.links.iter().map(|l| compartments[l.comp as usize].gas_voxels as f64 * voxel_ml).sum();
-    if seed_compartment.is_none() && colon_gas_ml < opts.min_colon_ml {
+    if seeded.is_empty() && colon_gas_ml < opts.min_colon_ml {
         return Err(no_colon(&comps, opts, from_mask));
     }
 
@@ -494,6 +516,7 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
             Left::TooFar(d) if d.is_finite() => format!("its nearest end is {d:.0} mm from the colon's end (more than {:.0} mm)", opts.chain.max_gap_mm),
             Left::TooFar(_) => "not reached from the colon's end".to_string(),
             Left::BridgeTooDear { gap_mm, cost } => format!("the way to it ({gap_mm:.0} mm) crosses fat or bone, not collapsed bowel (cost {cost:.1} per mm)"),
+            Left::Excluded => EXCLUDED.to_string(),
         };
         let label = match kind {
             ComponentKind::SmallBowel => "small bowel",
@@ -518,7 +541,7 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
             lps(ends.0)[2]
         ));
     }
-    for s in segments.iter().filter(|s| !s.kept && s.gas_ml >= LARGE_LEFT_ML) {
+    for s in segments.iter().filter(|s| !s.kept && s.gas_ml >= LARGE_LEFT_ML && s.reason.as_deref() != Some(EXCLUDED)) {
         warnings.push(format!("{:.0} ml of gas ({}) left out of the colon: {}", s.gas_ml, s.label, s.reason.as_deref().unwrap_or("")));
     }
     // Gas components, labelled by their compartment.
@@ -547,6 +570,8 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
     })
 }
 
+/// Why a segment the user excluded is not in the colon.
+const EXCLUDED: &str = "excluded by the user";
 /// Gas left out of the colon from this size on (ml) gets a warning.
 const LARGE_LEFT_ML: f64 = 20.0;
 /// Fluid filling a bridged stretch is taken this far (mm) from the bridge's path.
@@ -891,15 +916,16 @@ fn classify_lungs(comps: &mut [Component], from_mask: bool) {
     }
 }
 
-/// The gas component holding the seed (an error that says why when there is none).
-fn seed_component(comps: &[Component], runs: &Runs, run_comp: &[u32], vol: &Volume<i16>, mm: DVec3, opts: &SegmentOptions) -> Result<usize> {
-    let [i, j, k] = voxel_of(vol, mm)?;
+/// The gas component holding a point the user gave (`what`: "the seed", ...), or an error
+/// that says why there is none.
+fn gas_component(comps: &[Component], runs: &Runs, run_comp: &[u32], vol: &Volume<i16>, mm: DVec3, what: &str, opts: &SegmentOptions) -> Result<usize> {
     let at = vol.geometry().describe_point(mm);
+    let [i, j, k] = voxel_of(vol, mm).ok_or_else(|| Error::invalid(format!("{what} {at} lies outside the volume")))?;
     match runs.at([i, j, k]).map(|r| run_comp[r]) {
         Some(c) if c != u32::MAX && comps[c as usize].kind != ComponentKind::Lung => Ok(c as usize),
-        Some(c) if c != u32::MAX => Err(Error::invalid(format!("the seed {at} lies in a lung, not in the colon"))),
-        Some(_) => Err(Error::invalid(format!("the seed {at} lies in air outside the body"))),
-        None => Err(Error::invalid(format!("the seed {at} is not in air (HU {} ≥ {})", vol.get(i, j, k), opts.air_hu))),
+        Some(c) if c != u32::MAX => Err(Error::invalid(format!("{what} {at} lies in a lung, not in the bowel"))),
+        Some(_) => Err(Error::invalid(format!("{what} {at} lies in air outside the body"))),
+        None => Err(Error::invalid(format!("{what} {at} is not in gas (HU {} ≥ {})", vol.get(i, j, k), opts.air_hu))),
     }
 }
 
@@ -919,12 +945,9 @@ fn no_colon(comps: &[Component], opts: &SegmentOptions, from_mask: bool) -> Erro
     ))
 }
 
-fn voxel_of(vol: &Volume<i16>, mm: DVec3) -> Result<[usize; 3]> {
+fn voxel_of(vol: &Volume<i16>, mm: DVec3) -> Option<[usize; 3]> {
     let ijk = vol.geometry().local_to_index(mm).round();
-    if !vol.geometry().contains_index(ijk) {
-        return Err(Error::invalid(format!("the seed {} lies outside the volume", vol.geometry().describe_point(mm))));
-    }
-    Ok([ijk.x as usize, ijk.y as usize, ijk.z as usize])
+    vol.geometry().contains_index(ijk).then_some([ijk.x as usize, ijk.y as usize, ijk.z as usize])
 }
 
 /// (j, k) of run `r`'s row.
@@ -1213,6 +1236,7 @@ fn segment_report(comp: &Compartment, geom: &crate::Geometry, label: String, kin
         gas_ml: comp.gas_voxels as f64 * voxel_ml,
         fluid_ml: (comp.voxels - comp.gas_voxels) as f64 * voxel_ml,
         extent_lps_mm: [b[0].to_array(), b[1].to_array()],
+        anchor_lps_mm: geom.index_to_patient(DVec3::from_array(comp.lowest.map(|x| x as f64))).to_array(),
         kept: order.is_some(),
         reason,
     }
@@ -1367,18 +1391,18 @@ mod tests {
         // A seed in the pocket says it is colon: it joins, and so does the tube beside it
         // (a segment big enough, within reach), bridged, with a warning; the rectum side is
         // still the lowest colon gas, not the seed.
-        let seeded = SegmentOptions { seed_mm: Some(DVec3::new(40.0, 20.0, 15.0)), ..Default::default() };
+        let seeded = SegmentOptions { seeds_mm: vec![DVec3::new(40.0, 20.0, 15.0)], ..Default::default() };
         let s = segment(&v, &seeded).unwrap();
         assert_eq!(s.lumen.get(40, 20, 10), 1);
         assert_eq!(s.lumen.get(20, 25, 20), 1);
         assert_eq!(s.gaps.len(), 1);
         assert!(s.warnings.iter().any(|w| w.contains("bridged")), "{:?}", s.warnings);
         assert_eq!(s.seed_voxel[2], 3, "the source side is the lowest colon gas, not the seed");
-        let in_tissue = SegmentOptions { seed_mm: Some(DVec3::new(30.0, 10.0, 30.0)), ..Default::default() };
-        assert!(segment(&v, &in_tissue).unwrap_err().to_string().contains("not in air"));
-        let outside = SegmentOptions { seed_mm: Some(DVec3::new(0.0, 0.0, 0.0)), ..Default::default() };
+        let in_tissue = SegmentOptions { seeds_mm: vec![DVec3::new(30.0, 10.0, 30.0)], ..Default::default() };
+        assert!(segment(&v, &in_tissue).unwrap_err().to_string().contains("not in gas"));
+        let outside = SegmentOptions { seeds_mm: vec![DVec3::new(0.0, 0.0, 0.0)], ..Default::default() };
         assert!(segment(&v, &outside).unwrap_err().to_string().contains("outside the body"));
-        let beyond = SegmentOptions { seed_mm: Some(DVec3::new(500.0, 0.0, 0.0)), ..Default::default() };
+        let beyond = SegmentOptions { seeds_mm: vec![DVec3::new(500.0, 0.0, 0.0)], ..Default::default() };
         assert!(segment(&v, &beyond).is_err());
     }
 

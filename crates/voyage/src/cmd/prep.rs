@@ -50,9 +50,14 @@ fn parse_position(s: &str) -> Result<PatientPosition, String> {
 #[derive(Args, Debug, Clone, Default)]
 pub struct PointArgs {
     /// A point in gas that is colon (mm, see --coords): its gas joins the colon. It does not
-    /// move the start; --source does.
+    /// move the start; --source does. Repeat it for several segments (`prep --json` lists
+    /// each segment with a point in it, `anchor_lps_mm`).
     #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
-    pub seed: Option<DVec3>,
+    pub seed: Vec<DVec3>,
+    /// A point in gas that is not colon (mm, see --coords): its gas is left out, even when it
+    /// is the lowest (the rectum is then the lowest of the rest). Repeatable.
+    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
+    pub exclude: Vec<DVec3>,
     /// The rectum end of the flight (mm, see --coords).
     #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
     pub source: Option<DVec3>,
@@ -76,7 +81,8 @@ impl PointArgs {
             Frame::Lps => g.patient_to_local(p),
             Frame::Local => p,
         };
-        opts.segment.seed_mm = self.seed.map(to_local);
+        opts.segment.seeds_mm = self.seed.iter().map(|&p| to_local(p)).collect();
+        opts.segment.exclude_mm = self.exclude.iter().map(|&p| to_local(p)).collect();
         opts.endpoints.source_mm = self.source.map(to_local);
         opts.endpoints.target_mm = self.target.map(to_local);
         opts.segment.position = match (self.position, meta.position) {

@@ -15,13 +15,14 @@ use voyage_core::potential::Direction;
 use voyage_core::render::closeup::{render_closeup, CloseupBox, TransferFunction};
 use voyage_core::submarine::Input;
 
+use super::corrections::{self, Correction};
 use super::endoscopy::{label, ray_at, surface_point_on_screen, visible_centerline, Endoscope};
 use super::loader::{Job, Source};
 use super::pixels::WindowGpu;
 use super::scout::{ScoutMarks, ScoutView};
 use super::script::{Script, Step};
 use super::session::Session;
-use super::slices::SlicePanel;
+use super::slices::{SliceAction, SlicePanel};
 use super::WindowArgs;
 
 /// What a click on the endoscopic view does.
@@ -88,6 +89,12 @@ pub struct App {
     args: WindowArgs,
     job: Option<Job>,
     session: Option<Session>,
+    /// What the open session was made from (its points are the corrections so far).
+    source: Option<Source>,
+    /// The job running is a correction of the open session, which stays in use meanwhile.
+    correcting: Option<Correction>,
+    /// Why the last correction failed (the session before it stays).
+    correction_error: Option<String>,
     generation: u64,
     error: Option<String>,
     open_path: String,
@@ -156,6 +163,9 @@ impl App {
             args,
             job,
             session: None,
+            source: None,
+            correcting: None,
+            correction_error: None,
             generation: 0,
             error: None,
             open_path: String::new(),
@@ -194,15 +204,36 @@ impl App {
 
     fn open(&mut self, source: Source, ctx: &egui::Context) {
         self.error = None;
+        self.correcting = None;
         self.status = format!("opening {}", source.describe());
         self.job = Some(Job::start(source, ctx.clone()));
+    }
+
+    /// Preprocesses the open study again with a correction, in the background; the session
+    /// open stays in use until the new one is ready.
+    fn correct(&mut self, c: Correction, ctx: &egui::Context) {
+        let (Some(s), Some(source)) = (&self.session, &self.source) else { return };
+        if self.job.is_some() {
+            self.status = "a correction is still being preprocessed".into();
+            return;
+        }
+        let points = c.applied_to(source.points(), s.study.ct.geometry());
+        self.status = format!("preprocessing again: {}", c.describe());
+        self.correction_error = None;
+        self.correcting = Some(c);
+        self.job = Some(Job::start(source.with_points(points), ctx.clone()));
     }
 
     fn poll_job(&mut self) {
         let Some(job) = &mut self.job else { return };
         let Some(result) = job.poll() else { return };
         let seconds = job.started.elapsed().as_secs_f64();
+        let source = job.source.clone();
         self.job = None;
+        if let Some(c) = self.correcting.take() {
+            self.corrected(c, source, result, seconds);
+            return;
+        }
         match result {
             Ok(mut s) => {
                 s.set_playing(!self.args.paused);
@@ -218,6 +249,8 @@ impl App {
                 self.closeup_at = None;
                 self.measure_from = None;
                 self.session = Some(s);
+                self.source = Some(source);
+                self.correction_error = None;
                 self.generation += 1;
                 self.frames = 0;
                 self.announced = false;
@@ -228,6 +261,33 @@ impl App {
                 self.status = "could not open the study".into();
                 self.frames = 0;
                 note_error(&self.outcome, msg);
+            }
+        }
+    }
+
+    /// A correction's run is done: its session replaces the open one (findings, window and
+    /// level kept: the CT is the same), or the error is shown and the open one stays.
+    fn corrected(&mut self, c: Correction, source: Source, result: anyhow::Result<Session>, seconds: f64) {
+        match result {
+            Ok(mut s) => {
+                let was = self.session.as_ref().map_or(0.0, |o| o.study.centerline.length_mm);
+                s.set_playing(false);
+                let kept = s.study.segmentation.segments.iter().filter(|x| x.kept).count();
+                self.status = format!("{} in {seconds:.1} s: {kept} colon segment{}, centerline {:.0} mm (was {was:.0})", c.describe(), if kept == 1 { "" } else { "s" }, s.study.centerline.length_mm);
+                self.closeup = None;
+                self.measure_from = None;
+                self.slices.follow();
+                if let Some(v) = &mut self.scout {
+                    v.colon_changed();
+                }
+                self.session = Some(s);
+                self.source = Some(source);
+                self.generation += 1;
+            }
+            Err(e) => {
+                let msg = format!("{e:#}");
+                self.status = format!("{}: not possible", c.describe());
+                self.correction_error = Some(msg);
             }
         }
     }
@@ -367,7 +427,8 @@ impl App {
     }
 
     fn run_script(&mut self, ctx: &egui::Context) {
-        if self.session.is_none() {
+        // A correction being preprocessed holds the script: the next step sees its result.
+        if self.session.is_none() || self.job.is_some() {
             return;
         }
         let Some(script) = &mut self.script else { return };
@@ -442,6 +503,7 @@ impl App {
                 }
             }
             Step::Export(dir) => self.export(dir),
+            Step::Correct(c) => self.correct(c, ctx),
             Step::Quit(now) => {
                 if now {
                     self.quit(ctx);
@@ -510,6 +572,8 @@ impl App {
             "view_rect": rect(self.view_rect),
             "cells": self.endoscope.stats.cells,
             "triangles": self.endoscope.stats.triangles,
+            "colon": self.session.as_ref().map(|s| colon_report(s, self.source.as_ref())),
+            "correction_error": self.correction_error,
         });
         if let Ok(mut o) = self.outcome.lock() {
             o.report = Some(report);
@@ -530,7 +594,7 @@ impl App {
                     self.open(Source::File { path, mask: false, series: None, points: Default::default() }, ui.ctx());
                 }
                 if ui.button("Demo phantom").clicked() {
-                    self.open(Source::Phantom { small: false }, ui.ctx());
+                    self.open(Source::Phantom { small: false, points: Default::default() }, ui.ctx());
                 }
                 ui.separator();
                 if ui.button("Help (H)").clicked() {
@@ -570,7 +634,24 @@ impl App {
             ui.label(RichText::new("goal reached").color(Color32::LIGHT_GREEN));
         }
         ui.label(format!("to the goal: {:.0} mm", s.dt_to_goal()));
-        colon_summary(ui, &s.study);
+        ui.separator();
+        ui.heading("Colon");
+        let busy = self.job.is_some();
+        let mut asked = colon_summary(ui, &s.study, busy);
+        let n = self.source.as_ref().map_or(0, |x| corrections::count(x.points()));
+        if let Some(job) = &self.job {
+            ui.add(egui::ProgressBar::new(job.fraction()).text(format!("again: {}", job.what)));
+        } else if n > 0 && ui.button(format!("Undo {n} correction{}", if n == 1 { "" } else { "s" })).on_hover_text("back to the colon found automatically").clicked() {
+            asked = Some(Correction::Reset);
+        }
+        if let Some(e) = &self.correction_error {
+            ui.label(RichText::new(e).small().color(Color32::from_rgb(255, 140, 120)));
+        }
+        ui.label(RichText::new("right click on a slice: start / end here, gas is colon or not").small().color(Color32::from_gray(150)));
+        if let Some(c) = asked {
+            self.correct(c, ui.ctx());
+        }
+        let Some(s) = &mut self.session else { return };
         ui.separator();
         ui.add(egui::Slider::new(&mut s.sub.potential.ct, 0.0..=1000.0).text("Ct (pull)"));
         ui.add(egui::Slider::new(&mut s.sub.potential.cs, 0.0..=1000.0).text("Cs (wall)"));
@@ -658,15 +739,19 @@ impl App {
         egui::Panel::bottom("slices").resizable(false).exact_size(262.0).show(ui, |ui| {
             let Some(s) = &mut self.session else { return };
             let at = s.pose().position;
-            if let Some(p) = self.slices.show(ui, &s.study.ct, at) {
-                let forward = s.pose().z_body();
-                match s.jump_to(p, forward) {
-                    Ok(()) => {
-                        self.slices.follow();
-                        self.status = "moved to the point clicked".into();
+            match self.slices.show(ui, &s.study.ct, at, self.job.is_some()) {
+                Some(SliceAction::MoveTo(p)) => {
+                    let forward = s.pose().z_body();
+                    match s.jump_to(p, forward) {
+                        Ok(()) => {
+                            self.slices.follow();
+                            self.status = "moved to the point clicked".into();
+                        }
+                        Err(e) => self.status = e,
                     }
-                    Err(e) => self.status = e,
                 }
+                Some(SliceAction::Correct(c)) => self.correct(c, ui.ctx()),
+                None => {}
             }
         });
     }
@@ -991,13 +1076,31 @@ impl eframe::App for App {
 }
 
 /// The colon's segments, bridged gaps, the patient's position and the warnings, as
-/// preprocessing reported them.
-fn colon_summary(ui: &mut egui::Ui, study: &voyage_core::prep::Study) {
+/// preprocessing reported them. Each segment has a box to take it in or leave it out; the
+/// correction asked for, if any, is returned (`busy`: one is being preprocessed).
+fn colon_summary(ui: &mut egui::Ui, study: &voyage_core::prep::Study, busy: bool) -> Option<Correction> {
     let seg = &study.segmentation;
     let o = &seg.orientation;
     let kept = seg.segments.iter().filter(|s| s.kept).count();
     ui.label(format!("{} ({}, {})", o.position.code(), o.position.describe(), o.source.describe()));
-    ui.label(format!("{kept} colon segment{}", if kept == 1 { "" } else { "s" }));
+    let mut asked = None;
+    egui::CollapsingHeader::new(format!("{kept} colon segment{} of {} gas regions", if kept == 1 { "" } else { "s" }, seg.segments.len()))
+        .id_salt("segments")
+        .default_open(seg.segments.len() <= 8)
+        .show(ui, |ui| {
+            ui.add_enabled_ui(!busy, |ui| {
+                for s in &seg.segments {
+                    let mut on = s.kept;
+                    let text = format!("{}, {:.0} ml", s.label, s.gas_ml + s.fluid_ml);
+                    let why = s.reason.as_deref().unwrap_or("in the colon");
+                    let a = s.anchor_lps_mm;
+                    let hover = format!("{why}\nuntick to leave it out, tick to take it in\nLPS ({:.0}, {:.0}, {:.0}) mm", a[0], a[1], a[2]);
+                    if ui.checkbox(&mut on, text).on_hover_text(hover).changed() {
+                        asked = Some(if on { Correction::Include(a) } else { Correction::Exclude(a) });
+                    }
+                }
+            });
+        });
     for (gap, span) in seg.gaps.iter().zip(study.collapsed_spans.iter().map(Some).chain(std::iter::repeat(None))) {
         let names = |i: usize| seg.segments.iter().find(|s| s.order == Some(i)).map_or("?", |s| s.label.as_str());
         let at = span.map_or(String::new(), |a| format!(" at {:.0} mm", a[0]));
@@ -1012,4 +1115,24 @@ fn colon_summary(ui: &mut egui::Ui, study: &voyage_core::prep::Study) {
                 }
             });
     }
+    asked
+}
+
+/// The colon as the report gives it: segments kept or not, the centerline, the
+/// corrections in force (LPS mm, or the frame the user chose with --coords).
+fn colon_report(s: &Session, source: Option<&Source>) -> serde_json::Value {
+    let seg = &s.study.segmentation;
+    let cl = &s.study.centerline;
+    let g = s.study.ct.geometry();
+    let lps = |i: usize| cl.points_mm.get(i).map(|&p| g.local_to_patient(DVec3::from_array(p)).to_array());
+    let points = source.map(|x| x.points().clone()).unwrap_or_default();
+    let arr = |v: &[DVec3]| v.iter().map(|p| p.to_array()).collect::<Vec<_>>();
+    json!({
+        "segments": seg.segments.iter().map(|x| json!({"label": x.label, "order": x.order, "kept": x.kept, "gas_ml": x.gas_ml, "anchor_lps_mm": x.anchor_lps_mm, "reason": x.reason})).collect::<Vec<_>>(),
+        "gaps": seg.gaps.len(),
+        "centerline_mm": cl.length_mm,
+        "start_lps_mm": lps(0),
+        "end_lps_mm": lps(cl.points_mm.len().saturating_sub(1)),
+        "corrections": {"seed": arr(&points.seed), "exclude": arr(&points.exclude), "source": points.source.map(|p| p.to_array()), "target": points.target.map(|p| p.to_array())},
+    })
 }

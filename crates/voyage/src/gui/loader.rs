@@ -19,16 +19,32 @@ pub enum Source {
     /// A CT (DICOM folder or file, NIfTI, MetaImage, NRRD) or a lumen mask.
     File { path: PathBuf, mask: bool, series: Option<String>, points: PointArgs },
     /// The built-in colon phantom, made on the fly.
-    Phantom { small: bool },
+    Phantom { small: bool, points: PointArgs },
 }
 
 impl Source {
     pub fn describe(&self) -> String {
         match self {
             Source::File { path, .. } => path.display().to_string(),
-            Source::Phantom { small: false } => "the colon phantom".into(),
-            Source::Phantom { small: true } => "the small colon phantom".into(),
+            Source::Phantom { small: false, .. } => "the colon phantom".into(),
+            Source::Phantom { small: true, .. } => "the small colon phantom".into(),
         }
+    }
+
+    /// The user's choices of points (seeds, exclusions, ends) and position.
+    pub fn points(&self) -> &PointArgs {
+        match self {
+            Source::File { points, .. } | Source::Phantom { points, .. } => points,
+        }
+    }
+
+    /// The same input with other points.
+    pub fn with_points(&self, points: PointArgs) -> Source {
+        let mut s = self.clone();
+        match &mut s {
+            Source::File { points: p, .. } | Source::Phantom { points: p, .. } => *p = points,
+        }
+        s
     }
 
     /// The name shown in the title bar: the file name only (folders of DICOM files are
@@ -106,9 +122,11 @@ fn open(source: &Source, progress: &dyn Fn(usize, &str)) -> anyhow::Result<Sessi
             points.apply(loaded.volume.geometry(), &loaded.meta, &mut opts);
             loaded.volume
         }
-        Source::Phantom { small } => {
+        Source::Phantom { small, points } => {
             progress(0, "making the colon phantom");
-            phantom::colon(&ColonOptions { small: *small, ..ColonOptions::default() })?.ct
+            let ct = phantom::colon(&ColonOptions { small: *small, ..ColonOptions::default() })?.ct;
+            points.apply(ct.geometry(), &io::Meta::default(), &mut opts);
+            ct
         }
     };
     let study = prepare(ct, &opts, |stage| {

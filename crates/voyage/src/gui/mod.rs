@@ -3,6 +3,7 @@
 //! in the background while the window shows the progress.
 
 mod app;
+mod corrections;
 mod endoscopy;
 mod loader;
 mod pixels;
@@ -81,7 +82,7 @@ pub fn view(a: &ViewArgs) -> anyhow::Result<()> {
 }
 
 pub fn demo(window: &WindowArgs, small: bool) -> anyhow::Result<()> {
-    run(Some(Source::Phantom { small }), window)
+    run(Some(Source::Phantom { small, points: Default::default() }), window)
 }
 
 /// Opens the window and returns when it is closed. In screenshot and script runs, errors met

@@ -188,6 +188,11 @@ impl ScoutView {
         None
     }
 
+    /// The colon changed (a correction): the image is drawn again, from the same orbit.
+    pub fn colon_changed(&mut self) {
+        self.cached = None;
+    }
+
     /// The decimated surface, drawn on the CPU into an image that is redrawn only when the
     /// view changes: the scout stands still while the submarine flies, and a CPU Vulkan
     /// driver would otherwise blend every scout triangle again each frame. Faces seen

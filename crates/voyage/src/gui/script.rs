@@ -56,6 +56,10 @@ pub enum Step {
     Screenshot(PathBuf),
     /// Export the findings into a folder.
     Export(PathBuf),
+    /// Correct the colon found, as the slices' right-click menu and the segment list do
+    /// (`{"include": [x, y, z]}`, `{"exclude": ...}`, `{"source": ...}`, `{"target": ...}`,
+    /// LPS mm; or `"reset"`), and wait until it has been preprocessed again.
+    Correct(super::corrections::Correction),
     /// Close the window.
     Quit(bool),
 }

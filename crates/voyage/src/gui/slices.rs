@@ -2,12 +2,24 @@
 //! shown the way radiologists read them (the patient's right on the screen's left; anterior
 //! up on axial slices, head up on the others), with a crosshair at the submarine, window /
 //! level presets and drag, scroll through slices, and a click in the lumen to move there.
+//! A right click offers the corrections of the colon found: start or end the flight there,
+//! take the gas there in or leave it out.
 
 use egui::{Color32, Pos2, Rect, Sense, Stroke, Vec2};
 use glam::DVec3;
 use voyage_core::{Geometry, Volume};
 
+use super::corrections::Correction;
 use super::pixels::{PanelImage, Rgba};
+
+/// What a click on a slice asks for.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SliceAction {
+    /// Move the submarine to this point (volume-local mm).
+    MoveTo(DVec3),
+    /// Correct the colon found, and preprocess again.
+    Correct(Correction),
+}
 
 /// Window / level presets (HU): name, width, centre.
 pub const PRESETS: [(&str, f64, f64); 3] = [("Colon", 1600.0, -300.0), ("Lung", 1500.0, -600.0), ("Soft tissue", 400.0, 40.0)];
@@ -72,6 +84,8 @@ struct SliceView {
     image: PanelImage,
     /// What the image shows: slice, window, level, size in pixels.
     shows: Option<(usize, f64, f64, [usize; 2])>,
+    /// Where the context menu was opened (volume-local mm).
+    menu_at: Option<DVec3>,
 }
 
 pub struct SlicePanel {
@@ -84,7 +98,7 @@ impl SlicePanel {
     /// `image_keys`: the three slices' slots among the window's pixel images; `gpu`: the
     /// window's renderer holds them.
     pub fn new(image_keys: [u64; 3], gpu: bool) -> Self {
-        let views = std::array::from_fn(|i| SliceView { plane: Plane::ALL[i], offset: 0, scroll: 0.0, image: PanelImage::new(image_keys[i], Plane::ALL[i].name(), gpu), shows: None });
+        let views = std::array::from_fn(|i| SliceView { plane: Plane::ALL[i], offset: 0, scroll: 0.0, image: PanelImage::new(image_keys[i], Plane::ALL[i].name(), gpu), shows: None, menu_at: None });
         SlicePanel { views, window: PRESETS[0].1, level: PRESETS[0].2 }
     }
 
@@ -95,8 +109,9 @@ impl SlicePanel {
         }
     }
 
-    /// The three slices side by side; returns the local-mm point clicked, if any.
-    pub fn show(&mut self, ui: &mut egui::Ui, ct: &Volume<i16>, at: DVec3) -> Option<DVec3> {
+    /// The three slices side by side; returns what a click asked for, if anything. `busy`:
+    /// a correction is being preprocessed (no other is offered meanwhile).
+    pub fn show(&mut self, ui: &mut egui::Ui, ct: &Volume<i16>, at: DVec3, busy: bool) -> Option<SliceAction> {
         ui.horizontal(|ui| {
             ui.label("W/L:");
             for (name, w, l) in PRESETS {
@@ -104,7 +119,7 @@ impl SlicePanel {
                     (self.window, self.level) = (w, l);
                 }
             }
-            ui.label(format!("W {:.0} L {:.0}", self.window, self.level)).on_hover_text("drag on a slice: ←→ window, ↑↓ level; scroll: slices; click in the colon: go there");
+            ui.label(format!("W {:.0} L {:.0}", self.window, self.level)).on_hover_text("drag on a slice: ←→ window, ↑↓ level; scroll: slices; click in the colon: go there; right click: start / end here, gas is colon or not");
         });
         let mut clicked = None;
         let width = ui.available_width() / 3.0 - 6.0;
@@ -113,7 +128,10 @@ impl SlicePanel {
             for i in 0..3 {
                 let (rect, response) = ui.allocate_exact_size(Vec2::new(width, height), Sense::click_and_drag());
                 if let Some(p) = self.show_one(ui, i, ct, at, rect, &response) {
-                    clicked = Some(p);
+                    clicked = Some(SliceAction::MoveTo(p));
+                }
+                if let Some(c) = self.menu(i, ct.geometry(), &response, busy) {
+                    clicked = Some(SliceAction::Correct(c));
                 }
             }
         });
@@ -180,20 +198,50 @@ impl SlicePanel {
         painter.text(Pos2::new(image_rect.left() + 3.0, image_rect.center().y), egui::Align2::LEFT_CENTER, lx, egui::FontId::proportional(11.0), Color32::from_gray(160));
         painter.text(Pos2::new(image_rect.right() - 3.0, image_rect.center().y), egui::Align2::RIGHT_CENTER, rx, egui::FontId::proportional(11.0), Color32::from_gray(160));
 
-        if response.clicked() {
-            let p = response.interact_pointer_pos()?;
-            if !image_rect.contains(p) {
-                return None;
-            }
+        // Screen → the voxel centre under it (the nearest, so a point given back to
+        // segmentation lies in the voxel the user saw).
+        let to_local = |p: Pos2| {
             let u = ((p.x - image_rect.left()) / image_rect.width()) as f64 * nx as f64 - 0.5;
             let v = ((p.y - image_rect.top()) / image_rect.height()) as f64 * ny as f64 - 0.5;
             let mut ijk = [0.0; 3];
             ijk[lay.x.0] = if lay.x.1 { nx as f64 - 1.0 - u } else { u };
             ijk[lay.y.0] = if lay.y.1 { ny as f64 - 1.0 - v } else { v };
             ijk[lay.fixed] = fixed as f64;
-            return Some(g.index_to_local(DVec3::from_array(ijk)));
+            g.index_to_local(DVec3::from_array(ijk).round())
+        };
+        if response.secondary_clicked() {
+            view.menu_at = response.interact_pointer_pos().filter(|p| image_rect.contains(*p)).map(to_local);
+        }
+        if response.clicked() {
+            let p = response.interact_pointer_pos()?;
+            return image_rect.contains(p).then(|| to_local(p));
         }
         None
+    }
+
+    /// The right-click menu of slice `i`: the corrections at the point clicked.
+    fn menu(&mut self, i: usize, g: &Geometry, response: &egui::Response, busy: bool) -> Option<Correction> {
+        let at = self.views[i].menu_at?;
+        let lps = g.local_to_patient(at).to_array();
+        let mut chosen = None;
+        response.context_menu(|ui| {
+            ui.label(egui::RichText::new(format!("LPS ({:.0}, {:.0}, {:.0}) mm", lps[0], lps[1], lps[2])).small());
+            ui.add_enabled_ui(!busy, |ui| {
+                let items = [
+                    ("Start here (rectum end)", Correction::Source(lps)),
+                    ("End here (cecum end)", Correction::Target(lps)),
+                    ("This gas is colon", Correction::Include(lps)),
+                    ("This gas is not colon", Correction::Exclude(lps)),
+                ];
+                for (text, c) in items {
+                    if ui.button(text).clicked() {
+                        chosen = Some(c);
+                        ui.close();
+                    }
+                }
+            });
+        });
+        chosen
     }
 }
 
