@@ -15,7 +15,9 @@
 //! 3. Components: the remaining air, 6-connected in 3D (diagonal contact through a thin wall
 //!    does not join two loops of the colon).
 //! 4. Lungs: large components whose air is not dark enough to be gas (lung parenchyma lies
-//!    around −850 HU, bowel gas at −1000).
+//!    around −850 HU, bowel gas at −1000). A rectal tube (a thin tube of air from outside
+//!    air into a component) is taken out of its component ([`tube`]): the rectum starts at
+//!    its tip.
 //! 5. Gravity: DICOM PatientPosition or `--position`; else from the air–fluid levels; else
 //!    supine, assumed and said ([`crate::anatomy`]).
 //! 6. Tagged fluid: bright voxels in the column under a gas region's air, across the level
@@ -31,6 +33,7 @@
 mod bridge;
 mod chain;
 mod fluid;
+mod tube;
 mod work;
 
 use glam::DVec3;
@@ -85,6 +88,8 @@ pub enum ComponentKind {
     SmallBowel,
     /// Large gas high on the patient's left, not joined to the colon.
     Stomach,
+    /// The air in a rectal tube, from outside the body into the rectum ([`tube`]).
+    RectalTube,
     Other,
 }
 
@@ -272,8 +277,13 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
     let inside = if from_mask { vec![true; runs.runs.len()] } else { inside_body(&runs, vol.dims()) };
     let mut labels = UnionFind::new(runs.runs.len());
     connect_3d(&runs, &inside, vol.dims(), &mut labels);
-    let (mut comps, run_comp) = component_stats(&runs, &inside, vol, &mut labels, from_mask);
+    let (mut comps, mut run_comp) = component_stats(&runs, &inside, vol, &mut labels, from_mask);
     classify_lungs(&mut comps, from_mask);
+    let tubes = if from_mask { Vec::new() } else { tube::find(&runs, &inside, &run_comp, |c| c != u32::MAX && comps[c as usize].kind != ComponentKind::Lung, vol.dims(), vol.spacing()) };
+    for t in &tubes {
+        // Its air is the outside's, carried in.
+        t.runs.iter().for_each(|&r| run_comp[r] = u32::MAX);
+    }
     let gas_at = |what: &str, mm: &DVec3| gas_component(&comps, &runs, &run_comp, vol, *mm, what, opts);
     let seed_comps = opts.seeds_mm.iter().map(|mm| gas_at("the seed", mm)).collect::<Result<Vec<_>>>()?;
     let exclude_comps = opts.exclude_mm.iter().map(|mm| gas_at("the point to exclude", mm)).collect::<Result<Vec<_>>>()?;
@@ -524,6 +534,9 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
             _ => "other",
         };
         segments.push(segment_report(comp, &geom, label.to_string(), kind, None, Some(reason), voxel_ml));
+    }
+    for t in &tubes {
+        segments.push(tube_report(t, &runs, &geom, voxel_ml));
     }
     let mut gaps = Vec::new();
     for (i, p) in ch.gaps.iter().enumerate() {
@@ -1239,6 +1252,33 @@ fn segment_report(comp: &Compartment, geom: &crate::Geometry, label: String, kin
         anchor_lps_mm: geom.index_to_patient(DVec3::from_array(comp.lowest.map(|x| x as f64))).to_array(),
         kept: order.is_some(),
         reason,
+    }
+}
+
+/// A rectal tube as a gas region left out of the colon.
+fn tube_report(t: &tube::Tube, runs: &Runs, geom: &crate::Geometry, voxel_ml: f64) -> SegmentReport {
+    let mut bbox: Option<Bbox> = None;
+    let mut voxels = 0usize;
+    for &r in &t.runs {
+        let (j, k) = row_of(runs, r);
+        let run = runs.runs[r];
+        voxels += (run.x1 - run.x0) as usize;
+        let b = Bbox { lo: [run.x0 as usize, j, k], hi: [run.x1 as usize - 1, j, k] };
+        bbox = Some(bbox.map_or(b, |x| x.union(&b)));
+    }
+    let b = bbox.map_or([DVec3::ZERO; 2], |b| lps_box(geom, &b));
+    let lps = |v: [f64; 3]| geom.index_to_patient(DVec3::from_array(v)).to_array();
+    let tip = lps(t.tip);
+    SegmentReport {
+        label: "rectal tube".into(),
+        kind: ComponentKind::RectalTube,
+        order: None,
+        gas_ml: voxels as f64 * voxel_ml,
+        fluid_ml: 0.0,
+        extent_lps_mm: [b[0].to_array(), b[1].to_array()],
+        anchor_lps_mm: lps(t.entry),
+        kept: false,
+        reason: Some(format!("a rectal tube, {:.0} mm from the skin to its tip at LPS ({:.0}, {:.0}, {:.0}): its air is not colon; the rectum starts at its tip", t.length_mm, tip[0], tip[1], tip[2])),
     }
 }
 
