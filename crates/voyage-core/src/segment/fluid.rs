@@ -31,11 +31,19 @@ pub const MAX_DEPTH_MM: f64 = 60.0;
 /// voxel).
 const MAX_LAYER_MM: f64 = 2.0;
 
-/// Deeper than this below the gas, fluid stays the colon's only where it is wide: fluid on
-/// both horizontal axes within [`WIDE_MM`] (a pool spreads under its level; a loop leaving
-/// it downward, as the ileum through the ileocecal valve, is a narrow tube).
+/// Deeper than this below the gas, fluid stays the colon's only where it is wide, or where
+/// it ends soon below. Wide: a horizontal chord through it, all fluid, of at least
+/// [`WIDE_MM`] along one of the two horizontal axes. A pool spreads under its level along
+/// its segment; a loop leaving it downward, as the ileum through the ileocecal valve, is a
+/// tube at most 25 mm across (small bowel, real or the full-size phantom's 16–19 mm, 22 mm
+/// as a horizontal cut where it leaves at 30°), so every horizontal chord of it is shorter.
+/// Ends soon: the fluid below it along the line is less than [`TUBE_MM`] deep. The floor of
+/// a pool in a narrow or short segment is narrow too, but it ends at the wall, while a tube
+/// goes on down (a deeper allowance lets the ileum's rim in where its wall comes near). An absolute width, not one relative to the pool:
+/// the small bowel's calibre does not scale with the colon's.
 const NARROW_BELOW_MM: f64 = 4.0;
-const WIDE_MM: f64 = 6.0;
+const WIDE_MM: f64 = 27.0;
+const TUBE_MM: f64 = 3.0;
 
 /// Bright (tagged fluid or bone) in [`LabelRows`].
 pub const BRIGHT: u8 = 2;
@@ -165,22 +173,42 @@ pub fn pools(rows: &LabelRows, geom: &Geometry, bx: &Bbox, gravity_lps: DVec3, b
     let step = geom.spacing[axis];
     let stride = [1isize, geom.dims[0] as isize, (geom.dims[0] * geom.dims[1]) as isize][axis] * sign as isize;
     let limits = Walk { stride, gap_max: max_gap(step), depth_max: (MAX_DEPTH_MM / step).round() as i64, narrow_below: (NARROW_BELOW_MM / step).round() as i64 };
-    // Fluid on both horizontal axes within WIDE_MM of voxel v.
-    let strides = [1usize, geom.dims[0], geom.dims[0] * geom.dims[1]];
-    let horizontal: Vec<(usize, usize)> = (0..3).filter(|&a| a != axis).map(|a| (strides[a], ((WIDE_MM / geom.spacing[a]).round() as usize).max(1))).collect();
-    let wide = |v: usize| {
-        horizontal.iter().all(|&(s, r)| {
-            let ijk = geom.ijk(v);
-            let a = (0..3).find(|&a| strides[a] == s).unwrap_or(0);
-            (ijk[a] >= r && bright(v - s * r)) || (ijk[a] + r < geom.dims[a] && bright(v + s * r))
-        })
-    };
+    let tube_steps = (TUBE_MM / step).ceil() as usize;
+    let wide = |v: usize| !goes_on(geom, v, axis, sign, tube_steps, &bright) || (0..3).filter(|&a| a != axis).any(|a| chord_at_least(geom, v, a, WIDE_MM, &bright));
     let w = bx.widths();
     let lines = if axis == 2 { w[0] * w[1] } else { w[[1, 0, 0][axis]] };
     let per = walk(rows, bx, axis, sign, || (vec![Line { last: i64::MIN / 2, ..Default::default() }; lines], Vec::new()), |(state, marks), line, pos, idx, label| {
         state[line].visit(pos, label, idx, &limits, || wide(idx), marks);
     });
     per.into_iter().flat_map(|(_, m)| m).collect()
+}
+
+/// Whether the `steps` voxels after `v` along `axis` in direction `sign` are all bright.
+fn goes_on(geom: &Geometry, v: usize, axis: usize, sign: i32, steps: usize, bright: impl Fn(usize) -> bool) -> bool {
+    let stride = [1usize, geom.dims[0], geom.dims[0] * geom.dims[1]][axis];
+    let at = geom.ijk(v)[axis];
+    let room = if sign > 0 { geom.dims[axis] - 1 - at } else { at };
+    room >= steps && (1..=steps).all(|t| bright(if sign > 0 { v + t * stride } else { v - t * stride }))
+}
+
+/// Whether the run of bright voxels through voxel `v` along `axis` is at least `mm` long.
+/// Walks out from `v` both ways and stops as soon as it is.
+fn chord_at_least(geom: &Geometry, v: usize, axis: usize, mm: f64, bright: impl Fn(usize) -> bool) -> bool {
+    let need = (mm / geom.spacing[axis]).ceil() as usize;
+    let stride = [1usize, geom.dims[0], geom.dims[0] * geom.dims[1]][axis];
+    let at = geom.ijk(v)[axis];
+    let mut len = 1;
+    let mut up = 1;
+    while len < need && at + up < geom.dims[axis] && bright(v + up * stride) {
+        len += 1;
+        up += 1;
+    }
+    let mut down = 1;
+    while len < need && down <= at && bright(v - down * stride) {
+        len += 1;
+        down += 1;
+    }
+    len >= need
 }
 
 /// Air–fluid interfaces seen along each voxel axis: `[axis][0]` counts lines going from gas
@@ -232,12 +260,13 @@ mod tests {
     use super::*;
     use crate::Volume;
 
-    /// A box of gas over a pool (gravity +y), and beside it a bright "loop" with no gas above,
-    /// and under the gas, behind a 4-voxel wall, another bright loop.
+    /// A box of gas over a pool (gravity +y; 40 mm long along z, a colon segment's pool), and
+    /// beside it a bright "loop" with no gas above, and under the gas, behind a 4-voxel wall,
+    /// another bright loop.
     fn scene() -> Volume<u8> {
-        let g = Geometry::new([40, 30, 20], [1.0; 3], [0.0; 3]).unwrap();
+        let g = Geometry::new([40, 30, 40], [1.0; 3], [0.0; 3]).unwrap();
         let mut v = Volume::filled(g, 0u8).unwrap();
-        for k in 0..20 {
+        for k in 0..40 {
             for i in 2..22 {
                 for j in 2..8 {
                     v.set(i, j, k, GAS);
@@ -298,7 +327,7 @@ mod tests {
         assert_eq!(at(5, 11, 2), Some(POOL));
         assert_eq!(at(5, 20, 2), None, "a loop behind two walls");
         assert_eq!(at(30, 11, 2), None, "a loop with no gas above");
-        assert_eq!(marks.len(), 20 * 6 * 20);
+        assert_eq!(marks.len(), 20 * 6 * 40);
         // A narrow loop leaving the pool downward (the ileum through the ileocecal valve)
         // stays out below the pool, and so does the loop it leads to.
         let mut w = v.clone();
@@ -312,6 +341,20 @@ mod tests {
         let marks = pools(&rows_of(&w), w.geometry(), &all(&w), DVec3::Y, |i| w.data()[i] == BRIGHT);
         let at = |i, j, k| marks.iter().find(|m| m.0 == w.geometry().index(i, j, k)).map(|m| m.1);
         assert_eq!((at(11, 13, 10), at(11, 15, 10), at(11, 20, 10)), (Some(POOL), None, None));
+        // So does a wide one: a 16 mm ileum (the full-size phantom's, a real one's) taken
+        // whole by a rule of bright 6 mm to one side.
+        let mut w = v.clone();
+        for k in 0..40 {
+            for i in 0..40 {
+                for j in 14..30 {
+                    let tube = (4..20).contains(&i) && (12..28).contains(&k);
+                    w.set(i, j, k, if tube { BRIGHT } else { 0 });
+                }
+            }
+        }
+        let marks = pools(&rows_of(&w), w.geometry(), &all(&w), DVec3::Y, |i| w.data()[i] == BRIGHT);
+        let at = |i, j, k| marks.iter().find(|m| m.0 == w.geometry().index(i, j, k)).map(|m| m.1);
+        assert_eq!((at(12, 13, 20), at(12, 16, 20), at(12, 25, 20)), (Some(POOL), None, None));
         // Prone: gravity anterior, the fluid is above the gas: none joins.
         assert!(pools(&rows_of(&v), v.geometry(), &all(&v), -DVec3::Y, bright).is_empty());
     }
@@ -325,7 +368,7 @@ mod tests {
             let g = gravity_from_levels(&rows_of(&r), r.geometry(), &all(&r)).unwrap();
             assert!((g - DVec3::Y).length() < 1e-9, "{perm:?} {flip:?}: {g}");
             // And the same pool, whichever way the lines run in memory.
-            assert_eq!(pools(&rows_of(&r), r.geometry(), &all(&r), DVec3::Y, |i| r.data()[i] == BRIGHT).len(), 20 * 6 * 20, "{perm:?} {flip:?}");
+            assert_eq!(pools(&rows_of(&r), r.geometry(), &all(&r), DVec3::Y, |i| r.data()[i] == BRIGHT).len(), 20 * 6 * 40, "{perm:?} {flip:?}");
         }
     }
 }

@@ -40,7 +40,7 @@ pub fn find(runs: &Runs, inside: &[bool], run_comp: &[u32], is_gas: impl Fn(u32)
         if tubes.iter().any(|t| t.comp == c) {
             continue;
         }
-        if let Some(t) = follow(runs, run_comp, c, r, k, away, dims, spacing) {
+        if let Some(t) = follow(runs, run_comp, c, r, k, away, dims[2], spacing) {
             tubes.push(t);
         }
     }
@@ -76,9 +76,9 @@ fn contacts(runs: &Runs, inside: &[bool], run_comp: &[u32], is_gas: &impl Fn(u32
 /// gas of component `c` joined (in the slice) to the runs over the tube's runs of the slice
 /// before. Inside the rectum the tube's air is walled off by its plastic from the rectum's
 /// gas, so it is followed up to its tip, where it opens into the rectum and widens.
-fn follow(runs: &Runs, run_comp: &[u32], c: u32, start: usize, k0: usize, away: i64, dims: [usize; 3], spacing: [f64; 3]) -> Option<Tube> {
+fn follow(runs: &Runs, run_comp: &[u32], c: u32, start: usize, k0: usize, away: i64, nz: usize, spacing: [f64; 3]) -> Option<Tube> {
     let max_voxels = (MAX_AREA_MM2 / (spacing[0] * spacing[1])).ceil() as usize;
-    let nz = dims[2] as i64;
+    let nz = nz as i64;
     let mut blob = in_slice(runs, run_comp, c, vec![start], max_voxels)?;
     let entry = centroid(runs, &blob);
     let mut tip;
