@@ -35,12 +35,11 @@ pub struct Tube {
 /// stretch from there on, if it is long enough to be a tube.
 pub fn find(runs: &Runs, inside: &[bool], run_comp: &[u32], is_gas: impl Fn(u32) -> bool, dims: [usize; 3], spacing: [f64; 3]) -> Vec<Tube> {
     let mut tubes: Vec<Tube> = Vec::new();
-    for (k, away, r) in contacts(runs, inside, run_comp, &is_gas, dims) {
-        let c = run_comp[r];
-        if tubes.iter().any(|t| t.comp == c) {
+    for contact in contacts(runs, inside, run_comp, &is_gas, dims) {
+        if tubes.iter().any(|t| t.comp == run_comp[contact.2]) {
             continue;
         }
-        if let Some(t) = follow(runs, run_comp, c, r, k, away, dims[2], spacing) {
+        if let Some(t) = follow(runs, run_comp, contact, dims[2], spacing) {
             tubes.push(t);
         }
     }
@@ -76,7 +75,8 @@ fn contacts(runs: &Runs, inside: &[bool], run_comp: &[u32], is_gas: &impl Fn(u32
 /// gas of component `c` joined (in the slice) to the runs over the tube's runs of the slice
 /// before. Inside the rectum the tube's air is walled off by its plastic from the rectum's
 /// gas, so it is followed up to its tip, where it opens into the rectum and widens.
-fn follow(runs: &Runs, run_comp: &[u32], c: u32, start: usize, k0: usize, away: i64, nz: usize, spacing: [f64; 3]) -> Option<Tube> {
+fn follow(runs: &Runs, run_comp: &[u32], (k0, away, start): (usize, i64, usize), nz: usize, spacing: [f64; 3]) -> Option<Tube> {
+    let c = run_comp[start];
     let max_voxels = (MAX_AREA_MM2 / (spacing[0] * spacing[1])).ceil() as usize;
     let nz = nz as i64;
     let mut blob = in_slice(runs, run_comp, c, vec![start], max_voxels)?;
