@@ -10,6 +10,7 @@ pub mod blocks;
 pub mod camera;
 pub mod cells;
 pub mod centerline;
+pub mod cleanse;
 pub mod contacts;
 pub mod distance;
 pub mod endpoints;

@@ -8,6 +8,7 @@ use glam::DVec3;
 use serde::Serialize;
 
 use crate::cells::{build_cells, CellOptions, Cells};
+use crate::cleanse::{cleanse, CleanseOptions, Cleansing, Scene};
 use crate::centerline::{Centerline, CenterlineOptions};
 use crate::distance::distance_to_wall_in;
 use crate::contacts::{cut_contacts, ContactOptions};
@@ -18,13 +19,28 @@ use crate::segment::{segment, SegmentOptions, Segmentation};
 use crate::surface::{extract_surface, Surface};
 use crate::{Result, Volume};
 
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct PrepOptions {
     pub segment: SegmentOptions,
+    /// Electronic cleansing of the colon's tagged fluid ([`crate::cleanse`]); None: off.
+    pub cleanse: Option<CleanseOptions>,
     pub endpoints: EndpointOptions,
     pub centerline: CenterlineOptions,
     pub cells: CellOptions,
     pub contacts: ContactOptions,
+}
+
+impl Default for PrepOptions {
+    fn default() -> Self {
+        PrepOptions {
+            segment: SegmentOptions::default(),
+            cleanse: Some(CleanseOptions::default()),
+            endpoints: EndpointOptions::default(),
+            centerline: CenterlineOptions::default(),
+            cells: CellOptions::default(),
+            contacts: ContactOptions::default(),
+        }
+    }
 }
 
 /// The stages, in order, for progress reports.
@@ -57,6 +73,8 @@ impl Stage {
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct Timings {
     pub segment: f64,
+    /// Electronic cleansing (0 without tagged fluid).
+    pub cleanse: f64,
     /// The skeleton search: endpoints and the raw centerline path.
     pub skeleton: f64,
     /// Walls where loops touch.
@@ -76,6 +94,9 @@ pub struct Study {
     /// The input: HU, or a mask's labels.
     pub ct: Volume<i16>,
     pub segmentation: Segmentation,
+    /// What electronic cleansing changed in `ct` (empty without tagged fluid, or when it is
+    /// off): [`Study::cleansed_ct`] is the CT the surface was cut from.
+    pub cleansing: Cleansing,
     /// Ds: distance to the wall (mm), over the lumen's box, in the bricks that hold lumen
     /// (0 elsewhere).
     pub ds: Bricked<f32>,
@@ -97,6 +118,12 @@ pub struct Study {
 }
 
 impl Study {
+    /// The CT with the colon's tagged fluid made air (a copy; the CT itself when nothing was
+    /// cleansed).
+    pub fn cleansed_ct(&self) -> Volume<i16> {
+        self.cleansing.swapped_copy(&self.ct)
+    }
+
     /// Gravity as a volume-local unit vector (from the patient's position).
     pub fn gravity_local(&self) -> DVec3 {
         crate::anatomy::PatientFrame::of(self.ct.geometry()).local(self.segmentation.orientation.gravity())
@@ -147,6 +174,15 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Sta
     progress(Stage::Segment);
     let mut seg = segment(&ct, &opts.segment)?;
     lap(&mut t.segment);
+    let mut cleansing = match (&opts.cleanse, opts.segment.fluid_hu) {
+        (Some(c), Some(fluid_hu)) if !seg.from_mask && seg.fluid_voxels > 0 => {
+            let scene = Scene { ct: &ct, lumen: &mut seg.lumen, extent: seg.extent, gravity_lps: seg.orientation.gravity(), air_hu: opts.segment.air_hu, fluid_hu };
+            cleanse(scene, c)
+        }
+        _ => Cleansing::default(),
+    };
+    seg.lumen_voxels -= cleansing.left_lumen;
+    lap(&mut t.cleanse);
 
     // The skeleton search runs on blocks with their own Ds when the lumen is large, so the
     // voxels' Ds waits until the contacts are cut; on a small lumen it needs Ds first.
@@ -199,8 +235,13 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Sta
     lap(&mut t.dt);
 
     progress(Stage::Surface);
+    // The surface is cut from the cleansed CT: swapped in for it, and back.
+    let mut ct = ct;
+    cleansing.swap(&mut ct);
     let iso = if seg.from_mask { None } else { Some(&ct) };
-    let surface = extract_surface(&seg.lumen, iso, &ds.grid, opts.segment.air_hu as f32)?;
+    let surface = extract_surface(&seg.lumen, iso, &ds.grid, opts.segment.air_hu as f32);
+    cleansing.swap(&mut ct);
+    let surface = surface?;
     lap(&mut t.surface);
 
     progress(Stage::Cells);
@@ -216,6 +257,7 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Sta
     Ok(Study {
         ct,
         segmentation: seg,
+        cleansing,
         ds,
         dt_target: dt_target.dist,
         dt_source: dt_source.dist,

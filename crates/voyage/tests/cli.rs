@@ -232,6 +232,7 @@ fn prep_writes_its_exports_and_reports_json() {
     for f in ["lumen.nii.gz", "ds.nii.gz", "centerline.json", "centerline.mrk.json", "surface.ply", "surface.stl", "cells.json"] {
         assert!(out.join(f).metadata().map(|m| m.len() > 0).unwrap_or(false), "{f} not written");
     }
+    assert!(!out.join("cleansed.nii.gz").exists() && j["cleanse"].is_null(), "no tagged fluid, nothing to cleanse");
     let mrk: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("centerline.mrk.json")).unwrap()).unwrap();
     assert_eq!(mrk["markups"][0]["type"], "Curve");
     assert_eq!(mrk["markups"][0]["coordinateSystem"], "LPS");
@@ -256,6 +257,36 @@ fn prep_writes_its_exports_and_reports_json() {
     assert_eq!(std::fs::read(blocked.join("lumen.nii.gz")).unwrap(), b"old");
     let left: Vec<_> = std::fs::read_dir(&blocked).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert_eq!(left.len(), 2, "left behind: {left:?}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A tagged exam is cleansed by default: `cleansed.nii.gz` (the input's grid, i16 HU, the
+/// colon's fluid made air), the JSON's `cleanse` and `surface_roughness`; `--no-cleanse`
+/// keeps the fluid and writes no cleansed CT. A CT without tagged fluid writes none either.
+#[test]
+fn prep_cleanses_a_tagged_exam_unless_told_not_to() {
+    let dir = scratch("cleanse");
+    let ct = dir.join("tagged.nii.gz");
+    let made = voyage(&["phantom", "colon", "--small", "--tagged-fluid", "--out", ct.to_str().unwrap()]);
+    assert!(made.status.success(), "{}", text(&made));
+    let out = dir.join("on");
+    let o = voyage(&["prep", ct.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(j["cleanse"]["tagged_voxels"].as_u64().unwrap() > 500, "{}", j["cleanse"]);
+    let (air, fluid) = (j["surface_roughness"]["air_deg"].as_f64().unwrap(), j["surface_roughness"]["fluid_deg"].as_f64().unwrap());
+    assert!(fluid <= 1.5 * air, "roughness {fluid}° where fluid lay, {air}° in air");
+    assert!(j["timings_ms"]["cleanse"].as_f64().is_some());
+    let info = voyage(&["info", out.join("cleansed.nii.gz").to_str().unwrap(), "--json"]);
+    assert!(info.status.success(), "{}", text(&info));
+    let (a, b): (serde_json::Value, serde_json::Value) = (serde_json::from_slice(&info.stdout).unwrap(), serde_json::from_slice(&voyage(&["info", ct.to_str().unwrap(), "--json"]).stdout).unwrap());
+    assert_eq!(a["dims"], b["dims"]);
+    let kept = dir.join("off");
+    let o = voyage(&["prep", ct.to_str().unwrap(), "--out", kept.to_str().unwrap(), "--json", "--no-cleanse"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let k: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(k["cleanse"].is_null() && !kept.join("cleansed.nii.gz").exists());
+    assert!(k["surface_roughness"]["fluid_deg"].as_f64().unwrap() > fluid, "uncleansed {} vs {fluid}", k["surface_roughness"]);
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

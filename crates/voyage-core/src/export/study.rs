@@ -53,6 +53,9 @@ fn write_files(dir: &Path, study: &Study) -> Result<Vec<&'static str>> {
     };
     nifti::save(&put("lumen.nii.gz"), &study.segmentation.lumen)?;
     nifti::save_slices(&put("ds.nii.gz"), g, |k, out: &mut [f32]| study.ds.fill_slice(k, out))?;
+    if !study.cleansing.is_empty() {
+        nifti::save_slices(&put("cleansed.nii.gz"), g, |k, out: &mut [i16]| study.cleansing.fill_slice(&study.ct, k, out))?;
+    }
     let cl = &study.centerline;
     let lps: Vec<[f64; 3]> = cl.points_mm.iter().map(|p| g.local_to_patient(DVec3::from_array(*p)).to_array()).collect();
     let cl_json = json!({

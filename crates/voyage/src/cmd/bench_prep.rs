@@ -104,6 +104,7 @@ fn measure(name: &str, ct: Volume<i16>, repeats: usize) -> Result<Measured> {
     let med = |f: fn(&Timings) -> f64| median(&mut runs.iter().map(f).collect::<Vec<_>>());
     let timings = Timings {
         segment: med(|t| t.segment),
+        cleanse: med(|t| t.cleanse),
         ds: med(|t| t.ds),
         skeleton: med(|t| t.skeleton),
         contacts: med(|t| t.contacts),
@@ -182,6 +183,7 @@ fn report(rounds: &[(Measured, Value)], threads: usize) -> Value {
         "reference_triangles": refs.get("vtk_flying_edges").and_then(|v| v.get("triangles")).cloned(),
         "rows": [
             row("segment", |m| m.timings.segment, "-", "", 60.0, None),
+            row("cleanse (0 without tagged fluid)", |m| m.timings.cleanse, "-", "", 150.0, None),
             row("ds", |m| m.timings.ds, "edt (1 thread)", "edt", 100.0, Some(5.0)),
             row("ds", |m| m.timings.ds, "scipy.ndimage EDT", "scipy_edt", 100.0, None),
             row("one Dt", |m| m.dt_single_ms, "dijkstra3d", "dijkstra3d", 100.0, Some(4.0)),

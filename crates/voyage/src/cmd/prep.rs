@@ -38,6 +38,10 @@ pub struct InputArgs {
     /// DICOM: which series to load when the folder holds several.
     #[arg(long)]
     pub series: Option<String>,
+    /// Keep the colon's tagged fluid: no electronic cleansing (on by default where the
+    /// colon holds tagged fluid; the surface is then cut at the fluid's edge).
+    #[arg(long)]
+    pub no_cleanse: bool,
 }
 
 /// A DICOM PatientPosition code, any case.
@@ -129,6 +133,9 @@ pub fn load_and_prepare(a: &InputArgs) -> Result<Prepared> {
     let mut opts = PrepOptions::default();
     a.points.apply(&g, &loaded.meta, &mut opts);
     opts.segment.mask = a.mask.then_some(true);
+    if a.no_cleanse {
+        opts.cleanse = None;
+    }
 
     let bar = progress_bar();
     let study = prepare(loaded.volume, &opts, |stage| {
@@ -195,9 +202,12 @@ fn summary(s: &Study, g: &Geometry, load_ms: f64) -> serde_json::Value {
         "contact_voxels": s.contact_voxels,
         "cells": s.cells.cells.len(),
         "triangles": s.surface.mesh.triangles.len(),
+        "cleanse": cleanse_summary(s),
+        "surface_roughness": roughness(s).map(|(air, fluid)| json!({"air_deg": air, "fluid_deg": fluid})),
         "timings_ms": {
             "load": load_ms,
             "segment": t.segment,
+            "cleanse": t.cleanse,
             "ds": t.ds,
             "skeleton": t.skeleton,
             "contacts": t.contacts,
@@ -209,6 +219,21 @@ fn summary(s: &Study, g: &Geometry, load_ms: f64) -> serde_json::Value {
         },
         "peak_rss_mb": peak_rss_mb(),
     })
+}
+
+/// What electronic cleansing changed; null when it did not run or found no tagged fluid.
+fn cleanse_summary(s: &Study) -> serde_json::Value {
+    let c = &s.cleansing;
+    if c.is_empty() {
+        return serde_json::Value::Null;
+    }
+    json!({"voxels_changed": c.len(), "tagged_voxels": c.tagged_voxels, "left_lumen": c.left_lumen})
+}
+
+/// The surface's mean angle between neighbouring triangles (degrees) away from and near
+/// tagged material of the original CT (within 2 mm; None without any); None for a mask.
+fn roughness(s: &Study) -> Option<(Option<f64>, Option<f64>)> {
+    (!s.segmentation.from_mask).then(|| voyage_core::cleanse::roughness(&s.surface.mesh, &s.ct, voyage_core::segment::SegmentOptions::default().fluid_hu.unwrap_or(200), 2.0))
 }
 
 /// Each bridged gap with its span on the centerline.
@@ -259,13 +284,20 @@ fn print_text(s: &Study, g: &Geometry, load_ms: f64) {
     println!("centerline  {:.0} mm, {} points", s.centerline.length_mm, s.centerline.points_mm.len());
     println!("surface     {} triangles, {} vertices", s.surface.mesh.triangles.len(), s.surface.mesh.positions.len());
     println!("cells       {}", s.cells.cells.len());
+    if !s.cleansing.is_empty() {
+        let r = roughness(s).map_or(String::new(), |(air, fluid)| {
+            let deg = |x: Option<f64>| x.map_or("-".to_string(), |d| format!("{d:.1}°"));
+            format!("; surface roughness {} in air, {} where fluid lay", deg(air), deg(fluid))
+        });
+        println!("cleansing   {} voxels of tagged fluid made air, {} voxels changed{r}", s.cleansing.tagged_voxels, s.cleansing.len());
+    }
     if s.contact_voxels > 0 {
         println!("contacts    {} lumen voxels made wall where loops of the colon touch", s.contact_voxels);
     }
     let t = &s.timings;
     println!(
-        "time        load {load_ms:.0} ms; segment {:.0}, ds {:.0}, skeleton {:.0}, centerline {:.0}, contacts {:.0}, dt {:.0}, surface {:.0}, cells {:.0}; total after load {:.0} ms",
-        t.segment, t.ds, t.skeleton, t.centerline, t.contacts, t.dt, t.surface, t.cells, t.total_after_load
+        "time        load {load_ms:.0} ms; segment {:.0}, cleanse {:.0}, ds {:.0}, skeleton {:.0}, centerline {:.0}, contacts {:.0}, dt {:.0}, surface {:.0}, cells {:.0}; total after load {:.0} ms",
+        t.segment, t.cleanse, t.ds, t.skeleton, t.centerline, t.contacts, t.dt, t.surface, t.cells, t.total_after_load
     );
     if let Some(mb) = peak_rss_mb() {
         println!("memory      peak {mb:.0} MB");
