@@ -137,7 +137,7 @@ fn by_lumen(p: &Phantom, v: usize) -> bool {
 /// fluid that segmentation left out of the colon: the floor of a pool narrower than small
 /// bowel can be (27 mm) and deeper than 3 mm, which the half-size phantom's pools have
 /// (up to 7% prone, by the valve) and real anatomy's do not.
-fn check(name: &str, opts: ColonOptions, min_removed: f64) {
+fn check(name: &str, opts: ColonOptions, min_removed: f64) -> usize {
     let with = phantom::colon(&ColonOptions { tagged_fluid: true, ..opts.clone() }).unwrap();
     let without = phantom::colon(&ColonOptions { tagged_fluid: false, opacified_small_bowel: false, ..opts.clone() }).unwrap();
     assert!(with.lumen.data() == without.lumen.data(), "{name}: the fluid changed the anatomy");
@@ -173,21 +173,46 @@ fn check(name: &str, opts: ColonOptions, min_removed: f64) {
         }
     }
     assert!(gone as f64 >= min_removed * fluid as f64, "{name}: {gone} of {fluid} tagged fluid voxels made air");
-    eprintln!("{name}: former fluid {d_clean:.3} mm from the wall (uncleansed {d_raw:.3}), roughness {f:.1}° vs {a:.1}° in air, {gone}/{fluid} fluid voxels made air");
+    // Polyps under the fluid keep their shape: vertices within 1 mm of their sphere, on the
+    // lumen's side (as tests/prep.rs asks of every polyp in air).
+    let submerged = submerged_polyps(&with);
+    for polyp in &submerged {
+        let (c, r, into) = (DVec3::from_array(polyp.center_mm), polyp.diameter_mm / 2.0, DVec3::from_array(polyp.direction));
+        let near = (0..cleansed.surface.mesh.positions.len() as u32).map(|i| vertex(&cleansed.surface.mesh, i)).filter(|v| ((*v - c).length() - r).abs() <= 1.0 && (*v - c).dot(into) > 0.0).count();
+        assert!(near >= 3, "{name}: submerged polyp of {} mm in the {} has {near} vertices within 1 mm of its surface", polyp.diameter_mm, polyp.segment);
+    }
+    eprintln!("{name}: {} submerged polyps kept; former fluid {d_clean:.3} mm from the wall (uncleansed {d_raw:.3}), roughness {f:.1}° vs {a:.1}° in air, {gone}/{fluid} fluid voxels made air", submerged.len());
+    submerged.len()
+}
+
+/// Polyps of at least 3 mm whose centre lies under their segment's pool level.
+fn submerged_polyps(p: &Phantom) -> Vec<&voyage_core::phantom::PolypTruth> {
+    p.truth
+        .polyps
+        .iter()
+        .filter(|polyp| polyp.diameter_mm >= 3.0)
+        .filter(|polyp| {
+            p.truth.fluid_pools.iter().any(|q| {
+                q.segment == polyp.segment && (q.start_arc_mm..=q.end_arc_mm).contains(&polyp.arc_mm) && (polyp.center_mm[1] - q.level_y_mm) * q.gravity_lps[1] > 0.0
+            })
+        })
+        .collect()
 }
 
 #[test]
 fn cleansed_fluid_leaves_the_true_wall_small_phantom() {
+    let mut submerged = 0;
     for seed in 1..=3 {
-        check(&format!("small, supine, seed {seed}"), ColonOptions { seed, small: true, ..Default::default() }, 0.9);
-        check(&format!("small, prone, opacified small bowel, seed {seed}"), ColonOptions { seed, small: true, prone: true, opacified_small_bowel: true, ..Default::default() }, 0.9);
+        submerged += check(&format!("small, supine, seed {seed}"), ColonOptions { seed, small: true, ..Default::default() }, 0.9);
+        submerged += check(&format!("small, prone, opacified small bowel, seed {seed}"), ColonOptions { seed, small: true, prone: true, opacified_small_bowel: true, ..Default::default() }, 0.9);
     }
+    assert!(submerged >= 3, "only {submerged} submerged polyps were checked");
 }
 
 /// At full size the terraces show: uncleansed, the fluid's surface is 1.6× as rough as air's.
 #[test]
 fn cleansed_fluid_leaves_the_true_wall_full_size() {
-    check("full size, supine", ColonOptions::default(), 0.95);
+    assert!(check("full size, supine", ColonOptions::default(), 0.95) > 0, "no submerged polyp checked");
 }
 
 /// Oral contrast in the small bowel is never touched, except at the mouth of the
