@@ -86,6 +86,12 @@ impl Cleansing {
         &self.voxels
     }
 
+    /// Their other values (see [`Cleansing::swap`]): the cleansed HU while the CT holds the
+    /// original.
+    pub fn values(&self) -> &[i16] {
+        &self.other
+    }
+
     /// Swaps the stored values with the CT's: the original CT becomes the cleansed one, and
     /// back when called again.
     pub fn swap(&mut self, ct: &mut Volume<i16>) {

@@ -327,3 +327,44 @@ fn corrections_rerun_the_preprocessing_and_the_colon_follows() {
     assert!(len < full - 20.0 && len > 0.8 * full, "centerline {len:.0} mm starting higher, {full:.0} mm before");
     assert!(r["correction_error"].is_null());
 }
+
+/// A tagged exam's slices show the original CT, or on request the cleansed one with what
+/// cleansing changed outlined; `--no-cleanse` offers neither.
+#[test]
+fn slices_show_the_cleansed_ct_and_outline_it_on_request() {
+    let Some(display) = Display::start() else { return };
+    let dir = scratch("cleansed");
+    let ct = dir.join("tagged.nii.gz");
+    let made = Command::new(env!("CARGO_BIN_EXE_voyage")).args(["phantom", "colon", "--small", "--tagged-fluid", "--out"]).arg(&ct).output().unwrap();
+    assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+    let script = dir.join("script.json");
+    let (plain, cleansed) = (dir.join("plain.png"), dir.join("cleansed.png"));
+    std::fs::write(
+        &script,
+        serde_json::json!([
+            {"wait": 3},
+            {"screenshot": plain},
+            {"slices_cleansed": true}, {"slices_outline": true}, {"wait": 3},
+            {"screenshot": cleansed},
+            {"quit": true}
+        ])
+        .to_string(),
+    )
+    .unwrap();
+    let report = dir.join("report.json");
+    let out = voyage(&display).arg("view").arg(&ct).args(["--paused", "--script"]).arg(&script).arg("--report").arg(&report).output().unwrap();
+    assert!(out.status.success(), "{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    let r = read_json(&report);
+    let view: Vec<f32> = r["view_rect"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect();
+    let slices = [view[0], view[3] + 30.0, 1280.0, 800.0];
+    let outline = |p: &image::Rgba<u8>| p[0] < 30 && p[1] > 180 && p[2] > 230;
+    let grey = |p: &image::Rgba<u8>| p[0] == p[1] && p[1] == p[2];
+    let (a, b) = (image::open(&plain).unwrap().to_rgba8(), image::open(&cleansed).unwrap().to_rgba8());
+    assert_eq!(count(&a, slices, outline), 0, "outline drawn before it was asked for");
+    let outlined = count(&b, slices, outline);
+    assert!(outlined > 50, "cleansed voxels outlined: {outlined} pixels");
+    // Inside the outline the fluid (bright) became air (dark): fewer light grey pixels.
+    let light = |img: &image::RgbaImage| count(img, slices, |p| grey(p) && p[0] > 200);
+    assert!(light(&b) < light(&a), "cleansed slices are not darker where fluid lay: {} vs {}", light(&b), light(&a));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

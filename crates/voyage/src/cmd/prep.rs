@@ -38,10 +38,6 @@ pub struct InputArgs {
     /// DICOM: which series to load when the folder holds several.
     #[arg(long)]
     pub series: Option<String>,
-    /// Keep the colon's tagged fluid: no electronic cleansing (on by default where the
-    /// colon holds tagged fluid; the surface is then cut at the fluid's edge).
-    #[arg(long)]
-    pub no_cleanse: bool,
 }
 
 /// A DICOM PatientPosition code, any case.
@@ -50,7 +46,7 @@ fn parse_position(s: &str) -> Result<PatientPosition, String> {
 }
 
 /// Corrections to the automatic choices: which gas is colon, where the flight starts and
-/// ends, how the patient lay.
+/// ends, how the patient lay, whether the colon's tagged fluid is cleansed.
 #[derive(Args, Debug, Clone, Default)]
 pub struct PointArgs {
     /// A point in gas that is colon (mm, see --coords): its gas joins the colon. It does not
@@ -76,6 +72,10 @@ pub struct PointArgs {
     /// lies and which way is up in the view.
     #[arg(long, value_parser = parse_position)]
     pub position: Option<PatientPosition>,
+    /// Keep the colon's tagged fluid: no electronic cleansing (on by default where the
+    /// colon holds tagged fluid; the surface is then cut at the fluid's edge).
+    #[arg(long)]
+    pub no_cleanse: bool,
 }
 
 impl PointArgs {
@@ -94,6 +94,9 @@ impl PointArgs {
             (None, Some(p)) => Some((p, PositionSource::Dicom)),
             (None, None) => None,
         };
+        if self.no_cleanse {
+            opts.cleanse = None;
+        }
     }
 }
 
@@ -133,9 +136,6 @@ pub fn load_and_prepare(a: &InputArgs) -> Result<Prepared> {
     let mut opts = PrepOptions::default();
     a.points.apply(&g, &loaded.meta, &mut opts);
     opts.segment.mask = a.mask.then_some(true);
-    if a.no_cleanse {
-        opts.cleanse = None;
-    }
 
     let bar = progress_bar();
     let study = prepare(loaded.volume, &opts, |stage| {

@@ -22,7 +22,7 @@ use super::pixels::WindowGpu;
 use super::scout::{ScoutMarks, ScoutView};
 use super::script::{Script, Step};
 use super::session::Session;
-use super::slices::{SliceAction, SlicePanel};
+use super::slices::{SliceAction, SlicePanel, SliceSource};
 use super::WindowArgs;
 
 /// What a click on the endoscopic view does.
@@ -490,6 +490,8 @@ impl App {
             }
             Step::Closeup(on) => self.closeup_on = on,
             Step::Centerline(on) => self.show_centerline = on,
+            Step::SlicesCleansed(on) => self.slices.cleansed = on,
+            Step::SlicesOutline(on) => self.slices.outline = on,
             Step::Record(name) => {
                 if let Some(s) = &self.session {
                     self.recorded.insert(name, s.pose().to_array());
@@ -739,7 +741,7 @@ impl App {
         egui::Panel::bottom("slices").resizable(false).exact_size(262.0).show(ui, |ui| {
             let Some(s) = &mut self.session else { return };
             let at = s.pose().position;
-            match self.slices.show(ui, &s.study.ct, at, self.job.is_some()) {
+            match self.slices.show(ui, SliceSource { ct: &s.study.ct, cleansing: &s.study.cleansing }, at, self.job.is_some()) {
                 Some(SliceAction::MoveTo(p)) => {
                     let forward = s.pose().z_body();
                     match s.jump_to(p, forward) {

@@ -22,7 +22,8 @@ pub enum Correction {
     Include([f64; 3]),
     /// The gas here is not colon.
     Exclude([f64; 3]),
-    /// Back to what was found automatically (the patient position given stays).
+    /// Back to what was found automatically (the patient position given and the choice of
+    /// cleansing stay).
     Reset,
 }
 
@@ -69,7 +70,7 @@ impl Correction {
                 without(&mut out.exclude, p);
                 out.exclude.push(p);
             }
-            Correction::Reset => out = PointArgs { position: points.position, coords: points.coords, ..PointArgs::default() },
+            Correction::Reset => out = PointArgs { position: points.position, coords: points.coords, no_cleanse: points.no_cleanse, ..PointArgs::default() },
         }
         out
     }

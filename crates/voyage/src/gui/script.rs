@@ -50,6 +50,9 @@ pub enum Step {
     /// Toggle the close-up volume rendering or the centerline overlay.
     Closeup(bool),
     Centerline(bool),
+    /// Show the cleansed CT on the slices (a tagged exam), and outline what cleansing changed.
+    SlicesCleansed(bool),
+    SlicesOutline(bool),
     /// Save the camera's pose under a name in the report.
     Record(String),
     /// Save a PNG of the whole window.

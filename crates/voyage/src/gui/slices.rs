@@ -2,11 +2,16 @@
 //! shown the way radiologists read them (the patient's right on the screen's left; anterior
 //! up on axial slices, head up on the others), with a crosshair at the submarine, window /
 //! level presets and drag, scroll through slices, and a click in the lumen to move there.
+//! A tagged exam's slices show the original CT or the cleansed one (a toggle: readers check
+//! both), with the cleansed voxels outlined on request.
 //! A right click offers the corrections of the colon found: start or end the flight there,
 //! take the gas there in or leave it out.
 
+use std::collections::HashMap;
+
 use egui::{Color32, Pos2, Rect, Sense, Stroke, Vec2};
 use glam::DVec3;
+use voyage_core::cleanse::Cleansing;
 use voyage_core::{Geometry, Volume};
 
 use super::corrections::Correction;
@@ -82,8 +87,8 @@ struct SliceView {
     /// Scrolling not yet turned into slices (points).
     scroll: f32,
     image: PanelImage,
-    /// What the image shows: slice, window, level, size in pixels.
-    shows: Option<(usize, f64, f64, [usize; 2])>,
+    /// What the image shows: slice, window, level, size in pixels, cleansed, outlined.
+    shows: Option<(usize, f64, f64, [usize; 2], bool, bool)>,
     /// Where the context menu was opened (volume-local mm).
     menu_at: Option<DVec3>,
 }
@@ -92,6 +97,16 @@ pub struct SlicePanel {
     views: [SliceView; 3],
     pub window: f64,
     pub level: f64,
+    /// Show the cleansed CT (where cleansing changed anything), and outline what it changed.
+    pub cleansed: bool,
+    pub outline: bool,
+}
+
+/// The CT the slices read, and what cleansing changed in it.
+#[derive(Clone, Copy)]
+pub struct SliceSource<'a> {
+    pub ct: &'a Volume<i16>,
+    pub cleansing: &'a Cleansing,
 }
 
 impl SlicePanel {
@@ -99,7 +114,7 @@ impl SlicePanel {
     /// window's renderer holds them.
     pub fn new(image_keys: [u64; 3], gpu: bool) -> Self {
         let views = std::array::from_fn(|i| SliceView { plane: Plane::ALL[i], offset: 0, scroll: 0.0, image: PanelImage::new(image_keys[i], Plane::ALL[i].name(), gpu), shows: None, menu_at: None });
-        SlicePanel { views, window: PRESETS[0].1, level: PRESETS[0].2 }
+        SlicePanel { views, window: PRESETS[0].1, level: PRESETS[0].2, cleansed: false, outline: false }
     }
 
     /// Back to the slices through the submarine (after it moved somewhere new).
@@ -111,13 +126,19 @@ impl SlicePanel {
 
     /// The three slices side by side; returns what a click asked for, if anything. `busy`:
     /// a correction is being preprocessed (no other is offered meanwhile).
-    pub fn show(&mut self, ui: &mut egui::Ui, ct: &Volume<i16>, at: DVec3, busy: bool) -> Option<SliceAction> {
+    pub fn show(&mut self, ui: &mut egui::Ui, src: SliceSource, at: DVec3, busy: bool) -> Option<SliceAction> {
+        let ct = src.ct;
         ui.horizontal(|ui| {
             ui.label("W/L:");
             for (name, w, l) in PRESETS {
                 if ui.selectable_label(self.window == w && self.level == l, name).clicked() {
                     (self.window, self.level) = (w, l);
                 }
+            }
+            if !src.cleansing.is_empty() {
+                ui.separator();
+                ui.checkbox(&mut self.cleansed, "Cleansed").on_hover_text("show the CT with the colon's tagged fluid made air (the surface is cut from it); off: the original");
+                ui.checkbox(&mut self.outline, "Outline").on_hover_text("outline the voxels cleansing changed");
             }
             ui.label(format!("W {:.0} L {:.0}", self.window, self.level)).on_hover_text("drag on a slice: ←→ window, ↑↓ level; scroll: slices; click in the colon: go there; right click: start / end here, gas is colon or not");
         });
@@ -127,7 +148,7 @@ impl SlicePanel {
         ui.horizontal(|ui| {
             for i in 0..3 {
                 let (rect, response) = ui.allocate_exact_size(Vec2::new(width, height), Sense::click_and_drag());
-                if let Some(p) = self.show_one(ui, i, ct, at, rect, &response) {
+                if let Some(p) = self.show_one(ui, i, src, at, rect, &response) {
                     clicked = Some(SliceAction::MoveTo(p));
                 }
                 if let Some(c) = self.menu(i, ct.geometry(), &response, busy) {
@@ -138,7 +159,8 @@ impl SlicePanel {
         clicked
     }
 
-    fn show_one(&mut self, ui: &egui::Ui, i: usize, ct: &Volume<i16>, at: DVec3, rect: Rect, response: &egui::Response) -> Option<DVec3> {
+    fn show_one(&mut self, ui: &egui::Ui, i: usize, src: SliceSource, at: DVec3, rect: Rect, response: &egui::Response) -> Option<DVec3> {
+        let ct = src.ct;
         let g = ct.geometry();
         let plane = self.views[i].plane;
         let lay = layout(g, plane);
@@ -169,10 +191,13 @@ impl SlicePanel {
         let shown = Rect::from_center_size(rect.center() + Vec2::new(0.0, 8.0), size_mm * scale);
         let px = [((shown.width() * ppp).round() as usize).max(1), ((shown.height() * ppp).round() as usize).max(1)];
         let image_rect = Rect::from_min_size(((shown.min.to_vec2() * ppp).round() / ppp).to_pos2(), Vec2::new(px[0] as f32, px[1] as f32) / ppp);
-        let key = (fixed, self.window, self.level, px);
+        let (cleansed, outline) = (self.cleansed && !src.cleansing.is_empty(), self.outline && !src.cleansing.is_empty());
+        let key = (fixed, self.window, self.level, px, cleansed, outline);
         let view = &mut self.views[i];
         if view.shows != Some(key) {
-            view.image.set(slice_image(ct, lay, fixed, self.window, self.level, px));
+            let changes = (cleansed || outline).then(|| changes_in_plane(src.cleansing, ct.dims(), lay.fixed, fixed));
+            let shown = Shown { window: self.window, level: self.level, size: px, changes: changes.as_ref(), cleansed, outline };
+            view.image.set(slice_image(ct, lay, fixed, &shown));
             view.shows = Some(key);
         }
         let painter = ui.painter_at(rect);
@@ -245,11 +270,32 @@ impl SlicePanel {
     }
 }
 
+/// How a slice is shown: window / level (HU), size in pixels, and cleansing's changes in its
+/// plane (voxel index → cleansed HU), shown in place of the CT's values and/or outlined.
+struct Shown<'a> {
+    window: f64,
+    level: f64,
+    size: [usize; 2],
+    changes: Option<&'a HashMap<usize, i16>>,
+    cleansed: bool,
+    outline: bool,
+}
+
+/// Cleansing's changes in the plane where index axis `axis` is `at`.
+fn changes_in_plane(c: &Cleansing, dims: [usize; 3], axis: usize, at: usize) -> HashMap<usize, i16> {
+    let stride = [1, dims[0], dims[0] * dims[1]][axis];
+    c.voxels().iter().zip(c.values()).filter(|&(&v, _)| (v as usize / stride) % dims[axis] == at).map(|(&v, &h)| (v as usize, h)).collect()
+}
+
+/// Outline colour of the cleansed voxels.
+const OUTLINE: [u8; 4] = [0, 210, 255, 255];
+
 /// The grey image of one slice under a window / level, `size` pixels (the slice's
 /// orientation on screen), each pixel the voxel under its centre (no interpolation, as a
 /// slice viewer with interpolation off: a mask stays two-valued, and a slice shown smaller
 /// than the CT reads one voxel per pixel, not all of them).
-fn slice_image(ct: &Volume<i16>, lay: Layout, fixed: usize, window: f64, level: f64, size: [usize; 2]) -> Rgba {
+fn slice_image(ct: &Volume<i16>, lay: Layout, fixed: usize, shown: &Shown) -> Rgba {
+    let size = shown.size;
     let dims = ct.dims();
     let stride = [1, dims[0], dims[0] * dims[1]];
     // Per image column (row): the offset in the data of the voxels under it.
@@ -265,13 +311,30 @@ fn slice_image(ct: &Volume<i16>, lay: Layout, fixed: usize, window: f64, level: 
     let (xs, ys) = (offsets(size[0], lay.x), offsets(size[1], lay.y));
     let data = ct.data();
     let base = fixed * stride[lay.fixed];
-    let lo = (level - 0.5 * window) as f32;
-    let k = (255.0 / window.max(1.0)) as f32;
+    let lo = (shown.level - 0.5 * shown.window) as f32;
+    let k = (255.0 / shown.window.max(1.0)) as f32;
+    let changed = |v: usize| shown.changes.and_then(|c| c.get(&v).copied());
     let mut bytes = Vec::with_capacity(size[0] * size[1] * 4);
-    for &r in &ys {
+    for (y, &r) in ys.iter().enumerate() {
         let row = base + r;
-        for &c in &xs {
-            let g = ((data[row + c] as f32 - lo) * k).clamp(0.0, 255.0) as u8;
+        for (x, &c) in xs.iter().enumerate() {
+            let v = row + c;
+            let new = changed(v);
+            // A changed voxel whose neighbour on screen is not: the outline.
+            let edge = shown.outline
+                && new.is_some()
+                && [(x.wrapping_sub(1), y), (x + 1, y), (x, y.wrapping_sub(1)), (x, y + 1)]
+                    .iter()
+                    .any(|&(a, b)| a >= size[0] || b >= size[1] || changed(base + ys[b] + xs[a]).is_none());
+            if edge {
+                bytes.extend_from_slice(&OUTLINE);
+                continue;
+            }
+            let hu = match new {
+                Some(h) if shown.cleansed => h,
+                _ => data[v],
+            };
+            let g = ((hu as f32 - lo) * k).clamp(0.0, 255.0) as u8;
             bytes.extend_from_slice(&[g, g, g, 255]);
         }
     }
@@ -338,16 +401,17 @@ mod tests {
         let ct = numbered([6, 5, 2]);
         let g = ct.geometry().clone();
         // Axial slice k = 1 at full size: x = i, y = j, values i + 10 j + 100.
-        let a = slice_image(&ct, layout(&g, Plane::Axial), 1, 255.0, 127.5, [6, 5]);
+        let plain = |size| Shown { window: 255.0, level: 127.5, size, changes: None, cleansed: false, outline: false };
+        let a = slice_image(&ct, layout(&g, Plane::Axial), 1, &plain([6, 5]));
         for (x, y) in [(0, 0), (5, 0), (2, 3), (5, 4)] {
             assert_eq!(value(&a, x, y), (x + 10 * y + 100) as i16);
         }
         // Coronal slice j = 2: x = i, y = k reversed (head up): the top row is k = 1.
-        let c = slice_image(&ct, layout(&g, Plane::Coronal), 2, 255.0, 127.5, [6, 2]);
+        let c = slice_image(&ct, layout(&g, Plane::Coronal), 2, &plain([6, 2]));
         assert_eq!(value(&c, 4, 0), 4 + 20 + 100);
         assert_eq!(value(&c, 4, 1), 4 + 20);
         // Sagittal slice i = 3 at half width: x = j under each pixel's centre (1, 3), y = k reversed.
-        let s = slice_image(&ct, layout(&g, Plane::Sagittal), 3, 255.0, 127.5, [2, 2]);
+        let s = slice_image(&ct, layout(&g, Plane::Sagittal), 3, &plain([2, 2]));
         assert_eq!(value(&s, 0, 0), 3 + 10 + 100);
         assert_eq!(value(&s, 1, 1), 3 + 30);
     }
