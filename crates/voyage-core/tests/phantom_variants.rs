@@ -161,7 +161,7 @@ fn check_basics(p: &Phantom) {
     let t = &p.truth;
     assert_eq!(p.ct.dims(), t.dims);
     for (&l, &m) in p.labels.data().iter().zip(p.lumen.data()) {
-        assert_eq!(m == 1, l == label::LUMEN_AIR || l == label::LUMEN_FLUID, "label {l} vs lumen {m}");
+        assert_eq!(m == 1, l == label::LUMEN_AIR || l == label::LUMEN_FLUID || l == label::STOOL, "label {l} vs lumen {m}");
     }
     assert_eq!(t.lumen_voxels, p.lumen.data().iter().filter(|&&v| v == 1).count());
     let collapsed = |a: f64| t.collapsed.iter().any(|c| a > c.start_arc_mm - c.taper_mm && a < c.end_arc_mm + c.taper_mm);
@@ -474,6 +474,33 @@ fn rectal_tube_joins_colon_gas_to_the_air_outside() {
 
 // ---------------------------------------------------------------------------------------
 // Quantisation.
+
+/// Tagged stool: two lumps in each segment from the rectum to the ascending colon, bright,
+/// inside the lumen and on its wall, one of each two mottled with air; in the truth.
+#[test]
+fn tagged_stool_lies_on_the_wall_as_bright_lumen() {
+    for small_size in [true, false] {
+        let p = phantom::colon(&ColonOptions { small: small_size, tagged_fluid: true, tagged_stool: true, ..Default::default() }).unwrap();
+        check_basics(&p);
+        let t = &p.truth;
+        assert_eq!(t.stool.len(), 10);
+        let dims = p.labels.dims();
+        for s in &t.stool {
+            let v = voxel(&p.labels, s.center_mm);
+            assert_eq!(p.labels.data()[v], label::STOOL, "stool in the {} at its centre", s.segment);
+            // The lump's voxels: bright (or, mottled, some of them air), and some touch the wall.
+            let lump = flood6(dims, [v], |i| p.labels.data()[i] == label::STOOL);
+            let voxels: Vec<usize> = (0..lump.len()).filter(|&i| lump[i]).collect();
+            let bright = voxels.iter().filter(|&&i| p.ct.data()[i] >= 300).count();
+            let air = voxels.iter().filter(|&&i| p.ct.data()[i] < -500).count();
+            assert!(bright * 3 >= voxels.len(), "stool in the {}: {bright} of {} voxels bright", s.segment, voxels.len());
+            assert!(!s.mottled || small_size || air > 0, "stool in the {}: {air} voxels of air, mottled {}", s.segment, s.mottled);
+            assert!(s.mottled || air == 0, "stool in the {}: {air} voxels of air, not mottled", s.segment);
+            assert!(voxels.iter().any(|&i| neighbours6(dims, i).any(|n| p.labels.data()[n] == label::WALL)), "stool in the {} does not touch the wall", s.segment);
+        }
+        assert_eq!(Truth::from_json(&t.to_json()).unwrap().stool, t.stool);
+    }
+}
 
 #[test]
 fn quantised_ct_takes_multiples_of_the_step() {

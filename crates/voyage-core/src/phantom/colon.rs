@@ -46,7 +46,7 @@ use super::polyp::{PolypSpec, place};
 use super::raster::{Materials, Scene};
 use super::rng::{Rng, stream_key};
 use super::truth::{
-    COORDINATES_NOTE, CollapsedTruth, DistractorTruth, FilledTruth, FoldTruth, GapTruth, PolypTruth, PoolTruth,
+    COORDINATES_NOTE, CollapsedTruth, DistractorTruth, FilledTruth, FoldTruth, GapTruth, PolypTruth, PoolTruth, StoolTruth,
     RectalTubeTruth, RoiTruth, SegmentTruth, Truth,
 };
 use super::small_bowel::{self, Valve};
@@ -83,6 +83,10 @@ pub struct ColonOptions {
     /// A rectal catheter from the lower rectum out of the body through a perineum (the body
     /// then ends 4 mm above the first slice): colon gas joins the air outside in 3D.
     pub rectal_tube: bool,
+    /// Lumps of tagged stool (+500..+900 HU, 4–9 mm at full size) on the wall, two in each
+    /// of the rectum, sigmoid, descending, transverse and ascending colon, one of each two
+    /// mottled with air: colon content, labelled 11, in the truth's `stool`.
+    pub tagged_stool: bool,
     /// A few separate small-bowel gas pockets (not colon).
     pub small_bowel_gas: bool,
     /// The bases of both lungs in the top slices (not colon).
@@ -105,6 +109,7 @@ impl Default for ColonOptions {
             fluid_filled: Vec::new(),
             opacified_small_bowel: false,
             rectal_tube: false,
+            tagged_stool: false,
             small_bowel_gas: true,
             lung_bases: true,
             noise_hu: 20.0,
@@ -148,6 +153,7 @@ const STREAM_GAS: u64 = 0xC010_0005;
 const STREAM_FILLED: u64 = 0xC010_0006;
 pub(super) const STREAM_BOWEL: u64 = 0xC010_0007;
 const STREAM_VALVE_POOL: u64 = 0xC010_0008;
+const STREAM_STOOL: u64 = 0xC010_0009;
 
 /// Full-size height (z, mm) of the perineum's skin when the body has one (rectal tube): the
 /// rectum's wall ends ≈ 10.5 mm above the first slice, so this keeps ≥ 5 mm of tissue.
@@ -286,6 +292,8 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
         None
     };
     let pools = make_pools(&tube, &segments, opts, gravity, bowel.as_ref().map(|b| &b.valve));
+    let stool = if opts.tagged_stool { make_stool(&frame, &tube, &segments, &polyps, opts.seed)? } else { Vec::new() };
+    blobs.extend(stool.iter().map(|(b, _)| b.clone()));
     tube.pools = pools.iter().map(|(p, _)| p.clone()).collect();
     // Pockets keep clear of the loops and the catheter as they do of the colon; without
     // either the list is empty and they land where they always did.
@@ -381,7 +389,7 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
         wall_thickness_mm: tube.wall_mm,
         min_part_gap_mm: ax.min_part_gap(tube.wall_mm, 2).0,
         polyps,
-        lumen_voxels: counts[label::LUMEN_AIR as usize] + counts[label::LUMEN_FLUID as usize],
+        lumen_voxels: counts[label::LUMEN_AIR as usize] + counts[label::LUMEN_FLUID as usize] + counts[label::STOOL as usize],
         folds: tube.folds.len(),
         fold_list: fold_truth(&tube, &segments),
         segments: segments.clone(),
@@ -393,6 +401,7 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
         distractors,
         small_bowel_loops: bowel.as_ref().map_or_else(Vec::new, |b| b.loops.clone()),
         ileocecal_valve_mm: bowel.as_ref().map(|b| arr(b.valve.point)),
+        stool: stool.into_iter().map(|(_, t)| t).collect(),
         rectal_tube: catheter.as_ref().map(|c| RectalTubeTruth {
             tip_mm: arr(c.points[0]),
             exit_mm: arr(c.points[c.points.len() - 1]),
@@ -717,6 +726,49 @@ fn make_polyps(frame: &Frame, tube: &mut Tube, segments: &[SegmentTruth], seed: 
     let folds = std::mem::take(&mut tube.folds);
     tube.set_folds(folds);
     Ok(specs.iter().map(|sp| place(tube, sp)).unzip())
+}
+
+/// Segments that get tagged stool, two lumps each; the lumps' diameters (full size) and HU.
+const STOOL_SEGMENTS: &[&str] = &["rectum", "sigmoid", "descending", "transverse", "ascending"];
+const STOOL_DIAMETER: (f64, f64) = (4.0, 9.0);
+const STOOL_HU: (f64, f64) = (500.0, 900.0);
+
+/// Lumps of tagged stool on the wall, sessile like polyps, between folds, clear of the polyps
+/// (15 mm along the colon), of each other, of collapsed and fluid-filled stretches; the
+/// second of each segment's two is mottled with air.
+fn make_stool(frame: &Frame, tube: &Tube, segments: &[SegmentTruth], polyps: &[PolypTruth], seed: u64) -> Result<Vec<(Blob, StoolTruth)>> {
+    let s = frame.scale;
+    let mut rng = Rng::new(seed, STREAM_STOOL);
+    let mut out: Vec<(Blob, StoolTruth)> = Vec::new();
+    for &name in STOOL_SEGMENTS {
+        let seg = segment(segments, name)?;
+        for n in 0..2 {
+            let wanted = rng.range(STOOL_DIAMETER.0, STOOL_DIAMETER.1) * s;
+            let hu = rng.range(STOOL_HU.0, STOOL_HU.1);
+            let mut spec = None;
+            for _ in 0..16 {
+                let arc = seg.start_arc_mm + rng.range(0.1, 0.9) * (seg.end_arc_mm - seg.start_arc_mm);
+                let angle = rng.range(0.0, std::f64::consts::TAU);
+                let at = folds_around(tube, arc).map_or(arc, |(a, b)| 0.5 * (a + b));
+                let d = fit_diameter(wanted, None, tube.axis.radius_at(at)).max(2.0 * frame.max_spacing());
+                let clear = polyps.iter().all(|p| (p.arc_mm - at).abs() > 15.0 * s)
+                    && out.iter().all(|(_, t)| (t.arc_mm - at).abs() > 10.0 * s)
+                    && tube.collapse.iter().all(|c| at + d < c.start - c.taper || at - d > c.end + c.taper)
+                    && tube.filled.iter().all(|f| at + d < f.start || at - d > f.end);
+                if clear && at > seg.start_arc_mm && at < seg.end_arc_mm {
+                    spec = Some(PolypSpec { arc: at, angle, diameter: d, stalk: None, segment: name.into(), behind_fold: false });
+                    break;
+                }
+            }
+            let spec = spec.ok_or_else(|| Error::invalid(format!("colon phantom: no room for tagged stool in the {name}")))?;
+            let (mut blob, t) = place(tube, &spec);
+            let mottled = n == 1;
+            blob.kind = BlobKind::Stool { mottled };
+            blob.content_hu = hu;
+            out.push((blob, StoolTruth { center_mm: t.center_mm, diameter_mm: spec.diameter, segment: name.into(), arc_mm: spec.arc, hu, mottled }));
+        }
+    }
+    Ok(out)
 }
 
 /// A polyp reaches in at most this fraction of the local lumen radius.

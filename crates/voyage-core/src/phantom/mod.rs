@@ -39,7 +39,7 @@ pub use colon::{ColonOptions, colon};
 pub use pipe::pipe;
 pub use truth::{
     CollapsedTruth, DistractorTruth, FilledTruth, FoldTruth, GapTruth, LoopTruth, PolypTruth, PoolTruth,
-    RectalTubeTruth, RoiTruth, SegmentTruth, Truth,
+    RectalTubeTruth, RoiTruth, SegmentTruth, StoolTruth, Truth,
 };
 
 use crate::Volume;
@@ -67,6 +67,8 @@ pub mod label {
     pub const SMALL_BOWEL_FLUID: u8 = 9;
     /// Air inside the rectal catheter: joins colon gas and outside air, not lumen.
     pub const RECTAL_TUBE: u8 = 10;
+    /// Tagged stool on the colon's wall (its air pockets included): lumen, to be cleansed.
+    pub const STOOL: u8 = 11;
 
     /// (value, name) of every label, for the truth JSON.
     pub fn legend() -> Vec<(u8, String)> {
@@ -82,6 +84,7 @@ pub mod label {
             (BONE, "bone"),
             (SMALL_BOWEL_FLUID, "small_bowel_fluid"),
             (RECTAL_TUBE, "rectal_tube"),
+            (STOOL, "tagged_stool"),
         ]
         .into_iter()
         .map(|(v, n)| (v, n.to_string()))

@@ -173,6 +173,7 @@ pub fn pipe(seed: u64) -> Result<Phantom> {
         distractors: Vec::new(),
         small_bowel_loops: Vec::new(),
         ileocecal_valve_mm: None,
+        stool: Vec::new(),
         rectal_tube: None,
         body_floor_z_mm: None,
         noise_roi: Some(water_roi(&geom, center)),

@@ -97,6 +97,12 @@ impl BrickIndex {
 /// across one voxel (`inv_w` = 1 / voxel size), exactly ½ on the surface, so "fraction > ½"
 /// and "voxel centre inside" are the same thing.
 #[inline]
+/// Whether `p` lies in one of the air pockets of mottled stool: a lattice of bubbles about
+/// 3 mm apart (fixed in space, so every thread draws the same).
+fn air_pocket(p: DVec3) -> bool {
+    (p.x * 2.1).sin() + (p.y * 1.9).sin() + (p.z * 2.3).sin() > 1.6
+}
+
 fn ramp(sdf: f64, inv_w: f64) -> f64 {
     let x = (0.5 - sdf * inv_w).clamp(0.0, 1.0);
     x * x * (3.0 - 2.0 * x)
@@ -317,6 +323,8 @@ impl<B: Background> Scene<'_, B> {
         let mut pocket_outer = f64::INFINITY;
         // Small-bowel loop: content, wall and the content's HU.
         let (mut sb, mut sb_outer, mut sb_hu) = (f64::INFINITY, f64::INFINITY, 0.0);
+        // Tagged stool: the nearest lump, its HU and whether it is mottled with air.
+        let (mut stool, mut stool_hu, mut mottled) = (f64::INFINITY, 0.0, false);
         for &bl in &b.blobs {
             let blob = &self.blobs[bl as usize];
             match blob.kind {
@@ -333,6 +341,12 @@ impl<B: Background> Scene<'_, B> {
                     }
                     sb_outer = sb_outer.min(d - blob.wall_mm);
                 }
+                BlobKind::Stool { mottled: m } => {
+                    let d = blob.sdf(p);
+                    if d < stool {
+                        (stool, stool_hu, mottled) = (d, blob.content_hu, m);
+                    }
+                }
             }
         }
         let lumen = hit.lumen.max(-polyp);
@@ -341,6 +355,9 @@ impl<B: Background> Scene<'_, B> {
         let q = ramp(pocket, inv_w);
         let fluid_frac = if hit.fluid.is_finite() { ramp(hit.fluid, inv_w) } else { 0.0 };
         let content = m.lumen_air + fluid_frac * (hit.fluid_hu - m.lumen_air);
+        // Stool replaces the lumen's content where it lies (without stool, the content as
+        // it always was).
+        let content = if stool.is_finite() { content + ramp(stool, inv_w) * (if mottled && air_pocket(p) { m.lumen_air } else { stool_hu } - content) } else { content };
         let tissue_hu = m.wall + ramp(polyp, inv_w) * (m.polyp - m.wall);
         let (mut hu, mut lum, mut lab);
         if sb == f64::INFINITY && sb_outer == f64::INFINITY {
@@ -349,7 +366,7 @@ impl<B: Background> Scene<'_, B> {
             let tissue = ramp(outer.min(polyp).min(pocket_outer), inv_w).max((a + q).min(1.0));
             hu = a * content + q * m.pocket_air + (tissue - a - q).max(0.0) * tissue_hu + (1.0 - tissue) * bg;
             (lum, lab) = if lumen < 0.0 {
-                (1, if hit.fluid < 0.0 { label::LUMEN_FLUID } else { label::LUMEN_AIR })
+                (1, if stool < 0.0 { label::STOOL } else if hit.fluid < 0.0 { label::LUMEN_FLUID } else { label::LUMEN_AIR })
             } else if pocket < 0.0 {
                 (0, label::SMALL_BOWEL_GAS)
             } else if polyp < 0.0 {
@@ -367,7 +384,7 @@ impl<B: Background> Scene<'_, B> {
             let tissue = ramp(outer.min(polyp).min(pocket_outer).min(sb_outer), inv_w).max((a + q + l).min(1.0));
             hu = a * content + q * m.pocket_air + l * sb_hu + (tissue - a - q - l).max(0.0) * tissue_hu + (1.0 - tissue) * bg;
             (lum, lab) = if lumen < 0.0 {
-                (1, if hit.fluid < 0.0 { label::LUMEN_FLUID } else { label::LUMEN_AIR })
+                (1, if stool < 0.0 { label::STOOL } else if hit.fluid < 0.0 { label::LUMEN_FLUID } else { label::LUMEN_AIR })
             } else if sb < 0.0 {
                 (0, label::SMALL_BOWEL_FLUID)
             } else if pocket < 0.0 {

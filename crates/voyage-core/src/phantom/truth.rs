@@ -84,6 +84,9 @@ pub struct Truth {
     /// dependent side, under the caecal pool's level), with opacified small bowel.
     #[serde(default)]
     pub ileocecal_valve_mm: Option<[f64; 3]>,
+    /// Lumps of tagged stool on the wall (label 11), with `tagged_stool`.
+    #[serde(default)]
+    pub stool: Vec<StoolTruth>,
     /// The rectal catheter, if any (its air is label 10).
     #[serde(default)]
     pub rectal_tube: Option<RectalTubeTruth>,
@@ -177,6 +180,19 @@ pub struct GapTruth {
 }
 
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct StoolTruth {
+    /// The lump's sphere (volume-local mm); it sits on the wall, its centre half a radius
+    /// inside the lumen, like a sessile polyp's.
+    pub center_mm: [f64; 3],
+    pub diameter_mm: f64,
+    pub segment: String,
+    pub arc_mm: f64,
+    /// Tagged material's HU; mottled lumps hold pockets of air.
+    pub hu: f64,
+    pub mottled: bool,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct LoopTruth {
     /// The loop's axis (a polyline; the loop is every point within `radius_mm` of it).
     pub axis_mm: Vec<[f64; 3]>,

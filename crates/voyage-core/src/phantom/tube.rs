@@ -356,6 +356,9 @@ pub enum BlobKind {
     /// own wall. A loop is a chain of them (equal radii, so their union is the exact tube);
     /// where one reaches into the colon's lumen (the ileocaecal valve) the colon wins.
     Loop,
+    /// A lump of tagged stool (`content_hu`) on the wall, inside the lumen: colon content,
+    /// like fluid; `mottled` ones hold pockets of air.
+    Stool { mottled: bool },
 }
 
 /// A sphere, optionally on a stalk (a capsule from `stalk.0` to `stalk.1`, radius

@@ -40,6 +40,10 @@ pub struct PhantomArgs {
     /// Colon only: pools of tagged fluid with flat air–fluid levels.
     #[arg(long)]
     pub tagged_fluid: bool,
+    /// Colon only: lumps of tagged stool on the wall (two in each segment from the rectum to
+    /// the ascending colon, one of them mottled with air), colon content to be cleansed.
+    #[arg(long)]
+    pub tagged_stool: bool,
     /// Colon only: the patient lies prone (face down), so tagged fluid pools anteriorly; a
     /// DICOM series says so (PatientPosition HFP), NIfTI/MetaImage/NRRD cannot.
     #[arg(long)]
@@ -97,6 +101,7 @@ fn make(a: &PhantomArgs) -> Result<Phantom> {
             fluid_filled: a.fluid_filled.clone(),
             opacified_small_bowel: a.opacified_small_bowel,
             rectal_tube: a.rectal_tube,
+            tagged_stool: a.tagged_stool,
             small_bowel_gas: !a.no_small_bowel_gas,
             lung_bases: !a.no_lungs,
             noise_hu: a.noise,
