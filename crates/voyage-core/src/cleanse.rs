@@ -22,8 +22,8 @@
 //! - A voxel beside the wall (a lumen voxel with a wall neighbour, or a wall voxel beside
 //!   the fluid) brighter than soft tissue can be (100 HU) is a tissue–fluid mixture: with
 //!   the local fluid value `c` (the brighter half of the cores' voxels within two voxels)
-//!   and soft tissue `t` (40 HU), its fluid fraction is `f = (HU − t) / (c − t)`, and it becomes
-//!   `(1 − f)·t + f·AIR`: the same fraction of air. The wall under former fluid then
+//!   and soft tissue `t` (40 HU), its fluid fraction is `f = (HU − t) / (c − t)`, and it
+//!   becomes `(1 − f)·t + f·AIR`: the same fraction of air. The wall under former fluid then
 //!   crosses −500 HU where half of a voxel is tissue, as it does under air, and the surface
 //!   is cut there, sub-voxel. (Taking `t` at soft tissue's top instead keeps the values
 //!   continuous at 100 HU, but moves the cut to 0.59 tissue: on the full-size phantom the
@@ -168,7 +168,6 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
     let in_lumen = |m: u8| m & 1 != 0;
     let tagged = |v: usize, m: &[u8]| in_lumen(m[v]) && hu[v] >= fluid_hu;
 
-    // 1. Mark every voxel within two voxels of tagged fluid: dilate its boundary voxels.
     let offsets = |r: isize| {
         let mut out = Vec::new();
         for dk in -r..=r {
@@ -359,9 +358,9 @@ fn unmix(h: f32, t: f32, c: f32) -> i16 {
 }
 
 /// The surface's roughness: the mean angle (degrees) between neighbouring triangles, apart
-/// for triangles near tagged material in the original CT (a voxel at or above `fluid_hu` at
-/// the triangle's centre, or 1 mm or `near_mm` from it along an axis) and the rest (air). None for a class with no
-/// triangle pair.
+/// for the rest (air) and for triangles near tagged material in the original CT (a voxel at
+/// or above `fluid_hu` at the triangle's centre, or 1 mm or `near_mm` from it along an
+/// axis). None for a class with no triangle pair.
 pub fn roughness(mesh: &crate::surface::Mesh, ct: &Volume<i16>, fluid_hu: i16, near_mm: f64) -> (Option<f64>, Option<f64>) {
     use rayon::prelude::*;
     let g: &Geometry = ct.geometry();

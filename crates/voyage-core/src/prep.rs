@@ -162,7 +162,7 @@ impl Study {
 }
 
 /// Runs every stage. `progress` hears of each stage as it starts.
-pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Stage)) -> Result<Study> {
+pub fn prepare(mut ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Stage)) -> Result<Study> {
     let start = Instant::now();
     let mut t = Timings::default();
     let mut clock = Instant::now();
@@ -236,7 +236,6 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Sta
 
     progress(Stage::Surface);
     // The surface is cut from the cleansed CT: swapped in for it, and back.
-    let mut ct = ct;
     cleansing.swap(&mut ct);
     let iso = if seg.from_mask { None } else { Some(&ct) };
     let surface = extract_surface(&seg.lumen, iso, &ds.grid, opts.segment.air_hu as f32);

@@ -2,6 +2,8 @@
 //! without it: the anatomy is the same (the truth lumens are equal voxel for voxel), so the
 //! fluid-free phantom's surface is the true wall that the cleansed surface must find.
 
+mod common;
+
 use std::collections::HashMap;
 
 use glam::DVec3;
@@ -99,12 +101,11 @@ fn former_fluid(mesh: &Mesh, p: &Phantom, cleansed: &Volume<i16>) -> Vec<DVec3> 
     let is = |q: [i64; 3], l: u8| at(q).is_some_and(|v| p.labels.data()[v] == l && (l != label::LUMEN_FLUID || cleansed.data()[v] < -500));
     let near = |ijk: [i64; 3], l: u8, r: i64| (-r..=r).any(|dk| (-r..=r).any(|dj| (-r..=r).any(|di| is([ijk[0] + di, ijk[1] + dj, ijk[2] + dk], l))));
     // The ileocecal valve's opening, which the fluid-free phantom has not.
-    let valve = p.truth.ileocecal_valve_mm.map(DVec3::from_array);
-    let ileum = p.truth.small_bowel_loops.iter().filter(|l| l.enters_cecum).map(|l| l.radius_mm).fold(0.0, f64::max);
-    let reach = 2.0 * ileum + 2.0 * g.spacing.iter().cloned().fold(0.0, f64::max);
+    let voxel = g.spacing.iter().cloned().fold(0.0, f64::max);
+    let valve = common::valve_mouth(&p.truth);
     (0..mesh.positions.len() as u32)
         .map(|i| vertex(mesh, i))
-        .filter(|v| valve.is_none_or(|c| v.distance(c) > reach))
+        .filter(|v| valve.is_none_or(|(c, ileum)| v.distance(c) > 2.0 * ileum + 2.0 * voxel))
         .filter(|v| {
             let ijk = [0, 1, 2].map(|a| (v[a] / g.spacing[a]).round() as i64);
             near(ijk, label::LUMEN_FLUID, 1) && !near(ijk, label::SMALL_BOWEL_FLUID, 2)
@@ -223,16 +224,14 @@ fn small_bowel_contrast_stays() {
     let study = prepare(p.ct.clone(), &PrepOptions::default(), |_| {}).unwrap();
     let ct = study.cleansed_ct();
     let g = p.ct.geometry();
-    let mouth = DVec3::from_array(p.truth.ileocecal_valve_mm.unwrap());
-    let ileum = p.truth.small_bowel_loops.iter().filter(|l| l.enters_cecum).map(|l| l.radius_mm).fold(0.0, f64::max);
+    let (mouth, ileum) = common::valve_mouth(&p.truth).unwrap();
     let (mut loops, mut changed) = (0usize, 0usize);
     for (v, (&before, &after)) in p.ct.data().iter().zip(ct.data()).enumerate() {
         if p.labels.data()[v] != label::SMALL_BOWEL_FLUID {
             continue;
         }
         loops += 1;
-        let at = DVec3::from_array(g.ijk(v).map(|x| x as f64)) * DVec3::from_array(g.spacing);
-        if before != after && at.distance(mouth) > 1.5 * ileum {
+        if before != after && common::voxel_mm(g, v).distance(mouth) > 1.5 * ileum {
             changed += 1;
         }
     }

@@ -3,6 +3,8 @@
 //! pool, a rectal tube, coarse grey levels, alone and all together, over several seeds. The
 //! colon must be found whole, rectum to cecum, and flown both ways.
 
+mod common;
+
 use glam::DVec3;
 use voyage_core::flight::{fly, FlightOptions};
 use voyage_core::phantom::{self, label, ColonOptions};
@@ -32,9 +34,7 @@ fn to_polyline(p: DVec3, line: &[DVec3]) -> f64 {
 /// The loops beyond, and the ileum leaving the pool downward, stay out.
 fn check_lumen(name: &str, p: &phantom::Phantom, lumen: &voyage_core::Volume<u8>) {
     let g = p.ct.geometry();
-    let mouth = p.truth.ileocecal_valve_mm.map(DVec3::from_array);
-    let ileum = p.truth.small_bowel_loops.iter().filter(|l| l.enters_cecum).map(|l| l.radius_mm).fold(0.0, f64::max);
-    let reach = 1.5 * ileum;
+    let mouth = common::valve_mouth(&p.truth);
     let (mut both, mut ours, mut truth, mut small_bowel, mut beyond) = (0usize, 0usize, 0usize, 0usize, 0usize);
     for (v, ((&l, &m), &lab)) in lumen.data().iter().zip(p.lumen.data()).zip(p.labels.data()).enumerate() {
         both += (l != 0 && m != 0) as usize;
@@ -42,8 +42,7 @@ fn check_lumen(name: &str, p: &phantom::Phantom, lumen: &voyage_core::Volume<u8>
         truth += (m != 0) as usize;
         if l != 0 && lab == label::SMALL_BOWEL_FLUID {
             small_bowel += 1;
-            let at = DVec3::from_array(g.ijk(v).map(|x| x as f64)) * DVec3::from_array(g.spacing);
-            beyond += mouth.is_none_or(|m| at.distance(m) > reach) as usize;
+            beyond += mouth.is_none_or(|(m, ileum)| common::voxel_mm(g, v).distance(m) > 1.5 * ileum) as usize;
         }
     }
     let dice = 2.0 * both as f64 / (ours + truth) as f64;

@@ -97,15 +97,15 @@ impl BrickIndex {
 /// across one voxel (`inv_w` = 1 / voxel size), exactly ½ on the surface, so "fraction > ½"
 /// and "voxel centre inside" are the same thing.
 #[inline]
+fn ramp(sdf: f64, inv_w: f64) -> f64 {
+    let x = (0.5 - sdf * inv_w).clamp(0.0, 1.0);
+    x * x * (3.0 - 2.0 * x)
+}
+
 /// Whether `p` lies in one of the air pockets of mottled stool: a lattice of bubbles about
 /// 3 mm apart (fixed in space, so every thread draws the same).
 fn air_pocket(p: DVec3) -> bool {
     (p.x * 2.1).sin() + (p.y * 1.9).sin() + (p.z * 2.3).sin() > 1.6
-}
-
-fn ramp(sdf: f64, inv_w: f64) -> f64 {
-    let x = (0.5 - sdf * inv_w).clamp(0.0, 1.0);
-    x * x * (3.0 - 2.0 * x)
 }
 
 impl<B: Background> Scene<'_, B> {

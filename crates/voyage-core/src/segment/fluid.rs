@@ -39,8 +39,9 @@ const MAX_LAYER_MM: f64 = 2.0;
 /// as a horizontal cut where it leaves at 30°), so every horizontal chord of it is shorter.
 /// Ends soon: the fluid below it along the line is less than [`TUBE_MM`] deep. The floor of
 /// a pool in a narrow or short segment is narrow too, but it ends at the wall, while a tube
-/// goes on down (a deeper allowance lets the ileum's rim in where its wall comes near). An absolute width, not one relative to the pool:
-/// the small bowel's calibre does not scale with the colon's.
+/// goes on down (a deeper allowance lets the ileum's rim in where its wall comes near). An
+/// absolute width, not one relative to the pool: the small bowel's calibre does not scale
+/// with the colon's.
 const NARROW_BELOW_MM: f64 = 4.0;
 const WIDE_MM: f64 = 27.0;
 const TUBE_MM: f64 = 3.0;
@@ -174,7 +175,7 @@ pub fn pools(rows: &LabelRows, geom: &Geometry, bx: &Bbox, gravity_lps: DVec3, b
     let stride = [1isize, geom.dims[0] as isize, (geom.dims[0] * geom.dims[1]) as isize][axis] * sign as isize;
     let limits = Walk { stride, gap_max: max_gap(step), depth_max: (MAX_DEPTH_MM / step).round() as i64, narrow_below: (NARROW_BELOW_MM / step).round() as i64 };
     let tube_steps = (TUBE_MM / step).ceil() as usize;
-    let wide = |v: usize| !goes_on(geom, v, axis, sign, tube_steps, &bright) || (0..3).filter(|&a| a != axis).any(|a| chord_at_least(geom, v, a, WIDE_MM, &bright));
+    let wide = |v: usize| bright_run(geom, v, axis, sign, tube_steps, &bright) < tube_steps || (0..3).filter(|&a| a != axis).any(|a| chord_at_least(geom, v, a, WIDE_MM, &bright));
     let w = bx.widths();
     let lines = if axis == 2 { w[0] * w[1] } else { w[[1, 0, 0][axis]] };
     let per = walk(rows, bx, axis, sign, || (vec![Line { last: i64::MIN / 2, ..Default::default() }; lines], Vec::new()), |(state, marks), line, pos, idx, label| {
@@ -183,32 +184,21 @@ pub fn pools(rows: &LabelRows, geom: &Geometry, bx: &Bbox, gravity_lps: DVec3, b
     per.into_iter().flat_map(|(_, m)| m).collect()
 }
 
-/// Whether the `steps` voxels after `v` along `axis` in direction `sign` are all bright.
-fn goes_on(geom: &Geometry, v: usize, axis: usize, sign: i32, steps: usize, bright: impl Fn(usize) -> bool) -> bool {
+/// How many bright voxels follow `v` along `axis` in direction `sign` (±1), counting up to
+/// `limit` at most and stopping at the volume's edge.
+fn bright_run(geom: &Geometry, v: usize, axis: usize, sign: i32, limit: usize, bright: impl Fn(usize) -> bool) -> usize {
     let stride = [1usize, geom.dims[0], geom.dims[0] * geom.dims[1]][axis];
     let at = geom.ijk(v)[axis];
     let room = if sign > 0 { geom.dims[axis] - 1 - at } else { at };
-    room >= steps && (1..=steps).all(|t| bright(if sign > 0 { v + t * stride } else { v - t * stride }))
+    (1..=limit.min(room)).take_while(|&t| bright(if sign > 0 { v + t * stride } else { v - t * stride })).count()
 }
 
 /// Whether the run of bright voxels through voxel `v` along `axis` is at least `mm` long.
 /// Walks out from `v` both ways and stops as soon as it is.
 fn chord_at_least(geom: &Geometry, v: usize, axis: usize, mm: f64, bright: impl Fn(usize) -> bool) -> bool {
     let need = (mm / geom.spacing[axis]).ceil() as usize;
-    let stride = [1usize, geom.dims[0], geom.dims[0] * geom.dims[1]][axis];
-    let at = geom.ijk(v)[axis];
-    let mut len = 1;
-    let mut up = 1;
-    while len < need && at + up < geom.dims[axis] && bright(v + up * stride) {
-        len += 1;
-        up += 1;
-    }
-    let mut down = 1;
-    while len < need && down <= at && bright(v - down * stride) {
-        len += 1;
-        down += 1;
-    }
-    len >= need
+    let up = bright_run(geom, v, axis, 1, need.saturating_sub(1), &bright);
+    1 + up + bright_run(geom, v, axis, -1, need.saturating_sub(1 + up), &bright) >= need
 }
 
 /// Air–fluid interfaces seen along each voxel axis: `[axis][0]` counts lines going from gas

@@ -27,3 +27,16 @@ pub fn colon_a_volume() -> Option<Volume<i16>> {
 pub fn colon_a_study() -> Option<Study> {
     Some(prepare(colon_a_volume()?, &PrepOptions::default(), |_| {}).unwrap())
 }
+
+/// The mouth of the ileocecal valve of a colon phantom with opacified small bowel: the point
+/// where the terminal ileum opens into the caecum (volume-local mm) and the ileum's radius
+/// (mm); None without small bowel.
+pub fn valve_mouth(t: &voyage_core::phantom::Truth) -> Option<(glam::DVec3, f64)> {
+    let ileum = t.small_bowel_loops.iter().filter(|l| l.enters_cecum).map(|l| l.radius_mm).fold(0.0, f64::max);
+    t.ileocecal_valve_mm.map(|p| (glam::DVec3::from_array(p), ileum))
+}
+
+/// The centre of voxel `v` (volume index) in volume-local mm.
+pub fn voxel_mm(g: &voyage_core::Geometry, v: usize) -> glam::DVec3 {
+    g.index_to_local(glam::DVec3::from_array(g.ijk(v).map(|x| x as f64)))
+}
