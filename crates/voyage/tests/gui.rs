@@ -368,3 +368,55 @@ fn slices_show_the_cleansed_ct_and_outline_it_on_request() {
     assert!(light(&b) < light(&a), "cleansed slices are not darker where fluid lay: {} vs {}", light(&b), light(&a));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The translucency view (T, script step `translucency`) colours a polyp red and a lump of
+/// tagged stool green, with a legend; the plain view has neither colour.
+#[test]
+fn translucency_tells_polyp_from_stool() {
+    let Some(display) = Display::start() else { return };
+    let dir = scratch("translucency");
+    let (ct, truth) = (dir.join("stool.nii.gz"), dir.join("truth.json"));
+    let made = Command::new(env!("CARGO_BIN_EXE_voyage")).args(["phantom", "colon", "--small", "--tagged-stool", "--out"]).arg(&ct).arg("--truth").arg(&truth).output().unwrap();
+    assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+    let t = read_json(&truth);
+    let v3 = |v: &Value| DVec3::new(v[0].as_f64().unwrap(), v[1].as_f64().unwrap(), v[2].as_f64().unwrap());
+    // Facing a sphere on the wall from 6 mm off its surface, along `into` (into the lumen).
+    let facing = |c: DVec3, r: f64, into: DVec3| voyage_core::camera::Pose::looking(c + (r + 6.0) * into, -into, into.any_orthonormal_vector()).to_array();
+    let polyp = t["polyps"].as_array().unwrap().iter().max_by(|a, b| a["diameter_mm"].as_f64().unwrap().total_cmp(&b["diameter_mm"].as_f64().unwrap())).unwrap();
+    let at_polyp = facing(v3(&polyp["center_mm"]), polyp["diameter_mm"].as_f64().unwrap() / 2.0, v3(&polyp["direction"]));
+    let axis: Vec<DVec3> = t["centerline_mm"].as_array().unwrap().iter().map(v3).collect();
+    let lump = t["stool"].as_array().unwrap().iter().max_by(|a, b| a["diameter_mm"].as_f64().unwrap().total_cmp(&b["diameter_mm"].as_f64().unwrap())).unwrap();
+    let c = v3(&lump["center_mm"]);
+    let near = axis.iter().copied().min_by(|a, b| a.distance(c).total_cmp(&b.distance(c))).unwrap();
+    let at_lump = facing(c, lump["diameter_mm"].as_f64().unwrap() / 2.0, (near - c).normalize());
+    let script = dir.join("script.json");
+    let shots = ["plain", "polyp", "stool"].map(|n| dir.join(format!("{n}.png")));
+    std::fs::write(
+        &script,
+        serde_json::json!([
+            {"centerline": false}, {"wait": 3}, {"pose": at_polyp}, {"wait": 3}, {"screenshot": shots[0]},
+            {"translucency": true}, {"wait": 3}, {"screenshot": shots[1]},
+            {"pose": at_lump}, {"wait": 3}, {"screenshot": shots[2]},
+            {"quit": true}
+        ])
+        .to_string(),
+    )
+    .unwrap();
+    let report = dir.join("report.json");
+    let out = voyage(&display).arg("view").arg(&ct).args(["--paused", "--no-cleanse", "--script"]).arg(&script).arg("--report").arg(&report).output().unwrap();
+    assert!(out.status.success(), "{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    let r = read_json(&report);
+    let view: Vec<f32> = r["view_rect"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect();
+    let view = [view[0], view[1], view[2], view[3]];
+    // Encoded colours: the mucosa's green is 0.63 of its red at any light, the
+    // translucency's soft tissue 0.33; its stool is green.
+    let red = |p: &image::Rgba<u8>| p[0] > 100 && (p[1] as f32) < 0.45 * p[0] as f32 && (p[2] as f32) < 0.45 * p[0] as f32;
+    let green = |p: &image::Rgba<u8>| p[1] > 100 && (p[0] as f32) < 0.6 * p[1] as f32 && (p[2] as f32) < 0.8 * p[1] as f32;
+    let [plain, polyp, stool] = shots.map(|s| image::open(&s).unwrap().to_rgba8());
+    let (r0, g0) = (count(&plain, view, red), count(&plain, view, green));
+    let (r1, g2) = (count(&polyp, view, red), count(&stool, view, green));
+    assert!(r0 < 20 && g0 < 20, "plain view: {r0} red, {g0} green pixels");
+    assert!(r1 > 500, "the polyp is not red under translucency: {r1} pixels");
+    assert!(g2 > 500, "the stool is not green under translucency: {g2} pixels");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -1,13 +1,15 @@
 //! Rendering without a GPU: the reference rasterizer (depth and triangle-id buffers), the
 //! endoscope shading both renderers share, the surface laid out by cell, and the visibility
-//! strategies that choose which cells to draw (paper §4.3); and close-up volume rendering of
-//! the CT in a small box (paper Fig. 9).
+//! strategies that choose which cells to draw (paper §4.3); close-up volume rendering of
+//! the CT in a small box (paper Fig. 9); and the translucency view, the surface coloured by
+//! what lies beneath it.
 
 pub mod closeup;
 pub mod mesh;
 pub mod raster;
 pub mod shading;
 pub mod survey;
+pub mod translucency;
 pub mod visibility;
 
 pub use closeup::{render_closeup, CloseupBox, TfPoint, TransferFunction};
@@ -15,4 +17,5 @@ pub use mesh::CellMesh;
 pub use raster::{render_rgba, shade, Frame, Pixel, Rasterizer, View, NO_TRIANGLE};
 pub use shading::Lighting;
 pub use survey::{look_around, survey, StrategyStats, Survey};
+pub use translucency::{render_translucency, surface_point, Material, Translucency, TranslucencyOptions};
 pub use visibility::{Drawn, Strategy, Visibility};

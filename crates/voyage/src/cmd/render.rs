@@ -12,7 +12,7 @@ use voyage_core::flight::{fly, Flight};
 use voyage_core::io::atomic::write_atomic;
 use voyage_core::potential::{potential_field, Direction};
 use voyage_core::prep::Study;
-use voyage_core::render::{shade, CellMesh, Frame, Lighting, Rasterizer, Strategy, View, Visibility};
+use voyage_core::render::{render_translucency, shade, surface_point, CellMesh, CloseupBox, Frame, Lighting, Material, Rasterizer, Strategy, TranslucencyOptions, View, Visibility};
 use voyage_render::GpuRenderer;
 
 use super::fly::PhysicsArgs;
@@ -87,6 +87,11 @@ pub struct RenderArgs {
     /// The PNG to write.
     #[arg(long)]
     pub out: PathBuf,
+    /// Lay the translucency view over the frame: the surface within 15 mm of the point at the
+    /// view's centre, coloured by what lies beneath it (soft tissue red, fat yellow, tagged
+    /// or mottled stool green, ordinary wall blue).
+    #[arg(long)]
+    pub translucency: bool,
     #[command(flatten)]
     pub view: ViewArgs,
     #[command(flatten)]
@@ -191,10 +196,38 @@ pub fn render(a: &RenderArgs) -> Result<()> {
         (None, None) => bail!("give --frame N or --pose"),
     };
     let mut r = Renderer::new(&study, &a.view)?;
-    let rgba = r.draw(&a.view.camera(pose))?;
+    let camera = a.view.camera(pose);
+    let mut rgba = r.draw(&camera)?;
+    if a.translucency {
+        translucency_over(&study, &camera, &mut rgba, a.view.width, a.view.height)?;
+    }
     write_png(&a.out, &rgba, a.view.width, a.view.height)?;
     println!("wrote {} ({}×{}, {})", a.out.display(), a.view.width, a.view.height, if a.view.gpu { "GPU" } else { "CPU" });
     Ok(())
+}
+
+/// Blends the translucency view of the box around the surface point at the view's centre
+/// over `rgba` and says how many pixels each class has.
+fn translucency_over(study: &Study, camera: &Camera, rgba: &mut [u8], width: u32, height: u32) -> Result<()> {
+    let opts = TranslucencyOptions::default();
+    let ct = study.cleansed_ct();
+    let centre = surface_point(&ct, camera.pose.position, camera.pose.z_body(), 200.0, opts.air_hu).context("--translucency: no surface at the view's centre within 200 mm")?;
+    let t = render_translucency(&ct, &study.segmentation.lumen, camera, &CloseupBox::around(centre, voyage_core::render::translucency::HALF_SIZE_MM), width, height, &opts);
+    blend_over(rgba, &t.rgba);
+    let counts = t.counts();
+    let parts: Vec<String> = Material::ALL.iter().zip(counts).map(|(m, n)| format!("{} {n}", m.name())).collect();
+    println!("translucency around {} (pixels): {}", ct.geometry().describe_point(centre), parts.join(", "));
+    Ok(())
+}
+
+/// `over` (straight alpha) composited onto the opaque `under`, both RGBA8.
+pub fn blend_over(under: &mut [u8], over: &[u8]) {
+    for (u, o) in under.chunks_exact_mut(4).zip(over.chunks_exact(4)) {
+        let a = o[3] as u32;
+        for c in 0..3 {
+            u[c] = ((o[c] as u32 * a + u[c] as u32 * (255 - a) + 127) / 255) as u8;
+        }
+    }
 }
 
 pub fn movie(a: &MovieArgs) -> Result<()> {

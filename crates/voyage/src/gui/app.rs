@@ -13,6 +13,9 @@ use voyage_core::camera::Camera;
 use voyage_core::findings::{self, Findings};
 use voyage_core::potential::Direction;
 use voyage_core::render::closeup::{render_closeup, CloseupBox, TransferFunction};
+use voyage_core::render::shading::encode;
+use voyage_core::render::{render_translucency, Material, TranslucencyOptions};
+
 use voyage_core::submarine::Input;
 
 use super::corrections::{self, Correction};
@@ -78,6 +81,7 @@ const HELP: &[(&str, &str)] = &[
     ("C / L / S", "compass / leveling / still mode"),
     ("G", "centerline overlay (green)"),
     ("V", "close-up volume rendering"),
+    ("T", "translucency: what lies beneath the surface (red soft tissue, yellow fat, green stool)"),
     ("[ / ]", "narrower / wider field of view"),
     ("Ctrl+E", "export the findings"),
     ("H or F1", "this help"),
@@ -114,6 +118,8 @@ pub struct App {
     closeup: Option<Closeup>,
     /// Marker whose neighbourhood the close-up shows (instead of the view centre).
     closeup_at: Option<DVec3>,
+    translucency_on: bool,
+    translucency: Option<Closeup>,
     status: String,
     frame_ms: VecDeque<f64>,
     render_ms: VecDeque<f64>,
@@ -183,6 +189,8 @@ impl App {
             closeup_on: false,
             closeup: None,
             closeup_at: None,
+            translucency_on: false,
+            translucency: None,
             status: String::new(),
             frame_ms: VecDeque::new(),
             render_ms: VecDeque::new(),
@@ -246,6 +254,7 @@ impl App {
                 }
                 self.findings = Findings::default();
                 self.closeup = None;
+                self.translucency = None;
                 self.closeup_at = None;
                 self.measure_from = None;
                 self.session = Some(s);
@@ -275,6 +284,7 @@ impl App {
                 let kept = s.study.segmentation.segments.iter().filter(|x| x.kept).count();
                 self.status = format!("{} in {seconds:.1} s: {kept} colon segment{}, centerline {:.0} mm (was {was:.0})", c.describe(), if kept == 1 { "" } else { "s" }, s.study.centerline.length_mm);
                 self.closeup = None;
+                self.translucency = None;
                 self.measure_from = None;
                 self.slices.follow();
                 if let Some(v) = &mut self.scout {
@@ -316,6 +326,9 @@ impl App {
         }
         if pressed(Key::V) {
             self.closeup_on = !self.closeup_on;
+        }
+        if pressed(Key::T) {
+            self.translucency_on = !self.translucency_on;
         }
         if pressed(Key::Num1) {
             self.tool = Tool::Steer;
@@ -489,6 +502,7 @@ impl App {
                 }
             }
             Step::Closeup(on) => self.closeup_on = on,
+            Step::Translucency(on) => self.translucency_on = on,
             Step::Centerline(on) => self.show_centerline = on,
             Step::SlicesCleansed(on) => self.slices.cleansed = on,
             Step::SlicesOutline(on) => self.slices.outline = on,
@@ -665,6 +679,7 @@ impl App {
         ui.checkbox(&mut s.sub.modes.still, "still (S)");
         ui.checkbox(&mut self.show_centerline, "centerline (G)");
         ui.checkbox(&mut self.closeup_on, "close-up volume (V)");
+        ui.checkbox(&mut self.translucency_on, "translucency (T)").on_hover_text("what lies beneath the surface around the marker or the view's centre");
         ui.separator();
         ui.heading("Findings");
         ui.horizontal(|ui| {
@@ -792,6 +807,7 @@ impl App {
             self.last_cells = self.endoscope.last_cells.clone();
             push_limited(&mut self.render_ms, self.endoscope.stats.render_ms);
             self.closeup_overlay(ui, rect);
+            self.translucency_overlay(ui, rect);
             self.overlays(ui, rect);
         });
     }
@@ -865,6 +881,43 @@ impl App {
         if let Some(c) = &self.closeup {
             ui.painter().image(c.texture.id(), rect, Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)), Color32::WHITE);
         }
+    }
+
+    /// The translucency view over the view: the surface in a box around the marker flown back
+    /// to, or around the surface point at the view's centre, coloured by what lies beneath
+    /// it, with its legend.
+    fn translucency_overlay(&mut self, ui: &egui::Ui, rect: Rect) {
+        if !self.translucency_on {
+            self.translucency = None;
+            return;
+        }
+        let Some(s) = &self.session else { return };
+        let cam = s.camera();
+        let center = match self.closeup_at {
+            Some(c) => Some(c),
+            None => self.pick(rect.center()).map(|h| h.point),
+        };
+        let Some(center) = center else { return };
+        let fresh = self.translucency.as_ref().is_some_and(|c| c.camera == cam && c.center == center);
+        if !fresh {
+            // Half the view's resolution, as the close-up: rays are marched on the CPU.
+            let w = (rect.width() * 0.5).clamp(64.0, 384.0) as u32;
+            let h = ((w as f32) * rect.height() / rect.width()).max(16.0) as u32;
+            let region = CloseupBox { center, half_size_mm: voyage_core::render::translucency::HALF_SIZE_MM };
+            let t = render_translucency(s.surface_ct(), &s.study.segmentation.lumen, &cam, &region, w, h, &TranslucencyOptions::default());
+            let image = egui::ColorImage::from_rgba_unmultiplied([w as usize, h as usize], &t.rgba);
+            match &mut self.translucency {
+                Some(c) => {
+                    c.texture.set(image, egui::TextureOptions::LINEAR);
+                    (c.camera, c.center) = (cam, center);
+                }
+                None => self.translucency = Some(Closeup { texture: ui.ctx().load_texture("translucency", image, egui::TextureOptions::LINEAR), camera: cam, center }),
+            }
+        }
+        if let Some(c) = &self.translucency {
+            ui.painter().image(c.texture.id(), rect, Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)), Color32::WHITE);
+        }
+        translucency_legend(&ui.painter_at(rect), rect);
     }
 
     /// Centerline, markers, measurements and the read-outs over the view.
@@ -1137,4 +1190,17 @@ fn colon_report(s: &Session, source: Option<&Source>) -> serde_json::Value {
         "end_lps_mm": lps(cl.points_mm.len().saturating_sub(1)),
         "corrections": {"seed": arr(&points.seed), "exclude": arr(&points.exclude), "source": points.source.map(|p| p.to_array()), "target": points.target.map(|p| p.to_array())},
     })
+}
+
+/// The translucency view's colours, in the view's lower left corner above the status line.
+fn translucency_legend(painter: &egui::Painter, rect: Rect) {
+    let row = 18.0;
+    let top = rect.bottom() - 36.0 - row * Material::ALL.len() as f32;
+    painter.rect_filled(Rect::from_min_size(Pos2::new(rect.left() + 6.0, top - 4.0), Vec2::new(210.0, row * Material::ALL.len() as f32 + 8.0)), 4.0, Color32::from_black_alpha(160));
+    for (i, m) in Material::ALL.iter().enumerate() {
+        let y = top + row * i as f32;
+        let [r, g, b] = m.rgb().map(encode);
+        painter.rect_filled(Rect::from_min_size(Pos2::new(rect.left() + 12.0, y + 3.0), Vec2::splat(12.0)), 2.0, Color32::from_rgb(r, g, b));
+        painter.text(Pos2::new(rect.left() + 30.0, y + 9.0), egui::Align2::LEFT_CENTER, m.name(), egui::FontId::proportional(13.0), Color32::WHITE);
+    }
 }

@@ -47,8 +47,9 @@ pub enum Step {
     Pose([f64; 7]),
     /// Fly back to a marker (by label, e.g. "M1").
     GoTo(String),
-    /// Toggle the close-up volume rendering or the centerline overlay.
+    /// Toggle the close-up volume rendering, the translucency view or the centerline overlay.
     Closeup(bool),
+    Translucency(bool),
     Centerline(bool),
     /// Show the cleansed CT on the slices (a tagged exam), and outline what cleansing changed.
     SlicesCleansed(bool),

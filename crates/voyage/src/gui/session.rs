@@ -2,6 +2,8 @@
 //! what the window needs beside (the scout's light mesh, the cells' visibility state).
 //! No egui here: the panels read and steer a `Session`.
 
+use std::sync::OnceLock;
+
 use glam::DVec3;
 use voyage_core::camera::{Camera, Pose};
 use voyage_core::flight::{start_pose, Autopilot, FlightOptions};
@@ -9,6 +11,7 @@ use voyage_core::potential::{potential_field, BrickStore, Direction, PotentialFi
 use voyage_core::prep::Study;
 use voyage_core::render::{CellMesh, Strategy, Visibility};
 use voyage_core::submarine::{Input, Submarine};
+use voyage_core::Volume;
 
 use super::scout::ScoutMesh;
 
@@ -35,9 +38,19 @@ pub struct Session {
     pub fov: f64,
     /// Where the flight of the current direction starts.
     pub start: Pose,
+    /// The cleansed CT, made the first time the translucency view asks for it.
+    cleansed: OnceLock<Volume<i16>>,
 }
 
 impl Session {
+    /// The CT the surface was cut from: the cleansed one in a tagged exam (a copy, made once).
+    pub fn surface_ct(&self) -> &Volume<i16> {
+        if self.study.cleansing.is_empty() {
+            return &self.study.ct;
+        }
+        self.cleansed.get_or_init(|| self.study.cleansed_ct())
+    }
+
     /// The bridged gap (arc span along the centerline) the submarine is in, if any.
     pub fn collapsed_here(&self) -> Option<[f64; 2]> {
         let x = self.sub.state.x;
@@ -63,7 +76,7 @@ impl Session {
         sub.direction = dir;
         let dt0 = field.sample(start.position, dir).dt.unwrap_or(f64::INFINITY);
         let pilot = Autopilot::new(&study.centerline, dir, &opts, start.position, dt0);
-        Ok(Session { name, study, field, mesh, scout, vis, sub, pilot, opts, playing: false, reached: false, fov: 90.0, start })
+        Ok(Session { name, study, field, mesh, scout, vis, sub, pilot, opts, playing: false, reached: false, fov: 90.0, start, cleansed: OnceLock::new() })
     }
 
     pub fn pose(&self) -> Pose {
