@@ -69,6 +69,12 @@ pub struct Cleansing {
     pub tagged_voxels: usize,
     /// Lumen voxels that left the lumen (mostly wall, by the model).
     pub left_lumen: usize,
+    /// Lumps of tagged stool on the wall (outside the lumen segmentation found) made air,
+    /// and their voxels at or above the fluid threshold.
+    pub stool_lumps: usize,
+    pub stool_voxels: usize,
+    /// Voxels that joined the lumen where stool was.
+    pub joined_lumen: usize,
 }
 
 impl Cleansing {
@@ -145,6 +151,20 @@ pub struct Scene<'a> {
 const NEAR: u8 = 2;
 const CORE: u8 = 4;
 const POOL: u8 = 8;
+/// A lump of stool's tagged voxels and the air pockets inside it (`SOLID`), and with them
+/// their partial-volume skin (`LUMP`).
+const SOLID: u8 = 16;
+const LUMP: u8 = 32;
+
+/// Stool is tagged material outside the lumen with lumen air within this many voxels along
+/// an axis: across its partial-volume skin. Contrast in small bowel or bone lies behind the
+/// colon's wall and fat, farther than that.
+const STOOL_REACH: isize = 2;
+/// A lump larger than this (ml) is not stool; one of fewer tagged voxels than this is noise.
+const MAX_LUMP_ML: f64 = 20.0;
+const MIN_LUMP_VOXELS: usize = 8;
+/// How far (voxels) past a lump's tagged voxels its skin and pockets may reach.
+const SKIN_VOXELS: usize = 3;
 
 /// A pool too thin for a core is seeded where fluid this far above the fluid threshold lies
 /// under lumen air: a plastic pipe's or a wall's noise (≈ 150 ± 20, 40 ± 40 HU) does not
@@ -216,9 +236,6 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
                 }
             }
         }
-        if queue.is_empty() {
-            return Cleansing::default();
-        }
         // The pools: the tagged voxels joined to a core through tagged voxels (a pool's
         // thin edges and its partial-volume skin, not the noise).
         let inside = |v: usize| {
@@ -254,6 +271,10 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
         }
     }
 
+    // Lumps of tagged stool on the wall, outside the lumen (step 3 cleanses them; the pools'
+    // model leaves them alone).
+    let lumps = find_lumps(hu, lumen.data_mut(), &g, lo, hi, air_hu, fluid_hu);
+
     // 2. The model, voxel by voxel, over the marked ones (the marks reach 2 voxels past
     // the extent's tagged voxels, which lie inside lo..=hi).
     let t = opts.tissue_hu as f32;
@@ -271,7 +292,7 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
             let row = nx * (j + ny * k);
             for i in ilo..=ihi {
                 let v = row + i;
-                if m[v] & NEAR == 0 {
+                if m[v] & NEAR == 0 || m[v] & (SOLID | LUMP) != 0 {
                     continue;
                 }
                 let h = hu[v];
@@ -280,13 +301,14 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
                     if h < air_hu {
                         continue;
                     }
-                    let by_wall = six.iter().any(|&d| !in_lumen(m[at(d)]));
+                    // A lump of stool beside the pool is not wall.
+                    let by_wall = six.iter().any(|&d| m[at(d)] & (1 | SOLID | LUMP) == 0);
                     if !by_wall || air_above(v, m) {
                         AIR_HU
                     } else if h <= t_max {
                         continue;
                     } else {
-                        match fluid_value(v, hu, m, &cube, fluid_hu) {
+                        match fluid_value(v, hu, m, &cube, fluid_hu, CORE) {
                             Some(c) => unmix(h as f32, t, c),
                             None => continue,
                         }
@@ -300,7 +322,7 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
                     if !by_fluid || h <= t_max {
                         continue;
                     }
-                    match fluid_value(v, hu, m, &cube, fluid_hu) {
+                    match fluid_value(v, hu, m, &cube, fluid_hu, CORE) {
                         Some(c) => unmix(h as f32, t, c),
                         None => continue,
                     }
@@ -317,30 +339,340 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
         }
     }
 
-    // 3. Clear the marks (they reach two voxels past lo..=hi, which lies two inside the
-    // volume); the wall's voxels leave the lumen.
+    // 3. The lumps of stool: made air with the same model.
+    let stool = Lumps { hu, m: lumen.data(), g: &g, opts, air_hu, fluid_hu }.cleanse(&lumps, &cube);
+    let (stool_lumps, stool_voxels) = (lumps.len(), stool.tagged);
+    if !stool.voxels.is_empty() {
+        let mut all: Vec<(u32, i16)> = voxels.into_iter().zip(cleansed).chain(stool.voxels.iter().copied().zip(stool.values.iter().copied())).collect();
+        all.sort_unstable_by_key(|&(v, _)| v);
+        (voxels, cleansed) = all.into_iter().unzip();
+    }
+
+    // 4. What is left outside the lumen where pools and lumps were, and that the wall
+    // beyond does not hold: islands of partial-volume skin in the new lumen. They are air.
+    let mut join = stool.join;
+    let islands = Islands { m: lumen.data(), hu, g: &g, voxels: &voxels, values: &cleansed, leave: &leave, join: &join, air_hu }.find(lo, hi);
+    if !islands.is_empty() {
+        let mut all: Vec<(u32, i16)> = voxels.into_iter().zip(cleansed).filter(|(v, _)| islands.binary_search(&(*v as usize)).is_err()).collect();
+        all.extend(islands.iter().filter(|&&v| hu[v] != AIR_HU).map(|&v| (v as u32, AIR_HU)));
+        all.sort_unstable_by_key(|&(v, _)| v);
+        (voxels, cleansed) = all.into_iter().unzip();
+        let m = lumen.data();
+        leave.retain(|v| islands.binary_search(v).is_err());
+        join.extend(islands.iter().filter(|&&v| m[v] & 1 == 0));
+    }
+
+    // 5. Clear the marks (they reach two voxels past lo..=hi, which lies two inside the
+    // volume); the wall's voxels leave the lumen, former stool joins it.
     let m = lumen.data_mut();
     for k in lo[2] - 2..=hi[2] + 2 {
         for j in lo[1] - 2..=hi[1] + 2 {
             let row = nx * (j + ny * k);
             for x in &mut m[row + lo[0] - 2..=row + hi[0] + 2] {
-                *x &= !(NEAR | CORE | POOL);
+                *x &= !(NEAR | CORE | POOL | SOLID | LUMP);
             }
         }
     }
     for &v in &leave {
         m[v] = 0;
     }
-    Cleansing { voxels, other: cleansed, tagged_voxels, left_lumen: leave.len() }
+    for &v in &join {
+        m[v] = 1;
+    }
+    Cleansing { voxels, other: cleansed, tagged_voxels, left_lumen: leave.len(), stool_lumps, stool_voxels, joined_lumen: join.len() }
+}
+
+/// Finds the lumps of tagged stool: tagged voxels outside the lumen with lumen air within
+/// [`STOOL_REACH`] voxels along an axis, and the tagged voxels joined to them (face
+/// neighbours), at most [`MAX_LUMP_ML`] a lump, marked `SOLID`. Then its skin, marked `LUMP`:
+/// every voxel touching it (26 neighbours) that is not lumen, and from there every voxel
+/// outside the lumen that is more air than tissue, within [`SKIN_VOXELS`] of the lump's box:
+/// the air pockets of mottled stool, and the outer skin the lumen's threshold left out. A
+/// lump whose air runs out of that box (a tube's air, the outside) is not stool. Returns
+/// each lump's voxels.
+fn find_lumps(hu: &[i16], m: &mut [u8], g: &Geometry, lo: [usize; 3], hi: [usize; 3], air_hu: i16, fluid_hu: i16) -> Vec<Vec<usize>> {
+    let [nx, ny, _] = g.dims;
+    let strides = [1isize, nx as isize, (nx * ny) as isize];
+    let six = [1, -1, strides[1], -strides[1], strides[2], -strides[2]];
+    let in_lumen = |x: u8| x & 1 != 0;
+    let within = |v: usize, lo: [usize; 3], hi: [usize; 3]| {
+        let ijk = g.ijk(v);
+        (0..3).all(|a| ijk[a] >= lo[a] && ijk[a] <= hi[a])
+    };
+    let max_voxels = (MAX_LUMP_ML * 1000.0 / g.spacing.iter().product::<f64>()) as usize;
+    let solid = |v: usize, m: &[u8]| !in_lumen(m[v]) && hu[v] >= fluid_hu;
+    let near_air = |v: usize, m: &[u8]| {
+        six.iter().any(|&d| {
+            (1..=STOOL_REACH).any(|s| {
+                let w = v as isize + d * s;
+                w >= 0 && (w as usize) < m.len() && in_lumen(m[w as usize]) && hu[w as usize] < air_hu
+            })
+        })
+    };
+    let mostly_air = mostly_air(air_hu);
+    let mut lumps = Vec::new();
+    for k in lo[2]..=hi[2] {
+        for j in lo[1]..=hi[1] {
+            let row = nx * (j + ny * k);
+            for v in row + lo[0]..=row + hi[0] {
+                if !solid(v, m) || m[v] & (SOLID | LUMP) != 0 || !near_air(v, m) {
+                    continue;
+                }
+                // The lump: flood through tagged voxels outside the lumen.
+                let mut lump = vec![v];
+                m[v] |= SOLID;
+                let mut next = 0;
+                while next < lump.len() && lump.len() <= max_voxels {
+                    let u = lump[next];
+                    next += 1;
+                    for &d in &six {
+                        let w = (u as isize + d) as usize;
+                        if within(w, lo, hi) && solid(w, m) && m[w] & SOLID == 0 {
+                            m[w] |= SOLID;
+                            lump.push(w);
+                        }
+                    }
+                }
+                // Its box, grown by the skin's reach (inside lo..=hi, which lies two voxels
+                // inside the volume, so that 26 neighbours never leave it).
+                let (mut blo, mut bhi) = (hi, lo);
+                for &u in &lump {
+                    let ijk = g.ijk(u);
+                    for a in 0..3 {
+                        (blo[a], bhi[a]) = (blo[a].min(ijk[a]), bhi[a].max(ijk[a]));
+                    }
+                }
+                let blo = [0, 1, 2].map(|a| blo[a].saturating_sub(SKIN_VOXELS).max(lo[a]));
+                let bhi = [0, 1, 2].map(|a| (bhi[a] + SKIN_VOXELS).min(hi[a]));
+                // Stool, not noise on plastic or a wall: a few voxels at least, one of them
+                // well above the threshold.
+                let mut ok = lump.len() <= max_voxels && lump.len() >= MIN_LUMP_VOXELS && lump.iter().any(|&u| hu[u] >= fluid_hu.saturating_add(LEVEL_MARGIN_HU));
+                if ok {
+                    // The skin touching the tagged voxels, whatever its value; the air
+                    // pockets, flooded through air outside the lumen (air that leaves the
+                    // box is not a pocket); then the pockets' and the skin's own outer
+                    // skin, more air than tissue.
+                    let mut grow = |lump: &mut Vec<usize>, from: usize, pred: &dyn Fn(i16) -> bool| {
+                        let to = lump.len();
+                        for n in from..to {
+                            let u = lump[n] as isize;
+                            for dk in -1..=1 {
+                                for dj in -1..=1 {
+                                    for di in -1..=1 {
+                                        let w = (u + di + dj * strides[1] + dk * strides[2]) as usize;
+                                        if in_lumen(m[w]) || m[w] & (SOLID | LUMP) != 0 || !pred(hu[w]) {
+                                            continue;
+                                        }
+                                        if !within(w, blo, bhi) {
+                                            ok = false;
+                                            continue;
+                                        }
+                                        m[w] |= LUMP;
+                                        lump.push(w);
+                                    }
+                                }
+                            }
+                        }
+                        to
+                    };
+                    grow(&mut lump, 0, &|_| true);
+                    let mut from = 0;
+                    loop {
+                        let before = lump.len();
+                        from = grow(&mut lump, from, &|h| h < air_hu);
+                        if lump.len() == before {
+                            break;
+                        }
+                    }
+                    grow(&mut lump, 0, &|h| h < mostly_air);
+                }
+                if !ok {
+                    // Not stool: its voxels stay marked `LUMP` alone, so that no other seed
+                    // floods it again (cleared with the other marks), and the pools' model
+                    // leaves them as they are.
+                    for &u in &lump {
+                        m[u] = (m[u] & !SOLID) | LUMP;
+                    }
+                    continue;
+                }
+                lumps.push(lump);
+            }
+        }
+    }
+    lumps
+}
+
+/// The changes so far, to find what they left floating.
+struct Islands<'a> {
+    /// The lumen before cleansing, with the marks.
+    m: &'a [u8],
+    hu: &'a [i16],
+    g: &'a Geometry,
+    /// Changed voxels (ascending) and their new values.
+    voxels: &'a [u32],
+    values: &'a [i16],
+    /// Lumen voxels that leave it, voxels that join it (ascending).
+    leave: &'a [usize],
+    join: &'a [usize],
+    air_hu: i16,
+}
+
+impl Islands<'_> {
+    fn value(&self, v: usize) -> i16 {
+        self.voxels.binary_search(&(v as u32)).map_or(self.hu[v], |n| self.values[n])
+    }
+
+    /// Outside the lumen once cleansed, at or above the air level.
+    fn solid(&self, v: usize) -> bool {
+        let lumen = if self.m[v] & 1 != 0 { self.leave.binary_search(&v).is_err() } else { self.join.binary_search(&v).is_ok() };
+        !lumen && self.value(v) >= self.air_hu
+    }
+
+    /// Voxels marked near a pool or in a lump (within lo..=hi grown by one; the marks reach
+    /// two past it, and lo..=hi lies two inside the volume) that are solid once cleansed but
+    /// joined to nothing solid outside the marks, through face neighbours solid and marked:
+    /// ascending.
+    fn find(&self, lo: [usize; 3], hi: [usize; 3]) -> Vec<usize> {
+        let [nx, ny, _] = self.g.dims;
+        let six = [1isize, -1, nx as isize, -(nx as isize), (nx * ny) as isize, -((nx * ny) as isize)];
+        let (blo, bhi) = (lo.map(|x| x - 1), hi.map(|x| x + 1));
+        let in_box = |v: usize| {
+            let ijk = self.g.ijk(v);
+            (0..3).all(|a| ijk[a] >= blo[a] && ijk[a] <= bhi[a])
+        };
+        let marked = |v: usize| self.m[v] & (NEAR | SOLID | LUMP) != 0 && in_box(v);
+        // The marked voxels solid once cleansed (ascending, by the scan), and whether each is
+        // held: from outside (a neighbour outside the lumen, unmarked or past the box, where
+        // nothing changed), then through the others.
+        let mut solid = Vec::new();
+        for k in blo[2]..=bhi[2] {
+            for j in blo[1]..=bhi[1] {
+                let row = nx * (j + ny * k);
+                for v in row + blo[0]..=row + bhi[0] {
+                    if marked(v) && self.solid(v) {
+                        solid.push(v);
+                    }
+                }
+            }
+        }
+        let mut held: Vec<bool> = solid
+            .iter()
+            .map(|&v| {
+                six.iter().any(|&d| {
+                    let w = (v as isize + d) as usize;
+                    !marked(w) && self.m[w] & 1 == 0
+                })
+            })
+            .collect();
+        let mut queue: Vec<usize> = (0..solid.len()).filter(|&n| held[n]).collect();
+        while let Some(n) = queue.pop() {
+            for &d in &six {
+                let w = (solid[n] as isize + d) as usize;
+                if let Ok(x) = solid.binary_search(&w)
+                    && !held[x]
+                {
+                    held[x] = true;
+                    queue.push(x);
+                }
+            }
+        }
+        solid.into_iter().zip(held).filter(|&(_, h)| !h).map(|(v, _)| v).collect()
+    }
+}
+
+/// Below this a voxel is more air than soft tissue: halfway between the air level and soft
+/// tissue's 40 HU.
+fn mostly_air(air_hu: i16) -> i16 {
+    ((air_hu as i32 + 40) / 2) as i16
+}
+
+/// What cleansing the lumps changes: voxels (ascending), their cleansed values, the voxels
+/// that join the lumen, and how many tagged voxels became air.
+#[derive(Default)]
+struct LumpChanges {
+    voxels: Vec<u32>,
+    values: Vec<i16>,
+    join: Vec<usize>,
+    tagged: usize,
+}
+
+/// The lumps and what the model needs to cleanse them.
+struct Lumps<'a> {
+    hu: &'a [i16],
+    /// The lumen with the marks of [`find_lumps`].
+    m: &'a [u8],
+    g: &'a Geometry,
+    opts: &'a CleanseOptions,
+    air_hu: i16,
+    fluid_hu: i16,
+}
+
+impl Lumps<'_> {
+    /// The pools' model on the lumps: a lump's voxel (tagged, pocket or skin) with wall beside
+    /// it (a face neighbour outside the lumen and the lump, more tissue than air) is a
+    /// mixture of tissue and stool, unmixed with the local stool value as at a pool's floor
+    /// (soft tissue at or below `tissue_max_hu` keeps its value); any other is stool, or
+    /// stool and air: air. What ends below the air level joins the lumen.
+    fn cleanse(&self, lumps: &[Vec<usize>], cube: &[isize]) -> LumpChanges {
+        let mut out = LumpChanges::default();
+        let mut changes: Vec<(usize, i16)> = Vec::new();
+        for lump in lumps {
+            for &v in lump {
+                let value = self.model(v, cube);
+                let h = self.hu[v];
+                if value < self.air_hu {
+                    out.join.push(v);
+                    out.tagged += (h >= self.fluid_hu) as usize;
+                }
+                if value != h {
+                    changes.push((v, value));
+                }
+            }
+        }
+        changes.sort_unstable_by_key(|&(v, _)| v);
+        out.join.sort_unstable();
+        (out.voxels, out.values) = changes.into_iter().map(|(v, h)| (v as u32, h)).unzip();
+        out
+    }
+
+    fn six(&self) -> [isize; 6] {
+        let [nx, ny, _] = self.g.dims;
+        let (sy, sz) = (nx as isize, (nx * ny) as isize);
+        [1, -1, sy, -sy, sz, -sz]
+    }
+
+    /// A lump's voxel's cleansed value.
+    fn model(&self, v: usize, cube: &[isize]) -> i16 {
+        let (hu, m, air) = (self.hu, self.m, mostly_air(self.air_hu));
+        let h = hu[v];
+        let wall = self.six().iter().any(|&d| {
+            let w = (v as isize + d) as usize;
+            m[w] & (1 | SOLID | LUMP) == 0 && hu[w] >= air
+        });
+        // Beside the wall: below soft tissue's top, the wall itself (or its skin, more air
+        // than tissue: the corner where stool, air and wall met, taken as air); brighter,
+        // tissue and stool mixed, unmixed, and where that leaves more air than tissue, that
+        // corner again.
+        if !wall || h < air {
+            AIR_HU
+        } else if h <= self.opts.tissue_max_hu {
+            h
+        } else {
+            match fluid_value(v, hu, m, cube, self.fluid_hu, SOLID) {
+                Some(c) => Some(unmix(h as f32, self.opts.tissue_hu as f32, c)).filter(|&u| u >= air).unwrap_or(AIR_HU),
+                None => h,
+            }
+        }
+    }
 }
 
 /// The local tagged fluid's HU: the mean of the brighter half (by range, above the midpoint
 /// of the fluid threshold and the brightest) of the pools' core voxels in the 5³ cube
 /// around `v` (a core voxel may be the pool's partial-volume skin); None when there is none.
-fn fluid_value(v: usize, hu: &[i16], m: &[u8], cube: &[isize], fluid_hu: i16) -> Option<f32> {
+fn fluid_value(v: usize, hu: &[i16], m: &[u8], cube: &[isize], fluid_hu: i16, mark: u8) -> Option<f32> {
     let core = |d: isize| {
         let w = (v as isize + d) as usize;
-        (m[w] & CORE != 0).then_some(hu[w])
+        (m[w] & mark != 0 && hu[w] >= fluid_hu).then_some(hu[w])
     };
     let max = cube.iter().filter_map(|&d| core(d)).max()?;
     let half = ((max as i32 + fluid_hu as i32) / 2) as i16;

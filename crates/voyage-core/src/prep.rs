@@ -175,13 +175,15 @@ pub fn prepare(mut ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut
     let mut seg = segment(&ct, &opts.segment)?;
     lap(&mut t.segment);
     let mut cleansing = match (&opts.cleanse, opts.segment.fluid_hu) {
+        // A tagged exam: segmentation found tagged fluid in the colon (then stool on the
+        // wall is cleansed too; an exam without fluid costs nothing).
         (Some(c), Some(fluid_hu)) if !seg.from_mask && seg.fluid_voxels > 0 => {
             let scene = Scene { ct: &ct, lumen: &mut seg.lumen, extent: seg.extent, gravity_lps: seg.orientation.gravity(), air_hu: opts.segment.air_hu, fluid_hu };
             cleanse(scene, c)
         }
         _ => Cleansing::default(),
     };
-    seg.lumen_voxels -= cleansing.left_lumen;
+    seg.lumen_voxels = seg.lumen_voxels + cleansing.joined_lumen - cleansing.left_lumen;
     lap(&mut t.cleanse);
 
     // The skeleton search runs on blocks with their own Ds when the lumen is large, so the

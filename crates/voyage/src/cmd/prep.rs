@@ -221,13 +221,13 @@ fn summary(s: &Study, g: &Geometry, load_ms: f64) -> serde_json::Value {
     })
 }
 
-/// What electronic cleansing changed; null when it did not run or found no tagged fluid.
+/// What electronic cleansing changed; null when it did not run or found no tagged material.
 fn cleanse_summary(s: &Study) -> serde_json::Value {
     let c = &s.cleansing;
     if c.is_empty() {
         return serde_json::Value::Null;
     }
-    json!({"voxels_changed": c.len(), "tagged_voxels": c.tagged_voxels, "left_lumen": c.left_lumen})
+    json!({"voxels_changed": c.len(), "tagged_voxels": c.tagged_voxels, "left_lumen": c.left_lumen, "stool_lumps": c.stool_lumps, "stool_voxels": c.stool_voxels, "joined_lumen": c.joined_lumen})
 }
 
 /// The surface's mean angle between neighbouring triangles (degrees) away from and near
@@ -289,7 +289,9 @@ fn print_text(s: &Study, g: &Geometry, load_ms: f64) {
             let deg = |x: Option<f64>| x.map_or("-".to_string(), |d| format!("{d:.1}°"));
             format!("; surface roughness {} in air, {} where fluid lay", deg(air), deg(fluid))
         });
-        println!("cleansing   {} voxels of tagged fluid made air, {} voxels changed{r}", s.cleansing.tagged_voxels, s.cleansing.len());
+        let c = &s.cleansing;
+        let stool = if c.stool_lumps > 0 { format!(", {} lumps of tagged stool ({} voxels)", c.stool_lumps, c.stool_voxels) } else { String::new() };
+        println!("cleansing   {} voxels of tagged fluid made air{stool}, {} voxels changed{r}", c.tagged_voxels, c.len());
     }
     if s.contact_voxels > 0 {
         println!("contacts    {} lumen voxels made wall where loops of the colon touch", s.contact_voxels);
