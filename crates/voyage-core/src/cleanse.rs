@@ -35,6 +35,19 @@
 //! level) leave the lumen: they are the wall's partial-volume voxels that the fluid
 //! threshold took in.
 //!
+//! Tagged stool on the wall lies outside the lumen segmentation found (it is not under the
+//! gas, as fluid is) or partly in it. A lump is tagged voxels not in a pool with lumen air
+//! within two voxels (across its partial-volume skin; contrast in small bowel or bone lies
+//! farther, behind wall and fat), flooded through tagged voxels, with its air pockets and its
+//! skin; noise is told from stool by size and by one voxel well above the threshold. The
+//! same model cleanses it: beside the wall tissue and stool are unmixed, elsewhere (and at
+//! the corner of stool, air and wall) it is air, and it joins the lumen.
+//!
+//! Then what the model leaves floating goes: partial-volume skin that no wall holds any more
+//! (islands outside the lumen where pools and lumps were, unless they hold tissue inside,
+//! as a polyp's head on a stalk too thin to show does), spurs of skin held by one face, and
+//! air outside the lumen. Each would otherwise stand as a shard in the surface.
+//!
 //! The change is kept as a list of voxels with the other value (original or cleansed), so a
 //! CT can be switched between the two in place: no second copy of the volume.
 
@@ -216,13 +229,20 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
     // Then every voxel within two voxels of a pool is marked.
     let level_hu = fluid_hu.saturating_add(LEVEL_MARGIN_HU);
     let mut queue: Vec<usize> = Vec::new();
+    // Every voxel at or above the fluid threshold, in or out of the lumen (ascending): where
+    // lumps of stool are looked for, without a second pass over the box.
+    let mut bright: Vec<usize> = Vec::new();
     {
         let m = lumen.data_mut();
         for k in lo[2]..=hi[2] {
             for j in lo[1]..=hi[1] {
                 let row = nx * (j + ny * k);
                 for v in row + lo[0]..=row + hi[0] {
-                    if !tagged(v, m) {
+                    if hu[v] < fluid_hu {
+                        continue;
+                    }
+                    bright.push(v);
+                    if !in_lumen(m[v]) {
                         continue;
                     }
                     if six.iter().filter(|&&d| tagged((v as isize + d) as usize, m)).count() >= 5 {
@@ -273,7 +293,7 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
 
     // Lumps of tagged stool on the wall, outside the lumen (step 3 cleanses them; the pools'
     // model leaves them alone).
-    let lumps = find_lumps(hu, lumen.data_mut(), &g, lo, hi, air_hu, fluid_hu);
+    let lumps = find_lumps(hu, lumen.data_mut(), &g, &bright, lo, hi, air_hu, fluid_hu);
 
     // 2. The model, voxel by voxel, over the marked ones (the marks reach 2 voxels past
     // the extent's tagged voxels, which lie inside lo..=hi).
@@ -308,10 +328,8 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
                     } else if h <= t_max {
                         continue;
                     } else {
-                        match fluid_value(v, hu, m, &cube, fluid_hu, CORE) {
-                            Some(c) => unmix(h as f32, t, c),
-                            None => continue,
-                        }
+                        // No core near: the voxel is as bright as the fluid gets here.
+                        unmix(h as f32, t, fluid_value(v, hu, m, &cube, fluid_hu, CORE).unwrap_or(h as f32))
                     }
                 } else {
                     // The wall's first voxel: beside lumen that is not air.
@@ -379,28 +397,82 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
     for &v in &join {
         m[v] = 1;
     }
+    // Whatever cleansing made air is lumen (the wall's first voxel beside a pool, mostly
+    // fluid; a lump's voxel segmentation had taken in and then let go): the surface is cut
+    // between lumen and wall, and air on the wall's side would stand as a shard.
+    for (&v, &value) in voxels.iter().zip(&cleansed) {
+        let v = v as usize;
+        if value < air_hu && m[v] == 0 {
+            m[v] = 1;
+            join.push(v);
+        }
+    }
+    peel_spurs(m, hu, &mut voxels, &mut cleansed, &mut join, &six, air_hu);
     Cleansing { voxels, other: cleansed, tagged_voxels, left_lumen: leave.len(), stool_lumps, stool_voxels, joined_lumen: join.len() }
 }
 
-/// Finds the lumps of tagged stool: tagged voxels outside the lumen with lumen air within
-/// [`STOOL_REACH`] voxels along an axis, and the tagged voxels joined to them (face
+/// Spurs of skin that the wall holds by one face, beside what cleansing changed: a voxel
+/// outside the lumen, below 0 HU (partial volume, not tissue), with five of its six face
+/// neighbours lumen, becomes air and lumen; again, for longer spurs. `voxels` stays
+/// ascending.
+const SPUR_PASSES: usize = 4;
+
+fn peel_spurs(m: &mut [u8], hu: &[i16], voxels: &mut Vec<u32>, values: &mut Vec<i16>, join: &mut Vec<usize>, six: &[isize; 6], air_hu: i16) {
+    let mut candidates: Vec<usize> = voxels.iter().flat_map(|&v| six.iter().map(move |&d| (v as isize + d) as usize).chain([v as usize])).collect();
+    candidates.sort_unstable();
+    candidates.dedup();
+    let mut peeled: Vec<(u32, i16)> = Vec::new();
+    for _ in 0..SPUR_PASSES {
+        let value = |v: usize, voxels: &[u32], values: &[i16]| voxels.binary_search(&(v as u32)).map_or(hu[v], |n| values[n]);
+        let spurs: Vec<usize> = candidates
+            .iter()
+            .copied()
+            .filter(|&v| m[v] == 0 && value(v, voxels, values) < 0 && value(v, voxels, values) >= air_hu)
+            .filter(|&v| six.iter().filter(|&&d| m[(v as isize + d) as usize] & 1 != 0).count() >= 5)
+            .collect();
+        for &v in &spurs {
+            m[v] = 1;
+            join.push(v);
+            peeled.push((v as u32, AIR_HU));
+        }
+        if spurs.is_empty() {
+            break;
+        }
+    }
+    if peeled.is_empty() {
+        return;
+    }
+    peeled.sort_unstable();
+    let mut all: Vec<(u32, i16)> = voxels.iter().copied().zip(values.iter().copied()).filter(|(v, _)| peeled.binary_search_by_key(v, |p| p.0).is_err()).collect();
+    all.extend(peeled.iter().copied().filter(|&(v, _)| hu[v as usize] != AIR_HU));
+    all.sort_unstable_by_key(|&(v, _)| v);
+    (*voxels, *values) = all.into_iter().unzip();
+}
+
+/// Finds the lumps of tagged stool: tagged voxels not in a pool (outside the lumen, or taken
+/// in by segmentation as fluid but joined to no pool's core) with lumen air within
+/// [`STOOL_REACH`] voxels along an axis, and the tagged voxels joined to them (26
 /// neighbours), at most [`MAX_LUMP_ML`] a lump, marked `SOLID`. Then its skin, marked `LUMP`:
 /// every voxel touching it (26 neighbours) that is not lumen, and from there every voxel
 /// outside the lumen that is more air than tissue, within [`SKIN_VOXELS`] of the lump's box:
 /// the air pockets of mottled stool, and the outer skin the lumen's threshold left out. A
 /// lump whose air runs out of that box (a tube's air, the outside) is not stool. Returns
 /// each lump's voxels.
-fn find_lumps(hu: &[i16], m: &mut [u8], g: &Geometry, lo: [usize; 3], hi: [usize; 3], air_hu: i16, fluid_hu: i16) -> Vec<Vec<usize>> {
+#[allow(clippy::too_many_arguments)]
+fn find_lumps(hu: &[i16], m: &mut [u8], g: &Geometry, bright: &[usize], lo: [usize; 3], hi: [usize; 3], air_hu: i16, fluid_hu: i16) -> Vec<Vec<usize>> {
     let [nx, ny, _] = g.dims;
     let strides = [1isize, nx as isize, (nx * ny) as isize];
     let six = [1, -1, strides[1], -strides[1], strides[2], -strides[2]];
+    let cube26: Vec<isize> = (-1..=1).flat_map(|k| (-1..=1).flat_map(move |j| (-1..=1).map(move |i| i + j * strides[1] + k * strides[2]))).filter(|&d| d != 0).collect();
     let in_lumen = |x: u8| x & 1 != 0;
     let within = |v: usize, lo: [usize; 3], hi: [usize; 3]| {
         let ijk = g.ijk(v);
         (0..3).all(|a| ijk[a] >= lo[a] && ijk[a] <= hi[a])
     };
     let max_voxels = (MAX_LUMP_ML * 1000.0 / g.spacing.iter().product::<f64>()) as usize;
-    let solid = |v: usize, m: &[u8]| !in_lumen(m[v]) && hu[v] >= fluid_hu;
+    // Tagged and not a pool's: outside the lumen, or a few voxels of it that segmentation
+    // took for fluid.
+    let solid = |v: usize, m: &[u8]| m[v] & POOL == 0 && hu[v] >= fluid_hu;
     let near_air = |v: usize, m: &[u8]| {
         six.iter().any(|&d| {
             (1..=STOOL_REACH).any(|s| {
@@ -411,93 +483,91 @@ fn find_lumps(hu: &[i16], m: &mut [u8], g: &Geometry, lo: [usize; 3], hi: [usize
     };
     let mostly_air = mostly_air(air_hu);
     let mut lumps = Vec::new();
-    for k in lo[2]..=hi[2] {
-        for j in lo[1]..=hi[1] {
-            let row = nx * (j + ny * k);
-            for v in row + lo[0]..=row + hi[0] {
-                if !solid(v, m) || m[v] & (SOLID | LUMP) != 0 || !near_air(v, m) {
-                    continue;
+    for &v in bright {
+        if !solid(v, m) || m[v] & (SOLID | LUMP) != 0 || !near_air(v, m) {
+            continue;
+        }
+        // The lump: flood through tagged voxels (26 neighbours: a corner's partial
+        // volume leaves bits of a lump joined by a corner).
+        let mut lump = vec![v];
+        m[v] |= SOLID;
+        let mut next = 0;
+        while next < lump.len() && lump.len() <= max_voxels {
+            let u = lump[next];
+            next += 1;
+            for &d in &cube26 {
+                let w = (u as isize + d) as usize;
+                if within(w, lo, hi) && solid(w, m) && m[w] & SOLID == 0 {
+                    m[w] |= SOLID;
+                    lump.push(w);
                 }
-                // The lump: flood through tagged voxels outside the lumen.
-                let mut lump = vec![v];
-                m[v] |= SOLID;
-                let mut next = 0;
-                while next < lump.len() && lump.len() <= max_voxels {
-                    let u = lump[next];
-                    next += 1;
-                    for &d in &six {
-                        let w = (u as isize + d) as usize;
-                        if within(w, lo, hi) && solid(w, m) && m[w] & SOLID == 0 {
-                            m[w] |= SOLID;
-                            lump.push(w);
-                        }
-                    }
-                }
-                // Its box, grown by the skin's reach (inside lo..=hi, which lies two voxels
-                // inside the volume, so that 26 neighbours never leave it).
-                let (mut blo, mut bhi) = (hi, lo);
-                for &u in &lump {
-                    let ijk = g.ijk(u);
-                    for a in 0..3 {
-                        (blo[a], bhi[a]) = (blo[a].min(ijk[a]), bhi[a].max(ijk[a]));
-                    }
-                }
-                let blo = [0, 1, 2].map(|a| blo[a].saturating_sub(SKIN_VOXELS).max(lo[a]));
-                let bhi = [0, 1, 2].map(|a| (bhi[a] + SKIN_VOXELS).min(hi[a]));
-                // Stool, not noise on plastic or a wall: a few voxels at least, one of them
-                // well above the threshold.
-                let mut ok = lump.len() <= max_voxels && lump.len() >= MIN_LUMP_VOXELS && lump.iter().any(|&u| hu[u] >= fluid_hu.saturating_add(LEVEL_MARGIN_HU));
-                if ok {
-                    // The skin touching the tagged voxels, whatever its value; the air
-                    // pockets, flooded through air outside the lumen (air that leaves the
-                    // box is not a pocket); then the pockets' and the skin's own outer
-                    // skin, more air than tissue.
-                    let mut grow = |lump: &mut Vec<usize>, from: usize, pred: &dyn Fn(i16) -> bool| {
-                        let to = lump.len();
-                        for n in from..to {
-                            let u = lump[n] as isize;
-                            for dk in -1..=1 {
-                                for dj in -1..=1 {
-                                    for di in -1..=1 {
-                                        let w = (u + di + dj * strides[1] + dk * strides[2]) as usize;
-                                        if in_lumen(m[w]) || m[w] & (SOLID | LUMP) != 0 || !pred(hu[w]) {
-                                            continue;
-                                        }
-                                        if !within(w, blo, bhi) {
-                                            ok = false;
-                                            continue;
-                                        }
-                                        m[w] |= LUMP;
-                                        lump.push(w);
-                                    }
-                                }
-                            }
-                        }
-                        to
-                    };
-                    grow(&mut lump, 0, &|_| true);
-                    let mut from = 0;
-                    loop {
-                        let before = lump.len();
-                        from = grow(&mut lump, from, &|h| h < air_hu);
-                        if lump.len() == before {
-                            break;
-                        }
-                    }
-                    grow(&mut lump, 0, &|h| h < mostly_air);
-                }
-                if !ok {
-                    // Not stool: its voxels stay marked `LUMP` alone, so that no other seed
-                    // floods it again (cleared with the other marks), and the pools' model
-                    // leaves them as they are.
-                    for &u in &lump {
-                        m[u] = (m[u] & !SOLID) | LUMP;
-                    }
-                    continue;
-                }
-                lumps.push(lump);
             }
         }
+        // Its box, grown by the skin's reach (inside lo..=hi, which lies two voxels
+        // inside the volume, so that 26 neighbours never leave it).
+        let (mut blo, mut bhi) = (hi, lo);
+        for &u in &lump {
+            let ijk = g.ijk(u);
+            for a in 0..3 {
+                (blo[a], bhi[a]) = (blo[a].min(ijk[a]), bhi[a].max(ijk[a]));
+            }
+        }
+        let blo = [0, 1, 2].map(|a| blo[a].saturating_sub(SKIN_VOXELS).max(lo[a]));
+        let bhi = [0, 1, 2].map(|a| (bhi[a] + SKIN_VOXELS).min(hi[a]));
+        // Stool, not noise on plastic or a wall: one voxel well above the threshold,
+        // and a few voxels at least unless it is what a pool left (stool lying in
+        // one, mostly taken in with its fluid).
+        let by_pool = || lump.iter().any(|&u| cube26.iter().any(|&d| m[(u as isize + d) as usize] & POOL != 0));
+        let mut ok = lump.len() <= max_voxels && lump.iter().any(|&u| hu[u] >= fluid_hu.saturating_add(LEVEL_MARGIN_HU)) && (lump.len() >= MIN_LUMP_VOXELS || by_pool());
+        if ok {
+            // The skin touching the tagged voxels, whatever its value; the air
+            // pockets, flooded through air outside the lumen (air that leaves the
+            // box is not a pocket); then the pockets' and the skin's own outer
+            // skin, more air than tissue.
+            let mut grow = |lump: &mut Vec<usize>, from: usize, pred: &dyn Fn(i16) -> bool| {
+                let to = lump.len();
+                for n in from..to {
+                    let u = lump[n] as isize;
+                    for dk in -1..=1 {
+                        for dj in -1..=1 {
+                            for di in -1..=1 {
+                                let w = (u + di + dj * strides[1] + dk * strides[2]) as usize;
+                                if in_lumen(m[w]) || m[w] & (SOLID | LUMP) != 0 || !pred(hu[w]) {
+                                    continue;
+                                }
+                                if !within(w, blo, bhi) {
+                                    ok = false;
+                                    continue;
+                                }
+                                m[w] |= LUMP;
+                                lump.push(w);
+                            }
+                        }
+                    }
+                }
+                to
+            };
+            grow(&mut lump, 0, &|_| true);
+            let mut from = 0;
+            loop {
+                let before = lump.len();
+                from = grow(&mut lump, from, &|h| h < air_hu);
+                if lump.len() == before {
+                    break;
+                }
+            }
+            grow(&mut lump, 0, &|h| h < mostly_air);
+        }
+        if !ok {
+            // Not stool: its voxels stay marked `LUMP` alone, so that no other seed
+            // floods it again (cleared with the other marks), and the pools' model
+            // leaves them as they are.
+            for &u in &lump {
+                m[u] = (m[u] & !SOLID) | LUMP;
+            }
+            continue;
+        }
+        lumps.push(lump);
     }
     lumps
 }
@@ -549,7 +619,8 @@ impl Islands<'_> {
             for j in blo[1]..=bhi[1] {
                 let row = nx * (j + ny * k);
                 for v in row + blo[0]..=row + bhi[0] {
-                    if marked(v) && self.solid(v) {
+                    // (In the box by the loop's bounds.)
+                    if self.m[v] & (NEAR | SOLID | LUMP) != 0 && self.solid(v) {
                         solid.push(v);
                     }
                 }
@@ -576,7 +647,37 @@ impl Islands<'_> {
                 }
             }
         }
-        solid.into_iter().zip(held).filter(|&(_, h)| !h).map(|(v, _)| v).collect()
+        // An island with tissue inside it (a voxel of at least 0 HU all of whose neighbours
+        // are solid) is a polyp's head on a stalk too thin to show, not skin: it stays.
+        let loose: Vec<usize> = solid.into_iter().zip(held).filter(|&(_, h)| !h).map(|(v, _)| v).collect();
+        let inner = |v: usize| self.value(v) >= 0 && six.iter().all(|&d| self.solid((v as isize + d) as usize));
+        let mut seen = vec![false; loose.len()];
+        let mut out = Vec::new();
+        for start in 0..loose.len() {
+            if seen[start] {
+                continue;
+            }
+            seen[start] = true;
+            let mut island = vec![start];
+            let mut next = 0;
+            while next < island.len() {
+                let v = loose[island[next]];
+                next += 1;
+                for &d in &six {
+                    if let Ok(x) = loose.binary_search(&((v as isize + d) as usize))
+                        && !seen[x]
+                    {
+                        seen[x] = true;
+                        island.push(x);
+                    }
+                }
+            }
+            if !island.iter().any(|&n| inner(loose[n])) {
+                out.extend(island.iter().map(|&n| loose[n]));
+            }
+        }
+        out.sort_unstable();
+        out
     }
 }
 
@@ -621,7 +722,9 @@ impl Lumps<'_> {
                 let value = self.model(v, cube);
                 let h = self.hu[v];
                 if value < self.air_hu {
-                    out.join.push(v);
+                    if self.m[v] & 1 == 0 {
+                        out.join.push(v);
+                    }
                     out.tagged += (h >= self.fluid_hu) as usize;
                 }
                 if value != h {
@@ -754,8 +857,9 @@ mod tests {
     use glam::DVec3;
 
     /// Columns along +y (gravity): lumen air on top, tagged fluid (600 HU) below, then the
-    /// wall (40 HU) whose first voxel is half fluid (320 HU); a polyp voxel (60 HU) sits in
-    /// the fluid, and a small-bowel loop (500 HU) lies three voxels into the wall.
+    /// wall (40 HU) whose first voxel is half fluid (320 HU); a polyp (60 HU, two voxels
+    /// high) stands on the wall in the fluid, and a small-bowel loop (500 HU) lies three
+    /// voxels into the wall.
     fn scene() -> (Volume<i16>, Volume<u8>) {
         let g = Geometry::new([16, 20, 16], [1.0; 3], [0.0; 3]).unwrap();
         let mut ct = Volume::filled(g.clone(), 40i16).unwrap();
@@ -772,8 +876,11 @@ mod tests {
                 ct.set(i, 14, k, 500);
             }
         }
-        ct.set(5, 8, 5, 60);
-        lumen.set(5, 8, 5, 0);
+        // The polyp stands on the wall: a column of tissue from it.
+        for j in 8..10 {
+            ct.set(5, j, 5, 60);
+            lumen.set(5, j, 5, 0);
+        }
         (ct, lumen)
     }
 
@@ -801,6 +908,32 @@ mod tests {
         let mut slice = vec![0i16; 16 * 20];
         c.fill_slice(&ct, 5, &mut slice);
         assert_eq!(slice[5 + 16 * 6], AIR_HU);
+    }
+
+    /// Left floating in the fluid: a sliver of skin (−200 HU, one voxel thin) goes with it;
+    /// a 3³ lump of tissue (a polyp's head whose stalk does not show) stays.
+    #[test]
+    fn islands_of_skin_go_and_of_tissue_stay() {
+        let (mut ct, mut lumen) = scene();
+        for i in 8..11 {
+            for k in 8..11 {
+                ct.set(i, 6, k, -200);
+                lumen.set(i, 6, k, 0);
+            }
+        }
+        for i in 8..11 {
+            for j in 7..10 {
+                for k in 3..6 {
+                    ct.set(i, j, k, 40);
+                    lumen.set(i, j, k, 0);
+                }
+            }
+        }
+        let scene = Scene { ct: &ct, lumen: &mut lumen, extent: [[3, 3, 3], [12, 10, 12]], gravity_lps: DVec3::Y, air_hu: -500, fluid_hu: 200 };
+        let mut c = cleanse(scene, &CleanseOptions::default());
+        c.swap(&mut ct);
+        assert_eq!((ct.get(9, 6, 9), lumen.get(9, 6, 9)), (AIR_HU, 1));
+        assert_eq!((ct.get(9, 8, 4), lumen.get(9, 8, 4)), (40, 0));
     }
 
     #[test]
