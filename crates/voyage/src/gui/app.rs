@@ -55,7 +55,8 @@ struct Steering {
     look: Vec2,
 }
 
-/// The close-up volume rendering shown over the view, and the camera it was made for.
+/// An image shown over the view (the close-up volume rendering, the translucency view), and
+/// the camera and box centre it was made for.
 struct Closeup {
     texture: egui::TextureHandle,
     camera: Camera,
@@ -847,6 +848,17 @@ impl App {
         out
     }
 
+    /// Where a box over the view is drawn from: the camera, and the marker flown back to or
+    /// the surface point at the view's centre.
+    fn overlay_target(&self, rect: Rect) -> Option<(Camera, DVec3)> {
+        let s = self.session.as_ref()?;
+        let center = match self.closeup_at {
+            Some(c) => c,
+            None => self.pick(rect.center())?.point,
+        };
+        Some((s.camera(), center))
+    }
+
     /// The close-up volume rendering over the view: the CT ray-cast in a small box around
     /// the marker flown back to, or around the surface point at the view's centre.
     fn closeup_overlay(&mut self, ui: &egui::Ui, rect: Rect) {
@@ -854,33 +866,9 @@ impl App {
             self.closeup = None;
             return;
         }
-        let Some(s) = &self.session else { return };
-        let cam = s.camera();
-        let center = match self.closeup_at {
-            Some(c) => Some(c),
-            None => self.pick(rect.center()).map(|h| h.point),
-        };
-        let Some(center) = center else { return };
-        let fresh = self.closeup.as_ref().is_some_and(|c| c.camera == cam && c.center == center);
-        if !fresh {
-            // Half the view's resolution at most 384 px wide: the box is small on screen and
-            // ray casting is the costly part.
-            let w = (rect.width() * 0.5).clamp(64.0, 384.0) as u32;
-            let h = ((w as f32) * rect.height() / rect.width()).max(16.0) as u32;
-            let region = CloseupBox { center, half_size_mm: 15.0 };
-            let rgba = render_closeup(&s.study.ct, &cam, &region, w, h, &TransferFunction::tissue());
-            let image = egui::ColorImage::from_rgba_unmultiplied([w as usize, h as usize], &rgba);
-            match &mut self.closeup {
-                Some(c) => {
-                    c.texture.set(image, egui::TextureOptions::LINEAR);
-                    (c.camera, c.center) = (cam, center);
-                }
-                None => self.closeup = Some(Closeup { texture: ui.ctx().load_texture("closeup", image, egui::TextureOptions::LINEAR), camera: cam, center }),
-            }
-        }
-        if let Some(c) = &self.closeup {
-            ui.painter().image(c.texture.id(), rect, Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)), Color32::WHITE);
-        }
+        let (Some((cam, center)), Some(s)) = (self.overlay_target(rect), &self.session) else { return };
+        let region = CloseupBox { center, half_size_mm: 15.0 };
+        show_overlay(&mut self.closeup, ui, rect, "closeup", cam, center, |w, h| render_closeup(&s.study.ct, &cam, &region, w, h, &TransferFunction::tissue()));
     }
 
     /// The translucency view over the view: the surface in a box around the marker flown back
@@ -891,32 +879,11 @@ impl App {
             self.translucency = None;
             return;
         }
-        let Some(s) = &self.session else { return };
-        let cam = s.camera();
-        let center = match self.closeup_at {
-            Some(c) => Some(c),
-            None => self.pick(rect.center()).map(|h| h.point),
-        };
-        let Some(center) = center else { return };
-        let fresh = self.translucency.as_ref().is_some_and(|c| c.camera == cam && c.center == center);
-        if !fresh {
-            // Half the view's resolution, as the close-up: rays are marched on the CPU.
-            let w = (rect.width() * 0.5).clamp(64.0, 384.0) as u32;
-            let h = ((w as f32) * rect.height() / rect.width()).max(16.0) as u32;
-            let region = CloseupBox { center, half_size_mm: voyage_core::render::translucency::HALF_SIZE_MM };
-            let t = render_translucency(s.surface_ct(), &s.study.segmentation.lumen, &cam, &region, w, h, &TranslucencyOptions::default());
-            let image = egui::ColorImage::from_rgba_unmultiplied([w as usize, h as usize], &t.rgba);
-            match &mut self.translucency {
-                Some(c) => {
-                    c.texture.set(image, egui::TextureOptions::LINEAR);
-                    (c.camera, c.center) = (cam, center);
-                }
-                None => self.translucency = Some(Closeup { texture: ui.ctx().load_texture("translucency", image, egui::TextureOptions::LINEAR), camera: cam, center }),
-            }
-        }
-        if let Some(c) = &self.translucency {
-            ui.painter().image(c.texture.id(), rect, Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)), Color32::WHITE);
-        }
+        let (Some((cam, center)), Some(s)) = (self.overlay_target(rect), &self.session) else { return };
+        let region = CloseupBox { center, half_size_mm: voyage_core::render::translucency::HALF_SIZE_MM };
+        show_overlay(&mut self.translucency, ui, rect, "translucency", cam, center, |w, h| {
+            render_translucency(s.surface_ct(), &s.study.segmentation.lumen, &cam, &region, w, h, &TranslucencyOptions::default()).rgba
+        });
         translucency_legend(&ui.painter_at(rect), rect);
     }
 
@@ -1202,5 +1169,26 @@ fn translucency_legend(painter: &egui::Painter, rect: Rect) {
         let [r, g, b] = m.rgb().map(encode);
         painter.rect_filled(Rect::from_min_size(Pos2::new(rect.left() + 12.0, y + 3.0), Vec2::splat(12.0)), 2.0, Color32::from_rgb(r, g, b));
         painter.text(Pos2::new(rect.left() + 30.0, y + 9.0), egui::Align2::LEFT_CENTER, m.name(), egui::FontId::proportional(13.0), Color32::WHITE);
+    }
+}
+
+/// An image over the whole view made by `render` (width, height → RGBA, straight alpha) for
+/// a camera and a box's centre, redrawn only when they change, at half the view's resolution
+/// and at most 384 px wide: the box is small on screen and ray casting is the costly part.
+fn show_overlay(slot: &mut Option<Closeup>, ui: &egui::Ui, rect: Rect, name: &str, camera: Camera, center: DVec3, render: impl FnOnce(u32, u32) -> Vec<u8>) {
+    if !slot.as_ref().is_some_and(|c| c.camera == camera && c.center == center) {
+        let w = (rect.width() * 0.5).clamp(64.0, 384.0) as u32;
+        let h = ((w as f32) * rect.height() / rect.width()).max(16.0) as u32;
+        let image = egui::ColorImage::from_rgba_unmultiplied([w as usize, h as usize], &render(w, h));
+        match slot {
+            Some(c) => {
+                c.texture.set(image, egui::TextureOptions::LINEAR);
+                (c.camera, c.center) = (camera, center);
+            }
+            None => *slot = Some(Closeup { texture: ui.ctx().load_texture(name, image, egui::TextureOptions::LINEAR), camera, center }),
+        }
+    }
+    if let Some(c) = slot {
+        ui.painter().image(c.texture.id(), rect, Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)), Color32::WHITE);
     }
 }
