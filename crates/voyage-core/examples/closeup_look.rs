@@ -9,8 +9,10 @@ use std::time::Instant;
 use glam::DVec3;
 use voyage_core::camera::{Camera, Pose};
 use voyage_core::phantom::{self, ColonOptions, Phantom, Truth};
-use voyage_core::prep::{prepare, PrepOptions, Study};
-use voyage_core::render::{render_closeup, render_rgba, CellMesh, CloseupBox, Lighting, TransferFunction, View};
+use voyage_core::prep::{PrepOptions, Study, prepare};
+use voyage_core::render::{
+    CellMesh, CloseupBox, Lighting, TransferFunction, View, render_closeup, render_rgba,
+};
 use voyage_core::{Geometry, Volume};
 
 const SIZE: u32 = 384;
@@ -18,7 +20,9 @@ const SIZE: u32 = 384;
 const FOV: f64 = 60.0;
 
 fn main() {
-    let out = std::env::args().nth(1).unwrap_or_else(|| "docs/closeup".into());
+    let out = std::env::args()
+        .nth(1)
+        .unwrap_or_else(|| "docs/closeup".into());
     let out = Path::new(&out);
     std::fs::create_dir_all(out).unwrap();
     // An optional second argument picks some of: spheres, pipe, colon, tagged, time.
@@ -63,14 +67,20 @@ fn wall(tf: &TransferFunction) {
     let data: Vec<i16> = (0..g.len())
         .map(|n| {
             let [i, j, k] = g.ijk(n);
-            hu(g.index_to_local(DVec3::new(i as f64, j as f64, k as f64)), n) as i16
+            hu(
+                g.index_to_local(DVec3::new(i as f64, j as f64, k as f64)),
+                n,
+            ) as i16
         })
         .collect();
     let ct = Volume::from_vec(g, data).unwrap();
     let eye = c + DVec3::new(10.0, 5.0, -22.0);
     let cam = Camera::new(Pose::looking(eye, c - eye, -DVec3::Y));
     let region = CloseupBox::in_front_of(&cam, (c - eye).length(), 20.0);
-    let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
     let n = std::env::var("REPEATS").map_or(15, |v| v.parse().unwrap());
     let mut ms: Vec<f64> = (0..n)
         .map(|_| {
@@ -81,7 +91,10 @@ fn wall(tf: &TransferFunction) {
             })
         })
         .collect();
-    println!("synthetic wall, 256², 40 mm box, 1 thread, wall time: {}", summary(&mut ms));
+    println!(
+        "synthetic wall, 256², 40 mm box, 1 thread, wall time: {}",
+        summary(&mut ms)
+    );
 }
 
 /// Polyp, stool and tagged stool side by side in front of a wall, with the CT slice through
@@ -89,7 +102,8 @@ fn wall(tf: &TransferFunction) {
 fn spheres(out: &Path, tf: &TransferFunction) {
     let (ct, centre) = three_spheres();
     // 75°: the three spheres, 34 mm from edge to edge, fill the view from 30 mm.
-    let cam = Camera::new(Pose::looking(centre - DVec3::Z * 30.0, DVec3::Z, -DVec3::Y)).with_fov(75.0);
+    let cam =
+        Camera::new(Pose::looking(centre - DVec3::Z * 30.0, DVec3::Z, -DVec3::Y)).with_fov(75.0);
     let img = render_closeup(&ct, &cam, &CloseupBox::around(centre, 20.0), SIZE, SIZE, tf);
     let slice = ct_slice(&ct, (centre.z / ct.spacing()[2]).round() as usize, SIZE);
     save(out, "spheres.png", &[&over_black(&img), &slice]);
@@ -138,21 +152,43 @@ fn pipe(out: &Path, tf: &TransferFunction) {
     let c = DVec3::from_array(p.center_mm);
     let eye = truth_centerline_at(&truth, p.arc_mm - 25.0);
     let cam = Camera::new(Pose::looking(eye, c - eye, up_hint(c - eye))).with_fov(FOV);
-    triptych(out, &format!("pipe-polyp-{}mm.png", p.diameter_mm), &study, &cam, &CloseupBox::in_front_of(&cam, (c - eye).length(), 10.0), tf);
+    triptych(
+        out,
+        &format!("pipe-polyp-{}mm.png", p.diameter_mm),
+        &study,
+        &cam,
+        &CloseupBox::in_front_of(&cam, (c - eye).length(), 10.0),
+        tf,
+    );
 }
 
 /// The colon phantom: a polyp (soft tissue on a soft-tissue wall in fat), or with tagged
 /// fluid, a pool's air–fluid level; and the one-thread timing of a 40 mm box at 256².
 fn colon(out: &Path, tf: &TransferFunction, tagged: bool) {
-    let Phantom { ct, truth, .. } = phantom::colon(&ColonOptions { tagged_fluid: tagged, ..Default::default() }).unwrap();
+    let Phantom { ct, truth, .. } = phantom::colon(&ColonOptions {
+        tagged_fluid: tagged,
+        ..Default::default()
+    })
+    .unwrap();
     let study = prepare(ct, &PrepOptions::default(), |_| {}).unwrap();
     if !tagged {
-        let p = truth.polyps.iter().find(|p| !p.behind_fold && p.diameter_mm >= 6.0).unwrap();
+        let p = truth
+            .polyps
+            .iter()
+            .find(|p| !p.behind_fold && p.diameter_mm >= 6.0)
+            .unwrap();
         let c = DVec3::from_array(p.center_mm);
         let eye = truth_centerline_at(&truth, p.arc_mm - 25.0);
         let cam = Camera::new(Pose::looking(eye, c - eye, up_hint(c - eye))).with_fov(FOV);
         let region = CloseupBox::in_front_of(&cam, (c - eye).length(), 12.0);
-        triptych(out, &format!("colon-polyp-{}mm.png", p.diameter_mm), &study, &cam, &region, tf);
+        triptych(
+            out,
+            &format!("colon-polyp-{}mm.png", p.diameter_mm),
+            &study,
+            &cam,
+            &region,
+            tf,
+        );
         return;
     }
     let pool = &truth.fluid_pools[0];
@@ -162,7 +198,14 @@ fn colon(out: &Path, tf: &TransferFunction, tagged: bool) {
     // Looking down the lumen and a little towards the pool's side (posterior, +y).
     let dir = (ahead - eye).normalize() + DVec3::Y * 0.4;
     let cam = Camera::new(Pose::looking(eye, dir, up_hint(dir))).with_fov(FOV);
-    triptych(out, "colon-tagged-fluid.png", &study, &cam, &CloseupBox::in_front_of(&cam, 22.0, 15.0), tf);
+    triptych(
+        out,
+        "colon-tagged-fluid.png",
+        &study,
+        &cam,
+        &CloseupBox::in_front_of(&cam, 22.0, 15.0),
+        tf,
+    );
 }
 
 /// Times a 40 mm box at 256² around the colon phantom's first polyp (0.75 mm in-plane),
@@ -177,13 +220,21 @@ fn time(tf: &TransferFunction) {
     let (ct, cam, region) = (&ct, &cam, &region);
     // On one thread: wall time, and the thread's own CPU time (the build machines are shared,
     // so wall time includes waiting for a core).
-    let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
-    let (mut wall, mut cpu): (Vec<f64>, Vec<f64>) = (0..std::env::var("REPEATS").map_or(15, |v| v.parse().unwrap()))
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let (mut wall, mut cpu): (Vec<f64>, Vec<f64>) = (0..std::env::var("REPEATS")
+        .map_or(15, |v| v.parse().unwrap()))
         .map(|_| {
             one.install(|| {
                 let (t, c) = (Instant::now(), thread_cpu_ns());
                 std::hint::black_box(render_closeup(ct, cam, region, 256, 256, tf));
-                (t.elapsed().as_secs_f64() * 1e3, c.zip(thread_cpu_ns()).map_or(f64::NAN, |(a, b)| (b - a) as f64 * 1e-6))
+                (
+                    t.elapsed().as_secs_f64() * 1e3,
+                    c.zip(thread_cpu_ns())
+                        .map_or(f64::NAN, |(a, b)| (b - a) as f64 * 1e-6),
+                )
             })
         })
         .unzip();
@@ -197,35 +248,66 @@ fn time(tf: &TransferFunction) {
     println!("close-up 256², 40 mm box, 0.75 mm CT (median of 15, min..max):");
     println!("  1 thread, CPU time:  {}", summary(&mut cpu));
     println!("  1 thread, wall time: {}", summary(&mut wall));
-    println!("  {} threads, wall:    {}", rayon::current_num_threads(), summary(&mut all));
+    println!(
+        "  {} threads, wall:    {}",
+        rayon::current_num_threads(),
+        summary(&mut all)
+    );
 }
 
 fn summary(ms: &mut [f64]) -> String {
     ms.sort_by(f64::total_cmp);
-    format!("{:.1} ms ({:.1}..{:.1})", ms[ms.len() / 2], ms[0], ms[ms.len() - 1])
+    format!(
+        "{:.1} ms ({:.1}..{:.1})",
+        ms[ms.len() / 2],
+        ms[0],
+        ms[ms.len() - 1]
+    )
 }
 
 /// CPU time of the calling thread (Linux), ns.
 fn thread_cpu_ns() -> Option<u64> {
-    std::fs::read_to_string("/proc/thread-self/schedstat").ok()?.split_whitespace().next()?.parse().ok()
+    std::fs::read_to_string("/proc/thread-self/schedstat")
+        .ok()?
+        .split_whitespace()
+        .next()?
+        .parse()
+        .ok()
 }
 
 /// Surface view with the box drawn in, the close-up over black, and over the surface.
-fn triptych(out: &Path, name: &str, study: &Study, cam: &Camera, region: &CloseupBox, tf: &TransferFunction) {
+fn triptych(
+    out: &Path,
+    name: &str,
+    study: &Study,
+    cam: &Camera,
+    region: &CloseupBox,
+    tf: &TransferFunction,
+) {
     let mesh = CellMesh::new(&study.surface, &study.cells);
     let all: Vec<u32> = (0..mesh.cells() as u32).collect();
     let surface = render_rgba(&mesh, cam, &all, SIZE, SIZE, &Lighting::default());
     let closeup = render_closeup(&study.ct, cam, region, SIZE, SIZE, tf);
     let mut outlined = surface.clone();
     draw_box(&mut outlined, cam, region);
-    save(out, name, &[&outlined, &over_black(&closeup), &over(&closeup, &surface)]);
+    save(
+        out,
+        name,
+        &[&outlined, &over_black(&closeup), &over(&closeup, &surface)],
+    );
 }
 
 /// The box's twelve edges, in yellow, where in front of the camera.
 fn draw_box(img: &mut [u8], cam: &Camera, region: &CloseupBox) {
     let view = View::new(cam, SIZE, SIZE);
     let (lo, hi) = (region.min_mm(), region.max_mm());
-    let corner = |n: usize| DVec3::new([lo.x, hi.x][n & 1], [lo.y, hi.y][(n >> 1) & 1], [lo.z, hi.z][n >> 2]);
+    let corner = |n: usize| {
+        DVec3::new(
+            [lo.x, hi.x][n & 1],
+            [lo.y, hi.y][(n >> 1) & 1],
+            [lo.z, hi.z][n >> 2],
+        )
+    };
     for a in 0..8 {
         for bit in [1, 2, 4] {
             if a & bit != 0 {
@@ -289,18 +371,32 @@ fn save(dir: &Path, name: &str, images: &[&Vec<u8>]) {
             out[dst..dst + s * 4].copy_from_slice(&img[y * s * 4..(y + 1) * s * 4]);
         }
     }
-    image::save_buffer(dir.join(name), &out, w as u32, SIZE, image::ExtendedColorType::Rgba8).unwrap();
+    image::save_buffer(
+        dir.join(name),
+        &out,
+        w as u32,
+        SIZE,
+        image::ExtendedColorType::Rgba8,
+    )
+    .unwrap();
     println!("wrote {}", dir.join(name).display());
 }
 
 /// The phantom's true centerline at an arc length (where its polyps and pools are given).
 fn truth_centerline_at(truth: &Truth, arc: f64) -> DVec3 {
-    let i = truth.centerline_arc_mm.partition_point(|&a| a < arc).min(truth.centerline_mm.len() - 1);
+    let i = truth
+        .centerline_arc_mm
+        .partition_point(|&a| a < arc)
+        .min(truth.centerline_mm.len() - 1);
     DVec3::from_array(truth.centerline_mm[i])
 }
 
 fn up_hint(forward: DVec3) -> DVec3 {
     // Anterior (−y in the phantoms' volume frame) up, as a supine patient seen from the feet.
     let up = DVec3::new(0.0, -1.0, 0.0);
-    if up.cross(forward).length() < 1e-3 { DVec3::Z } else { up }
+    if up.cross(forward).length() < 1e-3 {
+        DVec3::Z
+    } else {
+        up
+    }
 }

@@ -29,7 +29,16 @@ pub enum PatientPosition {
 }
 
 impl PatientPosition {
-    pub const ALL: [PatientPosition; 8] = [Self::Hfs, Self::Hfp, Self::Ffs, Self::Ffp, Self::Hfdr, Self::Hfdl, Self::Ffdr, Self::Ffdl];
+    pub const ALL: [PatientPosition; 8] = [
+        Self::Hfs,
+        Self::Hfp,
+        Self::Ffs,
+        Self::Ffp,
+        Self::Hfdr,
+        Self::Hfdl,
+        Self::Ffdr,
+        Self::Ffdl,
+    ];
 
     /// The DICOM code ("HFS", ...), case and surrounding spaces ignored.
     pub fn parse(code: &str) -> Option<PatientPosition> {
@@ -55,8 +64,8 @@ impl PatientPosition {
     pub fn gravity_lps(self) -> DVec3 {
         match self {
             // Written out: `-DVec3::Y` would carry −0.0 into the reports.
-            Self::Hfs | Self::Ffs => DVec3::new(0.0, 1.0, 0.0),   // posterior
-            Self::Hfp | Self::Ffp => DVec3::new(0.0, -1.0, 0.0),  // anterior
+            Self::Hfs | Self::Ffs => DVec3::new(0.0, 1.0, 0.0), // posterior
+            Self::Hfp | Self::Ffp => DVec3::new(0.0, -1.0, 0.0), // anterior
             Self::Hfdr | Self::Ffdr => DVec3::new(-1.0, 0.0, 0.0), // the patient's right
             Self::Hfdl | Self::Ffdl => DVec3::new(1.0, 0.0, 0.0),
         }
@@ -64,7 +73,10 @@ impl PatientPosition {
 
     /// The position whose gravity is nearest `g` (head first).
     pub fn from_gravity(g: DVec3) -> PatientPosition {
-        [Self::Hfs, Self::Hfp, Self::Hfdr, Self::Hfdl].into_iter().max_by(|a, b| a.gravity_lps().dot(g).total_cmp(&b.gravity_lps().dot(g))).unwrap_or(Self::Hfs)
+        [Self::Hfs, Self::Hfp, Self::Hfdr, Self::Hfdl]
+            .into_iter()
+            .max_by(|a, b| a.gravity_lps().dot(g).total_cmp(&b.gravity_lps().dot(g)))
+            .unwrap_or(Self::Hfs)
     }
 
     pub fn describe(self) -> &'static str {
@@ -114,7 +126,11 @@ pub struct Orientation {
 
 impl Orientation {
     pub fn new(position: PatientPosition, source: PositionSource) -> Orientation {
-        Orientation { position, gravity_lps: position.gravity_lps().to_array(), source }
+        Orientation {
+            position,
+            gravity_lps: position.gravity_lps().to_array(),
+            source,
+        }
     }
 
     pub fn gravity(&self) -> DVec3 {
@@ -131,7 +147,9 @@ pub struct PatientFrame {
 
 impl PatientFrame {
     pub fn of(g: &Geometry) -> PatientFrame {
-        PatientFrame { dir: g.direction_mat() }
+        PatientFrame {
+            dir: g.direction_mat(),
+        }
     }
 
     /// An LPS direction as a volume-local direction.
@@ -153,7 +171,9 @@ impl PatientFrame {
     /// that way).
     pub fn nearest_axis(&self, lps: DVec3) -> (usize, i32) {
         let l = self.local(lps);
-        let a = (0..3).max_by(|&x, &y| l[x].abs().total_cmp(&l[y].abs())).unwrap_or(2);
+        let a = (0..3)
+            .max_by(|&x, &y| l[x].abs().total_cmp(&l[y].abs()))
+            .unwrap_or(2);
         (a, if l[a] >= 0.0 { 1 } else { -1 })
     }
 }
@@ -172,9 +192,18 @@ mod tests {
             assert!((g.length() - 1.0).abs() < 1e-12);
             assert_eq!(PatientPosition::from_gravity(g).gravity_lps(), g);
         }
-        assert_eq!(PatientPosition::Hfs.gravity_lps(), DVec3::new(0.0, 1.0, 0.0));
-        assert_eq!(PatientPosition::Ffp.gravity_lps(), DVec3::new(0.0, -1.0, 0.0));
-        assert_eq!(PatientPosition::Hfdr.gravity_lps(), DVec3::new(-1.0, 0.0, 0.0));
+        assert_eq!(
+            PatientPosition::Hfs.gravity_lps(),
+            DVec3::new(0.0, 1.0, 0.0)
+        );
+        assert_eq!(
+            PatientPosition::Ffp.gravity_lps(),
+            DVec3::new(0.0, -1.0, 0.0)
+        );
+        assert_eq!(
+            PatientPosition::Hfdr.gravity_lps(),
+            DVec3::new(-1.0, 0.0, 0.0)
+        );
     }
 
     #[test]

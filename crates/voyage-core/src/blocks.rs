@@ -51,7 +51,8 @@ impl Blocks {
         let g = lumen.geometry();
         for k in 0..grid.dims[2] {
             for j in 0..grid.dims[1] {
-                let row = &lumen.data()[g.index(grid.lo[0], grid.lo[1] + j, grid.lo[2] + k)..][..grid.dims[0]];
+                let row = &lumen.data()[g.index(grid.lo[0], grid.lo[1] + j, grid.lo[2] + k)..]
+                    [..grid.dims[0]];
                 let base = dims[0] * (j / f + dims[1] * (k / f));
                 let out = &mut count[base..base + dims[0]];
                 if f == 2 {
@@ -66,7 +67,13 @@ impl Blocks {
         let full = (f * f * f) as u8;
         let geom = Geometry::new(dims, sp.map(|s| f as f64 * s), [0.0; 3])?;
         let mask = Volume::from_vec(geom, count.iter().map(|&c| (c == full) as u8).collect())?;
-        Ok(Blocks { factor: f, mask, count, lo: grid.lo, fine_spacing: sp })
+        Ok(Blocks {
+            factor: f,
+            mask,
+            count,
+            lo: grid.lo,
+            fine_spacing: sp,
+        })
     }
 
     pub fn dims(&self) -> [usize; 3] {
@@ -121,20 +128,32 @@ impl Blocks {
                 return Ok(b.1);
             }
         }
-        Err(Error::invalid(format!("the voxel {v:?} lies where the lumen is too narrow to follow")))
+        Err(Error::invalid(format!(
+            "the voxel {v:?} lies where the lumen is too narrow to follow"
+        )))
     }
 
     /// Volume-local mm of a block's centre.
     pub fn centre_mm(&self, c: [usize; 3]) -> DVec3 {
         let half = (self.factor as f64 - 1.0) / 2.0;
-        DVec3::from_array([0, 1, 2].map(|a| (self.lo[a] as f64 + (self.factor * c[a]) as f64 + half) * self.fine_spacing[a]))
+        DVec3::from_array([0, 1, 2].map(|a| {
+            (self.lo[a] as f64 + (self.factor * c[a]) as f64 + half) * self.fine_spacing[a]
+        }))
     }
 
     /// The volume voxels of block `c` (those inside the volume).
-    pub fn voxels(&self, c: [usize; 3], vol_dims: [usize; 3]) -> impl Iterator<Item = [usize; 3]> + '_ {
+    pub fn voxels(
+        &self,
+        c: [usize; 3],
+        vol_dims: [usize; 3],
+    ) -> impl Iterator<Item = [usize; 3]> + '_ {
         let f = self.factor;
         (0..f * f * f).filter_map(move |o| {
-            let v = [self.lo[0] + f * c[0] + o % f, self.lo[1] + f * c[1] + (o / f) % f, self.lo[2] + f * c[2] + o / (f * f)];
+            let v = [
+                self.lo[0] + f * c[0] + o % f,
+                self.lo[1] + f * c[1] + (o / f) % f,
+                self.lo[2] + f * c[2] + o / (f * f),
+            ];
             v.iter().zip(vol_dims).all(|(&x, n)| x < n).then_some(v)
         })
     }
@@ -148,7 +167,9 @@ mod tests {
     fn pair_counts_equal_the_general_chunks() {
         let mut rng = crate::phantom::rng::Rng::new(7, 1);
         for len in 0..70usize {
-            let row: Vec<u8> = (0..len).map(|_| [0u8, 1, 1, 255][rng.range(0.0, 3.999) as usize]).collect();
+            let row: Vec<u8> = (0..len)
+                .map(|_| [0u8, 1, 1, 255][rng.range(0.0, 3.999) as usize])
+                .collect();
             let mut general = vec![3u8; len.div_ceil(2)];
             for (o, c) in general.iter_mut().zip(row.chunks(2)) {
                 *o += c.iter().filter(|&&m| m != 0).count() as u8;
@@ -174,7 +195,10 @@ mod tests {
         }
         data[g.index(5, 1, 1)] = 1;
         let vol = Volume::from_vec(g, data).unwrap();
-        let grid = BoxGrid { lo: [1, 1, 1], dims: [5, 4, 3] };
+        let grid = BoxGrid {
+            lo: [1, 1, 1],
+            dims: [5, 4, 3],
+        };
         let b = Blocks::new(&vol, &grid, 2).unwrap();
         assert_eq!(b.dims(), [3, 2, 2]);
         assert_eq!(b.count[0], 8);
@@ -185,6 +209,10 @@ mod tests {
         assert_eq!(b.block_of_voxel([0, 1, 1]), None);
         assert_eq!(b.nearest_full([5, 1, 1]).unwrap(), [1, 0, 0]);
         assert_eq!(b.centre_mm([0, 0, 0]), DVec3::new(0.75, 0.75, 1.5));
-        assert_eq!(b.voxels([2, 0, 0], vol.dims()).count(), 4, "the box's last block is cut by the volume's end");
+        assert_eq!(
+            b.voxels([2, 0, 0], vol.dims()).count(),
+            4,
+            "the box's last block is cut by the volume's end"
+        );
     }
 }

@@ -37,7 +37,10 @@ impl Pose {
         }
         let y = y.normalize();
         let x = y.cross(z);
-        Pose { position, orientation: DQuat::from_mat3(&DMat3::from_cols(x, y, z)).normalize() }
+        Pose {
+            position,
+            orientation: DQuat::from_mat3(&DMat3::from_cols(x, y, z)).normalize(),
+        }
     }
 
     /// `[x, y, z, qw, qx, qy, qz]`, the form trajectories and `--pose` use.
@@ -52,7 +55,10 @@ impl Pose {
         if !a.iter().all(|v| v.is_finite()) || n < 1e-9 {
             return None;
         }
-        Some(Pose { position: DVec3::new(a[0], a[1], a[2]), orientation: q / n })
+        Some(Pose {
+            position: DVec3::new(a[0], a[1], a[2]),
+            orientation: q / n,
+        })
     }
 }
 
@@ -70,7 +76,12 @@ impl Camera {
     pub const MAX_FOV_DEG: f64 = 140.0;
 
     pub fn new(pose: Pose) -> Self {
-        Camera { pose, fov_y_deg: 90.0, near_mm: 0.1, far_mm: 1000.0 }
+        Camera {
+            pose,
+            fov_y_deg: 90.0,
+            near_mm: 0.1,
+            far_mm: 1000.0,
+        }
     }
 
     pub fn with_fov(mut self, fov_y_deg: f64) -> Self {
@@ -141,14 +152,22 @@ mod tests {
         // The view matrix sends the pixel ray's points onto the same pixel.
         let v = cam.view_matrix();
         let proj = cam.projection_matrix(1.0);
-        let clip = proj * v * (pose.position + 10.0 * cam.pixel_ray(80.0, 20.0, 100, 100)).extend(1.0);
+        let clip =
+            proj * v * (pose.position + 10.0 * cam.pixel_ray(80.0, 20.0, 100, 100)).extend(1.0);
         let ndc = clip.truncate() / clip.w;
-        assert!((ndc.x - 0.6).abs() < 1e-9 && (ndc.y - 0.6).abs() < 1e-9, "{ndc}");
+        assert!(
+            (ndc.x - 0.6).abs() < 1e-9 && (ndc.y - 0.6).abs() < 1e-9,
+            "{ndc}"
+        );
     }
 
     #[test]
     fn poses_round_trip_through_arrays() {
-        let pose = Pose::looking(DVec3::new(1.0, 2.0, 3.0), DVec3::new(1.0, 1.0, 0.0), DVec3::Z);
+        let pose = Pose::looking(
+            DVec3::new(1.0, 2.0, 3.0),
+            DVec3::new(1.0, 1.0, 0.0),
+            DVec3::Z,
+        );
         let back = Pose::from_array(pose.to_array()).unwrap();
         assert!((back.position - pose.position).length() < 1e-12);
         assert!(back.orientation.angle_between(pose.orientation) < 1e-9);

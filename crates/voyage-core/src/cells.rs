@@ -36,7 +36,11 @@ pub struct CellOptions {
 
 impl Default for CellOptions {
     fn default() -> Self {
-        CellOptions { max_length_mm: 20.0, max_triangles: 20_000, min_length_mm: 6.0 }
+        CellOptions {
+            max_length_mm: 20.0,
+            max_triangles: 20_000,
+            min_length_mm: 6.0,
+        }
     }
 }
 
@@ -61,7 +65,10 @@ impl Portal {
     /// so the screen bounds of these points bound those of the boundary.
     pub fn bounding_points(&self) -> Vec<DVec3> {
         let n = DVec3::from_array(self.normal) * self.half_thickness_mm;
-        self.polygon_mm.iter().flat_map(|p| [DVec3::from_array(*p) + n, DVec3::from_array(*p) - n]).collect()
+        self.polygon_mm
+            .iter()
+            .flat_map(|p| [DVec3::from_array(*p) + n, DVec3::from_array(*p) - n])
+            .collect()
     }
 }
 
@@ -120,21 +127,41 @@ impl Cells {
 }
 
 /// Splits the lumen into cells. `dt_source`: Dt from the source (+∞ outside).
-pub fn build_cells(lumen: &Volume<u8>, dt_source: &Bricked<f32>, centerline: &Centerline, surface: &Surface, opts: &CellOptions) -> Result<Cells> {
+pub fn build_cells(
+    lumen: &Volume<u8>,
+    dt_source: &Bricked<f32>,
+    centerline: &Centerline,
+    surface: &Surface,
+    opts: &CellOptions,
+) -> Result<Cells> {
     if centerline.points_mm.len() < 2 {
         return Err(Error::invalid("the centerline has fewer than two points"));
     }
     let cl_dt = centerline_levels(dt_source, centerline);
-    let tri_dt: Vec<f32> = surface.owner_voxel.iter().map(|&v| dt_source.get(lumen.geometry().ijk(v as usize))).collect();
+    let tri_dt: Vec<f32> = surface
+        .owner_voxel
+        .iter()
+        .map(|&v| dt_source.get(lumen.geometry().ijk(v as usize)))
+        .collect();
     let min_len = opts.min_length_mm.max(2.0 * diagonal(lumen.spacing()));
     let levels = choose_levels(&cl_dt, &centerline.arc_mm, &tri_dt, opts, min_len);
     let reach = diagonal(lumen.spacing()) * 1.01;
-    let Labels { cells: voxel_cell, counts, below_cut } = label_voxels(dt_source, &levels, reach);
+    let Labels {
+        cells: voxel_cell,
+        counts,
+        below_cut,
+    } = label_voxels(dt_source, &levels, reach);
     let table = LevelTable::new(&levels);
     let triangle_cell: Vec<u16> = tri_dt.iter().map(|&d| table.cell(d)).collect();
     let ncells = levels.len() + 1;
     let mut cells: Vec<Cell> = (0..ncells)
-        .map(|c| Cell { triangles: Vec::new(), voxels: 0, centerline_span: (0, 0), portal_back: c.checked_sub(1), portal_front: (c + 1 < ncells).then_some(c) })
+        .map(|c| Cell {
+            triangles: Vec::new(),
+            voxels: 0,
+            centerline_span: (0, 0),
+            portal_back: c.checked_sub(1),
+            portal_front: (c + 1 < ncells).then_some(c),
+        })
         .collect();
     for (t, &c) in triangle_cell.iter().enumerate() {
         cells[c as usize].triangles.push(t as u32);
@@ -150,7 +177,12 @@ pub fn build_cells(lumen: &Volume<u8>, dt_source: &Bricked<f32>, centerline: &Ce
         .enumerate()
         .map(|(c, (&level, pts))| make_portal(pts, c, level, centerline, &cl_dt, lumen.spacing()))
         .collect::<Result<Vec<_>>>()?;
-    Ok(Cells { cells, portals, voxel_cell, triangle_cell })
+    Ok(Cells {
+        cells,
+        portals,
+        voxel_cell,
+        triangle_cell,
+    })
 }
 
 fn diagonal(sp: [f64; 3]) -> f64 {
@@ -174,7 +206,13 @@ fn centerline_levels(dt: &Bricked<f32>, cl: &Centerline) -> Vec<f64> {
 
 /// Cut levels (in Dt): walk the centerline, cutting when the stretch since the last cut is
 /// long enough or holds enough triangles, keeping cuts `min_len` apart in Dt.
-fn choose_levels(cl_dt: &[f64], arc: &[f64], tri_dt: &[f32], opts: &CellOptions, min_len: f64) -> Vec<f64> {
+fn choose_levels(
+    cl_dt: &[f64],
+    arc: &[f64],
+    tri_dt: &[f32],
+    opts: &CellOptions,
+    min_len: f64,
+) -> Vec<f64> {
     let sorted = sorted_distances(tri_dt);
     let tris_below = |level: f64| sorted.partition_point(|&d| (d as f64) < level);
     let end = *cl_dt.last().unwrap_or(&0.0);
@@ -199,7 +237,11 @@ fn choose_levels(cl_dt: &[f64], arc: &[f64], tri_dt: &[f32], opts: &CellOptions,
 /// patterns, which order like the values for non-negative floats: two passes of 16 bits over a
 /// million triangles instead of a comparison sort.
 fn sorted_distances(d: &[f32]) -> Vec<f32> {
-    let mut keys: Vec<u32> = d.iter().filter(|x| x.is_finite()).map(|&x| (x.max(0.0) + 0.0).to_bits()).collect();
+    let mut keys: Vec<u32> = d
+        .iter()
+        .filter(|x| x.is_finite())
+        .map(|&x| (x.max(0.0) + 0.0).to_bits())
+        .collect();
     let mut tmp = vec![0u32; keys.len()];
     for shift in [0, 16] {
         let mut start = vec![0usize; 1 << 16];
@@ -249,7 +291,11 @@ fn label_voxels(dt: &Bricked<f32>, levels: &[f64], reach: f64) -> Labels {
         }
         c as u16
     });
-    Labels { cells, counts, below_cut }
+    Labels {
+        cells,
+        counts,
+        below_cut,
+    }
 }
 
 /// [`cell_of_level`] by table: the cell at the start of each bin of Dt, bins narrower than the
@@ -263,19 +309,34 @@ struct LevelTable<'a> {
 
 impl<'a> LevelTable<'a> {
     fn new(levels: &'a [f64]) -> Self {
-        let gap = levels.windows(2).map(|w| w[1] - w[0]).fold(f64::INFINITY, f64::min);
-        let bin = if gap.is_finite() { (gap * 0.5).max(1e-3) } else { 1.0 };
+        let gap = levels
+            .windows(2)
+            .map(|w| w[1] - w[0])
+            .fold(f64::INFINITY, f64::min);
+        let bin = if gap.is_finite() {
+            (gap * 0.5).max(1e-3)
+        } else {
+            1.0
+        };
         let end = levels.last().copied().unwrap_or(0.0).max(0.0);
         let n = (end / bin) as usize + 2;
         // Half a bin early, so that rounding never starts a bin past its first voxel's cell.
-        let start = (0..n).map(|b| cell_of_level(levels, ((b as f64 - 0.5).max(0.0) * bin) as f32)).collect();
-        LevelTable { levels, start, inv_bin: 1.0 / bin }
+        let start = (0..n)
+            .map(|b| cell_of_level(levels, ((b as f64 - 0.5).max(0.0) * bin) as f32))
+            .collect();
+        LevelTable {
+            levels,
+            start,
+            inv_bin: 1.0 / bin,
+        }
     }
 
     #[inline]
     fn cell(&self, d: f32) -> u16 {
         let b = (d as f64 * self.inv_bin) as usize;
-        let Some(&c) = self.start.get(b) else { return self.levels.len() as u16 };
+        let Some(&c) = self.start.get(b) else {
+            return self.levels.len() as u16;
+        };
         let mut c = c as usize;
         while c < self.levels.len() && self.levels[c] <= d as f64 {
             c += 1;
@@ -298,14 +359,26 @@ fn set_spans(cells: &mut [Cell], cl_dt: &[f64], levels: &[f64]) {
 /// The portal between cells `c` and `c + 1`: boundary voxels (in either cell, 26-adjacent to
 /// the other) projected on the plane across the centerline at the cut; their convex hull,
 /// grown by half a voxel diagonal; the thickness their spread out of the plane.
-fn make_portal(pts: Vec<DVec3>, c: usize, level: f64, cl: &Centerline, cl_dt: &[f64], sp: [f64; 3]) -> Result<Portal> {
-    let at = cl_dt.partition_point(|&d| d < level).min(cl.points_mm.len() - 1);
+fn make_portal(
+    pts: Vec<DVec3>,
+    c: usize,
+    level: f64,
+    cl: &Centerline,
+    cl_dt: &[f64],
+    sp: [f64; 3],
+) -> Result<Portal> {
+    let at = cl_dt
+        .partition_point(|&d| d < level)
+        .min(cl.points_mm.len() - 1);
     let centre = DVec3::from_array(cl.points_mm[at]);
     let a = DVec3::from_array(cl.points_mm[at.saturating_sub(2)]);
     let b = DVec3::from_array(cl.points_mm[(at + 2).min(cl.points_mm.len() - 1)]);
     let normal = (b - a).normalize_or(DVec3::Z);
     if pts.is_empty() {
-        return Err(Error::invalid(format!("cells {c} and {} do not touch", c + 1)));
+        return Err(Error::invalid(format!(
+            "cells {c} and {} do not touch",
+            c + 1
+        )));
     }
     let (u, v) = plane_axes(normal);
     let half = 0.5 * diagonal(sp);
@@ -319,15 +392,30 @@ fn make_portal(pts: Vec<DVec3>, c: usize, level: f64, cl: &Centerline, cl_dt: &[
         })
         .collect();
     let hull = convex_hull(flat);
-    let polygon_mm = grow(&hull, half).into_iter().map(|(x, y)| (centre + u * x + v * y).to_array()).collect();
-    Ok(Portal { level_mm: level, centerline_index: at, centre_mm: centre.to_array(), normal: normal.to_array(), polygon_mm, half_thickness_mm: depth + half })
+    let polygon_mm = grow(&hull, half)
+        .into_iter()
+        .map(|(x, y)| (centre + u * x + v * y).to_array())
+        .collect();
+    Ok(Portal {
+        level_mm: level,
+        centerline_index: at,
+        centre_mm: centre.to_array(),
+        normal: normal.to_array(),
+        polygon_mm,
+        half_thickness_mm: depth + half,
+    })
 }
 
 /// For each cut c, the centres (volume-local mm) of the voxels on either side of it: voxels
 /// of cells c and c + 1 that are 26-adjacent, found from the voxels just below a cut (see
 /// [`label_voxels`]), each voxel once. Cells further apart than one must never touch (that is
 /// the guarantee visibility needs); if they do, that is an error.
-fn boundary_points(cells: &Bricked<u16>, below_cut: &[u32], cuts: usize, sp: [f64; 3]) -> Result<Vec<Vec<DVec3>>> {
+fn boundary_points(
+    cells: &Bricked<u16>,
+    below_cut: &[u32],
+    cuts: usize,
+    sp: [f64; 3],
+) -> Result<Vec<Vec<DVec3>>> {
     let dims = cells.grid.dims.map(|d| d as i64);
     let mut offs = Vec::with_capacity(26);
     for dk in -1i64..=1 {
@@ -355,13 +443,17 @@ fn boundary_points(cells: &Bricked<u16>, below_cut: &[u32], cuts: usize, sp: [f6
             if (0..3).any(|ax| q[ax] < 0 || q[ax] >= dims[ax]) {
                 continue;
             }
-            let Some(there) = cells.index_of_box(q.map(|x| x as usize)) else { continue };
+            let Some(there) = cells.index_of_box(q.map(|x| x as usize)) else {
+                continue;
+            };
             let b = values[there];
             if b == u16::MAX || b == a {
                 continue;
             }
             if a.abs_diff(b) != 1 {
-                return Err(Error::invalid(format!("cells {a} and {b} touch: the cuts are too close")));
+                return Err(Error::invalid(format!(
+                    "cells {a} and {b} touch: the cuts are too close"
+                )));
             }
             if b == a + 1 {
                 across = true;
@@ -382,7 +474,11 @@ fn boundary_points(cells: &Bricked<u16>, below_cut: &[u32], cuts: usize, sp: [f6
             v.into_iter()
                 .map(|at| {
                     let [i, j, k] = cells.box_voxel(at as usize);
-                    DVec3::new(((i + lo[0]) as f64) * sp[0], ((j + lo[1]) as f64) * sp[1], ((k + lo[2]) as f64) * sp[2])
+                    DVec3::new(
+                        ((i + lo[0]) as f64) * sp[0],
+                        ((j + lo[1]) as f64) * sp[1],
+                        ((k + lo[2]) as f64) * sp[2],
+                    )
                 })
                 .collect()
         })
@@ -411,9 +507,15 @@ fn monotone_chain(mut pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
     let mut hull: Vec<(f64, f64)> = Vec::with_capacity(2 * pts.len());
     for pass in 0..2 {
         let start = hull.len();
-        let iter: Box<dyn Iterator<Item = &(f64, f64)>> = if pass == 0 { Box::new(pts.iter()) } else { Box::new(pts.iter().rev()) };
+        let iter: Box<dyn Iterator<Item = &(f64, f64)>> = if pass == 0 {
+            Box::new(pts.iter())
+        } else {
+            Box::new(pts.iter().rev())
+        };
         for &p in iter {
-            while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0 {
+            while hull.len() >= start + 2
+                && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0
+            {
                 hull.pop();
             }
             hull.push(p);
@@ -437,7 +539,16 @@ fn drop_interior(pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
     }
     // Directions counter-clockwise from +x: the polygon through their extreme points is then
     // counter-clockwise too.
-    const DIRS: [(f64, f64); 8] = [(1.0, 0.0), (1.0, 1.0), (0.0, 1.0), (-1.0, 1.0), (-1.0, 0.0), (-1.0, -1.0), (0.0, -1.0), (1.0, -1.0)];
+    const DIRS: [(f64, f64); 8] = [
+        (1.0, 0.0),
+        (1.0, 1.0),
+        (0.0, 1.0),
+        (-1.0, 1.0),
+        (-1.0, 0.0),
+        (-1.0, -1.0),
+        (0.0, -1.0),
+        (1.0, -1.0),
+    ];
     let mut ext = [pts[0]; 8];
     for &p in &pts {
         for (e, d) in ext.iter_mut().zip(DIRS) {
@@ -456,7 +567,8 @@ fn drop_interior(pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
         return pts;
     }
     let n = poly.len();
-    let strictly_inside = |p: (f64, f64)| (0..n).all(|i| cross(poly[i], poly[(i + 1) % n], p) > 0.0);
+    let strictly_inside =
+        |p: (f64, f64)| (0..n).all(|i| cross(poly[i], poly[(i + 1) % n], p) > 0.0);
     pts.into_iter().filter(|&p| !strictly_inside(p)).collect()
 }
 
@@ -466,7 +578,17 @@ fn grow(hull: &[(f64, f64)], r: f64) -> Vec<(f64, f64)> {
     let n = hull.len();
     if n < 3 {
         // Degenerate boundary: a square of side 2r around each point.
-        let corners = hull.iter().flat_map(|&(x, y)| [(x - r, y - r), (x + r, y - r), (x + r, y + r), (x - r, y + r)]).collect();
+        let corners = hull
+            .iter()
+            .flat_map(|&(x, y)| {
+                [
+                    (x - r, y - r),
+                    (x + r, y - r),
+                    (x + r, y + r),
+                    (x - r, y + r),
+                ]
+            })
+            .collect();
         return convex_hull(corners);
     }
     (0..n)
@@ -486,17 +608,21 @@ fn grow(hull: &[(f64, f64)], r: f64) -> Vec<(f64, f64)> {
 
 fn norm(v: (f64, f64)) -> (f64, f64) {
     let l = (v.0 * v.0 + v.1 * v.1).sqrt();
-    if l == 0.0 { (0.0, 0.0) } else { (v.0 / l, v.1 / l) }
+    if l == 0.0 {
+        (0.0, 0.0)
+    } else {
+        (v.0 / l, v.1 / l)
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::centerline::{centerline, CenterlineOptions};
+    use crate::Geometry;
+    use crate::centerline::{CenterlineOptions, centerline};
     use crate::distance::{distance_to_wall, geodesic_distance};
     use crate::field::bounding_box;
     use crate::surface::extract_surface;
-    use crate::Geometry;
 
     #[test]
     fn leaving_out_interior_points_keeps_the_hull() {
@@ -511,13 +637,24 @@ mod tests {
             // A disc, a square and a thin slanted strip of random points, and a voxel grid
             // (many collinear and tied points).
             let pts: Vec<(f64, f64)> = match shape {
-                0 => (0..3000).map(|_| (rnd() - 50.0, rnd() - 50.0)).filter(|p| p.0 * p.0 + p.1 * p.1 < 2500.0).collect(),
+                0 => (0..3000)
+                    .map(|_| (rnd() - 50.0, rnd() - 50.0))
+                    .filter(|p| p.0 * p.0 + p.1 * p.1 < 2500.0)
+                    .collect(),
                 1 => (0..3000).map(|_| (rnd(), rnd())).collect(),
-                2 => (0..3000).map(|_| (rnd(), rnd(), rnd())).map(|(t, a, b)| (t + a * 0.02, 0.5 * t - b * 0.03)).collect(),
-                _ => (0..40).flat_map(|i| (0..30).map(move |j| (i as f64 * 0.8, j as f64 * 1.25))).collect(),
+                2 => (0..3000)
+                    .map(|_| (rnd(), rnd(), rnd()))
+                    .map(|(t, a, b)| (t + a * 0.02, 0.5 * t - b * 0.03))
+                    .collect(),
+                _ => (0..40)
+                    .flat_map(|i| (0..30).map(move |j| (i as f64 * 0.8, j as f64 * 1.25)))
+                    .collect(),
             };
             let hull = convex_hull(pts.clone());
-            assert!(drop_interior(pts.clone()).len() < pts.len(), "shape {shape}: nothing left out");
+            assert!(
+                drop_interior(pts.clone()).len() < pts.len(),
+                "shape {shape}: nothing left out"
+            );
             assert_eq!(hull, monotone_chain(pts), "shape {shape}");
         }
     }
@@ -531,9 +668,12 @@ mod tests {
                 let [i, j, k] = g.ijk(idx);
                 let (x, y, z) = (i as f64, j as f64, k as f64);
                 let r = 5.0;
-                let leg1 = ((y - 10.0).powi(2) + (z - 12.0).powi(2)).sqrt() < r && (5.0..=55.0).contains(&x);
-                let leg2 = ((y - 24.0).powi(2) + (z - 12.0).powi(2)).sqrt() < r && (5.0..=55.0).contains(&x);
-                let bend = x > 55.0 && (((x - 55.0).powi(2) + (y - 17.0).powi(2)).sqrt() - 7.0).hypot(z - 12.0) < r;
+                let leg1 = ((y - 10.0).powi(2) + (z - 12.0).powi(2)).sqrt() < r
+                    && (5.0..=55.0).contains(&x);
+                let leg2 = ((y - 24.0).powi(2) + (z - 12.0).powi(2)).sqrt() < r
+                    && (5.0..=55.0).contains(&x);
+                let bend = x > 55.0
+                    && (((x - 55.0).powi(2) + (y - 17.0).powi(2)).sqrt() - 7.0).hypot(z - 12.0) < r;
                 (leg1 || leg2 || bend) as u8
             })
             .collect();
@@ -564,7 +704,10 @@ mod tests {
         for &l in &levels {
             let l = l as f32;
             assert_eq!(table.cell(l), cell_of_level(&levels, l));
-            assert_eq!(table.cell(l.next_down()), cell_of_level(&levels, l.next_down()));
+            assert_eq!(
+                table.cell(l.next_down()),
+                cell_of_level(&levels, l.next_down())
+            );
         }
     }
 
@@ -577,7 +720,10 @@ mod tests {
         let dt = geodesic_distance(&m, &grid, src).unwrap();
         let cl = centerline(&m, &ds, src, dst, &CenterlineOptions::default()).unwrap();
         let surf = extract_surface(&m, None, &grid, 0.0).unwrap();
-        let opts = CellOptions { max_length_mm: 12.0, ..Default::default() };
+        let opts = CellOptions {
+            max_length_mm: 12.0,
+            ..Default::default()
+        };
         let cells = build_cells(&m, &dt.dist, &cl, &surf, &opts).unwrap();
         let n = cells.cells.len();
         assert!(n >= 6, "only {n} cells");
@@ -585,7 +731,10 @@ mod tests {
         // Every lumen voxel in exactly one cell; every triangle in one cell.
         let lumen = m.data().iter().filter(|&&v| v != 0).count();
         assert_eq!(cells.cells.iter().map(|c| c.voxels).sum::<usize>(), lumen);
-        assert_eq!(cells.cells.iter().map(|c| c.triangles.len()).sum::<usize>(), surf.mesh.triangles.len());
+        assert_eq!(
+            cells.cells.iter().map(|c| c.triangles.len()).sum::<usize>(),
+            surf.mesh.triangles.len()
+        );
         // Cells touch only their neighbours in the chain.
         let f = &cells.voxel_cell.to_field();
         let [nx, ny, nz] = f.grid.dims;
@@ -596,9 +745,21 @@ mod tests {
                     if a == u16::MAX {
                         continue;
                     }
-                    for (di, dj, dk) in [(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 1), (1, -1, 1), (-1, 1, 1), (1, 1, 0), (1, -1, 0)] {
+                    for (di, dj, dk) in [
+                        (1, 0, 0),
+                        (0, 1, 0),
+                        (0, 0, 1),
+                        (1, 1, 1),
+                        (1, -1, 1),
+                        (-1, 1, 1),
+                        (1, 1, 0),
+                        (1, -1, 0),
+                    ] {
                         let q = [i as i64 + di, j as i64 + dj, k as i64 + dk];
-                        if q.iter().zip(&f.grid.dims).any(|(&x, &n)| x < 0 || x >= n as i64) {
+                        if q.iter()
+                            .zip(&f.grid.dims)
+                            .any(|(&x, &n)| x < 0 || x >= n as i64)
+                        {
                             continue;
                         }
                         let b = f.data[f.grid.index(q[0] as usize, q[1] as usize, q[2] as usize)];
@@ -625,7 +786,11 @@ mod tests {
         // Portals: roughly the tube's cross-section (radius 5 mm), across the centerline.
         for p in &cells.portals {
             let c = DVec3::from_array(p.centre_mm);
-            let far = p.polygon_mm.iter().map(|q| DVec3::from_array(*q).distance(c)).fold(0.0, f64::max);
+            let far = p
+                .polygon_mm
+                .iter()
+                .map(|q| DVec3::from_array(*q).distance(c))
+                .fold(0.0, f64::max);
             assert!((4.0..10.0).contains(&far), "portal outline radius {far}");
             assert!(p.polygon_mm.len() >= 4);
         }

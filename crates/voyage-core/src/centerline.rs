@@ -9,8 +9,8 @@ use glam::DVec3;
 use serde::Serialize;
 
 use crate::distance::geodesic::Padded;
-use crate::skeleton::{colon_path, tree_search, SkeletonOptions};
 use crate::field::Field;
+use crate::skeleton::{SkeletonOptions, colon_path, tree_search};
 use crate::{Result, Volume};
 
 #[derive(Clone, Debug, Serialize)]
@@ -45,28 +45,59 @@ pub struct CenterlineOptions {
 
 impl Default for CenterlineOptions {
     fn default() -> Self {
-        CenterlineOptions { step_mm: 1.0, smooth_mm: 4.0, centre_iterations: 12, coarse_below_mm: 1.0, coarse_above_voxels: 1_000_000, penalty_power: 16, penalty_scale: 5000.0, skeleton: SkeletonOptions::default() }
+        CenterlineOptions {
+            step_mm: 1.0,
+            smooth_mm: 4.0,
+            centre_iterations: 12,
+            coarse_below_mm: 1.0,
+            coarse_above_voxels: 1_000_000,
+            penalty_power: 16,
+            penalty_scale: 5000.0,
+            skeleton: SkeletonOptions::default(),
+        }
     }
 }
 
 /// The centerline from `source` to `target` (volume voxels in the lumen): the longest simple
 /// path between them through the skeleton graph, centred and smoothed.
-pub fn centerline(mask: &Volume<u8>, ds: &Field<f32>, source: [usize; 3], target: [usize; 3], opts: &CenterlineOptions) -> Result<Centerline> {
+pub fn centerline(
+    mask: &Volume<u8>,
+    ds: &Field<f32>,
+    source: [usize; 3],
+    target: [usize; 3],
+    opts: &CenterlineOptions,
+) -> Result<Centerline> {
     let pad = Padded::new(mask, &ds.grid);
     let ds_pad = pad.pad(&ds.data, 0.0);
     let weight = cost_weight(&ds_pad, opts);
     let src = pad.lumen_index(source)?;
     let dst = pad.lumen_index(target)?;
     let tree = tree_search(&pad, &[src], mask.spacing(), Some(&weight), None);
-    let (path, _) = colon_path(&pad, &tree, &ds_pad, mask.spacing(), src, Some(dst), &opts.skeleton)?;
+    let (path, _) = colon_path(
+        &pad,
+        &tree,
+        &ds_pad,
+        mask.spacing(),
+        src,
+        Some(dst),
+        &opts.skeleton,
+    )?;
     let voxels: Vec<[usize; 3]> = path.iter().map(|&i| pad.global_of_index(i)).collect();
     Ok(refine(&voxels, mask, ds, opts))
 }
 
 /// Centres, smooths and resamples a voxel path from source to target.
-pub fn refine(voxels: &[[usize; 3]], mask: &Volume<u8>, ds: &Field<f32>, opts: &CenterlineOptions) -> Centerline {
+pub fn refine(
+    voxels: &[[usize; 3]],
+    mask: &Volume<u8>,
+    ds: &Field<f32>,
+    opts: &CenterlineOptions,
+) -> Centerline {
     let sp = mask.geometry().spacing_vec();
-    let raw: Vec<DVec3> = voxels.iter().map(|v| DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64) * sp).collect();
+    let raw: Vec<DVec3> = voxels
+        .iter()
+        .map(|v| DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64) * sp)
+        .collect();
     refine_points(raw, ds, opts)
 }
 
@@ -92,7 +123,13 @@ pub fn cost_weight(ds_pad: &[f32], opts: &CenterlineOptions) -> Vec<f32> {
     let k = opts.penalty_scale as f32;
     let p = opts.penalty_power;
     // Walls (Ds 0) all weigh 1 + K; only the lumen's voxels need the power.
-    let weight = |d: f32| if d == 0.0 { 1.0 + k } else { 1.0 + k * power(((dmax - d) / dmax).max(0.0), p) };
+    let weight = |d: f32| {
+        if d == 0.0 {
+            1.0 + k
+        } else {
+            1.0 + k * power(((dmax - d) / dmax).max(0.0), p)
+        }
+    };
     crate::mem::collect(ds_pad.len(), ds_pad.iter().map(|&d| weight(d)))
 }
 
@@ -133,7 +170,10 @@ fn resample(pts: &[DVec3], step: f64) -> Vec<DVec3> {
         }
         carried = len - (t - step);
     }
-    if out.last().is_some_and(|l| l.distance(pts[pts.len() - 1]) > 1e-9) {
+    if out
+        .last()
+        .is_some_and(|l| l.distance(pts[pts.len() - 1]) > 1e-9)
+    {
         out.push(pts[pts.len() - 1]);
     }
     out
@@ -188,7 +228,12 @@ fn finish(pts: Vec<DVec3>, ds: &Field<f32>) -> Centerline {
     let arc = arc_lengths(&pts);
     let length_mm = arc.last().copied().unwrap_or(0.0);
     let radius = pts.iter().map(|&p| ds.sample(p, 0.0) as f64).collect();
-    Centerline { points_mm: pts.iter().map(|p| p.to_array()).collect(), arc_mm: arc, radius_mm: radius, length_mm }
+    Centerline {
+        points_mm: pts.iter().map(|p| p.to_array()).collect(),
+        arc_mm: arc,
+        radius_mm: radius,
+        length_mm,
+    }
 }
 
 /// The length along a polyline from its first point to each point, mm.
@@ -210,14 +255,18 @@ mod tests {
     fn power_by_squaring_is_powi() {
         for n in [0u32, 1, 2, 3, 7, 16, 17] {
             for x in [0.0f32, 0.1, 0.37, 0.5, 0.93, 0.999, 1.0] {
-                assert_eq!(super::power(x, n).to_bits(), x.powi(n as i32).to_bits(), "{x}^{n}");
+                assert_eq!(
+                    super::power(x, n).to_bits(),
+                    x.powi(n as i32).to_bits(),
+                    "{x}^{n}"
+                );
             }
         }
     }
 
     use super::*;
-    use crate::distance::distance_to_wall;
     use crate::Geometry;
+    use crate::distance::distance_to_wall;
 
     /// A torus-like bent tube (a half ring of radius 30 mm, tube radius 6 mm).
     fn bent_tube() -> (Volume<u8>, DVec3, f64) {
@@ -247,13 +296,21 @@ mod tests {
         for p in &cl.points_mm {
             let p = DVec3::from_array(*p);
             let ijk = (p / m.geometry().spacing_vec()).round();
-            assert_eq!(m.get(ijk.x as usize, ijk.y as usize, ijk.z as usize), 1, "point {p} outside the lumen");
+            assert_eq!(
+                m.get(ijk.x as usize, ijk.y as usize, ijk.z as usize),
+                1,
+                "point {p} outside the lumen"
+            );
             let d = p - c;
             err += (((d.x * d.x + d.y * d.y).sqrt() - r).powi(2) + d.z * d.z).sqrt();
         }
         let mean = err / cl.points_mm.len() as f64;
         assert!(mean < 1.0, "mean distance to the true axis {mean} mm");
-        assert!((cl.length_mm - std::f64::consts::PI * r).abs() < 8.0, "length {}", cl.length_mm);
+        assert!(
+            (cl.length_mm - std::f64::consts::PI * r).abs() < 8.0,
+            "length {}",
+            cl.length_mm
+        );
         assert!(cl.arc_mm.windows(2).all(|w| w[1] > w[0]));
     }
 
@@ -265,7 +322,14 @@ mod tests {
             m.set(i, 2, 2, 1);
         }
         let ds = distance_to_wall(&m).unwrap();
-        let e = centerline(&m, &ds, [1, 2, 2], [18, 2, 2], &CenterlineOptions::default()).unwrap_err();
+        let e = centerline(
+            &m,
+            &ds,
+            [1, 2, 2],
+            [18, 2, 2],
+            &CenterlineOptions::default(),
+        )
+        .unwrap_err();
         assert!(e.to_string().contains("cannot be reached"), "{e}");
     }
 }

@@ -68,7 +68,10 @@ pub struct CleanseOptions {
 
 impl Default for CleanseOptions {
     fn default() -> Self {
-        CleanseOptions { tissue_hu: 40, tissue_max_hu: 100 }
+        CleanseOptions {
+            tissue_hu: 40,
+            tissue_max_hu: 100,
+        }
     }
 }
 
@@ -187,7 +190,14 @@ const LEVEL_MARGIN_HU: i16 = 100;
 /// Cleanses `scene.ct` in the colon: the changes, to be [`Cleansing::swap`]ped in. Empty when
 /// the colon holds no tagged fluid.
 pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
-    let Scene { ct, lumen, extent, gravity_lps, air_hu, fluid_hu } = scene;
+    let Scene {
+        ct,
+        lumen,
+        extent,
+        gravity_lps,
+        air_hu,
+        fluid_hu,
+    } = scene;
     let g = ct.geometry().clone();
     let [nx, ny, nz] = g.dims;
     // Two voxels of margin inside the volume, so that no neighbour look-up leaves it.
@@ -245,7 +255,12 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
                     if !in_lumen(m[v]) {
                         continue;
                     }
-                    if six.iter().filter(|&&d| tagged((v as isize + d) as usize, m)).count() >= 5 {
+                    if six
+                        .iter()
+                        .filter(|&&d| tagged((v as isize + d) as usize, m))
+                        .count()
+                        >= 5
+                    {
                         m[v] |= CORE | POOL;
                         queue.push(v);
                     } else if hu[v] >= level_hu && air_above(v, m) {
@@ -329,7 +344,11 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
                         continue;
                     } else {
                         // No core near: the voxel is as bright as the fluid gets here.
-                        unmix(h as f32, t, fluid_value(v, hu, m, &cube, fluid_hu, CORE).unwrap_or(h as f32))
+                        unmix(
+                            h as f32,
+                            t,
+                            fluid_value(v, hu, m, &cube, fluid_hu, CORE).unwrap_or(h as f32),
+                        )
                     }
                 } else {
                     // The wall's first voxel: beside lumen that is not air.
@@ -358,10 +377,28 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
     }
 
     // 3. The lumps of stool: made air with the same model.
-    let stool = Lumps { hu, m: lumen.data(), g: &g, opts, air_hu, fluid_hu }.cleanse(&lumps, &cube);
+    let stool = Lumps {
+        hu,
+        m: lumen.data(),
+        g: &g,
+        opts,
+        air_hu,
+        fluid_hu,
+    }
+    .cleanse(&lumps, &cube);
     let (stool_lumps, stool_voxels) = (lumps.len(), stool.tagged);
     if !stool.voxels.is_empty() {
-        let mut all: Vec<(u32, i16)> = voxels.into_iter().zip(cleansed).chain(stool.voxels.iter().copied().zip(stool.values.iter().copied())).collect();
+        let mut all: Vec<(u32, i16)> = voxels
+            .into_iter()
+            .zip(cleansed)
+            .chain(
+                stool
+                    .voxels
+                    .iter()
+                    .copied()
+                    .zip(stool.values.iter().copied()),
+            )
+            .collect();
         all.sort_unstable_by_key(|&(v, _)| v);
         (voxels, cleansed) = all.into_iter().unzip();
     }
@@ -369,10 +406,29 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
     // 4. What is left outside the lumen where pools and lumps were, and that the wall
     // beyond does not hold: islands of partial-volume skin in the new lumen. They are air.
     let mut join = stool.join;
-    let islands = Islands { m: lumen.data(), hu, g: &g, voxels: &voxels, values: &cleansed, leave: &leave, join: &join, air_hu }.find(lo, hi);
+    let islands = Islands {
+        m: lumen.data(),
+        hu,
+        g: &g,
+        voxels: &voxels,
+        values: &cleansed,
+        leave: &leave,
+        join: &join,
+        air_hu,
+    }
+    .find(lo, hi);
     if !islands.is_empty() {
-        let mut all: Vec<(u32, i16)> = voxels.into_iter().zip(cleansed).filter(|(v, _)| islands.binary_search(&(*v as usize)).is_err()).collect();
-        all.extend(islands.iter().filter(|&&v| hu[v] != AIR_HU).map(|&v| (v as u32, AIR_HU)));
+        let mut all: Vec<(u32, i16)> = voxels
+            .into_iter()
+            .zip(cleansed)
+            .filter(|(v, _)| islands.binary_search(&(*v as usize)).is_err())
+            .collect();
+        all.extend(
+            islands
+                .iter()
+                .filter(|&&v| hu[v] != AIR_HU)
+                .map(|&v| (v as u32, AIR_HU)),
+        );
         all.sort_unstable_by_key(|&(v, _)| v);
         (voxels, cleansed) = all.into_iter().unzip();
         let m = lumen.data();
@@ -408,7 +464,15 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
         }
     }
     peel_spurs(m, hu, &mut voxels, &mut cleansed, &mut join, &six, air_hu);
-    Cleansing { voxels, other: cleansed, tagged_voxels, left_lumen: leave.len(), stool_lumps, stool_voxels, joined_lumen: join.len() }
+    Cleansing {
+        voxels,
+        other: cleansed,
+        tagged_voxels,
+        left_lumen: leave.len(),
+        stool_lumps,
+        stool_voxels,
+        joined_lumen: join.len(),
+    }
 }
 
 /// Spurs of skin that the wall holds by one face, beside what cleansing changed: a voxel
@@ -417,18 +481,44 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
 /// ascending.
 const SPUR_PASSES: usize = 4;
 
-fn peel_spurs(m: &mut [u8], hu: &[i16], voxels: &mut Vec<u32>, values: &mut Vec<i16>, join: &mut Vec<usize>, six: &[isize; 6], air_hu: i16) {
-    let mut candidates: Vec<usize> = voxels.iter().flat_map(|&v| six.iter().map(move |&d| (v as isize + d) as usize).chain([v as usize])).collect();
+fn peel_spurs(
+    m: &mut [u8],
+    hu: &[i16],
+    voxels: &mut Vec<u32>,
+    values: &mut Vec<i16>,
+    join: &mut Vec<usize>,
+    six: &[isize; 6],
+    air_hu: i16,
+) {
+    let mut candidates: Vec<usize> = voxels
+        .iter()
+        .flat_map(|&v| {
+            six.iter()
+                .map(move |&d| (v as isize + d) as usize)
+                .chain([v as usize])
+        })
+        .collect();
     candidates.sort_unstable();
     candidates.dedup();
     let mut peeled: Vec<(u32, i16)> = Vec::new();
     for _ in 0..SPUR_PASSES {
-        let value = |v: usize, voxels: &[u32], values: &[i16]| voxels.binary_search(&(v as u32)).map_or(hu[v], |n| values[n]);
+        let value = |v: usize, voxels: &[u32], values: &[i16]| {
+            voxels
+                .binary_search(&(v as u32))
+                .map_or(hu[v], |n| values[n])
+        };
         let spurs: Vec<usize> = candidates
             .iter()
             .copied()
-            .filter(|&v| m[v] == 0 && value(v, voxels, values) < 0 && value(v, voxels, values) >= air_hu)
-            .filter(|&v| six.iter().filter(|&&d| m[(v as isize + d) as usize] & 1 != 0).count() >= 5)
+            .filter(|&v| {
+                m[v] == 0 && value(v, voxels, values) < 0 && value(v, voxels, values) >= air_hu
+            })
+            .filter(|&v| {
+                six.iter()
+                    .filter(|&&d| m[(v as isize + d) as usize] & 1 != 0)
+                    .count()
+                    >= 5
+            })
             .collect();
         for &v in &spurs {
             m[v] = 1;
@@ -443,8 +533,18 @@ fn peel_spurs(m: &mut [u8], hu: &[i16], voxels: &mut Vec<u32>, values: &mut Vec<
         return;
     }
     peeled.sort_unstable();
-    let mut all: Vec<(u32, i16)> = voxels.iter().copied().zip(values.iter().copied()).filter(|(v, _)| peeled.binary_search_by_key(v, |p| p.0).is_err()).collect();
-    all.extend(peeled.iter().copied().filter(|&(v, _)| hu[v as usize] != AIR_HU));
+    let mut all: Vec<(u32, i16)> = voxels
+        .iter()
+        .copied()
+        .zip(values.iter().copied())
+        .filter(|(v, _)| peeled.binary_search_by_key(v, |p| p.0).is_err())
+        .collect();
+    all.extend(
+        peeled
+            .iter()
+            .copied()
+            .filter(|&(v, _)| hu[v as usize] != AIR_HU),
+    );
     all.sort_unstable_by_key(|&(v, _)| v);
     (*voxels, *values) = all.into_iter().unzip();
 }
@@ -459,11 +559,25 @@ fn peel_spurs(m: &mut [u8], hu: &[i16], voxels: &mut Vec<u32>, values: &mut Vec<
 /// lump whose air runs out of that box (a tube's air, the outside) is not stool. Returns
 /// each lump's voxels.
 #[allow(clippy::too_many_arguments)]
-fn find_lumps(hu: &[i16], m: &mut [u8], g: &Geometry, bright: &[usize], lo: [usize; 3], hi: [usize; 3], air_hu: i16, fluid_hu: i16) -> Vec<Vec<usize>> {
+fn find_lumps(
+    hu: &[i16],
+    m: &mut [u8],
+    g: &Geometry,
+    bright: &[usize],
+    lo: [usize; 3],
+    hi: [usize; 3],
+    air_hu: i16,
+    fluid_hu: i16,
+) -> Vec<Vec<usize>> {
     let [nx, ny, _] = g.dims;
     let strides = [1isize, nx as isize, (nx * ny) as isize];
     let six = [1, -1, strides[1], -strides[1], strides[2], -strides[2]];
-    let cube26: Vec<isize> = (-1..=1).flat_map(|k| (-1..=1).flat_map(move |j| (-1..=1).map(move |i| i + j * strides[1] + k * strides[2]))).filter(|&d| d != 0).collect();
+    let cube26: Vec<isize> = (-1..=1)
+        .flat_map(|k| {
+            (-1..=1).flat_map(move |j| (-1..=1).map(move |i| i + j * strides[1] + k * strides[2]))
+        })
+        .filter(|&d| d != 0)
+        .collect();
     let in_lumen = |x: u8| x & 1 != 0;
     let within = |v: usize, lo: [usize; 3], hi: [usize; 3]| {
         let ijk = g.ijk(v);
@@ -477,7 +591,10 @@ fn find_lumps(hu: &[i16], m: &mut [u8], g: &Geometry, bright: &[usize], lo: [usi
         six.iter().any(|&d| {
             (1..=STOOL_REACH).any(|s| {
                 let w = v as isize + d * s;
-                w >= 0 && (w as usize) < m.len() && in_lumen(m[w as usize]) && hu[w as usize] < air_hu
+                w >= 0
+                    && (w as usize) < m.len()
+                    && in_lumen(m[w as usize])
+                    && hu[w as usize] < air_hu
             })
         })
     };
@@ -517,8 +634,18 @@ fn find_lumps(hu: &[i16], m: &mut [u8], g: &Geometry, bright: &[usize], lo: [usi
         // Stool, not noise on plastic or a wall: one voxel well above the threshold,
         // and a few voxels at least unless it is what a pool left (stool lying in
         // one, mostly taken in with its fluid).
-        let by_pool = || lump.iter().any(|&u| cube26.iter().any(|&d| m[(u as isize + d) as usize] & POOL != 0));
-        let mut ok = lump.len() <= max_voxels && lump.iter().any(|&u| hu[u] >= fluid_hu.saturating_add(LEVEL_MARGIN_HU)) && (lump.len() >= MIN_LUMP_VOXELS || by_pool());
+        let by_pool = || {
+            lump.iter().any(|&u| {
+                cube26
+                    .iter()
+                    .any(|&d| m[(u as isize + d) as usize] & POOL != 0)
+            })
+        };
+        let mut ok = lump.len() <= max_voxels
+            && lump
+                .iter()
+                .any(|&u| hu[u] >= fluid_hu.saturating_add(LEVEL_MARGIN_HU))
+            && (lump.len() >= MIN_LUMP_VOXELS || by_pool());
         if ok {
             // The skin touching the tagged voxels, whatever its value; the air
             // pockets, flooded through air outside the lumen (air that leaves the
@@ -589,12 +716,18 @@ struct Islands<'a> {
 
 impl Islands<'_> {
     fn value(&self, v: usize) -> i16 {
-        self.voxels.binary_search(&(v as u32)).map_or(self.hu[v], |n| self.values[n])
+        self.voxels
+            .binary_search(&(v as u32))
+            .map_or(self.hu[v], |n| self.values[n])
     }
 
     /// Outside the lumen once cleansed, at or above the air level.
     fn solid(&self, v: usize) -> bool {
-        let lumen = if self.m[v] & 1 != 0 { self.leave.binary_search(&v).is_err() } else { self.join.binary_search(&v).is_ok() };
+        let lumen = if self.m[v] & 1 != 0 {
+            self.leave.binary_search(&v).is_err()
+        } else {
+            self.join.binary_search(&v).is_ok()
+        };
         !lumen && self.value(v) >= self.air_hu
     }
 
@@ -604,7 +737,14 @@ impl Islands<'_> {
     /// ascending.
     fn find(&self, lo: [usize; 3], hi: [usize; 3]) -> Vec<usize> {
         let [nx, ny, _] = self.g.dims;
-        let six = [1isize, -1, nx as isize, -(nx as isize), (nx * ny) as isize, -((nx * ny) as isize)];
+        let six = [
+            1isize,
+            -1,
+            nx as isize,
+            -(nx as isize),
+            (nx * ny) as isize,
+            -((nx * ny) as isize),
+        ];
         let (blo, bhi) = (lo.map(|x| x - 1), hi.map(|x| x + 1));
         let in_box = |v: usize| {
             let ijk = self.g.ijk(v);
@@ -649,8 +789,15 @@ impl Islands<'_> {
         }
         // An island with tissue inside it (a voxel of at least 0 HU all of whose neighbours
         // are solid) is a polyp's head on a stalk too thin to show, not skin: it stays.
-        let loose: Vec<usize> = solid.into_iter().zip(held).filter(|&(_, h)| !h).map(|(v, _)| v).collect();
-        let inner = |v: usize| self.value(v) >= 0 && six.iter().all(|&d| self.solid((v as isize + d) as usize));
+        let loose: Vec<usize> = solid
+            .into_iter()
+            .zip(held)
+            .filter(|&(_, h)| !h)
+            .map(|(v, _)| v)
+            .collect();
+        let inner = |v: usize| {
+            self.value(v) >= 0 && six.iter().all(|&d| self.solid((v as isize + d) as usize))
+        };
         let mut seen = vec![false; loose.len()];
         let mut out = Vec::new();
         for start in 0..loose.len() {
@@ -762,7 +909,9 @@ impl Lumps<'_> {
             h
         } else {
             match fluid_value(v, hu, m, cube, self.fluid_hu, SOLID) {
-                Some(c) => Some(unmix(h as f32, self.opts.tissue_hu as f32, c)).filter(|&u| u >= air).unwrap_or(AIR_HU),
+                Some(c) => Some(unmix(h as f32, self.opts.tissue_hu as f32, c))
+                    .filter(|&u| u >= air)
+                    .unwrap_or(AIR_HU),
                 None => h,
             }
         }
@@ -772,14 +921,25 @@ impl Lumps<'_> {
 /// The local tagged fluid's HU: the mean of the brighter half (by range, above the midpoint
 /// of the fluid threshold and the brightest) of the pools' core voxels in the 5³ cube
 /// around `v` (a core voxel may be the pool's partial-volume skin); None when there is none.
-fn fluid_value(v: usize, hu: &[i16], m: &[u8], cube: &[isize], fluid_hu: i16, mark: u8) -> Option<f32> {
+fn fluid_value(
+    v: usize,
+    hu: &[i16],
+    m: &[u8],
+    cube: &[isize],
+    fluid_hu: i16,
+    mark: u8,
+) -> Option<f32> {
     let core = |d: isize| {
         let w = (v as isize + d) as usize;
         (m[w] & mark != 0 && hu[w] >= fluid_hu).then_some(hu[w])
     };
     let max = cube.iter().filter_map(|&d| core(d)).max()?;
     let half = ((max as i32 + fluid_hu as i32) / 2) as i16;
-    let (sum, n) = cube.iter().filter_map(|&d| core(d)).filter(|&h| h >= half).fold((0f32, 0f32), |(s, n), h| (s + h as f32, n + 1.0));
+    let (sum, n) = cube
+        .iter()
+        .filter_map(|&d| core(d))
+        .filter(|&h| h >= half)
+        .fold((0f32, 0f32), |(s, n), h| (s + h as f32, n + 1.0));
     Some(sum / n)
 }
 
@@ -796,7 +956,12 @@ fn unmix(h: f32, t: f32, c: f32) -> i16 {
 /// for the rest (air) and for triangles near tagged material in the original CT (a voxel at
 /// or above `fluid_hu` at the triangle's centre, or 1 mm or `near_mm` from it along an
 /// axis). None for a class with no triangle pair.
-pub fn roughness(mesh: &crate::surface::Mesh, ct: &Volume<i16>, fluid_hu: i16, near_mm: f64) -> (Option<f64>, Option<f64>) {
+pub fn roughness(
+    mesh: &crate::surface::Mesh,
+    ct: &Volume<i16>,
+    fluid_hu: i16,
+    near_mm: f64,
+) -> (Option<f64>, Option<f64>) {
     use rayon::prelude::*;
     let g: &Geometry = ct.geometry();
     let tri = &mesh.triangles;
@@ -817,10 +982,13 @@ pub fn roughness(mesh: &crate::surface::Mesh, ct: &Volume<i16>, fluid_hu: i16, n
     let near_fluid: Vec<bool> = tri
         .par_iter()
         .map(|t| {
-            let c = t.iter().fold(glam::DVec3::ZERO, |s, &i| s + glam::Vec3::from_array(pos[i as usize]).as_dvec3()) / 3.0;
+            let c = t.iter().fold(glam::DVec3::ZERO, |s, &i| {
+                s + glam::Vec3::from_array(pos[i as usize]).as_dvec3()
+            }) / 3.0;
             offsets.iter().any(|&o| {
                 let q = [0, 1, 2].map(|a| ((c[a] + o[a]) / g.spacing[a]).round() as i64);
-                (0..3).all(|a| q[a] >= 0 && q[a] < g.dims[a] as i64) && ct.data()[g.index(q[0] as usize, q[1] as usize, q[2] as usize)] >= fluid_hu
+                (0..3).all(|a| q[a] >= 0 && q[a] < g.dims[a] as i64)
+                    && ct.data()[g.index(q[0] as usize, q[1] as usize, q[2] as usize)] >= fluid_hu
             })
         })
         .collect();
@@ -842,7 +1010,11 @@ pub fn roughness(mesh: &crate::surface::Mesh, ct: &Volume<i16>, fluid_hu: i16, n
             continue;
         }
         let (a, b) = (&tri[w[0].1 as usize], &tri[w[1].1 as usize]);
-        let angle = normal(a).dot(normal(b)).clamp(-1.0, 1.0).acos().to_degrees() as f64;
+        let angle = normal(a)
+            .dot(normal(b))
+            .clamp(-1.0, 1.0)
+            .acos()
+            .to_degrees() as f64;
         let class = (near_fluid[w[0].1 as usize] || near_fluid[w[1].1 as usize]) as usize;
         sums[class].0 += angle;
         sums[class].1 += 1;
@@ -888,7 +1060,14 @@ mod tests {
     fn fluid_becomes_air_and_the_wall_is_cut_as_under_air() {
         let (mut ct, mut lumen) = scene();
         let original = ct.clone();
-        let scene = Scene { ct: &ct, lumen: &mut lumen, extent: [[3, 3, 3], [12, 10, 12]], gravity_lps: DVec3::Y, air_hu: -500, fluid_hu: 200 };
+        let scene = Scene {
+            ct: &ct,
+            lumen: &mut lumen,
+            extent: [[3, 3, 3], [12, 10, 12]],
+            gravity_lps: DVec3::Y,
+            air_hu: -500,
+            fluid_hu: 200,
+        };
         let mut c = cleanse(scene, &CleanseOptions::default());
         assert!(!c.is_empty());
         c.swap(&mut ct);
@@ -900,7 +1079,10 @@ mod tests {
         assert_eq!(lumen.get(5, 10, 5), 0);
         assert_eq!(c.left_lumen, 100);
         // The polyp, the wall beyond, and the small bowel behind it keep their values.
-        assert_eq!((ct.get(5, 8, 5), ct.get(5, 11, 5), ct.get(5, 14, 5)), (60, 40, 500));
+        assert_eq!(
+            (ct.get(5, 8, 5), ct.get(5, 11, 5), ct.get(5, 14, 5)),
+            (60, 40, 500)
+        );
         // No marks are left in the lumen, and swapping again restores the CT.
         assert!(lumen.data().iter().all(|&m| m <= 1));
         c.swap(&mut ct);
@@ -929,7 +1111,14 @@ mod tests {
                 }
             }
         }
-        let scene = Scene { ct: &ct, lumen: &mut lumen, extent: [[3, 3, 3], [12, 10, 12]], gravity_lps: DVec3::Y, air_hu: -500, fluid_hu: 200 };
+        let scene = Scene {
+            ct: &ct,
+            lumen: &mut lumen,
+            extent: [[3, 3, 3], [12, 10, 12]],
+            gravity_lps: DVec3::Y,
+            air_hu: -500,
+            fluid_hu: 200,
+        };
         let mut c = cleanse(scene, &CleanseOptions::default());
         c.swap(&mut ct);
         assert_eq!((ct.get(9, 6, 9), lumen.get(9, 6, 9)), (AIR_HU, 1));
@@ -939,7 +1128,14 @@ mod tests {
     #[test]
     fn no_tagged_fluid_changes_nothing() {
         let (ct, mut lumen) = scene();
-        let scene = Scene { ct: &ct, lumen: &mut lumen, extent: [[3, 3, 3], [12, 10, 12]], gravity_lps: DVec3::Y, air_hu: -500, fluid_hu: 1000 };
+        let scene = Scene {
+            ct: &ct,
+            lumen: &mut lumen,
+            extent: [[3, 3, 3], [12, 10, 12]],
+            gravity_lps: DVec3::Y,
+            air_hu: -500,
+            fluid_hu: 1000,
+        };
         assert!(cleanse(scene, &CleanseOptions::default()).is_empty());
     }
 

@@ -23,10 +23,10 @@
 
 use glam::DVec3;
 
-use crate::blocks::Blocks;
-use crate::distance::geodesic::{dial, Padded, SearchOptions};
-use crate::field::BoxGrid;
 use crate::Volume;
+use crate::blocks::Blocks;
+use crate::distance::geodesic::{Padded, SearchOptions, dial};
+use crate::field::BoxGrid;
 
 #[derive(Clone, Debug)]
 pub struct ContactOptions {
@@ -37,7 +37,11 @@ pub struct ContactOptions {
 
 impl Default for ContactOptions {
     fn default() -> Self {
-        ContactOptions { enabled: true, arc_ratio: 3.0, min_arc_mm: 50.0 }
+        ContactOptions {
+            enabled: true,
+            arc_ratio: 3.0,
+            min_arc_mm: 50.0,
+        }
     }
 }
 
@@ -47,7 +51,15 @@ const NO_LABEL: u16 = u16::MAX;
 /// `keep`, volume-local mm); returns the volume indices taken, so that a caller can put them
 /// back. `path_mm` is the colon's path from source to target; `blocks`, when given, the
 /// blocks of `grid` to search on (else single voxels).
-pub fn cut_contacts(lumen: &mut Volume<u8>, grid: &BoxGrid, path_mm: &[DVec3], blocks: Option<&Blocks>, keep: &[DVec3], keep_mm: f64, opts: &ContactOptions) -> crate::Result<Vec<usize>> {
+pub fn cut_contacts(
+    lumen: &mut Volume<u8>,
+    grid: &BoxGrid,
+    path_mm: &[DVec3],
+    blocks: Option<&Blocks>,
+    keep: &[DVec3],
+    keep_mm: f64,
+    opts: &ContactOptions,
+) -> crate::Result<Vec<usize>> {
     if !opts.enabled || path_mm.len() < 2 {
         return Ok(Vec::new());
     }
@@ -81,7 +93,13 @@ pub fn cut_contacts(lumen: &mut Volume<u8>, grid: &BoxGrid, path_mm: &[DVec3], b
                 if lumen.get(v[0], v[1], v[2]) == 0 {
                     continue;
                 }
-                let Some(b) = blocks.block_of_voxel(v).and_then(|c| pad.index_of_global(c)).map(|q| labels[q]) else { continue };
+                let Some(b) = blocks
+                    .block_of_voxel(v)
+                    .and_then(|c| pad.index_of_global(c))
+                    .map(|q| labels[q])
+                else {
+                    continue;
+                };
                 if b != NO_LABEL && b != a && far(a, b) {
                     cut.push(g.index(u[0], u[1], u[2]));
                     cut.push(g.index(v[0], v[1], v[2]));
@@ -107,7 +125,10 @@ fn label_points(path: &[DVec3]) -> (Vec<DVec3>, Vec<f64>) {
     let arc = crate::centerline::arc_lengths(path);
     let stride = path.len().div_ceil(NO_LABEL as usize - 1).max(1);
     let idx: Vec<usize> = (0..path.len()).step_by(stride).collect();
-    (idx.iter().map(|&i| path[i]).collect(), idx.iter().map(|&i| arc[i]).collect())
+    (
+        idx.iter().map(|&i| path[i]).collect(),
+        idx.iter().map(|&i| arc[i]).collect(),
+    )
 }
 
 /// The full blocks with a layer of empty blocks around, for the search, and which blocks are
@@ -150,7 +171,10 @@ fn label_blocks(pad: &PaddedBlocks, blocks: &Blocks, points: &[DVec3]) -> Vec<u1
     let mut labels = vec![NO_LABEL; pad.inside.len()];
     let mut sources = Vec::with_capacity(points.len());
     for (l, p) in points.iter().enumerate() {
-        if let Some(i) = blocks.block_of_mm(*p).and_then(|c| pad.index_of_global(c)).filter(|&i| pad.inside[i] != 0)
+        if let Some(i) = blocks
+            .block_of_mm(*p)
+            .and_then(|c| pad.index_of_global(c))
+            .filter(|&i| pad.inside[i] != 0)
             && labels[i] == NO_LABEL
         {
             labels[i] = l as u16;
@@ -158,7 +182,15 @@ fn label_blocks(pad: &PaddedBlocks, blocks: &Blocks, points: &[DVec3]) -> Vec<u1
         }
     }
     let spacing = blocks.mask.spacing();
-    let search = dial(pad, &sources, spacing, &SearchOptions { tree: true, ..Default::default() });
+    let search = dial(
+        pad,
+        &sources,
+        spacing,
+        &SearchOptions {
+            tree: true,
+            ..Default::default()
+        },
+    );
     for &u in &search.order {
         let u = u as usize;
         if let Some(p) = search.parent_of(u) {
@@ -166,7 +198,12 @@ fn label_blocks(pad: &PaddedBlocks, blocks: &Blocks, points: &[DVec3]) -> Vec<u1
         }
     }
     let rows = pad.neighbour_row_starts();
-    let mut frontier: Vec<usize> = search.order.iter().map(|&u| u as usize).filter(|&u| partial_around(&pad.partial, u, &rows) != 0).collect();
+    let mut frontier: Vec<usize> = search
+        .order
+        .iter()
+        .map(|&u| u as usize)
+        .filter(|&u| partial_around(&pad.partial, u, &rows) != 0)
+        .collect();
     while !frontier.is_empty() {
         let mut next = Vec::new();
         for &u in &frontier {
@@ -204,7 +241,12 @@ fn partial_around(partial: &[u8], u: usize, rows: &[isize; 9]) -> u32 {
 
 /// Blocks with a 26-neighbour whose label is far along the path from theirs.
 fn contact_blocks(pad: &Padded, labels: &[u16], far: &dyn Fn(u16, u16) -> bool) -> Vec<bool> {
-    let half: Vec<isize> = pad.neighbours([1.0; 3]).iter().map(|n| n.0).filter(|&o| o > 0).collect();
+    let half: Vec<isize> = pad
+        .neighbours([1.0; 3])
+        .iter()
+        .map(|n| n.0)
+        .filter(|&o| o > 0)
+        .collect();
     let mut contact = vec![false; labels.len()];
     for u in 0..labels.len() {
         let a = labels[u];
@@ -241,7 +283,10 @@ mod tests {
     /// neighbour offsets with the block itself at bit 13.
     #[test]
     fn partial_around_reads_the_27_blocks_in_order() {
-        let pad = Padded::shape(&BoxGrid { lo: [0; 3], dims: [7, 6, 5] });
+        let pad = Padded::shape(&BoxGrid {
+            lo: [0; 3],
+            dims: [7, 6, 5],
+        });
         let n = pad.dims.iter().product::<usize>();
         let mut rng = crate::phantom::rng::Rng::new(11, 2);
         let mut partial: Vec<u8> = (0..n).map(|_| (rng.range(0.0, 1.0) < 0.3) as u8).collect();

@@ -14,11 +14,11 @@
 use glam::DVec3;
 
 use crate::blocks::Blocks;
-use crate::centerline::{cost_weight, refine_points, Centerline, CenterlineOptions};
-use crate::skeleton::{colon_path, SkeletonOptions};
+use crate::centerline::{Centerline, CenterlineOptions, cost_weight, refine_points};
 use crate::distance::distance_to_wall;
-use crate::distance::geodesic::{geodesic_distance_pair_like, Geodesic, Padded, TreeStart};
+use crate::distance::geodesic::{Geodesic, Padded, TreeStart, geodesic_distance_pair_like};
 use crate::field::{BoxGrid, Bricked, Field};
+use crate::skeleton::{SkeletonOptions, colon_path};
 use crate::{Error, Result, Volume};
 
 #[derive(Clone, Debug)]
@@ -32,7 +32,11 @@ pub struct EndpointOptions {
 
 impl Default for EndpointOptions {
     fn default() -> Self {
-        EndpointOptions { source_mm: None, target_mm: None, min_width: 0.25 }
+        EndpointOptions {
+            source_mm: None,
+            target_mm: None,
+            min_width: 0.25,
+        }
     }
 }
 
@@ -56,7 +60,11 @@ pub struct Skeleton {
 /// Whether the skeleton search runs on 2×2×2 blocks: when the lumen is large and finely
 /// sampled (the path is then centred on the voxels' Ds anyway).
 pub fn uses_blocks(lumen: &Volume<u8>, lumen_voxels: usize, cl_opts: &CenterlineOptions) -> bool {
-    let finest = lumen.spacing().iter().cloned().fold(f64::INFINITY, f64::min);
+    let finest = lumen
+        .spacing()
+        .iter()
+        .cloned()
+        .fold(f64::INFINITY, f64::min);
     finest < cl_opts.coarse_below_mm && lumen_voxels > cl_opts.coarse_above_voxels
 }
 
@@ -64,21 +72,51 @@ pub fn uses_blocks(lumen: &Volume<u8>, lumen_voxels: usize, cl_opts: &Centerline
 /// `grid`. On blocks ([`uses_blocks`]) the search needs only the mask (the blocks get their
 /// own Ds), so it can run before the voxels' Ds; otherwise it uses `fine_ds`, computing it
 /// when not given.
-pub fn trace_skeleton(lumen: &Volume<u8>, grid: &BoxGrid, lumen_voxels: usize, seed: [usize; 3], fine_ds: Option<&Field<f32>>, opts: &EndpointOptions, cl_opts: &CenterlineOptions) -> Result<Skeleton> {
-    let given_source = opts.source_mm.map(|p| lumen_voxel(lumen, p, "source")).transpose()?;
-    let given_target = opts.target_mm.map(|p| lumen_voxel(lumen, p, "target")).transpose()?;
+pub fn trace_skeleton(
+    lumen: &Volume<u8>,
+    grid: &BoxGrid,
+    lumen_voxels: usize,
+    seed: [usize; 3],
+    fine_ds: Option<&Field<f32>>,
+    opts: &EndpointOptions,
+    cl_opts: &CenterlineOptions,
+) -> Result<Skeleton> {
+    let given_source = opts
+        .source_mm
+        .map(|p| lumen_voxel(lumen, p, "source"))
+        .transpose()?;
+    let given_target = opts
+        .target_mm
+        .map(|p| lumen_voxel(lumen, p, "target"))
+        .transpose()?;
     if let (Some(s), Some(t)) = (given_source, given_target)
         && s == t
     {
-        return Err(Error::invalid(format!("the source and the target are the same voxel ({})", lumen.geometry().describe_point(mm_of(lumen, s)))));
+        return Err(Error::invalid(format!(
+            "the source and the target are the same voxel ({})",
+            lumen.geometry().describe_point(mm_of(lumen, s))
+        )));
     }
     if uses_blocks(lumen, lumen_voxels, cl_opts) {
         let blocks = Blocks::new(lumen, grid, 2)?;
         let ds = distance_to_wall(&blocks.mask)?;
         let to_block = |v: [usize; 3]| blocks.nearest_full(v);
-        let voxels = skeleton_path(&blocks.mask, &ds, to_block(seed)?, given_source.map(to_block).transpose()?, given_target.map(to_block).transpose()?, opts, cl_opts)?;
+        let voxels = skeleton_path(
+            &blocks.mask,
+            &ds,
+            to_block(seed)?,
+            given_source.map(to_block).transpose()?,
+            given_target.map(to_block).transpose()?,
+            opts,
+            cl_opts,
+        )?;
         let path_mm = voxels.iter().map(|&v| blocks.centre_mm(v)).collect();
-        return Ok(Skeleton { path_mm, given_source, given_target, blocks: Some(blocks) });
+        return Ok(Skeleton {
+            path_mm,
+            given_source,
+            given_target,
+            blocks: Some(blocks),
+        });
     }
     let own;
     let ds = match fine_ds {
@@ -89,12 +127,22 @@ pub fn trace_skeleton(lumen: &Volume<u8>, grid: &BoxGrid, lumen_voxels: usize, s
         }
     };
     let voxels = skeleton_path(lumen, ds, seed, given_source, given_target, opts, cl_opts)?;
-    Ok(Skeleton { path_mm: voxels.iter().map(|v| mm_of(lumen, *v)).collect(), given_source, given_target, blocks: None })
+    Ok(Skeleton {
+        path_mm: voxels.iter().map(|v| mm_of(lumen, *v)).collect(),
+        given_source,
+        given_target,
+        blocks: None,
+    })
 }
 
 /// The endpoints (the given ones, else the widest voxels at the raw path's ends) and the
 /// centerline: the raw path centred on the voxels' Ds and smoothed (paper §4.2).
-pub fn centre_skeleton(lumen: &Volume<u8>, ds: &Field<f32>, sk: &Skeleton, cl_opts: &CenterlineOptions) -> Result<Endpoints> {
+pub fn centre_skeleton(
+    lumen: &Volume<u8>,
+    ds: &Field<f32>,
+    sk: &Skeleton,
+    cl_opts: &CenterlineOptions,
+) -> Result<Endpoints> {
     let path_mm = &sk.path_mm;
     let source = match sk.given_source {
         Some(v) => v,
@@ -104,17 +152,30 @@ pub fn centre_skeleton(lumen: &Volume<u8>, ds: &Field<f32>, sk: &Skeleton, cl_op
         Some(v) => v,
         None => snap(lumen, ds, path_mm[path_mm.len() - 1])?,
     };
-    let mut pts: Vec<DVec3> = path_mm.iter().map(|&p| mm_of(lumen, snap(lumen, ds, p).unwrap_or(source))).collect();
+    let mut pts: Vec<DVec3> = path_mm
+        .iter()
+        .map(|&p| mm_of(lumen, snap(lumen, ds, p).unwrap_or(source)))
+        .collect();
     pts[0] = mm_of(lumen, source);
     let last = pts.len() - 1;
     pts[last] = mm_of(lumen, target);
     let centerline = refine_points(pts, ds, cl_opts);
-    Ok(Endpoints { source, target, centerline })
+    Ok(Endpoints {
+        source,
+        target,
+        centerline,
+    })
 }
 
 /// The skeleton search and the centring in one: endpoints and centerline of the lumen whose
 /// Ds is `ds`.
-pub fn find_endpoints(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], opts: &EndpointOptions, cl_opts: &CenterlineOptions) -> Result<Endpoints> {
+pub fn find_endpoints(
+    lumen: &Volume<u8>,
+    ds: &Field<f32>,
+    seed: [usize; 3],
+    opts: &EndpointOptions,
+    cl_opts: &CenterlineOptions,
+) -> Result<Endpoints> {
     let lumen_voxels = ds.data.iter().filter(|&&d| d > 0.0).count();
     let sk = trace_skeleton(lumen, &ds.grid, lumen_voxels, seed, Some(ds), opts, cl_opts)?;
     centre_skeleton(lumen, ds, &sk, cl_opts)
@@ -127,7 +188,13 @@ pub fn find_endpoints(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], opt
 /// break preprocessing's memory budget (3× the CT) for a gain only on more than one core.
 ///
 /// `scratch`: memory to search in (Ds's box array, done with): fresh memory costs page faults.
-pub fn dt_fields(lumen: &Volume<u8>, ds: &Bricked<f32>, source: [usize; 3], target: [usize; 3], scratch: Vec<f32>) -> Result<(Geodesic, Geodesic)> {
+pub fn dt_fields(
+    lumen: &Volume<u8>,
+    ds: &Bricked<f32>,
+    source: [usize; 3],
+    target: [usize; 3],
+    scratch: Vec<f32>,
+) -> Result<(Geodesic, Geodesic)> {
     let [to_target, to_source] = geodesic_distance_pair_like(lumen, ds, [target, source], scratch)?;
     Ok((to_target, to_source))
 }
@@ -139,21 +206,39 @@ pub fn dt_fields(lumen: &Volume<u8>, ds: &Bricked<f32>, source: [usize; 3], targ
 /// colon between them (from a point in the middle it would wander through contacts to gain
 /// length), and neither is the shortest. Only an endpoint that lies off that path (farther
 /// from it than the lumen is wide there) falls back to the longest path from the source.
-fn skeleton_path(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], given_source: Option<[usize; 3]>, given_target: Option<[usize; 3]>, opts: &EndpointOptions, cl_opts: &CenterlineOptions) -> Result<Vec<[usize; 3]>> {
+fn skeleton_path(
+    lumen: &Volume<u8>,
+    ds: &Field<f32>,
+    seed: [usize; 3],
+    given_source: Option<[usize; 3]>,
+    given_target: Option<[usize; 3]>,
+    opts: &EndpointOptions,
+    cl_opts: &CenterlineOptions,
+) -> Result<Vec<[usize; 3]>> {
     let pad = Padded::new(lumen, &ds.grid);
     let sp = lumen.spacing();
     let ds_pad = pad.pad(&ds.data, 0.0);
     let weight = cost_weight(&ds_pad, cl_opts);
     let dmax = ds.data.iter().cloned().fold(0.0f32, f32::max);
     let floor = (opts.min_width as f32 * dmax).min(dmax);
-    let sk_opts = SkeletonOptions { min_width: opts.min_width, ..cl_opts.skeleton.clone() };
+    let sk_opts = SkeletonOptions {
+        min_width: opts.min_width,
+        ..cl_opts.skeleton.clone()
+    };
     let start = TreeStart::new(&pad, &weight);
     // The search stops at the first wide voxel it settles: the nearest.
     let wide = |v: usize| ds_pad[v] > 0.0 && ds_pad[v] >= floor;
     let (nearest, start) = start.nearest(&pad, &[pad.lumen_index(seed)?], sp, &weight, &wide);
-    let rectum = nearest.ok_or_else(|| Error::invalid("the search from the seed settled nothing"))?;
+    let rectum =
+        nearest.ok_or_else(|| Error::invalid("the search from the seed settled nothing"))?;
     let tree = start.search(&pad, &[rectum], sp, &weight);
-    let unreachable = |v: [usize; 3], what: &str| Error::invalid(format!("the {what} {} mm cannot be reached from the rectum {} mm through the lumen", mm_of(lumen, v), mm_of(lumen, pad.global_of_index(rectum))));
+    let unreachable = |v: [usize; 3], what: &str| {
+        Error::invalid(format!(
+            "the {what} {} mm cannot be reached from the rectum {} mm through the lumen",
+            mm_of(lumen, v),
+            mm_of(lumen, pad.global_of_index(rectum))
+        ))
+    };
     for (v, what) in [(given_source, "source"), (given_target, "target")] {
         if let Some(v) = v
             && !tree.dist[pad.lumen_index(v)?].is_finite()
@@ -170,7 +255,11 @@ fn skeleton_path(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], given_so
     if let (Some(a), Some(b)) = (place(given_source, 0), place(given_target, colon.len() - 1))
         && a != b
     {
-        let mut path: Vec<[usize; 3]> = if a < b { colon[a..=b].to_vec() } else { colon[b..=a].iter().rev().copied().collect() };
+        let mut path: Vec<[usize; 3]> = if a < b {
+            colon[a..=b].to_vec()
+        } else {
+            colon[b..=a].iter().rev().copied().collect()
+        };
         // The given points themselves are the ends (the centring puts them there too).
         let last = path.len() - 1;
         path[0] = given_source.unwrap_or(path[0]);
@@ -188,10 +277,26 @@ fn skeleton_path(lumen: &Volume<u8>, ds: &Field<f32>, seed: [usize; 3], given_so
 
 /// The index of the point of `path` nearest to voxel `v`, if `v` lies within the lumen's
 /// width of it (twice the point's Ds, plus two voxels): a point in the tube around the path.
-fn place_on_path(path: &[[usize; 3]], v: [usize; 3], pad: &Padded, ds_pad: &[f32], sp: [f64; 3]) -> Option<usize> {
-    let dist2 = |p: &[usize; 3]| (0..3).map(|a| ((p[a] as f64 - v[a] as f64) * sp[a]).powi(2)).sum::<f64>();
-    let (at, d2) = path.iter().enumerate().map(|(i, p)| (i, dist2(p))).min_by(|x, y| x.1.total_cmp(&y.1))?;
-    let width = pad.index_of_global(path[at]).map_or(0.0, |i| ds_pad[i] as f64);
+fn place_on_path(
+    path: &[[usize; 3]],
+    v: [usize; 3],
+    pad: &Padded,
+    ds_pad: &[f32],
+    sp: [f64; 3],
+) -> Option<usize> {
+    let dist2 = |p: &[usize; 3]| {
+        (0..3)
+            .map(|a| ((p[a] as f64 - v[a] as f64) * sp[a]).powi(2))
+            .sum::<f64>()
+    };
+    let (at, d2) = path
+        .iter()
+        .enumerate()
+        .map(|(i, p)| (i, dist2(p)))
+        .min_by(|x, y| x.1.total_cmp(&y.1))?;
+    let width = pad
+        .index_of_global(path[at])
+        .map_or(0.0, |i| ds_pad[i] as f64);
     let reach = 2.0 * width + 2.0 * sp.iter().map(|x| x * x).sum::<f64>().sqrt();
     (d2 <= reach * reach).then_some(at)
 }
@@ -206,7 +311,10 @@ fn snap(lumen: &Volume<u8>, ds: &Field<f32>, p: DVec3) -> Result<[usize; 3]> {
             for j in lo..=hi {
                 for i in lo..=hi {
                     let q = [base.x as i64 + i, base.y as i64 + j, base.z as i64 + k];
-                    if q.iter().zip(lumen.dims()).any(|(&x, n)| x < 0 || x >= n as i64) {
+                    if q.iter()
+                        .zip(lumen.dims())
+                        .any(|(&x, n)| x < 0 || x >= n as i64)
+                    {
                         continue;
                     }
                     let q = q.map(|x| x as usize);
@@ -227,15 +335,22 @@ fn snap(lumen: &Volume<u8>, ds: &Field<f32>, p: DVec3) -> Result<[usize; 3]> {
 fn lumen_voxel(lumen: &Volume<u8>, mm: DVec3, what: &str) -> Result<[usize; 3]> {
     let ijk = lumen.geometry().local_to_index(mm).round();
     if !lumen.geometry().contains_index(ijk) {
-        return Err(Error::invalid(format!("the {what} {} lies outside the volume", lumen.geometry().describe_point(mm))));
+        return Err(Error::invalid(format!(
+            "the {what} {} lies outside the volume",
+            lumen.geometry().describe_point(mm)
+        )));
     }
     let v = [ijk.x as usize, ijk.y as usize, ijk.z as usize];
     if lumen.get(v[0], v[1], v[2]) == 0 {
-        return Err(Error::invalid(format!("the {what} {} is not inside the colon lumen", lumen.geometry().describe_point(mm))));
+        return Err(Error::invalid(format!(
+            "the {what} {} is not inside the colon lumen",
+            lumen.geometry().describe_point(mm)
+        )));
     }
     Ok(v)
 }
 
 pub fn mm_of(vol: &Volume<u8>, v: [usize; 3]) -> DVec3 {
-    vol.geometry().index_to_local(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64))
+    vol.geometry()
+        .index_to_local(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64))
 }

@@ -18,7 +18,10 @@ impl BoxGrid {
         let [lo, hi] = extent;
         let lo_m = [0, 1, 2].map(|a| lo[a].saturating_sub(margin));
         let hi_m = [0, 1, 2].map(|a| (hi[a] + margin).min(dims[a] - 1));
-        BoxGrid { lo: lo_m, dims: [0, 1, 2].map(|a| hi_m[a] - lo_m[a] + 1) }
+        BoxGrid {
+            lo: lo_m,
+            dims: [0, 1, 2].map(|a| hi_m[a] - lo_m[a] + 1),
+        }
     }
     pub fn len(&self) -> usize {
         self.dims[0] * self.dims[1] * self.dims[2]
@@ -58,14 +61,20 @@ impl BoxGrid {
 
 /// The bounding box of the voxels where `pred` holds, grown by `margin` voxels and clipped to
 /// the volume. None when no voxel matches.
-pub fn bounding_box<T: Copy>(vol: &Volume<T>, margin: usize, pred: impl Fn(T) -> bool) -> Option<BoxGrid> {
+pub fn bounding_box<T: Copy>(
+    vol: &Volume<T>,
+    margin: usize,
+    pred: impl Fn(T) -> bool,
+) -> Option<BoxGrid> {
     let [nx, ny, nz] = vol.dims();
     let mut lo = [usize::MAX; 3];
     let mut hi = [0usize; 3];
     for k in 0..nz {
         let slice = vol.slice_k(k);
         for j in 0..ny {
-            let Some((first, last)) = first_and_last(&slice[j * nx..(j + 1) * nx], &pred) else { continue };
+            let Some((first, last)) = first_and_last(&slice[j * nx..(j + 1) * nx], &pred) else {
+                continue;
+            };
             lo = [lo[0].min(first), lo[1].min(j), lo[2].min(k)];
             hi = [hi[0].max(last), hi[1].max(j), hi[2].max(k)];
         }
@@ -79,7 +88,10 @@ pub fn bounding_box<T: Copy>(vol: &Volume<T>, margin: usize, pred: impl Fn(T) ->
 /// The first and last positions in `row` where `pred` holds. Most rows of a scan hold no
 /// lumen: they are tested 32 values at a time without an early exit, which compiles to vector
 /// code (a byte at a time, the lumen's box of a 512×512×400 scan took 70 ms).
-pub(crate) fn first_and_last<T: Copy>(row: &[T], pred: &impl Fn(T) -> bool) -> Option<(usize, usize)> {
+pub(crate) fn first_and_last<T: Copy>(
+    row: &[T],
+    pred: &impl Fn(T) -> bool,
+) -> Option<(usize, usize)> {
     const W: usize = 32;
     let hit = |c: &[T]| c.iter().fold(false, |a, &v| a | pred(v));
     let first_chunk = row.chunks(W).position(hit)?;
@@ -101,12 +113,18 @@ pub struct Field<T> {
 impl<T: Copy> Field<T> {
     pub fn filled(grid: BoxGrid, geometry: Geometry, v: T) -> Self {
         let n = grid.len();
-        Field { grid, geometry, data: vec![v; n] }
+        Field {
+            grid,
+            geometry,
+            data: vec![v; n],
+        }
     }
     /// Value at a volume voxel; `outside` when the voxel is not in the box.
     #[inline]
     pub fn get_global(&self, g: [usize; 3], outside: T) -> T {
-        self.grid.index_of_global(g).map_or(outside, |i| self.data[i])
+        self.grid
+            .index_of_global(g)
+            .map_or(outside, |i| self.data[i])
     }
 }
 
@@ -116,7 +134,9 @@ pub fn crop<T: Copy>(vol: &Volume<T>, grid: &BoxGrid) -> Vec<T> {
     let [bx, by, bz] = grid.dims;
     for k in 0..bz {
         for j in 0..by {
-            let start = vol.geometry().index(grid.lo[0], j + grid.lo[1], k + grid.lo[2]);
+            let start = vol
+                .geometry()
+                .index(grid.lo[0], j + grid.lo[1], k + grid.lo[2]);
             out.extend_from_slice(&vol.data()[start..start + bx]);
         }
     }
@@ -178,7 +198,11 @@ pub struct BrickMarks {
 impl BrickMarks {
     pub fn new(grid: &BoxGrid) -> Self {
         let nb = grid.dims.map(|d| d.div_ceil(BRICK));
-        BrickMarks { dims: grid.dims, nb, table: vec![0u32; nb[0] * nb[1] * nb[2]] }
+        BrickMarks {
+            dims: grid.dims,
+            nb,
+            table: vec![0u32; nb[0] * nb[1] * nb[2]],
+        }
     }
 
     /// Marks the bricks of box row (j, k) where `keep` holds for one of its values.
@@ -196,7 +220,11 @@ impl BrickMarks {
 
 impl Layout {
     /// The bricks where `keep` holds for one of the values of the box rows `row(j, k)`.
-    fn of_rows<'a, S: Copy + 'a>(grid: &BoxGrid, row: &impl Fn(usize, usize) -> &'a [S], keep: impl Fn(S) -> bool) -> Self {
+    fn of_rows<'a, S: Copy + 'a>(
+        grid: &BoxGrid,
+        row: &impl Fn(usize, usize) -> &'a [S],
+        keep: impl Fn(S) -> bool,
+    ) -> Self {
         let mut marks = BrickMarks::new(grid);
         for k in 0..grid.dims[2] {
             for j in 0..grid.dims[1] {
@@ -225,12 +253,17 @@ impl Layout {
     #[inline]
     fn brick_of_slot(&self, slot: usize) -> [usize; 3] {
         let b = self.bricks[slot] as usize;
-        [b % self.nb[0], (b / self.nb[0]) % self.nb[1], b / (self.nb[0] * self.nb[1])]
+        [
+            b % self.nb[0],
+            (b / self.nb[0]) % self.nb[1],
+            b / (self.nb[0] * self.nb[1]),
+        ]
     }
 
     #[inline]
     fn slot_of(&self, l: [usize; 3]) -> u32 {
-        self.table[(l[0] >> BRICK_SHIFT) + self.nb[0] * ((l[1] >> BRICK_SHIFT) + self.nb[1] * (l[2] >> BRICK_SHIFT))]
+        self.table[(l[0] >> BRICK_SHIFT)
+            + self.nb[0] * ((l[1] >> BRICK_SHIFT) + self.nb[1] * (l[2] >> BRICK_SHIFT))]
     }
 }
 
@@ -239,35 +272,80 @@ impl<T: Copy + PartialEq> Bricked<T> {
     /// where `keep` holds for one of its values, and each value passes through `map`
     /// (`map(s)` must be `outside` where `keep(s)` is false). Two streaming passes: which
     /// bricks to keep, then the copy.
-    pub fn from_rows<'a, S: Copy + 'a>(grid: &BoxGrid, geometry: &Geometry, outside: T, row: impl Fn(usize, usize) -> &'a [S], keep: impl Fn(S) -> bool, map: impl Fn(S) -> T) -> Self {
+    pub fn from_rows<'a, S: Copy + 'a>(
+        grid: &BoxGrid,
+        geometry: &Geometry,
+        outside: T,
+        row: impl Fn(usize, usize) -> &'a [S],
+        keep: impl Fn(S) -> bool,
+        map: impl Fn(S) -> T,
+    ) -> Self {
         let layout = Layout::of_rows(grid, &row, keep);
         Bricked::fill(grid, geometry, layout, outside, row, map)
     }
 
     /// [`Bricked::from_rows`] into the bricks `marks` marked (values in the others must map to
     /// `outside`).
-    pub fn from_rows_marked<'a, S: Copy + 'a>(grid: &BoxGrid, geometry: &Geometry, outside: T, marks: BrickMarks, row: impl Fn(usize, usize) -> &'a [S], map: impl Fn(S) -> T) -> Self {
+    pub fn from_rows_marked<'a, S: Copy + 'a>(
+        grid: &BoxGrid,
+        geometry: &Geometry,
+        outside: T,
+        marks: BrickMarks,
+        row: impl Fn(usize, usize) -> &'a [S],
+        map: impl Fn(S) -> T,
+    ) -> Self {
         Bricked::fill(grid, geometry, Layout::of_marks(marks), outside, row, map)
     }
 
     /// From box rows of the same box as `like`, into the bricks `like` stores (so one pass,
     /// over those bricks only); values in the other bricks must map to `outside`.
-    pub fn from_rows_like<'a, U, S: Copy + 'a>(like: &Bricked<U>, outside: T, row: impl Fn(usize, usize) -> &'a [S], map: impl Fn(S) -> T) -> Self {
-        Bricked::fill(&like.grid, &like.geometry, like.layout.clone(), outside, row, map)
+    pub fn from_rows_like<'a, U, S: Copy + 'a>(
+        like: &Bricked<U>,
+        outside: T,
+        row: impl Fn(usize, usize) -> &'a [S],
+        map: impl Fn(S) -> T,
+    ) -> Self {
+        Bricked::fill(
+            &like.grid,
+            &like.geometry,
+            like.layout.clone(),
+            outside,
+            row,
+            map,
+        )
     }
 
     /// [`Bricked::from_rows_like`] from a box-layout array whose row (j, k) starts at
     /// `src[row_start(j, k)]`, each value read through `take`, which may also change it: one
     /// pass both stores a field and readies its array for other use (a second search).
-    pub fn from_rows_like_taking<U, S>(like: &Bricked<U>, outside: T, src: &mut [S], row_start: impl Fn(usize, usize) -> usize, take: impl Fn(&mut S) -> T) -> Self {
-        Bricked::fill_with(&like.grid, &like.geometry, like.layout.clone(), outside, |j, k, ci, dst| {
-            for (d, s) in dst.iter_mut().zip(&mut src[row_start(j, k) + ci..]) {
-                *d = take(s);
-            }
-        })
+    pub fn from_rows_like_taking<U, S>(
+        like: &Bricked<U>,
+        outside: T,
+        src: &mut [S],
+        row_start: impl Fn(usize, usize) -> usize,
+        take: impl Fn(&mut S) -> T,
+    ) -> Self {
+        Bricked::fill_with(
+            &like.grid,
+            &like.geometry,
+            like.layout.clone(),
+            outside,
+            |j, k, ci, dst| {
+                for (d, s) in dst.iter_mut().zip(&mut src[row_start(j, k) + ci..]) {
+                    *d = take(s);
+                }
+            },
+        )
     }
 
-    fn fill<'a, S: Copy + 'a>(grid: &BoxGrid, geometry: &Geometry, layout: Layout, outside: T, row: impl Fn(usize, usize) -> &'a [S], map: impl Fn(S) -> T) -> Self {
+    fn fill<'a, S: Copy + 'a>(
+        grid: &BoxGrid,
+        geometry: &Geometry,
+        layout: Layout,
+        outside: T,
+        row: impl Fn(usize, usize) -> &'a [S],
+        map: impl Fn(S) -> T,
+    ) -> Self {
         Bricked::fill_with(grid, geometry, layout, outside, |j, k, ci, dst| {
             let n = dst.len();
             for (d, &s) in dst.iter_mut().zip(&row(j, k)[ci..ci + n]) {
@@ -278,7 +356,13 @@ impl<T: Copy + PartialEq> Bricked<T> {
 
     /// The bricks of `layout`, each row of each brick written by `row(j, k, ci, dst)`: box
     /// row (j, k) from x = ci on, into `dst` (as long as the brick's part of the row).
-    fn fill_with(grid: &BoxGrid, geometry: &Geometry, layout: Layout, outside: T, mut row: impl FnMut(usize, usize, usize, &mut [T])) -> Self {
+    fn fill_with(
+        grid: &BoxGrid,
+        geometry: &Geometry,
+        layout: Layout,
+        outside: T,
+        mut row: impl FnMut(usize, usize, usize, &mut [T]),
+    ) -> Self {
         let [bx, by, bz] = grid.dims;
         let mut data = crate::mem::filled(layout.bricks.len() * BRICK_VOXELS, outside);
         for (slot, bricks) in data.chunks_mut(BRICK_VOXELS).enumerate() {
@@ -286,30 +370,62 @@ impl<T: Copy + PartialEq> Bricked<T> {
             let n = BRICK.min(bx - ci);
             for z in 0..BRICK.min(bz - ck) {
                 for y in 0..BRICK.min(by - cj) {
-                    row(cj + y, ck + z, ci, &mut bricks[BRICK * (y + BRICK * z)..][..n]);
+                    row(
+                        cj + y,
+                        ck + z,
+                        ci,
+                        &mut bricks[BRICK * (y + BRICK * z)..][..n],
+                    );
                 }
             }
         }
-        Bricked { grid: grid.clone(), geometry: geometry.clone(), outside, layout, data }
+        Bricked {
+            grid: grid.clone(),
+            geometry: geometry.clone(),
+            outside,
+            layout,
+            data,
+        }
     }
 
     /// A box-layout field in bricks (bricks holding only `outside` left out).
     pub fn from_field(f: &Field<T>, outside: T) -> Self {
         let bx = f.grid.dims[0];
-        Bricked::from_rows(&f.grid, &f.geometry, outside, |j, k| &f.data[f.grid.index(0, j, k)..][..bx], |v| v != outside, |v| v)
+        Bricked::from_rows(
+            &f.grid,
+            &f.geometry,
+            outside,
+            |j, k| &f.data[f.grid.index(0, j, k)..][..bx],
+            |v| v != outside,
+            |v| v,
+        )
     }
 
     /// The same bricks holding `f(index, value)` of each stored value (index into
     /// [`Bricked::values`]; `f` must give `outside` for `self.outside`).
-    pub fn map<U: Copy + PartialEq>(&self, outside: U, mut f: impl FnMut(usize, T) -> U) -> Bricked<U> {
-        let data = crate::mem::collect(self.data.len(), self.data.iter().enumerate().map(|(at, &v)| f(at, v)));
-        Bricked { grid: self.grid.clone(), geometry: self.geometry.clone(), outside, layout: self.layout.clone(), data }
+    pub fn map<U: Copy + PartialEq>(
+        &self,
+        outside: U,
+        mut f: impl FnMut(usize, T) -> U,
+    ) -> Bricked<U> {
+        let data = crate::mem::collect(
+            self.data.len(),
+            self.data.iter().enumerate().map(|(at, &v)| f(at, v)),
+        );
+        Bricked {
+            grid: self.grid.clone(),
+            geometry: self.geometry.clone(),
+            outside,
+            layout: self.layout.clone(),
+            data,
+        }
     }
 
     /// Value at box-local voxel `l` (which must lie in the box).
     #[inline]
     pub fn get_box(&self, l: [usize; 3]) -> T {
-        self.index_of_box(l).map_or(self.outside, |at| self.data[at])
+        self.index_of_box(l)
+            .map_or(self.outside, |at| self.data[at])
     }
 
     /// Value at a volume voxel (`outside` beyond the box).
@@ -330,7 +446,11 @@ impl<T: Copy + PartialEq> Bricked<T> {
     pub fn box_voxel(&self, at: usize) -> [usize; 3] {
         let bb = self.layout.brick_of_slot(at / BRICK_VOXELS);
         let o = at % BRICK_VOXELS;
-        [bb[0] * BRICK + (o & (BRICK - 1)), bb[1] * BRICK + ((o >> BRICK_SHIFT) & (BRICK - 1)), bb[2] * BRICK + (o >> (2 * BRICK_SHIFT))]
+        [
+            bb[0] * BRICK + (o & (BRICK - 1)),
+            bb[1] * BRICK + ((o >> BRICK_SHIFT) & (BRICK - 1)),
+            bb[2] * BRICK + (o >> (2 * BRICK_SHIFT)),
+        ]
     }
 
     /// Index into [`Bricked::values`] of box-local voxel `l`, None in an absent brick.
@@ -348,7 +468,8 @@ impl<T: Copy + PartialEq> Bricked<T> {
 
     /// Heap bytes held.
     pub fn bytes(&self) -> usize {
-        self.data.capacity() * std::mem::size_of::<T>() + (self.layout.table.capacity() + self.layout.bricks.capacity()) * 4
+        self.data.capacity() * std::mem::size_of::<T>()
+            + (self.layout.table.capacity() + self.layout.bricks.capacity()) * 4
     }
 
     /// Axial slice k spread over the whole volume (x fastest), `outside` elsewhere: for
@@ -391,7 +512,11 @@ impl<T: Copy + PartialEq> Bricked<T> {
                 }
             }
         }
-        Field { grid: self.grid.clone(), geometry: self.geometry.clone(), data }
+        Field {
+            grid: self.grid.clone(),
+            geometry: self.geometry.clone(),
+            data,
+        }
     }
 
     /// The field spread over the whole volume (`outside` beyond the box).
@@ -420,19 +545,30 @@ fn within_brick(l: [usize; 3]) -> usize {
 
 /// Trilinear interpolation of voxel values `at` at a volume-local position; corners at
 /// negative indices count as `outside`.
-fn trilinear(geometry: &Geometry, mm: glam::DVec3, at: impl Fn([usize; 3]) -> f32, outside: f32) -> f32 {
+fn trilinear(
+    geometry: &Geometry,
+    mm: glam::DVec3,
+    at: impl Fn([usize; 3]) -> f32,
+    outside: f32,
+) -> f32 {
     let p = geometry.local_to_index(mm);
     let base = p.floor();
     let t = p - base;
     let mut acc = 0.0f64;
     for c in 0..8 {
         let o = [(c & 1) as f64, ((c >> 1) & 1) as f64, ((c >> 2) & 1) as f64];
-        let w = (if o[0] > 0.0 { t.x } else { 1.0 - t.x }) * (if o[1] > 0.0 { t.y } else { 1.0 - t.y }) * (if o[2] > 0.0 { t.z } else { 1.0 - t.z });
+        let w = (if o[0] > 0.0 { t.x } else { 1.0 - t.x })
+            * (if o[1] > 0.0 { t.y } else { 1.0 - t.y })
+            * (if o[2] > 0.0 { t.z } else { 1.0 - t.z });
         if w == 0.0 {
             continue;
         }
         let g = [base.x + o[0], base.y + o[1], base.z + o[2]];
-        let v = if g.iter().all(|&x| x >= 0.0) { at([g[0] as usize, g[1] as usize, g[2] as usize]) } else { outside };
+        let v = if g.iter().all(|&x| x >= 0.0) {
+            at([g[0] as usize, g[1] as usize, g[2] as usize])
+        } else {
+            outside
+        };
         acc += w * v as f64;
     }
     acc as f32
@@ -445,9 +581,19 @@ mod tests {
     #[test]
     fn slices_equal_the_spread_volume() {
         let g = Geometry::new([7, 6, 5], [1.0, 0.5, 2.0], [0.0; 3]).unwrap();
-        let grid = BoxGrid { lo: [2, 1, 1], dims: [3, 4, 3] };
+        let grid = BoxGrid {
+            lo: [2, 1, 1],
+            dims: [3, 4, 3],
+        };
         let data = (0..grid.len()).map(|i| i as f32 + 1.0).collect();
-        let f = Bricked::from_field(&Field { grid, geometry: g.clone(), data }, -1.0);
+        let f = Bricked::from_field(
+            &Field {
+                grid,
+                geometry: g.clone(),
+                data,
+            },
+            -1.0,
+        );
         let v = f.to_volume().unwrap();
         let mut s = vec![0.0f32; 7 * 6];
         for k in 0..5 {
@@ -459,7 +605,11 @@ mod tests {
                 }
             }
         }
-        assert_eq!(v.data().iter().filter(|&&x| x > 0.0).count(), 36, "every box value placed once");
+        assert_eq!(
+            v.data().iter().filter(|&&x| x > 0.0).count(),
+            36,
+            "every box value placed once"
+        );
         assert_eq!(f.get([2, 1, 1]), 1.0);
         assert_eq!(f.get([0, 0, 0]), -1.0);
     }
@@ -468,7 +618,10 @@ mod tests {
     fn bricks_hold_what_the_box_field_holds() {
         // A box not a multiple of 8 on any axis, values in a few scattered places.
         let g = Geometry::new([30, 27, 25], [0.8, 0.8, 1.25], [0.0; 3]).unwrap();
-        let grid = BoxGrid { lo: [3, 2, 1], dims: [21, 19, 18] };
+        let grid = BoxGrid {
+            lo: [3, 2, 1],
+            dims: [21, 19, 18],
+        };
         let mut data = vec![f32::INFINITY; grid.len()];
         // Values in the lower two of three layers of bricks only.
         for (n, v) in data.iter_mut().enumerate() {
@@ -477,13 +630,21 @@ mod tests {
                 *v = n as f32 * 0.5;
             }
         }
-        let f = Field { grid: grid.clone(), geometry: g.clone(), data };
+        let f = Field {
+            grid: grid.clone(),
+            geometry: g.clone(),
+            data,
+        };
         let b = Bricked::from_field(&f, f32::INFINITY);
         assert_eq!(b.to_field(), f);
         for k in 0..25 {
             for j in 0..27 {
                 for i in 0..30 {
-                    assert_eq!(b.get([i, j, k]).to_bits(), f.get_global([i, j, k], f32::INFINITY).to_bits(), "voxel {i},{j},{k}");
+                    assert_eq!(
+                        b.get([i, j, k]).to_bits(),
+                        f.get_global([i, j, k], f32::INFINITY).to_bits(),
+                        "voxel {i},{j},{k}"
+                    );
                 }
             }
         }
@@ -505,17 +666,20 @@ mod tests {
         assert_eq!(b.sample(p).to_bits(), f.sample(p, f32::INFINITY).to_bits());
     }
 
-
     #[test]
     fn first_and_last_agree_with_a_plain_scan() {
         let mut rng = crate::phantom::rng::Rng::new(4, 1);
         for len in [0usize, 1, 31, 32, 33, 64, 100, 512] {
             for _ in 0..50 {
-                let row: Vec<u8> = (0..len).map(|_| (rng.range(0.0, 1.0) < 0.03) as u8).collect();
-                let want = row.iter().position(|&v| v != 0).map(|f| (f, row.iter().rposition(|&v| v != 0).unwrap()));
+                let row: Vec<u8> = (0..len)
+                    .map(|_| (rng.range(0.0, 1.0) < 0.03) as u8)
+                    .collect();
+                let want = row
+                    .iter()
+                    .position(|&v| v != 0)
+                    .map(|f| (f, row.iter().rposition(|&v| v != 0).unwrap()));
                 assert_eq!(first_and_last(&row, &|v: u8| v != 0), want, "{row:?}");
             }
         }
     }
-
 }

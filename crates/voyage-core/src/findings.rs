@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use crate::camera::Pose;
-use crate::export::markups::{markups_line_node, markups_node, write_markups_nodes, MarkupsPoint};
+use crate::export::markups::{MarkupsPoint, markups_line_node, markups_node, write_markups_nodes};
 use crate::export::study::write_json;
 use crate::io::atomic::write_atomic;
 use crate::render::mesh::CellMesh;
@@ -45,12 +45,25 @@ pub fn pick(mesh: &CellMesh, cells: Option<&[u32]>, origin: DVec3, dir: DVec3) -
     let in_range = |r: &Range<u32>| nearest_in_range(mesh, r.clone(), origin, dir);
     // A click searches about a million triangles; cells are the natural parallel chunks.
     let best = match cells {
-        Some(list) => list.par_iter().filter_map(|&c| mesh.cell_ranges.get(c as usize)).filter_map(in_range).min_by(nearer),
-        None => mesh.cell_ranges.par_iter().filter_map(in_range).min_by(nearer),
+        Some(list) => list
+            .par_iter()
+            .filter_map(|&c| mesh.cell_ranges.get(c as usize))
+            .filter_map(in_range)
+            .min_by(nearer),
+        None => mesh
+            .cell_ranges
+            .par_iter()
+            .filter_map(in_range)
+            .min_by(nearer),
     }?;
     let (distance, triangle) = best;
     let [a, b, c] = triangle_points(mesh, triangle);
-    Some(Hit { point: origin + dir * distance, normal: (b - a).cross(c - a).normalize(), triangle, distance })
+    Some(Hit {
+        point: origin + dir * distance,
+        normal: (b - a).cross(c - a).normalize(),
+        triangle,
+        distance,
+    })
 }
 
 /// Orders (distance, triangle) candidates: nearer first, then the smaller triangle.
@@ -58,7 +71,12 @@ fn nearer(x: &(f64, u32), y: &(f64, u32)) -> std::cmp::Ordering {
     x.0.total_cmp(&y.0).then(x.1.cmp(&y.1))
 }
 
-fn nearest_in_range(mesh: &CellMesh, range: Range<u32>, origin: DVec3, dir: DVec3) -> Option<(f64, u32)> {
+fn nearest_in_range(
+    mesh: &CellMesh,
+    range: Range<u32>,
+    origin: DVec3,
+    dir: DVec3,
+) -> Option<(f64, u32)> {
     let mut best: Option<(f64, u32)> = None;
     for t in range {
         let [a, b, c] = triangle_points(mesh, t);
@@ -145,9 +163,21 @@ impl Findings {
     /// Adds a marker labelled M1, M2, ... (one past the highest number in use, so that a
     /// label the radiologist may already have quoted never names a different finding while
     /// it exists); returns it.
-    pub fn add_marker(&mut self, position: DVec3, normal: DVec3, view: Pose, note: impl Into<String>) -> &Marker {
+    pub fn add_marker(
+        &mut self,
+        position: DVec3,
+        normal: DVec3,
+        view: Pose,
+        note: impl Into<String>,
+    ) -> &Marker {
         let label = next_label("M", self.markers.iter().map(|m| m.label.as_str()));
-        self.markers.push(Marker { label, note: note.into(), position, normal, view });
+        self.markers.push(Marker {
+            label,
+            note: note.into(),
+            position,
+            normal,
+            view,
+        });
         self.markers.last().expect("just pushed")
     }
 
@@ -188,7 +218,10 @@ impl Findings {
 
 /// `prefix` followed by one more than the highest number among `labels` of that form.
 fn next_label<'a>(prefix: &str, labels: impl Iterator<Item = &'a str>) -> String {
-    let max = labels.filter_map(|l| l.strip_prefix(prefix)?.parse::<u64>().ok()).max().unwrap_or(0);
+    let max = labels
+        .filter_map(|l| l.strip_prefix(prefix)?.parse::<u64>().ok())
+        .max()
+        .unwrap_or(0);
     format!("{prefix}{}", max + 1)
 }
 
@@ -230,7 +263,17 @@ pub fn export_findings(
 fn snapshot_names(markers: &[Marker]) -> Vec<String> {
     let mut names: Vec<String> = Vec::with_capacity(markers.len());
     for (i, m) in markers.iter().enumerate() {
-        let safe: String = m.label.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect();
+        let safe: String = m
+            .label
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect();
         let mut name = format!("finding_{safe}.png");
         let mut n = i + 1;
         while names.contains(&name) {
@@ -246,9 +289,19 @@ fn write_png(path: &Path, width: u32, height: u32, rgba: &[u8]) -> Result<()> {
     use image::ImageEncoder;
     let want = width as u64 * height as u64 * 4;
     if width == 0 || height == 0 || rgba.len() as u64 != want {
-        return Err(Error::format(path, format!("snapshot of {width}×{height} pixels has {} bytes, not {want}", rgba.len())));
+        return Err(Error::format(
+            path,
+            format!(
+                "snapshot of {width}×{height} pixels has {} bytes, not {want}",
+                rgba.len()
+            ),
+        ));
     }
-    write_atomic(path, |w| image::codecs::png::PngEncoder::new(w).write_image(rgba, width, height, image::ExtendedColorType::Rgba8).map_err(std::io::Error::other))
+    write_atomic(path, |w| {
+        image::codecs::png::PngEncoder::new(w)
+            .write_image(rgba, width, height, image::ExtendedColorType::Rgba8)
+            .map_err(std::io::Error::other)
+    })
 }
 
 /// The report: LPS for other tools, volume-local mm and the pose for voyage itself. It
@@ -298,10 +351,22 @@ fn normal_to_patient(g: &Geometry, n: DVec3) -> DVec3 {
 /// line per measurement.
 fn markups_nodes(findings: &Findings, g: &Geometry) -> Vec<serde_json::Value> {
     let lps = |p: DVec3| g.local_to_patient(p).to_array();
-    let points: Vec<MarkupsPoint> = findings.markers.iter().map(|m| MarkupsPoint { label: m.label.clone(), position_lps: lps(m.position), description: m.note.clone() }).collect();
+    let points: Vec<MarkupsPoint> = findings
+        .markers
+        .iter()
+        .map(|m| MarkupsPoint {
+            label: m.label.clone(),
+            position_lps: lps(m.position),
+            description: m.note.clone(),
+        })
+        .collect();
     let mut nodes = vec![markups_node("Fiducial", "Findings", &points, MARKER_COLOR)];
     nodes.extend(findings.measurements.iter().map(|m| {
-        let end = |suffix: &str, p: DVec3| MarkupsPoint { label: format!("{}-{suffix}", m.label), position_lps: lps(p), description: String::new() };
+        let end = |suffix: &str, p: DVec3| MarkupsPoint {
+            label: format!("{}-{suffix}", m.label),
+            position_lps: lps(p),
+            description: String::new(),
+        };
         markups_line_node(&m.label, end("1", m.a), end("2", m.b), MEASUREMENT_COLOR)
     }));
     nodes
@@ -317,10 +382,16 @@ mod tests {
         let mut mesh = CellMesh::default();
         for z in [10.0f32, 5.0] {
             let base = mesh.positions.len() as u32;
-            mesh.positions.extend([[-1.0, -1.0, z], [-1.0, 1.0, z], [1.0, -1.0, z], [1.0, 1.0, z]]);
+            mesh.positions.extend([
+                [-1.0, -1.0, z],
+                [-1.0, 1.0, z],
+                [1.0, -1.0, z],
+                [1.0, 1.0, z],
+            ]);
             mesh.normals.extend([[0.0, 0.0, -1.0]; 4]);
             let start = mesh.triangles.len() as u32;
-            mesh.triangles.extend([[base, base + 1, base + 2], [base + 1, base + 3, base + 2]]);
+            mesh.triangles
+                .extend([[base, base + 1, base + 2], [base + 1, base + 3, base + 2]]);
             mesh.cell_ranges.push(start..start + 2);
         }
         mesh
@@ -337,12 +408,20 @@ mod tests {
     fn pick_hits_the_front_face() {
         let mesh = one_wall();
         let hit = pick(&mesh, None, DVec3::ZERO, DVec3::new(0.02, -0.03, 1.0) * 3.0).unwrap();
-        assert!((hit.point - DVec3::new(0.2, -0.3, 10.0)).length() < 1e-12, "{hit:?}");
+        assert!(
+            (hit.point - DVec3::new(0.2, -0.3, 10.0)).length() < 1e-12,
+            "{hit:?}"
+        );
         assert!((hit.distance - hit.point.length()).abs() < 1e-12);
         assert_eq!(hit.normal, DVec3::new(0.0, 0.0, -1.0));
         assert_eq!(hit.triangle, 0);
         // The other triangle of the square (upper right half).
-        assert_eq!(pick(&mesh, None, DVec3::ZERO, DVec3::new(0.05, 0.05, 1.0)).unwrap().triangle, 1);
+        assert_eq!(
+            pick(&mesh, None, DVec3::ZERO, DVec3::new(0.05, 0.05, 1.0))
+                .unwrap()
+                .triangle,
+            1
+        );
     }
 
     #[test]
@@ -353,7 +432,10 @@ mod tests {
         // The wall lies behind the origin.
         assert_eq!(pick(&mesh, None, DVec3::ZERO, -DVec3::Z), None);
         // From beyond the wall looking back: its back face, culled as the renderer does.
-        assert_eq!(pick(&mesh, None, DVec3::new(0.1, 0.2, 20.0), -DVec3::Z), None);
+        assert_eq!(
+            pick(&mesh, None, DVec3::new(0.1, 0.2, 20.0), -DVec3::Z),
+            None
+        );
         // No direction, or a NaN one.
         assert_eq!(pick(&mesh, None, DVec3::ZERO, DVec3::ZERO), None);
         assert_eq!(pick(&mesh, None, DVec3::ZERO, DVec3::NAN), None);
@@ -364,13 +446,23 @@ mod tests {
         let mesh = two_walls();
         let (o, d) = (DVec3::new(0.3, 0.1, 0.0), DVec3::Z);
         let hit = pick(&mesh, None, o, d).unwrap();
-        assert!((hit.distance - 5.0).abs() < 1e-12 && hit.triangle >= 2, "{hit:?}");
+        assert!(
+            (hit.distance - 5.0).abs() < 1e-12 && hit.triangle >= 2,
+            "{hit:?}"
+        );
         assert_eq!(pick(&mesh, Some(&[0, 1]), o, d), Some(hit));
         // Only the far wall's cell drawn: the far wall.
         let far = pick(&mesh, Some(&[0]), o, d).unwrap();
         assert!((far.distance - 10.0).abs() < 1e-12 && far.triangle < 2);
         // Starting between the walls: the near one is behind.
-        assert!((pick(&mesh, None, DVec3::new(0.3, 0.1, 7.0), d).unwrap().distance - 3.0).abs() < 1e-12);
+        assert!(
+            (pick(&mesh, None, DVec3::new(0.3, 0.1, 7.0), d)
+                .unwrap()
+                .distance
+                - 3.0)
+                .abs()
+                < 1e-12
+        );
         // No cells, or a cell that does not exist: nothing.
         assert_eq!(pick(&mesh, Some(&[]), o, d), None);
         assert_eq!(pick(&mesh, Some(&[7]), o, d), None);
@@ -384,13 +476,27 @@ mod tests {
     }
 
     fn pose() -> Pose {
-        Pose::looking(DVec3::new(1.0, 2.0, 3.0), DVec3::new(0.0, 1.0, 1.0), DVec3::X)
+        Pose::looking(
+            DVec3::new(1.0, 2.0, 3.0),
+            DVec3::new(0.0, 1.0, 1.0),
+            DVec3::X,
+        )
     }
 
     fn sample() -> Findings {
         let mut f = Findings::default();
-        f.add_marker(DVec3::new(10.0, 20.0, 30.0), DVec3::Y, pose(), "sessile polyp, 6 mm");
-        f.add_marker(DVec3::new(11.5, 20.25, 30.125), -DVec3::X, pose(), "fold \"thickening\"\nsecond line");
+        f.add_marker(
+            DVec3::new(10.0, 20.0, 30.0),
+            DVec3::Y,
+            pose(),
+            "sessile polyp, 6 mm",
+        );
+        f.add_marker(
+            DVec3::new(11.5, 20.25, 30.125),
+            -DVec3::X,
+            pose(),
+            "fold \"thickening\"\nsecond line",
+        );
         f.add_measurement(DVec3::new(1.0, 2.0, 3.0), DVec3::new(4.0, 6.0, 3.0));
         f
     }
@@ -398,11 +504,20 @@ mod tests {
     #[test]
     fn labels_count_up_and_are_not_reused_while_higher_ones_exist() {
         let mut f = sample();
-        assert_eq!(f.markers.iter().map(|m| m.label.as_str()).collect::<Vec<_>>(), ["M1", "M2"]);
+        assert_eq!(
+            f.markers
+                .iter()
+                .map(|m| m.label.as_str())
+                .collect::<Vec<_>>(),
+            ["M1", "M2"]
+        );
         assert_eq!(f.measurements[0].label, "L1");
         assert_eq!(f.measurements[0].length_mm(), 5.0);
         assert_eq!(f.add_marker(DVec3::ZERO, DVec3::Z, pose(), "").label, "M3");
-        assert_eq!(f.remove_marker("M2").unwrap().note, "fold \"thickening\"\nsecond line");
+        assert_eq!(
+            f.remove_marker("M2").unwrap().note,
+            "fold \"thickening\"\nsecond line"
+        );
         assert!(f.remove_marker("M2").is_none());
         assert_eq!(f.add_marker(DVec3::ZERO, DVec3::Z, pose(), "").label, "M4");
         assert_eq!(f.add_measurement(DVec3::ZERO, DVec3::ONE).label, "L2");
@@ -423,7 +538,8 @@ mod tests {
     }
 
     fn temp_dir(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("voyage-findings-{name}-{}", std::process::id()));
+        let dir =
+            std::env::temp_dir().join(format!("voyage-findings-{name}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         dir
     }
@@ -444,34 +560,82 @@ mod tests {
         let dir = temp_dir("export").join("new-subfolder");
         let f = sample();
         let written = export_findings(&dir, &f, &geometry(), grey).unwrap();
-        let names: Vec<_> = written.iter().map(|p| p.file_name().unwrap().to_string_lossy().into_owned()).collect();
-        assert_eq!(names, ["finding_M1.png", "finding_M2.png", "findings.json", "findings.mrk.json"]);
-        let mut listed: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+        let names: Vec<_> = written
+            .iter()
+            .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(
+            names,
+            [
+                "finding_M1.png",
+                "finding_M2.png",
+                "findings.json",
+                "findings.mrk.json"
+            ]
+        );
+        let mut listed: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
         listed.sort();
-        assert_eq!(listed, ["finding_M1.png", "finding_M2.png", "findings.json", "findings.mrk.json"], "temporary files left");
+        assert_eq!(
+            listed,
+            [
+                "finding_M1.png",
+                "finding_M2.png",
+                "findings.json",
+                "findings.mrk.json"
+            ],
+            "temporary files left"
+        );
         let png = image::open(dir.join("finding_M2.png")).unwrap().to_rgba8();
-        assert_eq!((png.width(), png.height(), png.get_pixel(3, 2).0), (4, 3, [40; 4]));
+        assert_eq!(
+            (png.width(), png.height(), png.get_pixel(3, 2).0),
+            (4, 3, [40; 4])
+        );
 
-        let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("findings.json")).unwrap()).unwrap();
+        let report: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("findings.json")).unwrap())
+                .unwrap();
         let m = &report["markers"][1];
         assert_eq!(m["label"], "M2");
         assert_eq!(m["note"], f.markers[1].note);
         assert_eq!(m["snapshot"], "finding_M2.png");
         // LPS = origin + diag(−1, −1, 1)·local.
-        assert_eq!(m["position_lps_mm"], json!([100.0 - 11.5, -50.0 - 20.25, 7.0 + 30.125]));
+        assert_eq!(
+            m["position_lps_mm"],
+            json!([100.0 - 11.5, -50.0 - 20.25, 7.0 + 30.125])
+        );
         assert_eq!(m["position_mm"], json!([11.5, 20.25, 30.125]));
         assert_eq!(m["normal_lps"], json!([1.0, -0.0, 0.0]));
-        assert_eq!(Pose::from_array(serde_json::from_value(m["view_pose_mm"].clone()).unwrap()).unwrap(), f.markers[1].view);
+        assert_eq!(
+            Pose::from_array(serde_json::from_value(m["view_pose_mm"].clone()).unwrap()).unwrap(),
+            f.markers[1].view
+        );
         let l = &report["measurements"][0];
-        assert_eq!((l["label"].as_str(), l["length_mm"].as_f64()), (Some("L1"), Some(5.0)));
+        assert_eq!(
+            (l["label"].as_str(), l["length_mm"].as_f64()),
+            (Some("L1"), Some(5.0))
+        );
         assert_eq!(l["b_lps_mm"], json!([96.0, -56.0, 10.0]));
 
-        let mrk: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("findings.mrk.json")).unwrap()).unwrap();
+        let mrk: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("findings.mrk.json")).unwrap())
+                .unwrap();
         let nodes = mrk["markups"].as_array().unwrap();
         assert_eq!(nodes.len(), 2);
-        assert_eq!((nodes[0]["type"].as_str(), nodes[1]["type"].as_str()), (Some("Fiducial"), Some("Line")));
-        assert_eq!(nodes[0]["controlPoints"][1]["description"], f.markers[1].note);
-        assert_eq!(nodes[0]["controlPoints"][1]["position"], m["position_lps_mm"]);
+        assert_eq!(
+            (nodes[0]["type"].as_str(), nodes[1]["type"].as_str()),
+            (Some("Fiducial"), Some("Line"))
+        );
+        assert_eq!(
+            nodes[0]["controlPoints"][1]["description"],
+            f.markers[1].note
+        );
+        assert_eq!(
+            nodes[0]["controlPoints"][1]["position"],
+            m["position_lps_mm"]
+        );
         assert_eq!(nodes[1]["measurements"][0]["value"].as_f64(), Some(5.0));
         assert_eq!(nodes[1]["controlPoints"][1]["position"], l["b_lps_mm"]);
         std::fs::remove_dir_all(dir.parent().unwrap()).unwrap();
@@ -480,9 +644,17 @@ mod tests {
     #[test]
     fn export_of_nothing_writes_an_empty_report() {
         let dir = temp_dir("empty");
-        let written = export_findings(&dir, &Findings::default(), &geometry(), |_, _| unreachable!()).unwrap();
+        let written = export_findings(
+            &dir,
+            &Findings::default(),
+            &geometry(),
+            |_, _| unreachable!(),
+        )
+        .unwrap();
         assert_eq!(written.len(), 2);
-        let mrk: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("findings.mrk.json")).unwrap()).unwrap();
+        let mrk: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("findings.mrk.json")).unwrap())
+                .unwrap();
         assert_eq!(mrk["markups"][0]["controlPoints"], json!([]));
         std::fs::remove_dir_all(&dir).unwrap();
     }
@@ -501,11 +673,19 @@ mod tests {
 
         // A snapshot of the wrong size names its file, and so does the callback's own error.
         let ok = base.join("ok");
-        let err = export_findings(&ok, &sample(), &geometry(), |_, _| Ok((4, 4, vec![0; 10]))).unwrap_err();
+        let err = export_findings(&ok, &sample(), &geometry(), |_, _| Ok((4, 4, vec![0; 10])))
+            .unwrap_err();
         assert!(err.to_string().contains("finding_M1.png"), "{err}");
-        let err = export_findings(&ok, &sample(), &geometry(), |_, _| Err(Error::invalid("no GPU"))).unwrap_err();
+        let err = export_findings(&ok, &sample(), &geometry(), |_, _| {
+            Err(Error::invalid("no GPU"))
+        })
+        .unwrap_err();
         assert!(err.to_string().contains("no GPU"), "{err}");
-        assert_eq!(std::fs::read_dir(&ok).unwrap().count(), 0, "something was written");
+        assert_eq!(
+            std::fs::read_dir(&ok).unwrap().count(),
+            0,
+            "something was written"
+        );
         std::fs::remove_dir_all(&base).unwrap();
     }
 
@@ -516,6 +696,9 @@ mod tests {
         f.add_marker(DVec3::ZERO, DVec3::Z, pose(), "");
         f.markers[2].label = "a/b c".into();
         let names = snapshot_names(&f.markers);
-        assert_eq!(names, ["finding_M1.png", "finding_M1_2.png", "finding_a_b_c.png"]);
+        assert_eq!(
+            names,
+            ["finding_M1.png", "finding_M1_2.png", "finding_a_b_c.png"]
+        );
     }
 }

@@ -51,7 +51,11 @@ impl Default for FlightOptions {
             fps: 30.0,
             potential: PotentialParams::default(),
             dynamics: Dynamics::default(),
-            modes: Modes { compass: true, leveling: true, still: false },
+            modes: Modes {
+                compass: true,
+                leveling: true,
+                still: false,
+            },
             safety: Safety::default(),
             reach_mm: None,
             max_sim_s: None,
@@ -75,7 +79,11 @@ impl FlightOptions {
 
     /// These options with gravity from the study's patient position and its bridged gaps.
     pub fn fitted_to(self, study: &crate::prep::Study) -> FlightOptions {
-        FlightOptions { dynamics: self.dynamics.with_gravity_along(study.gravity_local()), collapsed_spans: study.collapsed_spans.clone(), ..self }
+        FlightOptions {
+            dynamics: self.dynamics.with_gravity_along(study.gravity_local()),
+            collapsed_spans: study.collapsed_spans.clone(),
+            ..self
+        }
     }
 }
 
@@ -123,14 +131,25 @@ impl Guide {
             radius.reverse();
             arc = arc.iter().rev().map(|a| cl.length_mm - a).collect();
         }
-        Guide { points, radius, arc }
+        Guide {
+            points,
+            radius,
+            arc,
+        }
     }
 
     /// The point at arc length `s` (mm from the flight's start) and the index after it.
     fn at_arc(&self, s: f64) -> (DVec3, usize) {
-        let i = self.arc.partition_point(|&a| a < s).clamp(1, self.points.len() - 1);
+        let i = self
+            .arc
+            .partition_point(|&a| a < s)
+            .clamp(1, self.points.len() - 1);
         let (a, b) = (self.arc[i - 1], self.arc[i]);
-        let t = if b > a { ((s - a) / (b - a)).clamp(0.0, 1.0) } else { 1.0 };
+        let t = if b > a {
+            ((s - a) / (b - a)).clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
         (self.points[i - 1].lerp(self.points[i], t), i)
     }
     fn nearest(&self, x: DVec3) -> usize {
@@ -159,7 +178,9 @@ impl Guide {
         while j + 1 < self.points.len() && self.points[j].distance(self.points[i]) < reach {
             j += 1;
         }
-        (self.points[j] - x).try_normalize().unwrap_or_else(|| self.ahead(i))
+        (self.points[j] - x)
+            .try_normalize()
+            .unwrap_or_else(|| self.ahead(i))
     }
 }
 
@@ -201,7 +222,13 @@ const GLIDE_AFTER_MM: f64 = 5.0;
 
 impl Autopilot {
     /// An autopilot for a flight in direction `dir` starting at `x`, where Dt is `dt_now`.
-    pub fn new(cl: &Centerline, dir: Direction, opts: &FlightOptions, x: DVec3, dt_now: f64) -> Self {
+    pub fn new(
+        cl: &Centerline,
+        dir: Direction,
+        opts: &FlightOptions,
+        x: DVec3,
+        dt_now: f64,
+    ) -> Self {
         let guide = Guide::new(cl, dir);
         let near = guide.nearest(x);
         let goal_radius = *guide.radius.last().unwrap_or(&0.0);
@@ -253,7 +280,8 @@ impl Autopilot {
         let mut input = Input::default();
         if t < self.escape_until {
             let boost = 1.5f64.powi(self.in_a_row.saturating_sub(1).min(8) as i32);
-            input.force = self.guide.toward_ahead(self.near, x) * self.escape_factor * boost * ct.max(1.0);
+            input.force =
+                self.guide.toward_ahead(self.near, x) * self.escape_factor * boost * ct.max(1.0);
         }
         input
     }
@@ -286,8 +314,14 @@ impl Autopilot {
     /// gap for the field to act in: the flight keeps to the path, slowly.
     pub fn glide(&mut self, x: DVec3, dt: f64) -> Option<Pose> {
         let i = self.moved_to(x);
-        let here = self.glide_arc.unwrap_or(self.guide.arc[i]).max(self.guide.arc[i]);
-        let k = self.glides.iter().position(|g| g[0] <= here && here < g[1])?;
+        let here = self
+            .glide_arc
+            .unwrap_or(self.guide.arc[i])
+            .max(self.guide.arc[i]);
+        let k = self
+            .glides
+            .iter()
+            .position(|g| g[0] <= here && here < g[1])?;
         if self.glided == Some(k) && self.glide_arc.is_none() {
             return None;
         }
@@ -296,7 +330,11 @@ impl Autopilot {
         self.glide_arc = (next < end).then_some(next);
         self.glided = Some(k);
         let (p, j) = self.guide.at_arc(next);
-        Some(Pose::looking(p, self.guide.ahead(j.saturating_sub(1)), self.up))
+        Some(Pose::looking(
+            p,
+            self.guide.ahead(j.saturating_sub(1)),
+            self.up,
+        ))
     }
 
     /// Lumen radius at the guide's point `i` (mm).
@@ -307,7 +345,12 @@ impl Autopilot {
 
 /// Where a flight starts: the first centerline point from the start end that lies in the
 /// safe set, looking along the centerline, up against gravity.
-pub fn start_pose<S: DistanceStore>(field: &PotentialField<S>, cl: &Centerline, dir: Direction, opts: &FlightOptions) -> Result<Pose> {
+pub fn start_pose<S: DistanceStore>(
+    field: &PotentialField<S>,
+    cl: &Centerline,
+    dir: Direction,
+    opts: &FlightOptions,
+) -> Result<Pose> {
     if cl.points_mm.len() < 2 {
         return Err(Error::invalid("the centerline is empty"));
     }
@@ -319,11 +362,19 @@ pub fn start_pose<S: DistanceStore>(field: &PotentialField<S>, cl: &Centerline, 
             return Ok(Pose::looking(p, guide.ahead(i), up));
         }
     }
-    Err(Error::invalid(format!("no centerline point lies in the lumen at least {} mm from the wall", opts.safety.min_wall_mm)))
+    Err(Error::invalid(format!(
+        "no centerline point lies in the lumen at least {} mm from the wall",
+        opts.safety.min_wall_mm
+    )))
 }
 
 /// Flies from one end to the other without a user.
-pub fn fly<S: DistanceStore>(field: &PotentialField<S>, cl: &Centerline, dir: Direction, opts: &FlightOptions) -> Result<Flight> {
+pub fn fly<S: DistanceStore>(
+    field: &PotentialField<S>,
+    cl: &Centerline,
+    dir: Direction,
+    opts: &FlightOptions,
+) -> Result<Flight> {
     let guide = Guide::new(cl, dir);
     let pose = start_pose(field, cl, dir, opts)?;
     let mut sub = Submarine::new(field, pose, opts.safety)?;
@@ -442,5 +493,9 @@ fn nearest_from(guide: &Guide, x: DVec3, last: usize) -> usize {
             bi = i;
         }
     }
-    if best.sqrt() > guide.radius[bi].max(5.0) { guide.nearest(x) } else { bi }
+    if best.sqrt() > guide.radius[bi].max(5.0) {
+        guide.nearest(x)
+    } else {
+        bi
+    }
 }

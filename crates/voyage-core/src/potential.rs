@@ -21,7 +21,7 @@
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use crate::distance::geodesic::{dial, Padded, SearchOptions};
+use crate::distance::geodesic::{Padded, SearchOptions, dial};
 use crate::field::Field;
 use crate::prep::Study;
 use crate::{Error, Geometry, Result};
@@ -73,7 +73,11 @@ pub struct PotentialParams {
 
 impl Default for PotentialParams {
     fn default() -> Self {
-        PotentialParams { ct: 240.0, cs: 240.0, rho: 25.0 }
+        PotentialParams {
+            ct: 240.0,
+            cs: 240.0,
+            rho: 25.0,
+        }
     }
 }
 
@@ -128,15 +132,26 @@ impl Navigable {
     /// The core is as wide as `min_wall_mm` at least and half the centerline's narrowest
     /// radius (at most 3 mm), narrowed in halves until source and target are joined.
     pub fn new(study: &Study, min_wall_mm: f64) -> Result<Self> {
-        let narrowest = study.centerline.radius_mm.iter().cloned().fold(f64::INFINITY, f64::min);
+        let narrowest = study
+            .centerline
+            .radius_mm
+            .iter()
+            .cloned()
+            .fold(f64::INFINITY, f64::min);
         let mut core = (0.5 * narrowest).clamp(min_wall_mm, 3.0f64.max(min_wall_mm));
         let ds = study.ds.to_field();
         loop {
             if let Some(dt) = core_dt(study, &ds, core)? {
-                return Ok(Navigable { ds, dt, core_mm: core });
+                return Ok(Navigable {
+                    ds,
+                    dt,
+                    core_mm: core,
+                });
             }
             if core <= 1e-3 {
-                return Err(Error::invalid("the target cannot be reached from the source through the lumen"));
+                return Err(Error::invalid(
+                    "the target cannot be reached from the source through the lumen",
+                ));
             }
             core = if core * 0.5 < 0.25 { 0.0 } else { core * 0.5 };
         }
@@ -161,14 +176,24 @@ fn core_dt(study: &Study, ds: &Field<f32>, core: f64) -> Result<Option<[Field<f3
         let v = [0, 1, 2].map(|a| (p[a] / sp[a]).round().max(0.0) as usize);
         pad.index_of_global(v).filter(|&i| pad.inside[i] != 0)
     };
-    let (Some(s), Some(t)) = (cl.points_mm.iter().find_map(in_core), cl.points_mm.iter().rev().find_map(in_core)) else {
+    let (Some(s), Some(t)) = (
+        cl.points_mm.iter().find_map(in_core),
+        cl.points_mm.iter().rev().find_map(in_core),
+    ) else {
         return Ok(None);
     };
-    let (to_t, to_s) = rayon::join(|| dial(&pad, &[t], sp, &SearchOptions::default()), || dial(&pad, &[s], sp, &SearchOptions::default()));
+    let (to_t, to_s) = rayon::join(
+        || dial(&pad, &[t], sp, &SearchOptions::default()),
+        || dial(&pad, &[s], sp, &SearchOptions::default()),
+    );
     if !to_t.dist[s].is_finite() {
         return Ok(None);
     }
-    let field = |d: Vec<f32>| Field { grid: grid.clone(), geometry: lumen.geometry().clone(), data: pad.unpad(d) };
+    let field = |d: Vec<f32>| Field {
+        grid: grid.clone(),
+        geometry: lumen.geometry().clone(),
+        data: pad.unpad(d),
+    };
     Ok(Some([field(to_t.dist), field(to_s.dist)]))
 }
 
@@ -195,7 +220,9 @@ impl SortedStore {
     pub fn new(nav: &Navigable) -> Result<Self> {
         let d = nav.ds.geometry.dims;
         if d.iter().product::<usize>() > u32::MAX as usize {
-            return Err(Error::invalid("the volume has more voxels than a 32-bit index holds"));
+            return Err(Error::invalid(
+                "the volume has more voxels than a 32-bit index holds",
+            ));
         }
         let mut index = Vec::new();
         let mut values = Vec::new();
@@ -204,7 +231,11 @@ impl SortedStore {
             index.push((g[0] + d[0] * (g[1] + d[1] * g[2])) as u32);
             values.push(v);
         });
-        Ok(SortedStore { dims: d.map(|x| x as i64), index, values })
+        Ok(SortedStore {
+            dims: d.map(|x| x as i64),
+            index,
+            values,
+        })
     }
 }
 
@@ -229,7 +260,10 @@ const BRICK_SHIFT: usize = 3;
 const BRICK: usize = 1 << BRICK_SHIFT;
 const BRICK_VOXELS: usize = BRICK * BRICK * BRICK;
 const NO_BRICK: u32 = u32::MAX;
-const OUTSIDE: Voxel = Voxel { ds: 0.0, dt: [f32::INFINITY; 2] };
+const OUTSIDE: Voxel = Voxel {
+    ds: 0.0,
+    dt: [f32::INFINITY; 2],
+};
 
 /// 8×8×8 bricks over the lumen's box; a table gives each brick's slot, and only bricks that
 /// hold lumen have one. Non-lumen voxels inside a brick hold Ds = 0.
@@ -264,7 +298,13 @@ impl BrickStore {
             return Err(Error::invalid("too many bricks for a 32-bit table"));
         }
         bricks.shrink_to_fit();
-        Ok(BrickStore { lo, nb, table, bricks, voxels })
+        Ok(BrickStore {
+            lo,
+            nb,
+            table,
+            bricks,
+            voxels,
+        })
     }
     #[inline]
     fn brick_of(nb: [i64; 3], l: [i64; 3]) -> usize {
@@ -321,7 +361,12 @@ impl BoxStore {
             values[grid.index(l[0], l[1], l[2])] = v;
             voxels += 1;
         });
-        Ok(BoxStore { lo: grid.lo.map(|x| x as i64), dims: grid.dims.map(|x| x as i64), values, voxels })
+        Ok(BoxStore {
+            lo: grid.lo.map(|x| x as i64),
+            dims: grid.dims.map(|x| x as i64),
+            values,
+            voxels,
+        })
     }
 }
 
@@ -363,7 +408,11 @@ pub struct PotentialField<S: DistanceStore = BrickStore> {
 
 impl<S: DistanceStore> PotentialField<S> {
     pub fn new(store: S, geometry: &Geometry) -> Self {
-        PotentialField { store, spacing: geometry.spacing_vec(), dims: geometry.dims }
+        PotentialField {
+            store,
+            spacing: geometry.spacing_vec(),
+            dims: geometry.dims,
+        }
     }
     pub fn store(&self) -> &S {
         &self.store
@@ -385,7 +434,9 @@ impl<S: DistanceStore> PotentialField<S> {
         let (mut ds, mut dt, mut wt, mut n) = (0.0, 0.0, 0.0, 0);
         for c in 0..8 {
             let o = [c & 1, (c >> 1) & 1, (c >> 2) & 1];
-            let w = (if o[0] == 1 { t.x } else { 1.0 - t.x }) * (if o[1] == 1 { t.y } else { 1.0 - t.y }) * (if o[2] == 1 { t.z } else { 1.0 - t.z });
+            let w = (if o[0] == 1 { t.x } else { 1.0 - t.x })
+                * (if o[1] == 1 { t.y } else { 1.0 - t.y })
+                * (if o[2] == 1 { t.z } else { 1.0 - t.z });
             if let Some(v) = self.store.get([b[0] + o[0], b[1] + o[1], b[2] + o[2]]) {
                 ds += w * v.ds as f64;
                 dt += w * v.dt[dir.slot()] as f64;
@@ -401,11 +452,20 @@ impl<S: DistanceStore> PotentialField<S> {
             // X sits exactly on the far faces of lumen corners that carry no weight.
             self.nearest_dt(b, dir)
         };
-        Sample { ds, dt, lumen_corners: n }
+        Sample {
+            ds,
+            dt,
+            lumen_corners: n,
+        }
     }
 
     fn nearest_dt(&self, b: [i64; 3], dir: Direction) -> Option<f64> {
-        (0..8).find_map(|c| self.store.get([b[0] + (c & 1), b[1] + ((c >> 1) & 1), b[2] + ((c >> 2) & 1)])).map(|v| v.dt[dir.slot()] as f64)
+        (0..8)
+            .find_map(|c| {
+                self.store
+                    .get([b[0] + (c & 1), b[1] + ((c >> 1) & 1), b[2] + ((c >> 2) & 1)])
+            })
+            .map(|v| v.dt[dir.slot()] as f64)
     }
 
     /// Ds at `mm` (mm).
@@ -416,7 +476,13 @@ impl<S: DistanceStore> PotentialField<S> {
 
     /// V at `mm` (Eq. 2). Dt falls back to `dt_fallback` where no corner is lumen.
     #[inline]
-    pub fn value_with(&self, mm: DVec3, params: &PotentialParams, dir: Direction, dt_fallback: f64) -> f64 {
+    pub fn value_with(
+        &self,
+        mm: DVec3,
+        params: &PotentialParams,
+        dir: Direction,
+        dt_fallback: f64,
+    ) -> f64 {
         let s = self.sample(mm, dir);
         params.value(s.ds, s.dt.unwrap_or(dt_fallback))
     }
@@ -462,7 +528,11 @@ impl<S: DistanceStore> PotentialField<S> {
         let p = mm / self.spacing;
         let b = p.floor();
         let b = [b.x as i64, b.y as i64, b.z as i64];
-        (0..8).all(|c| self.store.get([b[0] + (c & 1), b[1] + ((c >> 1) & 1), b[2] + ((c >> 2) & 1)]).is_some())
+        (0..8).all(|c| {
+            self.store
+                .get([b[0] + (c & 1), b[1] + ((c >> 1) & 1), b[2] + ((c >> 2) & 1)])
+                .is_some()
+        })
     }
 }
 
@@ -470,7 +540,10 @@ impl<S: DistanceStore> PotentialField<S> {
 /// `min_wall_mm` from the wall.
 pub fn potential_field(study: &Study, min_wall_mm: f64) -> Result<PotentialField<BrickStore>> {
     let nav = Navigable::new(study, min_wall_mm)?;
-    Ok(PotentialField::new(BrickStore::new(&nav)?, study.ct.geometry()))
+    Ok(PotentialField::new(
+        BrickStore::new(&nav)?,
+        study.ct.geometry(),
+    ))
 }
 
 #[cfg(test)]
@@ -479,7 +552,11 @@ mod tests {
 
     #[test]
     fn eq2_is_continuous_at_rho_and_steep_near_the_wall() {
-        let p = PotentialParams { ct: 2.0, cs: 5.0, rho: 10.0 };
+        let p = PotentialParams {
+            ct: 2.0,
+            cs: 5.0,
+            rho: 10.0,
+        };
         assert_eq!(p.value(10.0, 3.0), 6.0);
         assert!((p.value(10.0 - 1e-9, 3.0) - 6.0).abs() < 1e-6);
         assert_eq!(p.value(5.0, 0.0), 5.0); // Cs·(10/5 − 1)²

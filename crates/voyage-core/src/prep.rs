@@ -7,16 +7,18 @@ use std::time::Instant;
 use glam::DVec3;
 use serde::Serialize;
 
-use crate::cells::{build_cells, CellOptions, Cells};
-use crate::cleanse::{cleanse, CleanseOptions, Cleansing, Scene};
+use crate::cells::{CellOptions, Cells, build_cells};
 use crate::centerline::{Centerline, CenterlineOptions};
+use crate::cleanse::{CleanseOptions, Cleansing, Scene, cleanse};
+use crate::contacts::{ContactOptions, cut_contacts};
 use crate::distance::distance_to_wall_in;
-use crate::contacts::{cut_contacts, ContactOptions};
-use crate::endpoints::{self, centre_skeleton, dt_fields, trace_skeleton, uses_blocks, EndpointOptions};
+use crate::endpoints::{
+    self, EndpointOptions, centre_skeleton, dt_fields, trace_skeleton, uses_blocks,
+};
 use crate::field::BoxGrid;
 use crate::field::Bricked;
-use crate::segment::{segment, SegmentOptions, Segmentation};
-use crate::surface::{extract_surface, Surface};
+use crate::segment::{SegmentOptions, Segmentation, segment};
+use crate::surface::{Surface, extract_surface};
 use crate::{Result, Volume};
 
 #[derive(Clone, Debug)]
@@ -56,7 +58,14 @@ pub enum Stage {
 }
 
 impl Stage {
-    pub const ALL: [Stage; 6] = [Stage::Segment, Stage::Centerline, Stage::Ds, Stage::Dt, Stage::Surface, Stage::Cells];
+    pub const ALL: [Stage; 6] = [
+        Stage::Segment,
+        Stage::Centerline,
+        Stage::Ds,
+        Stage::Dt,
+        Stage::Surface,
+        Stage::Cells,
+    ];
     pub fn name(self) -> &'static str {
         match self {
             Stage::Segment => "segment",
@@ -126,16 +135,24 @@ impl Study {
 
     /// Gravity as a volume-local unit vector (from the patient's position).
     pub fn gravity_local(&self) -> DVec3 {
-        crate::anatomy::PatientFrame::of(self.ct.geometry()).local(self.segmentation.orientation.gravity())
+        crate::anatomy::PatientFrame::of(self.ct.geometry())
+            .local(self.segmentation.orientation.gravity())
     }
 
     /// The collapsed span holding arc length `arc` (mm from the source), if any.
     pub fn collapsed_at(&self, arc: f64) -> Option<[f64; 2]> {
-        self.collapsed_spans.iter().copied().find(|s| s[0] <= arc && arc <= s[1])
+        self.collapsed_spans
+            .iter()
+            .copied()
+            .find(|s| s[0] <= arc && arc <= s[1])
     }
 
     pub fn source_mm(&self) -> DVec3 {
-        self.ct.geometry().index_to_local(DVec3::new(self.source[0] as f64, self.source[1] as f64, self.source[2] as f64))
+        self.ct.geometry().index_to_local(DVec3::new(
+            self.source[0] as f64,
+            self.source[1] as f64,
+            self.source[2] as f64,
+        ))
     }
     /// `n` points drawn uniformly in the lumen's box, kept where the nearest voxel is lumen
     /// (many lie within a voxel of the wall): for tests and benchmarks of the fields.
@@ -150,19 +167,32 @@ impl Study {
                 grid.lo[2] as f64 + rng.range(0.0, (grid.dims[2] - 1) as f64),
             );
             let v = ijk.round();
-            if self.segmentation.lumen.get(v.x as usize, v.y as usize, v.z as usize) != 0 {
+            if self
+                .segmentation
+                .lumen
+                .get(v.x as usize, v.y as usize, v.z as usize)
+                != 0
+            {
                 out.push(self.ct.geometry().index_to_local(ijk));
             }
         }
         out
     }
     pub fn target_mm(&self) -> DVec3 {
-        self.ct.geometry().index_to_local(DVec3::new(self.target[0] as f64, self.target[1] as f64, self.target[2] as f64))
+        self.ct.geometry().index_to_local(DVec3::new(
+            self.target[0] as f64,
+            self.target[1] as f64,
+            self.target[2] as f64,
+        ))
     }
 }
 
 /// Runs every stage. `progress` hears of each stage as it starts.
-pub fn prepare(mut ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut(Stage)) -> Result<Study> {
+pub fn prepare(
+    mut ct: Volume<i16>,
+    opts: &PrepOptions,
+    mut progress: impl FnMut(Stage),
+) -> Result<Study> {
     let start = Instant::now();
     let mut t = Timings::default();
     let mut clock = Instant::now();
@@ -178,7 +208,14 @@ pub fn prepare(mut ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut
         // A tagged exam: segmentation found tagged fluid in the colon (then stool on the
         // wall is cleansed too; an exam without fluid costs nothing).
         (Some(c), Some(fluid_hu)) if !seg.from_mask && seg.fluid_voxels > 0 => {
-            let scene = Scene { ct: &ct, lumen: &mut seg.lumen, extent: seg.extent, gravity_lps: seg.orientation.gravity(), air_hu: opts.segment.air_hu, fluid_hu };
+            let scene = Scene {
+                ct: &ct,
+                lumen: &mut seg.lumen,
+                extent: seg.extent,
+                gravity_lps: seg.orientation.gravity(),
+                air_hu: opts.segment.air_hu,
+                fluid_hu,
+            };
             cleanse(scene, c)
         }
         _ => Cleansing::default(),
@@ -192,14 +229,41 @@ pub fn prepare(mut ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut
     // Every Ds below is over this box: cutting contacts only takes lumen away, and a box
     // larger than the lumen's own changes no distance.
     let grid = BoxGrid::around(seg.extent, 1, seg.lumen.dims());
-    let early_ds = if uses_blocks(&seg.lumen, seg.lumen_voxels, &opts.centerline) { None } else { Some(distance_to_wall_in(&seg.lumen, grid.clone())) };
-    let sk = trace_skeleton(&seg.lumen, &grid, seg.lumen_voxels, seg.seed_voxel, early_ds.as_ref(), &opts.endpoints, &opts.centerline)?;
+    let early_ds = if uses_blocks(&seg.lumen, seg.lumen_voxels, &opts.centerline) {
+        None
+    } else {
+        Some(distance_to_wall_in(&seg.lumen, grid.clone()))
+    };
+    let sk = trace_skeleton(
+        &seg.lumen,
+        &grid,
+        seg.lumen_voxels,
+        seg.seed_voxel,
+        early_ds.as_ref(),
+        &opts.endpoints,
+        &opts.centerline,
+    )?;
     lap(&mut t.skeleton);
 
     // No wall at the ends: source and target stay lumen.
-    let keep = [sk.given_source.map(|v| endpoints::mm_of(&seg.lumen, v)).unwrap_or(sk.path_mm[0]), sk.given_target.map(|v| endpoints::mm_of(&seg.lumen, v)).unwrap_or(sk.path_mm[sk.path_mm.len() - 1])];
+    let keep = [
+        sk.given_source
+            .map(|v| endpoints::mm_of(&seg.lumen, v))
+            .unwrap_or(sk.path_mm[0]),
+        sk.given_target
+            .map(|v| endpoints::mm_of(&seg.lumen, v))
+            .unwrap_or(sk.path_mm[sk.path_mm.len() - 1]),
+    ];
     let keep_mm = 2.0 * seg.lumen.spacing().iter().cloned().fold(0.0, f64::max);
-    let taken = cut_contacts(&mut seg.lumen, &grid, &sk.path_mm, sk.blocks.as_ref(), &keep, keep_mm, &opts.contacts)?;
+    let taken = cut_contacts(
+        &mut seg.lumen,
+        &grid,
+        &sk.path_mm,
+        sk.blocks.as_ref(),
+        &keep,
+        keep_mm,
+        &opts.contacts,
+    )?;
     lap(&mut t.contacts);
 
     progress(Stage::Ds);
@@ -215,8 +279,10 @@ pub fn prepare(mut ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut
     lap(&mut t.centerline);
 
     progress(Stage::Dt);
-    let (mut dt_target, mut dt_source) = dt_fields(&seg.lumen, &ds, ends.source, ends.target, scratch)?;
-    let joined = |dt: &crate::distance::Geodesic, source: [usize; 3]| dt.dist.get(source).is_finite();
+    let (mut dt_target, mut dt_source) =
+        dt_fields(&seg.lumen, &ds, ends.source, ends.target, scratch)?;
+    let joined =
+        |dt: &crate::distance::Geodesic, source: [usize; 3]| dt.dist.get(source).is_finite();
     let mut contact_voxels = taken.len();
     if contact_voxels > 0 && !joined(&dt_target, ends.source) {
         // The walls closed the colon itself (a path across a contact): go without.
@@ -230,7 +296,9 @@ pub fn prepare(mut ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut
         (dt_target, dt_source) = dt_fields(&seg.lumen, &ds, ends.source, ends.target, ds_box.data)?;
     }
     if !joined(&dt_target, ends.source) {
-        return Err(crate::Error::invalid("the target cannot be reached from the source through the lumen"));
+        return Err(crate::Error::invalid(
+            "the target cannot be reached from the source through the lumen",
+        ));
     }
     seg.lumen_voxels -= contact_voxels;
     let (source, target, cl) = (ends.source, ends.target, ends.centerline);
@@ -251,7 +319,13 @@ pub fn prepare(mut ct: Volume<i16>, opts: &PrepOptions, mut progress: impl FnMut
 
     let collapsed_spans = collapsed_spans(&cl, &seg);
     if opts.endpoints.source_mm.is_none() || opts.endpoints.target_mm.is_none() {
-        let w = anatomical_checks(&seg, source, target, opts.endpoints.source_mm.is_none(), opts.endpoints.target_mm.is_none());
+        let w = anatomical_checks(
+            &seg,
+            source,
+            target,
+            opts.endpoints.source_mm.is_none(),
+            opts.endpoints.target_mm.is_none(),
+        );
         seg.warnings.extend(w);
     }
     t.total_after_load = start.elapsed().as_secs_f64() * 1e3;
@@ -285,7 +359,11 @@ fn collapsed_spans(cl: &Centerline, seg: &Segmentation) -> Vec<[f64; 2]> {
             if !g.contains_index(v) {
                 continue;
             }
-            if gap.voxels.binary_search(&g.index(v.x as usize, v.y as usize, v.z as usize)).is_ok() {
+            if gap
+                .voxels
+                .binary_search(&g.index(v.x as usize, v.y as usize, v.z as usize))
+                .is_ok()
+            {
                 span = Some(span.map_or([arc, arc], |s| [s[0].min(arc), s[1].max(arc)]));
             }
         }
@@ -300,7 +378,13 @@ fn collapsed_spans(cl: &Centerline, seg: &Segmentation) -> Vec<[f64; 2]> {
 /// Where the automatic ends lie in the colon's box in the patient frame: the rectum low and
 /// near the middle (else the rectum is collapsed, fluid-filled or out of the scan, and the
 /// flight starts at the lowest segment's lower end), the cecum on the patient's right and low.
-fn anatomical_checks(seg: &Segmentation, source: [usize; 3], target: [usize; 3], check_source: bool, check_target: bool) -> Vec<String> {
+fn anatomical_checks(
+    seg: &Segmentation,
+    source: [usize; 3],
+    target: [usize; 3],
+    check_source: bool,
+    check_target: bool,
+) -> Vec<String> {
     let g = seg.lumen.geometry();
     let [a, b] = g.patient_box(seg.extent[0], seg.extent[1]);
     let span = (b - a).max(DVec3::splat(1.0));

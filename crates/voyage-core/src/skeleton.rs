@@ -28,7 +28,7 @@
 
 use std::collections::HashMap;
 
-use crate::distance::geodesic::{dial, Padded, Search, SearchOptions};
+use crate::distance::geodesic::{Padded, Search, SearchOptions, dial};
 use crate::{Error, Result};
 
 #[derive(Clone, Debug)]
@@ -48,7 +48,14 @@ pub struct SkeletonOptions {
 
 impl Default for SkeletonOptions {
     fn default() -> Self {
-        SkeletonOptions { min_width: 0.25, cover_scale: 2.0, cover_mm: 5.0, meet_scale: 3.0, meet_mm: 20.0, search_budget: 2_000_000 }
+        SkeletonOptions {
+            min_width: 0.25,
+            cover_scale: 2.0,
+            cover_mm: 5.0,
+            meet_scale: 3.0,
+            meet_mm: 20.0,
+            search_budget: 2_000_000,
+        }
     }
 }
 
@@ -57,8 +64,23 @@ pub(crate) type Tree = Search;
 
 /// A weighted (or plain) search from `sources` that records its tree; stops early, after
 /// settling it, at the first voxel where `stop` holds.
-pub(crate) fn tree_search(pad: &Padded, sources: &[usize], spacing: [f64; 3], weight: Option<&[f32]>, stop: Option<&dyn Fn(usize) -> bool>) -> Tree {
-    dial(pad, sources, spacing, &SearchOptions { weight, tree: true, stop })
+pub(crate) fn tree_search(
+    pad: &Padded,
+    sources: &[usize],
+    spacing: [f64; 3],
+    weight: Option<&[f32]>,
+    stop: Option<&dyn Fn(usize) -> bool>,
+) -> Tree {
+    dial(
+        pad,
+        sources,
+        spacing,
+        &SearchOptions {
+            weight,
+            tree: true,
+            stop,
+        },
+    )
 }
 
 /// One skeleton voxel.
@@ -98,17 +120,36 @@ const SKELETON: u8 = 2;
 /// `source` through the skeleton graph, ending at `target` when given, else where the longest
 /// path ends (the cecum). `tree` is the weighted search from `source`; `ds` is Ds in the
 /// padded layout.
-pub(crate) fn colon_path(pad: &Padded, tree: &Tree, ds: &[f32], spacing: [f64; 3], source: usize, target: Option<usize>, opts: &SkeletonOptions) -> Result<(Vec<usize>, SkeletonStats)> {
+pub(crate) fn colon_path(
+    pad: &Padded,
+    tree: &Tree,
+    ds: &[f32],
+    spacing: [f64; 3],
+    source: usize,
+    target: Option<usize>,
+    opts: &SkeletonOptions,
+) -> Result<(Vec<usize>, SkeletonStats)> {
     if let Some(t) = target
         && !tree.dist[t].is_finite()
     {
-        return Err(Error::invalid("the target cannot be reached from the source through the lumen"));
+        return Err(Error::invalid(
+            "the target cannot be reached from the source through the lumen",
+        ));
     }
     let n = pad.inside.len();
-    let dmax = tree.order.iter().map(|&v| ds[v as usize]).fold(0.0f32, f32::max);
+    let dmax = tree
+        .order
+        .iter()
+        .map(|&v| ds[v as usize])
+        .fold(0.0f32, f32::max);
     let floor = (opts.min_width as f32 * dmax).min(dmax);
     // Tip candidates, farthest first.
-    let mut cand: Vec<(u32, u32)> = tree.order.iter().filter(|&&v| ds[v as usize] >= floor && ds[v as usize] > 0.0).map(|&v| (tree.dist[v as usize].to_bits(), v)).collect();
+    let mut cand: Vec<(u32, u32)> = tree
+        .order
+        .iter()
+        .filter(|&&v| ds[v as usize] >= floor && ds[v as usize] > 0.0)
+        .map(|&v| (tree.dist[v as usize].to_bits(), v))
+        .collect();
     cand.sort_unstable_by(|a, b| b.cmp(a));
 
     let mut flags = vec![0u8; n];
@@ -119,7 +160,10 @@ pub(crate) fn colon_path(pad: &Padded, tree: &Tree, ds: &[f32], spacing: [f64; 3
     let dims = pad.dims;
     let step_len = |a: usize, b: usize| -> f32 {
         let (pa, pb) = (ijk(a, dims), ijk(b, dims));
-        (0..3).map(|k| ((pa[k] as f32 - pb[k] as f32) * sp[k]).powi(2)).sum::<f32>().sqrt()
+        (0..3)
+            .map(|k| ((pa[k] as f32 - pb[k] as f32) * sp[k]).powi(2))
+            .sum::<f32>()
+            .sqrt()
     };
 
     // The first branch: from the source itself (so that the source is a skeleton voxel).
@@ -173,7 +217,11 @@ pub(crate) fn colon_path(pad: &Padded, tree: &Tree, ds: &[f32], spacing: [f64; 3
         path.reverse();
         let b = branches.len() as u32;
         let (mut arc, mut prev, depth) = match attach {
-            Some(a) => (nodes[a as usize].arc, Some(nodes[a as usize].idx), branches[nodes[a as usize].branch as usize].depth + 1),
+            Some(a) => (
+                nodes[a as usize].arc,
+                Some(nodes[a as usize].idx),
+                branches[nodes[a as usize].branch as usize].depth + 1,
+            ),
             None => (0.0, None, 0),
         };
         let mut ords = Vec::with_capacity(path.len());
@@ -183,7 +231,11 @@ pub(crate) fn colon_path(pad: &Padded, tree: &Tree, ds: &[f32], spacing: [f64; 3
             }
             prev = Some(v);
             let o = nodes.len() as u32;
-            nodes.push(Node { idx: v, branch: b, arc });
+            nodes.push(Node {
+                idx: v,
+                branch: b,
+                arc,
+            });
             ord_of.insert(v, o);
             flags[v] |= SKELETON | COVERED;
             ords.push(o);
@@ -201,7 +253,11 @@ pub(crate) fn colon_path(pad: &Padded, tree: &Tree, ds: &[f32], spacing: [f64; 3
                 since = 0.0;
             }
         }
-        branches.push(Branch { ords, attach, depth });
+        branches.push(Branch {
+            ords,
+            attach,
+            depth,
+        });
         first = false;
         if branches.len() > 20_000 {
             break;
@@ -210,18 +266,31 @@ pub(crate) fn colon_path(pad: &Padded, tree: &Tree, ds: &[f32], spacing: [f64; 3
 
     // Owner of every voxel: the nearest skeleton voxel through the lumen (a geodesic Voronoi
     // partition by the skeleton), and the way there.
-    let near = tree_search(pad, &nodes.iter().map(|nd| nd.idx).collect::<Vec<_>>(), spacing, None, None);
+    let near = tree_search(
+        pad,
+        &nodes.iter().map(|nd| nd.idx).collect::<Vec<_>>(),
+        spacing,
+        None,
+        None,
+    );
     let mut owner = vec![u32::MAX; n];
     for &v in &near.order {
         let v = v as usize;
-        owner[v] = if flags[v] & SKELETON != 0 { ord_of[&v] } else { near.parent_of(v).map_or(u32::MAX, |p| owner[p]) };
+        owner[v] = if flags[v] & SKELETON != 0 {
+            ord_of[&v]
+        } else {
+            near.parent_of(v).map_or(u32::MAX, |p| owner[p])
+        };
     }
 
     // Tree distance along the skeleton between two skeleton voxels.
     let tree_dist = |a: u32, b: u32| -> f32 {
         let (mut x, mut y) = (a, b);
         while nodes[x as usize].branch != nodes[y as usize].branch {
-            let (bx, by) = (nodes[x as usize].branch as usize, nodes[y as usize].branch as usize);
+            let (bx, by) = (
+                nodes[x as usize].branch as usize,
+                nodes[y as usize].branch as usize,
+            );
             if branches[bx].depth >= branches[by].depth {
                 x = branches[bx].attach.unwrap_or(x);
             } else {
@@ -268,7 +337,9 @@ pub(crate) fn colon_path(pad: &Padded, tree: &Tree, ds: &[f32], spacing: [f64; 3
             let (ka, kb) = (nodes[ka as usize], nodes[kb as usize]);
             let ra = opts.meet_scale as f32 * ds[ka.idx] + opts.meet_mm as f32;
             let rb = opts.meet_scale as f32 * ds[kb.idx] + opts.meet_mm as f32;
-            let close = |x: Node, y: Node, r: f32| x.branch == y.branch && (x.arc - y.arc).abs() <= r || x.idx == y.idx;
+            let close = |x: Node, y: Node, r: f32| {
+                x.branch == y.branch && (x.arc - y.arc).abs() <= r || x.idx == y.idx
+            };
             (close(na, ka, ra) && close(nb, kb, rb)) || (close(na, kb, rb) && close(nb, ka, ra))
         });
         if !near {
@@ -300,20 +371,34 @@ pub(crate) fn colon_path(pad: &Padded, tree: &Tree, ds: &[f32], spacing: [f64; 3
     }
     if let Some(o) = target_owner {
         if o == u32::MAX {
-            return Err(Error::invalid("the target cannot be reached from the source through the lumen"));
+            return Err(Error::invalid(
+                "the target cannot be reached from the source through the lumen",
+            ));
         }
         add_node(o, &mut is_node);
     }
     // Edges: (from node, to node, length mm, voxel path from → to).
     let mut edges: Vec<(usize, usize, f32, Vec<usize>)> = Vec::new();
     for br in &branches {
-        let chain: Vec<u32> = br.attach.into_iter().chain(br.ords.iter().copied()).collect();
+        let chain: Vec<u32> = br
+            .attach
+            .into_iter()
+            .chain(br.ords.iter().copied())
+            .collect();
         let mut last = 0usize;
         for i in 1..chain.len() {
             if let Some(&to) = is_node.get(&chain[i]) {
                 let from = is_node[&chain[last]];
                 let len = nodes[chain[i] as usize].arc - nodes[chain[last] as usize].arc;
-                edges.push((from, to, len, chain[last..=i].iter().map(|&o| nodes[o as usize].idx).collect()));
+                edges.push((
+                    from,
+                    to,
+                    len,
+                    chain[last..=i]
+                        .iter()
+                        .map(|&o| nodes[o as usize].idx)
+                        .collect(),
+                ));
                 last = i;
             }
         }
@@ -348,8 +433,16 @@ pub(crate) fn colon_path(pad: &Padded, tree: &Tree, ds: &[f32], spacing: [f64; 3
     }
     let start = is_node[&src_ord];
     let goal = target_owner.map(|o| is_node[&o]);
-    let (best, steps) = longest_path(&adj, &edges.iter().map(|e| e.2).collect::<Vec<_>>(), start, goal, opts.search_budget);
-    let best = best.ok_or_else(|| Error::invalid("the target cannot be reached from the source through the skeleton"))?;
+    let (best, steps) = longest_path(
+        &adj,
+        &edges.iter().map(|e| e.2).collect::<Vec<_>>(),
+        start,
+        goal,
+        opts.search_budget,
+    );
+    let best = best.ok_or_else(|| {
+        Error::invalid("the target cannot be reached from the source through the skeleton")
+    })?;
 
     // Voxels along the chosen edges.
     let mut out = vec![source];
@@ -392,10 +485,17 @@ pub(crate) fn colon_path(pad: &Padded, tree: &Tree, ds: &[f32], spacing: [f64; 3
 /// voxel: it passed the same place twice (a detour into a contact or round a junction). The
 /// straight step that replaces it stays inside that ball, so inside the lumen.
 fn erase_returns(path: &[usize], ds: &[f32], dims: [usize; 3], sp: [f32; 3]) -> Vec<usize> {
-    let pos: Vec<[f32; 3]> = path.iter().map(|&v| {
-        let p = ijk(v, dims);
-        [p[0] as f32 * sp[0], p[1] as f32 * sp[1], p[2] as f32 * sp[2]]
-    }).collect();
+    let pos: Vec<[f32; 3]> = path
+        .iter()
+        .map(|&v| {
+            let p = ijk(v, dims);
+            [
+                p[0] as f32 * sp[0],
+                p[1] as f32 * sp[1],
+                p[2] as f32 * sp[2],
+            ]
+        })
+        .collect();
     let d2 = |a: usize, b: usize| (0..3).map(|k| (pos[a][k] - pos[b][k]).powi(2)).sum::<f32>();
     let mut out = Vec::with_capacity(path.len());
     let mut i = 0;
@@ -403,7 +503,10 @@ fn erase_returns(path: &[usize], ds: &[f32], dims: [usize; 3], sp: [f32; 3]) -> 
         out.push(path[i]);
         let r2 = ds[path[i]] * ds[path[i]];
         // The last voxel of the path inside this one's ball (at least the next one).
-        let j = (i + 1..path.len()).rev().find(|&j| d2(i, j) < r2).unwrap_or(i + 1);
+        let j = (i + 1..path.len())
+            .rev()
+            .find(|&j| d2(i, j) < r2)
+            .unwrap_or(i + 1);
         i = j;
     }
     out
@@ -415,7 +518,11 @@ fn owner_of_walk(flags: &[u8], v: usize) -> bool {
 }
 
 fn ijk(idx: usize, dims: [usize; 3]) -> [usize; 3] {
-    [idx % dims[0], (idx / dims[0]) % dims[1], idx / (dims[0] * dims[1])]
+    [
+        idx % dims[0],
+        (idx / dims[0]) % dims[1],
+        idx / (dims[0] * dims[1]),
+    ]
 }
 
 /// Marks the voxels within `r` mm of voxel `c` as covered.
@@ -450,7 +557,13 @@ fn stamp(flags: &mut [u8], dims: [usize; 3], c: usize, r: f32, sp: [f32; 3]) {
 
 /// The longest simple path from `start` (ending at `goal` when given), by depth-first search
 /// with a budget of edge steps; returns its edges and the steps spent.
-fn longest_path(adj: &[Vec<(usize, usize)>], len: &[f32], start: usize, goal: Option<usize>, budget: usize) -> (Option<Vec<usize>>, usize) {
+fn longest_path(
+    adj: &[Vec<(usize, usize)>],
+    len: &[f32],
+    start: usize,
+    goal: Option<usize>,
+    budget: usize,
+) -> (Option<Vec<usize>>, usize) {
     struct S<'a> {
         adj: &'a [Vec<(usize, usize)>],
         len: &'a [f32],
@@ -480,7 +593,16 @@ fn longest_path(adj: &[Vec<(usize, usize)>], len: &[f32], start: usize, goal: Op
             s.seen[to] = false;
         }
     }
-    let mut s = S { adj, len, goal, seen: vec![false; adj.len()], path: Vec::new(), best: None, steps: 0, budget };
+    let mut s = S {
+        adj,
+        len,
+        goal,
+        seen: vec![false; adj.len()],
+        path: Vec::new(),
+        best: None,
+        steps: 0,
+        budget,
+    };
     s.seen[start] = true;
     go(&mut s, start, 0.0);
     (s.best.map(|b| b.1), s.steps)
@@ -492,7 +614,7 @@ mod tests {
 
     use crate::centerline::CenterlineOptions;
     use crate::distance::distance_to_wall;
-    use crate::endpoints::{find_endpoints, EndpointOptions};
+    use crate::endpoints::{EndpointOptions, find_endpoints};
     use crate::{Geometry, Volume};
 
     const R: f64 = 6.0;
@@ -522,12 +644,24 @@ mod tests {
                 let [i, j, k] = g.ijk(idx);
                 let p = DVec3::new(i as f64, j as f64, k as f64) - OFF;
                 let mut d = capsule(p, DVec3::ZERO, DVec3::new(LEG, 0.0, 0.0))
-                    .min(capsule(p, DVec3::new(0.0, 30.0, 0.0), DVec3::new(LEG, 30.0, 0.0)))
-                    .min(capsule(p, DVec3::new(0.0, 60.0, 0.0), DVec3::new(LEG, 60.0, 0.0)))
+                    .min(capsule(
+                        p,
+                        DVec3::new(0.0, 30.0, 0.0),
+                        DVec3::new(LEG, 30.0, 0.0),
+                    ))
+                    .min(capsule(
+                        p,
+                        DVec3::new(0.0, 60.0, 0.0),
+                        DVec3::new(LEG, 60.0, 0.0),
+                    ))
                     .min(half_ring(p, DVec3::new(LEG, 15.0, 0.0), 1.0))
                     .min(half_ring(p, DVec3::new(0.0, 45.0, 0.0), -1.0));
                 if bridge {
-                    d = d.min(capsule(p, DVec3::new(20.0, 0.0, 0.0), DVec3::new(20.0, 30.0, 0.0)));
+                    d = d.min(capsule(
+                        p,
+                        DVec3::new(20.0, 0.0, 0.0),
+                        DVec3::new(20.0, 30.0, 0.0),
+                    ));
                 }
                 (d < R) as u8
             })
@@ -539,20 +673,53 @@ mod tests {
         let m = serpentine(bridge);
         let ds = distance_to_wall(&m).unwrap();
         let seed = [(OFF.x - R + 1.0) as usize, OFF.y as usize, OFF.z as usize];
-        let e = find_endpoints(&m, &ds, seed, &EndpointOptions::default(), &CenterlineOptions::default()).unwrap();
+        let e = find_endpoints(
+            &m,
+            &ds,
+            seed,
+            &EndpointOptions::default(),
+            &CenterlineOptions::default(),
+        )
+        .unwrap();
         let cl = &e.centerline;
-        let pts: Vec<DVec3> = cl.points_mm.iter().map(|p| DVec3::from_array(*p) - OFF).collect();
+        let pts: Vec<DVec3> = cl
+            .points_mm
+            .iter()
+            .map(|p| DVec3::from_array(*p) - OFF)
+            .collect();
         let full = 3.0 * LEG + 2.0 * std::f64::consts::PI * BEND;
-        assert!((cl.length_mm - full).abs() < 15.0, "bridge {bridge}: length {} mm, the tube is {full} mm", cl.length_mm);
+        assert!(
+            (cl.length_mm - full).abs() < 15.0,
+            "bridge {bridge}: length {} mm, the tube is {full} mm",
+            cl.length_mm
+        );
         assert!(pts[0].length() < 8.0, "starts at {}", pts[0]);
-        assert!(pts.last().unwrap().distance(DVec3::new(LEG, 60.0, 0.0)) < 8.0, "ends at {}", pts.last().unwrap());
+        assert!(
+            pts.last().unwrap().distance(DVec3::new(LEG, 60.0, 0.0)) < 8.0,
+            "ends at {}",
+            pts.last().unwrap()
+        );
         // Through the first turn's apex, never through the middle of the contact.
-        let near = |q: DVec3| pts.iter().map(|p| p.distance(q)).fold(f64::INFINITY, f64::min);
-        assert!(near(DVec3::new(LEG + BEND, 15.0, 0.0)) < 3.0, "misses the first turn");
-        assert!(near(DVec3::new(20.0, 15.0, 0.0)) > 8.0, "takes the short cut");
+        let near = |q: DVec3| {
+            pts.iter()
+                .map(|p| p.distance(q))
+                .fold(f64::INFINITY, f64::min)
+        };
+        assert!(
+            near(DVec3::new(LEG + BEND, 15.0, 0.0)) < 3.0,
+            "misses the first turn"
+        );
+        assert!(
+            near(DVec3::new(20.0, 15.0, 0.0)) > 8.0,
+            "takes the short cut"
+        );
         for p in &cl.points_mm {
             let q = (DVec3::from_array(*p) / m.geometry().spacing_vec()).round();
-            assert_eq!(m.get(q.x as usize, q.y as usize, q.z as usize), 1, "point {p:?} outside the lumen");
+            assert_eq!(
+                m.get(q.x as usize, q.y as usize, q.z as usize),
+                1,
+                "point {p:?} outside the lumen"
+            );
         }
         assert!(cl.arc_mm.windows(2).all(|w| w[1] > w[0]));
     }

@@ -41,13 +41,25 @@ impl Dynamics {
     /// The same dynamics with gravity pulling along `dir` (volume-local; its strength kept):
     /// leveling keeps the view's up against the patient's real gravity (prone, decubitus).
     pub fn with_gravity_along(self, dir: DVec3) -> Dynamics {
-        Dynamics { gravity: dir.normalize_or(self.gravity.normalize_or_zero()) * self.gravity.length(), ..self }
+        Dynamics {
+            gravity: dir.normalize_or(self.gravity.normalize_or_zero()) * self.gravity.length(),
+            ..self
+        }
     }
 }
 
 impl Default for Dynamics {
     fn default() -> Self {
-        Dynamics { kf: 6.0, ka: 35.0, radius_mm: 2.0, length_mm: 6.0, user_force: 240.0, gravity: DVec3::new(0.0, 150.0, 0.0), max_speed: 150.0, max_spin: 3.0 }
+        Dynamics {
+            kf: 6.0,
+            ka: 35.0,
+            radius_mm: 2.0,
+            length_mm: 6.0,
+            user_force: 240.0,
+            gravity: DVec3::new(0.0, 150.0, 0.0),
+            max_speed: 150.0,
+            max_spin: 3.0,
+        }
     }
 }
 
@@ -91,7 +103,14 @@ pub struct Safety {
 
 impl Default for Safety {
     fn default() -> Self {
-        Safety { min_wall_mm: 1.0, voxel_fraction: 0.9, ds_fraction: 0.25, max_substep_s: 1.0 / 60.0, max_frame_s: 0.1, max_substeps: 2000 }
+        Safety {
+            min_wall_mm: 1.0,
+            voxel_fraction: 0.9,
+            ds_fraction: 0.25,
+            max_substep_s: 1.0 / 60.0,
+            max_frame_s: 0.1,
+            max_substeps: 2000,
+        }
     }
 }
 
@@ -114,10 +133,20 @@ pub struct State {
 
 impl State {
     pub fn at(pose: Pose) -> Self {
-        State { x: pose.position, p: DVec3::ZERO, q: pose.orientation, l: DVec3::ZERO, omega: DVec3::ZERO, t: 0.0 }
+        State {
+            x: pose.position,
+            p: DVec3::ZERO,
+            q: pose.orientation,
+            l: DVec3::ZERO,
+            omega: DVec3::ZERO,
+            t: 0.0,
+        }
     }
     pub fn pose(&self) -> Pose {
-        Pose { position: self.x, orientation: self.q }
+        Pose {
+            position: self.x,
+            orientation: self.q,
+        }
     }
 }
 
@@ -167,7 +196,14 @@ pub fn euler_step(s: &State, f: &Forces, dy: &Dynamics, still: bool, h: f64) -> 
     }
     // Eq. 9: q(t + Δt) = Δq · q(t), Δq = [cos(|ω|Δt/2), sin(|ω|Δt/2) ω/|ω|].
     let q = (delta_q(omega, h) * s.q).normalize();
-    State { x, p, q, l, omega, t: s.t + h }
+    State {
+        x,
+        p,
+        q,
+        l,
+        omega,
+        t: s.t + h,
+    }
 }
 
 /// Δq of Eq. 9: the rotation by |ω|·h about ω.
@@ -209,11 +245,28 @@ pub struct Submarine {
 
 impl Submarine {
     /// A submarine at rest at `pose`, which must lie in the safe set.
-    pub fn new<S: DistanceStore>(field: &PotentialField<S>, pose: Pose, safety: Safety) -> Result<Self> {
-        if !(safety.min_wall_mm >= 0.0 && safety.voxel_fraction > 0.0 && safety.voxel_fraction < 1.0 && safety.ds_fraction > 0.0) {
-            return Err(Error::invalid("safety: min_wall_mm ≥ 0, 0 < voxel_fraction < 1 and ds_fraction > 0 are required"));
+    pub fn new<S: DistanceStore>(
+        field: &PotentialField<S>,
+        pose: Pose,
+        safety: Safety,
+    ) -> Result<Self> {
+        if !(safety.min_wall_mm >= 0.0
+            && safety.voxel_fraction > 0.0
+            && safety.voxel_fraction < 1.0
+            && safety.ds_fraction > 0.0)
+        {
+            return Err(Error::invalid(
+                "safety: min_wall_mm ≥ 0, 0 < voxel_fraction < 1 and ds_fraction > 0 are required",
+            ));
         }
-        let sub = Submarine { state: State::at(pose), potential: PotentialParams::default(), dynamics: Dynamics::default(), modes: Modes::default(), direction: Direction::Forward, safety };
+        let sub = Submarine {
+            state: State::at(pose),
+            potential: PotentialParams::default(),
+            dynamics: Dynamics::default(),
+            modes: Modes::default(),
+            direction: Direction::Forward,
+            safety,
+        };
         if !sub.is_safe(field, pose.position) {
             return Err(Error::invalid(format!(
                 "the start point ({:.1}, {:.1}, {:.1}) mm is not inside the lumen at least {} mm from the wall",
@@ -234,7 +287,12 @@ impl Submarine {
     /// Puts the submarine at `pose`, at rest, `dt` seconds later, if `pose` is in the safe
     /// set (else leaves it where it was and returns false): the autopilot's glide through a
     /// bridged gap, where the colon holds no air for the field to act in.
-    pub fn glide_to<S: DistanceStore>(&mut self, field: &PotentialField<S>, pose: Pose, dt: f64) -> bool {
+    pub fn glide_to<S: DistanceStore>(
+        &mut self,
+        field: &PotentialField<S>,
+        pose: Pose,
+        dt: f64,
+    ) -> bool {
         if !self.is_safe(field, pose.position) {
             return false;
         }
@@ -267,7 +325,11 @@ impl Submarine {
         if self.modes.leveling {
             torque += -r.y_axis.cross(self.dynamics.gravity);
         }
-        Forces { grad_v, user: input.force, option_torque: torque }
+        Forces {
+            grad_v,
+            user: input.force,
+            option_torque: torque,
+        }
     }
 
     /// Longest sub-step the friction terms allow for a stable explicit Euler step.
@@ -285,15 +347,26 @@ impl Submarine {
 
     /// Advances the simulation by `dt` seconds (at most `max_frame_s`), sub-stepping as
     /// needed. X stays in the safe set after every sub-step.
-    pub fn step<S: DistanceStore>(&mut self, field: &PotentialField<S>, dt: f64, input: &Input) -> StepReport {
+    pub fn step<S: DistanceStore>(
+        &mut self,
+        field: &PotentialField<S>,
+        dt: f64,
+        input: &Input,
+    ) -> StepReport {
         let mut report = StepReport::default();
-        let mut remaining = if dt.is_finite() { dt.clamp(0.0, self.safety.max_frame_s) } else { 0.0 };
+        let mut remaining = if dt.is_finite() {
+            dt.clamp(0.0, self.safety.max_frame_s)
+        } else {
+            0.0
+        };
         let h_max = self.max_substep();
         let min_spacing = field.spacing().min_element();
         while remaining > 1e-12 && report.substeps < self.safety.max_substeps {
             let forces = self.forces(field, input);
             let ds = field.ds(self.state.x);
-            let max_move = (self.safety.voxel_fraction * min_spacing).min(self.safety.ds_fraction * ds).max(1e-6);
+            let max_move = (self.safety.voxel_fraction * min_spacing)
+                .min(self.safety.ds_fraction * ds)
+                .max(1e-6);
             let mut h = remaining.min(h_max);
             let mut next = euler_step(&self.state, &forces, &self.dynamics, self.modes.still, h);
             while (next.x - self.state.x).length() > max_move && h > 1e-7 {
@@ -309,7 +382,13 @@ impl Submarine {
                 next.x = self.last_safe_point(field, self.state.x, next.x);
                 let n = field.ds_gradient(next.x).normalize_or_zero();
                 let into = next.p.dot(n);
-                next.p = if n == DVec3::ZERO { DVec3::ZERO } else if into < 0.0 { next.p - into * n } else { next.p };
+                next.p = if n == DVec3::ZERO {
+                    DVec3::ZERO
+                } else if into < 0.0 {
+                    next.p - into * n
+                } else {
+                    next.p
+                };
                 report.clipped += 1;
             }
             debug_assert!(self.is_safe(field, next.x), "the camera left the safe set");
@@ -322,7 +401,12 @@ impl Submarine {
     }
 
     /// The farthest point of the segment from → to that is safe (`from` is).
-    fn last_safe_point<S: DistanceStore>(&self, field: &PotentialField<S>, from: DVec3, to: DVec3) -> DVec3 {
+    fn last_safe_point<S: DistanceStore>(
+        &self,
+        field: &PotentialField<S>,
+        from: DVec3,
+        to: DVec3,
+    ) -> DVec3 {
         let (mut lo, mut hi) = (0.0, 1.0);
         for _ in 0..16 {
             let mid = 0.5 * (lo + hi);

@@ -42,7 +42,12 @@ pub struct Surface {
 
 /// Marching cubes over `grid` (which must hold the whole lumen, e.g. its bounding box grown
 /// by one voxel). `ct`: HU with `iso` as threshold; None: the mask alone, at 0.5.
-pub fn extract_surface(lumen: &Volume<u8>, ct: Option<&Volume<i16>>, grid: &BoxGrid, iso: f32) -> Result<Surface> {
+pub fn extract_surface(
+    lumen: &Volume<u8>,
+    ct: Option<&Volume<i16>>,
+    grid: &BoxGrid,
+    iso: f32,
+) -> Result<Surface> {
     let s = Scalar::new(lumen, ct, grid, iso);
     let sp = lumen.spacing();
     let spacing = Vec3::new(sp[0] as f32, sp[1] as f32, sp[2] as f32);
@@ -64,7 +69,13 @@ struct Scalar<'a> {
 
 impl<'a> Scalar<'a> {
     fn new(lumen: &'a Volume<u8>, ct: Option<&'a Volume<i16>>, grid: &BoxGrid, iso: f32) -> Self {
-        Scalar { dims: grid.dims.map(|d| d + 2), lo: grid.lo, lumen, ct, iso }
+        Scalar {
+            dims: grid.dims.map(|d| d + 2),
+            lo: grid.lo,
+            lumen,
+            ct,
+            iso,
+        }
     }
 
     /// The volume voxel of a padded position, None in the padding.
@@ -93,7 +104,11 @@ impl<'a> Scalar<'a> {
                 if m { x.max(0.5) } else { x.min(-1.0) }
             }
             None => {
-                if m { 0.5 } else { -0.5 }
+                if m {
+                    0.5
+                } else {
+                    -0.5
+                }
             }
         }
     }
@@ -121,7 +136,9 @@ impl<'a> Scalar<'a> {
         out[lo..=hi].fill(0);
         let ny = self.dims[1];
         for (bit, &r) in rows.iter().enumerate() {
-            let Some(row) = self.mask_row(r % ny, r / ny) else { continue };
+            let Some(row) = self.mask_row(r % ny, r / ny) else {
+                continue;
+            };
             // Padded x is mask x + 1; the padding columns 0 and n + 1 stay 0.
             let (a, b) = (lo.max(1), hi.min(row.len()));
             if a > b {
@@ -136,7 +153,9 @@ impl<'a> Scalar<'a> {
     /// Padded x of the first lumen voxel of padded row (j, k) and one past its last; (0, 0)
     /// when the row has none.
     fn row_span(&self, j: usize, k: usize) -> (usize, usize) {
-        let found = self.mask_row(j, k).and_then(|row| crate::field::first_and_last(row, &|m: u8| m != 0));
+        let found = self
+            .mask_row(j, k)
+            .and_then(|row| crate::field::first_and_last(row, &|m: u8| m != 0));
         found.map_or((0, 0), |(first, last)| (first + 1, last + 2))
     }
 
@@ -146,7 +165,10 @@ impl<'a> Scalar<'a> {
         if j == 0 || k == 0 || j == self.dims[1] - 1 || k == self.dims[2] - 1 {
             return None;
         }
-        let start = self.lumen.geometry().index(self.lo[0], j - 1 + self.lo[1], k - 1 + self.lo[2]);
+        let start = self
+            .lumen
+            .geometry()
+            .index(self.lo[0], j - 1 + self.lo[1], k - 1 + self.lo[2]);
         Some(&self.lumen.data()[start..start + self.dims[0] - 2])
     }
 
@@ -172,10 +194,26 @@ const fn corner(c: usize) -> [usize; 3] {
 }
 
 /// The 12 cube edges as corner pairs; edges 0–3 run along x, 4–7 along y, 8–11 along z.
-const EDGES: [(usize, usize); 12] = [(0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0, 4), (1, 5), (2, 6), (3, 7)];
+const EDGES: [(usize, usize); 12] = [
+    (0, 1),
+    (2, 3),
+    (4, 5),
+    (6, 7),
+    (0, 2),
+    (1, 3),
+    (4, 6),
+    (5, 7),
+    (0, 4),
+    (1, 5),
+    (2, 6),
+    (3, 7),
+];
 
 fn edge_of(a: usize, b: usize) -> usize {
-    EDGES.iter().position(|&(p, q)| (p, q) == (a.min(b), a.max(b))).expect("corners share an edge")
+    EDGES
+        .iter()
+        .position(|&(p, q)| (p, q) == (a.min(b), a.max(b)))
+        .expect("corners share an edge")
 }
 
 /// Triangles (as cube edges) for each of the 256 inside/outside patterns.
@@ -260,7 +298,12 @@ struct EdgeCache {
 
 impl EdgeCache {
     fn new(nx: usize, ny: usize) -> Self {
-        EdgeCache { nx, x: vec![u32::MAX; nx * ny], y: vec![u32::MAX; nx * ny], since: 0 }
+        EdgeCache {
+            nx,
+            x: vec![u32::MAX; nx * ny],
+            y: vec![u32::MAX; nx * ny],
+            since: 0,
+        }
     }
 }
 
@@ -281,7 +324,10 @@ fn march(s: &Scalar, spacing: Vec3, vol_dims: [usize; 3]) -> Surface {
     // empty when none). A row of cubes needs work only where one of its four corner rows has
     // lumen, which skips most of the box.
     let row_span: Vec<(usize, usize)> = (0..ny * nz).map(|r| s.row_span(r % ny, r / ny)).collect();
-    let plane_has: Vec<bool> = row_span.chunks(ny).map(|p| p.iter().any(|r| r.1 > r.0)).collect();
+    let plane_has: Vec<bool> = row_span
+        .chunks(ny)
+        .map(|p| p.iter().any(|r| r.1 > r.0))
+        .collect();
     let mut faces = vec![0u8; nx];
     for k in 0..nz - 1 {
         // `lower` is the last layer's `upper` (valid since that layer began); `upper` and the
@@ -293,8 +339,17 @@ fn march(s: &Scalar, spacing: Vec3, vol_dims: [usize; 3]) -> Surface {
             continue;
         }
         for j in 0..ny - 1 {
-            let rows = [j + ny * k, j + 1 + ny * k, j + ny * (k + 1), j + 1 + ny * (k + 1)];
-            let (lo, hi) = rows.iter().map(|&r| row_span[r]).filter(|sp| sp.1 > sp.0).fold((usize::MAX, 0), |(lo, hi), sp| (lo.min(sp.0), hi.max(sp.1)));
+            let rows = [
+                j + ny * k,
+                j + 1 + ny * k,
+                j + ny * (k + 1),
+                j + 1 + ny * (k + 1),
+            ];
+            let (lo, hi) = rows
+                .iter()
+                .map(|&r| row_span[r])
+                .filter(|sp| sp.1 > sp.0)
+                .fold((usize::MAX, 0), |(lo, hi), sp| (lo.min(sp.0), hi.max(sp.1)));
             if lo > hi {
                 continue;
             }
@@ -307,7 +362,9 @@ fn march(s: &Scalar, spacing: Vec3, vol_dims: [usize; 3]) -> Surface {
                 // Eight cubes at once where nine faces in a row are all wall or all lumen (the
                 // inside of a wide lumen, the gap between two loops of the colon).
                 if i + 8 <= i_hi {
-                    let word = |at: usize| u64::from_le_bytes(faces[at..at + 8].try_into().unwrap_or([1; 8]));
+                    let word = |at: usize| {
+                        u64::from_le_bytes(faces[at..at + 8].try_into().unwrap_or([1; 8]))
+                    };
                     let w = word(i);
                     if w == word(i + 1) && (w == 0 || w == 0x0F0F_0F0F_0F0F_0F0F) {
                         i += 8;
@@ -328,13 +385,26 @@ fn march(s: &Scalar, spacing: Vec3, vol_dims: [usize; 3]) -> Surface {
                     for &e in tri {
                         let e = e as usize;
                         if vid[e] == u32::MAX {
-                            vid[e] = edge_vertex(s, spacing, [i, j, k], e, &mut lower, &mut upper, &mut zed, &mut out.mesh);
+                            vid[e] = edge_vertex(
+                                s,
+                                spacing,
+                                [i, j, k],
+                                e,
+                                &mut lower,
+                                &mut upper,
+                                &mut zed,
+                                &mut out.mesh,
+                            );
                         }
                     }
                 }
                 let owner = owner_voxel(s, [i, j, k], case, vol_dims);
                 for tri in tris {
-                    out.mesh.triangles.push([vid[tri[0] as usize], vid[tri[1] as usize], vid[tri[2] as usize]]);
+                    out.mesh.triangles.push([
+                        vid[tri[0] as usize],
+                        vid[tri[1] as usize],
+                        vid[tri[2] as usize],
+                    ]);
                     out.owner_voxel.push(owner);
                 }
             }
@@ -356,13 +426,26 @@ fn owner_voxel(s: &Scalar, c: [usize; 3], case: usize, vol_dims: [usize; 3]) -> 
     // the cell of the cube or in a neighbouring one.
     let [a, b, d] = corner(case.trailing_zeros() as usize);
     // Padded → volume: a lumen corner is never in the padding.
-    let g = [c[0] + a - 1 + s.lo[0], c[1] + b - 1 + s.lo[1], c[2] + d - 1 + s.lo[2]];
+    let g = [
+        c[0] + a - 1 + s.lo[0],
+        c[1] + b - 1 + s.lo[1],
+        c[2] + d - 1 + s.lo[2],
+    ];
     (g[0] + vol_dims[0] * (g[1] + vol_dims[1] * g[2])) as u32
 }
 
 /// The vertex on cube edge `e` of the cube at padded `c`, made once and shared.
 #[allow(clippy::too_many_arguments)]
-fn edge_vertex(s: &Scalar, spacing: Vec3, c: [usize; 3], e: usize, lower: &mut EdgeCache, upper: &mut EdgeCache, zed: &mut EdgeCache, mesh: &mut Mesh) -> u32 {
+fn edge_vertex(
+    s: &Scalar,
+    spacing: Vec3,
+    c: [usize; 3],
+    e: usize,
+    lower: &mut EdgeCache,
+    upper: &mut EdgeCache,
+    zed: &mut EdgeCache,
+    mesh: &mut Mesh,
+) -> u32 {
     let (a, b) = EDGES[e];
     let pa = corner(a).map(|o| o);
     let pb = corner(b);
@@ -371,8 +454,20 @@ fn edge_vertex(s: &Scalar, spacing: Vec3, c: [usize; 3], e: usize, lower: &mut E
     let nx = lower.nx;
     let slot = ga[0] + nx * ga[1];
     let (cache, since): (&mut u32, u32) = match e {
-        0..=3 => if ga[2] == c[2] { (&mut lower.x[slot], lower.since) } else { (&mut upper.x[slot], upper.since) },
-        4..=7 => if ga[2] == c[2] { (&mut lower.y[slot], lower.since) } else { (&mut upper.y[slot], upper.since) },
+        0..=3 => {
+            if ga[2] == c[2] {
+                (&mut lower.x[slot], lower.since)
+            } else {
+                (&mut upper.x[slot], upper.since)
+            }
+        }
+        4..=7 => {
+            if ga[2] == c[2] {
+                (&mut lower.y[slot], lower.since)
+            } else {
+                (&mut upper.y[slot], upper.since)
+            }
+        }
         _ => (&mut zed.x[slot], zed.since),
     };
     if let Some(id) = cached(*cache, since) {
@@ -381,9 +476,19 @@ fn edge_vertex(s: &Scalar, spacing: Vec3, c: [usize; 3], e: usize, lower: &mut E
     let fast = s.neighbours_in_box(ga) && s.neighbours_in_box(gb);
     let (va, vb, grad_a, grad_b) = if fast {
         let (a, b) = (s.voxel(ga).unwrap_or(0), s.voxel(gb).unwrap_or(0));
-        (s.value_at(a), s.value_at(b), s.gradient_inside(a, spacing), s.gradient_inside(b, spacing))
+        (
+            s.value_at(a),
+            s.value_at(b),
+            s.gradient_inside(a, spacing),
+            s.gradient_inside(b, spacing),
+        )
     } else {
-        (s.value(ga), s.value(gb), s.gradient(ga, spacing), s.gradient(gb, spacing))
+        (
+            s.value(ga),
+            s.value(gb),
+            s.gradient(ga, spacing),
+            s.gradient(gb, spacing),
+        )
     };
     let t = (va / (va - vb)).clamp(0.0, 1.0);
     let fa = Vec3::new(ga[0] as f32, ga[1] as f32, ga[2] as f32);
@@ -402,8 +507,8 @@ fn edge_vertex(s: &Scalar, spacing: Vec3, c: [usize; 3], e: usize, lower: &mut E
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::bounding_box;
     use crate::Geometry;
+    use crate::field::bounding_box;
     use std::collections::HashMap;
 
     fn ball(dims: [usize; 3], sp: [f64; 3], c: [f64; 3], r: f64) -> Volume<u8> {
@@ -411,7 +516,11 @@ mod tests {
         let data = (0..g.len())
             .map(|idx| {
                 let [i, j, k] = g.ijk(idx);
-                let p = [i as f64 * sp[0] - c[0], j as f64 * sp[1] - c[1], k as f64 * sp[2] - c[2]];
+                let p = [
+                    i as f64 * sp[0] - c[0],
+                    j as f64 * sp[1] - c[1],
+                    k as f64 * sp[2] - c[2],
+                ];
                 ((p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() < r) as u8
             })
             .collect();
@@ -425,7 +534,11 @@ mod tests {
         let data = (0..g.len())
             .map(|idx| {
                 let [i, j, k] = g.ijk(idx);
-                let p = [i as f64 * sp[0] - c[0], j as f64 * sp[1] - c[1], k as f64 * sp[2] - c[2]];
+                let p = [
+                    i as f64 * sp[0] - c[0],
+                    j as f64 * sp[1] - c[1],
+                    k as f64 * sp[2] - c[2],
+                ];
                 let d = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() - r; // signed, mm
                 let t = (d / sp[0] + 0.5).clamp(0.0, 1.0);
                 (-1000.0 + 1040.0 * t).round() as i16
@@ -475,7 +588,11 @@ mod tests {
             }
             for (&(a, b), &n) in &edges {
                 assert_eq!(n, 1, "directed edge repeated");
-                assert_eq!(edges.get(&(b, a)), Some(&1), "edge without its twin: not closed");
+                assert_eq!(
+                    edges.get(&(b, a)),
+                    Some(&1),
+                    "edge without its twin: not closed"
+                );
             }
             let centre = Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32);
             let mut max_err = 0.0f32;
@@ -483,12 +600,18 @@ mod tests {
                 let [a, b, d] = t.map(|v| Vec3::from_array(mesh.positions[v as usize]));
                 let face_n = (b - a).cross(d - a);
                 let to_centre = centre - (a + b + d) / 3.0;
-                assert!(face_n.dot(to_centre) > 0.0, "triangle faces away from the lumen");
+                assert!(
+                    face_n.dot(to_centre) > 0.0,
+                    "triangle faces away from the lumen"
+                );
             }
             for (p, n) in mesh.positions.iter().zip(&mesh.normals) {
                 let p = Vec3::from_array(*p);
                 max_err = max_err.max(((p - centre).length() - r as f32).abs());
-                assert!(Vec3::from_array(*n).dot(centre - p) > 0.0, "normal points out of the lumen");
+                assert!(
+                    Vec3::from_array(*n).dot(centre - p) > 0.0,
+                    "normal points out of the lumen"
+                );
             }
             let bound = if ct.is_some() { 0.5 } else { 1.2 };
             assert!(max_err < bound, "surface off the sphere by {max_err} mm");

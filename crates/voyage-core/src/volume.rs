@@ -30,7 +30,12 @@ pub struct Geometry {
 impl Geometry {
     /// Axis-aligned geometry with the identity direction (i→L, j→P, k→S).
     pub fn new(dims: [usize; 3], spacing: [f64; 3], origin: [f64; 3]) -> Result<Self> {
-        let g = Geometry { dims, spacing, origin, direction: IDENTITY };
+        let g = Geometry {
+            dims,
+            spacing,
+            origin,
+            direction: IDENTITY,
+        };
         g.validate()?;
         Ok(g)
     }
@@ -39,14 +44,23 @@ impl Geometry {
     pub fn validate(&self) -> Result<()> {
         check_dims(self.dims.map(|d| d as u64))?;
         if self.spacing.iter().any(|s| !s.is_finite() || *s <= 0.0) {
-            return Err(Error::invalid(format!("voxel spacing {:?} mm is not positive and finite", self.spacing)));
+            return Err(Error::invalid(format!(
+                "voxel spacing {:?} mm is not positive and finite",
+                self.spacing
+            )));
         }
         if self.origin.iter().any(|o| !o.is_finite()) {
-            return Err(Error::invalid(format!("origin {:?} is not finite", self.origin)));
+            return Err(Error::invalid(format!(
+                "origin {:?} is not finite",
+                self.origin
+            )));
         }
         let d = self.direction_mat();
         if !d.is_finite() || (d.determinant().abs() - 1.0).abs() > 1e-3 {
-            return Err(Error::invalid(format!("direction matrix {:?} is not a rotation", self.direction)));
+            return Err(Error::invalid(format!(
+                "direction matrix {:?} is not a rotation",
+                self.direction
+            )));
         }
         Ok(())
     }
@@ -109,7 +123,10 @@ impl Geometry {
     pub fn describe_point(&self, mm: DVec3) -> String {
         let p = self.local_to_patient(mm);
         let v = self.local_to_index(mm).round();
-        format!("at LPS ({:.1}, {:.1}, {:.1}) mm, voxel ({}, {}, {})", p.x, p.y, p.z, v.x as i64, v.y as i64, v.z as i64)
+        format!(
+            "at LPS ({:.1}, {:.1}, {:.1}) mm, voxel ({}, {}, {})",
+            p.x, p.y, p.z, v.x as i64, v.y as i64, v.z as i64
+        )
     }
 
     /// Volume-local millimetres → patient LPS millimetres.
@@ -144,7 +161,11 @@ impl Geometry {
 
     /// Size of the volume in mm (from first to last voxel centre, plus one voxel).
     pub fn extent_mm(&self) -> DVec3 {
-        DVec3::new(self.dims[0] as f64, self.dims[1] as f64, self.dims[2] as f64) * self.spacing_vec()
+        DVec3::new(
+            self.dims[0] as f64,
+            self.dims[1] as f64,
+            self.dims[2] as f64,
+        ) * self.spacing_vec()
     }
 
     /// Whether the continuous index lies inside the grid of voxel centres.
@@ -183,7 +204,11 @@ pub fn grid_index(dims: [usize; 3], i: usize, j: usize, k: usize) -> usize {
 /// Inverse of [`grid_index`].
 #[inline]
 pub fn grid_ijk(dims: [usize; 3], index: usize) -> [usize; 3] {
-    [index % dims[0], (index / dims[0]) % dims[1], index / (dims[0] * dims[1])]
+    [
+        index % dims[0],
+        (index / dims[0]) % dims[1],
+        index / (dims[0] * dims[1]),
+    ]
 }
 
 pub const IDENTITY: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
@@ -194,11 +219,15 @@ pub fn check_dims(dims: [u64; 3]) -> Result<()> {
         return Err(Error::invalid(format!("dimensions {dims:?} contain zero")));
     }
     if dims.iter().any(|&d| d > MAX_DIM) {
-        return Err(Error::invalid(format!("dimensions {dims:?} exceed the limit of {MAX_DIM} per axis")));
+        return Err(Error::invalid(format!(
+            "dimensions {dims:?} exceed the limit of {MAX_DIM} per axis"
+        )));
     }
     let n = dims[0].saturating_mul(dims[1]).saturating_mul(dims[2]);
     if n > MAX_VOXELS {
-        return Err(Error::invalid(format!("dimensions {dims:?} give {n} voxels, over the limit of {MAX_VOXELS}")));
+        return Err(Error::invalid(format!(
+            "dimensions {dims:?} give {n} voxels, over the limit of {MAX_VOXELS}"
+        )));
     }
     Ok(())
 }
@@ -227,7 +256,10 @@ impl<T: Copy> Volume<T> {
     pub fn filled(geom: Geometry, value: T) -> Result<Self> {
         geom.validate()?;
         let n = geom.len();
-        Ok(Volume { geom, data: vec![value; n] })
+        Ok(Volume {
+            geom,
+            data: vec![value; n],
+        })
     }
 
     pub fn geometry(&self) -> &Geometry {
@@ -262,7 +294,10 @@ impl<T: Copy> Volume<T> {
     }
     /// Same geometry, values mapped voxel by voxel.
     pub fn map<U: Copy>(&self, f: impl Fn(T) -> U) -> Volume<U> {
-        Volume { geom: self.geom.clone(), data: self.data.iter().map(|&v| f(v)).collect() }
+        Volume {
+            geom: self.geom.clone(),
+            data: self.data.iter().map(|&v| f(v)).collect(),
+        }
     }
     /// One axial slice (fixed k), x fastest.
     pub fn slice_k(&self, k: usize) -> &[T] {
@@ -279,7 +314,9 @@ impl<T: Copy + Send + Sync> Volume<T> {
         let mut sorted = perm;
         sorted.sort_unstable();
         if sorted != [0, 1, 2] {
-            return Err(Error::invalid(format!("axis order {perm:?} is not a permutation of 0, 1, 2")));
+            return Err(Error::invalid(format!(
+                "axis order {perm:?} is not a permutation of 0, 1, 2"
+            )));
         }
         use rayon::prelude::*;
         let old = &self.geom;
@@ -309,7 +346,12 @@ impl<T: Copy + Send + Sync> Volume<T> {
         }
         let m = old.direction_mat();
         let cols = [0, 1, 2].map(|a| m.col(perm[a]) * if flip[a] { -1.0 } else { 1.0 });
-        let mut geom = Geometry { dims, spacing: perm.map(|a| old.spacing[a]), origin: old.index_to_patient(DVec3::from_array(corner)).to_array(), direction: IDENTITY };
+        let mut geom = Geometry {
+            dims,
+            spacing: perm.map(|a| old.spacing[a]),
+            origin: old.index_to_patient(DVec3::from_array(corner)).to_array(),
+            direction: IDENTITY,
+        };
         geom.set_direction_mat(glam::DMat3::from_cols(cols[0], cols[1], cols[2]));
         Volume::from_vec(geom, data)
     }
@@ -340,7 +382,11 @@ impl<T: Copy + PartialOrd> Volume<T> {
 /// so compiles to vector compares; only the chunk where the run starts or ends is walked one
 /// entry at a time.
 #[inline]
-pub(crate) fn next_run<T: Copy>(s: &[T], from: usize, inside: impl Fn(T) -> bool) -> Option<std::ops::Range<usize>> {
+pub(crate) fn next_run<T: Copy>(
+    s: &[T],
+    from: usize,
+    inside: impl Fn(T) -> bool,
+) -> Option<std::ops::Range<usize>> {
     const W: usize = 16;
     let mut q = from;
     while q + W <= s.len() && !s[q..q + W].iter().fold(false, |a, &v| a | inside(v)) {
@@ -360,7 +406,10 @@ pub(crate) fn next_run<T: Copy>(s: &[T], from: usize, inside: impl Fn(T) -> bool
 }
 
 /// The maximal runs of consecutive entries of `s` where `inside` holds, in order.
-pub(crate) fn runs_where<T: Copy>(s: &[T], inside: impl Fn(T) -> bool) -> impl Iterator<Item = std::ops::Range<usize>> {
+pub(crate) fn runs_where<T: Copy>(
+    s: &[T],
+    inside: impl Fn(T) -> bool,
+) -> impl Iterator<Item = std::ops::Range<usize>> {
     let mut q = 0;
     std::iter::from_fn(move || {
         let run = next_run(s, q, &inside)?;
@@ -406,10 +455,16 @@ mod tests {
                 assert_eq!(r.dims(), perm.map(|a| g.dims[a]));
                 for idx in 0..60 {
                     let [i, j, k] = r.geometry().ijk(idx);
-                    let p = r.geometry().index_to_patient(DVec3::new(i as f64, j as f64, k as f64));
+                    let p = r
+                        .geometry()
+                        .index_to_patient(DVec3::new(i as f64, j as f64, k as f64));
                     let o = g.patient_to_index(p).round();
                     assert!((g.patient_to_index(p) - o).length() < 1e-9);
-                    assert_eq!(r.data()[idx], v.get(o.x as usize, o.y as usize, o.z as usize), "{perm:?} {flip:?}");
+                    assert_eq!(
+                        r.data()[idx],
+                        v.get(o.x as usize, o.y as usize, o.z as usize),
+                        "{perm:?} {flip:?}"
+                    );
                 }
             }
         }
@@ -436,7 +491,10 @@ mod tests {
     #[test]
     fn runs_are_the_maximal_stretches_where_the_predicate_holds() {
         let s = [0u8, 1, 1, 0, 0, 3, 0, 2, 2];
-        assert_eq!(runs_where(&s, |x| x != 0).collect::<Vec<_>>(), vec![1..3, 5..6, 7..9]);
+        assert_eq!(
+            runs_where(&s, |x| x != 0).collect::<Vec<_>>(),
+            vec![1..3, 5..6, 7..9]
+        );
         assert_eq!(next_run(&s, 2, |x| x != 0), Some(2..3));
         assert_eq!(runs_where(&[0u8; 4], |x| x != 0).count(), 0);
     }
@@ -446,7 +504,9 @@ mod tests {
         let mut rng = crate::phantom::rng::Rng::new(7, 1);
         for len in [0usize, 1, 15, 16, 17, 40, 512] {
             for p in [0.02, 0.5, 0.98] {
-                let row: Vec<i16> = (0..len).map(|_| if rng.range(0.0, 1.0) < p { -1000 } else { 40 }).collect();
+                let row: Vec<i16> = (0..len)
+                    .map(|_| if rng.range(0.0, 1.0) < p { -1000 } else { 40 })
+                    .collect();
                 let mut want = Vec::new();
                 let mut i = 0;
                 while i < len {
@@ -460,9 +520,12 @@ mod tests {
                         i += 1;
                     }
                 }
-                assert_eq!(runs_where(&row, |v| v < -500).collect::<Vec<_>>(), want, "{row:?}");
+                assert_eq!(
+                    runs_where(&row, |v| v < -500).collect::<Vec<_>>(),
+                    want,
+                    "{row:?}"
+                );
             }
         }
     }
-
 }

@@ -7,11 +7,11 @@ mod common;
 use std::collections::HashMap;
 
 use glam::DVec3;
-use voyage_core::cleanse::roughness;
-use voyage_core::phantom::{self, label, ColonOptions, Phantom};
-use voyage_core::prep::{prepare, PrepOptions, Study};
-use voyage_core::surface::Mesh;
 use voyage_core::Volume;
+use voyage_core::cleanse::roughness;
+use voyage_core::phantom::{self, ColonOptions, Phantom, label};
+use voyage_core::prep::{PrepOptions, Study, prepare};
+use voyage_core::surface::Mesh;
 
 /// Distance from `p` to triangle abc (Ericson, Real-Time Collision Detection 5.1.5).
 fn to_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> f64 {
@@ -71,8 +71,13 @@ impl<'a> Nearest<'a> {
         for dk in -2..=2 {
             for dj in -2..=2 {
                 for di in -2..=2 {
-                    for &t in self.cells.get(&[k[0] + di, k[1] + dj, k[2] + dk]).map_or(&[][..], |v| &v[..]) {
-                        let [a, b, c] = self.mesh.triangles[t as usize].map(|i| vertex(self.mesh, i));
+                    for &t in self
+                        .cells
+                        .get(&[k[0] + di, k[1] + dj, k[2] + dk])
+                        .map_or(&[][..], |v| &v[..])
+                    {
+                        let [a, b, c] =
+                            self.mesh.triangles[t as usize].map(|i| vertex(self.mesh, i));
                         best = best.min(to_triangle(p, a, b, c));
                     }
                 }
@@ -97,9 +102,21 @@ fn key(p: DVec3) -> [i64; 3] {
 /// partial-volume voxels, which the fluid-free phantom has not), away from the valve.
 fn former_fluid(mesh: &Mesh, p: &Phantom, cleansed: &Volume<i16>) -> Vec<DVec3> {
     let g = p.ct.geometry();
-    let at = |q: [i64; 3]| (0..3).all(|a| q[a] >= 0 && q[a] < g.dims[a] as i64).then(|| g.index(q[0] as usize, q[1] as usize, q[2] as usize));
-    let is = |q: [i64; 3], l: u8| at(q).is_some_and(|v| p.labels.data()[v] == l && (l != label::LUMEN_FLUID || cleansed.data()[v] < -500));
-    let near = |ijk: [i64; 3], l: u8, r: i64| (-r..=r).any(|dk| (-r..=r).any(|dj| (-r..=r).any(|di| is([ijk[0] + di, ijk[1] + dj, ijk[2] + dk], l))));
+    let at = |q: [i64; 3]| {
+        (0..3)
+            .all(|a| q[a] >= 0 && q[a] < g.dims[a] as i64)
+            .then(|| g.index(q[0] as usize, q[1] as usize, q[2] as usize))
+    };
+    let is = |q: [i64; 3], l: u8| {
+        at(q).is_some_and(|v| {
+            p.labels.data()[v] == l && (l != label::LUMEN_FLUID || cleansed.data()[v] < -500)
+        })
+    };
+    let near = |ijk: [i64; 3], l: u8, r: i64| {
+        (-r..=r).any(|dk| {
+            (-r..=r).any(|dj| (-r..=r).any(|di| is([ijk[0] + di, ijk[1] + dj, ijk[2] + dk], l)))
+        })
+    };
     // The ileocecal valve's opening, which the fluid-free phantom has not.
     let voxel = g.spacing.iter().cloned().fold(0.0, f64::max);
     let valve = common::valve_mouth(&p.truth);
@@ -128,7 +145,8 @@ fn by_lumen(p: &Phantom, v: usize) -> bool {
         (-2..=2).any(|dj| {
             (-2..=2).any(|di| {
                 let q = [i + di, j + dj, k + dk];
-                (0..3).all(|a| q[a] >= 0 && q[a] < g.dims[a] as i64) && p.lumen.data()[g.index(q[0] as usize, q[1] as usize, q[2] as usize)] != 0
+                (0..3).all(|a| q[a] >= 0 && q[a] < g.dims[a] as i64)
+                    && p.lumen.data()[g.index(q[0] as usize, q[1] as usize, q[2] as usize)] != 0
             })
         })
     })
@@ -142,32 +160,75 @@ fn by_lumen(p: &Phantom, v: usize) -> bool {
 /// bowel can be (27 mm) and deeper than 3 mm, which the half-size phantom's pools have
 /// (up to 7% prone, by the valve) and real anatomy's do not.
 fn check(name: &str, opts: ColonOptions, min_removed: f64, min_kept: f64) -> usize {
-    let with = phantom::colon(&ColonOptions { tagged_fluid: true, ..opts.clone() }).unwrap();
-    let without = phantom::colon(&ColonOptions { tagged_fluid: false, opacified_small_bowel: false, tagged_stool: false, ..opts.clone() }).unwrap();
-    assert!(with.lumen.data() == without.lumen.data(), "{name}: the fluid changed the anatomy");
+    let with = phantom::colon(&ColonOptions {
+        tagged_fluid: true,
+        ..opts.clone()
+    })
+    .unwrap();
+    let without = phantom::colon(&ColonOptions {
+        tagged_fluid: false,
+        opacified_small_bowel: false,
+        tagged_stool: false,
+        ..opts.clone()
+    })
+    .unwrap();
+    assert!(
+        with.lumen.data() == without.lumen.data(),
+        "{name}: the fluid changed the anatomy"
+    );
     let cleansed: Study = prepare(with.ct.clone(), &PrepOptions::default(), |_| {}).unwrap();
-    let raw: Study = prepare(with.ct.clone(), &PrepOptions { cleanse: None, ..Default::default() }, |_| {}).unwrap();
+    let raw: Study = prepare(
+        with.ct.clone(),
+        &PrepOptions {
+            cleanse: None,
+            ..Default::default()
+        },
+        |_| {},
+    )
+    .unwrap();
     let air: Study = prepare(without.ct.clone(), &PrepOptions::default(), |_| {}).unwrap();
-    assert!(air.cleansing.is_empty(), "{name}: cleansing changed a phantom without fluid");
+    assert!(
+        air.cleansing.is_empty(),
+        "{name}: cleansing changed a phantom without fluid"
+    );
     assert!(!cleansed.cleansing.is_empty(), "{name}: nothing cleansed");
 
     // The surface where fluid lay is the true wall, found as in air.
     let truth = Nearest::new(&air.surface.mesh);
     let ct = cleansed.cleansed_ct();
-    let off = |s: &Study| mean(former_fluid(&s.surface.mesh, &with, &ct).into_iter().map(|v| truth.distance(v)));
+    let off = |s: &Study| {
+        mean(
+            former_fluid(&s.surface.mesh, &with, &ct)
+                .into_iter()
+                .map(|v| truth.distance(v)),
+        )
+    };
     let (d_clean, d_raw) = (off(&cleansed), off(&raw));
-    assert!(d_clean <= 0.5 && d_clean < d_raw, "{name}: former-fluid surface {d_clean:.3} mm from the true wall on average (uncleansed {d_raw:.3})");
+    assert!(
+        d_clean <= 0.5 && d_clean < d_raw,
+        "{name}: former-fluid surface {d_clean:.3} mm from the true wall on average (uncleansed {d_raw:.3})"
+    );
     // And back: nothing of the true wall under the fluid is lost (the folds there, thin at
     // their crests, and the polyps): its vertices lie by the cleansed surface.
     let found = Nearest::new(&cleansed.surface.mesh);
-    let under: Vec<f64> = former_fluid(&air.surface.mesh, &with, &ct).into_iter().map(|v| found.distance(v)).collect();
+    let under: Vec<f64> = former_fluid(&air.surface.mesh, &with, &ct)
+        .into_iter()
+        .map(|v| found.distance(v))
+        .collect();
     let kept = under.iter().filter(|&&d| d <= 1.0).count() as f64 / under.len().max(1) as f64;
-    assert!(!under.is_empty() && kept >= min_kept, "{name}: {:.2} % of the true wall under the fluid within 1 mm of the cleansed surface", 100.0 * kept);
+    assert!(
+        !under.is_empty() && kept >= min_kept,
+        "{name}: {:.2} % of the true wall under the fluid within 1 mm of the cleansed surface",
+        100.0 * kept
+    );
 
     // As smooth as in air.
     let (a, f) = roughness(&cleansed.surface.mesh, &with.ct, 200, 2.0);
     let (a, f) = (a.unwrap(), f.unwrap());
-    assert!(f <= 1.5 * a, "{name}: roughness {f:.1}° where fluid lay against {a:.1}° in air");
+    assert!(
+        f <= 1.5 * a,
+        "{name}: roughness {f:.1}° where fluid lay against {a:.1}° in air"
+    );
 
     // The tagged fluid is gone (mostly air: a voxel labelled fluid at the wall may be barely
     // half fluid, half air once cleansed); nothing outside the colon's shell changed.
@@ -179,47 +240,98 @@ fn check(name: &str, opts: ColonOptions, min_removed: f64, min_kept: f64) -> usi
             gone += (after <= -400) as usize;
         }
         if before != after {
-            assert!(by_lumen(&with, v), "{name}: voxel {:?} outside the colon's shell changed ({before} -> {after} HU)", with.ct.geometry().ijk(v));
+            assert!(
+                by_lumen(&with, v),
+                "{name}: voxel {:?} outside the colon's shell changed ({before} -> {after} HU)",
+                with.ct.geometry().ijk(v)
+            );
         }
     }
-    assert!(gone as f64 >= min_removed * fluid as f64, "{name}: {gone} of {fluid} tagged fluid voxels made air");
+    assert!(
+        gone as f64 >= min_removed * fluid as f64,
+        "{name}: {gone} of {fluid} tagged fluid voxels made air"
+    );
     // Polyps under the fluid keep their shape: vertices within 1 mm of their sphere, on the
     // lumen's side (as tests/prep.rs asks of every polyp in air).
     let submerged = submerged_polyps(&with);
     for polyp in &submerged {
-        let (c, r, into) = (DVec3::from_array(polyp.center_mm), polyp.diameter_mm / 2.0, DVec3::from_array(polyp.direction));
-        let near = (0..cleansed.surface.mesh.positions.len() as u32).map(|i| vertex(&cleansed.surface.mesh, i)).filter(|v| ((*v - c).length() - r).abs() <= 1.0 && (*v - c).dot(into) > 0.0).count();
-        assert!(near >= 3, "{name}: submerged polyp of {} mm in the {} has {near} vertices within 1 mm of its surface", polyp.diameter_mm, polyp.segment);
+        let (c, r, into) = (
+            DVec3::from_array(polyp.center_mm),
+            polyp.diameter_mm / 2.0,
+            DVec3::from_array(polyp.direction),
+        );
+        let near = (0..cleansed.surface.mesh.positions.len() as u32)
+            .map(|i| vertex(&cleansed.surface.mesh, i))
+            .filter(|v| ((*v - c).length() - r).abs() <= 1.0 && (*v - c).dot(into) > 0.0)
+            .count();
+        assert!(
+            near >= 3,
+            "{name}: submerged polyp of {} mm in the {} has {near} vertices within 1 mm of its surface",
+            polyp.diameter_mm,
+            polyp.segment
+        );
     }
     lumps_gone(name, &with, &cleansed, &raw, &ct, &truth);
-    eprintln!("{name}: {} submerged polyps kept, {:.2} % of the true wall under the fluid found within 1 mm; former fluid {d_clean:.3} mm from the wall (uncleansed {d_raw:.3}), roughness {f:.1}° vs {a:.1}° in air, {gone}/{fluid} fluid voxels made air", submerged.len(), 100.0 * kept);
+    eprintln!(
+        "{name}: {} submerged polyps kept, {:.2} % of the true wall under the fluid found within 1 mm; former fluid {d_clean:.3} mm from the wall (uncleansed {d_raw:.3}), roughness {f:.1}° vs {a:.1}° in air, {gone}/{fluid} fluid voxels made air",
+        submerged.len(),
+        100.0 * kept
+    );
     submerged.len()
 }
 
 /// Every lump of tagged stool is gone: no tagged voxel left within 1 mm of its sphere, and
 /// the surface over it lies on the true wall (within 1 mm on average, 2 mm for 95 % of its
 /// vertices: the lumps are 4–9 mm), where uncleansed (most of them) stood a radius off.
-fn lumps_gone(name: &str, p: &Phantom, cleansed: &Study, raw: &Study, ct: &Volume<i16>, truth: &Nearest) {
+fn lumps_gone(
+    name: &str,
+    p: &Phantom,
+    cleansed: &Study,
+    raw: &Study,
+    ct: &Volume<i16>,
+    truth: &Nearest,
+) {
     let g = ct.geometry();
     let (mut showed, mut worst) = (0, 0.0f64);
     for lump in &p.truth.stool {
         let (c, r) = (DVec3::from_array(lump.center_mm), lump.diameter_mm / 2.0);
         let stool_left = |v: usize| ct.data()[v] >= 200 && p.labels.data()[v] == label::STOOL;
-        let tagged = (0..ct.data().len()).filter(|&v| stool_left(v) && common::voxel_mm(g, v).distance(c) <= r + 1.0).count();
+        let tagged = (0..ct.data().len())
+            .filter(|&v| stool_left(v) && common::voxel_mm(g, v).distance(c) <= r + 1.0)
+            .count();
         // Fluid that segmentation left out of the colon (the fluid check counts it) is no
         // lump: the surface by it is not asked about here.
         let by_fluid_left = |x: DVec3| {
             let ijk = g.local_to_index(x).round();
-            (-2..=2).any(|dk| (-2..=2).any(|dj| (-2..=2).any(|di| {
-                let q = ijk + DVec3::new(di as f64, dj as f64, dk as f64);
-                g.contains_index(q) && ct.get(q.x as usize, q.y as usize, q.z as usize) >= 200
-            })))
+            (-2..=2).any(|dk| {
+                (-2..=2).any(|dj| {
+                    (-2..=2).any(|di| {
+                        let q = ijk + DVec3::new(di as f64, dj as f64, dk as f64);
+                        g.contains_index(q)
+                            && ct.get(q.x as usize, q.y as usize, q.z as usize) >= 200
+                    })
+                })
+            })
         };
-        let off = |s: &Study| -> Vec<f64> { (0..s.surface.mesh.positions.len() as u32).map(|i| vertex(&s.surface.mesh, i)).filter(|v| v.distance(c) <= r + 1.0 && !by_fluid_left(*v)).map(|v| truth.distance(v)).collect() };
+        let off = |s: &Study| -> Vec<f64> {
+            (0..s.surface.mesh.positions.len() as u32)
+                .map(|i| vertex(&s.surface.mesh, i))
+                .filter(|v| v.distance(c) <= r + 1.0 && !by_fluid_left(*v))
+                .map(|v| truth.distance(v))
+                .collect()
+        };
         let (after, before) = (off(cleansed), off(raw));
         let max = |d: &[f64]| d.iter().cloned().fold(0.0, f64::max);
-        let what = format!("{name}: stool {:.1} mm in the {} (mottled {})", lump.diameter_mm, lump.segment, lump.mottled);
-        eprintln!("{what}: {tagged} tagged voxels left, surface {:.2} mm from the true wall on average, {:.2} at most (uncleansed {:.2})", mean(after.iter().cloned()), max(&after), max(&before));
+        let what = format!(
+            "{name}: stool {:.1} mm in the {} (mottled {})",
+            lump.diameter_mm, lump.segment, lump.mottled
+        );
+        eprintln!(
+            "{what}: {tagged} tagged voxels left, surface {:.2} mm from the true wall on average, {:.2} at most (uncleansed {:.2})",
+            mean(after.iter().cloned()),
+            max(&after),
+            max(&before)
+        );
         worst = worst.max(max(&after));
         assert_eq!(tagged, 0, "{what}: tagged voxels left");
         // (Distances read at most 2·CELL_MM; a lump under fluid shows only once cleansed.)
@@ -229,11 +341,22 @@ fn lumps_gone(name: &str, p: &Phantom, cleansed: &Study, raw: &Study, ct: &Volum
             d.sort_by(f64::total_cmp);
             d.get(d.len() * 95 / 100).copied().unwrap_or(f64::INFINITY)
         };
-        assert!(mean(after.iter().cloned()) <= 1.0 && p95 <= 2.0, "{what}: the surface where it lay is {:.2} mm from the true wall on average, {p95:.2} at the 95th percentile", mean(after.iter().cloned()));
+        assert!(
+            mean(after.iter().cloned()) <= 1.0 && p95 <= 2.0,
+            "{what}: the surface where it lay is {:.2} mm from the true wall on average, {p95:.2} at the 95th percentile",
+            mean(after.iter().cloned())
+        );
     }
-    assert!(2 * showed >= p.truth.stool.len(), "{name}: {showed} of {} lumps stood off the wall uncleansed", p.truth.stool.len());
+    assert!(
+        2 * showed >= p.truth.stool.len(),
+        "{name}: {showed} of {} lumps stood off the wall uncleansed",
+        p.truth.stool.len()
+    );
     if !p.truth.stool.is_empty() {
-        eprintln!("{name}: {} lumps of stool gone; the farthest vertex over one {worst:.2} mm from the true wall", p.truth.stool.len());
+        eprintln!(
+            "{name}: {} lumps of stool gone; the farthest vertex over one {worst:.2} mm from the true wall",
+            p.truth.stool.len()
+        );
     }
 }
 
@@ -245,7 +368,9 @@ fn submerged_polyps(p: &Phantom) -> Vec<&voyage_core::phantom::PolypTruth> {
         .filter(|polyp| polyp.diameter_mm >= 3.0)
         .filter(|polyp| {
             p.truth.fluid_pools.iter().any(|q| {
-                q.segment == polyp.segment && (q.start_arc_mm..=q.end_arc_mm).contains(&polyp.arc_mm) && (polyp.center_mm[1] - q.level_y_mm) * q.gravity_lps[1] > 0.0
+                q.segment == polyp.segment
+                    && (q.start_arc_mm..=q.end_arc_mm).contains(&polyp.arc_mm)
+                    && (polyp.center_mm[1] - q.level_y_mm) * q.gravity_lps[1] > 0.0
             })
         })
         .collect()
@@ -255,16 +380,42 @@ fn submerged_polyps(p: &Phantom) -> Vec<&voyage_core::phantom::PolypTruth> {
 fn cleansed_fluid_leaves_the_true_wall_small_phantom() {
     let mut submerged = 0;
     for seed in 1..=3 {
-        submerged += check(&format!("small, supine, seed {seed}"), ColonOptions { seed, small: true, ..Default::default() }, 0.9, 0.98);
-        submerged += check(&format!("small, prone, opacified small bowel, seed {seed}"), ColonOptions { seed, small: true, prone: true, opacified_small_bowel: true, ..Default::default() }, 0.9, 0.98);
+        submerged += check(
+            &format!("small, supine, seed {seed}"),
+            ColonOptions {
+                seed,
+                small: true,
+                ..Default::default()
+            },
+            0.9,
+            0.98,
+        );
+        submerged += check(
+            &format!("small, prone, opacified small bowel, seed {seed}"),
+            ColonOptions {
+                seed,
+                small: true,
+                prone: true,
+                opacified_small_bowel: true,
+                ..Default::default()
+            },
+            0.9,
+            0.98,
+        );
     }
-    assert!(submerged >= 3, "only {submerged} submerged polyps were checked");
+    assert!(
+        submerged >= 3,
+        "only {submerged} submerged polyps were checked"
+    );
 }
 
 /// At full size the terraces show: uncleansed, the fluid's surface is 1.6× as rough as air's.
 #[test]
 fn cleansed_fluid_leaves_the_true_wall_full_size() {
-    assert!(check("full size, supine", ColonOptions::default(), 0.95, 0.99) > 0, "no submerged polyp checked");
+    assert!(
+        check("full size, supine", ColonOptions::default(), 0.95, 0.99) > 0,
+        "no submerged polyp checked"
+    );
 }
 
 /// Lumps of tagged stool on the wall, in air and in pools, some mottled with air: gone, with
@@ -272,7 +423,16 @@ fn cleansed_fluid_leaves_the_true_wall_full_size() {
 #[test]
 fn tagged_stool_is_gone_full_size() {
     for seed in 1..=2 {
-        check(&format!("full size, tagged stool, seed {seed}"), ColonOptions { seed, tagged_stool: true, ..Default::default() }, 0.95, 0.99);
+        check(
+            &format!("full size, tagged stool, seed {seed}"),
+            ColonOptions {
+                seed,
+                tagged_stool: true,
+                ..Default::default()
+            },
+            0.95,
+            0.99,
+        );
     }
 }
 
@@ -280,7 +440,13 @@ fn tagged_stool_is_gone_full_size() {
 /// ileocecal valve, where it is one with the caecal pool inside the colon's lumen.
 #[test]
 fn small_bowel_contrast_stays() {
-    let p = phantom::colon(&ColonOptions { small: true, tagged_fluid: true, opacified_small_bowel: true, ..Default::default() }).unwrap();
+    let p = phantom::colon(&ColonOptions {
+        small: true,
+        tagged_fluid: true,
+        opacified_small_bowel: true,
+        ..Default::default()
+    })
+    .unwrap();
     let study = prepare(p.ct.clone(), &PrepOptions::default(), |_| {}).unwrap();
     let ct = study.cleansed_ct();
     let g = p.ct.geometry();
@@ -296,5 +462,8 @@ fn small_bowel_contrast_stays() {
         }
     }
     assert!(loops > 1000);
-    assert_eq!(changed, 0, "{changed} small-bowel voxels beyond the valve's mouth changed");
+    assert_eq!(
+        changed, 0,
+        "{changed} small-bowel voxels beyond the valve's mouth changed"
+    );
 }

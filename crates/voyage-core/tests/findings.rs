@@ -8,18 +8,21 @@ use std::time::Instant;
 
 use glam::DVec3;
 use serde_json::Value;
-use voyage_core::camera::{Camera, Pose};
-use voyage_core::export::markups::{write_markups_curve, MarkupsPoint};
-use voyage_core::findings::{export_findings, pick, Findings, Hit};
-use voyage_core::phantom::{self, Phantom, PolypTruth};
-use voyage_core::prep::{prepare, PrepOptions, Study};
-use voyage_core::render::{CellMesh, Frame, Rasterizer, Strategy, View, Visibility, NO_TRIANGLE};
 use voyage_core::Geometry;
+use voyage_core::camera::{Camera, Pose};
+use voyage_core::export::markups::{MarkupsPoint, write_markups_curve};
+use voyage_core::findings::{Findings, Hit, export_findings, pick};
+use voyage_core::phantom::{self, Phantom, PolypTruth};
+use voyage_core::prep::{PrepOptions, Study, prepare};
+use voyage_core::render::{CellMesh, Frame, NO_TRIANGLE, Rasterizer, Strategy, View, Visibility};
 
 mod common;
 
 fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("voyage-findings-test-{name}-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!(
+        "voyage-findings-test-{name}-{}",
+        std::process::id()
+    ));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
@@ -38,20 +41,38 @@ fn read_json(path: &Path) -> Value {
 /// Its `$id`s like "#markup/type" are not valid draft-07 anchors; no `$ref` points at them,
 /// and the validator accepts them as they are.
 fn slicer_validator() -> jsonschema::Validator {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/markups-schema-v1.0.3.json");
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/markups-schema-v1.0.3.json"
+    );
     let schema = read_json(Path::new(path));
-    jsonschema::options().with_draft(jsonschema::Draft::Draft7).build(&schema).expect("Slicer's schema compiles")
+    jsonschema::options()
+        .with_draft(jsonschema::Draft::Draft7)
+        .build(&schema)
+        .expect("Slicer's schema compiles")
 }
 
 fn assert_valid(validator: &jsonschema::Validator, doc: &Value, what: &str) {
-    let errors: Vec<String> = validator.iter_errors(doc).map(|e| format!("{} at {}", e, e.instance_path())).collect();
-    assert!(errors.is_empty(), "{what} does not follow Slicer's schema:\n{}", errors.join("\n"));
+    let errors: Vec<String> = validator
+        .iter_errors(doc)
+        .map(|e| format!("{} at {}", e, e.instance_path()))
+        .collect();
+    assert!(
+        errors.is_empty(),
+        "{what} does not follow Slicer's schema:\n{}",
+        errors.join("\n")
+    );
 }
 
 fn sample_findings() -> Findings {
     let mut f = Findings::default();
     let view = Pose::looking(DVec3::new(10.0, 10.0, 10.0), DVec3::Z, DVec3::Y);
-    f.add_marker(DVec3::new(10.0, 12.0, 30.0), -DVec3::Z, view, "sessile polyp ~6 mm, ascending colon");
+    f.add_marker(
+        DVec3::new(10.0, 12.0, 30.0),
+        -DVec3::Z,
+        view,
+        "sessile polyp ~6 mm, ascending colon",
+    );
     f.add_marker(DVec3::new(14.0, 9.0, 31.0), -DVec3::Z, view, "");
     f.add_measurement(DVec3::new(9.0, 12.0, 30.0), DVec3::new(15.0, 12.0, 30.0));
     f.add_measurement(DVec3::new(1.0, 1.0, 1.0), DVec3::new(1.0, 1.0, 4.0));
@@ -69,18 +90,42 @@ fn exported_markups_follow_slicers_schema() {
     let validator = slicer_validator();
     let dir = temp_dir("schema");
     let f = sample_findings();
-    export_findings(&dir, &f, &tilted_geometry(), |_, _| Ok((2, 2, vec![255; 16]))).unwrap();
+    export_findings(&dir, &f, &tilted_geometry(), |_, _| {
+        Ok((2, 2, vec![255; 16]))
+    })
+    .unwrap();
     let doc = read_json(&dir.join("findings.mrk.json"));
     assert_valid(&validator, &doc, "findings.mrk.json");
-    let types: Vec<_> = doc["markups"].as_array().unwrap().iter().map(|n| n["type"].as_str().unwrap().to_string()).collect();
+    let types: Vec<_> = doc["markups"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| n["type"].as_str().unwrap().to_string())
+        .collect();
     assert_eq!(types, ["Fiducial", "Line", "Line"]);
 
     // Nothing found yet: still a valid (empty) point list.
-    export_findings(&dir, &Findings::default(), &tilted_geometry(), |_, _| unreachable!()).unwrap();
-    assert_valid(&validator, &read_json(&dir.join("findings.mrk.json")), "empty findings.mrk.json");
+    export_findings(
+        &dir,
+        &Findings::default(),
+        &tilted_geometry(),
+        |_, _| unreachable!(),
+    )
+    .unwrap();
+    assert_valid(
+        &validator,
+        &read_json(&dir.join("findings.mrk.json")),
+        "empty findings.mrk.json",
+    );
 
     // The centerline curve `voyage prep` writes (export::study::write_study calls this).
-    let points: Vec<MarkupsPoint> = (0..12).map(|i| MarkupsPoint { label: format!("CL-{}", i + 1), position_lps: [i as f64, 2.0 * i as f64, -3.5], description: String::new() }).collect();
+    let points: Vec<MarkupsPoint> = (0..12)
+        .map(|i| MarkupsPoint {
+            label: format!("CL-{}", i + 1),
+            position_lps: [i as f64, 2.0 * i as f64, -3.5],
+            description: String::new(),
+        })
+        .collect();
     let curve = dir.join("centerline.mrk.json");
     write_markups_curve(&curve, "Centerline", &points).unwrap();
     assert_valid(&validator, &read_json(&curve), "centerline.mrk.json");
@@ -114,16 +159,36 @@ fn on_polyp(p: DVec3, polyp: &PolypTruth) -> bool {
 }
 
 fn triangle_on_polyp(mesh: &CellMesh, id: u32, polyp: &PolypTruth) -> bool {
-    id != NO_TRIANGLE && mesh.triangles[id as usize].iter().all(|&v| on_polyp(DVec3::from_array(mesh.positions[v as usize].map(f64::from)), polyp))
+    id != NO_TRIANGLE
+        && mesh.triangles[id as usize].iter().all(|&v| {
+            on_polyp(
+                DVec3::from_array(mesh.positions[v as usize].map(f64::from)),
+                polyp,
+            )
+        })
 }
 
 /// The last pixel, walking from `start` by `step` along a row or column, whose triangle is
 /// on the polyp: the reader's click on the polyp's edge.
-fn edge_pixel(frame: &Frame, mesh: &CellMesh, polyp: &PolypTruth, start: (i64, i64), step: (i64, i64)) -> (u32, u32) {
+fn edge_pixel(
+    frame: &Frame,
+    mesh: &CellMesh,
+    polyp: &PolypTruth,
+    start: (i64, i64),
+    step: (i64, i64),
+) -> (u32, u32) {
     let (mut x, mut y) = start;
     let at = |x: i64, y: i64| frame.id((y * W as i64 + x) as usize);
-    assert!(triangle_on_polyp(mesh, at(x, y), polyp), "the polyp is not at the centre of the view");
-    while x + step.0 >= 0 && x + step.0 < W as i64 && y + step.1 >= 0 && y + step.1 < W as i64 && triangle_on_polyp(mesh, at(x + step.0, y + step.1), polyp) {
+    assert!(
+        triangle_on_polyp(mesh, at(x, y), polyp),
+        "the polyp is not at the centre of the view"
+    );
+    while x + step.0 >= 0
+        && x + step.0 < W as i64
+        && y + step.1 >= 0
+        && y + step.1 < W as i64
+        && triangle_on_polyp(mesh, at(x + step.0, y + step.1), polyp)
+    {
         x += step.0;
         y += step.1;
     }
@@ -133,12 +198,36 @@ fn edge_pixel(frame: &Frame, mesh: &CellMesh, polyp: &PolypTruth, start: (i64, i
 /// The pixel before the largest jump in depth on the way from `centre` through `end` and
 /// 8 pixels beyond: where the polyp's outline occludes the wall behind it, the edge a reader
 /// sees. A check that the triangles taken for the polyp's stop at its visible outline.
-fn largest_depth_step(mesh: &CellMesh, camera: &Camera, cells: &[u32], centre: (i64, i64), end: (u32, u32)) -> (u32, u32) {
-    let step = ((end.0 as i64 - centre.0).signum(), (end.1 as i64 - centre.1).signum());
-    let n = (end.0 as i64 - centre.0).abs().max((end.1 as i64 - centre.1).abs()) + 8;
-    let pixels: Vec<(u32, u32)> = (0..=n).map(|k| ((centre.0 + k * step.0) as u32, (centre.1 + k * step.1) as u32)).collect();
-    let depth: Vec<f64> = pixels.iter().map(|&px| click(mesh, camera, cells, px).distance).collect();
-    let k = (0..depth.len() - 1).max_by(|&i, &j| (depth[i + 1] - depth[i]).total_cmp(&(depth[j + 1] - depth[j]))).unwrap();
+fn largest_depth_step(
+    mesh: &CellMesh,
+    camera: &Camera,
+    cells: &[u32],
+    centre: (i64, i64),
+    end: (u32, u32),
+) -> (u32, u32) {
+    let step = (
+        (end.0 as i64 - centre.0).signum(),
+        (end.1 as i64 - centre.1).signum(),
+    );
+    let n = (end.0 as i64 - centre.0)
+        .abs()
+        .max((end.1 as i64 - centre.1).abs())
+        + 8;
+    let pixels: Vec<(u32, u32)> = (0..=n)
+        .map(|k| {
+            (
+                (centre.0 + k * step.0) as u32,
+                (centre.1 + k * step.1) as u32,
+            )
+        })
+        .collect();
+    let depth: Vec<f64> = pixels
+        .iter()
+        .map(|&px| click(mesh, camera, cells, px).distance)
+        .collect();
+    let k = (0..depth.len() - 1)
+        .max_by(|&i, &j| (depth[i + 1] - depth[i]).total_cmp(&(depth[j + 1] - depth[j])))
+        .unwrap();
     pixels[k]
 }
 
@@ -184,22 +273,38 @@ fn two_clicks_measure_the_pipes_polyps_within_half_a_millimetre() {
     let (study, polyps) = pipe_study();
     let mesh = CellMesh::new(&study.surface, &study.cells);
     let all: Vec<u32> = (0..mesh.cells() as u32).collect();
-    assert_eq!(polyps.iter().map(|p| p.diameter_mm).collect::<Vec<_>>(), [7.0, 5.0, 3.0]);
+    assert_eq!(
+        polyps.iter().map(|p| p.diameter_mm).collect::<Vec<_>>(),
+        [7.0, 5.0, 3.0]
+    );
     let mut worst: f64 = 0.0;
     for polyp in &polyps {
         let axis = DVec3::from_array(polyp.direction).any_orthonormal_vector();
         let camera = camera_facing(polyp, axis);
         let eye = camera.pose.position;
-        assert!(study.cells.cell_of_point(eye).is_some(), "the camera in front of the {} mm polyp is outside the lumen", polyp.diameter_mm);
+        assert!(
+            study.cells.cell_of_point(eye).is_some(),
+            "the camera in front of the {} mm polyp is outside the lumen",
+            polyp.diameter_mm
+        );
         let mut frame = Frame::new(W, W);
         // What the navigator shows: the visible cells of the camera's position.
-        let drawn = Visibility::new(&study.cells, Strategy::Ours).draw(&mut frame, &Rasterizer::new(&mesh, View::new(&camera, W, W)), &study.cells);
+        let drawn = Visibility::new(&study.cells, Strategy::Ours).draw(
+            &mut frame,
+            &Rasterizer::new(&mesh, View::new(&camera, W, W)),
+            &study.cells,
+        );
         let centre = (W as i64 / 2, W as i64 / 2);
         for (dir_name, step) in [("row", (1, 0)), ("column", (0, 1))] {
-            let ends = [edge_pixel(&frame, &mesh, polyp, centre, (-step.0, -step.1)), edge_pixel(&frame, &mesh, polyp, centre, step)];
+            let ends = [
+                edge_pixel(&frame, &mesh, polyp, centre, (-step.0, -step.1)),
+                edge_pixel(&frame, &mesh, polyp, centre, step),
+            ];
             let hits = ends.map(|px| click(&mesh, &camera, &drawn.cells, px));
             let mut findings = Findings::default();
-            let length = findings.add_measurement(hits[0].point, hits[1].point).length_mm();
+            let length = findings
+                .add_measurement(hits[0].point, hits[1].point)
+                .length_mm();
             let err = length - polyp.diameter_mm;
             worst = worst.max(err.abs());
             eprintln!(
@@ -210,16 +315,35 @@ fn two_clicks_measure_the_pipes_polyps_within_half_a_millimetre() {
                 (ends[1].0 + ends[1].1) - (ends[0].0 + ends[0].1)
             );
             for end in ends {
-                assert_eq!(largest_depth_step(&mesh, &camera, &drawn.cells, centre, end), end, "the {} mm polyp's edge is not where its outline is", polyp.diameter_mm);
+                assert_eq!(
+                    largest_depth_step(&mesh, &camera, &drawn.cells, centre, end),
+                    end,
+                    "the {} mm polyp's edge is not where its outline is",
+                    polyp.diameter_mm
+                );
             }
             for (hit, px) in hits.iter().zip(ends) {
                 // The click lands on the triangle the frame shows there, and so does a
                 // search of every cell.
-                assert_eq!(hit.triangle, frame.id((px.1 * W + px.0) as usize), "pick and raster disagree at {px:?}");
-                assert_eq!(pick(&mesh, Some(&all), eye, hit.point - eye).map(|h| h.triangle), Some(hit.triangle));
-                assert!(hit.normal.dot(eye - hit.point) > 0.0, "the normal faces the camera");
+                assert_eq!(
+                    hit.triangle,
+                    frame.id((px.1 * W + px.0) as usize),
+                    "pick and raster disagree at {px:?}"
+                );
+                assert_eq!(
+                    pick(&mesh, Some(&all), eye, hit.point - eye).map(|h| h.triangle),
+                    Some(hit.triangle)
+                );
+                assert!(
+                    hit.normal.dot(eye - hit.point) > 0.0,
+                    "the normal faces the camera"
+                );
             }
-            assert!(err.abs() <= 0.5, "the {} mm polyp measures {length:.3} mm along the {dir_name}", polyp.diameter_mm);
+            assert!(
+                err.abs() <= 0.5,
+                "the {} mm polyp measures {length:.3} mm along the {dir_name}",
+                polyp.diameter_mm
+            );
         }
     }
     eprintln!("largest error {worst:.3} mm");
@@ -237,20 +361,35 @@ fn ms(t: Instant) -> f64 {
 /// agree with the id buffer under the cursor.
 #[test]
 fn pick_on_colon_a_is_quick_and_lands_where_the_frame_shows() {
-    let Some(study) = common::colon_a_study() else { return };
+    let Some(study) = common::colon_a_study() else {
+        return;
+    };
     let mesh = CellMesh::new(&study.surface, &study.cells);
-    eprintln!("colon-a: {} triangles in {} cells, {} rayon threads", mesh.triangles.len(), mesh.cells(), rayon::current_num_threads());
+    eprintln!(
+        "colon-a: {} triangles in {} cells, {} rayon threads",
+        mesh.triangles.len(),
+        mesh.cells(),
+        rayon::current_num_threads()
+    );
     let cl = &study.centerline;
     let size = 256u32;
-    let (mut t_all, mut t_drawn, mut n, mut agree, mut covered) = (Vec::new(), Vec::new(), 0usize, 0usize, 0usize);
+    let (mut t_all, mut t_drawn, mut n, mut agree, mut covered) =
+        (Vec::new(), Vec::new(), 0usize, 0usize, 0usize);
     let mut visibility = Visibility::new(&study.cells, Strategy::Ours);
     for k in 1..=12 {
         let i = k * (cl.points_mm.len() - 2) / 13;
-        let (p, q) = (DVec3::from_array(cl.points_mm[i]), DVec3::from_array(cl.points_mm[i + 1]));
+        let (p, q) = (
+            DVec3::from_array(cl.points_mm[i]),
+            DVec3::from_array(cl.points_mm[i + 1]),
+        );
         let camera = Camera::new(Pose::looking(p, q - p, (q - p).any_orthonormal_vector()));
         let mut frame = Frame::new(size, size);
         visibility.reset();
-        let drawn = visibility.draw(&mut frame, &Rasterizer::new(&mesh, View::new(&camera, size, size)), &study.cells);
+        let drawn = visibility.draw(
+            &mut frame,
+            &Rasterizer::new(&mesh, View::new(&camera, size, size)),
+            &study.cells,
+        );
         for (fx, fy) in [(0.5, 0.5), (0.2, 0.3), (0.8, 0.25), (0.3, 0.8), (0.7, 0.7)] {
             let px = ((fx * size as f64) as u32, (fy * size as f64) as u32);
             let dir = camera.pixel_ray(px.0 as f64 + 0.5, px.1 as f64 + 0.5, size, size);
@@ -272,12 +411,25 @@ fn pick_on_colon_a_is_quick_and_lands_where_the_frame_shows() {
     }
     let stats = |v: &mut Vec<f64>| {
         v.sort_by(f64::total_cmp);
-        (v[v.len() / 2], v.iter().sum::<f64>() / v.len() as f64, v[v.len() - 1])
+        (
+            v[v.len() / 2],
+            v.iter().sum::<f64>() / v.len() as f64,
+            v[v.len() - 1],
+        )
     };
     let (a, d) = (stats(&mut t_all), stats(&mut t_drawn));
-    eprintln!("pick over all cells:   median {:.2} ms, mean {:.2} ms, max {:.2} ms ({n} clicks)", a.0, a.1, a.2);
-    eprintln!("pick over drawn cells: median {:.2} ms, mean {:.2} ms, max {:.2} ms", d.0, d.1, d.2);
+    eprintln!(
+        "pick over all cells:   median {:.2} ms, mean {:.2} ms, max {:.2} ms ({n} clicks)",
+        a.0, a.1, a.2
+    );
+    eprintln!(
+        "pick over drawn cells: median {:.2} ms, mean {:.2} ms, max {:.2} ms",
+        d.0, d.1, d.2
+    );
     eprintln!("pick = id buffer on {agree} of {covered} covered pixels");
-    assert!(covered >= n * 9 / 10, "the views from the centerline should mostly see wall");
+    assert!(
+        covered >= n * 9 / 10,
+        "the views from the centerline should mostly see wall"
+    );
     assert_eq!(agree, covered, "pick and the rasterizer disagree");
 }

@@ -4,15 +4,21 @@
 //! NIfTI and DICOM; lumen, source, target and centerline must agree.
 
 use glam::DVec3;
-use voyage_core::anatomy::PositionSource;
-use voyage_core::io::{load, LoadOptions};
-use voyage_core::phantom::{self, ColonOptions};
-use voyage_core::prep::{prepare, PrepOptions, Study};
-use voyage_core::segment::{segment, SegmentOptions};
 use voyage_core::Volume;
+use voyage_core::anatomy::PositionSource;
+use voyage_core::io::{LoadOptions, load};
+use voyage_core::phantom::{self, ColonOptions};
+use voyage_core::prep::{PrepOptions, Study, prepare};
+use voyage_core::segment::{SegmentOptions, segment};
 
 fn phantom_ct() -> Volume<i16> {
-    phantom::colon(&ColonOptions { small: true, tagged_fluid: true, ..ColonOptions::default() }).unwrap().ct
+    phantom::colon(&ColonOptions {
+        small: true,
+        tagged_fluid: true,
+        ..ColonOptions::default()
+    })
+    .unwrap()
+    .ct
 }
 
 /// The storage that undoes `reoriented(perm, flip)`.
@@ -32,17 +38,34 @@ struct Answer {
 
 fn answer(s: &Study) -> Answer {
     let g = s.ct.geometry();
-    Answer { source: g.local_to_patient(s.source_mm()), target: g.local_to_patient(s.target_mm()), length: s.centerline.length_mm }
+    Answer {
+        source: g.local_to_patient(s.source_mm()),
+        target: g.local_to_patient(s.target_mm()),
+        length: s.centerline.length_mm,
+    }
 }
 
 /// Within one voxel: at most a voxel's size along each patient axis (NIfTI keeps geometry in
 /// f32: a micrometre more is allowed).
 fn check(what: &str, a: &Answer, reference: &Answer, voxel: f64) {
     let off = |p: DVec3, q: DVec3| (p - q).abs().max_element();
-    assert!(off(a.source, reference.source) <= voxel + 1e-3, "{what}: source {:?} mm from the reference's", a.source - reference.source);
-    assert!(off(a.target, reference.target) <= voxel + 1e-3, "{what}: target {:?} mm from the reference's", a.target - reference.target);
+    assert!(
+        off(a.source, reference.source) <= voxel + 1e-3,
+        "{what}: source {:?} mm from the reference's",
+        a.source - reference.source
+    );
+    assert!(
+        off(a.target, reference.target) <= voxel + 1e-3,
+        "{what}: target {:?} mm from the reference's",
+        a.target - reference.target
+    );
     let rel = (a.length - reference.length).abs() / reference.length;
-    assert!(rel <= 0.005, "{what}: centerline {:.1} mm against {:.1} mm", a.length, reference.length);
+    assert!(
+        rel <= 0.005,
+        "{what}: centerline {:.1} mm against {:.1} mm",
+        a.length,
+        reference.length
+    );
 }
 
 #[test]
@@ -50,7 +73,11 @@ fn every_storage_order_gives_the_same_colon() {
     let ct = phantom_ct();
     let voxel = ct.spacing().iter().cloned().fold(0.0, f64::max);
     let seg0 = segment(&ct, &SegmentOptions::default()).unwrap();
-    assert_eq!(seg0.orientation.source, PositionSource::AirFluidLevels, "gravity from the levels");
+    assert_eq!(
+        seg0.orientation.source,
+        PositionSource::AirFluidLevels,
+        "gravity from the levels"
+    );
     assert_eq!(seg0.orientation.position.code(), "HFS");
     let reference = answer(&prepare(ct.clone(), &PrepOptions::default(), |_| {}).unwrap());
     for perm in [[0, 1, 2], [1, 2, 0], [2, 0, 1]] {
@@ -59,12 +86,23 @@ fn every_storage_order_gives_the_same_colon() {
             let stored = ct.reoriented(perm, flip).unwrap();
             let what = format!("axes {perm:?} flipped {flip:?}");
             let seg = segment(&stored, &SegmentOptions::default()).unwrap();
-            assert_eq!(seg.orientation.position, seg0.orientation.position, "{what}");
+            assert_eq!(
+                seg.orientation.position, seg0.orientation.position,
+                "{what}"
+            );
             let (inv, iflip) = inverse(perm, flip);
             let back = seg.lumen.reoriented(inv, iflip).unwrap();
             assert_eq!(back.geometry().dims, seg0.lumen.geometry().dims);
-            let differ = back.data().iter().zip(seg0.lumen.data()).filter(|(a, b)| a != b).count();
-            assert_eq!(differ, 0, "{what}: {differ} lumen voxels differ in patient space");
+            let differ = back
+                .data()
+                .iter()
+                .zip(seg0.lumen.data())
+                .filter(|(a, b)| a != b)
+                .count();
+            assert_eq!(
+                differ, 0,
+                "{what}: {differ} lumen voxels differ in patient space"
+            );
             let study = prepare(stored, &PrepOptions::default(), |_| {}).unwrap();
             check(&what, &answer(&study), &reference, voxel);
         }
@@ -87,7 +125,12 @@ fn nifti_and_dicom_stored_upside_down_give_the_same_colon() {
     for path in [nii, dcm] {
         let loaded = load(&path, &LoadOptions::default()).unwrap().volume;
         let study = prepare(loaded, &PrepOptions::default(), |_| {}).unwrap();
-        check(&path.display().to_string(), &answer(&study), &reference, voxel);
+        check(
+            &path.display().to_string(),
+            &answer(&study),
+            &reference,
+            voxel,
+        );
     }
     std::fs::remove_dir_all(&dir).ok();
 }

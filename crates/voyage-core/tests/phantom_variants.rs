@@ -12,7 +12,11 @@ use voyage_core::Volume;
 use voyage_core::phantom::{self, ColonOptions, Phantom, Truth, label};
 
 fn small(opts: ColonOptions) -> Phantom {
-    phantom::colon(&ColonOptions { small: true, ..opts }).expect("small colon phantom")
+    phantom::colon(&ColonOptions {
+        small: true,
+        ..opts
+    })
+    .expect("small colon phantom")
 }
 
 fn names(list: &[&str]) -> Vec<String> {
@@ -78,7 +82,11 @@ fn neighbours6(dims: [usize; 3], idx: usize) -> impl Iterator<Item = usize> {
 }
 
 /// Voxels 6-connected to `seeds` through `pass`.
-fn flood6(dims: [usize; 3], seeds: impl IntoIterator<Item = usize>, pass: impl Fn(usize) -> bool) -> Vec<bool> {
+fn flood6(
+    dims: [usize; 3],
+    seeds: impl IntoIterator<Item = usize>,
+    pass: impl Fn(usize) -> bool,
+) -> Vec<bool> {
     let mut seen = vec![false; dims[0] * dims[1] * dims[2]];
     let mut queue = VecDeque::new();
     for s in seeds {
@@ -128,7 +136,9 @@ fn components6(dims: [usize; 3], pass: impl Fn(usize) -> bool) -> Vec<usize> {
 
 /// The voxels on the rim of an nx × ny slice (indices within the slice).
 fn rim2d(nx: usize, ny: usize) -> Vec<usize> {
-    (0..nx * ny).filter(|&i| i % nx == 0 || i % nx == nx - 1 || i / nx == 0 || i / nx == ny - 1).collect()
+    (0..nx * ny)
+        .filter(|&i| i % nx == 0 || i % nx == nx - 1 || i / nx == 0 || i / nx == ny - 1)
+        .collect()
 }
 
 /// The border voxels of a volume.
@@ -161,13 +171,28 @@ fn check_basics(p: &Phantom) {
     let t = &p.truth;
     assert_eq!(p.ct.dims(), t.dims);
     for (&l, &m) in p.labels.data().iter().zip(p.lumen.data()) {
-        assert_eq!(m == 1, l == label::LUMEN_AIR || l == label::LUMEN_FLUID || l == label::STOOL, "label {l} vs lumen {m}");
+        assert_eq!(
+            m == 1,
+            l == label::LUMEN_AIR || l == label::LUMEN_FLUID || l == label::STOOL,
+            "label {l} vs lumen {m}"
+        );
     }
-    assert_eq!(t.lumen_voxels, p.lumen.data().iter().filter(|&&v| v == 1).count());
-    let collapsed = |a: f64| t.collapsed.iter().any(|c| a > c.start_arc_mm - c.taper_mm && a < c.end_arc_mm + c.taper_mm);
+    assert_eq!(
+        t.lumen_voxels,
+        p.lumen.data().iter().filter(|&&v| v == 1).count()
+    );
+    let collapsed = |a: f64| {
+        t.collapsed
+            .iter()
+            .any(|c| a > c.start_arc_mm - c.taper_mm && a < c.end_arc_mm + c.taper_mm)
+    };
     for (pt, &a) in t.centerline_mm.iter().zip(&t.centerline_arc_mm) {
         if !collapsed(a) {
-            assert_eq!(p.lumen.data()[voxel(&p.lumen, *pt)], 1, "centerline at arc {a:.1} mm is not lumen");
+            assert_eq!(
+                p.lumen.data()[voxel(&p.lumen, *pt)],
+                1,
+                "centerline at arc {a:.1} mm is not lumen"
+            );
         }
     }
     for w in t.centerline_mm.windows(2) {
@@ -178,11 +203,20 @@ fn check_basics(p: &Phantom) {
     assert_eq!(t.segment_at(t.target_arc_mm), Some("cecum"));
     assert!((6..=10).contains(&t.polyps.len()));
     for q in &t.polyps {
-        assert_eq!(p.labels.data()[voxel(&p.labels, q.center_mm)], label::POLYP, "polyp at arc {:.0}", q.arc_mm);
+        assert_eq!(
+            p.labels.data()[voxel(&p.labels, q.center_mm)],
+            label::POLYP,
+            "polyp at arc {:.0}",
+            q.arc_mm
+        );
     }
     // The gaps in the gas are listed in order, each a collapse or a filled stretch.
     assert_eq!(t.gas_gaps.len(), t.collapsed.len() + t.fluid_filled.len());
-    assert!(t.gas_gaps.windows(2).all(|w| w[0].end_arc_mm < w[1].start_arc_mm));
+    assert!(
+        t.gas_gaps
+            .windows(2)
+            .all(|w| w[0].end_arc_mm < w[1].start_arc_mm)
+    );
     let back = Truth::from_json(&t.to_json()).expect("truth JSON");
     assert_eq!(back.collapsed.len(), t.collapsed.len());
     assert_eq!(back.position, t.position);
@@ -196,15 +230,44 @@ fn check_basics(p: &Phantom) {
 #[test]
 fn phantoms_without_the_new_options_are_unchanged() {
     let p = small(ColonOptions::default());
-    assert_eq!(ct_hash(&p), 0xd3e6_da06_4ad7_b82e, "default small CT changed");
-    assert_eq!(mask_hash(&p.lumen), 0xf400_d7aa_7e9e_7344, "default small lumen changed");
-    assert_eq!(mask_hash(&p.labels), 0xf427_62a3_d44d_456e, "default small labels changed");
-    let q = small(ColonOptions { tagged_fluid: true, collapsed: names(&["descending"]), seed: 3, ..ColonOptions::default() });
-    assert_eq!(ct_hash(&q), 0x69b0_ec73_d0a5_ca0e, "small CT with fluid and a collapse changed");
+    assert_eq!(
+        ct_hash(&p),
+        0xd3e6_da06_4ad7_b82e,
+        "default small CT changed"
+    );
+    assert_eq!(
+        mask_hash(&p.lumen),
+        0xf400_d7aa_7e9e_7344,
+        "default small lumen changed"
+    );
+    assert_eq!(
+        mask_hash(&p.labels),
+        0xf427_62a3_d44d_456e,
+        "default small labels changed"
+    );
+    let q = small(ColonOptions {
+        tagged_fluid: true,
+        collapsed: names(&["descending"]),
+        seed: 3,
+        ..ColonOptions::default()
+    });
+    assert_eq!(
+        ct_hash(&q),
+        0x69b0_ec73_d0a5_ca0e,
+        "small CT with fluid and a collapse changed"
+    );
     assert_eq!(p.truth.position, "HFS");
     assert_eq!(p.truth.gravity_lps, [0.0, 1.0, 0.0]);
-    assert!(p.truth.collapsed.is_empty() && p.truth.fluid_filled.is_empty() && p.truth.gas_gaps.is_empty());
-    assert!(p.truth.small_bowel_loops.is_empty() && p.truth.rectal_tube.is_none() && p.truth.body_floor_z_mm.is_none());
+    assert!(
+        p.truth.collapsed.is_empty()
+            && p.truth.fluid_filled.is_empty()
+            && p.truth.gas_gaps.is_empty()
+    );
+    assert!(
+        p.truth.small_bowel_loops.is_empty()
+            && p.truth.rectal_tube.is_none()
+            && p.truth.body_floor_z_mm.is_none()
+    );
 }
 
 // ---------------------------------------------------------------------------------------
@@ -212,14 +275,21 @@ fn phantoms_without_the_new_options_are_unchanged() {
 
 #[test]
 fn prone_fluid_lies_anterior_under_flat_levels() {
-    let p = small(ColonOptions { tagged_fluid: true, prone: true, ..ColonOptions::default() });
+    let p = small(ColonOptions {
+        tagged_fluid: true,
+        prone: true,
+        ..ColonOptions::default()
+    });
     check_basics(&p);
     let t = &p.truth;
     assert_eq!(t.position, "HFP");
     assert_eq!(t.gravity_lps, [0.0, -1.0, 0.0]);
     assert!(t.fluid_pools.len() >= 2, "{} pools", t.fluid_pools.len());
     let pool_names: Vec<&str> = t.fluid_pools.iter().map(|pl| pl.segment.as_str()).collect();
-    assert!(pool_names.contains(&"transverse") && pool_names.contains(&"sigmoid"), "pools in {pool_names:?}");
+    assert!(
+        pool_names.contains(&"transverse") && pool_names.contains(&"sigmoid"),
+        "pools in {pool_names:?}"
+    );
     for pl in &t.fluid_pools {
         assert_eq!(pl.gravity_lps, [0.0, -1.0, 0.0]);
     }
@@ -237,14 +307,29 @@ fn prone_fluid_lies_anterior_under_flat_levels() {
                     // On the anterior side (smaller y) of its pool's level.
                     let x = local(&p.labels, idx);
                     let a = arc_of(t, x);
-                    let ok = t.fluid_pools.iter().any(|pl| a >= pl.start_arc_mm - 10.0 && a <= pl.end_arc_mm + 10.0 && x[1] < pl.level_y_mm);
-                    assert!(ok, "fluid at {x:?} (arc {a:.0}) is not anterior of its pool's level");
+                    let ok = t.fluid_pools.iter().any(|pl| {
+                        a >= pl.start_arc_mm - 10.0
+                            && a <= pl.end_arc_mm + 10.0
+                            && x[1] < pl.level_y_mm
+                    });
+                    assert!(
+                        ok,
+                        "fluid at {x:?} (arc {a:.0}) is not anterior of its pool's level"
+                    );
                     // Gas never lies under it (anterior, towards the table).
-                    assert!(j == 0 || p.labels.get(i, j - 1, k) != label::LUMEN_AIR, "gas under fluid at {i} {j} {k}");
+                    assert!(
+                        j == 0 || p.labels.get(i, j - 1, k) != label::LUMEN_AIR,
+                        "gas under fluid at {i} {j} {k}"
+                    );
                     if j + 1 < ny && p.labels.get(i, j + 1, k) == label::LUMEN_AIR {
                         // Gas over fluid: the interface is one of the flat levels.
                         let y = (j as f64 + 0.5) * sy;
-                        assert!(t.fluid_pools.iter().any(|pl| (pl.level_y_mm - y).abs() <= 0.5 * sy + 1e-9), "level at y {y}");
+                        assert!(
+                            t.fluid_pools
+                                .iter()
+                                .any(|pl| (pl.level_y_mm - y).abs() <= 0.5 * sy + 1e-9),
+                            "level at y {y}"
+                        );
                         levels_seen += 1;
                     }
                 }
@@ -254,8 +339,16 @@ fn prone_fluid_lies_anterior_under_flat_levels() {
     assert!(fluid > 300, "{fluid} fluid voxels");
     assert!(levels_seen > 30, "{levels_seen} level voxels");
     // Supine, the same seed pools posteriorly: the pools are not where the prone ones are.
-    let s = small(ColonOptions { tagged_fluid: true, ..ColonOptions::default() });
-    assert!(s.truth.fluid_pools.iter().all(|pl| pl.gravity_lps == [0.0, 1.0, 0.0]));
+    let s = small(ColonOptions {
+        tagged_fluid: true,
+        ..ColonOptions::default()
+    });
+    assert!(
+        s.truth
+            .fluid_pools
+            .iter()
+            .all(|pl| pl.gravity_lps == [0.0, 1.0, 0.0])
+    );
     assert_ne!(s.ct.data(), p.ct.data());
 }
 
@@ -264,21 +357,43 @@ fn prone_fluid_lies_anterior_under_flat_levels() {
 
 #[test]
 fn collapses_split_the_gas_and_the_path_runs_through_them() {
-    for list in [&["sigmoid", "transverse"][..], &["sigmoid", "descending", "transverse"][..]] {
-        let p = small(ColonOptions { collapsed: names(list), ..ColonOptions::default() });
+    for list in [
+        &["sigmoid", "transverse"][..],
+        &["sigmoid", "descending", "transverse"][..],
+    ] {
+        let p = small(ColonOptions {
+            collapsed: names(list),
+            ..ColonOptions::default()
+        });
         check_basics(&p);
         let t = &p.truth;
         assert_eq!(t.collapsed.len(), list.len());
         let gas = components6(p.ct.dims(), |i| p.labels.data()[i] == label::LUMEN_AIR);
         let big: Vec<usize> = gas.iter().copied().filter(|&n| n >= 50).collect();
-        assert_eq!(big.len(), list.len() + 1, "{list:?}: gas in {} pieces ({gas:?})", big.len());
-        assert!(gas.iter().skip(big.len()).sum::<usize>() * 1000 < t.lumen_voxels, "crumbs of gas: {gas:?}");
+        assert_eq!(
+            big.len(),
+            list.len() + 1,
+            "{list:?}: gas in {} pieces ({gas:?})",
+            big.len()
+        );
+        assert!(
+            gas.iter().skip(big.len()).sum::<usize>() * 1000 < t.lumen_voxels,
+            "crumbs of gas: {gas:?}"
+        );
         for c in &t.collapsed {
             assert!(list.contains(&c.segment.as_str()));
-            assert_eq!(t.segment_at(0.5 * (c.start_arc_mm + c.end_arc_mm)), Some(c.segment.as_str()));
+            assert_eq!(
+                t.segment_at(0.5 * (c.start_arc_mm + c.end_arc_mm)),
+                Some(c.segment.as_str())
+            );
             let len = (c.end_arc_mm - c.start_arc_mm) / t.scale;
-            assert!((29.0..=31.0).contains(&len), "collapse of {len} mm (full size)");
-            assert!(t.gas_gaps.iter().any(|g| g.kind == "collapsed" && g.start_arc_mm == c.start_arc_mm && g.end_arc_mm == c.end_arc_mm));
+            assert!(
+                (29.0..=31.0).contains(&len),
+                "collapse of {len} mm (full size)"
+            );
+            assert!(t.gas_gaps.iter().any(|g| g.kind == "collapsed"
+                && g.start_arc_mm == c.start_arc_mm
+                && g.end_arc_mm == c.end_arc_mm));
             // The true path runs on through the cord: there, no lumen but tissue.
             let inside: Vec<&[f64; 3]> = t
                 .centerline_mm
@@ -303,17 +418,31 @@ fn collapses_split_the_gas_and_the_path_runs_through_them() {
 #[test]
 fn fluid_filled_stretches_hold_no_gas_and_the_lumen_goes_on() {
     let list = ["sigmoid", "transverse", "ascending"];
-    let p = small(ColonOptions { fluid_filled: names(&list), tagged_fluid: true, ..ColonOptions::default() });
+    let p = small(ColonOptions {
+        fluid_filled: names(&list),
+        tagged_fluid: true,
+        ..ColonOptions::default()
+    });
     check_basics(&p);
     let t = &p.truth;
     assert_eq!(t.fluid_filled.len(), 3);
     let sy = p.ct.spacing().iter().cloned().fold(0.0, f64::max);
     for f in &t.fluid_filled {
         let len = (f.end_arc_mm - f.start_arc_mm) / t.scale;
-        assert!((40.0..=60.0).contains(&len), "filled over {len} mm (full size)");
+        assert!(
+            (40.0..=60.0).contains(&len),
+            "filled over {len} mm (full size)"
+        );
         assert!((400.0..=700.0).contains(&f.hu));
-        assert_eq!(t.segment_at(0.5 * (f.start_arc_mm + f.end_arc_mm)), Some(f.segment.as_str()));
-        assert!(t.gas_gaps.iter().any(|g| g.kind == "fluid_filled" && g.segment == f.segment));
+        assert_eq!(
+            t.segment_at(0.5 * (f.start_arc_mm + f.end_arc_mm)),
+            Some(f.segment.as_str())
+        );
+        assert!(
+            t.gas_gaps
+                .iter()
+                .any(|g| g.kind == "fluid_filled" && g.segment == f.segment)
+        );
     }
     // Every lumen voxel held by a filled stretch (a voxel in from its ends) is fluid, and
     // the CT there is bright.
@@ -323,15 +452,28 @@ fn fluid_filled_stretches_hold_no_gas_and_the_lumen_goes_on() {
             continue;
         }
         let a = arc_of(t, local(&p.lumen, idx));
-        if t.fluid_filled.iter().any(|f| a > f.start_arc_mm + sy && a < f.end_arc_mm - sy) {
+        if t.fluid_filled
+            .iter()
+            .any(|f| a > f.start_arc_mm + sy && a < f.end_arc_mm - sy)
+        {
             held += 1;
-            assert_eq!(p.labels.data()[idx], label::LUMEN_FLUID, "gas in a filled stretch at arc {a:.0}");
+            assert_eq!(
+                p.labels.data()[idx],
+                label::LUMEN_FLUID,
+                "gas in a filled stretch at arc {a:.0}"
+            );
         }
     }
     assert!(held > 1000, "{held} voxels in the filled stretches");
     for (x, a) in t.centerline_mm.iter().zip(&t.centerline_arc_mm) {
-        if t.fluid_filled.iter().any(|f| *a > f.start_arc_mm + sy && *a < f.end_arc_mm - sy) {
-            assert!(p.ct.data()[voxel(&p.lumen, *x)] > 300, "dark centerline at arc {a:.0}");
+        if t.fluid_filled
+            .iter()
+            .any(|f| *a > f.start_arc_mm + sy && *a < f.end_arc_mm - sy)
+        {
+            assert!(
+                p.ct.data()[voxel(&p.lumen, *x)] > 300,
+                "dark centerline at arc {a:.0}"
+            );
         }
     }
     // The gas is split at each stretch; the lumen goes on through it: the true centerline
@@ -346,7 +488,10 @@ fn fluid_filled_stretches_hold_no_gas_and_the_lumen_goes_on() {
     let piece = flood6(p.ct.dims(), [source], |i| p.lumen.data()[i] == 1);
     assert_eq!(piece.iter().filter(|&&v| v).count(), lumen[0]);
     for (x, a) in t.centerline_mm.iter().zip(&t.centerline_arc_mm) {
-        assert!(piece[voxel(&p.lumen, *x)], "centerline at arc {a:.0} cut off from the source");
+        assert!(
+            piece[voxel(&p.lumen, *x)],
+            "centerline at arc {a:.0} cut off from the source"
+        );
     }
 }
 
@@ -359,33 +504,63 @@ fn check_small_bowel(p: &Phantom) {
     let dims = p.ct.dims();
     let lab = p.labels.data();
     let ct = p.ct.data();
-    let sb: Vec<usize> = (0..lab.len()).filter(|&i| lab[i] == label::SMALL_BOWEL_FLUID).collect();
+    let sb: Vec<usize> = (0..lab.len())
+        .filter(|&i| lab[i] == label::SMALL_BOWEL_FLUID)
+        .collect();
     assert!(sb.len() > 3000, "{} small-bowel voxels", sb.len());
-    assert!(sb.iter().all(|&i| p.lumen.data()[i] == 0), "small bowel in the truth lumen");
+    assert!(
+        sb.iter().all(|&i| p.lumen.data()[i] == 0),
+        "small bowel in the truth lumen"
+    );
     // Loops: ≥ 300 mm (full size) in all, radius 8–12 mm, content 300–600 HU.
     assert!(t.small_bowel_loops.len() >= 2);
     let total: f64 = t.small_bowel_loops.iter().map(|l| l.length_mm).sum();
     assert!(total >= 300.0 * t.scale, "small bowel {total} mm long");
     for l in &t.small_bowel_loops {
-        assert!((8.0 * t.scale - 1e-9..=12.0 * t.scale + 1e-9).contains(&l.radius_mm), "loop radius {}", l.radius_mm);
+        assert!(
+            (8.0 * t.scale - 1e-9..=12.0 * t.scale + 1e-9).contains(&l.radius_mm),
+            "loop radius {}",
+            l.radius_mm
+        );
         assert!((300.0..=600.0).contains(&l.hu));
     }
     assert!(t.small_bowel_loops.iter().any(|l| l.enters_cecum));
     assert!(t.small_bowel_loops.iter().any(|l| l.touches_colon));
-    assert_eq!(t.distractors.iter().filter(|d| d.kind == "opacified_small_bowel").count(), t.small_bowel_loops.len());
+    assert_eq!(
+        t.distractors
+            .iter()
+            .filter(|d| d.kind == "opacified_small_bowel")
+            .count(),
+        t.small_bowel_loops.len()
+    );
     // The caecal pool: a fluid voxel near the valve, in a pool of the caecum.
     let valve = t.ileocecal_valve_mm.expect("valve");
-    assert!(t.fluid_pools.iter().any(|pl| t.segment_at(0.5 * (pl.start_arc_mm + pl.end_arc_mm)).is_some() && pl.end_arc_mm >= arc_of(t, valve)));
+    assert!(t.fluid_pools.iter().any(|pl| {
+        t.segment_at(0.5 * (pl.start_arc_mm + pl.end_arc_mm))
+            .is_some()
+            && pl.end_arc_mm >= arc_of(t, valve)
+    }));
     let pool_voxel = (0..lab.len())
         .filter(|&i| lab[i] == label::LUMEN_FLUID)
-        .min_by(|&a, &b| dist(local(&p.labels, a), valve).total_cmp(&dist(local(&p.labels, b), valve)))
+        .min_by(|&a, &b| {
+            dist(local(&p.labels, a), valve).total_cmp(&dist(local(&p.labels, b), valve))
+        })
         .expect("caecal fluid");
-    assert!(dist(local(&p.labels, pool_voxel), valve) < 3.0 * p.ct.spacing()[0], "no caecal fluid at the valve");
+    assert!(
+        dist(local(&p.labels, pool_voxel), valve) < 3.0 * p.ct.spacing()[0],
+        "no caecal fluid at the valve"
+    );
     // One bright region: the caecal pool and every loop.
     let bright = flood6(dims, [pool_voxel], |i| ct[i] >= 200);
     let sb_bright: Vec<usize> = sb.iter().copied().filter(|&i| ct[i] >= 200).collect();
     let joined = sb_bright.iter().filter(|&&i| bright[i]).count();
-    assert_eq!(joined, sb_bright.len(), "{} of {} bright small-bowel voxels apart from the caecal pool", sb_bright.len() - joined, sb_bright.len());
+    assert_eq!(
+        joined,
+        sb_bright.len(),
+        "{} of {} bright small-bowel voxels apart from the caecal pool",
+        sb_bright.len() - joined,
+        sb_bright.len()
+    );
     // No gas right above the contrast (against gravity): no level in the small bowel.
     let up: i64 = if t.gravity_lps[1] > 0.0 { -1 } else { 1 };
     let nx = dims[0] as i64;
@@ -395,16 +570,32 @@ fn check_small_bowel(p: &Phantom) {
             continue;
         }
         let above = (i as i64 + up * nx) as usize;
-        assert!(ct[above] >= -500, "gas above small-bowel contrast at {:?}", local(&p.labels, i));
+        assert!(
+            ct[above] >= -500,
+            "gas above small-bowel contrast at {:?}",
+            local(&p.labels, i)
+        );
     }
     // The loops keep clear of spine, lungs and skin, and meet the colon's lumen only at the
     // valve.
-    let r_valve = 3.0 * t.small_bowel_loops.iter().map(|l| l.radius_mm).fold(0.0, f64::max);
+    let r_valve = 3.0
+        * t.small_bowel_loops
+            .iter()
+            .map(|l| l.radius_mm)
+            .fold(0.0, f64::max);
     for &i in &sb {
         for m in neighbours6(dims, i) {
-            assert!(![label::BONE, label::LUNG, label::OUTSIDE_AIR].contains(&lab[m]), "small bowel touches label {}", lab[m]);
+            assert!(
+                ![label::BONE, label::LUNG, label::OUTSIDE_AIR].contains(&lab[m]),
+                "small bowel touches label {}",
+                lab[m]
+            );
             if p.lumen.data()[m] == 1 {
-                assert!(dist(local(&p.labels, i), valve) < r_valve, "small bowel opens into the colon at {:?}", local(&p.labels, i));
+                assert!(
+                    dist(local(&p.labels, i), valve) < r_valve,
+                    "small bowel opens into the colon at {:?}",
+                    local(&p.labels, i)
+                );
             }
         }
     }
@@ -413,14 +604,27 @@ fn check_small_bowel(p: &Phantom) {
 #[test]
 fn opacified_small_bowel_is_one_bright_region_with_the_caecal_pool() {
     for prone in [false, true] {
-        let p = small(ColonOptions { opacified_small_bowel: true, prone, ..ColonOptions::default() });
+        let p = small(ColonOptions {
+            opacified_small_bowel: true,
+            prone,
+            ..ColonOptions::default()
+        });
         check_small_bowel(&p);
-        assert_eq!(p.truth.fluid_pools.len(), 1, "only the caecal pool without tagged fluid");
+        assert_eq!(
+            p.truth.fluid_pools.len(),
+            1,
+            "only the caecal pool without tagged fluid"
+        );
     }
     // Without it: no small-bowel contrast, and the bright region at the caecum (none) is not
     // joined to anything.
     let q = small(ColonOptions::default());
-    assert!(q.labels.data().iter().all(|&l| l != label::SMALL_BOWEL_FLUID));
+    assert!(
+        q.labels
+            .data()
+            .iter()
+            .all(|&l| l != label::SMALL_BOWEL_FLUID)
+    );
     assert!(q.truth.ileocecal_valve_mm.is_none());
 }
 
@@ -429,7 +633,10 @@ fn opacified_small_bowel_is_one_bright_region_with_the_caecal_pool() {
 
 #[test]
 fn rectal_tube_joins_colon_gas_to_the_air_outside() {
-    let p = small(ColonOptions { rectal_tube: true, ..ColonOptions::default() });
+    let p = small(ColonOptions {
+        rectal_tube: true,
+        ..ColonOptions::default()
+    });
     check_basics(&p);
     let t = &p.truth;
     let dims = p.ct.dims();
@@ -438,15 +645,30 @@ fn rectal_tube_joins_colon_gas_to_the_air_outside() {
     let floor = t.body_floor_z_mm.expect("a perineum");
     assert!(tube.exit_mm[2] < floor && tube.tip_mm[2] > floor + 10.0 * t.scale);
     assert_eq!(t.segment_at(arc_of(t, tube.tip_mm)), Some("rectum"));
-    assert!((2.5 * t.scale..=3.0f64.max(1.8)).contains(&tube.inner_radius_mm), "inner radius {}", tube.inner_radius_mm);
-    let air: Vec<usize> = (0..lab.len()).filter(|&i| lab[i] == label::RECTAL_TUBE).collect();
+    assert!(
+        (2.5 * t.scale..=3.0f64.max(1.8)).contains(&tube.inner_radius_mm),
+        "inner radius {}",
+        tube.inner_radius_mm
+    );
+    let air: Vec<usize> = (0..lab.len())
+        .filter(|&i| lab[i] == label::RECTAL_TUBE)
+        .collect();
     assert!(air.len() > 20, "{} voxels of catheter air", air.len());
-    assert!(air.iter().all(|&i| p.lumen.data()[i] == 0), "catheter air in the truth lumen");
+    assert!(
+        air.iter().all(|&i| p.lumen.data()[i] == 0),
+        "catheter air in the truth lumen"
+    );
     // From the volume's border through air (CT < −500) into the tube and the colon's gas.
     let outside = flood6(dims, border(dims), |i| ct[i] < -500);
-    let colon_gas: Vec<usize> = (0..lab.len()).filter(|&i| lab[i] == label::LUMEN_AIR).collect();
+    let colon_gas: Vec<usize> = (0..lab.len())
+        .filter(|&i| lab[i] == label::LUMEN_AIR)
+        .collect();
     let reached = colon_gas.iter().filter(|&&i| outside[i]).count();
-    assert!(reached * 100 >= colon_gas.len() * 99, "outside air reaches {reached} of {} colon gas voxels", colon_gas.len());
+    assert!(
+        reached * 100 >= colon_gas.len() * 99,
+        "outside air reaches {reached} of {} colon gas voxels",
+        colon_gas.len()
+    );
     assert!(air.iter().filter(|&&i| ct[i] < -500).all(|&i| outside[i]));
     // Slice by slice inside the body the catheter's air is enclosed by tissue (2D), so only
     // in 3D does it join the outside air; below the perineum there is only outside air.
@@ -456,20 +678,36 @@ fn rectal_tube_joins_colon_gas_to_the_air_outside() {
         let z = k as f64 * sz;
         let slice: Vec<usize> = (0..nx * ny).map(|i| i + k * nx * ny).collect();
         if z < floor - sz {
-            assert!(slice.iter().all(|&i| lab[i] == label::OUTSIDE_AIR), "body below the perineum at slice {k}");
+            assert!(
+                slice.iter().all(|&i| lab[i] == label::OUTSIDE_AIR),
+                "body below the perineum at slice {k}"
+            );
             continue;
         }
-        let tube_here: Vec<usize> = slice.iter().copied().filter(|&i| lab[i] == label::RECTAL_TUBE && ct[i] < -500).collect();
+        let tube_here: Vec<usize> = slice
+            .iter()
+            .copied()
+            .filter(|&i| lab[i] == label::RECTAL_TUBE && ct[i] < -500)
+            .collect();
         if z < floor + 2.0 * sz || tube_here.is_empty() {
             continue;
         }
         let from_edge = flood6([nx, ny, 1], rim2d(nx, ny), |i| ct[i + k * nx * ny] < -500);
-        assert!(tube_here.iter().all(|&i| !from_edge[i - k * nx * ny]), "catheter air open to the outside within slice {k}");
+        assert!(
+            tube_here.iter().all(|&i| !from_edge[i - k * nx * ny]),
+            "catheter air open to the outside within slice {k}"
+        );
     }
     // Without the option: no catheter, no perineum, colon gas sealed.
     let q = small(ColonOptions::default());
     let outside = flood6(dims, border(dims), |i| q.ct.data()[i] < -500);
-    assert!(q.labels.data().iter().zip(&outside).all(|(&l, &o)| !(o && l == label::LUMEN_AIR)));
+    assert!(
+        q.labels
+            .data()
+            .iter()
+            .zip(&outside)
+            .all(|(&l, &o)| !(o && l == label::LUMEN_AIR))
+    );
 }
 
 // ---------------------------------------------------------------------------------------
@@ -480,23 +718,54 @@ fn rectal_tube_joins_colon_gas_to_the_air_outside() {
 #[test]
 fn tagged_stool_lies_on_the_wall_as_bright_lumen() {
     for small_size in [true, false] {
-        let p = phantom::colon(&ColonOptions { small: small_size, tagged_fluid: true, tagged_stool: true, ..Default::default() }).unwrap();
+        let p = phantom::colon(&ColonOptions {
+            small: small_size,
+            tagged_fluid: true,
+            tagged_stool: true,
+            ..Default::default()
+        })
+        .unwrap();
         check_basics(&p);
         let t = &p.truth;
         assert_eq!(t.stool.len(), 10);
         let dims = p.labels.dims();
         for s in &t.stool {
             let v = voxel(&p.labels, s.center_mm);
-            assert_eq!(p.labels.data()[v], label::STOOL, "stool in the {} at its centre", s.segment);
+            assert_eq!(
+                p.labels.data()[v],
+                label::STOOL,
+                "stool in the {} at its centre",
+                s.segment
+            );
             // The lump's voxels: bright (or, mottled, some of them air), and some touch the wall.
             let lump = flood6(dims, [v], |i| p.labels.data()[i] == label::STOOL);
             let voxels: Vec<usize> = (0..lump.len()).filter(|&i| lump[i]).collect();
             let bright = voxels.iter().filter(|&&i| p.ct.data()[i] >= 300).count();
             let air = voxels.iter().filter(|&&i| p.ct.data()[i] < -500).count();
-            assert!(bright * 3 >= voxels.len(), "stool in the {}: {bright} of {} voxels bright", s.segment, voxels.len());
-            assert!(!s.mottled || small_size || air > 0, "stool in the {}: {air} voxels of air, mottled {}", s.segment, s.mottled);
-            assert!(s.mottled || air == 0, "stool in the {}: {air} voxels of air, not mottled", s.segment);
-            assert!(voxels.iter().any(|&i| neighbours6(dims, i).any(|n| p.labels.data()[n] == label::WALL)), "stool in the {} does not touch the wall", s.segment);
+            assert!(
+                bright * 3 >= voxels.len(),
+                "stool in the {}: {bright} of {} voxels bright",
+                s.segment,
+                voxels.len()
+            );
+            assert!(
+                !s.mottled || small_size || air > 0,
+                "stool in the {}: {air} voxels of air, mottled {}",
+                s.segment,
+                s.mottled
+            );
+            assert!(
+                s.mottled || air == 0,
+                "stool in the {}: {air} voxels of air, not mottled",
+                s.segment
+            );
+            assert!(
+                voxels
+                    .iter()
+                    .any(|&i| neighbours6(dims, i).any(|n| p.labels.data()[n] == label::WALL)),
+                "stool in the {} does not touch the wall",
+                s.segment
+            );
         }
         assert_eq!(Truth::from_json(&t.to_json()).unwrap().stool, t.stool);
     }
@@ -504,16 +773,36 @@ fn tagged_stool_lies_on_the_wall_as_bright_lumen() {
 
 #[test]
 fn quantised_ct_takes_multiples_of_the_step() {
-    let p = small(ColonOptions { quantize_hu: Some(8.0), tagged_fluid: true, ..ColonOptions::default() });
-    assert!(p.ct.data().iter().all(|&v| v % 8 == 0), "a value off the grid");
+    let p = small(ColonOptions {
+        quantize_hu: Some(8.0),
+        tagged_fluid: true,
+        ..ColonOptions::default()
+    });
+    assert!(
+        p.ct.data().iter().all(|&v| v % 8 == 0),
+        "a value off the grid"
+    );
     assert_eq!(p.truth.quantize_hu, Some(8.0));
-    let plain = small(ColonOptions { tagged_fluid: true, ..ColonOptions::default() });
+    let plain = small(ColonOptions {
+        tagged_fluid: true,
+        ..ColonOptions::default()
+    });
     assert!(plain.ct.data().iter().any(|&v| v % 8 != 0));
     // Same anatomy: each value is the plain one's, rounded (±½ step and the rounding of the
     // unrounded noise).
-    assert!(p.ct.data().iter().zip(plain.ct.data()).all(|(&a, &b)| (a as i32 - b as i32).abs() <= 5));
+    assert!(
+        p.ct.data()
+            .iter()
+            .zip(plain.ct.data())
+            .all(|(&a, &b)| (a as i32 - b as i32).abs() <= 5)
+    );
     for bad in [0.0, -4.0, f64::NAN, f64::INFINITY] {
-        let e = phantom::colon(&ColonOptions { small: true, quantize_hu: Some(bad), ..ColonOptions::default() }).unwrap_err();
+        let e = phantom::colon(&ColonOptions {
+            small: true,
+            quantize_hu: Some(bad),
+            ..ColonOptions::default()
+        })
+        .unwrap_err();
         assert!(e.to_string().contains("quantisation step"), "{e}");
     }
 }
@@ -565,38 +854,93 @@ fn every_option_is_deterministic_whatever_the_threads() {
         ..ColonOptions::default()
     };
     let a = phantom::colon(&opts).expect("colon");
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("pool");
     let b = pool.install(|| phantom::colon(&opts)).expect("colon");
-    assert!(a.ct.data() == b.ct.data() && a.labels.data() == b.labels.data() && a.lumen.data() == b.lumen.data());
+    assert!(
+        a.ct.data() == b.ct.data()
+            && a.labels.data() == b.labels.data()
+            && a.lumen.data() == b.lumen.data()
+    );
     assert_eq!(a.truth, b.truth);
     let c = phantom::colon(&ColonOptions { seed: 5, ..opts }).expect("colon");
-    assert_ne!(a.truth.small_bowel_loops, c.truth.small_bowel_loops, "the loops do not depend on the seed");
+    assert_ne!(
+        a.truth.small_bowel_loops, c.truth.small_bowel_loops,
+        "the loops do not depend on the seed"
+    );
 }
 
 #[test]
 fn older_truth_files_still_read() {
-    let p = small(ColonOptions { collapsed: names(&["descending"]), ..ColonOptions::default() });
+    let p = small(ColonOptions {
+        collapsed: names(&["descending"]),
+        ..ColonOptions::default()
+    });
     let mut v: serde_json::Value = serde_json::from_str(&p.truth.to_json()).expect("json");
     let obj = v.as_object_mut().expect("object");
     // Before: one collapse or null, no position, gravity, gaps, loops or tube.
     let one = obj["collapsed"][0].clone();
-    for key in ["position", "gravity_lps", "quantize_hu", "fluid_filled", "gas_gaps", "small_bowel_loops", "ileocecal_valve_mm", "rectal_tube", "body_floor_z_mm"] {
+    for key in [
+        "position",
+        "gravity_lps",
+        "quantize_hu",
+        "fluid_filled",
+        "gas_gaps",
+        "small_bowel_loops",
+        "ileocecal_valve_mm",
+        "rectal_tube",
+        "body_floor_z_mm",
+    ] {
         obj.remove(key);
     }
     obj.insert("collapsed".into(), one);
     let back = Truth::from_json(&v.to_string()).expect("older truth");
     assert_eq!(back.collapsed.len(), 1);
-    assert_eq!((back.position.as_str(), back.gravity_lps), ("HFS", [0.0, 1.0, 0.0]));
-    v.as_object_mut().expect("object").insert("collapsed".into(), serde_json::Value::Null);
-    assert!(Truth::from_json(&v.to_string()).expect("older truth").collapsed.is_empty());
+    assert_eq!(
+        (back.position.as_str(), back.gravity_lps),
+        ("HFS", [0.0, 1.0, 0.0])
+    );
+    v.as_object_mut()
+        .expect("object")
+        .insert("collapsed".into(), serde_json::Value::Null);
+    assert!(
+        Truth::from_json(&v.to_string())
+            .expect("older truth")
+            .collapsed
+            .is_empty()
+    );
 }
 
 #[test]
 fn unknown_or_repeated_segments_are_refused() {
-    let e = |o: ColonOptions| phantom::colon(&ColonOptions { small: true, ..o }).unwrap_err().to_string();
-    assert!(e(ColonOptions { collapsed: names(&["cecum"]), ..ColonOptions::default() }).contains("choose from sigmoid, descending, transverse"));
-    assert!(e(ColonOptions { collapsed: names(&["sigmoid", "sigmoid"]), ..ColonOptions::default() }).contains("named twice"));
-    assert!(e(ColonOptions { fluid_filled: names(&["appendix"]), ..ColonOptions::default() }).contains("fluid-filled segment 'appendix'"));
+    let e = |o: ColonOptions| {
+        phantom::colon(&ColonOptions { small: true, ..o })
+            .unwrap_err()
+            .to_string()
+    };
+    assert!(
+        e(ColonOptions {
+            collapsed: names(&["cecum"]),
+            ..ColonOptions::default()
+        })
+        .contains("choose from sigmoid, descending, transverse")
+    );
+    assert!(
+        e(ColonOptions {
+            collapsed: names(&["sigmoid", "sigmoid"]),
+            ..ColonOptions::default()
+        })
+        .contains("named twice")
+    );
+    assert!(
+        e(ColonOptions {
+            fluid_filled: names(&["appendix"]),
+            ..ColonOptions::default()
+        })
+        .contains("fluid-filled segment 'appendix'")
+    );
 }
 
 // ---------------------------------------------------------------------------------------
@@ -606,13 +950,27 @@ fn unknown_or_repeated_segments_are_refused() {
 fn dicom_of_a_prone_phantom_says_hfp() {
     use dicom_dictionary_std::tags;
     use voyage_core::io::dicom_write::{SeriesWriteOptions, write_series_with};
-    let p = small(ColonOptions { prone: true, tagged_fluid: true, ..ColonOptions::default() });
-    let dir: PathBuf = std::env::temp_dir().join(format!("voyage-phantom-prone-{}", std::process::id()));
+    let p = small(ColonOptions {
+        prone: true,
+        tagged_fluid: true,
+        ..ColonOptions::default()
+    });
+    let dir: PathBuf =
+        std::env::temp_dir().join(format!("voyage-phantom-prone-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let opts = SeriesWriteOptions { patient_position: Some(p.truth.position.clone()), ..Default::default() };
+    let opts = SeriesWriteOptions {
+        patient_position: Some(p.truth.position.clone()),
+        ..Default::default()
+    };
     write_series_with(&dir, &p.ct, &opts).expect("write");
     let obj = dicom_object::open_file(dir.join("slice0010.dcm")).expect("read back");
-    let position = obj.element(tags::PATIENT_POSITION).expect("PatientPosition").to_str().expect("text").trim().to_string();
+    let position = obj
+        .element(tags::PATIENT_POSITION)
+        .expect("PatientPosition")
+        .to_str()
+        .expect("text")
+        .trim()
+        .to_string();
     assert_eq!(position, "HFP");
     // The default options leave the element out.
     write_series_with(&dir, &p.ct, &SeriesWriteOptions::default()).expect("write");

@@ -3,7 +3,7 @@
 
 use glam::{DVec3, Vec3};
 use voyage_core::phantom::{self, ColonOptions, Phantom};
-use voyage_core::prep::{prepare, PrepOptions, Study};
+use voyage_core::prep::{PrepOptions, Study, prepare};
 
 fn dice(a: &[u8], b: &[u8]) -> f64 {
     let (mut both, mut na, mut nb) = (0usize, 0usize, 0usize);
@@ -19,7 +19,14 @@ fn dice(a: &[u8], b: &[u8]) -> f64 {
 /// Mean over our centerline points of the distance to the true polyline (points ≤ 1 mm apart).
 fn mean_distance_to_truth(ours: &[[f64; 3]], truth: &[[f64; 3]]) -> f64 {
     let t: Vec<DVec3> = truth.iter().map(|p| DVec3::from_array(*p)).collect();
-    ours.iter().map(|p| t.iter().map(|q| q.distance(DVec3::from_array(*p))).fold(f64::INFINITY, f64::min)).sum::<f64>() / ours.len() as f64
+    ours.iter()
+        .map(|p| {
+            t.iter()
+                .map(|q| q.distance(DVec3::from_array(*p)))
+                .fold(f64::INFINITY, f64::min)
+        })
+        .sum::<f64>()
+        / ours.len() as f64
 }
 
 fn check(p: &Phantom, s: &Study, what: &str) {
@@ -28,15 +35,32 @@ fn check(p: &Phantom, s: &Study, what: &str) {
     let cl = &s.centerline;
     // Inside the lumen everywhere.
     for q in &cl.points_mm {
-        let ijk = s.ct.geometry().local_to_index(DVec3::from_array(*q)).round();
-        assert_eq!(s.segmentation.lumen.get(ijk.x as usize, ijk.y as usize, ijk.z as usize), 1, "{what}: centerline point {q:?} outside the lumen");
+        let ijk =
+            s.ct.geometry()
+                .local_to_index(DVec3::from_array(*q))
+                .round();
+        assert_eq!(
+            s.segmentation
+                .lumen
+                .get(ijk.x as usize, ijk.y as usize, ijk.z as usize),
+            1,
+            "{what}: centerline point {q:?} outside the lumen"
+        );
     }
     // Near the true centerline: the ends are compared from the truth's side (ours may run
     // further into a blind end than the truth's inset source and target).
     let mean = mean_distance_to_truth(&p.truth.centerline_mm, &cl.points_mm);
-    assert!(mean <= 2.0, "{what}: mean distance to the true centerline {mean:.2} mm");
+    assert!(
+        mean <= 2.0,
+        "{what}: mean distance to the true centerline {mean:.2} mm"
+    );
     let rel = (cl.length_mm - p.truth.centerline_length_mm) / p.truth.centerline_length_mm;
-    assert!(rel.abs() < 0.1, "{what}: length {:.0} vs {:.0} mm", cl.length_mm, p.truth.centerline_length_mm);
+    assert!(
+        rel.abs() < 0.1,
+        "{what}: length {:.0} vs {:.0} mm",
+        cl.length_mm,
+        p.truth.centerline_length_mm
+    );
     // Every polyp is on the surface: vertices within 1 mm of its sphere, on the lumen side.
     let mesh = &s.surface.mesh;
     for polyp in &p.truth.polyps {
@@ -51,25 +75,50 @@ fn check(p: &Phantom, s: &Study, what: &str) {
                 ((v - c).length() - r).abs() <= 1.0 && (v - c).dot(into) > 0.0
             })
             .count();
-        assert!(near >= 3, "{what}: polyp of {} mm in the {} has {near} vertices within 1 mm of its surface", polyp.diameter_mm, polyp.segment);
+        assert!(
+            near >= 3,
+            "{what}: polyp of {} mm in the {} has {near} vertices within 1 mm of its surface",
+            polyp.diameter_mm,
+            polyp.segment
+        );
     }
     // Cells: a partition of the lumen and of the triangles.
     let cells = &s.cells;
-    assert_eq!(cells.cells.iter().map(|c| c.voxels).sum::<usize>(), s.segmentation.lumen_voxels, "{what}: cells vs lumen");
-    assert_eq!(cells.cells.iter().map(|c| c.triangles.len()).sum::<usize>(), mesh.triangles.len());
+    assert_eq!(
+        cells.cells.iter().map(|c| c.voxels).sum::<usize>(),
+        s.segmentation.lumen_voxels,
+        "{what}: cells vs lumen"
+    );
+    assert_eq!(
+        cells.cells.iter().map(|c| c.triangles.len()).sum::<usize>(),
+        mesh.triangles.len()
+    );
     assert!(cells.cells.len() > 5, "{what}: {} cells", cells.cells.len());
 }
 
 #[test]
 fn small_colon_with_distractors() {
-    let p = phantom::colon(&ColonOptions { small: true, seed: 2, ..Default::default() }).unwrap();
+    let p = phantom::colon(&ColonOptions {
+        small: true,
+        seed: 2,
+        ..Default::default()
+    })
+    .unwrap();
     let s = prepare(p.ct.clone(), &PrepOptions::default(), |_| {}).unwrap();
     check(&p, &s, "small colon");
     // The source is in the rectum, the target in the cecum.
     let src = DVec3::from_array(p.truth.source_mm);
     let dst = DVec3::from_array(p.truth.target_mm);
-    assert!(s.source_mm().distance(src) < 30.0, "source {} vs truth {src}", s.source_mm());
-    assert!(s.target_mm().distance(dst) < 30.0, "target {} vs truth {dst}", s.target_mm());
+    assert!(
+        s.source_mm().distance(src) < 30.0,
+        "source {} vs truth {src}",
+        s.source_mm()
+    );
+    assert!(
+        s.target_mm().distance(dst) < 30.0,
+        "target {} vs truth {dst}",
+        s.target_mm()
+    );
 }
 
 #[test]
@@ -88,7 +137,12 @@ fn the_papers_pipe() {
 
 #[test]
 fn mask_input_gives_the_same_colon() {
-    let p = phantom::colon(&ColonOptions { small: true, seed: 4, ..Default::default() }).unwrap();
+    let p = phantom::colon(&ColonOptions {
+        small: true,
+        seed: 4,
+        ..Default::default()
+    })
+    .unwrap();
     let mask = p.lumen.map(|m| m as i16);
     let s = prepare(mask, &PrepOptions::default(), |_| {}).unwrap();
     assert!(s.segmentation.from_mask);
@@ -99,32 +153,67 @@ fn mask_input_gives_the_same_colon() {
 
 #[test]
 fn tagged_fluid_belongs_to_the_lumen() {
-    let p = phantom::colon(&ColonOptions { small: true, seed: 5, tagged_fluid: true, ..Default::default() }).unwrap();
+    let p = phantom::colon(&ColonOptions {
+        small: true,
+        seed: 5,
+        tagged_fluid: true,
+        ..Default::default()
+    })
+    .unwrap();
     let s = prepare(p.ct.clone(), &PrepOptions::default(), |_| {}).unwrap();
     check(&p, &s, "small colon with tagged fluid");
     // Nearly every voxel of true fluid is lumen (without the fluid step: none of them). The
     // ones missed lie on the fluid's edge against the wall, where the noise-free HU is near
     // the 200 HU threshold and the noise decides.
-    let fluid: Vec<usize> = (0..p.labels.data().len()).filter(|&i| p.labels.data()[i] == phantom::label::LUMEN_FLUID).collect();
-    assert!(fluid.len() > 1000, "the phantom has {} fluid voxels", fluid.len());
-    let found = fluid.iter().filter(|&&i| s.segmentation.lumen.data()[i] != 0).count();
-    assert!(found as f64 >= 0.9 * fluid.len() as f64, "{found} of {} fluid voxels in the lumen", fluid.len());
+    let fluid: Vec<usize> = (0..p.labels.data().len())
+        .filter(|&i| p.labels.data()[i] == phantom::label::LUMEN_FLUID)
+        .collect();
+    assert!(
+        fluid.len() > 1000,
+        "the phantom has {} fluid voxels",
+        fluid.len()
+    );
+    let found = fluid
+        .iter()
+        .filter(|&&i| s.segmentation.lumen.data()[i] != 0)
+        .count();
+    assert!(
+        found as f64 >= 0.9 * fluid.len() as f64,
+        "{found} of {} fluid voxels in the lumen",
+        fluid.len()
+    );
 }
 
 /// Every stage is deterministic: one thread or two, the same study bit for bit.
 #[test]
 fn the_same_study_whatever_the_threads() {
-    let p = phantom::colon(&ColonOptions { small: true, seed: 9, ..Default::default() }).unwrap();
+    let p = phantom::colon(&ColonOptions {
+        small: true,
+        seed: 9,
+        ..Default::default()
+    })
+    .unwrap();
     let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
         pool.install(|| prepare(p.ct.clone(), &PrepOptions::default(), |_| {}).unwrap())
     };
     let (a, b) = (run(1), run(2));
     assert_eq!(a.segmentation.lumen.data(), b.segmentation.lumen.data());
-    let same = |x: &[f32], y: &[f32]| x.len() == y.len() && x.iter().zip(y).all(|(x, y)| x.to_bits() == y.to_bits());
+    let same = |x: &[f32], y: &[f32]| {
+        x.len() == y.len() && x.iter().zip(y).all(|(x, y)| x.to_bits() == y.to_bits())
+    };
     assert!(same(a.ds.values(), b.ds.values()), "Ds differs");
-    assert!(same(a.dt_target.values(), b.dt_target.values()), "Dt to the target differs");
-    assert!(same(a.dt_source.values(), b.dt_source.values()), "Dt to the source differs");
+    assert!(
+        same(a.dt_target.values(), b.dt_target.values()),
+        "Dt to the target differs"
+    );
+    assert!(
+        same(a.dt_source.values(), b.dt_source.values()),
+        "Dt to the source differs"
+    );
     assert_eq!(a.centerline.points_mm, b.centerline.points_mm);
     assert_eq!(a.surface.mesh.triangles, b.surface.mesh.triangles);
     assert_eq!(a.surface.mesh.positions, b.surface.mesh.positions);
@@ -135,18 +224,37 @@ fn the_same_study_whatever_the_threads() {
 /// the true centerline; one voxel as both ends, and a mask with no lumen, are clear errors.
 #[test]
 fn given_endpoints_and_their_errors() {
-    let p = phantom::colon(&ColonOptions { small: true, seed: 2, ..Default::default() }).unwrap();
+    let p = phantom::colon(&ColonOptions {
+        small: true,
+        seed: 2,
+        ..Default::default()
+    })
+    .unwrap();
     let mut opts = PrepOptions::default();
     opts.endpoints.source_mm = Some(DVec3::from_array(p.truth.target_mm));
     opts.endpoints.target_mm = Some(DVec3::from_array(p.truth.source_mm));
     let s = prepare(p.ct.clone(), &opts, |_| {}).unwrap();
     let mean = mean_distance_to_truth(&s.centerline.points_mm, &p.truth.centerline_mm);
     assert!(mean <= 2.0, "swapped ends: mean distance {mean:.2} mm");
-    let truth_len = p.truth.centerline_mm.windows(2).map(|w| DVec3::from_array(w[0]).distance(DVec3::from_array(w[1]))).sum::<f64>();
-    assert!((s.centerline.length_mm - truth_len).abs() < 0.1 * truth_len, "swapped ends: {:.0} mm, truth {truth_len:.0} mm", s.centerline.length_mm);
+    let truth_len = p
+        .truth
+        .centerline_mm
+        .windows(2)
+        .map(|w| DVec3::from_array(w[0]).distance(DVec3::from_array(w[1])))
+        .sum::<f64>();
+    assert!(
+        (s.centerline.length_mm - truth_len).abs() < 0.1 * truth_len,
+        "swapped ends: {:.0} mm, truth {truth_len:.0} mm",
+        s.centerline.length_mm
+    );
     opts.endpoints.target_mm = opts.endpoints.source_mm;
-    let e = prepare(p.ct.clone(), &opts, |_| {}).unwrap_err().to_string();
-    assert!(e.contains("the source and the target are the same voxel"), "{e}");
+    let e = prepare(p.ct.clone(), &opts, |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("the source and the target are the same voxel"),
+        "{e}"
+    );
     let empty = p.lumen.map(|_| 0i16);
     let mut as_mask = PrepOptions::default();
     as_mask.segment.mask = Some(true);

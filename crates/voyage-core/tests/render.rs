@@ -3,11 +3,13 @@
 
 use glam::DVec3;
 use voyage_core::camera::{Camera, Pose};
-use voyage_core::flight::{fly, FlightOptions};
+use voyage_core::flight::{FlightOptions, fly};
 use voyage_core::phantom::{self, ColonOptions, Phantom};
 use voyage_core::potential::{BrickStore, Direction, Navigable, PotentialField};
-use voyage_core::prep::{prepare, PrepOptions, Study};
-use voyage_core::render::{look_around, survey, CellMesh, Frame, Rasterizer, Strategy, View, Visibility, NO_TRIANGLE};
+use voyage_core::prep::{PrepOptions, Study, prepare};
+use voyage_core::render::{
+    CellMesh, Frame, NO_TRIANGLE, Rasterizer, Strategy, View, Visibility, look_around, survey,
+};
 
 mod common;
 
@@ -33,7 +35,15 @@ fn check_exact_and_reduced(study: &Study, what: &str, min_paper_ratio: f64) {
     let mesh = CellMesh::new(&study.surface, &study.cells);
     let cameras = flight_cameras(study, 80, 80);
     assert!(cameras.len() >= 200);
-    let s = survey(&mesh, &study.cells, &cameras, 256, 256, &Strategy::ALL, false);
+    let s = survey(
+        &mesh,
+        &study.cells,
+        &cameras,
+        256,
+        256,
+        &Strategy::ALL,
+        false,
+    );
     for st in &s.strategies {
         eprintln!(
             "{what}: {:5} mean {:9.0} max {:8} ratio {:5.1} inexact frames {} ({} px)",
@@ -44,16 +54,31 @@ fn check_exact_and_reduced(study: &Study, what: &str, min_paper_ratio: f64) {
             st.inexact_frames,
             st.differing_pixels
         );
-        assert_eq!(st.inexact_frames, 0, "{what}: {} changed the image in {} frames", st.strategy.name(), st.inexact_frames);
+        assert_eq!(
+            st.inexact_frames,
+            0,
+            "{what}: {} changed the image in {} frames",
+            st.strategy.name(),
+            st.inexact_frames
+        );
     }
     assert!(s.exact);
     let get = |k: Strategy| s.get(k).unwrap().mean_triangles;
     // Something was culled, so exactness was not trivially true.
     assert!(get(Strategy::Lg) < 0.5 * get(Strategy::All), "{what}");
     let paper = s.get(Strategy::Paper).unwrap().ratio_to_all;
-    assert!(paper >= min_paper_ratio, "{what}: MC : paper = {paper:.1} : 1, want ≥ {min_paper_ratio}");
-    assert!(get(Strategy::Ours) < get(Strategy::Paper), "{what}: ours draws no fewer triangles than the paper's");
-    assert!(get(Strategy::Paper) < get(Strategy::Lg), "{what}: the depth test removed nothing");
+    assert!(
+        paper >= min_paper_ratio,
+        "{what}: MC : paper = {paper:.1} : 1, want ≥ {min_paper_ratio}"
+    );
+    assert!(
+        get(Strategy::Ours) < get(Strategy::Paper),
+        "{what}: ours draws no fewer triangles than the paper's"
+    );
+    assert!(
+        get(Strategy::Paper) < get(Strategy::Lg),
+        "{what}: the depth test removed nothing"
+    );
     check_select_is_exact(study, &mesh, &cameras, what);
 }
 
@@ -73,12 +98,21 @@ fn check_select_is_exact(study: &Study, mesh: &CellMesh, cameras: &[Camera], wha
             raster.draw_cells(&mut reference, &all);
             let cells = vis.select(&study.cells, &view).cells;
             raster.draw_cells(&mut culled, &cells);
-            assert!(reference.ids().eq(culled.ids()), "{what}: select ({strategy}) changed the image");
+            assert!(
+                reference.ids().eq(culled.ids()),
+                "{what}: select ({strategy}) changed the image"
+            );
             drawn += mesh.triangles_in(&cells) as f64;
         }
         let ratio = all_triangles * sample.len() as f64 / drawn;
-        eprintln!("{what}: select {strategy}: exact on {} frames, MC : select = {ratio:.1}", sample.len());
-        assert!(ratio > 3.0, "{what}: select ({strategy}) culled little: {ratio:.1} : 1");
+        eprintln!(
+            "{what}: select {strategy}: exact on {} frames, MC : select = {ratio:.1}",
+            sample.len()
+        );
+        assert!(
+            ratio > 3.0,
+            "{what}: select ({strategy}) culled little: {ratio:.1} : 1"
+        );
     }
 }
 
@@ -91,7 +125,9 @@ fn culling_never_changes_the_image_on_the_colon_phantom() {
 
 #[test]
 fn culling_never_changes_the_image_on_colon_a() {
-    let Some(study) = common::colon_a_study() else { return };
+    let Some(study) = common::colon_a_study() else {
+        return;
+    };
     check_exact_and_reduced(&study, "colon-a", 9.0);
 }
 
@@ -100,7 +136,10 @@ fn pixels_on(frame: &Frame, mesh: &CellMesh, c: DVec3, r: f64) -> usize {
     frame
         .ids()
         .filter(|&id| {
-            id != NO_TRIANGLE && mesh.triangles[id as usize].iter().all(|&v| (DVec3::from_array(mesh.positions[v as usize].map(f64::from)) - c).length() <= r)
+            id != NO_TRIANGLE
+                && mesh.triangles[id as usize].iter().all(|&v| {
+                    (DVec3::from_array(mesh.positions[v as usize].map(f64::from)) - c).length() <= r
+                })
         })
         .count()
 }
@@ -115,7 +154,13 @@ fn the_pipe_shows_its_three_polyps() {
     for polyp in &truth.polyps {
         let c = DVec3::from_array(polyp.center_mm);
         // From the centerline 35 mm before the polyp, looking at it.
-        let near = (0..cl.points_mm.len()).min_by(|&a, &b| (DVec3::from_array(cl.points_mm[a]) - c).length().total_cmp(&(DVec3::from_array(cl.points_mm[b]) - c).length())).unwrap();
+        let near = (0..cl.points_mm.len())
+            .min_by(|&a, &b| {
+                (DVec3::from_array(cl.points_mm[a]) - c)
+                    .length()
+                    .total_cmp(&(DVec3::from_array(cl.points_mm[b]) - c).length())
+            })
+            .unwrap();
         let at = cl.arc_mm[near] - 35.0;
         let i = cl.arc_mm.partition_point(|&a| a < at).min(near);
         let eye = DVec3::from_array(cl.points_mm[i]);
@@ -124,12 +169,20 @@ fn the_pipe_shows_its_three_polyps() {
         let mut frame = Frame::new(512, 512);
         let cell = study.cells.cell_of_point(eye).unwrap() as u32;
         assert!(cell < mesh.cells() as u32);
-        Rasterizer::new(&mesh, view).draw_cells(&mut frame, &(0..mesh.cells() as u32).collect::<Vec<_>>());
+        Rasterizer::new(&mesh, view)
+            .draw_cells(&mut frame, &(0..mesh.cells() as u32).collect::<Vec<_>>());
         let seen = pixels_on(&frame, &mesh, c, polyp.diameter_mm / 2.0 + 0.5);
         // Its disc seen from ~35 mm covers ≈ π(256·r/35)² pixels; at least a fifth must show.
         let r = polyp.diameter_mm / 2.0;
         let disc = std::f64::consts::PI * (256.0 * r / (c - eye).length()).powi(2);
-        eprintln!("polyp {} mm: {seen} px (disc ≈ {disc:.0})", polyp.diameter_mm);
-        assert!(seen as f64 >= 0.2 * disc, "the {} mm polyp shows on {seen} pixels only", polyp.diameter_mm);
+        eprintln!(
+            "polyp {} mm: {seen} px (disc ≈ {disc:.0})",
+            polyp.diameter_mm
+        );
+        assert!(
+            seen as f64 >= 0.2 * disc,
+            "the {} mm polyp shows on {seen} pixels only",
+            polyp.diameter_mm
+        );
     }
 }

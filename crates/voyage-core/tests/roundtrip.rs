@@ -1,9 +1,9 @@
 //! Phantom → file → load gives back the phantom: geometry and every HU, through NIfTI and
 //! through a full-size DICOM series.
 
-use voyage_core::io::{self, dicom_write, nifti, LoadOptions};
-use voyage_core::phantom::{self, ColonOptions};
 use voyage_core::Volume;
+use voyage_core::io::{self, LoadOptions, dicom_write, nifti};
+use voyage_core::phantom::{self, ColonOptions};
 
 fn scratch(name: &str) -> std::path::PathBuf {
     let d = std::env::temp_dir().join(format!("voyage-rt-{name}-{}", std::process::id()));
@@ -16,10 +16,23 @@ fn assert_same(a: &Volume<i16>, b: &Volume<i16>, what: &str) {
     let (ga, gb) = (a.geometry(), b.geometry());
     assert_eq!(ga.dims, gb.dims, "{what}: dims");
     for i in 0..3 {
-        assert!((ga.spacing[i] - gb.spacing[i]).abs() < 1e-5, "{what}: spacing {:?} vs {:?}", ga.spacing, gb.spacing);
-        assert!((ga.origin[i] - gb.origin[i]).abs() < 1e-4, "{what}: origin {:?} vs {:?}", ga.origin, gb.origin);
+        assert!(
+            (ga.spacing[i] - gb.spacing[i]).abs() < 1e-5,
+            "{what}: spacing {:?} vs {:?}",
+            ga.spacing,
+            gb.spacing
+        );
+        assert!(
+            (ga.origin[i] - gb.origin[i]).abs() < 1e-4,
+            "{what}: origin {:?} vs {:?}",
+            ga.origin,
+            gb.origin
+        );
         for j in 0..3 {
-            assert!((ga.direction[i][j] - gb.direction[i][j]).abs() < 1e-6, "{what}: direction");
+            assert!(
+                (ga.direction[i][j] - gb.direction[i][j]).abs() < 1e-6,
+                "{what}: direction"
+            );
         }
     }
     assert!(a.data() == b.data(), "{what}: voxels differ");
@@ -28,18 +41,37 @@ fn assert_same(a: &Volume<i16>, b: &Volume<i16>, what: &str) {
 #[test]
 fn small_colon_and_pipe_through_nifti() {
     let dir = scratch("nifti");
-    let colon = phantom::colon(&ColonOptions { small: true, seed: 7, ..Default::default() }).unwrap();
+    let colon = phantom::colon(&ColonOptions {
+        small: true,
+        seed: 7,
+        ..Default::default()
+    })
+    .unwrap();
     let p = dir.join("colon.nii.gz");
     nifti::save(&p, &colon.ct).unwrap();
-    assert_same(&colon.ct, &io::load(&p, &LoadOptions::default()).unwrap().volume, "colon .nii.gz");
+    assert_same(
+        &colon.ct,
+        &io::load(&p, &LoadOptions::default()).unwrap().volume,
+        "colon .nii.gz",
+    );
     let m = dir.join("lumen.nii");
     nifti::save(&m, &colon.lumen).unwrap();
     let back = io::load(&m, &LoadOptions::default()).unwrap().volume;
-    assert!(back.data().iter().zip(colon.lumen.data()).all(|(&a, &b)| a == b as i16), "mask round trip");
+    assert!(
+        back.data()
+            .iter()
+            .zip(colon.lumen.data())
+            .all(|(&a, &b)| a == b as i16),
+        "mask round trip"
+    );
     let pipe = phantom::pipe(1).unwrap();
     let p = dir.join("pipe.nii.gz");
     nifti::save(&p, &pipe.ct).unwrap();
-    assert_same(&pipe.ct, &io::load(&p, &LoadOptions::default()).unwrap().volume, "pipe .nii.gz");
+    assert_same(
+        &pipe.ct,
+        &io::load(&p, &LoadOptions::default()).unwrap().volume,
+        "pipe .nii.gz",
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -3,21 +3,28 @@
 //! out; the patient's position decides on which side fluid lies.
 
 use glam::DVec3;
+use voyage_core::Volume;
 use voyage_core::anatomy::{PatientPosition, PositionSource};
 use voyage_core::phantom::{self, ColonOptions, Phantom};
-use voyage_core::prep::{prepare, PrepOptions};
-use voyage_core::segment::{segment, SegmentOptions};
-use voyage_core::Volume;
+use voyage_core::prep::{PrepOptions, prepare};
+use voyage_core::segment::{SegmentOptions, segment};
 
 fn small(opts: ColonOptions) -> Phantom {
-    phantom::colon(&ColonOptions { small: true, ..opts }).unwrap()
+    phantom::colon(&ColonOptions {
+        small: true,
+        ..opts
+    })
+    .unwrap()
 }
 
 /// The truth lumen as a 0/1 mask with a disc `half_mm` thick cut out across the colon at
 /// arc length `arc` (a collapsed stretch another segmenter would leave out).
 fn cut_mask(p: &Phantom, arc: f64, half_mm: f64) -> Volume<i16> {
     let t = &p.truth;
-    let i = t.centerline_arc_mm.partition_point(|&a| a < arc).min(t.centerline_mm.len() - 2);
+    let i = t
+        .centerline_arc_mm
+        .partition_point(|&a| a < arc)
+        .min(t.centerline_mm.len() - 2);
     let c = DVec3::from_array(t.centerline_mm[i]);
     let tangent = (DVec3::from_array(t.centerline_mm[i + 1]) - c).normalize();
     let reach = t.centerline_radius_mm[i] + 6.0;
@@ -47,21 +54,49 @@ fn a_mask_in_two_pieces_keeps_both_in_order_with_the_gap_bridged() {
     let kept: Vec<_> = s.segments.iter().filter(|x| x.kept).collect();
     assert_eq!(kept.len(), 2, "{:?}", s.segments);
     assert_eq!(s.gaps.len(), 1);
-    assert!((8.0..30.0).contains(&s.gaps[0].length_mm), "gap {} mm", s.gaps[0].length_mm);
-    assert!(s.warnings.iter().any(|w| w.contains("bridged")), "{:?}", s.warnings);
+    assert!(
+        (8.0..30.0).contains(&s.gaps[0].length_mm),
+        "gap {} mm",
+        s.gaps[0].length_mm
+    );
+    assert!(
+        s.warnings.iter().any(|w| w.contains("bridged")),
+        "{:?}",
+        s.warnings
+    );
     // Both pieces are lumen: nothing of the mask is lost but crumbs the cut left (a few
     // voxels, too small to be a segment).
-    let lost = mask.data().iter().zip(s.lumen.data()).filter(|&(&m, &l)| m != 0 && l == 0).count();
+    let lost = mask
+        .data()
+        .iter()
+        .zip(s.lumen.data())
+        .filter(|&(&m, &l)| m != 0 && l == 0)
+        .count();
     assert!(lost <= 10, "{lost} mask voxels left out");
     // The whole colon is flown: the centerline crosses the gap, which is marked on it.
     let study = prepare(mask, &PrepOptions::default(), |_| {}).unwrap();
     let rel = study.centerline.length_mm / whole.centerline.length_mm;
-    assert!((0.97..1.03).contains(&rel), "centerline {:.0} mm against {:.0} mm uncut", study.centerline.length_mm, whole.centerline.length_mm);
+    assert!(
+        (0.97..1.03).contains(&rel),
+        "centerline {:.0} mm against {:.0} mm uncut",
+        study.centerline.length_mm,
+        whole.centerline.length_mm
+    );
     assert_eq!(study.collapsed_spans.len(), 1);
     let span = study.collapsed_spans[0];
-    assert!(span[1] - span[0] >= 5.0 && span[1] - span[0] <= 40.0, "span {span:?}");
-    let src = study.ct.geometry().index_to_local(DVec3::new(study.source[0] as f64, study.source[1] as f64, study.source[2] as f64));
-    assert!(src.distance(DVec3::from_array(t.centerline_mm[0])) <= 15.0, "source {src} is not at the rectum");
+    assert!(
+        span[1] - span[0] >= 5.0 && span[1] - span[0] <= 40.0,
+        "span {span:?}"
+    );
+    let src = study.ct.geometry().index_to_local(DVec3::new(
+        study.source[0] as f64,
+        study.source[1] as f64,
+        study.source[2] as f64,
+    ));
+    assert!(
+        src.distance(DVec3::from_array(t.centerline_mm[0])) <= 15.0,
+        "source {src} is not at the rectum"
+    );
 }
 
 #[test]
@@ -80,60 +115,154 @@ fn a_seed_adds_gas_to_the_colon_but_does_not_move_the_start() {
 
 #[test]
 fn the_position_given_decides_where_fluid_lies() {
-    let p = small(ColonOptions { tagged_fluid: true, ..ColonOptions::default() });
+    let p = small(ColonOptions {
+        tagged_fluid: true,
+        ..ColonOptions::default()
+    });
     // Supine, as the levels say: the pools join the colon.
     let s = segment(&p.ct, &SegmentOptions::default()).unwrap();
     assert_eq!(s.orientation.source, PositionSource::AirFluidLevels);
     assert!(s.fluid_voxels > 0);
-    let truth_fluid = p.labels.data().iter().filter(|&&l| l == phantom::label::LUMEN_FLUID).count();
-    let found = p.labels.data().iter().zip(s.lumen.data()).filter(|&(&l, &m)| l == phantom::label::LUMEN_FLUID && m != 0).count();
-    assert!(found as f64 >= 0.95 * truth_fluid as f64, "{found} of {truth_fluid} fluid voxels");
+    let truth_fluid = p
+        .labels
+        .data()
+        .iter()
+        .filter(|&&l| l == phantom::label::LUMEN_FLUID)
+        .count();
+    let found = p
+        .labels
+        .data()
+        .iter()
+        .zip(s.lumen.data())
+        .filter(|&(&l, &m)| l == phantom::label::LUMEN_FLUID && m != 0)
+        .count();
+    assert!(
+        found as f64 >= 0.95 * truth_fluid as f64,
+        "{found} of {truth_fluid} fluid voxels"
+    );
     // Told (wrongly) that the patient was prone, the fluid is above the gas: none of it is
     // the colon's, and the user hears the position came from them.
-    let prone = SegmentOptions { position: Some((PatientPosition::Hfp, PositionSource::Given)), ..Default::default() };
+    let prone = SegmentOptions {
+        position: Some((PatientPosition::Hfp, PositionSource::Given)),
+        ..Default::default()
+    };
     let s = segment(&p.ct, &prone).unwrap();
     assert_eq!(s.orientation.gravity_lps, [0.0, -1.0, 0.0]);
-    let found = p.labels.data().iter().zip(s.lumen.data()).filter(|&(&l, &m)| l == phantom::label::LUMEN_FLUID && m != 0).count();
-    assert!((found as f64) < 0.05 * truth_fluid as f64, "{found} of {truth_fluid} fluid voxels taken above the gas");
+    let found = p
+        .labels
+        .data()
+        .iter()
+        .zip(s.lumen.data())
+        .filter(|&(&l, &m)| l == phantom::label::LUMEN_FLUID && m != 0)
+        .count();
+    assert!(
+        (found as f64) < 0.05 * truth_fluid as f64,
+        "{found} of {truth_fluid} fluid voxels taken above the gas"
+    );
 }
 
 /// The user's corrections: a segment left out by a point in its gas (even the rectum's), and
 /// taken back; a point both in and out is refused.
 #[test]
 fn excluded_gas_leaves_the_colon_and_the_rectum_moves_to_the_lowest_of_the_rest() {
-    let p = small(ColonOptions { collapsed: vec!["descending".into()], ..ColonOptions::default() });
+    let p = small(ColonOptions {
+        collapsed: vec!["descending".into()],
+        ..ColonOptions::default()
+    });
     let g = p.ct.geometry();
     let auto = segment(&p.ct, &SegmentOptions::default()).unwrap();
     let kept: Vec<_> = auto.segments.iter().filter(|s| s.kept).collect();
     assert_eq!(kept.len(), 2);
-    let anchor = |o: usize| g.patient_to_local(DVec3::from_array(auto.segments.iter().find(|s| s.order == Some(o)).unwrap().anchor_lps_mm));
-    let count = |s: &voyage_core::segment::Segmentation| s.lumen.data().iter().filter(|&&m| m != 0).count();
+    let anchor = |o: usize| {
+        g.patient_to_local(DVec3::from_array(
+            auto.segments
+                .iter()
+                .find(|s| s.order == Some(o))
+                .unwrap()
+                .anchor_lps_mm,
+        ))
+    };
+    let count =
+        |s: &voyage_core::segment::Segmentation| s.lumen.data().iter().filter(|&&m| m != 0).count();
 
     // The far segment out: only the rectum's side is left, no gap, and it says why.
-    let far_out = segment(&p.ct, &SegmentOptions { exclude_mm: vec![anchor(1)], ..Default::default() }).unwrap();
+    let far_out = segment(
+        &p.ct,
+        &SegmentOptions {
+            exclude_mm: vec![anchor(1)],
+            ..Default::default()
+        },
+    )
+    .unwrap();
     assert_eq!(far_out.segments.iter().filter(|s| s.kept).count(), 1);
     assert!(far_out.gaps.is_empty());
-    assert!(far_out.segments.iter().any(|s| !s.kept && s.reason.as_deref() == Some("excluded by the user")));
+    assert!(
+        far_out
+            .segments
+            .iter()
+            .any(|s| !s.kept && s.reason.as_deref() == Some("excluded by the user"))
+    );
     assert_eq!(far_out.seed_voxel, auto.seed_voxel, "the rectum stays");
     assert!(count(&far_out) < count(&auto) / 2 + count(&auto) / 4);
 
     // The rectum's segment out: the rectum is the lowest of the rest.
-    let near_out = segment(&p.ct, &SegmentOptions { exclude_mm: vec![anchor(0)], ..Default::default() }).unwrap();
+    let near_out = segment(
+        &p.ct,
+        &SegmentOptions {
+            exclude_mm: vec![anchor(0)],
+            ..Default::default()
+        },
+    )
+    .unwrap();
     assert_eq!(near_out.segments.iter().filter(|s| s.kept).count(), 1);
-    let lowest = |s: &voyage_core::segment::Segmentation| g.index_to_patient(DVec3::from_array(s.seed_voxel.map(|x| x as f64)));
-    assert!(lowest(&near_out).z > lowest(&auto).z + 10.0, "rectum side {} (was {})", lowest(&near_out), lowest(&auto));
+    let lowest = |s: &voyage_core::segment::Segmentation| {
+        g.index_to_patient(DVec3::from_array(s.seed_voxel.map(|x| x as f64)))
+    };
+    assert!(
+        lowest(&near_out).z > lowest(&auto).z + 10.0,
+        "rectum side {} (was {})",
+        lowest(&near_out),
+        lowest(&auto)
+    );
 
     // Both in: a seed in the far segment with no exclusion is the automatic colon.
-    let both = segment(&p.ct, &SegmentOptions { seeds_mm: vec![anchor(0), anchor(1)], ..Default::default() }).unwrap();
+    let both = segment(
+        &p.ct,
+        &SegmentOptions {
+            seeds_mm: vec![anchor(0), anchor(1)],
+            ..Default::default()
+        },
+    )
+    .unwrap();
     assert_eq!(both.lumen, auto.lumen);
     // In and out at once: refused, naming the seed.
-    let e = segment(&p.ct, &SegmentOptions { seeds_mm: vec![anchor(1)], exclude_mm: vec![anchor(1)], ..Default::default() }).unwrap_err().to_string();
+    let e = segment(
+        &p.ct,
+        &SegmentOptions {
+            seeds_mm: vec![anchor(1)],
+            exclude_mm: vec![anchor(1)],
+            ..Default::default()
+        },
+    )
+    .unwrap_err()
+    .to_string();
     assert!(e.contains("the seed") && e.contains("also excluded"), "{e}");
     // A point to exclude in tissue: refused, saying what it is.
     // (3 mm below the rectum's lowest gas voxel.)
     let below = g.patient_to_local(g.local_to_patient(anchor(0)) - DVec3::new(0.0, 0.0, 3.0));
-    let e = segment(&p.ct, &SegmentOptions { exclude_mm: vec![below], ..Default::default() }).unwrap_err().to_string();
-    assert!(e.contains("the point to exclude") && e.contains("not in gas"), "{e}");
+    let e = segment(
+        &p.ct,
+        &SegmentOptions {
+            exclude_mm: vec![below],
+            ..Default::default()
+        },
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("the point to exclude") && e.contains("not in gas"),
+        "{e}"
+    );
 }
 
 /// A rectal tube carries outside air into the rectum: its air is reported as the tube's, not
@@ -141,26 +270,66 @@ fn excluded_gas_leaves_the_colon_and_the_rectum_moves_to_the_lowest_of_the_rest(
 #[test]
 fn the_rectal_tube_is_not_colon_and_the_rectum_starts_at_its_tip() {
     for small in [true, false] {
-        let p = phantom::colon(&ColonOptions { small, rectal_tube: true, tagged_fluid: true, ..ColonOptions::default() }).unwrap();
+        let p = phantom::colon(&ColonOptions {
+            small,
+            rectal_tube: true,
+            tagged_fluid: true,
+            ..ColonOptions::default()
+        })
+        .unwrap();
         let g = p.ct.geometry();
         let t = p.truth.rectal_tube.clone().expect("the phantom has a tube");
         let s = segment(&p.ct, &SegmentOptions::default()).unwrap();
-        let tube = s.segments.iter().find(|x| x.kind == voyage_core::segment::ComponentKind::RectalTube).unwrap_or_else(|| panic!("small {small}: no rectal tube among {:?}", s.segments));
-        assert!(!tube.kept && tube.reason.as_deref().is_some_and(|r| r.contains("rectal tube")));
-        let in_lumen = s.lumen.data().iter().zip(p.labels.data()).filter(|&(&l, &lab)| l != 0 && lab == phantom::label::RECTAL_TUBE).count();
-        let all = p.labels.data().iter().filter(|&&lab| lab == phantom::label::RECTAL_TUBE).count();
+        let tube = s
+            .segments
+            .iter()
+            .find(|x| x.kind == voyage_core::segment::ComponentKind::RectalTube)
+            .unwrap_or_else(|| panic!("small {small}: no rectal tube among {:?}", s.segments));
+        assert!(
+            !tube.kept
+                && tube
+                    .reason
+                    .as_deref()
+                    .is_some_and(|r| r.contains("rectal tube"))
+        );
+        let in_lumen = s
+            .lumen
+            .data()
+            .iter()
+            .zip(p.labels.data())
+            .filter(|&(&l, &lab)| l != 0 && lab == phantom::label::RECTAL_TUBE)
+            .count();
+        let all = p
+            .labels
+            .data()
+            .iter()
+            .filter(|&&lab| lab == phantom::label::RECTAL_TUBE)
+            .count();
         // The coarse phantom's tube (3.5 mm across, 1.5 mm voxels) leaks into the rectum's
         // gas through its thin wall at a few voxels: followed less far.
         let allowed = if small { 0.5 } else { 0.02 };
-        assert!((in_lumen as f64) <= allowed * all as f64, "small {small}: {in_lumen} of {all} tube voxels in the lumen");
+        assert!(
+            (in_lumen as f64) <= allowed * all as f64,
+            "small {small}: {in_lumen} of {all} tube voxels in the lumen"
+        );
         // The rectum's side is colon, near the rectum's end, not in the tube; at full size the
         // tube runs 60 mm from the skin, and the old start (its outer end) was 5 mm above it.
         let start = g.index_to_local(DVec3::from_array(s.seed_voxel.map(|x| x as f64)));
         let [i, j, k] = s.seed_voxel;
-        assert_ne!(p.labels.get(i, j, k), phantom::label::RECTAL_TUBE, "small {small}: the colon starts in the tube");
+        assert_ne!(
+            p.labels.get(i, j, k),
+            phantom::label::RECTAL_TUBE,
+            "small {small}: the colon starts in the tube"
+        );
         let skin = p.truth.body_floor_z_mm.expect("a floor with a tube");
-        assert!(start.z > skin + 5.0 && t.tip_mm[2] > skin + 20.0, "small {small}: the colon starts at {start}, skin at z = {skin}");
+        assert!(
+            start.z > skin + 5.0 && t.tip_mm[2] > skin + 20.0,
+            "small {small}: the colon starts at {start}, skin at z = {skin}"
+        );
         let d = start.distance(DVec3::from_array(p.truth.centerline_mm[0]));
-        assert!(d <= 20.0, "small {small}: the colon starts {d:.1} mm from the rectum's end");
+        assert!(
+            d <= 20.0,
+            "small {small}: the colon starts {d:.1} mm from the rectum's end"
+        );
     }
 }

@@ -67,7 +67,12 @@ pub(crate) struct GpuMesh {
 impl GpuMesh {
     pub fn new(device: &wgpu::Device, mesh: &CellMesh) -> Result<Self, RenderError> {
         check(mesh)?;
-        let Layout { vertices, triangles, chunks, cell_chunks } = chunked(mesh);
+        let Layout {
+            vertices,
+            triangles,
+            chunks,
+            cell_chunks,
+        } = chunked(mesh);
         let max = device.limits().max_buffer_size;
         let vertex_bytes = (vertices.len() * std::mem::size_of::<Vertex>()) as u64;
         let index_bytes = (mesh.triangles.len() * 12) as u64;
@@ -119,10 +124,20 @@ impl GpuMesh {
 
     /// The index ranges that draw `cells` (order kept, as [`draw_ranges`]) without their
     /// chunks that lie wholly outside `view`.
-    pub fn draw_ranges_in(&self, cells: &[u32], view: &Frustum) -> Result<Vec<Range<u32>>, RenderError> {
+    pub fn draw_ranges_in(
+        &self,
+        cells: &[u32],
+        view: &Frustum,
+    ) -> Result<Vec<Range<u32>>, RenderError> {
         let mut out: Vec<Range<u32>> = Vec::with_capacity(cells.len());
         for &c in cells {
-            let chunks = self.cell_chunks.get(c as usize).ok_or(RenderError::UnknownCell { cell: c, cells: self.cell_chunks.len() })?;
+            let chunks = self
+                .cell_chunks
+                .get(c as usize)
+                .ok_or(RenderError::UnknownCell {
+                    cell: c,
+                    cells: self.cell_chunks.len(),
+                })?;
             for chunk in &self.chunks[chunks.clone()] {
                 if chunk.indices.is_empty() || view.excludes(chunk.lo, chunk.hi) {
                     continue;
@@ -153,7 +168,13 @@ impl Frustum {
     pub fn new(camera: &Camera, width: u32, height: u32) -> Self {
         let p = &camera.pose;
         let t = camera.tan_half_fov();
-        Frustum { eye: p.position, axes: [p.x_body(), p.y_body(), p.z_body()], tan: [t * width as f64 / height as f64, t], near: camera.near_mm, far: camera.far_mm }
+        Frustum {
+            eye: p.position,
+            axes: [p.x_body(), p.y_body(), p.z_body()],
+            tan: [t * width as f64 / height as f64, t],
+            near: camera.near_mm,
+            far: camera.far_mm,
+        }
     }
 
     /// True when every point of the box lo–hi lies outside one plane of the frustum, with a
@@ -163,11 +184,26 @@ impl Frustum {
         // Per plane: does some corner lie inside (or within the margin)?
         let mut inside = [false; 6];
         for k in 0..8 {
-            let c = DVec3::new(if k & 1 == 0 { lo[0] } else { hi[0] } as f64, if k & 2 == 0 { lo[1] } else { hi[1] } as f64, if k & 4 == 0 { lo[2] } else { hi[2] } as f64) - self.eye;
-            let (x, y, z) = (c.dot(self.axes[0]), c.dot(self.axes[1]), c.dot(self.axes[2]));
+            let c = DVec3::new(
+                if k & 1 == 0 { lo[0] } else { hi[0] } as f64,
+                if k & 2 == 0 { lo[1] } else { hi[1] } as f64,
+                if k & 4 == 0 { lo[2] } else { hi[2] } as f64,
+            ) - self.eye;
+            let (x, y, z) = (
+                c.dot(self.axes[0]),
+                c.dot(self.axes[1]),
+                c.dot(self.axes[2]),
+            );
             let margin = 1e-3 + 1e-4 * z.abs();
             let (sx, sy) = (z * self.tan[0] + margin, z * self.tan[1] + margin);
-            let tests = [x <= sx, -x <= sx, y <= sy, -y <= sy, z >= self.near - margin, z <= self.far + margin];
+            let tests = [
+                x <= sx,
+                -x <= sx,
+                y <= sy,
+                -y <= sy,
+                z >= self.near - margin,
+                z <= self.far + margin,
+            ];
             for (seen, ok) in inside.iter_mut().zip(tests) {
                 *seen |= ok;
             }
@@ -195,7 +231,12 @@ struct Layout {
 /// driver that shades the whole index range of a draw (Mesa's CPU driver does) would shade
 /// every vertex of the colon for every run.
 fn chunked(mesh: &CellMesh) -> Layout {
-    let mut out = Layout { vertices: Vec::with_capacity(mesh.positions.len() * 5 / 4), triangles: Vec::with_capacity(mesh.triangles.len()), chunks: Vec::new(), cell_chunks: Vec::with_capacity(mesh.cell_ranges.len()) };
+    let mut out = Layout {
+        vertices: Vec::with_capacity(mesh.positions.len() * 5 / 4),
+        triangles: Vec::with_capacity(mesh.triangles.len()),
+        chunks: Vec::new(),
+        cell_chunks: Vec::with_capacity(mesh.cell_ranges.len()),
+    };
     // Surface vertex → its index in the chunk being laid out (stamped with the chunk).
     let mut slot = vec![(u32::MAX, 0u32); mesh.positions.len()];
     for range in &mesh.cell_ranges {
@@ -215,12 +256,19 @@ fn chunked(mesh: &CellMesh) -> Layout {
                             bh[a] = bh[a].max(p[a]);
                         }
                         *s = (id, out.vertices.len() as u32);
-                        out.vertices.push(Vertex { position: p, normal: mesh.normals[v as usize] });
+                        out.vertices.push(Vertex {
+                            position: p,
+                            normal: mesh.normals[v as usize],
+                        });
                     }
                     s.1
                 }));
             }
-            out.chunks.push(Chunk { indices: begin..out.triangles.len() as u32 * 3, lo: bl, hi: bh });
+            out.chunks.push(Chunk {
+                indices: begin..out.triangles.len() as u32 * 3,
+                lo: bl,
+                hi: bh,
+            });
         }
         out.cell_chunks.push(first..out.chunks.len());
     }
@@ -341,24 +389,47 @@ mod tests {
     fn chunks_tile_each_cell_with_their_own_vertices() {
         // Three cells: 2, 2 500 and 0 triangles of a strip, so the middle cell has 3 chunks.
         let n = 2502usize;
-        let positions: Vec<[f32; 3]> = (0..n + 2).map(|i| [i as f32, (i % 2) as f32, 0.0]).collect();
+        let positions: Vec<[f32; 3]> = (0..n + 2)
+            .map(|i| [i as f32, (i % 2) as f32, 0.0])
+            .collect();
         let triangles: Vec<[u32; 3]> = (0..n as u32).map(|i| [i, i + 1, i + 2]).collect();
-        let mesh = CellMesh { normals: vec![[0.0, 0.0, 1.0]; positions.len()], positions, surface_triangle: (0..n as u32).collect(), triangles, cell_ranges: vec![0..2, 2..2502, 2502..2502], cell_vertices: Vec::new(), cell_vertex_ranges: Vec::new(), local_triangles: Vec::new() };
+        let mesh = CellMesh {
+            normals: vec![[0.0, 0.0, 1.0]; positions.len()],
+            positions,
+            surface_triangle: (0..n as u32).collect(),
+            triangles,
+            cell_ranges: vec![0..2, 2..2502, 2502..2502],
+            cell_vertices: Vec::new(),
+            cell_vertex_ranges: Vec::new(),
+            local_triangles: Vec::new(),
+        };
         let l = chunked(&mesh);
         assert_eq!(l.cell_chunks, vec![0..1, 1..4, 4..4]);
-        assert_eq!(l.chunks.iter().map(|c| c.indices.len() / 3).collect::<Vec<_>>(), vec![2, 1024, 1024, 452]);
+        assert_eq!(
+            l.chunks
+                .iter()
+                .map(|c| c.indices.len() / 3)
+                .collect::<Vec<_>>(),
+            vec![2, 1024, 1024, 452]
+        );
         // The same triangles, in the same order, each chunk indexing only its own vertices.
         let mut seen = 0;
         for c in &l.chunks {
             let tris = &l.triangles[c.indices.start as usize / 3..c.indices.end as usize / 3];
-            let (lo, hi) = (tris.iter().flatten().min().unwrap(), tris.iter().flatten().max().unwrap());
+            let (lo, hi) = (
+                tris.iter().flatten().min().unwrap(),
+                tris.iter().flatten().max().unwrap(),
+            );
             assert!(l.chunks.iter().filter(|o| o != &c).all(|o| {
                 let other = &l.triangles[o.indices.start as usize / 3..o.indices.end as usize / 3];
                 other.iter().flatten().all(|v| v < lo || v > hi)
             }));
             for t in tris {
                 let want = mesh.triangles[seen];
-                assert_eq!(t.map(|v| l.vertices[v as usize].position), want.map(|v| mesh.positions[v as usize]));
+                assert_eq!(
+                    t.map(|v| l.vertices[v as usize].position),
+                    want.map(|v| mesh.positions[v as usize])
+                );
                 for v in t {
                     let p = l.vertices[*v as usize].position;
                     assert!((0..3).all(|a| c.lo[a] <= p[a] && p[a] <= c.hi[a]));

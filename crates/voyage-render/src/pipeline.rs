@@ -7,9 +7,9 @@
 //! outer side (`Back`) is never drawn; the CPU renderer keeps the same triangles.
 
 use crate::mesh::Vertex;
-use crate::target::DEPTH_FORMAT;
 #[cfg(doc)]
 use crate::target::COLOR_FORMAT;
+use crate::target::DEPTH_FORMAT;
 use crate::uniforms::Uniforms;
 
 pub(crate) struct EndoscopePipeline {

@@ -33,30 +33,72 @@ pub struct PixelImages {
 impl PixelImages {
     /// For render passes whose colour target has `color_format` and whose depth attachment,
     /// if any, has `depth_format` (the depth is neither tested nor written).
-    pub fn new(device: wgpu::Device, queue: wgpu::Queue, color_format: wgpu::TextureFormat, depth_format: Option<wgpu::TextureFormat>) -> Self {
-        let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some("voyage pixels.wgsl"), source: wgpu::ShaderSource::Wgsl(include_str!("pixels.wgsl").into()) });
+    pub fn new(
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+        color_format: wgpu::TextureFormat,
+        depth_format: Option<wgpu::TextureFormat>,
+    ) -> Self {
+        let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("voyage pixels.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("pixels.wgsl").into()),
+        });
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("voyage pixel image"),
             entries: &[wgpu::BindGroupLayoutEntry {
                 binding: 0,
                 visibility: wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT,
-                ty: wgpu::BindingType::Texture { sample_type: wgpu::TextureSampleType::Float { filterable: false }, view_dimension: wgpu::TextureViewDimension::D2, multisampled: false },
+                ty: wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                    multisampled: false,
+                },
                 count: None,
             }],
         });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor { label: Some("voyage pixel image"), bind_group_layouts: &[Some(&layout)], immediate_size: 0 });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("voyage pixel image"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
         let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
             label: Some("voyage pixel image"),
             layout: Some(&pipeline_layout),
-            vertex: wgpu::VertexState { module: &shader, entry_point: Some("vs_main"), compilation_options: Default::default(), buffers: &[] },
+            vertex: wgpu::VertexState {
+                module: &shader,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
             primitive: wgpu::PrimitiveState::default(),
-            depth_stencil: depth_format.map(|format| wgpu::DepthStencilState { format, depth_write_enabled: Some(false), depth_compare: Some(wgpu::CompareFunction::Always), stencil: Default::default(), bias: Default::default() }),
+            depth_stencil: depth_format.map(|format| wgpu::DepthStencilState {
+                format,
+                depth_write_enabled: Some(false),
+                depth_compare: Some(wgpu::CompareFunction::Always),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
             multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState { module: &shader, entry_point: Some("fs_main"), compilation_options: Default::default(), targets: &[Some(wgpu::ColorTargetState { format: color_format, blend: None, write_mask: wgpu::ColorWrites::ALL })] }),
+            fragment: Some(wgpu::FragmentState {
+                module: &shader,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: color_format,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
             multiview_mask: None,
             cache: None,
         });
-        PixelImages { device, queue, pipeline, layout, images: HashMap::new() }
+        PixelImages {
+            device,
+            queue,
+            pipeline,
+            layout,
+            images: HashMap::new(),
+        }
     }
 
     /// Sets image `key` to `rgba` (`size[0] × size[1]` pixels, 4 bytes each, rows top to
@@ -66,15 +108,27 @@ impl PixelImages {
         let max = self.device.limits().max_texture_dimension_2d;
         let [w, h] = size;
         if w == 0 || h == 0 || w > max || h > max {
-            return Err(RenderError::BadSize { width: w, height: h, max });
+            return Err(RenderError::BadSize {
+                width: w,
+                height: h,
+                max,
+            });
         }
         if rgba.len() != w as usize * h as usize * 4 {
-            return Err(RenderError::Gpu(format!("a {w}×{h} image needs {} bytes, got {}", w as usize * h as usize * 4, rgba.len())));
+            return Err(RenderError::Gpu(format!(
+                "a {w}×{h} image needs {} bytes, got {}",
+                w as usize * h as usize * 4,
+                rgba.len()
+            )));
         }
         if self.images.get(&key).is_none_or(|s| s.size != size) {
             let texture = self.device.create_texture(&wgpu::TextureDescriptor {
                 label: Some("voyage pixel image"),
-                size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+                size: wgpu::Extent3d {
+                    width: w,
+                    height: h,
+                    depth_or_array_layers: 1,
+                },
                 mip_level_count: 1,
                 sample_count: 1,
                 dimension: wgpu::TextureDimension::D2,
@@ -83,21 +137,48 @@ impl PixelImages {
                 view_formats: &[],
             });
             let bind_group = self.bind(&texture.create_view(&Default::default()));
-            self.images.insert(key, Slot { texture, bind_group, size });
+            self.images.insert(
+                key,
+                Slot {
+                    texture,
+                    bind_group,
+                    size,
+                },
+            );
         }
         if let Some(Slot { texture, .. }) = self.images.get(&key) {
             self.queue.write_texture(
-                wgpu::TexelCopyTextureInfo { texture, mip_level: 0, origin: wgpu::Origin3d::ZERO, aspect: wgpu::TextureAspect::All },
+                wgpu::TexelCopyTextureInfo {
+                    texture,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d::ZERO,
+                    aspect: wgpu::TextureAspect::All,
+                },
                 rgba,
-                wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(4 * w), rows_per_image: Some(h) },
-                wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(4 * w),
+                    rows_per_image: Some(h),
+                },
+                wgpu::Extent3d {
+                    width: w,
+                    height: h,
+                    depth_or_array_layers: 1,
+                },
             );
         }
         Ok(())
     }
 
     fn bind(&self, view: &wgpu::TextureView) -> wgpu::BindGroup {
-        self.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("voyage pixel image"), layout: &self.layout, entries: &[wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(view) }] })
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("voyage pixel image"),
+            layout: &self.layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: wgpu::BindingResource::TextureView(view),
+            }],
+        })
     }
 
     /// Forgets image `key` (its texture is freed).
@@ -113,8 +194,17 @@ impl PixelImages {
     /// Draws image `key` with its top-left pixel at `at` (target pixels), one texel per pixel;
     /// the pass's scissor rectangle still clips it. Nothing is drawn for an unknown key.
     pub fn draw_in_pass(&self, pass: &mut wgpu::RenderPass<'_>, key: u64, at: [f32; 2]) {
-        let Some(slot) = self.images.get(&key) else { return };
-        pass.set_viewport(at[0], at[1], slot.size[0] as f32, slot.size[1] as f32, 0.0, 1.0);
+        let Some(slot) = self.images.get(&key) else {
+            return;
+        };
+        pass.set_viewport(
+            at[0],
+            at[1],
+            slot.size[0] as f32,
+            slot.size[1] as f32,
+            0.0,
+            1.0,
+        );
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &slot.bind_group, &[]);
         pass.draw(0..3, 0..1);

@@ -74,31 +74,61 @@ impl GpuRenderer {
     /// ([`Self::draw_in_pass`]), whose colour target has `color_format` (not sRGB: the shader
     /// applies the display gamma) and whose depth attachment is [`crate::DEPTH_FORMAT`].
     /// This is how the GUI draws the view straight into the window, with no texture between.
-    pub fn for_pass(device: wgpu::Device, queue: wgpu::Queue, color_format: wgpu::TextureFormat) -> Self {
+    pub fn for_pass(
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+        color_format: wgpu::TextureFormat,
+    ) -> Self {
         let pipeline = EndoscopePipeline::with_format(&device, color_format);
-        GpuRenderer { device, queue, pipeline, mesh: None, target: None, chunk_culling: true }
+        GpuRenderer {
+            device,
+            queue,
+            pipeline,
+            mesh: None,
+            target: None,
+            chunk_culling: true,
+        }
     }
 
     /// Writes the camera and lighting for a following [`Self::draw_in_pass`] of a
     /// `width × height` viewport (through the queue: call it before the pass is submitted).
-    pub fn prepare(&self, camera: &Camera, width: u32, height: u32, lighting: &Lighting) -> Result<(), RenderError> {
+    pub fn prepare(
+        &self,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+        lighting: &Lighting,
+    ) -> Result<(), RenderError> {
         self.check_size(width, height)?;
         let uniforms = Uniforms::new(camera, width, height, lighting);
-        self.queue.write_buffer(&self.pipeline.uniforms, 0, bytemuck::bytes_of(&uniforms));
+        self.queue
+            .write_buffer(&self.pipeline.uniforms, 0, bytemuck::bytes_of(&uniforms));
         Ok(())
     }
 
     /// What one frame of `cells` seen by `camera` at `width × height` draws: the cells'
     /// index ranges less their chunks outside the view (if chunk culling is on). Made once
     /// per frame, for [`Self::draw_in_pass`] and for the frame's statistics.
-    pub fn draw_list(&self, cells: &[u32], camera: &Camera, width: u32, height: u32) -> Result<DrawList, RenderError> {
+    pub fn draw_list(
+        &self,
+        cells: &[u32],
+        camera: &Camera,
+        width: u32,
+        height: u32,
+    ) -> Result<DrawList, RenderError> {
         let mesh = self.mesh.as_ref().ok_or(RenderError::NoMesh)?;
-        Ok(DrawList { ranges: self.ranges(mesh, cells, camera, width, height)? })
+        Ok(DrawList {
+            ranges: self.ranges(mesh, cells, camera, width, height)?,
+        })
     }
 
     /// Draws `list` into a render pass someone else began (viewport and scissor set by
     /// them), with the uniforms of the last [`Self::prepare`].
-    pub fn draw_in_pass(&self, pass: &mut wgpu::RenderPass<'_>, list: &DrawList) -> Result<(), RenderError> {
+    pub fn draw_in_pass(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        list: &DrawList,
+    ) -> Result<(), RenderError> {
         let mesh = self.mesh.as_ref().ok_or(RenderError::NoMesh)?;
         record(&self.pipeline, mesh, pass, list.ranges.clone());
         Ok(())
@@ -110,7 +140,14 @@ impl GpuRenderer {
         self.chunk_culling = on;
     }
 
-    fn ranges(&self, mesh: &GpuMesh, cells: &[u32], camera: &Camera, width: u32, height: u32) -> Result<Vec<std::ops::Range<u32>>, RenderError> {
+    fn ranges(
+        &self,
+        mesh: &GpuMesh,
+        cells: &[u32],
+        camera: &Camera,
+        width: u32,
+        height: u32,
+    ) -> Result<Vec<std::ops::Range<u32>>, RenderError> {
         if self.chunk_culling {
             mesh.draw_ranges_in(cells, &Frustum::new(camera, width, height))
         } else {
@@ -334,7 +371,12 @@ impl GpuRenderer {
 }
 
 /// The draw calls of one frame: the cells' index ranges with the endoscope pipeline.
-fn record(pipeline: &EndoscopePipeline, mesh: &GpuMesh, pass: &mut wgpu::RenderPass<'_>, ranges: Vec<std::ops::Range<u32>>) {
+fn record(
+    pipeline: &EndoscopePipeline,
+    mesh: &GpuMesh,
+    pass: &mut wgpu::RenderPass<'_>,
+    ranges: Vec<std::ops::Range<u32>>,
+) {
     pass.set_pipeline(&pipeline.pipeline);
     pass.set_bind_group(0, &pipeline.bind_group, &[]);
     pass.set_vertex_buffer(0, mesh.vertices.slice(..));

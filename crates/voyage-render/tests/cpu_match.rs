@@ -183,8 +183,16 @@ fn chunks_outside_the_view_change_nothing() {
     let mut cameras = views(study, &[0.05, 0.3, 0.5, 0.7, 0.95]);
     cameras.push(views(study, &[0.4])[0].with_fov(140.0));
     let c = views(study, &[0.6])[0];
-    cameras.push(Camera::new(Pose::looking(c.pose.position, c.pose.y_body(), c.pose.z_body())));
-    cameras.push(Camera::new(Pose::looking(c.pose.position, -c.pose.z_body(), DVec3::Z)));
+    cameras.push(Camera::new(Pose::looking(
+        c.pose.position,
+        c.pose.y_body(),
+        c.pose.z_body(),
+    )));
+    cameras.push(Camera::new(Pose::looking(
+        c.pose.position,
+        -c.pose.z_body(),
+        DVec3::Z,
+    )));
     let (mut kept, mut total) = (0, 0);
     for (k, cam) in cameras.iter().enumerate() {
         gpu.set_chunk_culling(false);
@@ -193,9 +201,20 @@ fn chunks_outside_the_view_change_nothing() {
         gpu.set_chunk_culling(true);
         let culled = gpu.render(cam, &all, w, h, &lighting).unwrap();
         kept += gpu.draw_list(&all, cam, w, h).unwrap().triangles();
-        assert!(whole == culled, "view {k}: {} pixels differ", whole.chunks(4).zip(culled.chunks(4)).filter(|(a, b)| a != b).count());
+        assert!(
+            whole == culled,
+            "view {k}: {} pixels differ",
+            whole
+                .chunks(4)
+                .zip(culled.chunks(4))
+                .filter(|(a, b)| a != b)
+                .count()
+        );
     }
     eprintln!("chunk culling kept {kept} of {total} triangles");
     assert_eq!(total, cameras.len() * mesh.triangles.len());
-    assert!(kept < total / 2, "most of the pipe lies outside each view: kept {kept} of {total}");
+    assert!(
+        kept < total / 2,
+        "most of the pipe lies outside each view: kept {kept} of {total}"
+    );
 }

@@ -158,7 +158,10 @@ fn colour_matches_the_cpu_renderer_and_the_lighting_formula() {
     // Normal 60° off the view axis: n·l = 0.5 on the axis.
     let n = DVec3::new(60f64.to_radians().sin(), 0.0, -60f64.to_radians().cos());
     // The plane through eye + depth·z with normal n, in 2 mm squares over ±60 mm.
-    let (u, v) = (DVec3::Y.cross(n).normalize(), n.cross(DVec3::Y.cross(n).normalize()));
+    let (u, v) = (
+        DVec3::Y.cross(n).normalize(),
+        n.cross(DVec3::Y.cross(n).normalize()),
+    );
     let o = eye + DVec3::new(0.0, 0.0, depth);
     let mut tris = Vec::new();
     for j in -30..30 {
@@ -177,7 +180,12 @@ fn colour_matches_the_cpu_renderer_and_the_lighting_formula() {
     let cells: Vec<u32> = (0..m.cells() as u32).collect();
     let mut gpu = gpu();
     gpu.upload(&m).unwrap();
-    let shiny = Lighting { specular: 0.6, shininess: 8.0, falloff_mm: 20.0, ..Default::default() };
+    let shiny = Lighting {
+        specular: 0.6,
+        shininess: 8.0,
+        falloff_mm: 20.0,
+        ..Default::default()
+    };
     for l in [Lighting::default(), shiny] {
         let img = gpu.render(&cam, &cells, w, h, &l).unwrap();
         let cpu = voyage_core::render::render_rgba(&m, &cam, &cells, w, h, &l);
@@ -200,9 +208,17 @@ fn colour_matches_the_cpu_renderer_and_the_lighting_formula() {
                 }
             }
         }
-        eprintln!("largest difference from the CPU renderer {worst_cpu}, from Lighting::rgb8 per pixel {worst_formula}");
-        assert!(worst_cpu <= 1, "CPU and GPU differ by {worst_cpu} with {l:?}");
-        assert!(worst_formula <= 3, "per-vertex lighting is {worst_formula} off the per-pixel formula with {l:?}");
+        eprintln!(
+            "largest difference from the CPU renderer {worst_cpu}, from Lighting::rgb8 per pixel {worst_formula}"
+        );
+        assert!(
+            worst_cpu <= 1,
+            "CPU and GPU differ by {worst_cpu} with {l:?}"
+        );
+        assert!(
+            worst_formula <= 3,
+            "per-vertex lighting is {worst_formula} off the per-pixel formula with {l:?}"
+        );
     }
 }
 

@@ -27,7 +27,9 @@ fn main() -> ExitCode {
 /// a desktop session (CI, servers) although nothing is wrong; wgpu chooses the adapter
 /// itself, so the layer is not needed.
 fn quiet_vulkan_layer() {
-    if std::env::var_os("NODEVICE_SELECT").is_none() && std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+    if std::env::var_os("NODEVICE_SELECT").is_none()
+        && std::env::var_os("XDG_RUNTIME_DIR").is_none()
+    {
         // SAFETY: first thing in main, before any other thread exists.
         unsafe { std::env::set_var("NODEVICE_SELECT", "1") };
     }

@@ -19,7 +19,11 @@ fn scratch(name: &str) -> PathBuf {
 }
 
 fn have(tool: &str) -> bool {
-    Command::new("sh").arg("-c").arg(format!("command -v {tool}")).output().is_ok_and(|o| o.status.success())
+    Command::new("sh")
+        .arg("-c")
+        .arg(format!("command -v {tool}"))
+        .output()
+        .is_ok_and(|o| o.status.success())
 }
 
 /// A private X display for one test, closed when dropped.
@@ -33,16 +37,29 @@ static NEXT_DISPLAY: AtomicU32 = AtomicU32::new(0);
 impl Display {
     fn start() -> Option<Display> {
         if !have("Xvfb") {
-            eprintln!("skipping: Xvfb not installed (bash scripts/deps.sh installs it)");
+            skip("Xvfb not installed (bash scripts/deps.sh installs it)");
             return None;
         }
         for _ in 0..20 {
-            let n = 140 + (std::process::id() % 400) * 2 + NEXT_DISPLAY.fetch_add(1, Ordering::SeqCst);
+            let n =
+                140 + (std::process::id() % 400) * 2 + NEXT_DISPLAY.fetch_add(1, Ordering::SeqCst);
             let name = format!(":{n}");
             if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() {
                 continue;
             }
-            let mut server = Command::new("Xvfb").args([name.as_str(), "-screen", "0", "1280x800x24", "-nolisten", "tcp"]).stdout(Stdio::null()).stderr(Stdio::null()).spawn().expect("start Xvfb");
+            let mut server = Command::new("Xvfb")
+                .args([
+                    name.as_str(),
+                    "-screen",
+                    "0",
+                    "1280x800x24",
+                    "-nolisten",
+                    "tcp",
+                ])
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .spawn()
+                .expect("start Xvfb");
             let t = Instant::now();
             while t.elapsed() < Duration::from_secs(10) {
                 if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() {
@@ -66,13 +83,22 @@ impl Drop for Display {
 
 fn voyage(display: &Display) -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_voyage"));
-    c.env("DISPLAY", &display.name).env_remove("WAYLAND_DISPLAY");
+    c.env("DISPLAY", &display.name)
+        .env_remove("WAYLAND_DISPLAY");
     c
 }
 
 fn pose(v: &Value) -> (DVec3, DQuat) {
-    let a: Vec<f64> = v.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
-    (DVec3::new(a[0], a[1], a[2]), DQuat::from_xyzw(a[4], a[5], a[6], a[3]).normalize())
+    let a: Vec<f64> = v
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    (
+        DVec3::new(a[0], a[1], a[2]),
+        DQuat::from_xyzw(a[4], a[5], a[6], a[3]).normalize(),
+    )
 }
 
 /// How far the view turned toward the screen's right (degrees, negative: left), between two
@@ -87,7 +113,10 @@ fn turned_right_deg(before: &Value, after: &Value) -> f64 {
 }
 
 fn read_json(p: &Path) -> Value {
-    serde_json::from_str(&std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))).unwrap()
+    serde_json::from_str(
+        &std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display())),
+    )
+    .unwrap()
 }
 
 /// Mean colour of a rectangle of the screenshot.
@@ -117,7 +146,9 @@ fn count(img: &image::RgbaImage, r: [f32; 4], pred: impl Fn(&image::Rgba<u8>) ->
 
 #[test]
 fn scripted_session_steers_marks_measures_exports_and_shows_three_panels() {
-    let Some(display) = Display::start() else { return };
+    let Some(display) = Display::start() else {
+        return;
+    };
     let dir = scratch("script");
     let script = dir.join("script.json");
     let export = dir.join("findings");
@@ -150,7 +181,11 @@ fn scripted_session_steers_marks_measures_exports_and_shows_three_panels() {
         .arg(&report)
         .output()
         .unwrap();
-    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert!(out.status.success(), "{text}");
     let r = read_json(&report);
     assert_eq!(r["ready"], true, "{r}");
@@ -158,8 +193,14 @@ fn scripted_session_steers_marks_measures_exports_and_shows_three_panels() {
     let right = turned_right_deg(&rec["start"], &rec["after_right"]);
     let left = turned_right_deg(&rec["after_right"], &rec["after_left"]);
     eprintln!("clicks right turned the view {right:.1}°, then clicks left {left:.1}°");
-    assert!(right > 3.0, "holding the button right of centre turned the camera by {right:.2}° (want right, > 3°)");
-    assert!(left < -3.0, "holding the button left of centre turned the camera by {left:.2}° (want left)");
+    assert!(
+        right > 3.0,
+        "holding the button right of centre turned the camera by {right:.2}° (want right, > 3°)"
+    );
+    assert!(
+        left < -3.0,
+        "holding the button left of centre turned the camera by {left:.2}° (want left)"
+    );
     assert_eq!(r["markers"].as_array().unwrap().len(), 1, "{r}");
     assert_eq!(r["markers"][0]["note"], "test marker");
     let lengths = r["measurements_mm"].as_array().unwrap();
@@ -172,45 +213,83 @@ fn scripted_session_steers_marks_measures_exports_and_shows_three_panels() {
     // The screenshot: the whole window, with the three panels drawn.
     let img = image::open(&shot).unwrap().to_rgba8();
     assert_eq!((img.width(), img.height()), (1280, 800));
-    let view: Vec<f32> = r["view_rect"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect();
+    let view: Vec<f32> = r["view_rect"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap() as f32)
+        .collect();
     let view = [view[0], view[1], view[2], view[3]];
     let pink = mean_rgb(&img, view);
-    assert!(pink[0] > 90.0 && pink[0] > pink[1] + 30.0, "endoscopic view is not mucosa-coloured: {pink:?}");
+    assert!(
+        pink[0] > 90.0 && pink[0] > pink[1] + 30.0,
+        "endoscopic view is not mucosa-coloured: {pink:?}"
+    );
     // Scout (right of the view): the green centerline on the dark background.
     let scout = [view[2] + 4.0, view[1], 1280.0, view[3]];
     let green = count(&img, scout, |p| p[1] > 150 && p[0] < 120 && p[2] < 140);
-    assert!(green > 200, "scout shows no centerline ({green} green pixels)");
+    assert!(
+        green > 200,
+        "scout shows no centerline ({green} green pixels)"
+    );
     // Slices (below the view): CT grey levels, both air (dark) and tissue (light).
     let slices = [view[0], view[3] + 30.0, 1280.0, 800.0];
     let dark = count(&img, slices, |p| p[0] < 40 && p[0] == p[1] && p[1] == p[2]);
     let light = count(&img, slices, |p| p[0] > 140 && p[0] == p[1] && p[1] == p[2]);
-    assert!(dark > 2000 && light > 2000, "slices missing: {dark} dark, {light} light grey pixels");
+    assert!(
+        dark > 2000 && light > 2000,
+        "slices missing: {dark} dark, {light} light grey pixels"
+    );
 }
 
 #[test]
 fn mouse_and_keys_drive_the_window() {
-    let Some(display) = Display::start() else { return };
+    let Some(display) = Display::start() else {
+        return;
+    };
     if !have("xdotool") {
-        eprintln!("skipping: xdotool not installed (bash scripts/deps.sh installs it)");
+        skip("xdotool not installed (bash scripts/deps.sh installs it)");
         return;
     }
     let dir = scratch("xdotool");
     let script = dir.join("script.json");
     std::fs::write(&script, r#"[{"record": "start"}]"#).unwrap();
     let report = dir.join("report.json");
-    let mut child = voyage(&display).args(["demo", "--small", "--paused"]).arg("--script").arg(&script).arg("--report").arg(&report).stdout(Stdio::piped()).stderr(Stdio::null()).spawn().unwrap();
+    let mut child = voyage(&display)
+        .args(["demo", "--small", "--paused"])
+        .arg("--script")
+        .arg(&script)
+        .arg("--report")
+        .arg(&report)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
     let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
     let ready: Value = loop {
-        let line = lines.next().expect("the window closed before it was ready").unwrap();
+        let line = lines
+            .next()
+            .expect("the window closed before it was ready")
+            .unwrap();
         if let Ok(v) = serde_json::from_str::<Value>(&line)
             && v["ready"] == true
         {
             break v;
         }
     };
-    let v: Vec<f64> = ready["view_px"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+    let v: Vec<f64> = ready["view_px"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
     let xdo = |args: &[&str]| {
-        let ok = Command::new("xdotool").env("DISPLAY", &display.name).args(args).status().unwrap().success();
+        let ok = Command::new("xdotool")
+            .env("DISPLAY", &display.name)
+            .args(args)
+            .status()
+            .unwrap()
+            .success();
         assert!(ok, "xdotool {args:?}");
     };
     // No window manager runs on the virtual display: give the window the keyboard focus.
@@ -247,19 +326,34 @@ fn mouse_and_keys_drive_the_window() {
     assert!(status.success());
     let r = read_json(&report);
     let turn = turned_right_deg(&r["recorded"]["start"], &r["pose"]);
-    eprintln!("after holding the button right of centre: turned {turn:.1}°; markers {}", r["markers"]);
-    assert!(turn > 2.0, "the camera turned {turn:.2}° (want right, > 2°)");
+    eprintln!(
+        "after holding the button right of centre: turned {turn:.1}°; markers {}",
+        r["markers"]
+    );
+    assert!(
+        turn > 2.0,
+        "the camera turned {turn:.2}° (want right, > 2°)"
+    );
     assert_eq!(r["markers"].as_array().unwrap().len(), 1, "{r}");
 }
 
 #[test]
 fn an_unreadable_file_is_reported_in_the_window() {
-    let Some(display) = Display::start() else { return };
+    let Some(display) = Display::start() else {
+        return;
+    };
     let dir = scratch("bad");
     let bad = dir.join("broken.nii.gz");
     std::fs::write(&bad, b"not a nifti file").unwrap();
     let shot = dir.join("error.png");
-    let out = voyage(&display).arg("view").arg(&bad).arg("--screenshot").arg(&shot).args(["--after-frames", "3"]).output().unwrap();
+    let out = voyage(&display)
+        .arg("view")
+        .arg(&bad)
+        .arg("--screenshot")
+        .arg(&shot)
+        .args(["--after-frames", "3"])
+        .output()
+        .unwrap();
     // The window stayed up, showed the error and saved the screenshot; the unattended run
     // then fails naming the file.
     assert!(!out.status.success());
@@ -273,18 +367,57 @@ fn an_unreadable_file_is_reported_in_the_window() {
 /// shown and leaves the open colon as it was.
 #[test]
 fn corrections_rerun_the_preprocessing_and_the_colon_follows() {
-    let Some(display) = Display::start() else { return };
+    let Some(display) = Display::start() else {
+        return;
+    };
     let dir = scratch("correct");
     let ct = dir.join("collapsed.nii.gz");
-    let made = voyage(&display).args(["phantom", "colon", "--small", "--collapsed", "descending", "--out"]).arg(&ct).output().unwrap();
-    assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+    let made = voyage(&display)
+        .args([
+            "phantom",
+            "colon",
+            "--small",
+            "--collapsed",
+            "descending",
+            "--out",
+        ])
+        .arg(&ct)
+        .output()
+        .unwrap();
+    assert!(
+        made.status.success(),
+        "{}",
+        String::from_utf8_lossy(&made.stderr)
+    );
     // The automatic colon: two segments, rectum first; each with a point in its gas.
-    let prep = voyage(&display).arg("prep").arg(&ct).arg("--out").arg(dir.join("prep")).arg("--json").output().unwrap();
-    assert!(prep.status.success(), "{}", String::from_utf8_lossy(&prep.stderr));
+    let prep = voyage(&display)
+        .arg("prep")
+        .arg(&ct)
+        .arg("--out")
+        .arg(dir.join("prep"))
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(
+        prep.status.success(),
+        "{}",
+        String::from_utf8_lossy(&prep.stderr)
+    );
     let auto: Value = serde_json::from_slice(&prep.stdout).unwrap();
     let segs = auto["segments"].as_array().unwrap();
-    assert_eq!(segs.iter().filter(|s| s["kept"] == true).count(), 2, "{auto}");
-    let anchor = |order: u64| -> Vec<f64> { segs.iter().find(|s| s["order"] == order).unwrap()["anchor_lps_mm"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect() };
+    assert_eq!(
+        segs.iter().filter(|s| s["kept"] == true).count(),
+        2,
+        "{auto}"
+    );
+    let anchor = |order: u64| -> Vec<f64> {
+        segs.iter().find(|s| s["order"] == order).unwrap()["anchor_lps_mm"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect()
+    };
     let far = anchor(1);
     let full = auto["centerline_length_mm"].as_f64().unwrap();
 
@@ -292,8 +425,21 @@ fn corrections_rerun_the_preprocessing_and_the_colon_follows() {
         let script = dir.join(format!("{name}.json"));
         std::fs::write(&script, steps.to_string()).unwrap();
         let report = dir.join(format!("{name}.report.json"));
-        let out = voyage(&display).arg("view").arg(&ct).args(["--paused", "--after-frames", "1"]).arg("--script").arg(&script).arg("--report").arg(&report).output().unwrap();
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let out = voyage(&display)
+            .arg("view")
+            .arg(&ct)
+            .args(["--paused", "--after-frames", "1"])
+            .arg("--script")
+            .arg(&script)
+            .arg("--report")
+            .arg(&report)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
         read_json(&report)
     };
     // Leaving the far segment out: one segment, a shorter flight; then a point in tissue
@@ -301,30 +447,69 @@ fn corrections_rerun_the_preprocessing_and_the_colon_follows() {
     // (The rectum's lowest gas voxel, 3 mm further down: soft tissue.)
     let rectum = anchor(0);
     let tissue = [rectum[0], rectum[1], rectum[2] - 3.0];
-    let r = run("exclude", serde_json::json!([{"correct": {"exclude": far}}, {"correct": {"include": tissue}}, {"quit": true}]));
+    let r = run(
+        "exclude",
+        serde_json::json!([{"correct": {"exclude": far}}, {"correct": {"include": tissue}}, {"quit": true}]),
+    );
     let colon = &r["colon"];
-    let kept = |c: &Value| c["segments"].as_array().unwrap().iter().filter(|s| s["kept"] == true).count();
+    let kept = |c: &Value| {
+        c["segments"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|s| s["kept"] == true)
+            .count()
+    };
     assert_eq!(kept(colon), 1, "{colon}");
-    assert!(colon["segments"].as_array().unwrap().iter().any(|s| s["reason"] == "excluded by the user"), "{colon}");
+    assert!(
+        colon["segments"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|s| s["reason"] == "excluded by the user"),
+        "{colon}"
+    );
     let len = colon["centerline_mm"].as_f64().unwrap();
-    assert!(len < 0.7 * full, "centerline {len:.0} mm after leaving out the far segment, {full:.0} mm before");
-    assert!(r["correction_error"].as_str().is_some_and(|e| e.contains("not in gas")), "{}", r["correction_error"]);
+    assert!(
+        len < 0.7 * full,
+        "centerline {len:.0} mm after leaving out the far segment, {full:.0} mm before"
+    );
+    assert!(
+        r["correction_error"]
+            .as_str()
+            .is_some_and(|e| e.contains("not in gas")),
+        "{}",
+        r["correction_error"]
+    );
     assert_eq!(colon["corrections"]["exclude"].as_array().unwrap().len(), 1);
 
     // Taken back in, and the flight started higher up the rectosigmoid (a point on the
     // automatic centerline 40 mm along).
     let pts = std::fs::read_to_string(dir.join("prep").join("centerline.json")).unwrap();
     let cl: Value = serde_json::from_str(&pts).unwrap();
-    let start = cl["points_lps_mm"].as_array().map(|p| p[p.len() / 20].clone()).unwrap_or(Value::Null);
-    assert!(!start.is_null(), "centerline.json has points_lps_mm: {}", &pts[..200.min(pts.len())]);
-    let r = run("include", serde_json::json!([{"correct": {"exclude": far}}, {"correct": {"include": far}}, {"correct": {"source": start}}, {"quit": true}]));
+    let start = cl["points_lps_mm"]
+        .as_array()
+        .map(|p| p[p.len() / 20].clone())
+        .unwrap_or(Value::Null);
+    assert!(
+        !start.is_null(),
+        "centerline.json has points_lps_mm: {}",
+        &pts[..200.min(pts.len())]
+    );
+    let r = run(
+        "include",
+        serde_json::json!([{"correct": {"exclude": far}}, {"correct": {"include": far}}, {"correct": {"source": start}}, {"quit": true}]),
+    );
     let colon = &r["colon"];
     assert_eq!(kept(colon), 2, "{colon}");
     let at = |v: &Value| DVec3::from_array([0, 1, 2].map(|i| v[i].as_f64().unwrap()));
     let d = at(&colon["start_lps_mm"]).distance(at(&start));
     assert!(d < 3.0, "the flight starts {d:.1} mm from the point chosen");
     let len = colon["centerline_mm"].as_f64().unwrap();
-    assert!(len < full - 20.0 && len > 0.8 * full, "centerline {len:.0} mm starting higher, {full:.0} mm before");
+    assert!(
+        len < full - 20.0 && len > 0.8 * full,
+        "centerline {len:.0} mm starting higher, {full:.0} mm before"
+    );
     assert!(r["correction_error"].is_null());
 }
 
@@ -332,11 +517,21 @@ fn corrections_rerun_the_preprocessing_and_the_colon_follows() {
 /// cleansing changed outlined; `--no-cleanse` offers neither.
 #[test]
 fn slices_show_the_cleansed_ct_and_outline_it_on_request() {
-    let Some(display) = Display::start() else { return };
+    let Some(display) = Display::start() else {
+        return;
+    };
     let dir = scratch("cleansed");
     let ct = dir.join("tagged.nii.gz");
-    let made = Command::new(env!("CARGO_BIN_EXE_voyage")).args(["phantom", "colon", "--small", "--tagged-fluid", "--out"]).arg(&ct).output().unwrap();
-    assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+    let made = Command::new(env!("CARGO_BIN_EXE_voyage"))
+        .args(["phantom", "colon", "--small", "--tagged-fluid", "--out"])
+        .arg(&ct)
+        .output()
+        .unwrap();
+    assert!(
+        made.status.success(),
+        "{}",
+        String::from_utf8_lossy(&made.stderr)
+    );
     let script = dir.join("script.json");
     let (plain, cleansed) = (dir.join("plain.png"), dir.join("cleansed.png"));
     std::fs::write(
@@ -352,20 +547,50 @@ fn slices_show_the_cleansed_ct_and_outline_it_on_request() {
     )
     .unwrap();
     let report = dir.join("report.json");
-    let out = voyage(&display).arg("view").arg(&ct).args(["--paused", "--script"]).arg(&script).arg("--report").arg(&report).output().unwrap();
-    assert!(out.status.success(), "{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    let out = voyage(&display)
+        .arg("view")
+        .arg(&ct)
+        .args(["--paused", "--script"])
+        .arg(&script)
+        .arg("--report")
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
     let r = read_json(&report);
-    let view: Vec<f32> = r["view_rect"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect();
+    let view: Vec<f32> = r["view_rect"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap() as f32)
+        .collect();
     let slices = [view[0], view[3] + 30.0, 1280.0, 800.0];
     let outline = |p: &image::Rgba<u8>| p[0] < 30 && p[1] > 180 && p[2] > 230;
     let grey = |p: &image::Rgba<u8>| p[0] == p[1] && p[1] == p[2];
-    let (a, b) = (image::open(&plain).unwrap().to_rgba8(), image::open(&cleansed).unwrap().to_rgba8());
-    assert_eq!(count(&a, slices, outline), 0, "outline drawn before it was asked for");
+    let (a, b) = (
+        image::open(&plain).unwrap().to_rgba8(),
+        image::open(&cleansed).unwrap().to_rgba8(),
+    );
+    assert_eq!(
+        count(&a, slices, outline),
+        0,
+        "outline drawn before it was asked for"
+    );
     let outlined = count(&b, slices, outline);
     assert!(outlined > 50, "cleansed voxels outlined: {outlined} pixels");
     // Inside the outline the fluid (bright) became air (dark): fewer light grey pixels.
     let light = |img: &image::RgbaImage| count(img, slices, |p| grey(p) && p[0] > 200);
-    assert!(light(&b) < light(&a), "cleansed slices are not darker where fluid lay: {} vs {}", light(&b), light(&a));
+    assert!(
+        light(&b) < light(&a),
+        "cleansed slices are not darker where fluid lay: {} vs {}",
+        light(&b),
+        light(&a)
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -373,22 +598,84 @@ fn slices_show_the_cleansed_ct_and_outline_it_on_request() {
 /// tagged stool green, with a legend; the plain view has neither colour.
 #[test]
 fn translucency_tells_polyp_from_stool() {
-    let Some(display) = Display::start() else { return };
+    let Some(display) = Display::start() else {
+        return;
+    };
     let dir = scratch("translucency");
     let (ct, truth) = (dir.join("stool.nii.gz"), dir.join("truth.json"));
-    let made = Command::new(env!("CARGO_BIN_EXE_voyage")).args(["phantom", "colon", "--small", "--tagged-stool", "--out"]).arg(&ct).arg("--truth").arg(&truth).output().unwrap();
-    assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+    let made = Command::new(env!("CARGO_BIN_EXE_voyage"))
+        .args(["phantom", "colon", "--small", "--tagged-stool", "--out"])
+        .arg(&ct)
+        .arg("--truth")
+        .arg(&truth)
+        .output()
+        .unwrap();
+    assert!(
+        made.status.success(),
+        "{}",
+        String::from_utf8_lossy(&made.stderr)
+    );
     let t = read_json(&truth);
-    let v3 = |v: &Value| DVec3::new(v[0].as_f64().unwrap(), v[1].as_f64().unwrap(), v[2].as_f64().unwrap());
+    let v3 = |v: &Value| {
+        DVec3::new(
+            v[0].as_f64().unwrap(),
+            v[1].as_f64().unwrap(),
+            v[2].as_f64().unwrap(),
+        )
+    };
     // Facing a sphere on the wall from 6 mm off its surface, along `into` (into the lumen).
-    let facing = |c: DVec3, r: f64, into: DVec3| voyage_core::camera::Pose::looking(c + (r + 6.0) * into, -into, into.any_orthonormal_vector()).to_array();
-    let polyp = t["polyps"].as_array().unwrap().iter().max_by(|a, b| a["diameter_mm"].as_f64().unwrap().total_cmp(&b["diameter_mm"].as_f64().unwrap())).unwrap();
-    let at_polyp = facing(v3(&polyp["center_mm"]), polyp["diameter_mm"].as_f64().unwrap() / 2.0, v3(&polyp["direction"]));
-    let axis: Vec<DVec3> = t["centerline_mm"].as_array().unwrap().iter().map(v3).collect();
-    let lump = t["stool"].as_array().unwrap().iter().max_by(|a, b| a["diameter_mm"].as_f64().unwrap().total_cmp(&b["diameter_mm"].as_f64().unwrap())).unwrap();
+    let facing = |c: DVec3, r: f64, into: DVec3| {
+        voyage_core::camera::Pose::looking(
+            c + (r + 6.0) * into,
+            -into,
+            into.any_orthonormal_vector(),
+        )
+        .to_array()
+    };
+    let polyp = t["polyps"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .max_by(|a, b| {
+            a["diameter_mm"]
+                .as_f64()
+                .unwrap()
+                .total_cmp(&b["diameter_mm"].as_f64().unwrap())
+        })
+        .unwrap();
+    let at_polyp = facing(
+        v3(&polyp["center_mm"]),
+        polyp["diameter_mm"].as_f64().unwrap() / 2.0,
+        v3(&polyp["direction"]),
+    );
+    let axis: Vec<DVec3> = t["centerline_mm"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(v3)
+        .collect();
+    let lump = t["stool"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .max_by(|a, b| {
+            a["diameter_mm"]
+                .as_f64()
+                .unwrap()
+                .total_cmp(&b["diameter_mm"].as_f64().unwrap())
+        })
+        .unwrap();
     let c = v3(&lump["center_mm"]);
-    let near = axis.iter().copied().min_by(|a, b| a.distance(c).total_cmp(&b.distance(c))).unwrap();
-    let at_lump = facing(c, lump["diameter_mm"].as_f64().unwrap() / 2.0, (near - c).normalize());
+    let near = axis
+        .iter()
+        .copied()
+        .min_by(|a, b| a.distance(c).total_cmp(&b.distance(c)))
+        .unwrap();
+    let at_lump = facing(
+        c,
+        lump["diameter_mm"].as_f64().unwrap() / 2.0,
+        (near - c).normalize(),
+    );
     let script = dir.join("script.json");
     let shots = ["plain", "polyp", "stool"].map(|n| dir.join(format!("{n}.png")));
     std::fs::write(
@@ -403,20 +690,61 @@ fn translucency_tells_polyp_from_stool() {
     )
     .unwrap();
     let report = dir.join("report.json");
-    let out = voyage(&display).arg("view").arg(&ct).args(["--paused", "--no-cleanse", "--script"]).arg(&script).arg("--report").arg(&report).output().unwrap();
-    assert!(out.status.success(), "{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    let out = voyage(&display)
+        .arg("view")
+        .arg(&ct)
+        .args(["--paused", "--no-cleanse", "--script"])
+        .arg(&script)
+        .arg("--report")
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
     let r = read_json(&report);
-    let view: Vec<f32> = r["view_rect"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect();
+    let view: Vec<f32> = r["view_rect"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap() as f32)
+        .collect();
     let view = [view[0], view[1], view[2], view[3]];
     // Encoded colours: the mucosa's green is 0.63 of its red at any light, the
     // translucency's soft tissue 0.33; its stool is green.
-    let red = |p: &image::Rgba<u8>| p[0] > 100 && (p[1] as f32) < 0.45 * p[0] as f32 && (p[2] as f32) < 0.45 * p[0] as f32;
-    let green = |p: &image::Rgba<u8>| p[1] > 100 && (p[0] as f32) < 0.6 * p[1] as f32 && (p[2] as f32) < 0.8 * p[1] as f32;
+    let red = |p: &image::Rgba<u8>| {
+        p[0] > 100 && (p[1] as f32) < 0.45 * p[0] as f32 && (p[2] as f32) < 0.45 * p[0] as f32
+    };
+    let green = |p: &image::Rgba<u8>| {
+        p[1] > 100 && (p[0] as f32) < 0.6 * p[1] as f32 && (p[2] as f32) < 0.8 * p[1] as f32
+    };
     let [plain, polyp, stool] = shots.map(|s| image::open(&s).unwrap().to_rgba8());
     let (r0, g0) = (count(&plain, view, red), count(&plain, view, green));
     let (r1, g2) = (count(&polyp, view, red), count(&stool, view, green));
-    assert!(r0 < 20 && g0 < 20, "plain view: {r0} red, {g0} green pixels");
-    assert!(r1 > 500, "the polyp is not red under translucency: {r1} pixels");
-    assert!(g2 > 500, "the stool is not green under translucency: {g2} pixels");
+    assert!(
+        r0 < 20 && g0 < 20,
+        "plain view: {r0} red, {g0} green pixels"
+    );
+    assert!(
+        r1 > 500,
+        "the polyp is not red under translucency: {r1} pixels"
+    );
+    assert!(
+        g2 > 500,
+        "the stool is not green under translucency: {g2} pixels"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A test that cannot run here says so; where `VOYAGE_REQUIRE_ALL` is set (CI sets it) it
+/// fails instead, so that a skip is never a silent pass.
+fn skip(why: &str) {
+    assert!(
+        std::env::var_os("VOYAGE_REQUIRE_ALL").is_none(),
+        "cannot run: {why} (VOYAGE_REQUIRE_ALL is set)"
+    );
+    eprintln!("skipping: {why}");
 }

@@ -13,14 +13,15 @@
 
 use rayon::prelude::*;
 
-use crate::field::{bounding_box, BoxGrid, Field};
+use crate::field::{BoxGrid, Field, bounding_box};
 use crate::volume::{next_run, runs_where};
 use crate::{Error, Result, Volume};
 
 /// Ds over the lumen's bounding box (grown by one voxel): distance in mm to the nearest wall
 /// for lumen voxels (mask ≠ 0), 0 elsewhere.
 pub fn distance_to_wall(mask: &Volume<u8>) -> Result<Field<f32>> {
-    let grid = bounding_box(mask, 1, |v| v != 0).ok_or_else(|| Error::invalid("the lumen mask is empty"))?;
+    let grid = bounding_box(mask, 1, |v| v != 0)
+        .ok_or_else(|| Error::invalid("the lumen mask is empty"))?;
     Ok(distance_to_wall_in(mask, grid))
 }
 
@@ -31,7 +32,11 @@ pub fn distance_to_wall_in(mask: &Volume<u8>, grid: BoxGrid) -> Field<f32> {
     let (mut f, span_y, span_z) = pass_x(mask, &grid, sp[0]);
     pass_y(&mut f, &grid, sp[1], &span_y);
     pass_z(&mut f, &grid, sp[2], &span_z);
-    Field { grid, geometry: mask.geometry().clone(), data: f }
+    Field {
+        grid,
+        geometry: mask.geometry().clone(),
+        data: f,
+    }
 }
 
 /// Scratch space for the 1D transforms: the envelope's parabolas and a column.
@@ -54,7 +59,12 @@ struct Site {
 
 impl Scratch {
     fn new(n: usize) -> Self {
-        Scratch { sites: vec![Site::default(); n + 3], col: vec![0.0; n], pos: vec![0.0; n + 8], out: vec![0.0; n + 8] }
+        Scratch {
+            sites: vec![Site::default(); n + 3],
+            col: vec![0.0; n],
+            pos: vec![0.0; n + 8],
+            out: vec![0.0; n + 8],
+        }
     }
 }
 
@@ -126,12 +136,18 @@ unsafe fn direct_envelope_avx2(run: &mut [f32], h: f32, s: &mut Scratch) {
 /// returns how many entries it did.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn direct_group_avx2<const B: usize>((sp, sf): (&[f32], &[f32]), pos: &[f32], out: &mut [f32]) -> usize {
+unsafe fn direct_group_avx2<const B: usize>(
+    (sp, sf): (&[f32], &[f32]),
+    pos: &[f32],
+    out: &mut [f32],
+) -> usize {
     use std::arch::x86_64::*;
     assert!(pos.len() >= 8 * B && out.len() >= 8 * B);
     // SAFETY (loads and stores): 8·B entries of each, asserted above.
-    let p: [__m256; B] = std::array::from_fn(|b| unsafe { _mm256_loadu_ps(pos.as_ptr().add(8 * b)) });
-    let mut acc: [__m256; B] = std::array::from_fn(|b| unsafe { _mm256_loadu_ps(out.as_ptr().add(8 * b)) });
+    let p: [__m256; B] =
+        std::array::from_fn(|b| unsafe { _mm256_loadu_ps(pos.as_ptr().add(8 * b)) });
+    let mut acc: [__m256; B] =
+        std::array::from_fn(|b| unsafe { _mm256_loadu_ps(out.as_ptr().add(8 * b)) });
     for (&pt, &ft) in sp.iter().zip(sf) {
         let (pt, ft) = (_mm256_set1_ps(pt), _mm256_set1_ps(ft));
         for b in 0..B {
@@ -176,7 +192,11 @@ fn lower_envelope(run: &mut [f32], h: f32, s: &mut Scratch) {
     let n = run.len();
     let sites = &mut s.sites[..n + 3];
     // Site 0 is the wall before the run, at position −h.
-    sites[0] = Site { v: -h, f: 0.0, z: f32::NEG_INFINITY };
+    sites[0] = Site {
+        v: -h,
+        f: 0.0,
+        z: f32::NEG_INFINITY,
+    };
     sites[1].z = f32::INFINITY;
     let mut k = 0usize;
     let mut push = |pq: f32, fq: f32, k: &mut usize| {
@@ -191,7 +211,11 @@ fn lower_envelope(run: &mut [f32], h: f32, s: &mut Scratch) {
             *k -= 1;
         }
         *k += 1;
-        sites[*k] = Site { v: pq, f: fq, z: sct };
+        sites[*k] = Site {
+            v: pq,
+            f: fq,
+            z: sct,
+        };
         sites[*k + 1].z = f32::INFINITY;
     };
     for (q, &fq) in run.iter().enumerate() {
@@ -221,7 +245,10 @@ struct Span {
     hi: u16,
 }
 
-const EMPTY: Span = Span { lo: u16::MAX, hi: 0 };
+const EMPTY: Span = Span {
+    lo: u16::MAX,
+    hi: 0,
+};
 
 impl Span {
     fn add(&mut self, at: usize) {
@@ -241,7 +268,11 @@ fn pass_x(mask: &Volume<u8>, grid: &BoxGrid, h: f64) -> (Vec<f32>, Vec<Span>, Ve
     let h = h as f32;
     let g = mask.geometry();
     // Room for the Dt searches, which work in this memory after it (prep).
-    let mut f = crate::mem::filled_with_room(grid.len(), super::geodesic::Padded::shape(grid).search_len(), 0.0f32);
+    let mut f = crate::mem::filled_with_room(
+        grid.len(),
+        super::geodesic::Padded::shape(grid).search_len(),
+        0.0f32,
+    );
     let runs: Vec<Vec<(u32, u32, u32)>> = f
         .par_chunks_mut(nx * ny)
         .enumerate()
@@ -267,8 +298,12 @@ fn pass_x(mask: &Volume<u8>, grid: &BoxGrid, h: f64) -> (Vec<f32>, Vec<Span>, Ve
     for (k, slice) in runs.iter().enumerate() {
         for &(j, a, b) in slice {
             let (j, a, b) = (j as usize, a as usize, b as usize);
-            span_y[nx * k + a..nx * k + b].iter_mut().for_each(|s| s.add(j));
-            span_z[nx * j + a..nx * j + b].iter_mut().for_each(|s| s.add(k));
+            span_y[nx * k + a..nx * k + b]
+                .iter_mut()
+                .for_each(|s| s.add(j));
+            span_z[nx * j + a..nx * j + b]
+                .iter_mut()
+                .for_each(|s| s.add(k));
         }
     }
     (f, span_y, span_z)
@@ -282,7 +317,9 @@ fn pass_y(f: &mut [f32], grid: &BoxGrid, h: f64, spans: &[Span]) {
         || Scratch::new(ny),
         |s, (k, slab)| {
             for i in 0..nx {
-                let Some(range) = spans[i + nx * k].range() else { continue };
+                let Some(range) = spans[i + nx * k].range() else {
+                    continue;
+                };
                 let (lo, n) = (*range.start(), range.end() - range.start() + 1);
                 for (t, j) in range.clone().enumerate() {
                     s.col[t] = slab[i + nx * j];
@@ -320,7 +357,9 @@ fn pass_z(f: &mut [f32], grid: &BoxGrid, h: f64, spans: &[Span]) {
                 let w = TILE.min(nx - i0);
                 let base = i0 + nx * j;
                 let cols = &spans[base..base + w];
-                let (lo, hi) = cols.iter().fold((usize::MAX, 0), |(lo, hi), c| (lo.min(c.lo as usize), hi.max(c.hi as usize)));
+                let (lo, hi) = cols.iter().fold((usize::MAX, 0), |(lo, hi), c| {
+                    (lo.min(c.lo as usize), hi.max(c.hi as usize))
+                });
                 if lo > hi {
                     continue;
                 }
@@ -366,7 +405,10 @@ unsafe impl<T: Send> Send for SharedSlice<T> {}
 
 impl<T: Copy> SharedSlice<T> {
     fn new(s: &mut [T]) -> Self {
-        SharedSlice { ptr: s.as_mut_ptr(), len: s.len() }
+        SharedSlice {
+            ptr: s.as_mut_ptr(),
+            len: s.len(),
+        }
     }
     /// SAFETY: `i < len`, and no other task writes index `i` concurrently.
     unsafe fn get(&self, i: usize) -> T {
@@ -398,7 +440,12 @@ mod tests {
         for k in -1..=nz as i64 {
             for j in -1..=ny as i64 {
                 for i in -1..=nx as i64 {
-                    let inside = i >= 0 && j >= 0 && k >= 0 && i < nx as i64 && j < ny as i64 && k < nz as i64;
+                    let inside = i >= 0
+                        && j >= 0
+                        && k >= 0
+                        && i < nx as i64
+                        && j < ny as i64
+                        && k < nz as i64;
                     if !inside || mask.get(i as usize, j as usize, k as usize) == 0 {
                         walls.push([i as f64 * s[0], j as f64 * s[1], k as f64 * s[2]]);
                     }
@@ -414,7 +461,10 @@ mod tests {
                 let p = [i as f64 * s[0], j as f64 * s[1], k as f64 * s[2]];
                 walls
                     .iter()
-                    .map(|w| ((p[0] - w[0]).powi(2) + (p[1] - w[1]).powi(2) + (p[2] - w[2]).powi(2)).sqrt())
+                    .map(|w| {
+                        ((p[0] - w[0]).powi(2) + (p[1] - w[1]).powi(2) + (p[2] - w[2]).powi(2))
+                            .sqrt()
+                    })
                     .fold(f64::INFINITY, f64::min)
             })
             .collect()
@@ -438,10 +488,15 @@ mod tests {
     fn matches_brute_force_anisotropic() {
         for (seed, fill) in [(1, 0.9), (2, 0.97), (3, 0.6), (4, 1.0)] {
             let m = random_mask([13, 11, 9], [0.82, 0.7, 1.25], seed, fill);
-            let ds = crate::field::Bricked::from_field(&distance_to_wall(&m).unwrap(), 0.0).to_volume().unwrap();
+            let ds = crate::field::Bricked::from_field(&distance_to_wall(&m).unwrap(), 0.0)
+                .to_volume()
+                .unwrap();
             let want = brute(&m);
             for (idx, (&got, &w)) in ds.data().iter().zip(&want).enumerate() {
-                assert!((got as f64 - w).abs() < 1e-4, "seed {seed} voxel {idx}: {got} vs {w}");
+                assert!(
+                    (got as f64 - w).abs() < 1e-4,
+                    "seed {seed} voxel {idx}: {got} vs {w}"
+                );
             }
         }
     }
@@ -451,9 +506,14 @@ mod tests {
     fn long_runs_match_brute_force() {
         for (seed, fill) in [(5, 0.995), (6, 1.0)] {
             let m = random_mask([4, DIRECT_MAX + 40, 5], [0.82, 0.7, 1.25], seed, fill);
-            let ds = crate::field::Bricked::from_field(&distance_to_wall(&m).unwrap(), 0.0).to_volume().unwrap();
+            let ds = crate::field::Bricked::from_field(&distance_to_wall(&m).unwrap(), 0.0)
+                .to_volume()
+                .unwrap();
             for (idx, (&got, &w)) in ds.data().iter().zip(&brute(&m)).enumerate() {
-                assert!((got as f64 - w).abs() < 1e-4, "seed {seed} voxel {idx}: {got} vs {w}");
+                assert!(
+                    (got as f64 - w).abs() < 1e-4,
+                    "seed {seed} voxel {idx}: {got} vs {w}"
+                );
             }
         }
     }
@@ -481,7 +541,12 @@ mod tests {
             direct_envelope(&mut direct, h, &mut s);
             for q in 0..n {
                 let tol = 1e-5 * envelope[q].max(1.0);
-                assert!((scalar[q] - envelope[q]).abs() <= tol, "n {n} q {q}: {} vs {}", scalar[q], envelope[q]);
+                assert!(
+                    (scalar[q] - envelope[q]).abs() <= tol,
+                    "n {n} q {q}: {} vs {}",
+                    scalar[q],
+                    envelope[q]
+                );
                 assert_eq!(direct[q].to_bits(), scalar[q].to_bits(), "n {n} q {q}");
             }
         }
@@ -496,7 +561,8 @@ mod tests {
             .map(|idx| {
                 let [i, j, k] = g.ijk(idx);
                 let p = [i as f64 * 0.5, j as f64 * 0.5, k as f64 * 0.8];
-                (((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2) + (p[2] - c[2]).powi(2)).sqrt() < r) as u8
+                (((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2) + (p[2] - c[2]).powi(2)).sqrt() < r)
+                    as u8
             })
             .collect();
         let m = Volume::from_vec(g, data).unwrap();

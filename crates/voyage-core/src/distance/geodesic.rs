@@ -28,11 +28,20 @@ pub struct Geodesic {
 /// The distances start straight from the mask (walls 0, lumen +∞: no padded copy of the mask
 /// is needed, the search itself tells walls by their 0) and are finished and moved into
 /// bricks in one pass.
-pub fn geodesic_distance(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3]) -> Result<Geodesic> {
+pub fn geodesic_distance(
+    mask: &Volume<u8>,
+    grid: &BoxGrid,
+    source: [usize; 3],
+) -> Result<Geodesic> {
     let mut marks = BrickMarks::new(grid);
     let (shape, r) = search_from(mask, grid, source, Vec::new(), Some(&mut marks))?;
     let dist = shape.finish_bricked(&r.dist, mask.geometry(), marks);
-    Ok(Geodesic { farthest: shape.global_of_index(r.far), max_mm: r.far_d, reached: r.reached, dist })
+    Ok(Geodesic {
+        farthest: shape.global_of_index(r.far),
+        max_mm: r.far_d,
+        reached: r.reached,
+        dist,
+    })
 }
 
 /// [`geodesic_distance`] over the box of `like` and stored in the bricks it stores, which must
@@ -40,37 +49,98 @@ pub fn geodesic_distance(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3]) 
 /// bricks only. The search works in `scratch`'s memory (any length) and hands it back for the
 /// next one: a fresh box-sized array costs a page fault per page, which on some machines costs
 /// as much as the search itself.
-pub fn geodesic_distance_like<U>(mask: &Volume<u8>, like: &Bricked<U>, source: [usize; 3], scratch: Vec<f32>) -> Result<(Geodesic, Vec<f32>)> {
+pub fn geodesic_distance_like<U>(
+    mask: &Volume<u8>,
+    like: &Bricked<U>,
+    source: [usize; 3],
+    scratch: Vec<f32>,
+) -> Result<(Geodesic, Vec<f32>)> {
     let (shape, r) = search_from(mask, &like.grid, source, scratch, None)?;
-    let dist = Bricked::from_rows_like(like, f32::INFINITY, |j, k| shape.row(&r.dist, j, k), finish);
-    Ok((Geodesic { farthest: shape.global_of_index(r.far), max_mm: r.far_d, reached: r.reached, dist }, r.dist))
+    let dist =
+        Bricked::from_rows_like(like, f32::INFINITY, |j, k| shape.row(&r.dist, j, k), finish);
+    Ok((
+        Geodesic {
+            farthest: shape.global_of_index(r.far),
+            max_mm: r.far_d,
+            reached: r.reached,
+            dist,
+        },
+        r.dist,
+    ))
 }
 
 /// [`geodesic_distance_like`] from two sources in turn (Dt to the target, and to the source).
 /// The pass that moves the first search's distances into bricks also turns its array back
 /// into a start (every lumen voxel of the box lies in those bricks), so the second search
 /// needs no new one from the mask.
-pub fn geodesic_distance_pair_like<U>(mask: &Volume<u8>, like: &Bricked<U>, sources: [[usize; 3]; 2], scratch: Vec<f32>) -> Result<[Geodesic; 2]> {
+pub fn geodesic_distance_pair_like<U>(
+    mask: &Volume<u8>,
+    like: &Bricked<U>,
+    sources: [[usize; 3]; 2],
+    scratch: Vec<f32>,
+) -> Result<[Geodesic; 2]> {
     let (shape, mut first) = search_from(mask, &like.grid, sources[0], scratch, None)?;
     let second_src = source_index(mask, &shape, sources[1])?;
-    let first_dist = Bricked::from_rows_like_taking(like, f32::INFINITY, &mut first.dist, |j, k| shape.row_start(j, k), |d| {
-        let done = finish(*d);
-        *d = restart(*d);
-        done
-    });
-    let second = dial_impl::<false, false>(&shape, std::mem::take(&mut first.dist), Vec::new(), &[second_src], mask.spacing(), &[], None, None, false);
-    let second_dist = Bricked::from_rows_like(like, f32::INFINITY, |j, k| shape.row(&second.dist, j, k), finish);
-    let geodesic = |r: &Search, dist| Geodesic { farthest: shape.global_of_index(r.far), max_mm: r.far_d, reached: r.reached, dist };
+    let first_dist = Bricked::from_rows_like_taking(
+        like,
+        f32::INFINITY,
+        &mut first.dist,
+        |j, k| shape.row_start(j, k),
+        |d| {
+            let done = finish(*d);
+            *d = restart(*d);
+            done
+        },
+    );
+    let second = dial_impl::<false, false>(
+        &shape,
+        std::mem::take(&mut first.dist),
+        Vec::new(),
+        &[second_src],
+        mask.spacing(),
+        &[],
+        None,
+        None,
+        false,
+    );
+    let second_dist = Bricked::from_rows_like(
+        like,
+        f32::INFINITY,
+        |j, k| shape.row(&second.dist, j, k),
+        finish,
+    );
+    let geodesic = |r: &Search, dist| Geodesic {
+        farthest: shape.global_of_index(r.far),
+        max_mm: r.far_d,
+        reached: r.reached,
+        dist,
+    };
     Ok([geodesic(&first, first_dist), geodesic(&second, second_dist)])
 }
 
 /// The plain search from `source` over `grid`, its distances left unfinished ([`finish`]);
 /// `marks`, when given, hears of the bricks that hold lumen as the mask is read.
-fn search_from(mask: &Volume<u8>, grid: &BoxGrid, source: [usize; 3], scratch: Vec<f32>, marks: Option<&mut BrickMarks>) -> Result<(Padded, Search)> {
+fn search_from(
+    mask: &Volume<u8>,
+    grid: &BoxGrid,
+    source: [usize; 3],
+    scratch: Vec<f32>,
+    marks: Option<&mut BrickMarks>,
+) -> Result<(Padded, Search)> {
     let shape = Padded::shape(grid);
     let src = source_index(mask, &shape, source)?;
     let dist = shape.start_from_mask(mask, scratch, marks);
-    let r = dial_impl::<false, false>(&shape, dist, Vec::new(), &[src], mask.spacing(), &[], None, None, false);
+    let r = dial_impl::<false, false>(
+        &shape,
+        dist,
+        Vec::new(),
+        &[src],
+        mask.spacing(),
+        &[],
+        None,
+        None,
+        false,
+    );
     Ok((shape, r))
 }
 
@@ -137,7 +207,15 @@ impl Padded {
 
     /// `mask` over the box in the padded layout, each voxel as `value` makes it, `wall` in the
     /// padding, plus `spare` more `wall`s at the end; `marks` hears of the bricks holding lumen.
-    fn lay_out_mask<T: Copy>(&self, mask: &Volume<u8>, spare: usize, wall: T, value: impl Fn(u8) -> T, reuse: Vec<T>, mut marks: Option<&mut BrickMarks>) -> Vec<T> {
+    fn lay_out_mask<T: Copy>(
+        &self,
+        mask: &Volume<u8>,
+        spare: usize,
+        wall: T,
+        value: impl Fn(u8) -> T,
+        reuse: Vec<T>,
+        mut marks: Option<&mut BrickMarks>,
+    ) -> Vec<T> {
         let n = self.dims[0] * self.dims[1] * self.dims[2] + spare;
         let mut out = if reuse.capacity() >= n {
             let mut v = reuse;
@@ -151,7 +229,8 @@ impl Padded {
         let (g, grid) = (mask.geometry(), &self.grid);
         for k in 0..grid.dims[2] {
             for j in 0..grid.dims[1] {
-                let src = &mask.data()[g.index(grid.lo[0], grid.lo[1] + j, grid.lo[2] + k)..][..grid.dims[0]];
+                let src = &mask.data()[g.index(grid.lo[0], grid.lo[1] + j, grid.lo[2] + k)..]
+                    [..grid.dims[0]];
                 if let Some(m) = marks.as_deref_mut() {
                     m.mark_row(j, k, src, |m| m != 0);
                 }
@@ -167,7 +246,11 @@ impl Padded {
     /// The padded layout of `grid` without the mask (for searches that start from
     /// [`Padded::start_from_mask`]).
     pub(crate) fn shape(grid: &BoxGrid) -> Self {
-        Padded { grid: grid.clone(), dims: grid.dims.map(|d| d + 2), inside: Vec::new() }
+        Padded {
+            grid: grid.clone(),
+            dims: grid.dims.map(|d| d + 2),
+            inside: Vec::new(),
+        }
     }
 
     /// Length of a search's distances: the padded box and one spare wall.
@@ -178,15 +261,39 @@ impl Padded {
     /// A search's starting distances in the padded layout straight from the mask: 0 for walls
     /// and padding, +∞ for lumen, plus the spare wall at the end the row loads need; in
     /// `reuse`'s memory where it is large enough; `marks` hears of the bricks holding lumen.
-    pub(crate) fn start_from_mask(&self, mask: &Volume<u8>, reuse: Vec<f32>, marks: Option<&mut BrickMarks>) -> Vec<f32> {
-        self.lay_out_mask(mask, 1, 0.0f32, |m| if m != 0 { f32::INFINITY } else { 0.0 }, reuse, marks)
+    pub(crate) fn start_from_mask(
+        &self,
+        mask: &Volume<u8>,
+        reuse: Vec<f32>,
+        marks: Option<&mut BrickMarks>,
+    ) -> Vec<f32> {
+        self.lay_out_mask(
+            mask,
+            1,
+            0.0f32,
+            |m| if m != 0 { f32::INFINITY } else { 0.0 },
+            reuse,
+            marks,
+        )
     }
 
     /// Unfinished search distances ([`finish`]) in bricks (+∞ outside): the bricks that hold
     /// lumen, as marked when the search's start was read from the mask (no pass over the
     /// distances to find them). Walls finish as +∞, so a brick without lumen holds nothing else.
-    pub(crate) fn finish_bricked(&self, v: &[f32], geometry: &crate::Geometry, marks: BrickMarks) -> Bricked<f32> {
-        Bricked::from_rows_marked(&self.grid, geometry, f32::INFINITY, marks, |j, k| self.row(v, j, k), finish)
+    pub(crate) fn finish_bricked(
+        &self,
+        v: &[f32],
+        geometry: &crate::Geometry,
+        marks: BrickMarks,
+    ) -> Bricked<f32> {
+        Bricked::from_rows_marked(
+            &self.grid,
+            geometry,
+            f32::INFINITY,
+            marks,
+            |j, k| self.row(v, j, k),
+            finish,
+        )
     }
 
     /// Box row (j, k) of a padded-layout field.
@@ -236,7 +343,10 @@ impl Padded {
                     if di == 0 && dj == 0 && dk == 0 {
                         continue;
                     }
-                    let len = ((di as f64 * spacing[0]).powi(2) + (dj as f64 * spacing[1]).powi(2) + (dk as f64 * spacing[2]).powi(2)).sqrt();
+                    let len = ((di as f64 * spacing[0]).powi(2)
+                        + (dj as f64 * spacing[1]).powi(2)
+                        + (dk as f64 * spacing[2]).powi(2))
+                    .sqrt();
                     out.push((di + nx * (dj + ny * dk), len as f32));
                 }
             }
@@ -283,12 +393,40 @@ impl Padded {
 /// the buckets exact.
 pub fn dial(pad: &Padded, sources: &[usize], spacing: [f64; 3], opts: &SearchOptions) -> Search {
     let start = start_from_inside(pad);
-    let parent = if opts.tree { vec![NO_PARENT; pad.inside.len()] } else { Vec::new() };
+    let parent = if opts.tree {
+        vec![NO_PARENT; pad.inside.len()]
+    } else {
+        Vec::new()
+    };
     match (opts.weight, opts.tree) {
-        (Some(w), true) => dial_impl::<true, true>(pad, start, parent, sources, spacing, w, None, opts.stop, true),
-        (Some(w), false) => dial_impl::<true, false>(pad, start, parent, sources, spacing, w, None, opts.stop, true),
-        (None, true) => dial_impl::<false, true>(pad, start, parent, sources, spacing, &[], None, opts.stop, true),
-        (None, false) => dial_impl::<false, false>(pad, start, parent, sources, spacing, &[], None, opts.stop, true),
+        (Some(w), true) => dial_impl::<true, true>(
+            pad, start, parent, sources, spacing, w, None, opts.stop, true,
+        ),
+        (Some(w), false) => dial_impl::<true, false>(
+            pad, start, parent, sources, spacing, w, None, opts.stop, true,
+        ),
+        (None, true) => dial_impl::<false, true>(
+            pad,
+            start,
+            parent,
+            sources,
+            spacing,
+            &[],
+            None,
+            opts.stop,
+            true,
+        ),
+        (None, false) => dial_impl::<false, false>(
+            pad,
+            start,
+            parent,
+            sources,
+            spacing,
+            &[],
+            None,
+            opts.stop,
+            true,
+        ),
     }
 }
 
@@ -305,20 +443,63 @@ pub(crate) struct TreeStart {
 
 impl TreeStart {
     pub(crate) fn new(pad: &Padded, weight: &[f32]) -> Self {
-        let range = weight.iter().zip(&pad.inside).filter(|(_, m)| **m != 0).fold((f32::INFINITY, 0.0f32), |(lo, hi), (&x, _)| (lo.min(x), hi.max(x)));
-        TreeStart { dist: start_from_inside(pad), parent: vec![NO_PARENT; pad.inside.len()], range }
+        let range = weight
+            .iter()
+            .zip(&pad.inside)
+            .filter(|(_, m)| **m != 0)
+            .fold((f32::INFINITY, 0.0f32), |(lo, hi), (&x, _)| {
+                (lo.min(x), hi.max(x))
+            });
+        TreeStart {
+            dist: start_from_inside(pad),
+            parent: vec![NO_PARENT; pad.inside.len()],
+            range,
+        }
     }
 
     /// The weighted search from `sources` to its end.
-    pub(crate) fn search(self, pad: &Padded, sources: &[usize], spacing: [f64; 3], weight: &[f32]) -> Search {
-        dial_impl::<true, true>(pad, self.dist, self.parent, sources, spacing, weight, Some(self.range), None, true)
+    pub(crate) fn search(
+        self,
+        pad: &Padded,
+        sources: &[usize],
+        spacing: [f64; 3],
+        weight: &[f32],
+    ) -> Search {
+        dial_impl::<true, true>(
+            pad,
+            self.dist,
+            self.parent,
+            sources,
+            spacing,
+            weight,
+            Some(self.range),
+            None,
+            true,
+        )
     }
 
     /// The last voxel the weighted search from `sources` settles: the first where `stop` holds
     /// (else the farthest), and the arrays back at their start.
-    pub(crate) fn nearest(self, pad: &Padded, sources: &[usize], spacing: [f64; 3], weight: &[f32], stop: &dyn Fn(usize) -> bool) -> (Option<usize>, TreeStart) {
+    pub(crate) fn nearest(
+        self,
+        pad: &Padded,
+        sources: &[usize],
+        spacing: [f64; 3],
+        weight: &[f32],
+        stop: &dyn Fn(usize) -> bool,
+    ) -> (Option<usize>, TreeStart) {
         let range = self.range;
-        let r = dial_impl::<true, true>(pad, self.dist, self.parent, sources, spacing, weight, Some(range), Some(stop), false);
+        let r = dial_impl::<true, true>(
+            pad,
+            self.dist,
+            self.parent,
+            sources,
+            spacing,
+            weight,
+            Some(range),
+            Some(stop),
+            false,
+        );
         let (mut dist, mut parent) = (r.dist, r.parent);
         // Every value the search wrote belongs to a voxel it settled or to one of their
         // neighbours (improved from them): walls, never written, are exactly +0.
@@ -334,7 +515,14 @@ impl TreeStart {
                 }
             }
         }
-        (r.order.last().map(|&u| u as usize), TreeStart { dist, parent, range })
+        (
+            r.order.last().map(|&u| u as usize),
+            TreeStart {
+                dist,
+                parent,
+                range,
+            },
+        )
     }
 }
 
@@ -343,7 +531,13 @@ impl TreeStart {
 /// +∞, and one spare wall at the end: the four-wide row loads read a lane past the last
 /// neighbour.
 fn start_from_inside(pad: &Padded) -> Vec<f32> {
-    crate::mem::collect(pad.inside.len() + 1, pad.inside.iter().map(|&m| if m != 0 { f32::INFINITY } else { 0.0 }).chain([0.0]))
+    crate::mem::collect(
+        pad.inside.len() + 1,
+        pad.inside
+            .iter()
+            .map(|&m| if m != 0 { f32::INFINITY } else { 0.0 })
+            .chain([0.0]),
+    )
 }
 
 /// A search's final distance from its working value: settled voxels carry their distance
@@ -376,14 +570,34 @@ fn restart(d: f32) -> f32 {
 /// finished ([`finish`]) and as long as the padded grid, else left as the search leaves them
 /// for the caller to finish.
 #[allow(clippy::too_many_arguments)]
-fn dial_impl<const W: bool, const T: bool>(pad: &Padded, mut dist: Vec<f32>, mut parent: Vec<u8>, sources: &[usize], spacing: [f64; 3], weight: &[f32], range: Option<(f32, f32)>, stop: Option<&dyn Fn(usize) -> bool>, finalize: bool) -> Search {
+fn dial_impl<const W: bool, const T: bool>(
+    pad: &Padded,
+    mut dist: Vec<f32>,
+    mut parent: Vec<u8>,
+    sources: &[usize],
+    spacing: [f64; 3],
+    weight: &[f32],
+    range: Option<(f32, f32)>,
+    stop: Option<&dyn Fn(usize) -> bool>,
+    finalize: bool,
+) -> Search {
     let nbrs = pad.neighbours(spacing);
     let (w_min, w_max) = match range {
         _ if !W => (1.0, 1.0),
         Some(r) => r,
-        None => weight.iter().zip(&dist).filter(|(_, d)| **d != 0.0).fold((f32::INFINITY, 0.0f32), |(lo, hi), (&x, _)| (lo.min(x), hi.max(x))),
+        None => weight
+            .iter()
+            .zip(&dist)
+            .filter(|(_, d)| **d != 0.0)
+            .fold((f32::INFINITY, 0.0f32), |(lo, hi), (&x, _)| {
+                (lo.min(x), hi.max(x))
+            }),
     };
-    let w_min = if w_min.is_finite() { w_min.max(1e-6) } else { 1.0 };
+    let w_min = if w_min.is_finite() {
+        w_min.max(1e-6)
+    } else {
+        1.0
+    };
     let shortest = nbrs.iter().map(|n| n.1).fold(f32::INFINITY, f32::min);
     let longest = nbrs.iter().map(|n| n.1).fold(0.0, f32::max);
     let width = shortest * w_min;
@@ -401,7 +615,10 @@ fn dial_impl<const W: bool, const T: bool>(pad: &Padded, mut dist: Vec<f32>, mut
     let rows = neighbour_rows(pad, spacing);
     let mut order = Vec::new();
     // Offsets back: parent code c of v means v + nbrs[c].0 is the predecessor.
-    let back: Vec<u8> = nbrs.iter().map(|&(off, _)| nbrs.iter().position(|&(o, _)| o == -off).unwrap_or(0) as u8).collect();
+    let back: Vec<u8> = nbrs
+        .iter()
+        .map(|&(off, _)| nbrs.iter().position(|&(o, _)| o == -off).unwrap_or(0) as u8)
+        .collect();
     let mut pending = 0usize;
     let mut pushes = 0usize;
     for &s in sources {
@@ -472,7 +689,11 @@ fn dial_impl<const W: bool, const T: bool>(pad: &Padded, mut dist: Vec<f32>, mut
                 let mut improved = 0u64;
                 for (r, row) in rows.iter().enumerate() {
                     let at = (u as isize + row.start) as usize;
-                    let m = if W { weighted_row_improvements(&dist, weight, at, du, wu, &row.len) } else { row_improvements(&dist, at, du, &row.len) };
+                    let m = if W {
+                        weighted_row_improvements(&dist, weight, at, du, wu, &row.len)
+                    } else {
+                        row_improvements(&dist, at, du, &row.len)
+                    };
                     improved |= (m as u64) << (4 * r);
                 }
                 while improved != 0 {
@@ -481,7 +702,11 @@ fn dial_impl<const W: bool, const T: bool>(pad: &Padded, mut dist: Vec<f32>, mut
                     let (r, lane) = (bit / 4, bit % 4);
                     let v = (u as isize + rows[r].start) as usize + lane;
                     let len = rows[r].len[lane];
-                    let dv = if W { du + len * 0.5 * (wu + weight[v]) } else { du + len };
+                    let dv = if W {
+                        du + len * 0.5 * (wu + weight[v])
+                    } else {
+                        du + len
+                    };
                     improve!(v, dv, dist[v], row_code(r, lane));
                 }
             }
@@ -493,7 +718,16 @@ fn dial_impl<const W: bool, const T: bool>(pad: &Padded, mut dist: Vec<f32>, mut
         dist.truncate(n);
         dist.iter_mut().for_each(|d| *d = finish(*d));
     }
-    Search { dist, far, far_d, reached, pushes, parent, order, nbrs }
+    Search {
+        dist,
+        far,
+        far_d,
+        reached,
+        pushes,
+        parent,
+        order,
+        nbrs,
+    }
 }
 
 /// How many voxels of a bucket ahead the neighbour rows are fetched: the rows of the voxel
@@ -525,10 +759,16 @@ fn neighbour_rows(pad: &Padded, spacing: [f64; 3]) -> [Row; 9] {
         for (lane, l) in len.iter_mut().take(3).enumerate() {
             let di = lane as isize - 1;
             if (di, dj, dk) != (0, 0, 0) {
-                *l = ((di as f64 * spacing[0]).powi(2) + (dj as f64 * spacing[1]).powi(2) + (dk as f64 * spacing[2]).powi(2)).sqrt() as f32;
+                *l = ((di as f64 * spacing[0]).powi(2)
+                    + (dj as f64 * spacing[1]).powi(2)
+                    + (dk as f64 * spacing[2]).powi(2))
+                .sqrt() as f32;
             }
         }
-        Row { start: starts[r], len }
+        Row {
+            start: starts[r],
+            len,
+        }
     })
 }
 
@@ -547,7 +787,9 @@ fn row_improvements(dist: &[f32], at: usize, du: f32, len: &[f32; 4]) -> u32 {
     let d = &dist[at..at + 4];
     #[cfg(target_arch = "x86_64")]
     {
-        use std::arch::x86_64::{_mm_add_ps, _mm_cmplt_ps, _mm_loadu_ps, _mm_movemask_ps, _mm_set1_ps};
+        use std::arch::x86_64::{
+            _mm_add_ps, _mm_cmplt_ps, _mm_loadu_ps, _mm_movemask_ps, _mm_set1_ps,
+        };
         // SAFETY: SSE is part of x86_64; `d` and `len` hold four floats.
         unsafe {
             let c = _mm_add_ps(_mm_set1_ps(du), _mm_loadu_ps(len.as_ptr()));
@@ -556,14 +798,23 @@ fn row_improvements(dist: &[f32], at: usize, du: f32, len: &[f32; 4]) -> u32 {
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
-        (0..4).filter(|&l| du + len[l] < d[l]).fold(0u32, |m, l| m | 1 << l)
+        (0..4)
+            .filter(|&l| du + len[l] < d[l])
+            .fold(0u32, |m, l| m | 1 << l)
     }
 }
 
 /// [`row_improvements`] of a weighted search: lane l's candidate is
 /// `du + len[l] · 0.5 · (wu + weight[at + l])`, computed as the scalar code computes it.
 #[inline(always)]
-fn weighted_row_improvements(dist: &[f32], weight: &[f32], at: usize, du: f32, wu: f32, len: &[f32; 4]) -> u32 {
+fn weighted_row_improvements(
+    dist: &[f32],
+    weight: &[f32],
+    at: usize,
+    du: f32,
+    wu: f32,
+    len: &[f32; 4],
+) -> u32 {
     let d = &dist[at..at + 4];
     // The fourth lane (never a neighbour: its length is +∞) may lie past the weights' end.
     let w = match weight.get(at..at + 4) {
@@ -572,26 +823,36 @@ fn weighted_row_improvements(dist: &[f32], weight: &[f32], at: usize, du: f32, w
     };
     #[cfg(target_arch = "x86_64")]
     {
-        use std::arch::x86_64::{_mm_add_ps, _mm_cmplt_ps, _mm_loadu_ps, _mm_movemask_ps, _mm_mul_ps, _mm_set1_ps};
+        use std::arch::x86_64::{
+            _mm_add_ps, _mm_cmplt_ps, _mm_loadu_ps, _mm_movemask_ps, _mm_mul_ps, _mm_set1_ps,
+        };
         // SAFETY: SSE is part of x86_64; `d`, `w` and `len` hold four floats.
         unsafe {
             let half_len = _mm_mul_ps(_mm_loadu_ps(len.as_ptr()), _mm_set1_ps(0.5));
-            let c = _mm_add_ps(_mm_set1_ps(du), _mm_mul_ps(half_len, _mm_add_ps(_mm_set1_ps(wu), _mm_loadu_ps(w.as_ptr()))));
+            let c = _mm_add_ps(
+                _mm_set1_ps(du),
+                _mm_mul_ps(
+                    half_len,
+                    _mm_add_ps(_mm_set1_ps(wu), _mm_loadu_ps(w.as_ptr())),
+                ),
+            );
             _mm_movemask_ps(_mm_cmplt_ps(c, _mm_loadu_ps(d.as_ptr()))) as u32
         }
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
-        (0..4).filter(|&l| du + len[l] * 0.5 * (wu + w[l]) < d[l]).fold(0u32, |m, l| m | 1 << l)
+        (0..4)
+            .filter(|&l| du + len[l] * 0.5 * (wu + w[l]) < d[l])
+            .fold(0u32, |m, l| m | 1 << l)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::Geometry;
     use crate::distance::distance_to_wall;
     use crate::field::bounding_box;
-    use crate::Geometry;
     use std::cmp::Reverse;
     use std::collections::BinaryHeap;
 
@@ -601,7 +862,11 @@ mod tests {
     }
 
     /// The same with an edge u–v costing its length times (w(u) + w(v)) / 2 (volume indices).
-    fn reference_weighted(mask: &Volume<u8>, src: [usize; 3], w: impl Fn(usize) -> f64) -> Vec<f64> {
+    fn reference_weighted(
+        mask: &Volume<u8>,
+        src: [usize; 3],
+        w: impl Fn(usize) -> f64,
+    ) -> Vec<f64> {
         let g = mask.geometry();
         let [nx, ny, nz] = g.dims;
         let s = g.spacing;
@@ -620,14 +885,24 @@ mod tests {
                 for dj in -1i64..=1 {
                     for di in -1i64..=1 {
                         let (a, b, c) = (i as i64 + di, j as i64 + dj, k as i64 + dk);
-                        if (di, dj, dk) == (0, 0, 0) || a < 0 || b < 0 || c < 0 || a >= nx as i64 || b >= ny as i64 || c >= nz as i64 {
+                        if (di, dj, dk) == (0, 0, 0)
+                            || a < 0
+                            || b < 0
+                            || c < 0
+                            || a >= nx as i64
+                            || b >= ny as i64
+                            || c >= nz as i64
+                        {
                             continue;
                         }
                         let v = g.index(a as usize, b as usize, c as usize);
                         if mask.data()[v] == 0 {
                             continue;
                         }
-                        let len = ((di as f64 * s[0]).powi(2) + (dj as f64 * s[1]).powi(2) + (dk as f64 * s[2]).powi(2)).sqrt();
+                        let len = ((di as f64 * s[0]).powi(2)
+                            + (dj as f64 * s[1]).powi(2)
+                            + (dk as f64 * s[2]).powi(2))
+                        .sqrt();
                         let dv = du + len * 0.5 * (w(u) + w(v));
                         if dv < d[v] {
                             d[v] = dv;
@@ -673,21 +948,35 @@ mod tests {
             // Two searches in one array, the second started from what the first left: each as
             // if alone (the second from the first's farthest voxel, the source's own −0 included).
             let (alone, _) = geodesic_distance_like(&m, &ds, geo.farthest, Vec::new()).unwrap();
-            let [a, b] = geodesic_distance_pair_like(&m, &ds, [[0, 0, 0], geo.farthest], used).unwrap();
+            let [a, b] =
+                geodesic_distance_pair_like(&m, &ds, [[0, 0, 0], geo.farthest], used).unwrap();
             assert_eq!(a.dist.to_volume().unwrap(), got);
             assert_eq!(b.dist.to_volume().unwrap(), alone.dist.to_volume().unwrap());
-            assert_eq!((b.reached, b.farthest, b.max_mm), (alone.reached, alone.farthest, alone.max_mm));
+            assert_eq!(
+                (b.reached, b.farthest, b.max_mm),
+                (alone.reached, alone.farthest, alone.max_mm)
+            );
             let mut reached = 0;
             for (idx, (&a, &b)) in got.data().iter().zip(&want).enumerate() {
                 if b.is_infinite() {
-                    assert!(a.is_infinite(), "seed {seed} voxel {idx}: reached {a}, reference unreachable");
+                    assert!(
+                        a.is_infinite(),
+                        "seed {seed} voxel {idx}: reached {a}, reference unreachable"
+                    );
                 } else {
                     reached += 1;
-                    assert!((a as f64 - b).abs() <= 1e-5 * b + 1e-4, "seed {seed} voxel {idx}: {a} vs {b}");
+                    assert!(
+                        (a as f64 - b).abs() <= 1e-5 * b + 1e-4,
+                        "seed {seed} voxel {idx}: {a} vs {b}"
+                    );
                 }
             }
             assert_eq!(geo.reached, reached);
-            let far = want.iter().cloned().filter(|d| d.is_finite()).fold(0.0, f64::max);
+            let far = want
+                .iter()
+                .cloned()
+                .filter(|d| d.is_finite())
+                .fold(0.0, f64::max);
             assert!((geo.max_mm as f64 - far).abs() < 1e-3);
         }
     }
@@ -709,7 +998,16 @@ mod tests {
                 }
             }
             let src = pad.lumen_index([0, 0, 0]).unwrap();
-            let r = dial(&pad, &[src], m.spacing(), &SearchOptions { weight: Some(&weight), tree: true, stop: None });
+            let r = dial(
+                &pad,
+                &[src],
+                m.spacing(),
+                &SearchOptions {
+                    weight: Some(&weight),
+                    tree: true,
+                    stop: None,
+                },
+            );
             let want = reference_weighted(&m, [0, 0, 0], |v| w_of(v) as f64);
             let mut reached = 0;
             for (i, &inside) in pad.inside.iter().enumerate() {
@@ -720,17 +1018,29 @@ mod tests {
                 let b = want[m.geometry().index(g[0], g[1], g[2])];
                 let a = r.dist[i] as f64;
                 if b.is_infinite() {
-                    assert!(a.is_infinite(), "seed {seed} voxel {g:?}: reached {a}, reference unreachable");
+                    assert!(
+                        a.is_infinite(),
+                        "seed {seed} voxel {g:?}: reached {a}, reference unreachable"
+                    );
                     continue;
                 }
                 reached += 1;
-                assert!((a - b).abs() <= 1e-5 * b + 1e-4, "seed {seed} voxel {g:?}: {a} vs {b}");
+                assert!(
+                    (a - b).abs() <= 1e-5 * b + 1e-4,
+                    "seed {seed} voxel {g:?}: {a} vs {b}"
+                );
                 // The tree: each voxel's distance is its parent's plus the edge between them.
                 if let Some(p) = r.parent_of(i) {
                     let (gp, gi) = (pad.global_of_index(p), g);
-                    let len = (0..3).map(|a| ((gp[a] as f64 - gi[a] as f64) * m.spacing()[a]).powi(2)).sum::<f64>().sqrt();
+                    let len = (0..3)
+                        .map(|a| ((gp[a] as f64 - gi[a] as f64) * m.spacing()[a]).powi(2))
+                        .sum::<f64>()
+                        .sqrt();
                     let edge = len * 0.5 * (weight[p] as f64 + weight[i] as f64);
-                    assert!((r.dist[p] as f64 + edge - a).abs() <= 1e-4 * a + 1e-3, "seed {seed}: tree edge to {g:?}");
+                    assert!(
+                        (r.dist[p] as f64 + edge - a).abs() <= 1e-4 * a + 1e-3,
+                        "seed {seed}: tree edge to {g:?}"
+                    );
                 } else {
                     assert_eq!(i, src);
                 }
@@ -746,12 +1056,26 @@ mod tests {
                     count.get() == settle
                 };
                 let (last, back) = start.nearest(&pad, &[src], m.spacing(), &weight, &stop);
-                assert_eq!(last, Some(r.order[settle - 1] as usize), "seed {seed}: settled {settle}");
+                assert_eq!(
+                    last,
+                    Some(r.order[settle - 1] as usize),
+                    "seed {seed}: settled {settle}"
+                );
                 start = back;
             }
             let again = start.search(&pad, &[src], m.spacing(), &weight);
-            assert!(again.dist.iter().zip(&r.dist).all(|(a, b)| a.to_bits() == b.to_bits()), "seed {seed}: distances");
-            assert_eq!((again.parent, again.order), (r.parent.clone(), r.order.clone()));
+            assert!(
+                again
+                    .dist
+                    .iter()
+                    .zip(&r.dist)
+                    .all(|(a, b)| a.to_bits() == b.to_bits()),
+                "seed {seed}: distances"
+            );
+            assert_eq!(
+                (again.parent, again.order),
+                (r.parent.clone(), r.order.clone())
+            );
         }
     }
 

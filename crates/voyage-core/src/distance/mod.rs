@@ -5,4 +5,4 @@ pub mod edt;
 pub mod geodesic;
 
 pub use edt::{distance_to_wall, distance_to_wall_in};
-pub use geodesic::{geodesic_distance, geodesic_distance_like, Geodesic};
+pub use geodesic::{Geodesic, geodesic_distance, geodesic_distance_like};

@@ -3,10 +3,10 @@
 
 use std::path::Path;
 
-use serde_json::{json, Value};
+use serde_json::{Value, json};
 
-use crate::io::atomic::write_atomic;
 use crate::Result;
+use crate::io::atomic::write_atomic;
 
 pub const MARKUPS_SCHEMA: &str = "https://raw.githubusercontent.com/slicer/slicer/master/Modules/Loadable/Markups/Resources/Schema/markups-schema-v1.0.3.json#";
 
@@ -69,7 +69,9 @@ pub fn markups_node(kind: &str, name: &str, points: &[MarkupsPoint], color: [f64
 /// A line between two points (a measurement), carrying its length as Slicer's "length"
 /// measurement so that Slicer shows the number without recomputing it.
 pub fn markups_line_node(name: &str, a: MarkupsPoint, b: MarkupsPoint, color: [f64; 3]) -> Value {
-    let length = (glam::DVec3::from_array(a.position_lps) - glam::DVec3::from_array(b.position_lps)).length();
+    let length = (glam::DVec3::from_array(a.position_lps)
+        - glam::DVec3::from_array(b.position_lps))
+    .length();
     let mut node = markups_node("Line", name, &[a, b], color);
     node["fixedNumberOfControlPoints"] = json!(true);
     node["measurements"] = json!([{

@@ -19,13 +19,20 @@ struct ToPatient {
 
 impl ToPatient {
     fn new(g: &Geometry) -> Self {
-        ToPatient { rot: g.direction_mat(), origin: DVec3::from_array(g.origin) }
+        ToPatient {
+            rot: g.direction_mat(),
+            origin: DVec3::from_array(g.origin),
+        }
     }
     fn point(&self, p: [f32; 3]) -> [f32; 3] {
-        (self.origin + self.rot * Vec3::from_array(p).as_dvec3()).as_vec3().to_array()
+        (self.origin + self.rot * Vec3::from_array(p).as_dvec3())
+            .as_vec3()
+            .to_array()
     }
     fn normal(&self, n: [f32; 3]) -> [f32; 3] {
-        (self.rot * Vec3::from_array(n).as_dvec3()).as_vec3().to_array()
+        (self.rot * Vec3::from_array(n).as_dvec3())
+            .as_vec3()
+            .to_array()
     }
 }
 
@@ -90,7 +97,12 @@ mod tests {
 
     fn tetra() -> Mesh {
         Mesh {
-            positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            positions: vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [0.0, 0.0, 1.0],
+            ],
             normals: vec![[0.0, 0.0, 1.0]; 4],
             triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
         }
@@ -105,7 +117,11 @@ mod tests {
         let ply = dir.join("m.ply");
         write_ply(&ply, &m, &g).unwrap();
         let bytes = std::fs::read(&ply).unwrap();
-        let end = bytes.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
+        let end = bytes
+            .windows(11)
+            .position(|w| w == b"end_header\n")
+            .unwrap()
+            + 11;
         assert_eq!(bytes.len() - end, 4 * 24 + 4 * 13);
         let x = f32::from_le_bytes(bytes[end..end + 4].try_into().unwrap());
         assert_eq!(x, 10.0, "vertex 0 moved to the patient frame");

@@ -7,5 +7,5 @@ pub mod mesh;
 pub mod study;
 pub mod trajectory;
 
-pub use markups::{write_markups_curve, MarkupsPoint};
+pub use markups::{MarkupsPoint, write_markups_curve};
 pub use mesh::{write_ply, write_stl};

@@ -5,10 +5,10 @@ use std::path::{Path, PathBuf};
 use glam::DVec3;
 use serde_json::json;
 
-use super::{write_markups_curve, write_ply, write_stl, MarkupsPoint};
+use super::{MarkupsPoint, write_markups_curve, write_ply, write_stl};
+use crate::Result;
 use crate::io::{atomic::write_atomic, nifti};
 use crate::prep::Study;
-use crate::Result;
 
 /// Writes every export of a study into `dir`; returns the paths written.
 ///
@@ -35,7 +35,10 @@ pub fn write_study(dir: &Path, study: &Study) -> Result<Vec<PathBuf>> {
 fn move_into(dir: &Path, staging: &Path, names: &[&str]) -> Result<Vec<PathBuf>> {
     let paths: Vec<PathBuf> = names.iter().map(|n| dir.join(n)).collect();
     if let Some(p) = paths.iter().find(|p| p.is_dir()) {
-        return Err(crate::Error::format(p, "a folder is in the way of this export"));
+        return Err(crate::Error::format(
+            p,
+            "a folder is in the way of this export",
+        ));
     }
     for (name, p) in names.iter().zip(&paths) {
         std::fs::rename(staging.join(name), p).map_err(|e| crate::Error::io(p, e))?;
@@ -52,12 +55,20 @@ fn write_files(dir: &Path, study: &Study) -> Result<Vec<&'static str>> {
         dir.join(name)
     };
     nifti::save(&put("lumen.nii.gz"), &study.segmentation.lumen)?;
-    nifti::save_slices(&put("ds.nii.gz"), g, |k, out: &mut [f32]| study.ds.fill_slice(k, out))?;
+    nifti::save_slices(&put("ds.nii.gz"), g, |k, out: &mut [f32]| {
+        study.ds.fill_slice(k, out)
+    })?;
     if !study.cleansing.is_empty() {
-        nifti::save_slices(&put("cleansed.nii.gz"), g, |k, out: &mut [i16]| study.cleansing.fill_slice(&study.ct, k, out))?;
+        nifti::save_slices(&put("cleansed.nii.gz"), g, |k, out: &mut [i16]| {
+            study.cleansing.fill_slice(&study.ct, k, out)
+        })?;
     }
     let cl = &study.centerline;
-    let lps: Vec<[f64; 3]> = cl.points_mm.iter().map(|p| g.local_to_patient(DVec3::from_array(*p)).to_array()).collect();
+    let lps: Vec<[f64; 3]> = cl
+        .points_mm
+        .iter()
+        .map(|p| g.local_to_patient(DVec3::from_array(*p)).to_array())
+        .collect();
     let cl_json = json!({
         "frame": "points_mm: volume-local mm (x = i·sx, y = j·sy, z = k·sz); points_lps_mm: DICOM patient LPS",
         "length_mm": cl.length_mm,
@@ -77,7 +88,11 @@ fn write_files(dir: &Path, study: &Study) -> Result<Vec<&'static str>> {
         .step_by(5)
         .chain(lps.last())
         .enumerate()
-        .map(|(i, p)| MarkupsPoint { label: format!("CL-{}", i + 1), position_lps: *p, description: String::new() })
+        .map(|(i, p)| MarkupsPoint {
+            label: format!("CL-{}", i + 1),
+            position_lps: *p,
+            description: String::new(),
+        })
         .collect();
     write_markups_curve(&put("centerline.mrk.json"), "Centerline", &points)?;
     write_ply(&put("surface.ply"), &study.surface.mesh, g)?;
@@ -112,7 +127,10 @@ fn write_files(dir: &Path, study: &Study) -> Result<Vec<&'static str>> {
             })
         })
         .collect();
-    write_json(&put("cells.json"), &json!({ "frame": "volume-local mm, with LPS copies", "cells": cells }))?;
+    write_json(
+        &put("cells.json"),
+        &json!({ "frame": "volume-local mm, with LPS copies", "cells": cells }),
+    )?;
     Ok(out)
 }
 

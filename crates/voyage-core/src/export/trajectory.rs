@@ -11,7 +11,12 @@ use crate::{Geometry, Result};
 /// Writes `flights` as JSON: per flight its summary and its poses `[x, y, z, qw, qx, qy, qz]`
 /// in volume-local mm (q turns the body frame into the volume's: z_body is the view
 /// direction, y_body the up vector), and the camera positions in patient LPS mm.
-pub fn write_trajectory(path: &Path, flights: &[Flight], geometry: &Geometry, fps: f64) -> Result<()> {
+pub fn write_trajectory(
+    path: &Path,
+    flights: &[Flight],
+    geometry: &Geometry,
+    fps: f64,
+) -> Result<()> {
     let flights: Vec<_> = flights
         .iter()
         .map(|f| {
@@ -33,7 +38,9 @@ pub fn write_trajectory(path: &Path, flights: &[Flight], geometry: &Geometry, fp
         },
         "flights": flights,
     });
-    let text = serde_json::to_string(&doc).map_err(|e| crate::Error::invalid(format!("trajectory: {e}")))? + "\n";
+    let text = serde_json::to_string(&doc)
+        .map_err(|e| crate::Error::invalid(format!("trajectory: {e}")))?
+        + "\n";
     write_atomic(path, |w| w.write_all(text.as_bytes()))
 }
 
@@ -42,20 +49,31 @@ pub fn read_poses(path: &Path) -> Result<Vec<Vec<crate::camera::Pose>>> {
     let text = std::fs::read_to_string(path).map_err(|e| crate::Error::io(path, e))?;
     let bad = |what: &str| crate::Error::format(path, format!("not a voyage trajectory: {what}"));
     let doc: serde_json::Value = serde_json::from_str(&text).map_err(|e| bad(&e.to_string()))?;
-    let flights = doc.get("flights").and_then(|f| f.as_array()).ok_or_else(|| bad("no \"flights\" list"))?;
+    let flights = doc
+        .get("flights")
+        .and_then(|f| f.as_array())
+        .ok_or_else(|| bad("no \"flights\" list"))?;
     flights
         .iter()
         .map(|f| {
-            let poses = f.get("poses").and_then(|p| p.as_array()).ok_or_else(|| bad("a flight without \"poses\""))?;
+            let poses = f
+                .get("poses")
+                .and_then(|p| p.as_array())
+                .ok_or_else(|| bad("a flight without \"poses\""))?;
             poses
                 .iter()
                 .map(|p| {
-                    let a: Vec<f64> = p.as_array().map(|a| a.iter().filter_map(|v| v.as_f64()).collect()).unwrap_or_default();
-                    let arr: [f64; 7] = a.try_into().map_err(|_| bad("a pose is not seven numbers"))?;
-                    crate::camera::Pose::from_array(arr).ok_or_else(|| bad("a pose with a zero or non-finite quaternion"))
+                    let a: Vec<f64> = p
+                        .as_array()
+                        .map(|a| a.iter().filter_map(|v| v.as_f64()).collect())
+                        .unwrap_or_default();
+                    let arr: [f64; 7] = a
+                        .try_into()
+                        .map_err(|_| bad("a pose is not seven numbers"))?;
+                    crate::camera::Pose::from_array(arr)
+                        .ok_or_else(|| bad("a pose with a zero or non-finite quaternion"))
                 })
                 .collect()
         })
         .collect()
 }
-

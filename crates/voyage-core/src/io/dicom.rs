@@ -94,7 +94,12 @@ pub fn load_dir(path: &Path, opts: &LoadOptions) -> Result<Loaded> {
         }
     }
     if images.is_empty() {
-        return Err(no_images_error(path, files.len(), &skipped_non_dicom, &skipped_non_image));
+        return Err(no_images_error(
+            path,
+            files.len(),
+            &skipped_non_dicom,
+            &skipped_non_image,
+        ));
     }
     let mut notes = skipped_notes(&skipped_non_dicom, &skipped_non_image);
     let (chosen, others, choice_note) = choose_series(path, images, opts)?;
@@ -119,7 +124,10 @@ pub fn load_file(path: &Path, opts: &LoadOptions) -> Result<Loaded> {
         Probe::Image(h) => match &opts.series_uid {
             Some(want) if *want != h.series_uid => Err(Error::format(
                 path,
-                format!("this file belongs to series {}, not to the requested {want}", h.series_uid),
+                format!(
+                    "this file belongs to series {}, not to the requested {want}",
+                    h.series_uid
+                ),
             )),
             _ => load_series(vec![*h]),
         },
@@ -217,9 +225,12 @@ fn probe_file(path: &Path) -> Result<Probe> {
         return Ok(Probe::NotDicom(path.to_path_buf()));
     }
     let obj = guarded(path, "reading the header", || {
-        open_dicom(path, Some(tags::PIXEL_DATA)).map_err(|e| e.into_error(path, "not a readable DICOM file"))
+        open_dicom(path, Some(tags::PIXEL_DATA))
+            .map_err(|e| e.into_error(path, "not a readable DICOM file"))
     })?;
-    guarded(path, "reading the header", || parse_header(path, &obj).map_err(|m| Error::format(path, m)))
+    guarded(path, "reading the header", || {
+        parse_header(path, &obj).map_err(|m| Error::format(path, m))
+    })
 }
 
 /// Whether the file carries the DICOM Part 10 marker ("DICM" after the 128-byte preamble, or at
@@ -242,7 +253,10 @@ fn guarded<T>(path: &Path, what: &str, f: impl FnOnce() -> Result<T>) -> Result<
                 .map(|s| s.to_string())
                 .or_else(|| panic.downcast_ref::<String>().cloned())
                 .unwrap_or_else(|| "unknown cause".into());
-            Err(Error::format(path, format!("malformed DICOM data: the reader failed while {what} ({msg})")))
+            Err(Error::format(
+                path,
+                format!("malformed DICOM data: the reader failed while {what} ({msg})"),
+            ))
         }
     }
 }
@@ -266,15 +280,24 @@ fn parse_header(path: &Path, obj: &DefaultDicomObject) -> std::result::Result<Pr
     let sop_class = text(obj, tags::SOP_CLASS_UID);
     let modality = text(obj, tags::MODALITY);
     if sop_class.as_deref() == Some(MEDIA_STORAGE_DIRECTORY) {
-        return Ok(Probe::NotImage(path.to_path_buf(), "a DICOMDIR (directory index)".into()));
+        return Ok(Probe::NotImage(
+            path.to_path_buf(),
+            "a DICOMDIR (directory index)".into(),
+        ));
     }
-    let (Some(rows), Some(cols)) = (uint(obj, tags::ROWS, "Rows")?, uint(obj, tags::COLUMNS, "Columns")?) else {
+    let (Some(rows), Some(cols)) = (
+        uint(obj, tags::ROWS, "Rows")?,
+        uint(obj, tags::COLUMNS, "Columns")?,
+    ) else {
         let what = match (&modality, &sop_class) {
             (Some(m), _) => format!("modality {m}"),
             (None, Some(c)) => format!("SOP class {c}"),
             _ => "no modality".into(),
         };
-        return Ok(Probe::NotImage(path.to_path_buf(), format!("no image in this file (no Rows/Columns; {what})")));
+        return Ok(Probe::NotImage(
+            path.to_path_buf(),
+            format!("no image in this file (no Rows/Columns; {what})"),
+        ));
     };
     let frames = uint(obj, tags::NUMBER_OF_FRAMES, "NumberOfFrames")?.unwrap_or(1);
     check_dims([cols, rows, frames]).map_err(|e| format!("image size: {e}"))?;
@@ -289,7 +312,11 @@ fn parse_header(path: &Path, obj: &DefaultDicomObject) -> std::result::Result<Pr
         series_uid: text(obj, tags::SERIES_INSTANCE_UID).unwrap_or_default(),
         series_description: text(obj, tags::SERIES_DESCRIPTION),
         modality,
-        ts_uid: obj.meta().transfer_syntax().trim_end_matches(['\0', ' ']).to_string(),
+        ts_uid: obj
+            .meta()
+            .transfer_syntax()
+            .trim_end_matches(['\0', ' '])
+            .to_string(),
         rows: rows as usize,
         cols: cols as usize,
         frames: frames as usize,
@@ -305,20 +332,27 @@ fn parse_header(path: &Path, obj: &DefaultDicomObject) -> std::result::Result<Pr
 /// Checks the pixel module: one grayscale sample of 8 or 16 bits.
 fn parse_pixel_format(obj: &InMemDicomObject) -> std::result::Result<PixelFormat, String> {
     let samples = uint(obj, tags::SAMPLES_PER_PIXEL, "SamplesPerPixel")?.unwrap_or(1);
-    let photometric = text(obj, tags::PHOTOMETRIC_INTERPRETATION).unwrap_or_else(|| "MONOCHROME2".into());
+    let photometric =
+        text(obj, tags::PHOTOMETRIC_INTERPRETATION).unwrap_or_else(|| "MONOCHROME2".into());
     if samples != 1 || !photometric.starts_with("MONOCHROME") {
         return Err(format!(
             "not a grayscale image (SamplesPerPixel {samples}, PhotometricInterpretation {photometric}): its values are not CT numbers"
         ));
     }
-    let bits_allocated =
-        uint(obj, tags::BITS_ALLOCATED, "BitsAllocated")?.ok_or("BitsAllocated (0028,0100) is missing")?;
+    let bits_allocated = uint(obj, tags::BITS_ALLOCATED, "BitsAllocated")?
+        .ok_or("BitsAllocated (0028,0100) is missing")?;
     if bits_allocated != 8 && bits_allocated != 16 {
-        return Err(format!("BitsAllocated {bits_allocated} is not supported (CT images use 8 or 16)"));
+        return Err(format!(
+            "BitsAllocated {bits_allocated} is not supported (CT images use 8 or 16)"
+        ));
     }
     let bits_stored = uint(obj, tags::BITS_STORED, "BitsStored")?.unwrap_or(bits_allocated);
     let high_bit = uint(obj, tags::HIGH_BIT, "HighBit")?.unwrap_or(bits_stored.saturating_sub(1));
-    if bits_stored == 0 || bits_stored > bits_allocated || high_bit >= bits_allocated || high_bit + 1 < bits_stored {
+    if bits_stored == 0
+        || bits_stored > bits_allocated
+        || high_bit >= bits_allocated
+        || high_bit + 1 < bits_stored
+    {
         return Err(format!(
             "inconsistent bit layout: BitsAllocated {bits_allocated}, BitsStored {bits_stored}, HighBit {high_bit}"
         ));
@@ -335,20 +369,33 @@ fn parse_pixel_format(obj: &InMemDicomObject) -> std::result::Result<PixelFormat
 /// The plane of each frame: per-frame functional groups first (enhanced multi-frame), then the
 /// shared functional groups, then the classic top-level attributes.
 fn parse_planes(obj: &InMemDicomObject, frames: usize) -> std::result::Result<Vec<Plane>, String> {
-    let shared = obj.get(tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE).and_then(|e| e.items()).and_then(|i| i.first());
-    let per_frame = obj.get(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE).and_then(|e| e.items());
+    let shared = obj
+        .get(tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE)
+        .and_then(|e| e.items())
+        .and_then(|i| i.first());
+    let per_frame = obj
+        .get(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
+        .and_then(|e| e.items());
     if let Some(items) = per_frame
         && items.len() != frames
     {
-        return Err(format!("PerFrameFunctionalGroupsSequence has {} items for {frames} frames", items.len()));
+        return Err(format!(
+            "PerFrameFunctionalGroupsSequence has {} items for {frames} frames",
+            items.len()
+        ));
     }
     (0..frames)
         .map(|f| {
             let groups = [per_frame.and_then(|items| items.get(f)), shared];
-            let at = |seq: Tag, tag: Tag, name: &str| grouped_floats(Some(obj), &groups, seq, tag, name);
+            let at =
+                |seq: Tag, tag: Tag, name: &str| grouped_floats(Some(obj), &groups, seq, tag, name);
             // A multi-frame file's shared or top-level position is that of its first frame.
             let position = if frames == 1 || f == 0 {
-                at(tags::PLANE_POSITION_SEQUENCE, tags::IMAGE_POSITION_PATIENT, "ImagePositionPatient")?
+                at(
+                    tags::PLANE_POSITION_SEQUENCE,
+                    tags::IMAGE_POSITION_PATIENT,
+                    "ImagePositionPatient",
+                )?
             } else {
                 grouped_floats(
                     None,
@@ -358,22 +405,39 @@ fn parse_planes(obj: &InMemDicomObject, frames: usize) -> std::result::Result<Ve
                     "ImagePositionPatient",
                 )?
             };
-            let position = position.map(|v| vec3(&v, "ImagePositionPatient")).transpose()?;
-            let orientation =
-                at(tags::PLANE_ORIENTATION_SEQUENCE, tags::IMAGE_ORIENTATION_PATIENT, "ImageOrientationPatient")?
-                    .map(|v| orientation(&v))
-                    .transpose()?;
-            let spacing = at(tags::PIXEL_MEASURES_SEQUENCE, tags::PIXEL_SPACING, "PixelSpacing")?
-                .map(|v| pixel_spacing(&v))
+            let position = position
+                .map(|v| vec3(&v, "ImagePositionPatient"))
                 .transpose()?;
+            let orientation = at(
+                tags::PLANE_ORIENTATION_SEQUENCE,
+                tags::IMAGE_ORIENTATION_PATIENT,
+                "ImageOrientationPatient",
+            )?
+            .map(|v| orientation(&v))
+            .transpose()?;
+            let spacing = at(
+                tags::PIXEL_MEASURES_SEQUENCE,
+                tags::PIXEL_SPACING,
+                "PixelSpacing",
+            )?
+            .map(|v| pixel_spacing(&v))
+            .transpose()?;
             let seq = tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE;
-            let slope = at(seq, tags::RESCALE_SLOPE, "RescaleSlope")?.and_then(|v| v.first().copied()).unwrap_or(1.0);
-            let intercept =
-                at(seq, tags::RESCALE_INTERCEPT, "RescaleIntercept")?.and_then(|v| v.first().copied()).unwrap_or(0.0);
+            let slope = at(seq, tags::RESCALE_SLOPE, "RescaleSlope")?
+                .and_then(|v| v.first().copied())
+                .unwrap_or(1.0);
+            let intercept = at(seq, tags::RESCALE_INTERCEPT, "RescaleIntercept")?
+                .and_then(|v| v.first().copied())
+                .unwrap_or(0.0);
             if slope == 0.0 {
                 return Err("RescaleSlope is 0".to_string());
             }
-            Ok(Plane { position, orientation, spacing, rescale: Rescale { slope, intercept } })
+            Ok(Plane {
+                position,
+                orientation,
+                spacing,
+                rescale: Rescale { slope, intercept },
+            })
         })
         .collect()
 }
@@ -388,7 +452,10 @@ fn grouped_floats(
     name: &str,
 ) -> std::result::Result<Option<Vec<f64>>, String> {
     for group in groups.iter().flatten() {
-        let item = group.get(seq).and_then(|e| e.items()).and_then(|i| i.first());
+        let item = group
+            .get(seq)
+            .and_then(|e| e.items())
+            .and_then(|i| i.first());
         if let Some(item) = item
             && let Some(v) = floats(item, tag, name)?
         {
@@ -412,13 +479,18 @@ fn vec3(v: &[f64], name: &str) -> std::result::Result<DVec3, String> {
 /// exactly orthonormal (values are written with a few decimals).
 fn orientation(v: &[f64]) -> std::result::Result<[DVec3; 2], String> {
     let [rx, ry, rz, cx, cy, cz] = v else {
-        return Err(format!("ImageOrientationPatient has {} values, expected 6", v.len()));
+        return Err(format!(
+            "ImageOrientationPatient has {} values, expected 6",
+            v.len()
+        ));
     };
     let row = DVec3::new(*rx, *ry, *rz);
     let col = DVec3::new(*cx, *cy, *cz);
     let unit = |a: DVec3| (a.length() - 1.0).abs() < 1e-3;
     if !unit(row) || !unit(col) || row.dot(col).abs() > 1e-3 {
-        return Err(format!("ImageOrientationPatient {v:?} is not two orthogonal unit vectors"));
+        return Err(format!(
+            "ImageOrientationPatient {v:?} is not two orthogonal unit vectors"
+        ));
     }
     let row = row.normalize();
     let col = (col - row * row.dot(col)).normalize();
@@ -442,13 +514,22 @@ fn text(obj: &InMemDicomObject, tag: Tag) -> Option<String> {
 
 /// An unsigned integer attribute: `None` when absent or empty, an error when unreadable.
 fn uint(obj: &InMemDicomObject, tag: Tag, name: &str) -> std::result::Result<Option<u64>, String> {
-    let Some(elem) = obj.get(tag) else { return Ok(None) };
+    let Some(elem) = obj.get(tag) else {
+        return Ok(None);
+    };
     if is_empty(elem) {
         return Ok(None);
     }
     elem.to_int::<u64>().map(Some).map_err(|_| {
-        let raw = elem.to_str().map(|s| s.trim().to_string()).unwrap_or_default();
-        format!("{name} ({:04X},{:04X}) is '{raw}', not a whole number", tag.group(), tag.element())
+        let raw = elem
+            .to_str()
+            .map(|s| s.trim().to_string())
+            .unwrap_or_default();
+        format!(
+            "{name} ({:04X},{:04X}) is '{raw}', not a whole number",
+            tag.group(),
+            tag.element()
+        )
     })
 }
 
@@ -456,7 +537,10 @@ fn uint(obj: &InMemDicomObject, tag: Tag, name: &str) -> std::result::Result<Opt
 fn is_empty(elem: &dicom_object::mem::InMemElement) -> bool {
     match elem.value() {
         Value::Primitive(PrimitiveValue::Empty) => true,
-        Value::Primitive(p) => p.to_str().trim_matches(|c: char| c.is_whitespace() || c == '\0').is_empty(),
+        Value::Primitive(p) => p
+            .to_str()
+            .trim_matches(|c: char| c.is_whitespace() || c == '\0')
+            .is_empty(),
         _ => false,
     }
 }
@@ -467,21 +551,39 @@ fn float(obj: &InMemDicomObject, tag: Tag, name: &str) -> std::result::Result<Op
 
 /// A decimal attribute with any number of values: `None` when absent or empty, an error when
 /// unreadable or not finite.
-fn floats(obj: &InMemDicomObject, tag: Tag, name: &str) -> std::result::Result<Option<Vec<f64>>, String> {
-    let Some(elem) = obj.get(tag) else { return Ok(None) };
+fn floats(
+    obj: &InMemDicomObject,
+    tag: Tag,
+    name: &str,
+) -> std::result::Result<Option<Vec<f64>>, String> {
+    let Some(elem) = obj.get(tag) else {
+        return Ok(None);
+    };
     if is_empty(elem) {
         return Ok(None);
     }
     match elem.to_multi_float64() {
         Ok(v) if v.iter().all(|x| x.is_finite()) => Ok(Some(v)),
         _ => {
-            let raw = elem.to_str().map(|s| s.trim().to_string()).unwrap_or_default();
-            Err(format!("{name} ({:04X},{:04X}) is '{raw}', not a list of numbers", tag.group(), tag.element()))
+            let raw = elem
+                .to_str()
+                .map(|s| s.trim().to_string())
+                .unwrap_or_default();
+            Err(format!(
+                "{name} ({:04X},{:04X}) is '{raw}', not a list of numbers",
+                tag.group(),
+                tag.element()
+            ))
         }
     }
 }
 
-fn no_images_error(dir: &Path, n_files: usize, non_dicom: &[PathBuf], non_image: &[(PathBuf, String)]) -> Error {
+fn no_images_error(
+    dir: &Path,
+    n_files: usize,
+    non_dicom: &[PathBuf],
+    non_image: &[(PathBuf, String)],
+) -> Error {
     let mut msg = format!("no DICOM images in folder ({n_files} files");
     if !non_dicom.is_empty() {
         msg.push_str(&format!(", {} not DICOM", non_dicom.len()));
@@ -496,7 +598,11 @@ fn no_images_error(dir: &Path, n_files: usize, non_dicom: &[PathBuf], non_image:
 fn skipped_notes(non_dicom: &[PathBuf], non_image: &[(PathBuf, String)]) -> Vec<String> {
     let mut notes = Vec::new();
     if !non_dicom.is_empty() {
-        notes.push(format!("skipped {} non-DICOM file(s), e.g. {}", non_dicom.len(), file_name(&non_dicom[0])));
+        notes.push(format!(
+            "skipped {} non-DICOM file(s), e.g. {}",
+            non_dicom.len(),
+            file_name(&non_dicom[0])
+        ));
     }
     if !non_image.is_empty() {
         let (p, why) = &non_image[0];
@@ -510,7 +616,9 @@ fn skipped_notes(non_dicom: &[PathBuf], non_image: &[(PathBuf, String)]) -> Vec<
 }
 
 fn file_name(p: &Path) -> String {
-    p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| p.display().to_string())
+    p.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| p.display().to_string())
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -533,19 +641,30 @@ fn choose_series(dir: &Path, images: Vec<Header>, opts: &LoadOptions) -> Result<
                 let list: Vec<String> = summaries.iter().map(describe_series).collect();
                 return Err(Error::format(
                     dir,
-                    format!("series {want} not found; the folder holds: {}", list.join("; ")),
+                    format!(
+                        "series {want} not found; the folder holds: {}",
+                        list.join("; ")
+                    ),
                 ));
             }
             want.clone()
         }
         None => {
-            let best = summaries
-                .iter()
-                .max_by_key(|s| (s.modality.as_deref() == Some("CT"), s.slices, std::cmp::Reverse(s.uid.clone())));
+            let best = summaries.iter().max_by_key(|s| {
+                (
+                    s.modality.as_deref() == Some("CT"),
+                    s.slices,
+                    std::cmp::Reverse(s.uid.clone()),
+                )
+            });
             best.map(|s| s.uid.clone()).unwrap_or_default()
         }
     };
-    let others: Vec<SeriesSummary> = summaries.iter().filter(|s| s.uid != chosen_uid).cloned().collect();
+    let others: Vec<SeriesSummary> = summaries
+        .iter()
+        .filter(|s| s.uid != chosen_uid)
+        .cloned()
+        .collect();
     let note = (!others.is_empty()).then(|| {
         let chosen = summaries.iter().find(|s| s.uid == chosen_uid);
         let how = match chosen {
@@ -554,7 +673,10 @@ fn choose_series(dir: &Path, images: Vec<Header>, opts: &LoadOptions) -> Result<
             _ => "no CT series; the series with the most slices",
         };
         let chosen = chosen.map(describe_series).unwrap_or_default();
-        format!("the folder holds {} series; loaded {chosen} ({how})", summaries.len())
+        format!(
+            "the folder holds {} series; loaded {chosen} ({how})",
+            summaries.len()
+        )
     });
     let chosen = groups.remove(&chosen_uid).unwrap_or_default();
     Ok((chosen, others, note))
@@ -570,12 +692,19 @@ fn summary(uid: &str, headers: &[Header]) -> SeriesSummary {
 }
 
 fn describe_series(s: &SeriesSummary) -> String {
-    let uid = if s.uid.is_empty() { "(no SeriesInstanceUID)" } else { &s.uid };
+    let uid = if s.uid.is_empty() {
+        "(no SeriesInstanceUID)"
+    } else {
+        &s.uid
+    };
     format!(
         "{uid} ({}, {} slices{})",
         s.modality.as_deref().unwrap_or("no modality"),
         s.slices,
-        s.description.as_deref().map(|d| format!(", \"{d}\"")).unwrap_or_default()
+        s.description
+            .as_deref()
+            .map(|d| format!(", \"{d}\""))
+            .unwrap_or_default()
     )
 }
 
@@ -603,7 +732,11 @@ struct Stack {
 
 fn slice_label(headers: &[Header], s: &SliceRef) -> String {
     let h = &headers[s.file];
-    if h.frames > 1 { format!("{} frame {}", file_name(&h.path), s.frame + 1) } else { file_name(&h.path) }
+    if h.frames > 1 {
+        format!("{} frame {}", file_name(&h.path), s.frame + 1)
+    } else {
+        file_name(&h.path)
+    }
 }
 
 /// Checks that all slices agree on size, pixel layout, orientation and spacing, sorts them
@@ -629,7 +762,11 @@ fn build_stack(headers: &[Header]) -> Result<Stack> {
         .iter()
         .enumerate()
         .flat_map(|(file, h)| {
-            h.planes.iter().enumerate().map(move |(frame, p)| SliceRef { file, frame, plane: p.clone() })
+            h.planes.iter().enumerate().map(move |(frame, p)| SliceRef {
+                file,
+                frame,
+                plane: p.clone(),
+            })
         })
         .collect();
     let path_of = |s: &SliceRef| headers[s.file].path.clone();
@@ -639,17 +776,28 @@ fn build_stack(headers: &[Header]) -> Result<Stack> {
     let [row, col] = common_orientation(headers, &slices, &mut notes)?;
     let normal = row.cross(col);
 
-    let unplaced_frames = headers.len() == 1 && slices[1..].iter().all(|s| s.plane.position.is_none());
+    let unplaced_frames =
+        headers.len() == 1 && slices[1..].iter().all(|s| s.plane.position.is_none());
     if slices.len() == 1 || unplaced_frames {
         return single_file_stack(&headers[0], slices, spacing, [row, col, normal], notes);
     }
     if let Some(s) = slices.iter().find(|s| s.plane.position.is_none()) {
-        return Err(Error::format(path_of(s), format!("{}: ImagePositionPatient is missing", slice_label(headers, s))));
+        return Err(Error::format(
+            path_of(s),
+            format!(
+                "{}: ImagePositionPatient is missing",
+                slice_label(headers, s)
+            ),
+        ));
     }
     let mut slices = slices;
     let pos = |s: &SliceRef| s.plane.position.unwrap_or_default();
     slices.sort_by(|a, b| {
-        pos(a).dot(normal).total_cmp(&pos(b).dot(normal)).then(a.file.cmp(&b.file)).then(a.frame.cmp(&b.frame))
+        pos(a)
+            .dot(normal)
+            .total_cmp(&pos(b).dot(normal))
+            .then(a.file.cmp(&b.file))
+            .then(a.frame.cmp(&b.frame))
     });
 
     let steps: Vec<DVec3> = slices.windows(2).map(|w| pos(&w[1]) - pos(&w[0])).collect();
@@ -665,7 +813,8 @@ fn build_stack(headers: &[Header]) -> Result<Stack> {
     let shear_mm = [drift.dot(row), drift.dot(col)];
     // Drift over the whole stack, in pixels. Below a quarter pixel it is rounding in the
     // positions (or a tilt too small to matter), and resampling would only blur.
-    let drift_px = (shear_mm[0].abs() / spacing[0]).max(shear_mm[1].abs() / spacing[1]) * (n - 1) as f64;
+    let drift_px =
+        (shear_mm[0].abs() / spacing[0]).max(shear_mm[1].abs() / spacing[1]) * (n - 1) as f64;
     let negligible = drift_px <= 0.25;
     if negligible && drift_px > 0.01 {
         notes
@@ -677,11 +826,19 @@ fn build_stack(headers: &[Header]) -> Result<Stack> {
         ));
     }
 
-    let mut geometry =
-        Geometry::new([first.cols, first.rows, n], [spacing[0], spacing[1], dz], pos(&slices[0]).to_array())
-            .map_err(super::at(&first.path))?;
+    let mut geometry = Geometry::new(
+        [first.cols, first.rows, n],
+        [spacing[0], spacing[1], dz],
+        pos(&slices[0]).to_array(),
+    )
+    .map_err(super::at(&first.path))?;
     geometry.set_direction_mat(glam::DMat3::from_cols(row, col, normal));
-    Ok(Stack { slices, geometry, shear: (!negligible).then_some(shear_mm), notes })
+    Ok(Stack {
+        slices,
+        geometry,
+        shear: (!negligible).then_some(shear_mm),
+        notes,
+    })
 }
 
 /// A single slice, or a multi-frame file whose frames carry no positions: frames are stacked
@@ -696,7 +853,10 @@ fn single_file_stack(
     let dz = match header.slice_step {
         Some(s) => s,
         None => {
-            notes.push("no SpacingBetweenSlices or SliceThickness: slice spacing assumed to be 1 mm".into());
+            notes.push(
+                "no SpacingBetweenSlices or SliceThickness: slice spacing assumed to be 1 mm"
+                    .into(),
+            );
             1.0
         }
     };
@@ -708,13 +868,23 @@ fn single_file_stack(
         }
     };
     if slices.len() > 1 {
-        notes.push(format!("frames carry no positions: stacked along the slice normal {dz} mm apart"));
+        notes.push(format!(
+            "frames carry no positions: stacked along the slice normal {dz} mm apart"
+        ));
     }
-    let mut geometry =
-        Geometry::new([header.cols, header.rows, slices.len()], [spacing[0], spacing[1], dz], origin.to_array())
-            .map_err(super::at(&header.path))?;
+    let mut geometry = Geometry::new(
+        [header.cols, header.rows, slices.len()],
+        [spacing[0], spacing[1], dz],
+        origin.to_array(),
+    )
+    .map_err(super::at(&header.path))?;
     geometry.set_direction_mat(glam::DMat3::from_cols(axes[0], axes[1], axes[2]));
-    Ok(Stack { slices, geometry, shear: None, notes })
+    Ok(Stack {
+        slices,
+        geometry,
+        shear: None,
+        notes,
+    })
 }
 
 /// All slices must share PixelSpacing (the one CT attribute voyage will not guess).
@@ -727,7 +897,10 @@ fn common_spacing(headers: &[Header], slices: &[SliceRef]) -> Result<[f64; 2]> {
         ));
     };
     for s in slices {
-        let ok = s.plane.spacing.is_some_and(|p| (0..2).all(|a| (p[a] - spacing[a]).abs() <= COSINE_TOL * spacing[a]));
+        let ok = s
+            .plane
+            .spacing
+            .is_some_and(|p| (0..2).all(|a| (p[a] - spacing[a]).abs() <= COSINE_TOL * spacing[a]));
         if !ok {
             return Err(Error::format(
                 &headers[s.file].path,
@@ -745,7 +918,11 @@ fn common_spacing(headers: &[Header], slices: &[SliceRef]) -> Result<[f64; 2]> {
 }
 
 /// All slices must share one orientation; a lone slice without one is taken as axial.
-fn common_orientation(headers: &[Header], slices: &[SliceRef], notes: &mut Vec<String>) -> Result<[DVec3; 2]> {
+fn common_orientation(
+    headers: &[Header],
+    slices: &[SliceRef],
+    notes: &mut Vec<String>,
+) -> Result<[DVec3; 2]> {
     let first = &slices[0];
     let Some(orient) = first.plane.orientation else {
         if slices.len() == 1 {
@@ -754,12 +931,16 @@ fn common_orientation(headers: &[Header], slices: &[SliceRef], notes: &mut Vec<S
         }
         return Err(Error::format(
             &headers[first.file].path,
-            format!("{}: ImageOrientationPatient is missing", slice_label(headers, first)),
+            format!(
+                "{}: ImageOrientationPatient is missing",
+                slice_label(headers, first)
+            ),
         ));
     };
     for s in slices {
         let same = s.plane.orientation.is_some_and(|o| {
-            (o[0] - orient[0]).abs().max_element() <= COSINE_TOL && (o[1] - orient[1]).abs().max_element() <= COSINE_TOL
+            (o[0] - orient[0]).abs().max_element() <= COSINE_TOL
+                && (o[1] - orient[1]).abs().max_element() <= COSINE_TOL
         });
         if !same {
             return Err(Error::format(
@@ -791,7 +972,12 @@ fn tilt_note(headers: &[Header], steps: &[DVec3], normal: DVec3) -> Option<Strin
 
 /// Every gap along the normal must equal the typical one: a duplicate position, a missing
 /// slice or an uneven gap is an error naming the two slices around it.
-fn check_gaps(headers: &[Header], slices: &[SliceRef], gaps: &[f64], tilt: Option<&str>) -> Result<()> {
+fn check_gaps(
+    headers: &[Header],
+    slices: &[SliceRef],
+    gaps: &[f64],
+    tilt: Option<&str>,
+) -> Result<()> {
     let mut sorted = gaps.to_vec();
     sorted.sort_by(f64::total_cmp);
     let typical = sorted[sorted.len() / 2];
@@ -800,14 +986,23 @@ fn check_gaps(headers: &[Header], slices: &[SliceRef], gaps: &[f64], tilt: Optio
     let normal_z = |k: usize, n: DVec3| z(&slices[k]).dot(n);
     let orient = slices[0].plane.orientation.unwrap_or([DVec3::X, DVec3::Y]);
     let normal = orient[0].cross(orient[1]);
-    let bad: Vec<usize> = (0..gaps.len()).filter(|&k| (gaps[k] - typical).abs() > tol || gaps[k] <= tol).collect();
+    let bad: Vec<usize> = (0..gaps.len())
+        .filter(|&k| (gaps[k] - typical).abs() > tol || gaps[k] <= tol)
+        .collect();
     // Report a duplicate first (the most specific problem), else the worst gap.
     let duplicate = bad.iter().copied().find(|&k| gaps[k] <= tol);
-    let worst = bad.iter().copied().max_by(|&a, &b| (gaps[a] - typical).abs().total_cmp(&(gaps[b] - typical).abs()));
+    let worst = bad.iter().copied().max_by(|&a, &b| {
+        (gaps[a] - typical)
+            .abs()
+            .total_cmp(&(gaps[b] - typical).abs())
+    });
     let Some(k) = duplicate.or(worst) else {
         return Ok(());
     };
-    let (a, b) = (slice_label(headers, &slices[k]), slice_label(headers, &slices[k + 1]));
+    let (a, b) = (
+        slice_label(headers, &slices[k]),
+        slice_label(headers, &slices[k + 1]),
+    );
     let (za, zb) = (normal_z(k, normal), normal_z(k + 1, normal));
     let gap = gaps[k];
     let mut msg = if gap <= tol {
@@ -897,7 +1092,11 @@ fn load_series(headers: Vec<Header>) -> Result<Loaded> {
     if headers.iter().any(|h| h.lossy || is_lossy(&h.ts_uid)) {
         notes.push("pixel data is lossy-compressed: HU values carry the compression error".into());
     }
-    let coarsest = stack.slices.iter().map(|s| s.plane.rescale.slope.abs()).fold(0.0, f64::max);
+    let coarsest = stack
+        .slices
+        .iter()
+        .map(|s| s.plane.rescale.slope.abs())
+        .fold(0.0, f64::max);
     if coarsest > 1.5 {
         notes.push(format!(
             "RescaleSlope {coarsest}: HU come in steps of {coarsest:.1} ({}-bit stored values)",
@@ -936,7 +1135,10 @@ fn transfer_syntax_names(headers: &[Header]) -> Vec<String> {
 }
 
 fn ts_name(uid: &str) -> String {
-    TransferSyntaxRegistry.get(uid).map(|ts| ts.name().to_string()).unwrap_or_else(|| uid.to_string())
+    TransferSyntaxRegistry
+        .get(uid)
+        .map(|ts| ts.name().to_string())
+        .unwrap_or_else(|| uid.to_string())
 }
 
 /// Transfer syntaxes that are, or may be, lossy: JPEG baseline/extended/progressive, JPEG-LS
@@ -1027,7 +1229,9 @@ fn read_pixel_data(h: &Header) -> Result<Raw> {
             Err(OpenError::Truncated { declared, found }) if declared as usize >= expected => {
                 return Err(Error::format(
                     path,
-                    format!("pixel data truncated: expected {expected} bytes, found {found} (the file ends early)"),
+                    format!(
+                        "pixel data truncated: expected {expected} bytes, found {found} (the file ends early)"
+                    ),
                 ));
             }
             Err(e) => return Err(e.into_error(path, "pixel data unreadable")),
@@ -1037,7 +1241,10 @@ fn read_pixel_data(h: &Header) -> Result<Raw> {
     if raw.byte_len() < expected {
         return Err(Error::format(
             path,
-            format!("pixel data truncated: expected {expected} bytes, found {} ({name})", raw.byte_len()),
+            format!(
+                "pixel data truncated: expected {expected} bytes, found {} ({name})",
+                raw.byte_len()
+            ),
         ));
     }
     Ok(raw)
@@ -1056,10 +1263,16 @@ fn native_fast_path(h: &Header, expected: usize) -> Result<Option<Raw>> {
     let mut bytes = std::fs::read(&h.path).map_err(|e| Error::io(&h.path, e))?;
     let value_len = expected + expected % 2;
     let header_len = if explicit { 12 } else { 8 };
-    let Some(start) = bytes.len().checked_sub(value_len + header_len) else { return Ok(None) };
+    let Some(start) = bytes.len().checked_sub(value_len + header_len) else {
+        return Ok(None);
+    };
     let head = &bytes[start..start + header_len];
-    let declared =
-        u32::from_le_bytes([head[header_len - 4], head[header_len - 3], head[header_len - 2], head[header_len - 1]]);
+    let declared = u32::from_le_bytes([
+        head[header_len - 4],
+        head[header_len - 3],
+        head[header_len - 2],
+        head[header_len - 1],
+    ]);
     let tag_ok = head[..4] == [0xE0, 0x7F, 0x10, 0x00];
     let vr_ok = !explicit || matches!(&head[4..8], b"OW\0\0" | b"OB\0\0");
     if !(tag_ok && vr_ok && declared as usize == value_len) {
@@ -1069,43 +1282,75 @@ fn native_fast_path(h: &Header, expected: usize) -> Result<Option<Raw>> {
     Ok(Some(Raw::Bytes(bytes, start + header_len)))
 }
 
-fn extract_pixels(path: &Path, obj: &mut DefaultDicomObject, ts_uid: &str, name: &str) -> Result<Raw> {
-    let decode_error =
-        |why: String| Error::format(path, format!("cannot decode pixel data (transfer syntax {name}): {why}"));
+fn extract_pixels(
+    path: &Path,
+    obj: &mut DefaultDicomObject,
+    ts_uid: &str,
+    name: &str,
+) -> Result<Raw> {
+    let decode_error = |why: String| {
+        Error::format(
+            path,
+            format!("cannot decode pixel data (transfer syntax {name}): {why}"),
+        )
+    };
     let Some(ts) = TransferSyntaxRegistry.get(ts_uid) else {
-        return Err(decode_error(format!("unknown transfer syntax UID {ts_uid}")));
+        return Err(decode_error(format!(
+            "unknown transfer syntax UID {ts_uid}"
+        )));
     };
     let Some(elem) = obj.get(tags::PIXEL_DATA) else {
-        return Err(Error::format(path, "no pixel data (7FE0,0010) in this file"));
+        return Err(Error::format(
+            path,
+            "no pixel data (7FE0,0010) in this file",
+        ));
     };
     match elem.value() {
         Value::PixelSequence(seq) if ts_uid == RLE_LOSSLESS => {
             let shape = RleShape::of(obj).map_err(decode_error)?;
-            decode_rle(seq.fragments(), shape).map(|b| Raw::Bytes(b, 0)).map_err(decode_error)
+            decode_rle(seq.fragments(), shape)
+                .map(|b| Raw::Bytes(b, 0))
+                .map_err(decode_error)
         }
         Value::PixelSequence(_) => {
             let Some(reader) = ts.pixel_data_reader() else {
-                return Err(decode_error("no decoder for this transfer syntax is built in".into()));
+                return Err(decode_error(
+                    "no decoder for this transfer syntax is built in".into(),
+                ));
             };
             let mut out = Vec::new();
-            reader.decode(&*obj, &mut out).map_err(|e| decode_error(error_chain(&e)))?;
+            reader
+                .decode(&*obj, &mut out)
+                .map_err(|e| decode_error(error_chain(&e)))?;
             Ok(Raw::Bytes(out, 0))
         }
         Value::Primitive(_) => {
-            let elem = obj.take(tags::PIXEL_DATA).ok_or_else(|| decode_error("pixel data vanished".into()))?;
+            let elem = obj
+                .take(tags::PIXEL_DATA)
+                .ok_or_else(|| decode_error("pixel data vanished".into()))?;
             match elem.into_value() {
                 Value::Primitive(PrimitiveValue::U16(w)) => Ok(Raw::Words(w.into_vec())),
-                Value::Primitive(PrimitiveValue::U8(b)) if ts.endianness() == Endianness::Little => {
+                Value::Primitive(PrimitiveValue::U8(b))
+                    if ts.endianness() == Endianness::Little =>
+                {
                     Ok(Raw::Bytes(b.into_vec(), 0))
                 }
-                Value::Primitive(PrimitiveValue::U8(b)) => {
-                    Ok(Raw::Words(b.chunks_exact(2).map(|c| u16::from_be_bytes([c[0], c[1]])).collect()))
+                Value::Primitive(PrimitiveValue::U8(b)) => Ok(Raw::Words(
+                    b.chunks_exact(2)
+                        .map(|c| u16::from_be_bytes([c[0], c[1]]))
+                        .collect(),
+                )),
+                Value::Primitive(PrimitiveValue::Empty) => {
+                    Err(Error::format(path, "pixel data (7FE0,0010) is empty"))
                 }
-                Value::Primitive(PrimitiveValue::Empty) => Err(Error::format(path, "pixel data (7FE0,0010) is empty")),
-                _ => Err(decode_error("pixel data has an unexpected value representation".into())),
+                _ => Err(decode_error(
+                    "pixel data has an unexpected value representation".into(),
+                )),
             }
         }
-        Value::Sequence(_) => Err(decode_error("pixel data is a sequence, not pixel values".into())),
+        Value::Sequence(_) => Err(decode_error(
+            "pixel data is a sequence, not pixel values".into(),
+        )),
     }
 }
 
@@ -1126,11 +1371,19 @@ impl RleShape {
         let cols = get(tags::COLUMNS, "Columns")?.ok_or("no Columns")? as usize;
         let bits = get(tags::BITS_ALLOCATED, "BitsAllocated")?.ok_or("no BitsAllocated")?;
         let samples = get(tags::SAMPLES_PER_PIXEL, "SamplesPerPixel")?.unwrap_or(1);
-        let frames = get(tags::NUMBER_OF_FRAMES, "NumberOfFrames")?.unwrap_or(1).max(1) as usize;
+        let frames = get(tags::NUMBER_OF_FRAMES, "NumberOfFrames")?
+            .unwrap_or(1)
+            .max(1) as usize;
         if samples != 1 || !(bits == 8 || bits == 16) {
-            return Err(format!("RLE with {samples} samples of {bits} bits is not a CT image"));
+            return Err(format!(
+                "RLE with {samples} samples of {bits} bits is not a CT image"
+            ));
         }
-        Ok(RleShape { pixels: rows * cols, bytes_per_sample: bits as usize / 8, frames })
+        Ok(RleShape {
+            pixels: rows * cols,
+            bytes_per_sample: bits as usize / 8,
+            frames,
+        })
     }
 }
 
@@ -1141,7 +1394,11 @@ impl RleShape {
 fn decode_rle(fragments: &[Vec<u8>], shape: RleShape) -> std::result::Result<Vec<u8>, String> {
     // The first fragment may be the basic offset table's successor; frames are the fragments.
     if fragments.len() != shape.frames {
-        return Err(format!("{} fragments for {} frames (frames split over fragments are not supported)", fragments.len(), shape.frames));
+        return Err(format!(
+            "{} fragments for {} frames (frames split over fragments are not supported)",
+            fragments.len(),
+            shape.frames
+        ));
     }
     let bps = shape.bytes_per_sample;
     let mut out = vec![0u8; shape.frames * shape.pixels * bps];
@@ -1149,22 +1406,45 @@ fn decode_rle(fragments: &[Vec<u8>], shape: RleShape) -> std::result::Result<Vec
         if frame.len() < 64 {
             return Err(format!("RLE frame {f} has no 64-byte header"));
         }
-        let word = |i: usize| u32::from_le_bytes([frame[4 * i], frame[4 * i + 1], frame[4 * i + 2], frame[4 * i + 3]]) as usize;
+        let word = |i: usize| {
+            u32::from_le_bytes([
+                frame[4 * i],
+                frame[4 * i + 1],
+                frame[4 * i + 2],
+                frame[4 * i + 3],
+            ]) as usize
+        };
         let segments = word(0);
         if segments != bps {
-            return Err(format!("RLE frame {f} has {segments} segments, expected {bps}"));
+            return Err(format!(
+                "RLE frame {f} has {segments} segments, expected {bps}"
+            ));
         }
         let dst = &mut out[f * shape.pixels * bps..(f + 1) * shape.pixels * bps];
         for seg in 0..segments {
             let start = word(1 + seg);
-            let end = if seg + 1 < segments { word(2 + seg) } else { frame.len() };
+            let end = if seg + 1 < segments {
+                word(2 + seg)
+            } else {
+                frame.len()
+            };
             if start < 64 || start > end || end > frame.len() {
-                return Err(format!("RLE frame {f} segment {seg} spans bytes {start}..{end} of {}", frame.len()));
+                return Err(format!(
+                    "RLE frame {f} segment {seg} spans bytes {start}..{end} of {}",
+                    frame.len()
+                ));
             }
             // Segment 0 holds the most significant bytes; samples are stored little-endian.
             let byte = bps - 1 - seg;
-            unpack_bits(&frame[start..end], shape.pixels, |i, v| dst[i * bps + byte] = v)
-                .map_err(|n| format!("RLE frame {f} segment {seg} decodes to {n} bytes, expected {}", shape.pixels))?;
+            unpack_bits(&frame[start..end], shape.pixels, |i, v| {
+                dst[i * bps + byte] = v
+            })
+            .map_err(|n| {
+                format!(
+                    "RLE frame {f} segment {seg} decodes to {n} bytes, expected {}",
+                    shape.pixels
+                )
+            })?;
         }
     }
     Ok(out)
@@ -1173,7 +1453,11 @@ fn decode_rle(fragments: &[Vec<u8>], shape: RleShape) -> std::result::Result<Vec
 /// PackBits: a control byte n ≥ 0 copies the next n + 1 bytes, n in −127..=−1 repeats the next
 /// byte 1 − n times, −128 does nothing. Calls `put(i, byte)` for each of the first `want`
 /// bytes; returns how many there were when that is fewer.
-fn unpack_bits(src: &[u8], want: usize, mut put: impl FnMut(usize, u8)) -> std::result::Result<(), usize> {
+fn unpack_bits(
+    src: &[u8],
+    want: usize,
+    mut put: impl FnMut(usize, u8),
+) -> std::result::Result<(), usize> {
     let (mut i, mut n) = (0usize, 0usize);
     while i < src.len() && n < want {
         let c = src[i] as i8;
@@ -1202,27 +1486,62 @@ fn unpack_bits(src: &[u8], want: usize, mut put: impl FnMut(usize, u8)) -> std::
 
 /// Turns frame `frame` of a file's pixel data into HU: mask to BitsStored, extend the sign,
 /// apply this slice's rescale, round and saturate.
-fn convert_frame(h: &Header, raw: &Raw, frame: usize, rescale: Rescale, out: &mut [i16]) -> Result<()> {
+fn convert_frame(
+    h: &Header,
+    raw: &Raw,
+    frame: usize,
+    rescale: Rescale,
+    out: &mut [i16],
+) -> Result<()> {
     let n = h.rows * h.cols;
     let f = h.pixel;
     let unpack = Unpack::new(f);
     let hu = Hu::new(rescale);
     match (raw, f.bits_allocated) {
-        (Raw::Words(w), 16) => convert(w[frame * n..(frame + 1) * n].iter().map(|&v| u32::from(v)), unpack, hu, out),
+        (Raw::Words(w), 16) => convert(
+            w[frame * n..(frame + 1) * n].iter().map(|&v| u32::from(v)),
+            unpack,
+            hu,
+            out,
+        ),
         (Raw::Bytes(b, start), 16) => {
             let b = &b[start + frame * n * 2..start + (frame + 1) * n * 2];
-            convert(b.as_chunks::<2>().0.iter().map(|c| u32::from(u16::from_le_bytes(*c))), unpack, hu, out)
+            convert(
+                b.as_chunks::<2>()
+                    .0
+                    .iter()
+                    .map(|c| u32::from(u16::from_le_bytes(*c))),
+                unpack,
+                hu,
+                out,
+            )
         }
-        (Raw::Bytes(b, start), 8) => {
-            convert(b[start + frame * n..start + (frame + 1) * n].iter().map(|&v| u32::from(v)), unpack, hu, out)
-        }
+        (Raw::Bytes(b, start), 8) => convert(
+            b[start + frame * n..start + (frame + 1) * n]
+                .iter()
+                .map(|&v| u32::from(v)),
+            unpack,
+            hu,
+            out,
+        ),
         (Raw::Words(w), 8) => {
             // 8-bit samples read as OW words (implicit VR): two samples per word, low byte first.
             let start = frame * n;
-            let byte = |i: usize| u32::from(if i.is_multiple_of(2) { w[i / 2] & 0xFF } else { w[i / 2] >> 8 });
+            let byte = |i: usize| {
+                u32::from(if i.is_multiple_of(2) {
+                    w[i / 2] & 0xFF
+                } else {
+                    w[i / 2] >> 8
+                })
+            };
             convert((start..start + n).map(byte), unpack, hu, out)
         }
-        _ => return Err(Error::format(&h.path, format!("BitsAllocated {} is not supported", f.bits_allocated))),
+        _ => {
+            return Err(Error::format(
+                &h.path,
+                format!("BitsAllocated {} is not supported", f.bits_allocated),
+            ));
+        }
     }
     Ok(())
 }
@@ -1263,7 +1582,11 @@ struct Hu {
 impl Hu {
     fn new(r: Rescale) -> Self {
         let whole = r.slope == 1.0 && r.intercept.fract() == 0.0 && r.intercept.abs() < 1e6;
-        Hu { slope: r.slope, intercept: r.intercept, integer_intercept: whole.then_some(r.intercept as i32) }
+        Hu {
+            slope: r.slope,
+            intercept: r.intercept,
+            integer_intercept: whole.then_some(r.intercept as i32),
+        }
     }
 }
 
@@ -1277,7 +1600,11 @@ fn convert(src: impl Iterator<Item = u32>, u: Unpack, hu: Hu, out: &mut [i16]) {
     match (u.signed, full16) {
         (true, true) => rescale_all(src.map(|v| i32::from(v as u16 as i16)), hu, out),
         (false, true) => rescale_all(src.map(|v| (v & 0xFFFF) as i32), hu, out),
-        (true, false) => rescale_all(src.map(move |v| ((((v >> shift) & mask) << ss) as i32) >> ss), hu, out),
+        (true, false) => rescale_all(
+            src.map(move |v| ((((v >> shift) & mask) << ss) as i32) >> ss),
+            hu,
+            out,
+        ),
         (false, false) => rescale_all(src.map(move |v| ((v >> shift) & mask) as i32), hu, out),
     }
 }
@@ -1288,7 +1615,10 @@ fn rescale_all(src: impl Iterator<Item = i32>, hu: Hu, out: &mut [i16]) {
     const HI: i32 = i16::MAX as i32;
     match hu.integer_intercept {
         // |stored| < 2^16 and |intercept| < 10^6: the sum cannot overflow.
-        Some(c) => out.iter_mut().zip(src).for_each(|(o, x)| *o = x.wrapping_add(c).clamp(LO, HI) as i16),
+        Some(c) => out
+            .iter_mut()
+            .zip(src)
+            .for_each(|(o, x)| *o = x.wrapping_add(c).clamp(LO, HI) as i16),
         None => {
             let (slope, intercept) = (hu.slope, hu.intercept);
             // Round half away from zero like f64::round, without a libm call; `as` saturates.
@@ -1307,28 +1637,48 @@ fn rescale_all(src: impl Iterator<Item = i32>, hu: Hu, out: &mut [i16]) {
 /// Undoes a constant in-plane drift of the slices (gantry tilt): slice k is shifted by
 /// `-k·shear` within its plane, with linear interpolation, onto a grid widened so that every
 /// acquired voxel is kept. The result is orthogonal, with k along the slice normal.
-fn correct_tilt(g: &Geometry, data: &[i16], shear: [f64; 2]) -> Result<(Geometry, Vec<i16>, String)> {
+fn correct_tilt(
+    g: &Geometry,
+    data: &[i16],
+    shear: [f64; 2],
+) -> Result<(Geometry, Vec<i16>, String)> {
     let [nx, ny, nz] = g.dims;
     let last = (nz - 1) as f64;
     // Extent of the drift over the stack, in voxels along i and j.
-    let lo = [0.0f64.min(shear[0] * last / g.spacing[0]), 0.0f64.min(shear[1] * last / g.spacing[1])];
-    let hi = [0.0f64.max(shear[0] * last / g.spacing[0]), 0.0f64.max(shear[1] * last / g.spacing[1])];
-    let grow = [(hi[0] - lo[0] - 1e-6).ceil().max(0.0) as usize, (hi[1] - lo[1] - 1e-6).ceil().max(0.0) as usize];
+    let lo = [
+        0.0f64.min(shear[0] * last / g.spacing[0]),
+        0.0f64.min(shear[1] * last / g.spacing[1]),
+    ];
+    let hi = [
+        0.0f64.max(shear[0] * last / g.spacing[0]),
+        0.0f64.max(shear[1] * last / g.spacing[1]),
+    ];
+    let grow = [
+        (hi[0] - lo[0] - 1e-6).ceil().max(0.0) as usize,
+        (hi[1] - lo[1] - 1e-6).ceil().max(0.0) as usize,
+    ];
     let dims = [nx + grow[0], ny + grow[1], nz];
     check_dims(dims.map(|d| d as u64))?;
     let mut out_geom = g.clone();
     out_geom.dims = dims;
     let m = g.direction_mat();
-    let origin = DVec3::from_array(g.origin) + m.col(0) * (lo[0] * g.spacing[0]) + m.col(1) * (lo[1] * g.spacing[1]);
+    let origin = DVec3::from_array(g.origin)
+        + m.col(0) * (lo[0] * g.spacing[0])
+        + m.col(1) * (lo[1] * g.spacing[1]);
     out_geom.origin = origin.to_array();
     let out_plane = dims[0] * dims[1];
     let mut out = vec![OUTSIDE_HU; out_plane * nz];
-    out.par_chunks_mut(out_plane).enumerate().for_each(|(k, dst)| {
-        // Output voxel (i', j') of slice k samples input (i' + off_i, j' + off_j).
-        let off = [lo[0] - k as f64 * shear[0] / g.spacing[0], lo[1] - k as f64 * shear[1] / g.spacing[1]];
-        let src = &data[k * nx * ny..(k + 1) * nx * ny];
-        shift_slice(src, [nx, ny], dst, [dims[0], dims[1]], off);
-    });
+    out.par_chunks_mut(out_plane)
+        .enumerate()
+        .for_each(|(k, dst)| {
+            // Output voxel (i', j') of slice k samples input (i' + off_i, j' + off_j).
+            let off = [
+                lo[0] - k as f64 * shear[0] / g.spacing[0],
+                lo[1] - k as f64 * shear[1] / g.spacing[1],
+            ];
+            let src = &data[k * nx * ny..(k + 1) * nx * ny];
+            shift_slice(src, [nx, ny], dst, [dims[0], dims[1]], off);
+        });
     let along = g.spacing[2];
     let drift = (shear[0] * shear[0] + shear[1] * shear[1]).sqrt();
     let note = format!(
@@ -1343,7 +1693,13 @@ fn correct_tilt(g: &Geometry, data: &[i16], shear: [f64; 2]) -> Result<(Geometry
 
 /// Bilinear resampling of one slice by a constant offset (the weights are the same for every
 /// voxel); samples outside the source keep the destination's fill value.
-fn shift_slice(src: &[i16], [sx, sy]: [usize; 2], dst: &mut [i16], [dx, dy]: [usize; 2], off: [f64; 2]) {
+fn shift_slice(
+    src: &[i16],
+    [sx, sy]: [usize; 2],
+    dst: &mut [i16],
+    [dx, dy]: [usize; 2],
+    off: [f64; 2],
+) {
     let (fi, fj) = (off[0].floor(), off[1].floor());
     let (wi, wj) = (off[0] - fi, off[1] - fj);
     let (fi, fj) = (fi as isize, fj as isize);
@@ -1403,11 +1759,17 @@ impl OpenError {
             OpenError::Meta(m) => Error::format(path, format!("{what}: {m}")),
             OpenError::Truncated { declared, found } => Error::format(
                 path,
-                format!("pixel data truncated: the element announces {declared} bytes, found {found}"),
+                format!(
+                    "pixel data truncated: the element announces {declared} bytes, found {found}"
+                ),
             ),
-            OpenError::Parse(e) if ends_early(&e) => {
-                Error::format(path, format!("{what}: the file is cut short (truncated): {}", error_chain(&e)))
-            }
+            OpenError::Parse(e) if ends_early(&e) => Error::format(
+                path,
+                format!(
+                    "{what}: the file is cut short (truncated): {}",
+                    error_chain(&e)
+                ),
+            ),
             OpenError::Parse(e) => Error::format(path, format!("{what}: {}", error_chain(&e))),
         }
     }
@@ -1417,7 +1779,10 @@ impl OpenError {
 fn ends_early(e: &(dyn std::error::Error + 'static)) -> bool {
     let mut cur: Option<&(dyn std::error::Error + 'static)> = Some(e);
     while let Some(err) = cur {
-        if err.downcast_ref::<std::io::Error>().is_some_and(|io| io.kind() == std::io::ErrorKind::UnexpectedEof) {
+        if err
+            .downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::UnexpectedEof)
+        {
             return true;
         }
         cur = err.source();
@@ -1434,7 +1799,10 @@ const MAX_META_BYTES: usize = 1 << 20;
 /// often break rules that dicom-rs enforces there: a missing group length, an application
 /// entity title longer than 16 characters (the transfer-syntax test files have one), padding
 /// in the wrong place. Only the elements needed to read the data set are kept.
-fn open_dicom(path: &Path, until: Option<Tag>) -> std::result::Result<DefaultDicomObject, OpenError> {
+fn open_dicom(
+    path: &Path,
+    until: Option<Tag>,
+) -> std::result::Result<DefaultDicomObject, OpenError> {
     use std::io::{Cursor, Read};
     let mut file = std::fs::File::open(path).map_err(OpenError::Io)?;
     let mut buf = Vec::with_capacity(8192);
@@ -1444,10 +1812,15 @@ fn open_dicom(path: &Path, until: Option<Tag>) -> std::result::Result<DefaultDic
             Ok(Some(meta)) => break meta,
             Ok(None) => {
                 if buf.len() >= MAX_META_BYTES {
-                    return Err(OpenError::Meta("the file meta information is implausibly large".into()));
+                    return Err(OpenError::Meta(
+                        "the file meta information is implausibly large".into(),
+                    ));
                 }
                 let want = (buf.len().max(4096) * 2).min(MAX_META_BYTES) - buf.len();
-                let got = (&mut file).take(want as u64).read_to_end(&mut buf).map_err(OpenError::Io)?;
+                let got = (&mut file)
+                    .take(want as u64)
+                    .read_to_end(&mut buf)
+                    .map_err(OpenError::Io)?;
                 eof = got < want;
             }
             Err(m) => return Err(OpenError::Meta(m)),
@@ -1469,19 +1842,26 @@ fn open_dicom(path: &Path, until: Option<Tag>) -> std::result::Result<DefaultDic
                 Scan::Sound => break,
                 Scan::NeedMore(upto) if !eof && (buf.len() as u64) < size => {
                     let want = upto.max(buf.len() * 2).min(size as usize) - buf.len();
-                    let got = (&mut file).take(want as u64).read_to_end(&mut buf).map_err(OpenError::Io)?;
+                    let got = (&mut file)
+                        .take(want as u64)
+                        .read_to_end(&mut buf)
+                        .map_err(OpenError::Io)?;
                     eof = got < want;
                 }
                 // Cut short within the header: dicom-rs reports where.
                 Scan::NeedMore(_) => break,
                 // The header pass stops before the pixel data; the pixel pass reports this.
                 Scan::Truncated { .. } if until.is_some() => break,
-                Scan::Truncated { declared, found } => return Err(OpenError::Truncated { declared, found }),
+                Scan::Truncated { declared, found } => {
+                    return Err(OpenError::Truncated { declared, found });
+                }
                 Scan::Bad(m) => return Err(OpenError::Meta(m)),
             }
         }
     }
-    let source = Cursor::new(meta.clean).chain(Cursor::new(buf.split_off(meta.end))).chain(file);
+    let source = Cursor::new(meta.clean)
+        .chain(Cursor::new(buf.split_off(meta.end)))
+        .chain(file);
     let mut options = OpenFileOptions::new().read_preamble(dicom_object::file::ReadPreamble::Never);
     if let Some(tag) = until {
         options = options.read_until(tag);
@@ -1508,24 +1888,38 @@ const MAX_INFLATE_RATIO: u64 = 256;
 /// Deflated explicit VR little endian: inflated here (bounded), its lengths checked like any
 /// other data set's, and handed to dicom-rs as plain explicit VR little endian. dicom-rs would
 /// otherwise inflate as it parses and allocate whatever a corrupt length inside announces.
-fn open_deflated(meta: MetaGroup, mut buf: Vec<u8>, mut file: std::fs::File, until: Option<Tag>) -> std::result::Result<DefaultDicomObject, OpenError> {
+fn open_deflated(
+    meta: MetaGroup,
+    mut buf: Vec<u8>,
+    mut file: std::fs::File,
+    until: Option<Tag>,
+) -> std::result::Result<DefaultDicomObject, OpenError> {
     use std::io::{Cursor, Read};
     file.read_to_end(&mut buf).map_err(OpenError::Io)?;
     let compressed = &buf[meta.end.min(buf.len())..];
-    let cap = (compressed.len() as u64).saturating_mul(MAX_INFLATE_RATIO).max(1 << 20);
+    let cap = (compressed.len() as u64)
+        .saturating_mul(MAX_INFLATE_RATIO)
+        .max(1 << 20);
     let mut inflated = Vec::new();
     flate2::read::DeflateDecoder::new(compressed)
         .take(cap + 1)
         .read_to_end(&mut inflated)
         .map_err(|e| OpenError::Meta(format!("the deflated data set cannot be inflated: {e}")))?;
     if inflated.len() as u64 > cap {
-        return Err(OpenError::Meta(format!("the deflated data set inflates to more than {MAX_INFLATE_RATIO} times its size")));
+        return Err(OpenError::Meta(format!(
+            "the deflated data set inflates to more than {MAX_INFLATE_RATIO} times its size"
+        )));
     }
-    let layout = Layout { explicit: true, big_endian: false };
+    let layout = Layout {
+        explicit: true,
+        big_endian: false,
+    };
     match scan_lengths(&inflated, 0, inflated.len() as u64, layout, until.is_none()) {
         Scan::Sound | Scan::NeedMore(_) => {}
         Scan::Truncated { .. } if until.is_some() => {}
-        Scan::Truncated { declared, found } => return Err(OpenError::Truncated { declared, found }),
+        Scan::Truncated { declared, found } => {
+            return Err(OpenError::Truncated { declared, found });
+        }
         Scan::Bad(m) => return Err(OpenError::Meta(m)),
     }
     let clean = with_transfer_syntax(&meta.clean, EXPLICIT_LE);
@@ -1549,9 +1943,20 @@ fn with_transfer_syntax(clean: &[u8], ts: &str) -> Vec<u8> {
         let element = u16::from_le_bytes([clean[pos + 2], clean[pos + 3]]);
         let vr = [clean[pos + 4], clean[pos + 5]];
         let (header, len) = if &vr == b"OB" {
-            (12, u32::from_le_bytes([clean[pos + 8], clean[pos + 9], clean[pos + 10], clean[pos + 11]]) as usize)
+            (
+                12,
+                u32::from_le_bytes([
+                    clean[pos + 8],
+                    clean[pos + 9],
+                    clean[pos + 10],
+                    clean[pos + 11],
+                ]) as usize,
+            )
         } else {
-            (8, u16::from_le_bytes([clean[pos + 6], clean[pos + 7]]) as usize)
+            (
+                8,
+                u16::from_le_bytes([clean[pos + 6], clean[pos + 7]]) as usize,
+            )
         };
         let value = &clean[pos + header..(pos + header + len).min(clean.len())];
         if element == 0x0010 {
@@ -1577,10 +1982,18 @@ fn with_transfer_syntax(clean: &[u8], ts: &str) -> Vec<u8> {
 /// that the refusal says what the file is.
 fn describe_unknown_ts(uid: &str) -> String {
     let name = match uid {
-        "1.2.840.10008.1.2.4.52" | "1.2.840.10008.1.2.4.54" => "JPEG Extended, Non-Hierarchical (retired)",
-        "1.2.840.10008.1.2.4.53" => "JPEG Spectral Selection, Non-Hierarchical (Process 6 & 8), retired",
-        "1.2.840.10008.1.2.4.55" => "JPEG Full Progression, Non-Hierarchical (Process 10 & 12), retired",
-        "1.2.840.10008.1.2.4.56" | "1.2.840.10008.1.2.4.58" => "JPEG Lossless, Non-Hierarchical (retired)",
+        "1.2.840.10008.1.2.4.52" | "1.2.840.10008.1.2.4.54" => {
+            "JPEG Extended, Non-Hierarchical (retired)"
+        }
+        "1.2.840.10008.1.2.4.53" => {
+            "JPEG Spectral Selection, Non-Hierarchical (Process 6 & 8), retired"
+        }
+        "1.2.840.10008.1.2.4.55" => {
+            "JPEG Full Progression, Non-Hierarchical (Process 10 & 12), retired"
+        }
+        "1.2.840.10008.1.2.4.56" | "1.2.840.10008.1.2.4.58" => {
+            "JPEG Lossless, Non-Hierarchical (retired)"
+        }
         u if u.starts_with("1.2.840.10008.1.2.4.") => "a JPEG family syntax unknown to the decoder",
         _ => "unknown",
     };
@@ -1589,8 +2002,13 @@ fn describe_unknown_ts(uid: &str) -> String {
 
 /// Parses the file meta group from the start of a file. `Ok(None)` asks for more bytes.
 fn parse_meta(buf: &[u8], eof: bool) -> std::result::Result<Option<MetaGroup>, String> {
-    let need_more =
-        |eof: bool| if eof { Err("the file ends inside its file meta information".to_string()) } else { Ok(None) };
+    let need_more = |eof: bool| {
+        if eof {
+            Err("the file ends inside its file meta information".to_string())
+        } else {
+            Ok(None)
+        }
+    };
     if buf.len() < 132 && !eof {
         return Ok(None);
     }
@@ -1616,26 +2034,51 @@ fn parse_meta(buf: &[u8], eof: bool) -> std::result::Result<Option<MetaGroup>, S
         let element = u16::from_le_bytes([buf[pos + 2], buf[pos + 3]]);
         let vr = [buf[pos + 4], buf[pos + 5]];
         if !vr.iter().all(u8::is_ascii_uppercase) {
-            return Err(format!("file meta element (0002,{element:04X}) is not explicit VR little endian"));
+            return Err(format!(
+                "file meta element (0002,{element:04X}) is not explicit VR little endian"
+            ));
         }
         let long = matches!(
             &vr,
-            b"OB" | b"OW" | b"OF" | b"OD" | b"OL" | b"OV" | b"SQ" | b"UT" | b"UN" | b"UC" | b"UR" | b"SV" | b"UV"
+            b"OB"
+                | b"OW"
+                | b"OF"
+                | b"OD"
+                | b"OL"
+                | b"OV"
+                | b"SQ"
+                | b"UT"
+                | b"UN"
+                | b"UC"
+                | b"UR"
+                | b"SV"
+                | b"UV"
         );
         let (header, len) = if long {
             if pos + 12 > buf.len() {
                 return need_more(eof);
             }
-            (12, u32::from_le_bytes([buf[pos + 8], buf[pos + 9], buf[pos + 10], buf[pos + 11]]) as usize)
+            (
+                12,
+                u32::from_le_bytes([buf[pos + 8], buf[pos + 9], buf[pos + 10], buf[pos + 11]])
+                    as usize,
+            )
         } else {
-            (8, usize::from(u16::from_le_bytes([buf[pos + 6], buf[pos + 7]])))
+            (
+                8,
+                usize::from(u16::from_le_bytes([buf[pos + 6], buf[pos + 7]])),
+            )
         };
         if len == 0xFFFF_FFFF {
-            return Err(format!("file meta element (0002,{element:04X}) has an undefined length"));
+            return Err(format!(
+                "file meta element (0002,{element:04X}) has an undefined length"
+            ));
         }
         if pos + header + len > buf.len() {
             if buf.len() >= MAX_META_BYTES {
-                return Err(format!("file meta element (0002,{element:04X}) is {len} bytes long"));
+                return Err(format!(
+                    "file meta element (0002,{element:04X}) is {len} bytes long"
+                ));
             }
             return need_more(eof);
         }
@@ -1643,17 +2086,23 @@ fn parse_meta(buf: &[u8], eof: bool) -> std::result::Result<Option<MetaGroup>, S
         pos += header + len;
     }
     let text = |el: u16| {
-        elements
-            .iter()
-            .find(|(e, _)| *e == el)
-            .map(|(_, v)| String::from_utf8_lossy(v).trim_matches(|c: char| c == '\0' || c.is_whitespace()).to_string())
+        elements.iter().find(|(e, _)| *e == el).map(|(_, v)| {
+            String::from_utf8_lossy(v)
+                .trim_matches(|c: char| c == '\0' || c.is_whitespace())
+                .to_string()
+        })
     };
     let ts = text(0x0010)
         .filter(|t| !t.is_empty())
         .ok_or("no TransferSyntaxUID (0002,0010) in the file meta information, so the data set cannot be decoded")?;
     let mut body = Vec::with_capacity(256);
     put_meta_element(&mut body, 0x0001, b"OB", &[0, 1]);
-    for (el, value) in [(0x0002, text(0x0002)), (0x0003, text(0x0003)), (0x0010, Some(ts)), (0x0012, text(0x0012))] {
+    for (el, value) in [
+        (0x0002, text(0x0002)),
+        (0x0003, text(0x0003)),
+        (0x0010, Some(ts)),
+        (0x0012, text(0x0012)),
+    ] {
         if let Some(v) = value.filter(|v| !v.is_empty()) {
             let mut bytes = v.into_bytes();
             if bytes.len() % 2 == 1 {
@@ -1667,7 +2116,11 @@ fn parse_meta(buf: &[u8], eof: bool) -> std::result::Result<Option<MetaGroup>, S
     clean.extend_from_slice(&[0x02, 0x00, 0x00, 0x00, b'U', b'L', 4, 0]);
     clean.extend_from_slice(&(body.len() as u32).to_le_bytes());
     clean.extend_from_slice(&body);
-    Ok(Some(MetaGroup { clean, end: pos, ts_uid: text(0x0010).unwrap_or_default() }))
+    Ok(Some(MetaGroup {
+        clean,
+        end: pos,
+        ts_uid: text(0x0010).unwrap_or_default(),
+    }))
 }
 
 fn put_meta_element(out: &mut Vec<u8>, element: u16, vr: &[u8; 2], value: &[u8]) {
@@ -1694,14 +2147,24 @@ impl Layout {
     /// `None` for deflated data sets, which cannot be scanned before inflating.
     fn of(ts_uid: &str) -> Option<Layout> {
         let ts = TransferSyntaxRegistry.get(ts_uid)?;
-        if matches!(ts.codec(), dicom_encoding::transfer_syntax::Codec::Dataset(_)) {
+        if matches!(
+            ts.codec(),
+            dicom_encoding::transfer_syntax::Codec::Dataset(_)
+        ) {
             return None;
         }
-        Some(Layout { explicit: ts_uid != "1.2.840.10008.1.2", big_endian: ts.endianness() == Endianness::Big })
+        Some(Layout {
+            explicit: ts_uid != "1.2.840.10008.1.2",
+            big_endian: ts.endianness() == Endianness::Big,
+        })
     }
 
     fn u16(&self, b: &[u8]) -> u16 {
-        if self.big_endian { u16::from_be_bytes([b[0], b[1]]) } else { u16::from_le_bytes([b[0], b[1]]) }
+        if self.big_endian {
+            u16::from_be_bytes([b[0], b[1]])
+        } else {
+            u16::from_le_bytes([b[0], b[1]])
+        }
     }
 
     fn u32(&self, b: &[u8]) -> u32 {
@@ -1773,7 +2236,10 @@ fn scan_lengths(buf: &[u8], start: usize, file_size: u64, layout: Layout, whole:
             if (group, element) == (0x7FE0, 0x0010) && open.is_empty() {
                 let found = file_size.saturating_sub(value as u64);
                 if len != UNDEFINED && u64::from(len) > found {
-                    return Scan::Truncated { declared: len, found };
+                    return Scan::Truncated {
+                        declared: len,
+                        found,
+                    };
                 }
                 if !whole {
                     return Scan::Sound;
@@ -1828,7 +2294,11 @@ fn scan_fragments(buf: &[u8], start: usize, file_size: u64, layout: Layout) -> R
                 }
                 pos += 8 + len as usize;
             }
-            _ => return Err(Scan::Bad(format!("encapsulated pixel data holds ({group:04X},{element:04X}) where a fragment item belongs"))),
+            _ => {
+                return Err(Scan::Bad(format!(
+                    "encapsulated pixel data holds ({group:04X},{element:04X}) where a fragment item belongs"
+                )));
+            }
         }
     }
 }
@@ -1838,8 +2308,9 @@ fn element_header(buf: &[u8], pos: usize, layout: Layout) -> Option<(usize, u32,
     if !layout.explicit {
         let len = layout.u32(&buf[pos + 4..]);
         // Implicit VR does not say SQ: a defined-length value that starts with an item tag is one.
-        let item =
-            pos + 12 <= buf.len() && layout.u16(&buf[pos + 8..]) == 0xFFFE && layout.u16(&buf[pos + 10..]) == 0xE000;
+        let item = pos + 12 <= buf.len()
+            && layout.u16(&buf[pos + 8..]) == 0xFFFE
+            && layout.u16(&buf[pos + 10..]) == 0xE000;
         return Some((8, len, item));
     }
     let vr = &buf[pos + 4..pos + 6];

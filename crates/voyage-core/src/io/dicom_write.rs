@@ -38,7 +38,12 @@ pub struct SeriesWriteOptions {
 
 impl Default for SeriesWriteOptions {
     fn default() -> Self {
-        SeriesWriteOptions { series_description: "voyage volume".into(), series_number: 1, uid_seed: 0, patient_position: None }
+        SeriesWriteOptions {
+            series_description: "voyage volume".into(),
+            series_number: 1,
+            uid_seed: 0,
+            patient_position: None,
+        }
     }
 }
 
@@ -54,7 +59,9 @@ pub fn write_series_with(dir: &Path, vol: &Volume<i16>, opts: &SeriesWriteOption
     g.validate()?;
     let [nx, ny, nz] = g.dims;
     if nx > u16::MAX as usize || ny > u16::MAX as usize {
-        return Err(Error::invalid(format!("slices of {nx}×{ny} are too large for DICOM (at most 65535 per side)")));
+        return Err(Error::invalid(format!(
+            "slices of {nx}×{ny} are too large for DICOM (at most 65535 per side)"
+        )));
     }
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let uids = SeriesUids::new(vol, opts);
@@ -80,7 +87,12 @@ impl SeriesUids {
         for d in g.dims {
             h.word(d as u64);
         }
-        for v in g.spacing.iter().chain(&g.origin).chain(g.direction.iter().flatten()) {
+        for v in g
+            .spacing
+            .iter()
+            .chain(&g.origin)
+            .chain(g.direction.iter().flatten())
+        {
             h.word(v.to_bits());
         }
         let frame = h.clone();
@@ -95,7 +107,11 @@ impl SeriesUids {
         }
         let mut study = Hash128::new(opts.uid_seed);
         study.bytes(b"study");
-        SeriesUids { study: study.uid(), series: h.uid(), frame_of_reference: frame.uid() }
+        SeriesUids {
+            study: study.uid(),
+            series: h.uid(),
+            frame_of_reference: frame.uid(),
+        }
     }
 
     /// SOPInstanceUID of slice k: the series UID with the instance number appended.
@@ -114,13 +130,21 @@ struct Hash128 {
 
 impl Hash128 {
     fn new(seed: u64) -> Self {
-        Hash128 { a: 0x9E37_79B9_7F4A_7C15 ^ seed, b: 0xC2B2_AE3D_27D4_EB4F ^ seed.rotate_left(32) }
+        Hash128 {
+            a: 0x9E37_79B9_7F4A_7C15 ^ seed,
+            b: 0xC2B2_AE3D_27D4_EB4F ^ seed.rotate_left(32),
+        }
     }
 
     #[inline]
     fn word(&mut self, w: u64) {
-        self.a = (self.a ^ w).wrapping_mul(0xFF51_AFD7_ED55_8CCD).rotate_left(29);
-        self.b = (self.b ^ w.rotate_left(17)).wrapping_mul(0xC4CE_B9FE_1A85_EC53).rotate_left(31) ^ self.a;
+        self.a = (self.a ^ w)
+            .wrapping_mul(0xFF51_AFD7_ED55_8CCD)
+            .rotate_left(29);
+        self.b = (self.b ^ w.rotate_left(17))
+            .wrapping_mul(0xC4CE_B9FE_1A85_EC53)
+            .rotate_left(31)
+            ^ self.a;
     }
 
     fn bytes(&mut self, s: &[u8]) {
@@ -140,7 +164,8 @@ impl Hash128 {
             x = x.wrapping_mul(0xC4CE_B9FE_1A85_EC53);
             x ^ (x >> 33)
         };
-        (u128::from(mix(self.a ^ self.b.rotate_left(7))) << 64) | u128::from(mix(self.b ^ self.a.rotate_left(13)))
+        (u128::from(mix(self.a ^ self.b.rotate_left(7))) << 64)
+            | u128::from(mix(self.b ^ self.a.rotate_left(13)))
     }
 
     /// A UID under the 2.25 root (a 128-bit number, never 0 so it has no leading zero).
@@ -150,7 +175,12 @@ impl Hash128 {
 }
 
 /// Encodes slice k as a complete DICOM Part 10 file.
-fn encode_slice(vol: &Volume<i16>, k: usize, uids: &SeriesUids, opts: &SeriesWriteOptions) -> Vec<u8> {
+fn encode_slice(
+    vol: &Volume<i16>,
+    k: usize,
+    uids: &SeriesUids,
+    opts: &SeriesWriteOptions,
+) -> Vec<u8> {
     let g = vol.geometry();
     let [nx, ny, _] = g.dims;
     let m = g.direction_mat();
@@ -158,7 +188,9 @@ fn encode_slice(vol: &Volume<i16>, k: usize, uids: &SeriesUids, opts: &SeriesWri
     let (row, col) = (m.col(0), m.col(1));
     let sop_instance = uids.instance(k);
 
-    let mut e = Encoder { buf: Vec::with_capacity(nx * ny * 2 + 2048) };
+    let mut e = Encoder {
+        buf: Vec::with_capacity(nx * ny * 2 + 2048),
+    };
     e.buf.extend_from_slice(&[0u8; 128]);
     e.buf.extend_from_slice(b"DICM");
     e.meta_group(&sop_instance);
@@ -190,7 +222,12 @@ fn encode_slice(vol: &Volume<i16>, k: usize, uids: &SeriesUids, opts: &SeriesWri
     e.text(0x0020, 0x0013, b"IS", &(k + 1).to_string());
     e.text(0x0020, 0x0020, b"CS", "");
     e.text(0x0020, 0x0032, b"DS", &ds_list(&position.to_array()));
-    e.text(0x0020, 0x0037, b"DS", &ds_list(&[row.x, row.y, row.z, col.x, col.y, col.z]));
+    e.text(
+        0x0020,
+        0x0037,
+        b"DS",
+        &ds_list(&[row.x, row.y, row.z, col.x, col.y, col.z]),
+    );
     e.uid(0x0020, 0x0052, &uids.frame_of_reference);
     e.text(0x0020, 0x1040, b"LO", "");
     e.us(0x0028, 0x0002, 1);
@@ -198,7 +235,12 @@ fn encode_slice(vol: &Volume<i16>, k: usize, uids: &SeriesUids, opts: &SeriesWri
     e.us(0x0028, 0x0010, ny as u16);
     e.us(0x0028, 0x0011, nx as u16);
     // PixelSpacing: between rows (along j) first, then between columns (along i).
-    e.text(0x0028, 0x0030, b"DS", &ds_list(&[g.spacing[1], g.spacing[0]]));
+    e.text(
+        0x0028,
+        0x0030,
+        b"DS",
+        &ds_list(&[g.spacing[1], g.spacing[0]]),
+    );
     e.us(0x0028, 0x0100, 16);
     e.us(0x0028, 0x0101, 16);
     e.us(0x0028, 0x0102, 15);
@@ -262,7 +304,9 @@ impl Encoder {
 
     /// The file meta information group (always explicit VR little endian), with its length.
     fn meta_group(&mut self, sop_instance: &str) {
-        let mut meta = Encoder { buf: Vec::with_capacity(256) };
+        let mut meta = Encoder {
+            buf: Vec::with_capacity(256),
+        };
         meta.header(0x0002, 0x0001, b"OB", 2);
         meta.buf.extend_from_slice(&[0, 1]);
         meta.uid(0x0002, 0x0002, CT_IMAGE_STORAGE);
@@ -271,7 +315,8 @@ impl Encoder {
         meta.uid(0x0002, 0x0012, IMPLEMENTATION_CLASS_UID);
         meta.text(0x0002, 0x0013, b"SH", IMPLEMENTATION_VERSION);
         self.header(0x0002, 0x0000, b"UL", 4);
-        self.buf.extend_from_slice(&(meta.buf.len() as u32).to_le_bytes());
+        self.buf
+            .extend_from_slice(&(meta.buf.len() as u32).to_le_bytes());
         self.buf.extend_from_slice(&meta.buf);
     }
 }
@@ -281,7 +326,11 @@ fn ds(v: f64) -> String {
     let v = if v == 0.0 { 0.0 } else { v }; // no "-0"
     for decimals in (0..=15).rev() {
         let s = format!("{v:.decimals$}");
-        let s = if s.contains('.') { s.trim_end_matches('0').trim_end_matches('.').to_string() } else { s };
+        let s = if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s
+        };
         let s = if s == "-0" { "0".to_string() } else { s };
         if s.len() <= 16 {
             return s;

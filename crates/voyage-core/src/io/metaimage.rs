@@ -34,12 +34,17 @@ pub fn load(path: &Path) -> Result<Loaded> {
     let fmt = |m: String| Error::format(path, m);
 
     let (dims, n) = shared::dims3(path, &h.dim_size)?;
-    let ty = h.element_type.ok_or_else(|| fmt("ElementType is missing".into()))?;
+    let ty = h
+        .element_type
+        .ok_or_else(|| fmt("ElementType is missing".into()))?;
     let endian = if h.msb { Endian::Big } else { Endian::Little };
     let expected = (n as u64).saturating_mul(ty.size() as u64);
     let (geom, mut notes) = h.geometry(path, dims)?;
 
-    let data_file = h.data_file.as_deref().ok_or_else(|| fmt("ElementDataFile is missing".into()))?;
+    let data_file = h
+        .data_file
+        .as_deref()
+        .ok_or_else(|| fmt("ElementDataFile is missing".into()))?;
     let decoded = if data_file.eq_ignore_ascii_case("LOCAL") {
         let avail = h.avail(len.saturating_sub(consumed));
         avail.check(path, 0, expected)?;
@@ -50,15 +55,26 @@ pub fn load(path: &Path) -> Result<Loaded> {
         let offset = h.data_offset(path, data_len, expected)?;
         (|| {
             h.avail(data_len).check(&data_path, offset, expected)?;
-            dr.seek(SeekFrom::Start(offset)).map_err(|e| Error::io(&data_path, e))?;
+            dr.seek(SeekFrom::Start(offset))
+                .map_err(|e| Error::io(&data_path, e))?;
             h.decode(&data_path, &mut dr, n, ty, endian)
         })()
         .map_err(shared::in_data_file(path, &data_path))?
     };
     notes.extend(decoded.notes());
     let volume = Volume::from_vec(geom, decoded.voxels).map_err(at(path))?;
-    let files = if data_file.eq_ignore_ascii_case("LOCAL") { 1 } else { 2 };
-    let meta = Meta { format: Some(Format::MetaImage), files, modality: h.modality, notes, ..Meta::default() };
+    let files = if data_file.eq_ignore_ascii_case("LOCAL") {
+        1
+    } else {
+        2
+    };
+    let meta = Meta {
+        format: Some(Format::MetaImage),
+        files,
+        modality: h.modality,
+        notes,
+        ..Meta::default()
+    };
     Ok(Loaded { volume, meta })
 }
 
@@ -86,7 +102,9 @@ impl Header {
         let mut h = Header::default();
         let mut any = false;
         let not_text = |e: Error| match e {
-            Error::Format { msg, .. } => Error::format(path, format!("not a MetaImage file: {msg}")),
+            Error::Format { msg, .. } => {
+                Error::format(path, format!("not a MetaImage file: {msg}"))
+            }
             other => other,
         };
         while let Some(line) = lines.next_line().map_err(not_text)? {
@@ -95,7 +113,10 @@ impl Header {
                 continue;
             }
             let Some((key, value)) = line.split_once('=') else {
-                return Err(Error::format(path, format!("not a MetaImage header line: \"{}\"", shared::clip(line))));
+                return Err(Error::format(
+                    path,
+                    format!("not a MetaImage header line: \"{}\"", shared::clip(line)),
+                ));
             };
             any = true;
             let (key, value) = (key.trim(), value.trim());
@@ -104,7 +125,11 @@ impl Header {
                 return Ok(h);
             }
         }
-        let what = if any { "header ends without ElementDataFile" } else { "not a MetaImage header" };
+        let what = if any {
+            "header ends without ElementDataFile"
+        } else {
+            "not a MetaImage header"
+        };
         Err(Error::format(path, what))
     }
 
@@ -122,7 +147,9 @@ impl Header {
             "elementspacing" => self.spacing = Some(shared::numbers(key, value, 3)?),
             "elementsize" => self.element_size = Some(shared::numbers(key, value, 3)?),
             "offset" | "origin" | "position" => self.offset = Some(shared::numbers(key, value, 3)?),
-            "transformmatrix" | "rotation" | "orientation" => self.matrix = Some(shared::numbers(key, value, 9)?),
+            "transformmatrix" | "rotation" | "orientation" => {
+                self.matrix = Some(shared::numbers(key, value, 9)?)
+            }
             "elementtype" => self.element_type = Some(element_type(value)?),
             "binarydatabyteordermsb" | "elementbyteordermsb" => self.msb = boolean(key, value)?,
             "compresseddata" => self.compressed = boolean(key, value)?,
@@ -130,7 +157,10 @@ impl Header {
             "headersize" => {
                 self.header_size = shared::numbers::<i64>(key, value, 1)?[0];
                 if self.header_size < -1 {
-                    return Err(format!("HeaderSize = {}: must be -1 or more", self.header_size));
+                    return Err(format!(
+                        "HeaderSize = {}: must be -1 or more",
+                        self.header_size
+                    ));
                 }
             }
             "binarydata" if !boolean(key, value)? => {
@@ -139,7 +169,9 @@ impl Header {
             "elementnumberofchannels" => {
                 let c = shared::numbers::<u64>(key, value, 1)?[0];
                 if c != 1 {
-                    return Err(format!("ElementNumberOfChannels = {c}: only scalar images are supported"));
+                    return Err(format!(
+                        "ElementNumberOfChannels = {c}: only scalar images are supported"
+                    ));
                 }
             }
             "objecttype" if !value.eq_ignore_ascii_case("Image") => {
@@ -147,7 +179,8 @@ impl Header {
             }
             "modality" => {
                 let m = value.trim_start_matches("MET_MOD_");
-                self.modality = (!m.eq_ignore_ascii_case("UNKNOWN") && !m.is_empty()).then(|| m.to_string());
+                self.modality =
+                    (!m.eq_ignore_ascii_case("UNKNOWN") && !m.is_empty()).then(|| m.to_string());
             }
             "elementdatafile" => self.data_file = Some(value.to_string()),
             _ => {}
@@ -168,12 +201,17 @@ impl Header {
                 DVec3::ONE
             }
         };
-        let origin = self.offset.as_ref().map_or(DVec3::ZERO, |o| DVec3::new(o[0], o[1], o[2]));
+        let origin = self
+            .offset
+            .as_ref()
+            .map_or(DVec3::ZERO, |o| DVec3::new(o[0], o[1], o[2]));
         let dir = match &self.matrix {
             None => DMat3::IDENTITY,
             Some(m) => {
                 let axes = [0, 3, 6].map(|c| DVec3::new(m[c], m[c + 1], m[c + 2]));
-                shared::direction_from_axes(axes).map_err(|e| Error::format(path, format!("TransformMatrix: {e}")))?.1
+                shared::direction_from_axes(axes)
+                    .map_err(|e| Error::format(path, format!("TransformMatrix: {e}")))?
+                    .1
             }
         };
         Ok((shared::geometry(path, dims, spacing, origin, dir)?, notes))
@@ -192,7 +230,10 @@ impl Header {
     /// Where the voxels start in a separate data file of `len` bytes.
     fn data_offset(&self, path: &Path, len: u64, expected: u64) -> Result<u64> {
         match self.header_size {
-            -1 if self.compressed => Err(Error::format(path, "HeaderSize = -1 cannot be used with compressed data")),
+            -1 if self.compressed => Err(Error::format(
+                path,
+                "HeaderSize = -1 cannot be used with compressed data",
+            )),
             -1 => Ok(len.saturating_sub(expected)),
             h => Ok(h as u64),
         }
@@ -226,10 +267,15 @@ impl Header {
 
 /// Resolves `ElementDataFile` beside the header; file lists and patterns are refused.
 fn data_path(header: &Path, name: &str) -> Result<PathBuf> {
-    if name.eq_ignore_ascii_case("LIST") || name.contains('%') || name.split_whitespace().count() > 1 {
+    if name.eq_ignore_ascii_case("LIST")
+        || name.contains('%')
+        || name.split_whitespace().count() > 1
+    {
         return Err(Error::format(
             header,
-            format!("ElementDataFile = {name}: lists of slice files are not supported, only LOCAL or one file"),
+            format!(
+                "ElementDataFile = {name}: lists of slice files are not supported, only LOCAL or one file"
+            ),
         ));
     }
     Ok(sibling(header, name))
@@ -242,7 +288,10 @@ fn open_data(header: &Path, data: &Path) -> Result<(BufReader<std::fs::File>, u6
         Ok((f, len)) => Ok((BufReader::with_capacity(1 << 16, f), len)),
         Err(e) => Err(Error::format(
             header,
-            format!("cannot open the data file {} named by ElementDataFile: {e}", data.display()),
+            format!(
+                "cannot open the data file {} named by ElementDataFile: {e}",
+                data.display()
+            ),
         )),
     }
 }
@@ -257,7 +306,11 @@ fn element_type(value: &str) -> Result<Scalar, String> {
         "MET_UINT" | "MET_ULONG" => Scalar::U32,
         "MET_FLOAT" => Scalar::F32,
         "MET_DOUBLE" => Scalar::F64,
-        _ => return Err(format!("ElementType = {value} is not supported (MET_UCHAR ... MET_DOUBLE, scalar)")),
+        _ => {
+            return Err(format!(
+                "ElementType = {value} is not supported (MET_UCHAR ... MET_DOUBLE, scalar)"
+            ));
+        }
     })
 }
 
@@ -269,23 +322,30 @@ fn boolean(key: &str, value: &str) -> Result<bool, String> {
     }
 }
 
-
 // ---------------------------------------------------------------------------------------
 // Writing
 
 /// Saves an `i16` volume: a .mha gets the voxels inline, zlib-compressed; a .mhd gets an
 /// uncompressed `<stem>.raw` beside it. Both writes are atomic (data file first).
 pub fn save(path: &Path, vol: &Volume<i16>) -> Result<()> {
-    let detached = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("mhd"));
+    let detached = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("mhd"));
     if detached {
-        let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        let stem = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
         let raw_name = format!("{stem}.raw");
         let raw_path = sibling(path, &raw_name);
         super::atomic::write_atomic(&raw_path, |w| write_le(w, vol.data()))?;
         let header = header_text(vol, &raw_name, None);
         super::atomic::write_atomic(path, |w| w.write_all(header.as_bytes()))
     } else {
-        let mut enc = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::new(super::nifti::GZIP_LEVEL));
+        let mut enc = flate2::write::ZlibEncoder::new(
+            Vec::new(),
+            flate2::Compression::new(super::nifti::GZIP_LEVEL),
+        );
         write_le(&mut enc, vol.data()).map_err(|e| Error::io(path, e))?;
         let data = enc.finish().map_err(|e| Error::io(path, e))?;
         let header = header_text(vol, "LOCAL", Some(data.len()));
@@ -300,7 +360,12 @@ pub fn save(path: &Path, vol: &Volume<i16>) -> Result<()> {
 fn header_text(vol: &Volume<i16>, data_file: &str, compressed_size: Option<usize>) -> String {
     let g = vol.geometry();
     let d = &g.direction;
-    let join = |v: &[f64]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(" ");
+    let join = |v: &[f64]| {
+        v.iter()
+            .map(|x| x.to_string())
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
     let columns: Vec<f64> = (0..3).flat_map(|c| (0..3).map(move |r| d[r][c])).collect();
     let mut s = String::new();
     s += "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\n";

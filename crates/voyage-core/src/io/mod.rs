@@ -86,7 +86,10 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Loaded> {
 
 /// Decides the format of a file from its name, then from its first bytes.
 pub fn detect_format(path: &Path) -> Result<Format> {
-    let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
     if name.ends_with(".nii") || name.ends_with(".nii.gz") {
         return Ok(Format::Nifti);
     }
@@ -108,11 +111,18 @@ pub fn detect_format(path: &Path) -> Result<Format> {
     if n >= 348 && (&head[344..348] == b"n+1\0" || &head[344..348] == b"ni1\0") {
         return Ok(Format::Nifti);
     }
-    if name.ends_with(".dcm") || name.ends_with(".dicom") || !name.contains('.') || name.starts_with("ct.") {
+    if name.ends_with(".dcm")
+        || name.ends_with(".dicom")
+        || !name.contains('.')
+        || name.starts_with("ct.")
+    {
         // DICOM files without the preamble (old ACR-NEMA style) and extension-less names.
         return Ok(Format::Dicom);
     }
-    Err(Error::format(path, "unknown file format (expected DICOM, NIfTI, MetaImage or NRRD)"))
+    Err(Error::format(
+        path,
+        "unknown file format (expected DICOM, NIfTI, MetaImage or NRRD)",
+    ))
 }
 
 fn read_prefix(path: &Path, buf: &mut [u8]) -> Result<usize> {
@@ -140,5 +150,7 @@ pub(crate) fn at(path: &Path) -> impl Fn(Error) -> Error + '_ {
 
 /// Returns the path with its extension(s) replaced, e.g. for the .raw of a .mhd.
 pub(crate) fn sibling(path: &Path, file_name: &str) -> PathBuf {
-    path.parent().map(|p| p.join(file_name)).unwrap_or_else(|| PathBuf::from(file_name))
+    path.parent()
+        .map(|p| p.join(file_name))
+        .unwrap_or_else(|| PathBuf::from(file_name))
 }

@@ -45,7 +45,11 @@ pub fn load(path: &Path) -> Result<Loaded> {
     let head = r.fill_buf().map_err(|e| Error::io(path, e))?;
     if shared::is_gzip(head) {
         let mut gz = flate2::bufread::MultiGzDecoder::new(r);
-        load_from(path, &mut gz, shared::Avail::AtMost(shared::max_inflated_len(len)))
+        load_from(
+            path,
+            &mut gz,
+            shared::Avail::AtMost(shared::max_inflated_len(len)),
+        )
     } else {
         load_from(path, &mut r, shared::Avail::Exact(len))
     }
@@ -58,7 +62,10 @@ fn load_from(path: &Path, r: &mut dyn Read, avail: shared::Avail) -> Result<Load
     let mut head = [0u8; HEADER_LEN];
     let got = shared::fill(r, &mut head).map_err(|e| shared::read_error(path, e))?;
     if got < HEADER_LEN {
-        return Err(Error::format(path, format!("{got} bytes is too short for a NIfTI-1 header (348 bytes)")));
+        return Err(Error::format(
+            path,
+            format!("{got} bytes is too short for a NIfTI-1 header (348 bytes)"),
+        ));
     }
     let h = Header::parse(&head).map_err(|m| Error::format(path, m))?;
     let dims = h.dims().map_err(|m| Error::format(path, m))?;
@@ -70,14 +77,21 @@ fn load_from(path: &Path, r: &mut dyn Read, avail: shared::Avail) -> Result<Load
     let n = dims[0] * dims[1] * dims[2];
     let expected = (n as u64).saturating_mul(ty.size() as u64);
     avail.check(path, offset, expected)?;
-    shared::skip(r, offset - HEADER_LEN as u64).map_err(|e| shared::read_error(path, e))?.check(path, offset)?;
+    shared::skip(r, offset - HEADER_LEN as u64)
+        .map_err(|e| shared::read_error(path, e))?
+        .check(path, offset)?;
     let decoded = shared::read_voxels(path, r, n, ty, h.endian, h.rescale())?;
     if let shared::Avail::AtMost(_) = avail {
         shared::finish_compressed(path, r)?;
     }
     notes.extend(decoded.notes());
     let volume = Volume::from_vec(geom, decoded.voxels).map_err(at(path))?;
-    let meta = Meta { format: Some(Format::Nifti), files: 1, notes, ..Meta::default() };
+    let meta = Meta {
+        format: Some(Format::Nifti),
+        files: 1,
+        notes,
+        ..Meta::default()
+    };
     Ok(Loaded { volume, meta })
 }
 
@@ -109,7 +123,11 @@ impl Fields<'_> {
     /// Never panics: an offset past the end reads as zeros (cannot happen for the fixed
     /// offsets below, which all lie inside the 348-byte header).
     fn arr<const N: usize>(&self, off: usize) -> [u8; N] {
-        let mut a: [u8; N] = self.b.get(off..off + N).and_then(|s| s.try_into().ok()).unwrap_or([0; N]);
+        let mut a: [u8; N] = self
+            .b
+            .get(off..off + N)
+            .and_then(|s| s.try_into().ok())
+            .unwrap_or([0; N]);
         if self.endian == Endian::Big {
             a.reverse();
         }
@@ -168,7 +186,9 @@ impl Header {
         let d = self.dim;
         let ndim = d[0];
         if !(3..=7).contains(&ndim) {
-            return Err(format!("dim[0] = {ndim}: voyage reads 3D volumes only (dim = {d:?})"));
+            return Err(format!(
+                "dim[0] = {ndim}: voyage reads 3D volumes only (dim = {d:?})"
+            ));
         }
         if let Some(extra) = (4..=ndim as usize).find(|&a| d[a] != 1) {
             return Err(format!(
@@ -193,7 +213,9 @@ impl Header {
             512 => Scalar::U16,
             768 => Scalar::U32,
             other => {
-                return Err(format!("datatype {other} is not supported (u8, i8, i16, u16, i32, u32, f32, f64 are)"));
+                return Err(format!(
+                    "datatype {other} is not supported (u8, i8, i16, u16, i32, u32, f32, f64 are)"
+                ));
             }
         })
     }
@@ -202,7 +224,9 @@ impl Header {
     fn vox_offset(&self) -> Result<u64, String> {
         let v = self.vox_offset;
         if !v.is_finite() || v.fract() != 0.0 || v < HEADER_LEN as f32 || v > u32::MAX as f32 {
-            return Err(format!("vox_offset {v} is not a whole byte offset of at least 348"));
+            return Err(format!(
+                "vox_offset {v} is not a whole byte offset of at least 348"
+            ));
         }
         Ok(v as u64)
     }
@@ -224,7 +248,9 @@ impl Header {
             0 | 2 => Ok(1.0),
             1 => Ok(1000.0),
             3 => Ok(0.001),
-            u => Err(format!("spatial unit code {u} in xyzt_units is not a length unit")),
+            u => Err(format!(
+                "spatial unit code {u} in xyzt_units is not a length unit"
+            )),
         }
     }
 
@@ -232,7 +258,9 @@ impl Header {
     fn pixdim_xyz(&self) -> Result<DVec3, String> {
         let p = &self.pixdim[1..4];
         if p.iter().any(|v| !v.is_finite() || *v <= 0.0) {
-            return Err(format!("pixdim[1..4] = {p:?}: voxel sizes must be positive and finite"));
+            return Err(format!(
+                "pixdim[1..4] = {p:?}: voxel sizes must be positive and finite"
+            ));
         }
         Ok(DVec3::new(p[0].into(), p[1].into(), p[2].into()))
     }
@@ -246,20 +274,31 @@ impl Header {
             let (steps, origin) = self.sform_ras();
             match check_orthogonal(steps) {
                 Ok(()) => {
-                    notes.push(format!("geometry from the sform (code {})", self.sform_code));
+                    notes.push(format!(
+                        "geometry from the sform (code {})",
+                        self.sform_code
+                    ));
                     (steps, origin)
                 }
                 Err(m) if self.qform_code > 0 => {
-                    notes.push(format!("sform ignored ({m}); geometry from the qform (code {})", self.qform_code));
+                    notes.push(format!(
+                        "sform ignored ({m}); geometry from the qform (code {})",
+                        self.qform_code
+                    ));
                     self.qform_ras(pixdim)?
                 }
                 Err(m) => return Err(format!("sform: {m}")),
             }
         } else if self.qform_code > 0 {
-            notes.push(format!("geometry from the qform (code {})", self.qform_code));
+            notes.push(format!(
+                "geometry from the qform (code {})",
+                self.qform_code
+            ));
             self.qform_ras(pixdim)?
         } else {
-            notes.push("no sform or qform: voxel axes taken as RAS, origin 0, spacing from pixdim".into());
+            notes.push(
+                "no sform or qform: voxel axes taken as RAS, origin 0, spacing from pixdim".into(),
+            );
             (DMat3::from_diagonal(pixdim), DVec3::ZERO)
         };
         if unit != 1.0 {
@@ -270,8 +309,12 @@ impl Header {
         if !origin.is_finite() {
             return Err(format!("origin {origin:?} is not finite"));
         }
-        let mut geom =
-            Geometry { dims, spacing: spacing.to_array(), origin: origin.to_array(), direction: [[0.0; 3]; 3] };
+        let mut geom = Geometry {
+            dims,
+            spacing: spacing.to_array(),
+            origin: origin.to_array(),
+            direction: [[0.0; 3]; 3],
+        };
         geom.set_direction_mat(direction);
         geom.validate().map_err(|e| e.to_string())?;
         Ok((geom, notes))
@@ -294,24 +337,41 @@ impl Header {
         let [b, c, d] = self.quatern.map(f64::from);
         let offset = DVec3::from_array(self.qoffset.map(f64::from));
         if ![b, c, d].iter().all(|v| v.is_finite()) || !offset.is_finite() {
-            return Err(format!("qform quaternion {:?} or offset {offset:?} is not finite", self.quatern));
+            return Err(format!(
+                "qform quaternion {:?} or offset {offset:?} is not finite",
+                self.quatern
+            ));
         }
         let rot = quaternion_matrix(b, c, d)?;
         let qfac = if self.pixdim[0] < 0.0 { -1.0 } else { 1.0 };
-        let m = DMat3::from_cols(rot.x_axis * pixdim.x, rot.y_axis * pixdim.y, rot.z_axis * (pixdim.z * qfac));
+        let m = DMat3::from_cols(
+            rot.x_axis * pixdim.x,
+            rot.y_axis * pixdim.y,
+            rot.z_axis * (pixdim.z * qfac),
+        );
         Ok((m, offset))
     }
 }
 
 /// Byte order from `sizeof_hdr`, which must read 348 one way or the other.
 fn detect_endian(b: &[u8; HEADER_LEN]) -> Result<Endian, String> {
-    let le = Fields { b, endian: Endian::Little }.i32(0);
-    let be = Fields { b, endian: Endian::Big }.i32(0);
+    let le = Fields {
+        b,
+        endian: Endian::Little,
+    }
+    .i32(0);
+    let be = Fields {
+        b,
+        endian: Endian::Big,
+    }
+    .i32(0);
     match (le, be) {
         (348, _) => Ok(Endian::Little),
         (_, 348) => Ok(Endian::Big),
         (540, _) | (_, 540) => Err("NIfTI-2 files are not supported (sizeof_hdr = 540)".into()),
-        _ => Err(format!("not a NIfTI-1 file: sizeof_hdr is {le}, expected 348")),
+        _ => Err(format!(
+            "not a NIfTI-1 file: sizeof_hdr is {le}, expected 348"
+        )),
     }
 }
 
@@ -347,7 +407,9 @@ fn check_orthogonal(m: DMat3) -> Result<(), String> {
     for (a, c) in cols.iter().enumerate() {
         let len = c.length();
         if !len.is_finite() || len <= 0.0 {
-            return Err(format!("voxel axis {a} has length {len} (affine columns {cols:?})"));
+            return Err(format!(
+                "voxel axis {a} has length {len} (affine columns {cols:?})"
+            ));
         }
     }
     for (a, b) in [(0, 1), (0, 2), (1, 2)] {
@@ -366,7 +428,11 @@ fn check_orthogonal(m: DMat3) -> Result<(), String> {
 fn decompose(m: DMat3) -> Result<(DVec3, DMat3), String> {
     check_orthogonal(m)?;
     let spacing = DVec3::new(m.x_axis.length(), m.y_axis.length(), m.z_axis.length());
-    let dir = DMat3::from_cols(m.x_axis / spacing.x, m.y_axis / spacing.y, m.z_axis / spacing.z);
+    let dir = DMat3::from_cols(
+        m.x_axis / spacing.x,
+        m.y_axis / spacing.y,
+        m.z_axis / spacing.z,
+    );
     Ok((spacing, dir))
 }
 
@@ -434,7 +500,11 @@ pub fn save_i16(path: &Path, vol: &Volume<i16>) -> Result<()> {
 /// Header, the 4-byte "no extensions" flag, then the voxels in chunks (bounded memory).
 /// Saves a volume given slice by slice (`slice(k, out)` fills axial slice k, x fastest), so
 /// that a field stored on a box never has to be spread over a whole volume in memory.
-pub fn save_slices<T: NiftiVoxel + Default>(path: &Path, geometry: &Geometry, slice: impl Fn(usize, &mut [T])) -> Result<()> {
+pub fn save_slices<T: NiftiVoxel + Default>(
+    path: &Path,
+    geometry: &Geometry,
+    slice: impl Fn(usize, &mut [T]),
+) -> Result<()> {
     let header = header_bytes::<T>(geometry).map_err(at(path))?;
     let gz = path.to_string_lossy().to_ascii_lowercase().ends_with(".gz");
     let [nx, ny, nz] = geometry.dims;
@@ -462,7 +532,11 @@ pub fn save_slices<T: NiftiVoxel + Default>(path: &Path, geometry: &Geometry, sl
     })
 }
 
-fn write_body<T: NiftiVoxel>(w: &mut dyn Write, header: &[u8; VOX_OFFSET], data: &[T]) -> std::io::Result<()> {
+fn write_body<T: NiftiVoxel>(
+    w: &mut dyn Write,
+    header: &[u8; VOX_OFFSET],
+    data: &[T],
+) -> std::io::Result<()> {
     w.write_all(header)?;
     let mut buf = Vec::with_capacity(1 << 20);
     for chunk in data.chunks((1 << 20) / std::mem::size_of::<T>().max(1)) {
@@ -480,7 +554,16 @@ fn header_bytes<T: NiftiVoxel>(g: &Geometry) -> Result<[u8; VOX_OFFSET]> {
     let mut put = |off: usize, bytes: &[u8]| h[off..off + bytes.len()].copy_from_slice(bytes);
     put(0, &348i32.to_le_bytes());
     put(38, b"r");
-    let dim: [i16; 8] = [3, dim_i16(g.dims[0])?, dim_i16(g.dims[1])?, dim_i16(g.dims[2])?, 1, 1, 1, 1];
+    let dim: [i16; 8] = [
+        3,
+        dim_i16(g.dims[0])?,
+        dim_i16(g.dims[1])?,
+        dim_i16(g.dims[2])?,
+        1,
+        1,
+        1,
+        1,
+    ];
     for (i, d) in dim.iter().enumerate() {
         put(40 + 2 * i, &d.to_le_bytes());
     }
@@ -490,7 +573,16 @@ fn header_bytes<T: NiftiVoxel>(g: &Geometry) -> Result<[u8; VOX_OFFSET]> {
     let steps_ras = ras_to_lps(g.direction_mat() * DMat3::from_diagonal(g.spacing_vec()));
     let origin_ras = ras_to_lps_point(DVec3::from_array(g.origin));
     let (quat, qfac) = quaternion_of(ras_to_lps(g.direction_mat()));
-    let pixdim = [qfac, g.spacing[0], g.spacing[1], g.spacing[2], 1.0, 1.0, 1.0, 1.0];
+    let pixdim = [
+        qfac,
+        g.spacing[0],
+        g.spacing[1],
+        g.spacing[2],
+        1.0,
+        1.0,
+        1.0,
+        1.0,
+    ];
     for (i, p) in pixdim.iter().enumerate() {
         put(76 + 4 * i, &(*p as f32).to_le_bytes());
     }
@@ -500,12 +592,24 @@ fn header_bytes<T: NiftiVoxel>(g: &Geometry) -> Result<[u8; VOX_OFFSET]> {
     put(148, b"voyage");
     put(252, &1i16.to_le_bytes()); // qform_code: scanner
     put(254, &1i16.to_le_bytes()); // sform_code: scanner
-    let q = [quat.x, quat.y, quat.z, origin_ras.x, origin_ras.y, origin_ras.z];
+    let q = [
+        quat.x,
+        quat.y,
+        quat.z,
+        origin_ras.x,
+        origin_ras.y,
+        origin_ras.z,
+    ];
     for (i, v) in q.iter().enumerate() {
         put(256 + 4 * i, &(*v as f32).to_le_bytes());
     }
     for r in 0..3 {
-        let row = [steps_ras.x_axis[r], steps_ras.y_axis[r], steps_ras.z_axis[r], origin_ras[r]];
+        let row = [
+            steps_ras.x_axis[r],
+            steps_ras.y_axis[r],
+            steps_ras.z_axis[r],
+            origin_ras[r],
+        ];
         for (c, v) in row.iter().enumerate() {
             put(280 + 16 * r + 4 * c, &(*v as f32).to_le_bytes());
         }
@@ -515,7 +619,11 @@ fn header_bytes<T: NiftiVoxel>(g: &Geometry) -> Result<[u8; VOX_OFFSET]> {
 }
 
 fn dim_i16(d: usize) -> Result<i16> {
-    i16::try_from(d).map_err(|_| Error::invalid(format!("dimension {d} does not fit NIfTI-1 (at most 32767)")))
+    i16::try_from(d).map_err(|_| {
+        Error::invalid(format!(
+            "dimension {d} does not fit NIfTI-1 (at most 32767)"
+        ))
+    })
 }
 
 /// Quaternion (with a ≥ 0) and qfac of a RAS direction matrix; a left-handed matrix gets
@@ -622,7 +730,10 @@ pub(crate) mod shared {
                 notes.push(format!("{} NaN voxels set to {NAN_HU}", self.nan));
             }
             if self.clamped > 0 {
-                notes.push(format!("{} voxels outside the i16 range were clamped", self.clamped));
+                notes.push(format!(
+                    "{} voxels outside the i16 range were clamped",
+                    self.clamped
+                ));
             }
             notes
         }
@@ -649,54 +760,86 @@ pub(crate) mod shared {
 
     impl<'a> HeaderLines<'a> {
         pub fn new(path: &'a Path, r: &'a mut dyn BufRead) -> Self {
-            HeaderLines { r, consumed: 0, path }
+            HeaderLines {
+                r,
+                consumed: 0,
+                path,
+            }
         }
 
         /// The next line without its line ending, or None at the end of the file.
         pub fn next_line(&mut self) -> Result<Option<String>> {
             let mut buf = Vec::new();
-            let n = (&mut *self.r).take(MAX_LINE).read_until(b'\n', &mut buf).map_err(|e| Error::io(self.path, e))?;
+            let n = (&mut *self.r)
+                .take(MAX_LINE)
+                .read_until(b'\n', &mut buf)
+                .map_err(|e| Error::io(self.path, e))?;
             if n == 0 {
                 return Ok(None);
             }
             self.consumed += n as u64;
             if self.consumed > MAX_HEADER || (n as u64 == MAX_LINE && !buf.ends_with(b"\n")) {
-                return Err(Error::format(self.path, "header is too long: is this really a text header?"));
+                return Err(Error::format(
+                    self.path,
+                    "header is too long: is this really a text header?",
+                ));
             }
             while buf.last().is_some_and(|&c| c == b'\n' || c == b'\r') {
                 buf.pop();
             }
             String::from_utf8(buf).map(Some).map_err(|_| {
-                Error::format(self.path, format!("header line ending at byte {} is not text", self.consumed))
+                Error::format(
+                    self.path,
+                    format!("header line ending at byte {} is not text", self.consumed),
+                )
             })
         }
     }
 
     /// Parses exactly `count` whitespace-separated numbers of a header field.
-    pub fn numbers<T: std::str::FromStr>(key: &str, value: &str, count: usize) -> Result<Vec<T>, String> {
+    pub fn numbers<T: std::str::FromStr>(
+        key: &str,
+        value: &str,
+        count: usize,
+    ) -> Result<Vec<T>, String> {
         let v: Vec<T> = value
             .split_whitespace()
             .map(|t| t.parse::<T>())
             .collect::<Result<_, _>>()
             .map_err(|_| format!("{key}: cannot read numbers from \"{value}\""))?;
         if v.len() != count {
-            return Err(format!("{key}: expected {count} numbers, found {} in \"{value}\"", v.len()));
+            return Err(format!(
+                "{key}: expected {count} numbers, found {} in \"{value}\"",
+                v.len()
+            ));
         }
         Ok(v)
     }
 
     /// Checks header dims and returns them with the voxel count.
     pub fn dims3(path: &Path, d: &[u64]) -> Result<([usize; 3], usize)> {
-        let d: [u64; 3] =
-            d.try_into().map_err(|_| Error::format(path, format!("expected 3 dimensions, found {}", d.len())))?;
+        let d: [u64; 3] = d.try_into().map_err(|_| {
+            Error::format(path, format!("expected 3 dimensions, found {}", d.len()))
+        })?;
         check_dims(d).map_err(super::at(path))?;
         let dims = d.map(|v| v as usize);
         Ok((dims, dims[0] * dims[1] * dims[2]))
     }
 
     /// Builds and validates the geometry from LPS origin, spacing and unit direction.
-    pub fn geometry(path: &Path, dims: [usize; 3], spacing: DVec3, origin: DVec3, dir: DMat3) -> Result<Geometry> {
-        let mut g = Geometry { dims, spacing: spacing.to_array(), origin: origin.to_array(), direction: [[0.0; 3]; 3] };
+    pub fn geometry(
+        path: &Path,
+        dims: [usize; 3],
+        spacing: DVec3,
+        origin: DVec3,
+        dir: DMat3,
+    ) -> Result<Geometry> {
+        let mut g = Geometry {
+            dims,
+            spacing: spacing.to_array(),
+            origin: origin.to_array(),
+            direction: [[0.0; 3]; 3],
+        };
         g.set_direction_mat(dir);
         g.validate().map_err(super::at(path))?;
         Ok(g)
@@ -738,9 +881,10 @@ pub(crate) mod shared {
         /// starting at `offset` cannot fit in the stream.
         pub fn check(self, path: &Path, offset: u64, expected: u64) -> Result<()> {
             match self {
-                Avail::Exact(len) if len.saturating_sub(offset) < expected => {
-                    Err(Error::format(path, truncated_msg(expected, len.saturating_sub(offset))))
-                }
+                Avail::Exact(len) if len.saturating_sub(offset) < expected => Err(Error::format(
+                    path,
+                    truncated_msg(expected, len.saturating_sub(offset)),
+                )),
                 Avail::AtMost(max) if max.saturating_sub(offset) < expected => Err(Error::format(
                     path,
                     format!(
@@ -795,7 +939,9 @@ pub(crate) mod shared {
             if self.got < self.wanted {
                 return Err(Error::format(
                     path,
-                    format!("truncated: voxel data should start at byte {data_start}, but the file ends before"),
+                    format!(
+                        "truncated: voxel data should start at byte {data_start}, but the file ends before"
+                    ),
                 ));
             }
             Ok(())
@@ -814,7 +960,10 @@ pub(crate) mod shared {
                 break;
             }
         }
-        Ok(Skipped { wanted: n, got: n - left })
+        Ok(Skipped {
+            wanted: n,
+            got: n - left,
+        })
     }
 
     /// Reads a compressed stream to its end after the voxels, so that the decoder checks
@@ -847,12 +996,18 @@ pub(crate) mod shared {
         endian: Endian,
         rescale: Option<Rescale>,
     ) -> Result<Decoded> {
-        let expected = n
-            .checked_mul(ty.size())
-            .ok_or_else(|| Error::format(path, format!("{n} voxels of {} bytes overflow", ty.size())))?;
+        let expected = n.checked_mul(ty.size()).ok_or_else(|| {
+            Error::format(path, format!("{n} voxels of {} bytes overflow", ty.size()))
+        })?;
         let mut voxels = Vec::new();
-        voxels.try_reserve_exact(n).map_err(|_| Error::format(path, format!("cannot allocate {n} voxels")))?;
-        let mut out = Decoded { voxels, nan: 0, clamped: 0 };
+        voxels
+            .try_reserve_exact(n)
+            .map_err(|_| Error::format(path, format!("cannot allocate {n} voxels")))?;
+        let mut out = Decoded {
+            voxels,
+            nan: 0,
+            clamped: 0,
+        };
         let mut buf = vec![0u8; CHUNK.min(expected)];
         let mut done = 0usize;
         while done < expected {
@@ -860,7 +1015,10 @@ pub(crate) mod shared {
             let got = fill(r, &mut buf[..want]).map_err(|e| read_error(path, e))?;
             done += got;
             if got < want {
-                return Err(Error::format(path, truncated_msg(expected as u64, done as u64)));
+                return Err(Error::format(
+                    path,
+                    truncated_msg(expected as u64, done as u64),
+                ));
             }
             convert(&buf[..want], ty, endian == Endian::Big, rescale, &mut out);
         }
@@ -868,7 +1026,11 @@ pub(crate) mod shared {
     }
 
     /// Elements of `N` bytes, decoded in the file's byte order.
-    fn samples<const N: usize, T>(bytes: &[u8], big: bool, from_le: impl Fn([u8; N]) -> T) -> impl Iterator<Item = T> {
+    fn samples<const N: usize, T>(
+        bytes: &[u8],
+        big: bool,
+        from_le: impl Fn([u8; N]) -> T,
+    ) -> impl Iterator<Item = T> {
         bytes.as_chunks::<N>().0.iter().map(move |c| {
             let mut c = *c;
             if big {

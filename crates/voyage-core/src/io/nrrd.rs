@@ -29,8 +29,11 @@ pub fn load(path: &Path) -> Result<Loaded> {
     let consumed = lines.consumed;
 
     let (dims, n) = shared::dims3(path, &h.sizes)?;
-    let ty = h.ty.ok_or_else(|| Error::format(path, "the type: field is missing"))?;
-    let encoding = h.encoding.ok_or_else(|| Error::format(path, "the encoding: field is missing"))?;
+    let ty =
+        h.ty.ok_or_else(|| Error::format(path, "the type: field is missing"))?;
+    let encoding = h
+        .encoding
+        .ok_or_else(|| Error::format(path, "the encoding: field is missing"))?;
     let (geom, mut notes) = h.geometry(path, dims)?;
     let endian = h.endian.unwrap_or_else(|| {
         if ty.size() > 1 {
@@ -40,8 +43,15 @@ pub fn load(path: &Path) -> Result<Loaded> {
     });
 
     let decoded = match &h.data_file {
-        None if !h.ended_by_blank_line => return Err(Error::format(path, "header ends without data")),
-        None => h.decode(path, &mut r, len.saturating_sub(consumed), (n, ty, endian, encoding))?,
+        None if !h.ended_by_blank_line => {
+            return Err(Error::format(path, "header ends without data"));
+        }
+        None => h.decode(
+            path,
+            &mut r,
+            len.saturating_sub(consumed),
+            (n, ty, endian, encoding),
+        )?,
         Some(name) => {
             let data_path = data_path(path, name)?;
             let (mut dr, data_len) = open_data(path, &data_path)?;
@@ -52,7 +62,12 @@ pub fn load(path: &Path) -> Result<Loaded> {
     notes.extend(decoded.notes());
     let volume = Volume::from_vec(geom, decoded.voxels).map_err(at(path))?;
     let files = if h.data_file.is_some() { 2 } else { 1 };
-    let meta = Meta { format: Some(Format::Nrrd), files, notes, ..Meta::default() };
+    let meta = Meta {
+        format: Some(Format::Nrrd),
+        files,
+        notes,
+        ..Meta::default()
+    };
     Ok(Loaded { volume, meta })
 }
 
@@ -125,9 +140,13 @@ impl Header {
                 continue;
             }
             let Some((field, value)) = line.split_once(": ") else {
-                return Err(Error::format(path, format!("not a NRRD field line: \"{}\"", shared::clip(&line))));
+                return Err(Error::format(
+                    path,
+                    format!("not a NRRD field line: \"{}\"", shared::clip(&line)),
+                ));
             };
-            h.set(&field.trim().to_ascii_lowercase(), value.trim()).map_err(|m| Error::format(path, m))?;
+            h.set(&field.trim().to_ascii_lowercase(), value.trim())
+                .map_err(|m| Error::format(path, m))?;
         }
         Ok(h)
     }
@@ -148,14 +167,17 @@ impl Header {
             "space dimension" => {
                 let d = shared::numbers::<usize>(field, value, 1)?[0];
                 if d != 3 {
-                    return Err(format!("space dimension: {d}: only 3D spaces are supported"));
+                    return Err(format!(
+                        "space dimension: {d}: only 3D spaces are supported"
+                    ));
                 }
                 self.space.get_or_insert(Space::Unnamed);
             }
             "space directions" => {
                 let v = vectors(field, value)?;
-                let axes: [DVec3; 3] =
-                    v.try_into().map_err(|_| format!("space directions: expected 3 vectors in \"{value}\""))?;
+                let axes: [DVec3; 3] = v
+                    .try_into()
+                    .map_err(|_| format!("space directions: expected 3 vectors in \"{value}\""))?;
                 self.directions = Some(axes);
             }
             "space origin" => {
@@ -222,15 +244,26 @@ impl Header {
 
     /// Skips `line skip` lines and `byte skip` bytes, then decodes the voxels from `r`, a
     /// stream with `len` bytes left.
-    fn decode(&self, path: &Path, r: &mut dyn BufRead, len: u64, layout: Layout) -> Result<shared::Decoded> {
+    fn decode(
+        &self,
+        path: &Path,
+        r: &mut dyn BufRead,
+        len: u64,
+        layout: Layout,
+    ) -> Result<shared::Decoded> {
         let (n, ty, endian, encoding) = layout;
         let expected = (n as u64).saturating_mul(ty.size() as u64);
         let mut skipped = 0u64;
         for _ in 0..self.line_skip {
             let mut line = Vec::new();
-            let k = r.read_until(b'\n', &mut line).map_err(|e| Error::io(path, e))?;
+            let k = r
+                .read_until(b'\n', &mut line)
+                .map_err(|e| Error::io(path, e))?;
             if k == 0 {
-                return Err(Error::format(path, format!("line skip: {}: the data has fewer lines", self.line_skip)));
+                return Err(Error::format(
+                    path,
+                    format!("line skip: {}: the data has fewer lines", self.line_skip),
+                ));
             }
             skipped += k as u64;
         }
@@ -242,17 +275,24 @@ impl Header {
                     b => b as u64,
                 };
                 Avail::Exact(left).check(path, offset, expected)?;
-                shared::skip(r, offset).map_err(|e| shared::read_error(path, e))?.check(path, offset)?;
+                shared::skip(r, offset)
+                    .map_err(|e| shared::read_error(path, e))?
+                    .check(path, offset)?;
                 shared::read_voxels(path, r, n, ty, endian, None)
             }
             Encoding::Gzip => {
                 if self.byte_skip < 0 {
-                    return Err(Error::format(path, "byte skip: -1 is only allowed with raw encoding"));
+                    return Err(Error::format(
+                        path,
+                        "byte skip: -1 is only allowed with raw encoding",
+                    ));
                 }
                 let offset = self.byte_skip as u64;
                 Avail::AtMost(shared::max_inflated_len(left)).check(path, offset, expected)?;
                 let mut d = flate2::bufread::MultiGzDecoder::new(r);
-                shared::skip(&mut d, offset).map_err(|e| shared::read_error(path, e))?.check(path, offset)?;
+                shared::skip(&mut d, offset)
+                    .map_err(|e| shared::read_error(path, e))?
+                    .check(path, offset)?;
                 let decoded = shared::read_voxels(path, &mut d, n, ty, endian, None)?;
                 shared::finish_compressed(path, &mut d)?;
                 Ok(decoded)
@@ -266,13 +306,19 @@ fn scalar(value: &str) -> Result<Scalar, String> {
     Ok(match value.to_ascii_lowercase().as_str() {
         "signed char" | "int8" | "int8_t" => Scalar::I8,
         "uchar" | "unsigned char" | "uint8" | "uint8_t" => Scalar::U8,
-        "short" | "short int" | "signed short" | "signed short int" | "int16" | "int16_t" => Scalar::I16,
+        "short" | "short int" | "signed short" | "signed short int" | "int16" | "int16_t" => {
+            Scalar::I16
+        }
         "ushort" | "unsigned short" | "unsigned short int" | "uint16" | "uint16_t" => Scalar::U16,
         "int" | "signed int" | "int32" | "int32_t" => Scalar::I32,
         "uint" | "unsigned int" | "uint32" | "uint32_t" => Scalar::U32,
         "float" => Scalar::F32,
         "double" => Scalar::F64,
-        _ => return Err(format!("type: {value} is not supported (8 to 32-bit integers, float, double)")),
+        _ => {
+            return Err(format!(
+                "type: {value} is not supported (8 to 32-bit integers, float, double)"
+            ));
+        }
     })
 }
 
@@ -292,10 +338,16 @@ fn vectors(field: &str, value: &str) -> Result<Vec<DVec3>, String> {
     let mut rest = value.trim();
     while !rest.is_empty() {
         let Some(inner) = rest.strip_prefix('(') else {
-            return Err(format!("{field}: expected \"(x,y,z)\" vectors in \"{}\"", shared::clip(value)));
+            return Err(format!(
+                "{field}: expected \"(x,y,z)\" vectors in \"{}\"",
+                shared::clip(value)
+            ));
         };
         let Some((inside, after)) = inner.split_once(')') else {
-            return Err(format!("{field}: unclosed parenthesis in \"{}\"", shared::clip(value)));
+            return Err(format!(
+                "{field}: unclosed parenthesis in \"{}\"",
+                shared::clip(value)
+            ));
         };
         let v: Vec<f64> = inside
             .split(',')
@@ -327,12 +379,15 @@ fn open_data(header: &Path, data: &Path) -> Result<(BufReader<std::fs::File>, u6
     let opened = std::fs::File::open(data).and_then(|f| f.metadata().map(|m| (f, m.len())));
     match opened {
         Ok((f, len)) => Ok((BufReader::with_capacity(1 << 16, f), len)),
-        Err(e) => {
-            Err(Error::format(header, format!("cannot open the data file {} named by data file: {e}", data.display())))
-        }
+        Err(e) => Err(Error::format(
+            header,
+            format!(
+                "cannot open the data file {} named by data file: {e}",
+                data.display()
+            ),
+        )),
     }
 }
-
 
 // ---------------------------------------------------------------------------------------
 // Writing
@@ -340,9 +395,14 @@ fn open_data(header: &Path, data: &Path) -> Result<(BufReader<std::fs::File>, u6
 /// Saves an `i16` volume, gzip-compressed, in LPS: a .nrrd holds the data after its
 /// header; a .nhdr names a `<stem>.raw.gz` beside it. Atomic (data file first).
 pub fn save(path: &Path, vol: &Volume<i16>) -> Result<()> {
-    let detached = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("nhdr"));
+    let detached = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("nhdr"));
     if detached {
-        let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        let stem = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
         let data_name = format!("{stem}.raw.gz");
         super::atomic::write_atomic(&sibling(path, &data_name), |w| write_gzip(w, vol.data()))?;
         let header = header_text(vol.geometry(), Some(&data_name));
@@ -360,12 +420,21 @@ pub fn save(path: &Path, vol: &Volume<i16>) -> Result<()> {
 fn header_text(g: &Geometry, data_file: Option<&str>) -> String {
     let vec = |v: DVec3| format!("({},{},{})", v.x, v.y, v.z);
     let m = g.direction_mat();
-    let axes = [m.x_axis * g.spacing[0], m.y_axis * g.spacing[1], m.z_axis * g.spacing[2]];
+    let axes = [
+        m.x_axis * g.spacing[0],
+        m.y_axis * g.spacing[1],
+        m.z_axis * g.spacing[2],
+    ];
     let mut s = String::from("NRRD0004\n# Complete NRRD file format specification at:\n");
     s += "# http://teem.sourceforge.net/nrrd/format.html\n";
     s += "type: short\ndimension: 3\nspace: left-posterior-superior\n";
     s += &format!("sizes: {} {} {}\n", g.dims[0], g.dims[1], g.dims[2]);
-    s += &format!("space directions: {} {} {}\n", vec(axes[0]), vec(axes[1]), vec(axes[2]));
+    s += &format!(
+        "space directions: {} {} {}\n",
+        vec(axes[0]),
+        vec(axes[1]),
+        vec(axes[2])
+    );
     s += "kinds: domain domain domain\nendian: little\nencoding: gzip\n";
     s += &format!("space origin: {}\n", vec(DVec3::from_array(g.origin)));
     match data_file {
@@ -377,7 +446,8 @@ fn header_text(g: &Geometry, data_file: Option<&str>) -> String {
 
 /// Voxels as little-endian bytes through a fast gzip encoder.
 fn write_gzip(w: &mut dyn Write, data: &[i16]) -> std::io::Result<()> {
-    let mut enc = flate2::write::GzEncoder::new(w, flate2::Compression::new(super::nifti::GZIP_LEVEL));
+    let mut enc =
+        flate2::write::GzEncoder::new(w, flate2::Compression::new(super::nifti::GZIP_LEVEL));
     let mut buf = Vec::with_capacity(1 << 20);
     for chunk in data.chunks(1 << 19) {
         buf.clear();

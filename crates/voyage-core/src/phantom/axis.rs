@@ -42,7 +42,9 @@ impl Axis {
             return Err(Error::invalid("an axis needs at least two knots"));
         }
         if !(max_step > 0.0 && max_step.is_finite()) {
-            return Err(Error::invalid(format!("axis step {max_step} mm is not positive")));
+            return Err(Error::invalid(format!(
+                "axis step {max_step} mm is not positive"
+            )));
         }
         let (dense, dense_arc, knot_arc) = sample_spline(knots);
         let length = *dense_arc.last().unwrap_or(&0.0);
@@ -60,14 +62,30 @@ impl Axis {
                 cursor += 1;
             }
             let (s0, s1) = (dense_arc[cursor], dense_arc[cursor + 1]);
-            let t = if s1 > s0 { ((s - s0) / (s1 - s0)).clamp(0.0, 1.0) } else { 0.0 };
+            let t = if s1 > s0 {
+                ((s - s0) / (s1 - s0)).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
             points.push(dense[cursor].lerp(dense[cursor + 1], t));
             arc.push(s);
         }
-        let radius = arc.iter().map(|&s| knot_radius(knots, &knot_arc, s)).collect();
+        let radius = arc
+            .iter()
+            .map(|&s| knot_radius(knots, &knot_arc, s))
+            .collect();
         let tangent = tangents(&points);
         let (normal, binormal) = rotation_minimising_frames(&points, &tangent);
-        Ok(Axis { points, arc, radius, tangent, normal, binormal, knot_arc, length })
+        Ok(Axis {
+            points,
+            arc,
+            radius,
+            tangent,
+            normal,
+            binormal,
+            knot_arc,
+            length,
+        })
     }
 
     pub fn len(&self) -> usize {
@@ -119,7 +137,11 @@ impl Axis {
         for i in w..self.len().saturating_sub(w) {
             let turn = self.tangent[i - w].angle_between(self.tangent[i + w]);
             let ds = self.arc[i + w] - self.arc[i - w];
-            let rho = if turn > 1e-9 { ds / turn } else { f64::INFINITY };
+            let rho = if turn > 1e-9 {
+                ds / turn
+            } else {
+                f64::INFINITY
+            };
             let ratio = rho / (self.radius[i] + extra_mm);
             if ratio < worst.0 {
                 worst = (ratio, i);
@@ -198,9 +220,15 @@ fn catmull_rom(p0: DVec3, p1: DVec3, p2: DVec3, p3: DVec3, u: f64) -> DVec3 {
 
 /// Radius at arc `s`: smoothstep between the knots' radii, so it varies smoothly (C¹).
 fn knot_radius(knots: &[Knot], knot_arc: &[f64], s: f64) -> f64 {
-    let k = knot_arc.partition_point(|&a| a <= s).clamp(1, knots.len() - 1);
+    let k = knot_arc
+        .partition_point(|&a| a <= s)
+        .clamp(1, knots.len() - 1);
     let (s0, s1) = (knot_arc[k - 1], knot_arc[k]);
-    let t = if s1 > s0 { ((s - s0) / (s1 - s0)).clamp(0.0, 1.0) } else { 0.0 };
+    let t = if s1 > s0 {
+        ((s - s0) / (s1 - s0)).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
     let t = t * t * (3.0 - 2.0 * t);
     knots[k - 1].radius + (knots[k].radius - knots[k - 1].radius) * t
 }
@@ -237,13 +265,21 @@ fn rotation_minimising_frames(points: &[DVec3], tangent: &[DVec3]) -> (Vec<DVec3
         let t_l = tangent[i] - v1 * (2.0 / c1 * v1.dot(tangent[i]));
         let v2 = tangent[i + 1] - t_l;
         let c2 = v2.dot(v2);
-        let next = if c2 < 1e-18 { r_l } else { r_l - v2 * (2.0 / c2 * v2.dot(r_l)) };
+        let next = if c2 < 1e-18 {
+            r_l
+        } else {
+            r_l - v2 * (2.0 / c2 * v2.dot(r_l))
+        };
         // Re-orthogonalise against rounding drift.
         let t = tangent[i + 1];
         r = (next - t * next.dot(t)).normalize_or(r);
         normal.push(r);
     }
-    let binormal = tangent.iter().zip(&normal).map(|(t, n)| t.cross(*n)).collect();
+    let binormal = tangent
+        .iter()
+        .zip(&normal)
+        .map(|(t, n)| t.cross(*n))
+        .collect();
     (normal, binormal)
 }
 
@@ -254,9 +290,18 @@ mod tests {
     #[test]
     fn straight_axis_has_exact_length_and_orthonormal_frames() {
         let knots = [
-            Knot { pos: DVec3::ZERO, radius: 5.0 },
-            Knot { pos: DVec3::new(0.0, 0.0, 50.0), radius: 10.0 },
-            Knot { pos: DVec3::new(0.0, 0.0, 100.0), radius: 5.0 },
+            Knot {
+                pos: DVec3::ZERO,
+                radius: 5.0,
+            },
+            Knot {
+                pos: DVec3::new(0.0, 0.0, 50.0),
+                radius: 10.0,
+            },
+            Knot {
+                pos: DVec3::new(0.0, 0.0, 100.0),
+                radius: 5.0,
+            },
         ];
         let a = Axis::through(&knots, 1.0).unwrap();
         assert!((a.length - 100.0).abs() < 1e-6);

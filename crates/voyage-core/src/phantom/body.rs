@@ -216,7 +216,10 @@ impl Background for Body {
             let dx = (x - self.center.x).abs();
             if dx > air_from {
                 (*h, *l) = (AIR, label::OUTSIDE_AIR);
-            } else if dx < fat_until && !lungs_here && (x - s.center.x).powi(2) + spine_dy2 > spine_r2 {
+            } else if dx < fat_until
+                && !lungs_here
+                && (x - s.center.x).powi(2) + spine_dy2 > spine_r2
+            {
                 (*h, *l) = (FAT, label::OTHER);
             } else {
                 (*h, *l) = self.sample(DVec3::new(x, y, z));

@@ -45,12 +45,15 @@ use super::body::{self, Body, Lung, Spine};
 use super::polyp::{PolypSpec, place};
 use super::raster::{Materials, Scene};
 use super::rng::{Rng, stream_key};
-use super::truth::{
-    COORDINATES_NOTE, CollapsedTruth, DistractorTruth, FilledTruth, FoldTruth, GapTruth, PolypTruth, PoolTruth, StoolTruth,
-    RectalTubeTruth, RoiTruth, SegmentTruth, Truth,
-};
 use super::small_bowel::{self, Valve};
-use super::tube::{Blob, BlobKind, Catheter, Collapse, Ends, Filled, Fold, FoldSector, Pool, Tube, segment_distance};
+use super::truth::{
+    COORDINATES_NOTE, CollapsedTruth, DistractorTruth, FilledTruth, FoldTruth, GapTruth,
+    PolypTruth, PoolTruth, RectalTubeTruth, RoiTruth, SegmentTruth, StoolTruth, Truth,
+};
+use super::tube::{
+    Blob, BlobKind, Catheter, Collapse, Ends, Filled, Fold, FoldSector, Pool, Tube,
+    segment_distance,
+};
 use super::{Phantom, arr, label, label_counts};
 use crate::{Error, Geometry, Result};
 
@@ -121,7 +124,14 @@ impl Default for ColonOptions {
 /// Segments that `ColonOptions::collapsed` may name.
 pub const COLLAPSIBLE: &[&str] = &["sigmoid", "descending", "transverse"];
 /// Segments that `ColonOptions::fluid_filled` may name.
-pub const FILLABLE: &[&str] = &["rectum", "sigmoid", "descending", "transverse", "ascending", "cecum"];
+pub const FILLABLE: &[&str] = &[
+    "rectum",
+    "sigmoid",
+    "descending",
+    "transverse",
+    "ascending",
+    "cecum",
+];
 
 pub const FULL_DIMS: [usize; 3] = [512, 512, 400];
 pub const FULL_SPACING: [f64; 3] = [0.75, 0.75, 1.0];
@@ -243,13 +253,20 @@ pub(super) struct Frame {
 
 impl Frame {
     fn new(small: bool) -> Result<Frame> {
-        let (dims, spacing, scale) =
-            if small { (SMALL_DIMS, SMALL_SPACING, SMALL_SCALE) } else { (FULL_DIMS, FULL_SPACING, 1.0) };
+        let (dims, spacing, scale) = if small {
+            (SMALL_DIMS, SMALL_SPACING, SMALL_SCALE)
+        } else {
+            (FULL_DIMS, FULL_SPACING, 1.0)
+        };
         let geom = Geometry::new(dims, spacing, [0.0; 3])?;
         let full = Geometry::new(FULL_DIMS, FULL_SPACING, [0.0; 3])?;
         let ext = |g: &Geometry| g.extent_mm() - g.spacing_vec();
         let offset = (ext(&geom) - ext(&full) * scale) * 0.5;
-        Ok(Frame { geom, scale, offset })
+        Ok(Frame {
+            geom,
+            scale,
+            offset,
+        })
     }
 
     /// Full-size anatomy position → this volume's local mm.
@@ -285,21 +302,48 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
     let (mut blobs, polyps) = make_polyps(&frame, &mut tube, &segments, opts.seed)?;
     let filled = make_filled(&frame, &tube, &segments, &opts.fluid_filled, opts.seed)?;
     tube.filled = filled.iter().map(|(f, _)| f.clone()).collect();
-    let catheter = if opts.rectal_tube { Some(make_catheter(&frame, &tube, &blobs, floor.unwrap_or(0.0))?) } else { None };
-    let bowel = if opts.opacified_small_bowel {
-        Some(small_bowel::make(&frame, &tube, &body, &segments, gravity, &blobs, catheter.as_ref(), opts.seed)?)
+    let catheter = if opts.rectal_tube {
+        Some(make_catheter(&frame, &tube, &blobs, floor.unwrap_or(0.0))?)
     } else {
         None
     };
-    let pools = make_pools(&tube, &segments, opts, gravity, bowel.as_ref().map(|b| &b.valve));
-    let stool = if opts.tagged_stool { make_stool(&frame, &tube, &segments, &polyps, opts.seed)? } else { Vec::new() };
+    let bowel = if opts.opacified_small_bowel {
+        Some(small_bowel::make(
+            &frame,
+            &tube,
+            &body,
+            &segments,
+            gravity,
+            &blobs,
+            catheter.as_ref(),
+            opts.seed,
+        )?)
+    } else {
+        None
+    };
+    let pools = make_pools(
+        &tube,
+        &segments,
+        opts,
+        gravity,
+        bowel.as_ref().map(|b| &b.valve),
+    );
+    let stool = if opts.tagged_stool {
+        make_stool(&frame, &tube, &segments, &polyps, opts.seed)?
+    } else {
+        Vec::new()
+    };
     blobs.extend(stool.iter().map(|(b, _)| b.clone()));
     tube.pools = pools.iter().map(|(p, _)| p.clone()).collect();
     // Pockets keep clear of the loops and the catheter as they do of the colon; without
     // either the list is empty and they land where they always did.
     let mut obstacles: Vec<(DVec3, DVec3, f64)> = Vec::new();
     if let Some(b) = &bowel {
-        obstacles.extend(b.blobs.iter().filter_map(|l| l.stalk.map(|(p, q, r)| (p, q, r + l.wall_mm))));
+        obstacles.extend(
+            b.blobs
+                .iter()
+                .filter_map(|l| l.stalk.map(|(p, q, r)| (p, q, r + l.wall_mm))),
+        );
     }
     if let Some(c) = &catheter {
         obstacles.extend(c.points.windows(2).map(|w| (w[0], w[1], c.outer_radius())));
@@ -317,9 +361,15 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
     }
     if let Some(b) = &bowel {
         distractors.extend(b.loops.iter().map(|l| {
-            let (lo, hi) = l.axis_mm.iter().fold(([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]), |(lo, hi), p| {
-                ([0, 1, 2].map(|a| lo[a].min(p[a])), [0, 1, 2].map(|a| hi[a].max(p[a])))
-            });
+            let (lo, hi) = l.axis_mm.iter().fold(
+                ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]),
+                |(lo, hi), p| {
+                    (
+                        [0, 1, 2].map(|a| lo[a].min(p[a])),
+                        [0, 1, 2].map(|a| hi[a].max(p[a])),
+                    )
+                },
+            );
             DistractorTruth {
                 kind: "opacified_small_bowel".into(),
                 center_mm: [0, 1, 2].map(|a| 0.5 * (lo[a] + hi[a])),
@@ -331,8 +381,16 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
     }
     distractors.extend(body.lungs.iter().map(|l| DistractorTruth {
         kind: "lung".into(),
-        center_mm: [l.center.x, l.center.y, 0.5 * (l.recess + frame.geom.extent_mm().z)],
-        semi_axes_mm: [l.semi.x, l.semi.y, 0.5 * (frame.geom.extent_mm().z - l.recess)],
+        center_mm: [
+            l.center.x,
+            l.center.y,
+            0.5 * (l.recess + frame.geom.extent_mm().z),
+        ],
+        semi_axes_mm: [
+            l.semi.x,
+            l.semi.y,
+            0.5 * (frame.geom.extent_mm().z - l.recess),
+        ],
         hu: body::LUNG,
     }));
     let noise_roi = fat_roi(&frame, &tube, &blobs, &body, catheter.as_ref());
@@ -341,7 +399,12 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
         tube: &tube,
         blobs: &blobs,
         catheter: catheter.as_ref(),
-        materials: Materials { lumen_air: body::AIR, wall: body::SOFT_TISSUE, polyp: body::SOFT_TISSUE, pocket_air: body::AIR },
+        materials: Materials {
+            lumen_air: body::AIR,
+            wall: body::SOFT_TISSUE,
+            polyp: body::SOFT_TISSUE,
+            pocket_air: body::AIR,
+        },
         background: &body,
         noise_sigma: opts.noise_hu,
         noise_key: stream_key(opts.seed, STREAM_NOISE),
@@ -356,7 +419,12 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
     let fluid_filled: Vec<FilledTruth> = filled.into_iter().map(|(_, t)| t).collect();
     let mut gas_gaps: Vec<GapTruth> = collapsed
         .iter()
-        .map(|c| GapTruth { kind: "collapsed".into(), segment: c.segment.clone(), start_arc_mm: c.start_arc_mm, end_arc_mm: c.end_arc_mm })
+        .map(|c| GapTruth {
+            kind: "collapsed".into(),
+            segment: c.segment.clone(),
+            start_arc_mm: c.start_arc_mm,
+            end_arc_mm: c.end_arc_mm,
+        })
         .chain(fluid_filled.iter().map(|f| GapTruth {
             kind: "fluid_filled".into(),
             segment: f.segment.clone(),
@@ -389,7 +457,9 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
         wall_thickness_mm: tube.wall_mm,
         min_part_gap_mm: ax.min_part_gap(tube.wall_mm, 2).0,
         polyps,
-        lumen_voxels: counts[label::LUMEN_AIR as usize] + counts[label::LUMEN_FLUID as usize] + counts[label::STOOL as usize],
+        lumen_voxels: counts[label::LUMEN_AIR as usize]
+            + counts[label::LUMEN_FLUID as usize]
+            + counts[label::STOOL as usize],
         folds: tube.folds.len(),
         fold_list: fold_truth(&tube, &segments),
         segments: segments.clone(),
@@ -414,23 +484,36 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
         materials_hu: materials(opts),
         labels: label::legend(),
     };
-    Ok(Phantom { ct: r.ct, lumen: r.lumen, labels: r.labels, truth })
+    Ok(Phantom {
+        ct: r.ct,
+        lumen: r.lumen,
+        labels: r.labels,
+        truth,
+    })
 }
 
 /// Refuses options that cannot make a phantom, with a message that says why.
 fn check_options(opts: &ColonOptions) -> Result<()> {
     if !(opts.noise_hu >= 0.0 && opts.noise_hu.is_finite()) {
-        return Err(Error::invalid(format!("noise {} HU is not a non-negative number", opts.noise_hu)));
+        return Err(Error::invalid(format!(
+            "noise {} HU is not a non-negative number",
+            opts.noise_hu
+        )));
     }
     if let Some(q) = opts.quantize_hu
         && !(q > 0.0 && q.is_finite())
     {
-        return Err(Error::invalid(format!("quantisation step {q} HU is not a positive number")));
+        return Err(Error::invalid(format!(
+            "quantisation step {q} HU is not a positive number"
+        )));
     }
     let names = |what: &str, list: &[String], allowed: &[&str]| -> Result<()> {
         for (i, n) in list.iter().enumerate() {
             if !allowed.contains(&n.as_str()) {
-                return Err(Error::invalid(format!("{what} segment '{n}': choose from {}", allowed.join(", "))));
+                return Err(Error::invalid(format!(
+                    "{what} segment '{n}': choose from {}",
+                    allowed.join(", ")
+                )));
             }
             if list[..i].contains(n) {
                 return Err(Error::invalid(format!("{what} segment '{n}' named twice")));
@@ -491,38 +574,60 @@ fn make_body(frame: &Frame, lungs: bool, floor: Option<f64>) -> Body {
             arch_inner: 7.0 * s,
             arch_outer: 11.0 * s,
         },
-        lungs: if lungs { vec![lung(192.0 - 88.0), lung(192.0 + 88.0)] } else { Vec::new() },
+        lungs: if lungs {
+            vec![lung(192.0 - 88.0), lung(192.0 + 88.0)]
+        } else {
+            Vec::new()
+        },
         floor,
         inv_w: 3.0 / frame.geom.spacing.iter().sum::<f64>(),
     }
 }
 
 fn make_axis(frame: &Frame) -> Result<Axis> {
-    let knots: Vec<Knot> = KNOTS.iter().map(|(p, r, _)| Knot { pos: frame.pos(*p), radius: r * frame.scale }).collect();
+    let knots: Vec<Knot> = KNOTS
+        .iter()
+        .map(|(p, r, _)| Knot {
+            pos: frame.pos(*p),
+            radius: r * frame.scale,
+        })
+        .collect();
     Axis::through(&knots, 1.0)
 }
 
 /// Named arc ranges from the knots that start each segment.
 fn segments(axis: &Axis) -> Vec<SegmentTruth> {
-    let starts: Vec<(usize, &str)> =
-        KNOTS.iter().enumerate().filter(|(_, k)| !k.2.is_empty()).map(|(i, k)| (i, k.2)).collect();
+    let starts: Vec<(usize, &str)> = KNOTS
+        .iter()
+        .enumerate()
+        .filter(|(_, k)| !k.2.is_empty())
+        .map(|(i, k)| (i, k.2))
+        .collect();
     starts
         .iter()
         .enumerate()
         .map(|(n, &(i, name))| SegmentTruth {
             name: name.to_string(),
             start_arc_mm: axis.knot_arc[i],
-            end_arc_mm: starts.get(n + 1).map_or(axis.length, |&(j, _)| axis.knot_arc[j]),
+            end_arc_mm: starts
+                .get(n + 1)
+                .map_or(axis.length, |&(j, _)| axis.knot_arc[j]),
         })
         .collect()
 }
 
 fn segment<'a>(segments: &'a [SegmentTruth], name: &str) -> Result<&'a SegmentTruth> {
-    segments.iter().find(|s| s.name == name).ok_or_else(|| Error::invalid(format!("colon has no segment {name}")))
+    segments
+        .iter()
+        .find(|s| s.name == name)
+        .ok_or_else(|| Error::invalid(format!("colon has no segment {name}")))
 }
 
 fn segment_name(segments: &[SegmentTruth], s: f64) -> String {
-    segments.iter().find(|g| s >= g.start_arc_mm && s <= g.end_arc_mm).map_or_else(String::new, |g| g.name.clone())
+    segments
+        .iter()
+        .find(|g| s >= g.start_arc_mm && s <= g.end_arc_mm)
+        .map_or_else(String::new, |g| g.name.clone())
 }
 
 /// The checks that make the truth trustworthy: length, bends, separation of the loops,
@@ -536,11 +641,17 @@ fn check_anatomy(frame: &Frame, axis: &Axis, body: &Body) -> Result<()> {
     }
     let (bend, at) = axis.min_bend_ratio(wall);
     if bend < 1.05 {
-        return bad(format!("bend too tight at arc {:.0} mm (ratio {bend:.2})", axis.arc[at]));
+        return bad(format!(
+            "bend too tight at arc {:.0} mm (ratio {bend:.2})",
+            axis.arc[at]
+        ));
     }
     let (gap, i, j) = axis.min_part_gap(wall, 2);
     if gap < MIN_PART_GAP * s {
-        return bad(format!("loops at arcs {:.0} and {:.0} mm only {gap:.1} mm apart", axis.arc[i], axis.arc[j]));
+        return bad(format!(
+            "loops at arcs {:.0} and {:.0} mm only {gap:.1} mm apart",
+            axis.arc[i], axis.arc[j]
+        ));
     }
     let ext = frame.geom.extent_mm() - frame.geom.spacing_vec();
     for (p, r) in axis.points.iter().zip(&axis.radius) {
@@ -561,7 +672,10 @@ fn check_anatomy(frame: &Frame, axis: &Axis, body: &Body) -> Result<()> {
             return bad(format!("colon at {p:?} touches the spine"));
         }
         if let Some(l) = body.lungs.iter().find(|l| l.sdf(*p) < reach + 10.0 * s) {
-            return bad(format!("colon at {p:?} within 10 mm of the lung at {:?}", l.center));
+            return bad(format!(
+                "colon at {p:?} within 10 mm of the lung at {:?}",
+                l.center
+            ));
         }
     }
     Ok(())
@@ -570,7 +684,11 @@ fn check_anatomy(frame: &Frame, axis: &Axis, body: &Body) -> Result<()> {
 /// 30 mm (full size) of each named segment collapses to a tissue cord: the descending colon
 /// 60 % of the way up (where it always did), the sigmoid at 55 % of its length (the top of
 /// its anterior loop), the transverse colon at half its length. Sorted along the colon.
-fn make_collapses(frame: &Frame, segments: &[SegmentTruth], names: &[String]) -> Result<Vec<(Collapse, CollapsedTruth)>> {
+fn make_collapses(
+    frame: &Frame,
+    segments: &[SegmentTruth],
+    names: &[String],
+) -> Result<Vec<(Collapse, CollapsedTruth)>> {
     let s = frame.scale;
     let mut out = Vec::new();
     for name in names {
@@ -584,8 +702,18 @@ fn make_collapses(frame: &Frame, segments: &[SegmentTruth], names: &[String]) ->
         let mid = a + frac * (b - a);
         let half = 15.0 * s;
         let taper = 8.0 * s;
-        let c = Collapse { start: mid - half, end: mid + half, taper, cord_radius: 2.0 * frame.thin(WALL, 1.0) };
-        let t = CollapsedTruth { segment: name.clone(), start_arc_mm: c.start, end_arc_mm: c.end, taper_mm: taper };
+        let c = Collapse {
+            start: mid - half,
+            end: mid + half,
+            taper,
+            cord_radius: 2.0 * frame.thin(WALL, 1.0),
+        };
+        let t = CollapsedTruth {
+            segment: name.clone(),
+            start_arc_mm: c.start,
+            end_arc_mm: c.end,
+            taper_mm: taper,
+        };
         out.push((c, t));
     }
     out.sort_by(|x, y| x.0.start.total_cmp(&y.0.start));
@@ -594,13 +722,21 @@ fn make_collapses(frame: &Frame, segments: &[SegmentTruth], names: &[String]) ->
 
 /// Whether arc `s` lies within `margin` of a collapsed stretch (tapers included).
 fn near_collapse(tube: &Tube, s: f64, margin: f64) -> bool {
-    tube.collapse.iter().any(|c| s > c.start - c.taper - margin && s < c.end + c.taper + margin)
+    tube.collapse
+        .iter()
+        .any(|c| s > c.start - c.taper - margin && s < c.end + c.taper + margin)
 }
 
 /// A 40–60 mm stretch (full size) of each named segment filled to the brim with tagged
 /// fluid (+400..+700 HU), centred 20–35 % of the way along the segment (or 65–80 % if that
 /// would meet a collapse), clear of the colon's ends. Sorted along the colon.
-fn make_filled(frame: &Frame, tube: &Tube, segments: &[SegmentTruth], names: &[String], seed: u64) -> Result<Vec<(Filled, FilledTruth)>> {
+fn make_filled(
+    frame: &Frame,
+    tube: &Tube,
+    segments: &[SegmentTruth],
+    names: &[String],
+    seed: u64,
+) -> Result<Vec<(Filled, FilledTruth)>> {
     let s = frame.scale;
     let mut rng = Rng::new(seed, STREAM_FILLED);
     let mut out: Vec<(Filled, FilledTruth)> = Vec::new();
@@ -616,15 +752,34 @@ fn make_filled(frame: &Frame, tube: &Tube, segments: &[SegmentTruth], names: &[S
             let (lo, hi) = (mid - 0.5 * len, mid + 0.5 * len);
             lo >= (END_INSET + 5.0) * s
                 && hi <= tube.axis.length - (END_INSET + 5.0) * s
-                && !tube.collapse.iter().any(|c| lo < c.end + c.taper + margin && hi > c.start - c.taper - margin)
-                && !out.iter().any(|(f, _)| lo < f.end + margin && hi > f.start - margin)
+                && !tube
+                    .collapse
+                    .iter()
+                    .any(|c| lo < c.end + c.taper + margin && hi > c.start - c.taper - margin)
+                && !out
+                    .iter()
+                    .any(|(f, _)| lo < f.end + margin && hi > f.start - margin)
         };
-        let mid = [early, late, 0.5].into_iter().map(|f| a + f * (b - a)).find(|&m| fits(m));
+        let mid = [early, late, 0.5]
+            .into_iter()
+            .map(|f| a + f * (b - a))
+            .find(|&m| fits(m));
         let Some(mid) = mid else {
-            return Err(Error::invalid(format!("colon phantom: no room for a fluid-filled stretch in the {name}")));
+            return Err(Error::invalid(format!(
+                "colon phantom: no room for a fluid-filled stretch in the {name}"
+            )));
         };
-        let f = Filled { start: mid - 0.5 * len, end: mid + 0.5 * len, hu };
-        let t = FilledTruth { segment: name.clone(), start_arc_mm: f.start, end_arc_mm: f.end, hu };
+        let f = Filled {
+            start: mid - 0.5 * len,
+            end: mid + 0.5 * len,
+            hu,
+        };
+        let t = FilledTruth {
+            segment: name.clone(),
+            start_arc_mm: f.start,
+            end_arc_mm: f.end,
+            hu,
+        };
         out.push((f, t));
     }
     out.sort_by(|x, y| x.0.start.total_cmp(&y.0.start));
@@ -637,7 +792,11 @@ fn make_folds(frame: &Frame, tube: &Tube, segments: &[SegmentTruth], seed: u64) 
     let s = frame.scale;
     let mut rng = Rng::new(seed, STREAM_FOLDS);
     let hw = frame.thin(FOLD_HALF_WIDTH, 0.9);
-    let start = segments.iter().find(|g| g.name == "sigmoid").map_or(0.0, |g| g.start_arc_mm) + 10.0 * s;
+    let start = segments
+        .iter()
+        .find(|g| g.name == "sigmoid")
+        .map_or(0.0, |g| g.start_arc_mm)
+        + 10.0 * s;
     let end = tube.axis.length - 12.0 * s;
     let phase0 = rng.range(0.0, std::f64::consts::TAU);
     let mut folds = Vec::new();
@@ -652,7 +811,12 @@ fn make_folds(frame: &Frame, tube: &Tube, segments: &[SegmentTruth], seed: u64) 
         let sectors = [sector(), sector(), sector()];
         if !collapsed {
             // The taeniae twist slowly around the colon.
-            folds.push(Fold { arc, phase: phase0 + 0.002 * arc / s, half_width: hw, sectors });
+            folds.push(Fold {
+                arc,
+                phase: phase0 + 0.002 * arc / s,
+                half_width: hw,
+                sectors,
+            });
         }
         arc += rng.range(FOLD_SPACING.0, FOLD_SPACING.1) * s;
     }
@@ -681,7 +845,12 @@ fn fold_truth(tube: &Tube, segments: &[SegmentTruth]) -> Vec<FoldTruth> {
 /// diameter is reduced if needed), so the lumen stays open around the centerline. In the
 /// small phantom a diameter d becomes d/2 + 2.5 mm (3–12 mm → 4–8.5 mm: at least about three
 /// voxels, so the centre voxel is solid tissue) and every polyp is sessile.
-fn make_polyps(frame: &Frame, tube: &mut Tube, segments: &[SegmentTruth], seed: u64) -> Result<(Vec<Blob>, Vec<PolypTruth>)> {
+fn make_polyps(
+    frame: &Frame,
+    tube: &mut Tube,
+    segments: &[SegmentTruth],
+    seed: u64,
+) -> Result<(Vec<Blob>, Vec<PolypTruth>)> {
     let s = frame.scale;
     let small = s < 1.0;
     let mut rng = Rng::new(seed, STREAM_POLYPS);
@@ -689,7 +858,11 @@ fn make_polyps(frame: &Frame, tube: &mut Tube, segments: &[SegmentTruth], seed: 
     for &(seg_name, diameter, behind, stalk) in POLYPS {
         let seg = segment(segments, seg_name)?;
         let stalk = if small { None } else { stalk };
-        let wanted = if small { 0.5 * diameter + 2.5 } else { diameter };
+        let wanted = if small {
+            0.5 * diameter + 2.5
+        } else {
+            diameter
+        };
         let mut arc = seg.start_arc_mm + rng.range(0.3, 0.7) * (seg.end_arc_mm - seg.start_arc_mm);
         let mut angle = rng.range(0.0, std::f64::consts::TAU);
         let k = ((rng.uniform() * 3.0) as usize).min(2);
@@ -708,15 +881,29 @@ fn make_polyps(frame: &Frame, tube: &mut Tube, segments: &[SegmentTruth], seed: 
                 at = 0.5 * (a + b);
             }
             let d = fit_diameter(wanted, stalk, tube.axis.radius_at(at));
-            let clear_collapse = tube.collapse.iter().all(|c| at + d < c.start - c.taper || at - d > c.end + c.taper);
+            let clear_collapse = tube
+                .collapse
+                .iter()
+                .all(|c| at + d < c.start - c.taper || at - d > c.end + c.taper);
             let clear_polyps = specs.iter().all(|o| (o.arc - at).abs() > 20.0 * s);
             if clear_collapse && clear_polyps && at > seg.start_arc_mm && at < seg.end_arc_mm {
-                spec = Some(PolypSpec { arc: at, angle, diameter: d, stalk, segment: seg_name.into(), behind_fold: behind });
+                spec = Some(PolypSpec {
+                    arc: at,
+                    angle,
+                    diameter: d,
+                    stalk,
+                    segment: seg_name.into(),
+                    behind_fold: behind,
+                });
                 break;
             }
             arc = seg.start_arc_mm + rng.range(0.1, 0.9) * (seg.end_arc_mm - seg.start_arc_mm);
         }
-        let spec = spec.ok_or_else(|| Error::invalid(format!("colon phantom: no room for a polyp in the {seg_name}")))?;
+        let spec = spec.ok_or_else(|| {
+            Error::invalid(format!(
+                "colon phantom: no room for a polyp in the {seg_name}"
+            ))
+        })?;
         if behind {
             deepen_fold_before(tube, &spec, k, frame);
         }
@@ -736,7 +923,13 @@ const STOOL_HU: (f64, f64) = (500.0, 900.0);
 /// Lumps of tagged stool on the wall, sessile like polyps, between folds, clear of the polyps
 /// (15 mm along the colon), of each other, of collapsed and fluid-filled stretches; the
 /// second of each segment's two is mottled with air.
-fn make_stool(frame: &Frame, tube: &Tube, segments: &[SegmentTruth], polyps: &[PolypTruth], seed: u64) -> Result<Vec<(Blob, StoolTruth)>> {
+fn make_stool(
+    frame: &Frame,
+    tube: &Tube,
+    segments: &[SegmentTruth],
+    polyps: &[PolypTruth],
+    seed: u64,
+) -> Result<Vec<(Blob, StoolTruth)>> {
     let s = frame.scale;
     let mut rng = Rng::new(seed, STREAM_STOOL);
     let mut out: Vec<(Blob, StoolTruth)> = Vec::new();
@@ -747,25 +940,54 @@ fn make_stool(frame: &Frame, tube: &Tube, segments: &[SegmentTruth], polyps: &[P
             let hu = rng.range(STOOL_HU.0, STOOL_HU.1);
             let mut spec = None;
             for _ in 0..16 {
-                let arc = seg.start_arc_mm + rng.range(0.1, 0.9) * (seg.end_arc_mm - seg.start_arc_mm);
+                let arc =
+                    seg.start_arc_mm + rng.range(0.1, 0.9) * (seg.end_arc_mm - seg.start_arc_mm);
                 let angle = rng.range(0.0, std::f64::consts::TAU);
                 let at = folds_around(tube, arc).map_or(arc, |(a, b)| 0.5 * (a + b));
-                let d = fit_diameter(wanted, None, tube.axis.radius_at(at)).max(2.0 * frame.max_spacing());
+                let d = fit_diameter(wanted, None, tube.axis.radius_at(at))
+                    .max(2.0 * frame.max_spacing());
                 let clear = polyps.iter().all(|p| (p.arc_mm - at).abs() > 15.0 * s)
                     && out.iter().all(|(_, t)| (t.arc_mm - at).abs() > 10.0 * s)
-                    && tube.collapse.iter().all(|c| at + d < c.start - c.taper || at - d > c.end + c.taper)
-                    && tube.filled.iter().all(|f| at + d < f.start || at - d > f.end);
+                    && tube
+                        .collapse
+                        .iter()
+                        .all(|c| at + d < c.start - c.taper || at - d > c.end + c.taper)
+                    && tube
+                        .filled
+                        .iter()
+                        .all(|f| at + d < f.start || at - d > f.end);
                 if clear && at > seg.start_arc_mm && at < seg.end_arc_mm {
-                    spec = Some(PolypSpec { arc: at, angle, diameter: d, stalk: None, segment: name.into(), behind_fold: false });
+                    spec = Some(PolypSpec {
+                        arc: at,
+                        angle,
+                        diameter: d,
+                        stalk: None,
+                        segment: name.into(),
+                        behind_fold: false,
+                    });
                     break;
                 }
             }
-            let spec = spec.ok_or_else(|| Error::invalid(format!("colon phantom: no room for tagged stool in the {name}")))?;
+            let spec = spec.ok_or_else(|| {
+                Error::invalid(format!(
+                    "colon phantom: no room for tagged stool in the {name}"
+                ))
+            })?;
             let (mut blob, t) = place(tube, &spec);
             let mottled = n == 1;
             blob.kind = BlobKind::Stool { mottled };
             blob.content_hu = hu;
-            out.push((blob, StoolTruth { center_mm: t.center_mm, diameter_mm: spec.diameter, segment: name.into(), arc_mm: spec.arc, hu, mottled }));
+            out.push((
+                blob,
+                StoolTruth {
+                    center_mm: t.center_mm,
+                    diameter_mm: spec.diameter,
+                    segment: name.into(),
+                    arc_mm: spec.arc,
+                    hu,
+                    mottled,
+                },
+            ));
         }
     }
     Ok(out)
@@ -796,9 +1018,13 @@ fn fit_diameter(wanted: f64, stalk: Option<f64>, radius: f64) -> f64 {
 
 /// Makes crescent `k` of the fold just before a behind-fold polyp deep enough to hide it.
 fn deepen_fold_before(tube: &mut Tube, spec: &PolypSpec, k: usize, frame: &Frame) {
-    let Ok(fi) = nearest_fold(tube, spec.arc) else { return };
+    let Ok(fi) = nearest_fold(tube, spec.arc) else {
+        return;
+    };
     let r = tube.axis.radius_at(tube.folds[fi].arc);
-    let need = (protrusion(spec.diameter, spec.stalk) + 1.0 * frame.scale).min(FOLD_MAX_FRACTION * r).min(FOLD_DEPTH.1 * frame.scale);
+    let need = (protrusion(spec.diameter, spec.stalk) + 1.0 * frame.scale)
+        .min(FOLD_MAX_FRACTION * r)
+        .min(FOLD_DEPTH.1 * frame.scale);
     let sector = &mut tube.folds[fi].sectors[k];
     sector.depth = sector.depth.max(need);
 }
@@ -806,7 +1032,11 @@ fn deepen_fold_before(tube: &mut Tube, spec: &PolypSpec, k: usize, frame: &Frame
 /// The fold nearest to `arc`.
 fn nearest_fold(tube: &Tube, arc: f64) -> Result<usize> {
     (0..tube.folds.len())
-        .min_by(|&a, &b| (tube.folds[a].arc - arc).abs().total_cmp(&(tube.folds[b].arc - arc).abs()))
+        .min_by(|&a, &b| {
+            (tube.folds[a].arc - arc)
+                .abs()
+                .total_cmp(&(tube.folds[b].arc - arc).abs())
+        })
         .ok_or_else(|| Error::invalid("colon phantom: no fold to hide a polyp behind"))
 }
 
@@ -830,7 +1060,13 @@ fn folds_around(tube: &Tube, arc: f64) -> Option<(f64, f64)> {
 /// ileocaecal valve, deep enough to cover the valve's opening (even without tagged fluid);
 /// it comes first, and the usual pool of that part of the colon (ascending supine, caecum
 /// prone), which it would overlap, is left out.
-fn make_pools(tube: &Tube, segments: &[SegmentTruth], opts: &ColonOptions, gravity: DVec3, valve: Option<&Valve>) -> Vec<(Pool, PoolTruth)> {
+fn make_pools(
+    tube: &Tube,
+    segments: &[SegmentTruth],
+    opts: &ColonOptions,
+    gravity: DVec3,
+    valve: Option<&Valve>,
+) -> Vec<(Pool, PoolTruth)> {
     let ax = &tube.axis;
     let floor = |i: usize| ax.points[i].dot(gravity) + ax.radius[i];
     let mut pools: Vec<(Pool, PoolTruth)> = Vec::new();
@@ -845,15 +1081,31 @@ fn make_pools(tube: &Tube, segments: &[SegmentTruth], opts: &ColonOptions, gravi
     }
     if opts.tagged_fluid {
         let mut rng = Rng::new(opts.seed, STREAM_POOLS);
-        for &name in if opts.prone { PRONE_POOL_SEGMENTS } else { POOL_SEGMENTS } {
-            let Ok(seg) = segment(segments, name) else { continue };
+        for &name in if opts.prone {
+            PRONE_POOL_SEGMENTS
+        } else {
+            POOL_SEGMENTS
+        } {
+            let Ok(seg) = segment(segments, name) else {
+                continue;
+            };
             let (a, b) = (ax.vertex_at(seg.start_arc_mm), ax.vertex_at(seg.end_arc_mm));
             let open = |i: &usize| !near_collapse(tube, ax.arc[*i], 0.0);
-            let Some(anchor) = (a..=b).filter(open).max_by(|&i, &j| floor(i).total_cmp(&floor(j))) else { continue };
+            let Some(anchor) = (a..=b)
+                .filter(open)
+                .max_by(|&i, &j| floor(i).total_cmp(&floor(j)))
+            else {
+                continue;
+            };
             let depth = rng.range(0.3, 0.5) * ax.radius[anchor];
             let hu = rng.range(400.0, 700.0);
-            let Some(p) = pool_from(tube, anchor, floor(anchor) - depth, gravity, hu, name) else { continue };
-            if pools.iter().any(|(q, _)| p.0.start < q.end && p.0.end > q.start) {
+            let Some(p) = pool_from(tube, anchor, floor(anchor) - depth, gravity, hu, name) else {
+                continue;
+            };
+            if pools
+                .iter()
+                .any(|(q, _)| p.0.start < q.end && p.0.end > q.start)
+            {
                 continue;
             }
             pools.push(p);
@@ -866,7 +1118,14 @@ fn make_pools(tube: &Tube, segments: &[SegmentTruth], opts: &ColonOptions, gravi
 /// The pool with level `level` (along `gravity`) around axis vertex `anchor`: as far along
 /// the colon both ways as the lumen's floor lies below the level, never across a collapsed
 /// cord (the anchor's side is kept).
-fn pool_from(tube: &Tube, anchor: usize, level: f64, gravity: DVec3, hu: f64, name: &str) -> Option<(Pool, PoolTruth)> {
+fn pool_from(
+    tube: &Tube,
+    anchor: usize,
+    level: f64,
+    gravity: DVec3,
+    hu: f64,
+    name: &str,
+) -> Option<(Pool, PoolTruth)> {
     let ax = &tube.axis;
     let floor = |i: usize| ax.points[i].dot(gravity) + ax.radius[i];
     let mut lo = anchor;
@@ -891,7 +1150,13 @@ fn pool_from(tube: &Tube, anchor: usize, level: f64, gravity: DVec3, hu: f64, na
     if start >= end {
         return None;
     }
-    let pool = Pool { start, end, gravity, level, hu };
+    let pool = Pool {
+        start,
+        end,
+        gravity,
+        level,
+        hu,
+    };
     // The level is the plane y = level·g_y (gravity is ±y).
     let truth = PoolTruth {
         segment: name.into(),
@@ -909,7 +1174,13 @@ fn pool_from(tube: &Tube, anchor: usize, level: f64, gravity: DVec3, hu: f64, na
 /// other and the `obstacles` (capsules: ends and radius; opacified loops, the catheter).
 /// Rejection sampling with a fixed number of tries and draws: deterministic, and where they
 /// always were when there are no obstacles.
-fn make_pockets(frame: &Frame, tube: &Tube, body: &Body, obstacles: &[(DVec3, DVec3, f64)], seed: u64) -> Vec<Blob> {
+fn make_pockets(
+    frame: &Frame,
+    tube: &Tube,
+    body: &Body,
+    obstacles: &[(DVec3, DVec3, f64)],
+    seed: u64,
+) -> Vec<Blob> {
     let s = frame.scale;
     let mut rng = Rng::new(seed, STREAM_GAS);
     let wall = frame.thin(1.5, 0.8);
@@ -921,7 +1192,11 @@ fn make_pockets(frame: &Frame, tube: &Tube, body: &Body, obstacles: &[(DVec3, DV
             break;
         }
         let r = rng.range(5.0, 10.0) * s;
-        let c = frame.pos([rng.range(110.0, 274.0), rng.range(100.0, 260.0), rng.range(60.0, 330.0)]);
+        let c = frame.pos([
+            rng.range(110.0, 274.0),
+            rng.range(100.0, 260.0),
+            rng.range(60.0, 330.0),
+        ]);
         let colon_ok = ax
             .points
             .iter()
@@ -931,10 +1206,21 @@ fn make_pockets(frame: &Frame, tube: &Tube, body: &Body, obstacles: &[(DVec3, DV
         let body_ok = body.skin_sdf(c) + r + wall + clear <= -body.rim
             && body.spine.sdf_xy(c) >= r + wall + clear
             && body.lungs.iter().all(|l| l.sdf(c) >= r + wall + clear);
-        let apart = pockets.iter().all(|o| o.center.distance(c) - o.radius - r - 2.0 * wall >= clear);
-        let free = obstacles.iter().all(|&(a, b, ro)| segment_distance(c, a, b) - ro - r - wall >= clear);
+        let apart = pockets
+            .iter()
+            .all(|o| o.center.distance(c) - o.radius - r - 2.0 * wall >= clear);
+        let free = obstacles
+            .iter()
+            .all(|&(a, b, ro)| segment_distance(c, a, b) - ro - r - wall >= clear);
         if colon_ok && body_ok && apart && free {
-            pockets.push(Blob { kind: BlobKind::Pocket, center: c, radius: r, stalk: None, wall_mm: wall, content_hu: 0.0 });
+            pockets.push(Blob {
+                kind: BlobKind::Pocket,
+                center: c,
+                radius: r,
+                stalk: None,
+                wall_mm: wall,
+                content_hu: 0.0,
+            });
         }
     }
     pockets
@@ -968,19 +1254,34 @@ fn make_catheter(frame: &Frame, tube: &Tube, polyps: &[Blob], floor: f64) -> Res
         let mid = low + dir * (0.5 * (low.z - end_z) / -dir.z);
         let knots = [tip, low, mid, exit].map(|pos| Knot { pos, radius: inner });
         let path = Axis::through(&knots, 1.0 * s)?;
-        let c = Catheter { points: path.points, inner_radius: inner, wall_mm: wall, hu: CATHETER_HU };
-        let clear = polyps.iter().all(|b| c.distance(b.center) - c.outer_radius() - b.reach() >= frame.max_spacing());
+        let c = Catheter {
+            points: path.points,
+            inner_radius: inner,
+            wall_mm: wall,
+            hu: CATHETER_HU,
+        };
+        let clear = polyps
+            .iter()
+            .all(|b| c.distance(b.center) - c.outer_radius() - b.reach() >= frame.max_spacing());
         if clear {
             return Ok(c);
         }
     }
-    Err(Error::invalid("colon phantom: no room for the rectal catheter beside the rectal polyp"))
+    Err(Error::invalid(
+        "colon phantom: no room for the rectal catheter beside the rectal polyp",
+    ))
 }
 
 /// A 12-voxel box of pure fat (far from colon, pockets, loops, catheter, spine, lungs and
 /// the rim) for
 /// measuring the noise, found by a fixed scan.
-fn fat_roi(frame: &Frame, tube: &Tube, blobs: &[Blob], body: &Body, catheter: Option<&Catheter>) -> Option<RoiTruth> {
+fn fat_roi(
+    frame: &Frame,
+    tube: &Tube,
+    blobs: &[Blob],
+    body: &Body,
+    catheter: Option<&Catheter>,
+) -> Option<RoiTruth> {
     let g = &frame.geom;
     let half_vox = 6usize;
     let half = DVec3::from_array(g.spacing) * half_vox as f64;
@@ -994,8 +1295,14 @@ fn fat_roi(frame: &Frame, tube: &Tube, blobs: &[Blob], body: &Body, catheter: Op
                 let ok = body.skin_sdf(c) + margin <= -body.rim
                     && body.spine.sdf_xy(c) >= margin
                     && body.lungs.iter().all(|l| l.sdf(c) >= margin)
-                    && ax.points.iter().zip(&ax.radius).all(|(p, r)| p.distance(c) - r - tube.wall_mm >= margin)
-                    && blobs.iter().all(|b| b.center.distance(c) - b.reach() >= margin)
+                    && ax
+                        .points
+                        .iter()
+                        .zip(&ax.radius)
+                        .all(|(p, r)| p.distance(c) - r - tube.wall_mm >= margin)
+                    && blobs
+                        .iter()
+                        .all(|b| b.center.distance(c) - b.reach() >= margin)
                     && catheter.is_none_or(|t| t.distance(c) - t.outer_radius() >= margin);
                 if ok {
                     return Some(RoiTruth {
@@ -1024,9 +1331,16 @@ pub fn anatomy_report(small: bool) -> Result<String> {
         axis.length, axis.arc[at], axis.arc[i], axis.arc[j]
     );
     for g in segments(&axis) {
-        out += &format!("  {:<16} {:6.0} .. {:6.0} mm ({:.0} mm)\n", g.name, g.start_arc_mm, g.end_arc_mm, g.end_arc_mm - g.start_arc_mm);
+        out += &format!(
+            "  {:<16} {:6.0} .. {:6.0} mm ({:.0} mm)\n",
+            g.name,
+            g.start_arc_mm,
+            g.end_arc_mm,
+            g.end_arc_mm - g.start_arc_mm
+        );
     }
-    let verdict = check_anatomy(&frame, &axis, &make_body(&frame, true, None)).map_or_else(|e| e.to_string(), |_| "checks pass".into());
+    let verdict = check_anatomy(&frame, &axis, &make_body(&frame, true, None))
+        .map_or_else(|e| e.to_string(), |_| "checks pass".into());
     Ok(out + &verdict + "\n")
 }
 
@@ -1050,9 +1364,19 @@ pub fn free_space_map(z_from: f64, z_to: f64) -> Result<String> {
             let mut x = 60.0;
             while x <= 330.0 {
                 let p = DVec3::new(x, y, z);
-                let colon = axis.points.iter().zip(&axis.radius).map(|(a, r)| a.distance(p) - r - wall).fold(f64::INFINITY, f64::min);
+                let colon = axis
+                    .points
+                    .iter()
+                    .zip(&axis.radius)
+                    .map(|(a, r)| a.distance(p) - r - wall)
+                    .fold(f64::INFINITY, f64::min);
                 let skin = -body.skin_sdf(p) - body.rim;
-                let room = colon.min(skin).min(body.spine.sdf_xy(p)).min(body.lungs.iter().map(|l| l.sdf(p)).fold(f64::INFINITY, f64::min));
+                let room = colon.min(skin).min(body.spine.sdf_xy(p)).min(
+                    body.lungs
+                        .iter()
+                        .map(|l| l.sdf(p))
+                        .fold(f64::INFINITY, f64::min),
+                );
                 row.push(if colon < 0.0 {
                     '#'
                 } else if skin < 0.0 {
@@ -1080,19 +1404,39 @@ pub fn loop_room_report(knots: &[[f64; 3]], r: f64) -> Result<String> {
     let axis = make_axis(&frame)?;
     let body = make_body(&frame, true, None);
     let wall = frame.thin(WALL, 1.0);
-    let ks: Vec<Knot> = knots.iter().map(|k| Knot { pos: DVec3::from_array(*k), radius: r }).collect();
+    let ks: Vec<Knot> = knots
+        .iter()
+        .map(|k| Knot {
+            pos: DVec3::from_array(*k),
+            radius: r,
+        })
+        .collect();
     let path = Axis::through(&ks, 1.0)?;
     let reach = r + 1.5;
-    let mut out = format!("length {:.0} mm, tightest bend {:.2}\n", path.length, path.min_bend_ratio(1.5).0);
+    let mut out = format!(
+        "length {:.0} mm, tightest bend {:.2}\n",
+        path.length,
+        path.min_bend_ratio(1.5).0
+    );
     for span in 0..ks.len() - 1 {
         let (a, b) = (path.knot_arc[span], path.knot_arc[span + 1]);
         let mut worst = (f64::INFINITY, "", 0.0, DVec3::ZERO);
         let mut bend = f64::INFINITY;
-        for (i, (p, s)) in path.points.iter().zip(&path.arc).enumerate().filter(|(_, (_, s))| **s >= a && **s <= b) {
+        for (i, (p, s)) in path
+            .points
+            .iter()
+            .zip(&path.arc)
+            .enumerate()
+            .filter(|(_, (_, s))| **s >= a && **s <= b)
+        {
             if i >= 3 && i + 3 < path.len() {
                 let turn = path.tangent[i - 3].angle_between(path.tangent[i + 3]);
                 let ds = path.arc[i + 3] - path.arc[i - 3];
-                bend = bend.min(if turn > 1e-9 { ds / turn / (r + 1.5) } else { f64::INFINITY });
+                bend = bend.min(if turn > 1e-9 {
+                    ds / turn / (r + 1.5)
+                } else {
+                    f64::INFINITY
+                });
             }
             let (colon, at) = axis
                 .points
@@ -1105,7 +1449,14 @@ pub fn loop_room_report(knots: &[[f64; 3]], r: f64) -> Result<String> {
                 (colon - reach, "colon"),
                 (-body.skin_sdf(*p) - body.rim - reach, "skin"),
                 (body.spine.sdf_xy(*p) - reach, "spine"),
-                (body.lungs.iter().map(|l| l.sdf(*p)).fold(f64::INFINITY, f64::min) - reach, "lung"),
+                (
+                    body.lungs
+                        .iter()
+                        .map(|l| l.sdf(*p))
+                        .fold(f64::INFINITY, f64::min)
+                        - reach,
+                    "lung",
+                ),
             ];
             for (v, what) in cands {
                 if v < worst.0 {
@@ -1115,7 +1466,12 @@ pub fn loop_room_report(knots: &[[f64; 3]], r: f64) -> Result<String> {
         }
         out += &format!(
             "  {:?} -> {:?}: room {:.1} mm ({} at {:.0}, near {:.0?}), bend {bend:.2}\n",
-            knots[span], knots[span + 1], worst.0, worst.1, worst.2, worst.3.to_array()
+            knots[span],
+            knots[span + 1],
+            worst.0,
+            worst.1,
+            worst.2,
+            worst.3.to_array()
         );
     }
     Ok(out)

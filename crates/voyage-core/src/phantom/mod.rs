@@ -38,8 +38,8 @@ pub mod tube;
 pub use colon::{ColonOptions, colon};
 pub use pipe::pipe;
 pub use truth::{
-    CollapsedTruth, DistractorTruth, FilledTruth, FoldTruth, GapTruth, LoopTruth, PolypTruth, PoolTruth,
-    RectalTubeTruth, RoiTruth, SegmentTruth, StoolTruth, Truth,
+    CollapsedTruth, DistractorTruth, FilledTruth, FoldTruth, GapTruth, LoopTruth, PolypTruth,
+    PoolTruth, RectalTubeTruth, RoiTruth, SegmentTruth, StoolTruth, Truth,
 };
 
 use crate::Volume;

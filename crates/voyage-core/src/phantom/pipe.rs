@@ -70,8 +70,14 @@ impl Background for Tank {
         let cavity = (rho - TANK_INNER).max(TANK_FLOOR.1 - p.z);
         let shell = cylinder.max(-cavity);
         let water = cavity.max(p.z - WATER_LEVEL);
-        let hu = AIR + ramp(shell, self.inv_w) * (ACRYLIC - AIR) + ramp(water, self.inv_w) * (WATER - AIR);
-        let lab = if shell < 0.0 || water < 0.0 { label::OTHER } else { label::OUTSIDE_AIR };
+        let hu = AIR
+            + ramp(shell, self.inv_w) * (ACRYLIC - AIR)
+            + ramp(water, self.inv_w) * (WATER - AIR);
+        let lab = if shell < 0.0 || water < 0.0 {
+            label::OTHER
+        } else {
+            label::OUTSIDE_AIR
+        };
         (hu, lab)
     }
 }
@@ -89,7 +95,10 @@ fn spiral_knots(center: DVec3) -> Vec<Knot> {
             let phi = n as f64 * std::f64::consts::TAU / 12.0;
             let r = SPIRAL_START + SPIRAL_PITCH * phi / std::f64::consts::TAU;
             let z = PIPE_Z + PIPE_BOB * (phi / SPIRAL_TURNS / 2.0).sin();
-            Knot { pos: DVec3::new(center.x + r * phi.cos(), center.y + r * phi.sin(), z), radius: PIPE_RADIUS }
+            Knot {
+                pos: DVec3::new(center.x + r * phi.cos(), center.y + r * phi.sin(), z),
+                radius: PIPE_RADIUS,
+            }
         })
         .collect()
 }
@@ -127,7 +136,12 @@ pub fn pipe(seed: u64) -> Result<Phantom> {
         tube: &tube,
         blobs: &blobs,
         catheter: None,
-        materials: Materials { lumen_air: AIR, wall: PLASTIC, polyp: RUBBER, pocket_air: AIR },
+        materials: Materials {
+            lumen_air: AIR,
+            wall: PLASTIC,
+            polyp: RUBBER,
+            pocket_air: AIR,
+        },
         background: &tank,
         noise_sigma: NOISE_HU,
         noise_key: stream_key(seed, STREAM_NOISE),
@@ -164,7 +178,11 @@ pub fn pipe(seed: u64) -> Result<Phantom> {
         lumen_voxels: counts[label::LUMEN_AIR as usize] + counts[label::LUMEN_FLUID as usize],
         folds: 0,
         fold_list: Vec::new(),
-        segments: vec![SegmentTruth { name: "pipe".into(), start_arc_mm: 0.0, end_arc_mm: ax.length }],
+        segments: vec![SegmentTruth {
+            name: "pipe".into(),
+            start_arc_mm: 0.0,
+            end_arc_mm: ax.length,
+        }],
         fluid_pools: Vec::new(),
         fluid_voxels: 0,
         collapsed: Vec::new(),
@@ -177,13 +195,24 @@ pub fn pipe(seed: u64) -> Result<Phantom> {
         rectal_tube: None,
         body_floor_z_mm: None,
         noise_roi: Some(water_roi(&geom, center)),
-        materials_hu: [("air", AIR), ("water", WATER), ("pipe_plastic", PLASTIC), ("tank_acrylic", ACRYLIC), ("rubber_polyp", RUBBER)]
-            .into_iter()
-            .map(|(n, v)| (n.to_string(), v))
-            .collect(),
+        materials_hu: [
+            ("air", AIR),
+            ("water", WATER),
+            ("pipe_plastic", PLASTIC),
+            ("tank_acrylic", ACRYLIC),
+            ("rubber_polyp", RUBBER),
+        ]
+        .into_iter()
+        .map(|(n, v)| (n.to_string(), v))
+        .collect(),
         labels: label::legend(),
     };
-    Ok(Phantom { ct: r.ct, lumen: r.lumen, labels: r.labels, truth })
+    Ok(Phantom {
+        ct: r.ct,
+        lumen: r.lumen,
+        labels: r.labels,
+        truth,
+    })
 }
 
 /// The coil must not touch itself: ≥ 10 mm of water between the walls of different turns,
@@ -191,11 +220,15 @@ pub fn pipe(seed: u64) -> Result<Phantom> {
 fn check_pipe_axis(axis: &Axis) -> Result<()> {
     let (gap, _, _) = axis.min_part_gap(PIPE_WALL, 2);
     if gap < 2.0 * PIPE_WALL + 10.0 {
-        return Err(Error::invalid(format!("pipe phantom: turns only {gap:.1} mm apart")));
+        return Err(Error::invalid(format!(
+            "pipe phantom: turns only {gap:.1} mm apart"
+        )));
     }
     let (bend, _) = axis.min_bend_ratio(PIPE_WALL);
     if bend < 1.2 {
-        return Err(Error::invalid(format!("pipe phantom: bend too tight (ratio {bend:.2})")));
+        return Err(Error::invalid(format!(
+            "pipe phantom: bend too tight (ratio {bend:.2})"
+        )));
     }
     Ok(())
 }

@@ -30,7 +30,12 @@ pub fn place(tube: &Tube, spec: &PolypSpec) -> (Blob, PolypTruth) {
     let rp = spec.diameter / 2.0;
     let base = q + out * wall_r;
     let (center, stalk, protrusion, stalk_len) = match spec.stalk {
-        None => (q + out * (wall_r - SESSILE_INSET * rp), None, (1.0 + SESSILE_INSET) * rp, 0.0),
+        None => (
+            q + out * (wall_r - SESSILE_INSET * rp),
+            None,
+            (1.0 + SESSILE_INSET) * rp,
+            0.0,
+        ),
         Some(len) => {
             let center = q + out * (wall_r - len - rp);
             // The stalk starts inside the wall so that it is rooted, and ends in the head.
@@ -39,7 +44,14 @@ pub fn place(tube: &Tube, spec: &PolypSpec) -> (Blob, PolypTruth) {
             (center, Some((root, center, r_stalk)), len + 2.0 * rp, len)
         }
     };
-    let blob = Blob { kind: BlobKind::Polyp, center, radius: rp, stalk, wall_mm: 0.0, content_hu: 0.0 };
+    let blob = Blob {
+        kind: BlobKind::Polyp,
+        center,
+        radius: rp,
+        stalk,
+        wall_mm: 0.0,
+        content_hu: 0.0,
+    };
     let truth = PolypTruth {
         center_mm: arr(center),
         diameter_mm: spec.diameter,
@@ -50,7 +62,12 @@ pub fn place(tube: &Tube, spec: &PolypSpec) -> (Blob, PolypTruth) {
         base_mm: arr(base),
         direction: arr(-out),
         protrusion_mm: protrusion,
-        shape: if spec.stalk.is_some() { "pedunculated" } else { "sessile" }.to_string(),
+        shape: if spec.stalk.is_some() {
+            "pedunculated"
+        } else {
+            "sessile"
+        }
+        .to_string(),
         stalk_length_mm: stalk_len,
     };
     (blob, truth)

@@ -144,7 +144,12 @@ impl<B: Background> Scene<'_, B> {
     }
 
     /// Brick range (inclusive) covering the mm box [lo, hi].
-    fn brick_range(&self, lo: DVec3, hi: DVec3, nb: [usize; 3]) -> Option<([usize; 3], [usize; 3])> {
+    fn brick_range(
+        &self,
+        lo: DVec3,
+        hi: DVec3,
+        nb: [usize; 3],
+    ) -> Option<([usize; 3], [usize; 3])> {
         let s = self.geom.spacing;
         let mut a = [0usize; 3];
         let mut b = [0usize; 3];
@@ -178,10 +183,15 @@ impl<B: Background> Scene<'_, B> {
                 lo = lo.min(pts[i + 1]);
                 hi = hi.max(pts[i + 1]);
             }
-            let Some((a, b)) = self.brick_range(lo - reach, hi + reach, nb) else { continue };
+            let Some((a, b)) = self.brick_range(lo - reach, hi + reach, nb) else {
+                continue;
+            };
             for_each_brick(a, b, |bi| {
                 let (center, h) = self.brick_center_and_half_diagonal(bi);
-                let near = segs.clone().map(|i| seg_distance(center, pts[i], pts[i + 1])).fold(f64::INFINITY, f64::min);
+                let near = segs
+                    .clone()
+                    .map(|i| seg_distance(center, pts[i], pts[i + 1]))
+                    .fold(f64::INFINITY, f64::min);
                 if near <= reach + h {
                     chunks[bi[0] + nb[0] * (bi[1] + nb[1] * bi[2])].push(c as u32);
                 }
@@ -189,7 +199,10 @@ impl<B: Background> Scene<'_, B> {
         }
         for (bl, blob) in self.blobs.iter().enumerate() {
             let reach = blob.reach() + margin;
-            let Some((a, b)) = self.brick_range(blob.center - reach, blob.center + reach, nb) else { continue };
+            let Some((a, b)) = self.brick_range(blob.center - reach, blob.center + reach, nb)
+            else {
+                continue;
+            };
             for_each_brick(a, b, |bi| {
                 let (center, h) = self.brick_center_and_half_diagonal(bi);
                 if center.distance(blob.center) <= reach + h {
@@ -201,7 +214,11 @@ impl<B: Background> Scene<'_, B> {
         if let Some(c) = self.catheter {
             let reach = c.outer_radius() + margin;
             for w in c.points.windows(2) {
-                let Some((a, b)) = self.brick_range(w[0].min(w[1]) - reach, w[0].max(w[1]) + reach, nb) else { continue };
+                let Some((a, b)) =
+                    self.brick_range(w[0].min(w[1]) - reach, w[0].max(w[1]) + reach, nb)
+                else {
+                    continue;
+                };
                 for_each_brick(a, b, |bi| {
                     let (center, h) = self.brick_center_and_half_diagonal(bi);
                     if seg_distance(center, w[0], w[1]) <= reach + h {
@@ -247,10 +264,15 @@ impl<B: Background> Scene<'_, B> {
             }
             let first = chunks[start] as usize * CHUNK;
             let last = ((chunks[end - 1] as usize + 1) * CHUNK).min(nseg);
-            let dist: Vec<f64> = (first..last).map(|i| seg_distance(center, pts[i], pts[i + 1])).collect();
+            let dist: Vec<f64> = (first..last)
+                .map(|i| seg_distance(center, pts[i], pts[i + 1]))
+                .collect();
             let dmin = dist.iter().cloned().fold(f64::INFINITY, f64::min);
-            let mut kept: Vec<(f64, u32)> =
-                (first..last).zip(&dist).filter(|(_, d)| **d <= dmin + 2.0 * h).map(|(i, d)| (*d, i as u32)).collect();
+            let mut kept: Vec<(f64, u32)> = (first..last)
+                .zip(&dist)
+                .filter(|(_, d)| **d <= dmin + 2.0 * h)
+                .map(|(i, d)| (*d, i as u32))
+                .collect();
             kept.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
             let run_start = data.segs.len() as u32;
             data.segs.extend(kept.iter().map(|k| k.1));
@@ -260,11 +282,21 @@ impl<B: Background> Scene<'_, B> {
         }
         data.center = center;
         let margin = self.geom.spacing.iter().cloned().fold(0.0, f64::max);
-        data.inside = data.runs.len() == 1 && self.tube.surely_inside(&data.segs, dmin_all(&data.seg_dist), h, margin);
+        data.inside = data.runs.len() == 1
+            && self
+                .tube
+                .surely_inside(&data.segs, dmin_all(&data.seg_dist), h, margin);
         data
     }
 
-    fn fill_slice(&self, index: &BrickIndex, k: usize, ct: &mut [i16], lumen: &mut [u8], labels: &mut [u8]) {
+    fn fill_slice(
+        &self,
+        index: &BrickIndex,
+        k: usize,
+        ct: &mut [i16],
+        lumen: &mut [u8],
+        labels: &mut [u8],
+    ) {
         let [nx, ny, _] = self.geom.dims;
         let [sx, sy, sz] = self.geom.spacing;
         let z = k as f64 * sz;
@@ -279,7 +311,9 @@ impl<B: Background> Scene<'_, B> {
             lumen[row..row + nx].fill(0);
             labels[row..row + nx].copy_from_slice(&bg_label);
             for bi in 0..index.nb[0] {
-                let Some(brick) = index.get(bi, j / BRICK, k / BRICK) else { continue };
+                let Some(brick) = index.get(bi, j / BRICK, k / BRICK) else {
+                    continue;
+                };
                 for i in bi * BRICK..((bi + 1) * BRICK).min(nx) {
                     let p = DVec3::new(i as f64 * sx, y, z);
                     let (hu, lum, lab) = self.compose(p, brick, bg[i], bg_label[i], inv_w);
@@ -292,7 +326,9 @@ impl<B: Background> Scene<'_, B> {
             match self.quantize {
                 None => {
                     for (i, (c, hu)) in ct[row..row + nx].iter_mut().zip(&bg).enumerate() {
-                        *c = round_to_i16(hu + sigma * voxel_noise(self.noise_key, first + i as u64) as f64);
+                        *c = round_to_i16(
+                            hu + sigma * voxel_noise(self.noise_key, first + i as u64) as f64,
+                        );
                     }
                 }
                 Some(q) => {
@@ -308,12 +344,18 @@ impl<B: Background> Scene<'_, B> {
     /// HU (noise-free), lumen flag and label of a voxel near the tube or a blob.
     #[inline]
     fn compose(&self, p: DVec3, b: &BrickData, bg: f64, bg_label: u8, inv_w: f64) -> (f64, u8, u8) {
-        let mut hit = if b.inside { TubeHit::INSIDE } else { TubeHit::NONE };
+        let mut hit = if b.inside {
+            TubeHit::INSIDE
+        } else {
+            TubeHit::NONE
+        };
         let mut outer = hit.outer;
         let pc = if b.inside { 0.0 } else { p.distance(b.center) };
         for &(r0, r1) in if b.inside { &[][..] } else { &b.runs[..] } {
             let (r0, r1) = (r0 as usize, r1 as usize);
-            let h = self.tube.sample(p, &b.segs[r0..r1], &b.seg_dist[r0..r1], pc);
+            let h = self
+                .tube
+                .sample(p, &b.segs[r0..r1], &b.seg_dist[r0..r1], pc);
             if h.lumen < hit.lumen {
                 hit = h;
             }
@@ -353,20 +395,46 @@ impl<B: Background> Scene<'_, B> {
         let m = &self.materials;
         let a = ramp(lumen, inv_w);
         let q = ramp(pocket, inv_w);
-        let fluid_frac = if hit.fluid.is_finite() { ramp(hit.fluid, inv_w) } else { 0.0 };
+        let fluid_frac = if hit.fluid.is_finite() {
+            ramp(hit.fluid, inv_w)
+        } else {
+            0.0
+        };
         let content = m.lumen_air + fluid_frac * (hit.fluid_hu - m.lumen_air);
         // Stool replaces the lumen's content where it lies (without stool, the content as
         // it always was).
-        let content = if stool.is_finite() { content + ramp(stool, inv_w) * (if mottled && air_pocket(p) { m.lumen_air } else { stool_hu } - content) } else { content };
+        let content = if stool.is_finite() {
+            content
+                + ramp(stool, inv_w)
+                    * (if mottled && air_pocket(p) {
+                        m.lumen_air
+                    } else {
+                        stool_hu
+                    } - content)
+        } else {
+            content
+        };
         let tissue_hu = m.wall + ramp(polyp, inv_w) * (m.polyp - m.wall);
         let (mut hu, mut lum, mut lab);
         if sb == f64::INFINITY && sb_outer == f64::INFINITY {
             // The colon, polyps and gas pockets only (every phantom without the newer
             // options): exactly the arithmetic it always had.
             let tissue = ramp(outer.min(polyp).min(pocket_outer), inv_w).max((a + q).min(1.0));
-            hu = a * content + q * m.pocket_air + (tissue - a - q).max(0.0) * tissue_hu + (1.0 - tissue) * bg;
+            hu = a * content
+                + q * m.pocket_air
+                + (tissue - a - q).max(0.0) * tissue_hu
+                + (1.0 - tissue) * bg;
             (lum, lab) = if lumen < 0.0 {
-                (1, if stool < 0.0 { label::STOOL } else if hit.fluid < 0.0 { label::LUMEN_FLUID } else { label::LUMEN_AIR })
+                (
+                    1,
+                    if stool < 0.0 {
+                        label::STOOL
+                    } else if hit.fluid < 0.0 {
+                        label::LUMEN_FLUID
+                    } else {
+                        label::LUMEN_AIR
+                    },
+                )
             } else if pocket < 0.0 {
                 (0, label::SMALL_BOWEL_GAS)
             } else if polyp < 0.0 {
@@ -381,10 +449,24 @@ impl<B: Background> Scene<'_, B> {
             // (the ileocaecal valve) the colon's content wins, and each one's wall gives way
             // to the other's content, so the two open into each other there.
             let l = ramp(sb, inv_w).min(1.0 - a);
-            let tissue = ramp(outer.min(polyp).min(pocket_outer).min(sb_outer), inv_w).max((a + q + l).min(1.0));
-            hu = a * content + q * m.pocket_air + l * sb_hu + (tissue - a - q - l).max(0.0) * tissue_hu + (1.0 - tissue) * bg;
+            let tissue = ramp(outer.min(polyp).min(pocket_outer).min(sb_outer), inv_w)
+                .max((a + q + l).min(1.0));
+            hu = a * content
+                + q * m.pocket_air
+                + l * sb_hu
+                + (tissue - a - q - l).max(0.0) * tissue_hu
+                + (1.0 - tissue) * bg;
             (lum, lab) = if lumen < 0.0 {
-                (1, if stool < 0.0 { label::STOOL } else if hit.fluid < 0.0 { label::LUMEN_FLUID } else { label::LUMEN_AIR })
+                (
+                    1,
+                    if stool < 0.0 {
+                        label::STOOL
+                    } else if hit.fluid < 0.0 {
+                        label::LUMEN_FLUID
+                    } else {
+                        label::LUMEN_AIR
+                    },
+                )
             } else if sb < 0.0 {
                 (0, label::SMALL_BOWEL_FLUID)
             } else if pocket < 0.0 {

@@ -28,7 +28,9 @@ pub struct Rng {
 
 impl Rng {
     pub fn new(seed: u64, stream: u64) -> Self {
-        Rng { state: stream_key(seed, stream) }
+        Rng {
+            state: stream_key(seed, stream),
+        }
     }
 
     pub fn next_u64(&mut self) -> u64 {
@@ -92,10 +94,12 @@ mod tests {
 
     #[test]
     fn rng_is_deterministic_and_streams_differ() {
-        let a: Vec<u64> = (0..4).map({
-            let mut r = Rng::new(3, 9);
-            move |_| r.next_u64()
-        }).collect();
+        let a: Vec<u64> = (0..4)
+            .map({
+                let mut r = Rng::new(3, 9);
+                move |_| r.next_u64()
+            })
+            .collect();
         let mut r = Rng::new(3, 9);
         assert_eq!(a, (0..4).map(|_| r.next_u64()).collect::<Vec<_>>());
         assert_ne!(Rng::new(3, 9).next_u64(), Rng::new(3, 10).next_u64());

@@ -28,13 +28,13 @@
 
 use glam::DVec3;
 
+use super::arr;
 use super::axis::{Axis, Knot};
 use super::body::Body;
 use super::colon::Frame;
 use super::rng::Rng;
 use super::truth::{LoopTruth, SegmentTruth};
 use super::tube::{Blob, BlobKind, Catheter, Tube};
-use super::arr;
 use crate::{Error, Result};
 
 /// Where the terminal ileum opens into the caecum.
@@ -106,7 +106,13 @@ fn course(prone: bool) -> (Vec<Spec>, [usize; 2]) {
     if prone {
         // Up the right side to the caecal pole's anterior face, from below (in front of the
         // caecum there is no room between the sigmoid and the abdominal wall).
-        v.extend([At([160.0, 185.0, 42.0]), At([130.0, 172.0, 45.0]), At([112.0, 148.0, 56.0]), At([100.0, 134.0, 70.0]), At([96.0, 133.0, 86.0])]);
+        v.extend([
+            At([160.0, 185.0, 42.0]),
+            At([130.0, 172.0, 45.0]),
+            At([112.0, 148.0, 56.0]),
+            At([100.0, 134.0, 70.0]),
+            At([96.0, 133.0, 86.0]),
+        ]);
     } else {
         // Up the right side behind the caecum, round to its posterior face.
         v.extend([
@@ -138,7 +144,10 @@ pub(super) fn make(
     let prone = gravity.y < 0.0;
     let mut rng = Rng::new(seed, super::colon::STREAM_BOWEL);
     let wall = frame.thin(WALL, 0.7);
-    let cecum = segments.iter().find(|g| g.name == "cecum").ok_or_else(|| Error::invalid("colon has no cecum"))?;
+    let cecum = segments
+        .iter()
+        .find(|g| g.name == "cecum")
+        .ok_or_else(|| Error::invalid("colon has no cecum"))?;
     let (specs, starts) = course(prone);
     // Draws: radii, contents, then the jitter of every knot per try: a fixed number, so the
     // result depends on the seed only.
@@ -151,7 +160,12 @@ pub(super) fn make(
         let jitter = attempt < TRIES;
         let mut knots: Vec<DVec3> = Vec::with_capacity(specs.len() + 3);
         for (i, k) in specs.iter().enumerate() {
-            let d = DVec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)) * JITTER * s;
+            let d = DVec3::new(
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+            ) * JITTER
+                * s;
             let d = if jitter { d } else { DVec3::ZERO };
             let r = radii[tube_of(i, starts)];
             knots.push(match *k {
@@ -165,9 +179,14 @@ pub(super) fn make(
         knots.push(valve.point - valve.normal * (0.9 * r_ileum));
         // (The axis's radius is the widest tube's: it only enters the bend check.)
         let rmax = radii.iter().cloned().fold(0.0, f64::max);
-        let ks: Vec<Knot> = knots.iter().map(|&pos| Knot { pos, radius: rmax }).collect();
+        let ks: Vec<Knot> = knots
+            .iter()
+            .map(|&pos| Knot { pos, radius: rmax })
+            .collect();
         let axis = Axis::through(&ks, 1.0 * s)?;
-        match check(frame, tube, body, &axis, &specs, starts, &radii, wall, catheter) {
+        match check(
+            frame, tube, body, &axis, &specs, starts, &radii, wall, catheter,
+        ) {
             Ok(()) => {
                 chosen = Some(axis);
                 break;
@@ -176,9 +195,15 @@ pub(super) fn make(
             Err(_) => {}
         }
     }
-    let axis = chosen.ok_or_else(|| Error::invalid("colon phantom: no room for the small-bowel loops"))?;
+    let axis =
+        chosen.ok_or_else(|| Error::invalid("colon phantom: no room for the small-bowel loops"))?;
     // Split the one smooth course into its tubes at the joining knots.
-    let bounds = [0, axis.vertex_at(axis.knot_arc[starts[0]]), axis.vertex_at(axis.knot_arc[starts[1]]), axis.len() - 1];
+    let bounds = [
+        0,
+        axis.vertex_at(axis.knot_arc[starts[0]]),
+        axis.vertex_at(axis.knot_arc[starts[1]]),
+        axis.len() - 1,
+    ];
     let mut blobs = Vec::new();
     let mut loops = Vec::new();
     for n in 0..3 {
@@ -188,10 +213,23 @@ pub(super) fn make(
         while i < last {
             let j = (i + 3).min(last);
             let (a, b) = (axis.points[i], axis.points[j]);
-            blobs.push(Blob { kind: BlobKind::Loop, center: (a + b) * 0.5, radius: radii[n], stalk: Some((a, b, radii[n])), wall_mm: wall, content_hu: hus[n] });
+            blobs.push(Blob {
+                kind: BlobKind::Loop,
+                center: (a + b) * 0.5,
+                radius: radii[n],
+                stalk: Some((a, b, radii[n])),
+                wall_mm: wall,
+                content_hu: hus[n],
+            });
             i = j;
         }
-        let range = if n == 0 { 0..starts[0] } else if n == 1 { starts[0]..starts[1] } else { starts[1]..specs.len() };
+        let range = if n == 0 {
+            0..starts[0]
+        } else if n == 1 {
+            starts[0]..starts[1]
+        } else {
+            starts[1]..specs.len()
+        };
         loops.push(LoopTruth {
             axis_mm: axis.points[first..=last].iter().map(|p| arr(*p)).collect(),
             radius_mm: radii[n],
@@ -202,7 +240,11 @@ pub(super) fn make(
             touches_colon: specs[range].iter().any(|k| matches!(k, Contact { .. })),
         });
     }
-    Ok(SmallBowel { blobs, loops, valve })
+    Ok(SmallBowel {
+        blobs,
+        loops,
+        valve,
+    })
 }
 
 /// Which tube knot `i` belongs to.
@@ -221,17 +263,36 @@ fn tube_of(i: usize, starts: [usize; 2]) -> usize {
 /// caecum if a polyp is in the way; on the lumen's surface in the direction of gravity
 /// supine, 30° below it prone (the terminal ileum comes up from the pelvis there: in front of
 /// the caecum there is no room for it).
-fn place_valve(frame: &Frame, tube: &Tube, cecum: &SegmentTruth, gravity: DVec3, r: f64, wall: f64, polyps: &[Blob]) -> Result<Valve> {
+fn place_valve(
+    frame: &Frame,
+    tube: &Tube,
+    cecum: &SegmentTruth,
+    gravity: DVec3,
+    r: f64,
+    wall: f64,
+    polyps: &[Blob],
+) -> Result<Valve> {
     let s = frame.scale;
     let ax = &tube.axis;
     let prone = gravity.y < 0.0;
-    let base = if prone { cecum.end_arc_mm - 20.0 * s } else { cecum.start_arc_mm + 12.0 * s };
-    let normal = if prone { (gravity - DVec3::Z * 30f64.to_radians().tan()).normalize() } else { gravity };
+    let base = if prone {
+        cecum.end_arc_mm - 20.0 * s
+    } else {
+        cecum.start_arc_mm + 12.0 * s
+    };
+    let normal = if prone {
+        (gravity - DVec3::Z * 30f64.to_radians().tan()).normalize()
+    } else {
+        gravity
+    };
     for shift in [0.0, 8.0, -8.0, 16.0, -16.0] {
-        let arc = (base + shift * s).clamp(cecum.start_arc_mm + 4.0 * s, cecum.end_arc_mm - 12.0 * s);
+        let arc =
+            (base + shift * s).clamp(cecum.start_arc_mm + 4.0 * s, cecum.end_arc_mm - 12.0 * s);
         let v = ax.vertex_at(arc);
         let point = ax.points[v] + normal * ax.radius[v];
-        let clear = polyps.iter().all(|b| b.center.distance(point) - b.reach() >= r + wall + 2.0 * s);
+        let clear = polyps
+            .iter()
+            .all(|b| b.center.distance(point) - b.reach() >= r + wall + 2.0 * s);
         if clear {
             // The opening's rim reaches angle tilt + asin(r / R) from straight down, on the
             // wall's outer surface of radius R; then a margin of 3 mm (2 voxels).
@@ -239,10 +300,17 @@ fn place_valve(frame: &Frame, tube: &Tube, cecum: &SegmentTruth, gravity: DVec3,
             let tilt = normal.angle_between(gravity);
             let rim = (tilt + (r / big).min(1.0).asin()).min(std::f64::consts::FRAC_PI_2);
             let min_depth = big * (1.0 - rim.cos()) + (3.0 * s).max(2.0 * frame.max_spacing());
-            return Ok(Valve { vertex: v, point, normal, min_depth });
+            return Ok(Valve {
+                vertex: v,
+                point,
+                normal,
+                min_depth,
+            });
         }
     }
-    Err(Error::invalid("colon phantom: no room for the ileocaecal valve beside the caecal polyp"))
+    Err(Error::invalid(
+        "colon phantom: no room for the ileocaecal valve beside the caecal polyp",
+    ))
 }
 
 /// A knot against the colon's outer wall at `arc`, towards `side`: the two walls touch
@@ -258,39 +326,81 @@ fn contact(tube: &Tube, arc: f64, side: DVec3, r: f64, wall: f64) -> DVec3 {
 /// Checks the course's room (see the module's notes). Within a contact knot's stretch the
 /// bowel may touch the colon, and from a little before the valve's knots on it may join it.
 #[allow(clippy::too_many_arguments)]
-fn check(frame: &Frame, tube: &Tube, body: &Body, ax: &Axis, specs: &[Spec], starts: [usize; 2], radii: &[f64], wall: f64, catheter: Option<&Catheter>) -> Result<()> {
+fn check(
+    frame: &Frame,
+    tube: &Tube,
+    body: &Body,
+    ax: &Axis,
+    specs: &[Spec],
+    starts: [usize; 2],
+    radii: &[f64],
+    wall: f64,
+    catheter: Option<&Catheter>,
+) -> Result<()> {
     let s = frame.scale;
     let gap = (3.0 * s).max(frame.max_spacing());
     let bad = |what: String| Err(Error::invalid(format!("colon phantom: small bowel {what}")));
     let col = &tube.axis;
     // Radius at each vertex (that of its tube).
     let bound = [ax.knot_arc[starts[0]], ax.knot_arc[starts[1]]];
-    let radius = |a: f64| radii[if a < bound[0] { 0 } else if a < bound[1] { 1 } else { 2 }];
+    let radius = |a: f64| {
+        radii[if a < bound[0] {
+            0
+        } else if a < bound[1] {
+            1
+        } else {
+            2
+        }]
+    };
     let rmax = radii.iter().cloned().fold(0.0, f64::max);
     // Relative to the full-size wall (scaled), so small and full size agree; below 1 the
     // tube would fold into itself on the inside of the bend.
     let (bend, at) = ax.min_bend_ratio(WALL * s);
     if bend < 1.0 {
-        return bad(format!("bends too tightly ({bend:.2}) at {:.0?}", ax.points[at].to_array()));
+        return bad(format!(
+            "bends too tightly ({bend:.2}) at {:.0?}",
+            ax.points[at].to_array()
+        ));
     }
     let touch: Vec<(f64, f64)> = specs
         .iter()
         .enumerate()
         .filter(|(_, k)| matches!(k, Contact { .. }))
-        .map(|(i, _)| (ax.knot_arc[i] - 3.5 * (rmax + wall), ax.knot_arc[i] + 3.5 * (rmax + wall)))
+        .map(|(i, _)| {
+            (
+                ax.knot_arc[i] - 3.5 * (rmax + wall),
+                ax.knot_arc[i] + 3.5 * (rmax + wall),
+            )
+        })
         .collect();
     let valve_from = ax.knot_arc[specs.len()] - 2.0 * (rmax + wall);
     for (p, a) in ax.points.iter().zip(&ax.arc) {
         let reach = radius(*a) + wall;
-        let colon = col.points.iter().zip(&col.radius).map(|(c, rc)| c.distance(*p) - rc - tube.wall_mm).fold(f64::INFINITY, f64::min) - reach;
+        let colon = col
+            .points
+            .iter()
+            .zip(&col.radius)
+            .map(|(c, rc)| c.distance(*p) - rc - tube.wall_mm)
+            .fold(f64::INFINITY, f64::min)
+            - reach;
         let touching = touch.iter().any(|&(lo, hi)| *a >= lo && *a <= hi);
         // Touching: the lumens stay a voxel apart at least, so there is tissue between them.
-        let need = if touching { frame.max_spacing() - wall - tube.wall_mm } else { gap };
+        let need = if touching {
+            frame.max_spacing() - wall - tube.wall_mm
+        } else {
+            gap
+        };
         if colon < need && *a < valve_from {
-            return bad(format!("at {:.0?} only {colon:.1} mm from the colon", p.to_array()));
+            return bad(format!(
+                "at {:.0?} only {colon:.1} mm from the colon",
+                p.to_array()
+            ));
         }
         if -body.skin_sdf(*p) - body.rim - reach < gap {
-            return bad(format!("at {:.0?} reaches the abdominal wall", p.to_array()));
+            return bad(format!(
+                "at {:.0?} reaches the abdominal wall",
+                p.to_array()
+            ));
         }
         if body.spine.sdf_xy(*p) - reach < gap {
             return bad(format!("at {:.0?} touches the spine", p.to_array()));
@@ -307,7 +417,11 @@ fn check(frame: &Frame, tube: &Tube, body: &Body, ax: &Axis, specs: &[Spec], sta
         let far = std::f64::consts::PI * 2.0 * (rmax + wall);
         for (q, b) in ax.points.iter().zip(&ax.arc).step_by(2) {
             if (a - b).abs() > far && p.distance(*q) - radius(*a) - radius(*b) < 2.0 * wall {
-                return bad(format!("at {:.0?} runs into itself at {:.0?}", p.to_array(), q.to_array()));
+                return bad(format!(
+                    "at {:.0?} runs into itself at {:.0?}",
+                    p.to_array(),
+                    q.to_array()
+                ));
             }
         }
     }

@@ -273,8 +273,9 @@ impl Truth {
     /// Pretty JSON. Serialising plain numbers and strings cannot fail; if it ever did, the
     /// error comes back as a JSON object so that callers never panic.
     pub fn to_json(&self) -> String {
-        serde_json::to_string_pretty(self)
-            .unwrap_or_else(|e| serde_json::json!({ "error": format!("cannot serialise truth: {e}") }).to_string())
+        serde_json::to_string_pretty(self).unwrap_or_else(|e| {
+            serde_json::json!({ "error": format!("cannot serialise truth: {e}") }).to_string()
+        })
     }
 
     /// Parses what [`Truth::to_json`] wrote.
@@ -284,6 +285,9 @@ impl Truth {
 
     /// Name of the segment that contains arc length `s`.
     pub fn segment_at(&self, s: f64) -> Option<&str> {
-        self.segments.iter().find(|g| s >= g.start_arc_mm && s <= g.end_arc_mm).map(|g| g.name.as_str())
+        self.segments
+            .iter()
+            .find(|g| s >= g.start_arc_mm && s <= g.end_arc_mm)
+            .map(|g| g.name.as_str())
     }
 }

@@ -36,9 +36,20 @@ pub struct FoldSector {
 impl Fold {
     /// Arc range the fold touches.
     pub fn extent(&self) -> (f64, f64) {
-        let lo = self.sectors.iter().map(|s| s.offset).fold(f64::INFINITY, f64::min);
-        let hi = self.sectors.iter().map(|s| s.offset).fold(f64::NEG_INFINITY, f64::max);
-        (self.arc + lo - self.half_width, self.arc + hi + self.half_width)
+        let lo = self
+            .sectors
+            .iter()
+            .map(|s| s.offset)
+            .fold(f64::INFINITY, f64::min);
+        let hi = self
+            .sectors
+            .iter()
+            .map(|s| s.offset)
+            .fold(f64::NEG_INFINITY, f64::max);
+        (
+            self.arc + lo - self.half_width,
+            self.arc + hi + self.half_width,
+        )
     }
 
     /// Sector index (0..3) and position inside it (0..1) for frame angle `theta`.
@@ -171,16 +182,31 @@ pub struct TubeHit {
 
 impl TubeHit {
     /// Deep inside the lumen, away from everything.
-    pub const INSIDE: TubeHit = TubeHit { lumen: -1e3, outer: -1e3, fluid: f64::INFINITY, fluid_hu: 0.0 };
-    pub const NONE: TubeHit = TubeHit { lumen: f64::INFINITY, outer: f64::INFINITY, fluid: f64::INFINITY, fluid_hu: 0.0 };
+    pub const INSIDE: TubeHit = TubeHit {
+        lumen: -1e3,
+        outer: -1e3,
+        fluid: f64::INFINITY,
+        fluid_hu: 0.0,
+    };
+    pub const NONE: TubeHit = TubeHit {
+        lumen: f64::INFINITY,
+        outer: f64::INFINITY,
+        fluid: f64::INFINITY,
+        fluid_hu: 0.0,
+    };
 }
 
 impl Tube {
     pub fn new(axis: Axis, wall_mm: f64, ends: Ends) -> Tube {
         let nseg = axis.len().saturating_sub(1);
         let seg_a: Vec<DVec3> = axis.points[..nseg].to_vec();
-        let seg_ab: Vec<DVec3> = (0..nseg).map(|i| axis.points[i + 1] - axis.points[i]).collect();
-        let seg_inv_len2 = seg_ab.iter().map(|ab| 1.0 / ab.length_squared().max(1e-18)).collect();
+        let seg_ab: Vec<DVec3> = (0..nseg)
+            .map(|i| axis.points[i + 1] - axis.points[i])
+            .collect();
+        let seg_inv_len2 = seg_ab
+            .iter()
+            .map(|ab| 1.0 / ab.length_squared().max(1e-18))
+            .collect();
         Tube {
             axis,
             wall_mm,
@@ -207,7 +233,10 @@ impl Tube {
         for (fi, f) in folds.iter().enumerate() {
             let (lo, hi) = f.extent();
             let a = self.axis.vertex_at(lo.max(0.0));
-            let b = self.axis.vertex_at(hi.max(0.0)).min(self.segments().saturating_sub(1));
+            let b = self
+                .axis
+                .vertex_at(hi.max(0.0))
+                .min(self.segments().saturating_sub(1));
             for slot in &mut self.fold_at[a..=b] {
                 *slot = fi as u32;
             }
@@ -218,7 +247,11 @@ impl Tube {
     /// Largest distance from the axis at which the tube still changes anything.
     pub fn reach(&self, seg: usize) -> f64 {
         let r = self.axis.radius[seg].max(self.axis.radius[seg + 1]);
-        let cord = self.collapse.iter().map(|c| c.cord_radius).fold(0.0, f64::max);
+        let cord = self
+            .collapse
+            .iter()
+            .map(|c| c.cord_radius)
+            .fold(0.0, f64::max);
         r.max(cord) + self.wall_mm
     }
 
@@ -266,7 +299,11 @@ impl Tube {
             }
             let fold = match self.fold_at[i] {
                 u32::MAX => 0.0,
-                f => self.folds[f as usize].sectors.iter().map(|s| s.depth).fold(0.0, f64::max),
+                f => self.folds[f as usize]
+                    .sectors
+                    .iter()
+                    .map(|s| s.depth)
+                    .fold(0.0, f64::max),
             };
             r_min = r_min.min(self.axis.radius[i].min(self.axis.radius[i + 1]) - fold);
         }
@@ -283,7 +320,8 @@ impl Tube {
         let seg_len = ax.arc[i + 1] - ax.arc[i];
         let last = self.segments() - 1;
         // Beyond a flat end the axial coordinate runs on past the last point.
-        let flat_end = self.ends == Ends::Flat && ((i == 0 && raw < 0.0) || (i == last && raw > 1.0));
+        let flat_end =
+            self.ends == Ends::Flat && ((i == 0 && raw < 0.0) || (i == last && raw > 1.0));
         let tt = if flat_end { raw } else { t };
         let q = ax.points[i] + (ax.points[i + 1] - ax.points[i]) * tt;
         let v = p - q;
@@ -296,9 +334,16 @@ impl Tube {
         let (mut r_lumen, mut r_outer) = (r, r + self.wall_mm);
         // The collapse that narrows the lumen most here (they are disjoint, so at most one
         // is below 1; the first wins a tie, which keeps a single collapse as it always was).
-        let narrowest = self.collapse.iter().map(|c| (c.factor(s), c)).fold(None, |best: Option<(f64, &Collapse)>, (f, c)| {
-            if best.is_none_or(|(b, _)| f < b) { Some((f, c)) } else { best }
-        });
+        let narrowest = self.collapse.iter().map(|c| (c.factor(s), c)).fold(
+            None,
+            |best: Option<(f64, &Collapse)>, (f, c)| {
+                if best.is_none_or(|(b, _)| f < b) {
+                    Some((f, c))
+                } else {
+                    best
+                }
+            },
+        );
         if let Some((f, c)) = narrowest {
             // A small negative margin makes the core solid even on the axis itself.
             r_lumen = r * f - (1.0 - f) * 2.0 * self.wall_mm;
@@ -318,7 +363,11 @@ impl Tube {
         }
         let mut outer = d - r_outer;
         if flat_end {
-            let axial = if i == 0 { -raw * seg_len } else { (raw - 1.0) * seg_len } - self.end_margin;
+            let axial = if i == 0 {
+                -raw * seg_len
+            } else {
+                (raw - 1.0) * seg_len
+            } - self.end_margin;
             lumen = capped(lumen, axial);
             outer = capped(outer, axial - self.wall_mm);
         }
@@ -326,7 +375,9 @@ impl Tube {
             .pools
             .iter()
             .find(|pl| s >= pl.start && s <= pl.end)
-            .map_or((f64::INFINITY, 0.0), |pl| (pl.level - p.dot(pl.gravity), pl.hu));
+            .map_or((f64::INFINITY, 0.0), |pl| {
+                (pl.level - p.dot(pl.gravity), pl.hu)
+            });
         // A filled stretch: fluid across the whole lumen, its ends cut across the axis.
         for f in &self.filled {
             let d = (f.start - s).max(s - f.end);
@@ -334,7 +385,12 @@ impl Tube {
                 (fluid, fluid_hu) = (d, f.hu);
             }
         }
-        TubeHit { lumen, outer, fluid, fluid_hu }
+        TubeHit {
+            lumen,
+            outer,
+            fluid,
+            fluid_hu,
+        }
     }
 }
 
@@ -342,7 +398,11 @@ impl Tube {
 /// axial part `axial` (≤ 0 inside the cap plane).
 #[inline]
 fn capped(radial: f64, axial: f64) -> f64 {
-    if radial > 0.0 && axial > 0.0 { (radial * radial + axial * axial).sqrt() } else { radial.max(axial) }
+    if radial > 0.0 && axial > 0.0 {
+        (radial * radial + axial * axial).sqrt()
+    } else {
+        radial.max(axial)
+    }
 }
 
 /// What a blob is.
@@ -388,7 +448,9 @@ impl Blob {
 
     /// Radius of a sphere about `center` outside which the blob (with wall) changes nothing.
     pub fn reach(&self) -> f64 {
-        let stalk = self.stalk.map_or(0.0, |(a, b, r)| a.distance(self.center).max(b.distance(self.center)) + r);
+        let stalk = self.stalk.map_or(0.0, |(a, b, r)| {
+            a.distance(self.center).max(b.distance(self.center)) + r
+        });
         self.radius.max(stalk) + self.wall_mm
     }
 }
@@ -427,7 +489,10 @@ impl Catheter {
 
     /// Distance from `p` to the axis.
     pub fn distance(&self, p: DVec3) -> f64 {
-        self.points.windows(2).map(|w| capsule(p, w[0], w[1])).fold(f64::INFINITY, f64::min)
+        self.points
+            .windows(2)
+            .map(|w| capsule(p, w[0], w[1]))
+            .fold(f64::INFINITY, f64::min)
     }
 
     /// Signed distances (negative inside) to the air channel and to the plastic, both cut by
@@ -441,9 +506,13 @@ impl Catheter {
         let d = self.distance(p);
         let u0 = (self.points[1] - self.points[0]).normalize_or_zero();
         let u1 = (self.points[n - 1] - self.points[n - 2]).normalize_or_zero();
-        let cut = (self.points[0] - p).dot(u0).max((p - self.points[n - 1]).dot(u1));
+        let cut = (self.points[0] - p)
+            .dot(u0)
+            .max((p - self.points[n - 1]).dot(u1));
         let air = (d - self.inner_radius).max(cut);
-        let plastic = (d - self.outer_radius()).max(self.inner_radius - d).max(cut);
+        let plastic = (d - self.outer_radius())
+            .max(self.inner_radius - d)
+            .max(cut);
         (air, plastic)
     }
 }

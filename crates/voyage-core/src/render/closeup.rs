@@ -44,7 +44,7 @@ use glam::{DVec3, Vec3A, Vec4};
 use rayon::prelude::*;
 
 use super::raster::View;
-use super::shading::{encode, Lighting};
+use super::shading::{Lighting, encode};
 use crate::camera::Camera;
 use crate::{Error, Result, Volume};
 
@@ -111,14 +111,25 @@ impl TransferFunction {
     /// Control points sorted by HU, with finite values, colours and opacities in 0..1; the
     /// lighting as in [`TransferFunction::tissue`] (its fields are public).
     pub fn new(points: Vec<TfPoint>) -> Result<Self> {
-        let ok = |p: &TfPoint| p.hu.is_finite() && (0.0..=1.0).contains(&p.opacity_per_mm) && p.rgb.iter().all(|c| (0.0..=1.0).contains(c));
+        let ok = |p: &TfPoint| {
+            p.hu.is_finite()
+                && (0.0..=1.0).contains(&p.opacity_per_mm)
+                && p.rgb.iter().all(|c| (0.0..=1.0).contains(c))
+        };
         if points.is_empty() || !points.iter().all(ok) {
-            return Err(Error::invalid("transfer function: needs control points with finite HU, colour and opacity in 0..1"));
+            return Err(Error::invalid(
+                "transfer function: needs control points with finite HU, colour and opacity in 0..1",
+            ));
         }
         if points.windows(2).any(|w| w[0].hu > w[1].hu) {
-            return Err(Error::invalid("transfer function: control points must be sorted by HU"));
+            return Err(Error::invalid(
+                "transfer function: control points must be sorted by HU",
+            ));
         }
-        Ok(TransferFunction { points, ..Self::tissue() })
+        Ok(TransferFunction {
+            points,
+            ..Self::tissue()
+        })
     }
 
     /// The default for CT colonography: air transparent; fat (−190…−30 HU) faint yellow and
@@ -131,7 +142,11 @@ impl TransferFunction {
         const FAT: [f32; 3] = [0.85, 0.68, 0.22];
         const SOFT: [f32; 3] = [0.80, 0.20, 0.15];
         const BRIGHT: [f32; 3] = [0.95, 0.93, 0.88];
-        let p = |hu, rgb, opacity_per_mm| TfPoint { hu, rgb, opacity_per_mm };
+        let p = |hu, rgb, opacity_per_mm| TfPoint {
+            hu,
+            rgb,
+            opacity_per_mm,
+        };
         TransferFunction {
             points: vec![
                 p(-600.0, CLEAR, 0.0),
@@ -170,7 +185,10 @@ impl TransferFunction {
         let (a, b) = (ps[i - 1], ps[i]);
         let t = (hu - a.hu) / (b.hu - a.hu);
         let rgb = [0, 1, 2].map(|c| a.rgb[c] + t * (b.rgb[c] - a.rgb[c]));
-        (rgb, a.opacity_per_mm + t * (b.opacity_per_mm - a.opacity_per_mm))
+        (
+            rgb,
+            a.opacity_per_mm + t * (b.opacity_per_mm - a.opacity_per_mm),
+        )
     }
 
     /// The lookup table for one step length: per HU, linear RGB and the step's opacity.
@@ -205,17 +223,27 @@ pub struct CloseupBox {
 impl CloseupBox {
     /// A box centred `distance_mm` ahead of the camera on its view axis.
     pub fn in_front_of(camera: &Camera, distance_mm: f64, half_size_mm: f64) -> Self {
-        CloseupBox { center: camera.pose.position + distance_mm * camera.pose.z_body(), half_size_mm }
+        CloseupBox {
+            center: camera.pose.position + distance_mm * camera.pose.z_body(),
+            half_size_mm,
+        }
     }
 
     /// A box centred on a point (a marker, a polyp candidate).
     pub fn around(center: DVec3, half_size_mm: f64) -> Self {
-        CloseupBox { center, half_size_mm }
+        CloseupBox {
+            center,
+            half_size_mm,
+        }
     }
 
     /// The half size actually rendered: non-negative, at most [`MAX_HALF_SIZE_MM`].
     pub fn effective_half_size(&self) -> f64 {
-        if self.half_size_mm.is_finite() { self.half_size_mm.clamp(0.0, MAX_HALF_SIZE_MM) } else { 0.0 }
+        if self.half_size_mm.is_finite() {
+            self.half_size_mm.clamp(0.0, MAX_HALF_SIZE_MM)
+        } else {
+            0.0
+        }
     }
 
     pub fn min_mm(&self) -> DVec3 {
@@ -266,14 +294,34 @@ impl Brick {
         let dims = [0, 1, 2].map(|a| hi[a] - lo[a] + 1);
         let data = sobel(&Grid::around(ct, lo, dims), ct.spacing());
         let [nx, ny, nz] = dims;
-        let strides = [usize::from(nx > 1), nx * usize::from(ny > 1), nx * ny * usize::from(nz > 1)];
+        let strides = [
+            usize::from(nx > 1),
+            nx * usize::from(ny > 1),
+            nx * ny * usize::from(nz > 1),
+        ];
         // A one-voxel axis (a single slice) has no upper corner: samples stay on the slice.
         let hi = Vec3A::from_array(dims.map(|d| (d as f32 - 1.0 - 1e-3).max(0.0)));
         let block_dims = dims.map(|d| d.div_ceil(BLOCK));
         let n = data.len();
-        let (cells, blocks) = U16S.with(|p| (p.take(n, MIXED), p.take(block_dims.iter().product(), MIXED)));
-        let block_strides = Vec3A::new(1.0, block_dims[0] as f32, (block_dims[0] * block_dims[1]) as f32);
-        Brick { dims, lo, data, strides, hi, cells, blocks, block_dims, block_strides, reach: Vec::new() }
+        let (cells, blocks) =
+            U16S.with(|p| (p.take(n, MIXED), p.take(block_dims.iter().product(), MIXED)));
+        let block_strides = Vec3A::new(
+            1.0,
+            block_dims[0] as f32,
+            (block_dims[0] * block_dims[1]) as f32,
+        );
+        Brick {
+            dims,
+            lo,
+            data,
+            strides,
+            hi,
+            cells,
+            blocks,
+            block_dims,
+            block_strides,
+            reach: Vec::new(),
+        }
     }
 
     /// Finds the cells whose every sample classifies alike: all eight corners in one run of
@@ -293,18 +341,23 @@ impl Brick {
         let [dx, dy, dz] = self.strides;
         let [nx, ny, nz] = self.dims;
         let last = [nx - 1, ny - 1, nz - 1].map(|l| l.max(1));
-        self.cells.par_chunks_mut(nx).enumerate().for_each(|(r, row)| {
-            let (j, k) = (r % ny, r / ny);
-            if (j >= last[1] && dy > 0) || (k >= last[2] && dz > 0) {
-                return;
-            }
-            for (i, c) in row.iter_mut().enumerate().take(last[0]) {
-                let n = i + nx * r;
-                let a = class[n];
-                let same = [dx, dy, dx + dy, dz, dz + dx, dz + dy, dz + dy + dx].iter().all(|&o| class[n + o] == a);
-                *c = if same && a != ROUGH { a + 1 } else { MIXED };
-            }
-        });
+        self.cells
+            .par_chunks_mut(nx)
+            .enumerate()
+            .for_each(|(r, row)| {
+                let (j, k) = (r % ny, r / ny);
+                if (j >= last[1] && dy > 0) || (k >= last[2] && dz > 0) {
+                    return;
+                }
+                for (i, c) in row.iter_mut().enumerate().take(last[0]) {
+                    let n = i + nx * r;
+                    let a = class[n];
+                    let same = [dx, dy, dx + dy, dz, dz + dx, dz + dy, dz + dy + dx]
+                        .iter()
+                        .all(|&o| class[n + o] == a);
+                    *c = if same && a != ROUGH { a + 1 } else { MIXED };
+                }
+            });
         U16S.with(|p| p.give(class));
     }
 
@@ -319,13 +372,22 @@ impl Brick {
                 let b = [n % bx, (n / bx) % by, n / (bx * by)];
                 let cells = |a: usize| b[a] * BLOCK..((b[a] + 1) * BLOCK).min(self.dims[a]);
                 let voxels = |a: usize| b[a] * BLOCK..((b[a] + 1) * BLOCK + 1).min(self.dims[a]);
-                let all_voxels = |f: &dyn Fn(usize) -> bool| voxels(2).all(|k| voxels(1).all(|j| voxels(0).all(|i| f(i + nx * (j + ny * k)))));
-                let all_cells = |f: &dyn Fn(usize) -> bool| cells(2).all(|k| cells(1).all(|j| cells(0).all(|i| f(i + nx * (j + ny * k)))));
+                let all_voxels = |f: &dyn Fn(usize) -> bool| {
+                    voxels(2)
+                        .all(|k| voxels(1).all(|j| voxels(0).all(|i| f(i + nx * (j + ny * k)))))
+                };
+                let all_cells = |f: &dyn Fn(usize) -> bool| {
+                    cells(2).all(|k| cells(1).all(|j| cells(0).all(|i| f(i + nx * (j + ny * k)))))
+                };
                 if all_voxels(&|v| self.data[v].x < clear_below) {
                     return EMPTY;
                 }
                 let first = self.cells[b[0] * BLOCK + nx * (b[1] * BLOCK + ny * b[2] * BLOCK)];
-                if first != MIXED && all_cells(&|c| self.cells[c] == first) { first } else { MIXED }
+                if first != MIXED && all_cells(&|c| self.cells[c] == first) {
+                    first
+                } else {
+                    MIXED
+                }
             })
             .collect();
         self.reach = block_reach(&blocks, self.block_dims);
@@ -356,9 +418,14 @@ impl Brick {
         let lo = (b - Vec3A::splat(r)) * BLOCK as f32;
         let hi = (b + Vec3A::splat(r + 1.0)) * BLOCK as f32;
         // Steps m with p + m·dp still strictly inside: m < s.
-        let s = (Vec3A::select(dp.cmpge(Vec3A::ZERO), hi - p, lo - p) * inv_dp).min_element().clamp(0.0, 1e6);
+        let s = (Vec3A::select(dp.cmpge(Vec3A::ZERO), hi - p, lo - p) * inv_dp)
+            .min_element()
+            .clamp(0.0, 1e6);
         let m = s as u32;
-        (self.blocks[i], (m + u32::from((m as f32) < s)).max(1) as usize)
+        (
+            self.blocks[i],
+            (m + u32::from((m as f32) < s)).max(1) as usize,
+        )
     }
 
     /// The cell holding brick coordinates `p` (voxel units from the brick's first voxel,
@@ -372,7 +439,10 @@ impl Brick {
         // SAFETY: every lane is finite, ≥ 0 and < 2³² (see above).
         let ijk = [p.x, p.y, p.z].map(|v| unsafe { v.to_int_unchecked::<u32>() });
         let n = ijk[0] as usize + self.dims[0] * (ijk[1] as usize + self.dims[1] * ijk[2] as usize);
-        Spot { n, f: p - Vec3A::new(ijk[0] as f32, ijk[1] as f32, ijk[2] as f32) }
+        Spot {
+            n,
+            f: p - Vec3A::new(ijk[0] as f32, ijk[1] as f32, ijk[2] as f32),
+        }
     }
 
     /// The sample at `p`.
@@ -394,12 +464,23 @@ impl Brick {
         }
         // SAFETY: every index read is between n and top, and top < data.len().
         let at = |o: usize| unsafe { *self.data.get_unchecked(n + o) };
-        let c = [at(0), at(dx), at(dy), at(dy + dx), at(dz), at(dz + dx), at(dz + dy), at(dz + dy + dx)];
+        let c = [
+            at(0),
+            at(dx),
+            at(dy),
+            at(dy + dx),
+            at(dz),
+            at(dz + dx),
+            at(dz + dy),
+            at(dz + dy + dx),
+        ];
         let x00 = c[0].lerp(c[1], f.x);
         let x10 = c[2].lerp(c[3], f.x);
         let x01 = c[4].lerp(c[5], f.x);
         let x11 = c[6].lerp(c[7], f.x);
-        Sample { v: x00.lerp(x10, f.y).lerp(x01.lerp(x11, f.y), f.z) }
+        Sample {
+            v: x00.lerp(x10, f.y).lerp(x01.lerp(x11, f.y), f.z),
+        }
     }
 }
 
@@ -444,7 +525,10 @@ impl Drop for Brick {
 /// differs): the cube of radius r around b is the union of the cubes of radius r − 1 around
 /// its 26 neighbours.
 fn block_reach(class: &[u16], dims: [usize; 3]) -> Vec<u8> {
-    let mut r: Vec<u8> = class.iter().map(|&c| if c == MIXED { 0 } else { u8::MAX }).collect();
+    let mut r: Vec<u8> = class
+        .iter()
+        .map(|&c| if c == MIXED { 0 } else { u8::MAX })
+        .collect();
     let [bx, by, bz] = dims;
     loop {
         let mut changed = false;
@@ -457,12 +541,18 @@ fn block_reach(class: &[u16], dims: [usize; 3]) -> Vec<u8> {
             for o in 0..27 {
                 let d = [o % 3, (o / 3) % 3, o / 9];
                 let q = [0, 1, 2].map(|a| (b[a] + d[a]).checked_sub(1));
-                let [Some(x), Some(y), Some(z)] = q else { continue };
+                let [Some(x), Some(y), Some(z)] = q else {
+                    continue;
+                };
                 if x >= bx || y >= by || z >= bz || o == 13 {
                     continue;
                 }
                 let m = x + bx * (y + by * z);
-                best = best.min(if class[m] == class[n] { r[m].saturating_add(1) } else { 0 });
+                best = best.min(if class[m] == class[n] {
+                    r[m].saturating_add(1)
+                } else {
+                    0
+                });
             }
             if best != r[n] {
                 r[n] = best;
@@ -551,7 +641,11 @@ impl Grid {
             src[axis] += 1;
             let c = src[0] + self.dims[0] * (src[1] + self.dims[1] * src[2]);
             let n = row.len();
-            let (a, b, e) = (&self.v[c - stride..][..n], &self.v[c..][..n], &self.v[c + stride..][..n]);
+            let (a, b, e) = (
+                &self.v[c - stride..][..n],
+                &self.v[c..][..n],
+                &self.v[c + stride..][..n],
+            );
             for (o, ((a, b), e)) in row.iter_mut().zip(a.iter().zip(b).zip(e)) {
                 *o = w[0] * a + w[1] * b + w[2] * e;
             }
@@ -585,7 +679,12 @@ fn sobel(g: &Grid, spacing: [f64; 3]) -> Vec<Vec4> {
         let (ym, yp) = (at(&across_y, 0, j, k, nx), at(&across_y, 0, j + 2, k, nx));
         let (zm, zp) = (at(&across_z, 0, j, k, nx), at(&across_z, 0, j, k + 2, nx));
         for (i, o) in row.iter_mut().enumerate() {
-            *o = Vec4::new(hu[i], (xp[i] - xm[i]) * h[0], (yp[i] - ym[i]) * h[1], (zp[i] - zm[i]) * h[2]);
+            *o = Vec4::new(
+                hu[i],
+                (xp[i] - xm[i]) * h[0],
+                (yp[i] - ym[i]) * h[1],
+                (zp[i] - zm[i]) * h[2],
+            );
         }
     });
     out
@@ -624,12 +723,19 @@ struct StepTable {
 
 impl StepTable {
     fn new(tf: &TransferFunction, step_mm: f32) -> Self {
-        StepTable { rgba: tf.table(step_mm), surface_alpha: step_opacity(tf.surface_opacity_per_mm, step_mm) }
+        StepTable {
+            rgba: tf.table(step_mm),
+            surface_alpha: step_opacity(tf.surface_opacity_per_mm, step_mm),
+        }
     }
 
     /// Values below this are transparent (one HU of margin for the table's rounding).
     fn clear_below(&self) -> f32 {
-        let first = self.rgba.iter().position(|e| e.w > 0.0).unwrap_or(TABLE_LEN);
+        let first = self
+            .rgba
+            .iter()
+            .position(|e| e.w > 0.0)
+            .unwrap_or(TABLE_LEN);
         (TABLE_MIN_HU + first as i32 - 1) as f32
     }
 
@@ -747,11 +853,18 @@ impl Scene<'_> {
     /// Premultiplied linear RGB and alpha seen along the ray from `eye` in direction `dir`
     /// (unit, mm).
     fn cast(&self, eye: DVec3, dir: DVec3) -> (Vec3A, f32) {
-        let Some((t0, t1)) = clip_ray(eye, dir, self.lo_mm, self.hi_mm) else { return (Vec3A::ZERO, 0.0) };
+        let Some((t0, t1)) = clip_ray(eye, dir, self.lo_mm, self.hi_mm) else {
+            return (Vec3A::ZERO, 0.0);
+        };
         let view = dir.as_vec3a();
         let lo_idx = DVec3::from_array(self.brick.lo.map(|v| v as f64));
         let to_brick = |t: f64| ((eye + t * dir) * self.inv_spacing - lo_idx).as_vec3a();
-        let mut acc = Accum { color: Vec3A::ZERO, trans: 1.0, light: 1.0, inv_falloff: 1.0 / self.tf.falloff_mm.max(1e-3) };
+        let mut acc = Accum {
+            color: Vec3A::ZERO,
+            trans: 1.0,
+            light: 1.0,
+            inv_falloff: 1.0 / self.tf.falloff_mm.max(1e-3),
+        };
         // Samples on spheres around the eye, the same distances for every ray; each stands
         // for the stretch of ray before it. The first and a last one at the exit cover the
         // partial stretches, so that a face of the box cut through tissue shows no rings.
@@ -768,7 +881,12 @@ impl Scene<'_> {
             return (acc.color, 1.0 - acc.trans);
         }
         let dp = (dir * self.step_mm * self.inv_spacing).as_vec3a();
-        let ray = Ray { dp, view, t: (first * self.step_mm) as f32, step: self.step_mm as f32 };
+        let ray = Ray {
+            dp,
+            view,
+            t: (first * self.step_mm) as f32,
+            step: self.step_mm as f32,
+        };
         if !self.march(&mut acc, p, &ray, (last - first) as usize) {
             acc.at(t1 as f32);
             self.add_partial(&mut acc, to_brick(t1), view, t1 / self.step_mm - last);
@@ -782,7 +900,11 @@ impl Scene<'_> {
     fn march(&self, acc: &mut Accum, mut p: Vec3A, ray: &Ray, n: usize) -> bool {
         let dp = ray.dp;
         let inv_dp = Vec3A::select(dp.cmpeq(Vec3A::ZERO), Vec3A::splat(f32::MAX), dp.recip());
-        let mut prev_hu = if self.brick.is_clear(p) { f32::NEG_INFINITY } else { self.brick.sample(p).hu() };
+        let mut prev_hu = if self.brick.is_clear(p) {
+            f32::NEG_INFINITY
+        } else {
+            self.brick.sample(p).hu()
+        };
         let mut k = 0;
         while k < n {
             let next = p + dp;
@@ -791,12 +913,19 @@ impl Scene<'_> {
             if block == EMPTY {
                 // Coming out of air, the next sample fetched refines its stretch.
                 prev_hu = f32::NEG_INFINITY;
-            } else if block != MIXED && (self.runs.entry[block as usize - 1].1 - prev_hu).abs() <= REFINE_HU {
+            } else if block != MIXED
+                && (self.runs.entry[block as usize - 1].1 - prev_hu).abs() <= REFINE_HU
+            {
                 let (e, hu) = self.runs.entry[block as usize - 1];
                 prev_hu = hu;
                 // Lit as at the middle of the hop.
                 acc.at(ray.t + (k as f32 + 0.5 * (m + 1) as f32) * ray.step);
-                if e.w > 0.0 && acc.add(Vec3A::from_vec4(e) * self.tf.interior_light, 1.0 - (1.0 - e.w).powi(m as i32)) {
+                if e.w > 0.0
+                    && acc.add(
+                        Vec3A::from_vec4(e) * self.tf.interior_light,
+                        1.0 - (1.0 - e.w).powi(m as i32),
+                    )
+                {
                     return true;
                 }
             } else if self.samples(acc, p, ray, k, m, &mut prev_hu) {
@@ -810,7 +939,15 @@ impl Scene<'_> {
 
     /// The `m` samples after `p` (step `k` of the ray), one by one; true once nothing behind
     /// can show.
-    fn samples(&self, acc: &mut Accum, mut p: Vec3A, ray: &Ray, k: usize, m: usize, prev_hu: &mut f32) -> bool {
+    fn samples(
+        &self,
+        acc: &mut Accum,
+        mut p: Vec3A,
+        ray: &Ray,
+        k: usize,
+        m: usize,
+        prev_hu: &mut f32,
+    ) -> bool {
         for j in 1..=m {
             p += ray.dp;
             acc.at(ray.t + (k + j) as f32 * ray.step);
@@ -828,8 +965,13 @@ impl Scene<'_> {
             }
             let s = self.brick.fetch(spot.n, spot.f);
             // Refine where the value jumps, unless only within air.
-            let jump = (s.hu() - *prev_hu).abs() > REFINE_HU && s.hu().max(*prev_hu) >= self.clear_below;
-            let done = if jump { self.add_refined(acc, p - ray.dp, ray.dp, s, ray.view) } else { self.add(acc, p, s, ray.view, &self.full) };
+            let jump =
+                (s.hu() - *prev_hu).abs() > REFINE_HU && s.hu().max(*prev_hu) >= self.clear_below;
+            let done = if jump {
+                self.add_refined(acc, p - ray.dp, ray.dp, s, ray.view)
+            } else {
+                self.add(acc, p, s, ray.view, &self.full)
+            };
             if done {
                 return true;
             }
@@ -848,7 +990,14 @@ impl Scene<'_> {
 
     /// The stretch from `start` to `start + dp` (brick units) in sub-steps; `end` is the
     /// sample at its end.
-    fn add_refined(&self, acc: &mut Accum, start: Vec3A, dp: Vec3A, end: Sample, view: Vec3A) -> bool {
+    fn add_refined(
+        &self,
+        acc: &mut Accum,
+        start: Vec3A,
+        dp: Vec3A,
+        end: Sample,
+        view: Vec3A,
+    ) -> bool {
         for k in 1..SUB_STEPS {
             let p = start + dp * (k as f32 / SUB_STEPS as f32);
             if self.add(acc, p, self.brick.sample(p), view, &self.sub) {
@@ -864,14 +1013,23 @@ impl Scene<'_> {
             return false;
         }
         match self.classify(p, self.brick.sample(p), view, &self.full) {
-            Some((rgb, alpha)) => acc.add(rgb, 1.0 - (1.0 - alpha).powf(fraction.clamp(0.0, 1.0) as f32)),
+            Some((rgb, alpha)) => acc.add(
+                rgb,
+                1.0 - (1.0 - alpha).powf(fraction.clamp(0.0, 1.0) as f32),
+            ),
             None => false,
         }
     }
 
     /// Colour (lit where on a boundary) and opacity of a sample; None when transparent.
     #[inline(always)]
-    fn classify(&self, p: Vec3A, s: Sample, view: Vec3A, table: &StepTable) -> Option<(Vec3A, f32)> {
+    fn classify(
+        &self,
+        p: Vec3A,
+        s: Sample,
+        view: Vec3A,
+        table: &StepTable,
+    ) -> Option<(Vec3A, f32)> {
         let tf = self.tf;
         let grad = s.gradient();
         let g2 = grad.length_squared();
@@ -891,15 +1049,23 @@ impl Scene<'_> {
         // show the material a voxel up the gradient, so that no yellow or pink rim wraps
         // every fold, polyp and pool, and the surface sits where segmentation and the mesh
         // put it. (Tagged material itself needs no look: nothing above it is different.)
-        let hu = if (AIR_HU..TAGGED_HU).contains(&s.hu()) { s.hu() + w * (self.dense_side(p, grad * inv_g) - s.hu()).max(0.0) } else { s.hu() };
+        let hu = if (AIR_HU..TAGGED_HU).contains(&s.hu()) {
+            s.hu() + w * (self.dense_side(p, grad * inv_g) - s.hu()).max(0.0)
+        } else {
+            s.hu()
+        };
         let e = table.get(hu);
         if e.w <= 0.0 {
             return None;
         }
         let ndl = grad.dot(view).abs() * inv_g;
-        let lit = Vec3A::from_vec4(e) * (tf.ambient + tf.diffuse * ndl) + Vec3A::splat(tf.specular * ndl.powi(16));
+        let lit = Vec3A::from_vec4(e) * (tf.ambient + tf.diffuse * ndl)
+            + Vec3A::splat(tf.specular * ndl.powi(16));
         let alpha = 1.0 - (1.0 - e.w) * (1.0 - w * table.surface_alpha);
-        Some(((Vec3A::from_vec4(e) * tf.interior_light).lerp(lit, w), alpha))
+        Some((
+            (Vec3A::from_vec4(e) * tf.interior_light).lerp(lit, w),
+            alpha,
+        ))
     }
 }
 
@@ -934,7 +1100,10 @@ fn scene<'a>(ct: &Volume<i16>, region: &CloseupBox, tf: &'a TransferFunction) ->
         runs,
         interior_g2,
         clear_below,
-        boundary: (tf.boundary_hu_per_mm[0], 1.0 / (tf.boundary_hu_per_mm[1] - tf.boundary_hu_per_mm[0]).max(1e-6)),
+        boundary: (
+            tf.boundary_hu_per_mm[0],
+            1.0 / (tf.boundary_hu_per_mm[1] - tf.boundary_hu_per_mm[0]).max(1e-6),
+        ),
         inv_spacing: spacing.recip(),
         reach: (spacing.min_element() / spacing).as_vec3a(),
         lo_mm,
@@ -958,9 +1127,18 @@ fn to_rgba8(color: Vec3A, alpha: f32) -> [u8; 4] {
 /// of the same camera and size. Alpha is 0 where the ray misses the box (or the volume) or
 /// meets nothing but transparent values. Rows are rendered in parallel; the result does not
 /// depend on the number of threads.
-pub fn render_closeup(ct: &Volume<i16>, camera: &Camera, region: &CloseupBox, width: u32, height: u32, tf: &TransferFunction) -> Vec<u8> {
+pub fn render_closeup(
+    ct: &Volume<i16>,
+    camera: &Camera,
+    region: &CloseupBox,
+    width: u32,
+    height: u32,
+    tf: &TransferFunction,
+) -> Vec<u8> {
     let mut out = vec![0u8; width as usize * height as usize * 4];
-    let Some(scene) = scene(ct, region, tf) else { return out };
+    let Some(scene) = scene(ct, region, tf) else {
+        return out;
+    };
     if width == 0 || height == 0 {
         return out;
     }
@@ -968,13 +1146,15 @@ pub fn render_closeup(ct: &Volume<i16>, camera: &Camera, region: &CloseupBox, wi
     // images line up pixel for pixel.
     let view = View::new(camera, width, height);
     let eye = camera.pose.position;
-    out.par_chunks_mut(width as usize * 4).enumerate().for_each(|(y, row)| {
-        for (x, px) in row.chunks_exact_mut(4).enumerate() {
-            let dir = view.pixel_direction(x as u32, y as u32).normalize();
-            let (color, alpha) = scene.cast(eye, dir);
-            px.copy_from_slice(&to_rgba8(color, alpha));
-        }
-    });
+    out.par_chunks_mut(width as usize * 4)
+        .enumerate()
+        .for_each(|(y, row)| {
+            for (x, px) in row.chunks_exact_mut(4).enumerate() {
+                let dir = view.pixel_direction(x as u32, y as u32).normalize();
+                let (color, alpha) = scene.cast(eye, dir);
+                px.copy_from_slice(&to_rgba8(color, alpha));
+            }
+        });
     out
 }
 
@@ -998,7 +1178,11 @@ mod tests {
         let mid = tf.eval(150.0);
         assert!((mid.1 - 0.5 * (0.15 + 0.6)).abs() < 1e-6);
         assert!(TransferFunction::new(vec![]).is_err());
-        let p = |hu| TfPoint { hu, rgb: [1.0; 3], opacity_per_mm: 0.5 };
+        let p = |hu| TfPoint {
+            hu,
+            rgb: [1.0; 3],
+            opacity_per_mm: 0.5,
+        };
         assert!(TransferFunction::new(vec![p(10.0), p(0.0)]).is_err());
     }
 
@@ -1038,20 +1222,35 @@ mod tests {
         let s = b.sample(Vec3A::new(1.5, 2.25, 0.5)).v;
         // Brick (1.5, 2.25, 0.5) is volume index (2.5, 2.25, 1.5): x = 1.25 mm, z = 3 mm.
         assert!((s.x - (12.5 + 9.0)).abs() < 1e-4, "{s}");
-        assert!((s.y - 10.0).abs() < 1e-4 && s.z.abs() < 1e-4 && (s.w - 3.0).abs() < 1e-4, "{s}");
+        assert!(
+            (s.y - 10.0).abs() < 1e-4 && s.z.abs() < 1e-4 && (s.w - 3.0).abs() < 1e-4,
+            "{s}"
+        );
     }
 
     #[test]
     fn a_box_outside_the_volume_renders_nothing() {
         let g = Geometry::new([8, 8, 8], [1.0; 3], [0.0; 3]).unwrap();
         let ct = Volume::filled(g, 40i16).unwrap();
-        let cam = Camera::new(crate::camera::Pose::looking(DVec3::new(4.0, 4.0, -10.0), DVec3::Z, DVec3::Y));
+        let cam = Camera::new(crate::camera::Pose::looking(
+            DVec3::new(4.0, 4.0, -10.0),
+            DVec3::Z,
+            DVec3::Y,
+        ));
         let far = CloseupBox::around(DVec3::new(100.0, 4.0, 4.0), 5.0);
-        assert!(render_closeup(&ct, &cam, &far, 16, 16, &TransferFunction::tissue()).iter().all(|&v| v == 0));
+        assert!(
+            render_closeup(&ct, &cam, &far, 16, 16, &TransferFunction::tissue())
+                .iter()
+                .all(|&v| v == 0)
+        );
         let near = CloseupBox::in_front_of(&cam, 14.0, 3.0);
         let img = render_closeup(&ct, &cam, &near, 16, 16, &TransferFunction::tissue());
         // 6 mm of soft tissue: 1 − 0.85⁶ ≈ 62 % opaque.
-        assert!(img[(8 * 16 + 8) * 4 + 3] > 140, "{:?}", &img[(8 * 16 + 8) * 4..][..4]);
+        assert!(
+            img[(8 * 16 + 8) * 4 + 3] > 140,
+            "{:?}",
+            &img[(8 * 16 + 8) * 4..][..4]
+        );
         assert!(render_closeup(&ct, &cam, &near, 0, 16, &TransferFunction::tissue()).is_empty());
     }
 }

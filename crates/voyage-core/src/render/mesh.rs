@@ -63,13 +63,15 @@ impl CellMesh {
             for &v in &self.cell_vertices[start..] {
                 local[v as usize] = u32::MAX;
             }
-            self.cell_vertex_ranges.push(start as u32..self.cell_vertices.len() as u32);
+            self.cell_vertex_ranges
+                .push(start as u32..self.cell_vertices.len() as u32);
         }
     }
 
     /// Whether [`CellMesh::index_cells`] matches the triangles.
     pub fn is_indexed(&self) -> bool {
-        self.local_triangles.len() == self.triangles.len() && self.cell_vertex_ranges.len() == self.cell_ranges.len()
+        self.local_triangles.len() == self.triangles.len()
+            && self.cell_vertex_ranges.len() == self.cell_ranges.len()
     }
 
     /// The surface's own normals (the CT gradient), unsmoothed.
@@ -102,12 +104,19 @@ impl CellMesh {
     }
 
     pub fn triangles_in(&self, cells: &[u32]) -> usize {
-        cells.iter().map(|&c| self.cell_ranges[c as usize].len()).sum()
+        cells
+            .iter()
+            .map(|&c| self.cell_ranges[c as usize].len())
+            .sum()
     }
 }
 
 /// Averages each vertex normal with those of the triangles around it, `passes` times.
-pub fn smooth_normals(normals: &[[f32; 3]], triangles: &[[u32; 3]], passes: usize) -> Vec<[f32; 3]> {
+pub fn smooth_normals(
+    normals: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    passes: usize,
+) -> Vec<[f32; 3]> {
     let mut cur: Vec<Vec3> = normals.iter().map(|&n| Vec3::from_array(n)).collect();
     for _ in 0..passes {
         let mut acc = cur.clone();

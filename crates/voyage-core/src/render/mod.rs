@@ -12,10 +12,12 @@ pub mod survey;
 pub mod translucency;
 pub mod visibility;
 
-pub use closeup::{render_closeup, CloseupBox, TfPoint, TransferFunction};
+pub use closeup::{CloseupBox, TfPoint, TransferFunction, render_closeup};
 pub use mesh::CellMesh;
-pub use raster::{render_rgba, shade, Frame, Pixel, Rasterizer, View, NO_TRIANGLE};
+pub use raster::{Frame, NO_TRIANGLE, Pixel, Rasterizer, View, render_rgba, shade};
 pub use shading::Lighting;
-pub use survey::{look_around, survey, StrategyStats, Survey};
-pub use translucency::{render_translucency, surface_point, Material, Translucency, TranslucencyOptions};
+pub use survey::{StrategyStats, Survey, look_around, survey};
+pub use translucency::{
+    Material, Translucency, TranslucencyOptions, render_translucency, surface_point,
+};
 pub use visibility::{Drawn, Strategy, Visibility};

@@ -47,7 +47,11 @@ pub struct Pixel {
     pub rgb: [u8; 3],
 }
 
-const EMPTY: Pixel = Pixel { inv_depth: 0.0, id: NO_TRIANGLE, rgb: [0; 3] };
+const EMPTY: Pixel = Pixel {
+    inv_depth: 0.0,
+    id: NO_TRIANGLE,
+    rgb: [0; 3],
+};
 
 /// What the rasterizer writes, per pixel, row-major, top row first.
 #[derive(Clone, Debug, PartialEq)]
@@ -59,7 +63,11 @@ pub struct Frame {
 
 impl Frame {
     pub fn new(width: u32, height: u32) -> Self {
-        Frame { width, height, pixels: vec![EMPTY; width as usize * height as usize] }
+        Frame {
+            width,
+            height,
+            pixels: vec![EMPTY; width as usize * height as usize],
+        }
     }
 
     pub fn clear(&mut self) {
@@ -76,7 +84,11 @@ impl Frame {
 
     /// Pixels whose triangle differs from `other`'s.
     pub fn id_differences(&self, other: &Frame) -> usize {
-        self.pixels.iter().zip(&other.pixels).filter(|(a, b)| a.id != b.id).count()
+        self.pixels
+            .iter()
+            .zip(&other.pixels)
+            .filter(|(a, b)| a.id != b.id)
+            .count()
     }
 
     /// Pixels some triangle covers.
@@ -126,7 +138,10 @@ impl View {
     #[inline]
     pub fn project(&self, e: DVec3) -> (f64, f64) {
         let s = self.focal / e.z;
-        (0.5 * self.width as f64 + e.x * s, 0.5 * self.height as f64 - e.y * s)
+        (
+            0.5 * self.width as f64 + e.x * s,
+            0.5 * self.height as f64 - e.y * s,
+        )
     }
 
     /// The (unnormalised) direction of the ray through the centre of pixel (x, y).
@@ -148,7 +163,12 @@ struct EyeXf {
 
 impl EyeXf {
     fn new(view: &View) -> Self {
-        EyeXf { eye: view.eye.as_vec3(), right: view.right.as_vec3(), up: view.up.as_vec3(), forward: view.forward.as_vec3() }
+        EyeXf {
+            eye: view.eye.as_vec3(),
+            right: view.right.as_vec3(),
+            up: view.up.as_vec3(),
+            forward: view.forward.as_vec3(),
+        }
     }
 }
 
@@ -192,7 +212,14 @@ impl<'a> Rasterizer<'a> {
     }
 
     pub fn lit(mesh: &'a CellMesh, view: View, lighting: &Lighting) -> Self {
-        Rasterizer { mesh, xf: EyeXf::new(&view), view, lighting: *lighting, tables: ShadeTables::cached(lighting), scratch: RefCell::new(Vec::new()) }
+        Rasterizer {
+            mesh,
+            xf: EyeXf::new(&view),
+            view,
+            lighting: *lighting,
+            tables: ShadeTables::cached(lighting),
+            scratch: RefCell::new(Vec::new()),
+        }
     }
 
     pub fn view(&self) -> &View {
@@ -215,10 +242,20 @@ impl<'a> Rasterizer<'a> {
         let mut buf = self.scratch.borrow_mut();
         buf.clear();
         let vr = mesh.cell_vertex_ranges[cell as usize].clone();
-        buf.extend(mesh.cell_vertices[vr.start as usize..vr.end as usize].iter().map(|&v| self.vertex(v)));
+        buf.extend(
+            mesh.cell_vertices[vr.start as usize..vr.end as usize]
+                .iter()
+                .map(|&v| self.vertex(v)),
+        );
         let local = &mesh.local_triangles[range.start as usize..range.end as usize];
         for (id, t) in (range.start..).zip(local) {
-            self.draw_triangle(frame, id, &buf[t[0] as usize], &buf[t[1] as usize], &buf[t[2] as usize]);
+            self.draw_triangle(
+                frame,
+                id,
+                &buf[t[0] as usize],
+                &buf[t[1] as usize],
+                &buf[t[2] as usize],
+            );
         }
         range.len()
     }
@@ -231,10 +268,28 @@ impl<'a> Rasterizer<'a> {
     fn vertex(&self, v: u32) -> Vertex {
         let xf = &self.xf;
         let rel = Vec3::from_array(self.mesh.positions[v as usize]) - xf.eye;
-        let eye = DVec3::new(rel.dot(xf.right) as f64, rel.dot(xf.up) as f64, rel.dot(xf.forward) as f64);
+        let eye = DVec3::new(
+            rel.dot(xf.right) as f64,
+            rel.dot(xf.up) as f64,
+            rel.dot(xf.forward) as f64,
+        );
         let normal = Vec3::from_array(self.mesh.normals[v as usize]);
-        let screen = if eye.z >= self.view.near { self.screen(eye) } else { ScreenVertex { x: 0.0, y: 0.0, w: 0.0 } };
-        Vertex { rel, eye, normal, color: std::cell::Cell::new(Vec3::NAN), screen }
+        let screen = if eye.z >= self.view.near {
+            self.screen(eye)
+        } else {
+            ScreenVertex {
+                x: 0.0,
+                y: 0.0,
+                w: 0.0,
+            }
+        };
+        Vertex {
+            rel,
+            eye,
+            normal,
+            color: std::cell::Cell::new(Vec3::NAN),
+            screen,
+        }
     }
 
     /// The vertex lit (Gouraud), like the GPU's vertex stage: the light sits at the eye.
@@ -245,7 +300,11 @@ impl<'a> Rasterizer<'a> {
             return c;
         }
         let d2 = v.rel.length_squared();
-        let ndl = if d2 > 0.0 { -v.normal.dot(v.rel) / d2.sqrt() } else { 0.0 };
+        let ndl = if d2 > 0.0 {
+            -v.normal.dot(v.rel) / d2.sqrt()
+        } else {
+            0.0
+        };
         let att = 1.0 / (1.0 + d2 / (self.lighting.falloff_mm * self.lighting.falloff_mm));
         let c = self.tables.encoded(&self.lighting, att, ndl);
         v.color.set(c);
@@ -263,7 +322,9 @@ impl<'a> Rasterizer<'a> {
             return;
         }
         if inside.iter().all(|&i| i) {
-            self.fill(frame, id, [a.screen, b.screen, c.screen], || [self.color(a), self.color(b), self.color(c)]);
+            self.fill(frame, id, [a.screen, b.screen, c.screen], || {
+                [self.color(a), self.color(b), self.color(c)]
+            });
             return;
         }
         let v = [a, b, c];
@@ -281,13 +342,21 @@ impl<'a> Rasterizer<'a> {
                 let t = (near - p.eye.z) / (q.eye.z - p.eye.z);
                 let mut x = p.eye + (q.eye - p.eye) * t;
                 x.z = near;
-                poly[n] = (x, self.color(p) + (self.color(q) - self.color(p)) * t as f32);
+                poly[n] = (
+                    x,
+                    self.color(p) + (self.color(q) - self.color(p)) * t as f32,
+                );
                 n += 1;
             }
         }
         let s0 = self.screen(poly[0].0);
         for k in 1..n - 1 {
-            self.fill(frame, id, [s0, self.screen(poly[k].0), self.screen(poly[k + 1].0)], || [poly[0].1, poly[k].1, poly[k + 1].1]);
+            self.fill(
+                frame,
+                id,
+                [s0, self.screen(poly[k].0), self.screen(poly[k + 1].0)],
+                || [poly[0].1, poly[k].1, poly[k + 1].1],
+            );
         }
     }
 
@@ -301,7 +370,13 @@ impl<'a> Rasterizer<'a> {
     /// id where it is nearer, or as near with a smaller id.
     /// `colors` gives the vertices' colours; it is called only once a pixel centre is known
     /// to lie in the bounding box.
-    fn fill(&self, frame: &mut Frame, id: u32, [v0, v1, v2]: [ScreenVertex; 3], colors: impl FnOnce() -> [Vec3; 3]) {
+    fn fill(
+        &self,
+        frame: &mut Frame,
+        id: u32,
+        [v0, v1, v2]: [ScreenVertex; 3],
+        colors: impl FnOnce() -> [Vec3; 3],
+    ) {
         let (w, h) = (frame.width as i64, frame.height as i64);
         let min_x = v0.x.min(v1.x).min(v2.x);
         let max_x = v0.x.max(v1.x).max(v2.x);
@@ -332,11 +407,18 @@ impl<'a> Rasterizer<'a> {
             // Where on this row all three edge functions can be ≥ 0, widened by a pixel so
             // rounding of the division never loses a centre: only those are tested exactly.
             let (mut lo, mut hi) = (x0 as f64 + 0.5, x1 as f64 + 0.5);
-            for (e, r) in [(&e0, r0), (&e1, r1), (&e2, r2)].into_iter().filter(|_| x1 - x0 >= SPAN_MIN_WIDTH) {
+            for (e, r) in [(&e0, r0), (&e1, r1), (&e2, r2)]
+                .into_iter()
+                .filter(|_| x1 - x0 >= SPAN_MIN_WIDTH)
+            {
                 let a = e.a;
                 if a != 0.0 {
                     let x = -r / a;
-                    if a > 0.0 { lo = lo.max(x - 1.0) } else { hi = hi.min(x + 1.0) }
+                    if a > 0.0 {
+                        lo = lo.max(x - 1.0)
+                    } else {
+                        hi = hi.min(x + 1.0)
+                    }
                 } else if r < 0.0 {
                     hi = f64::NEG_INFINITY;
                 }
@@ -360,7 +442,11 @@ impl<'a> Rasterizer<'a> {
                 if wz > px.inv_depth || (wz == px.inv_depth && id < px.id) {
                     let inv = 1.0 / sum;
                     let c = c0 + (c1 - c0) * (p1 * inv) as f32 + (c2 - c0) * (p2 * inv) as f32;
-                    *px = Pixel { inv_depth: wz, id, rgb: (c * 255.0 + 0.5).to_array().map(|v| v as u8) };
+                    *px = Pixel {
+                        inv_depth: wz,
+                        id,
+                        rgb: (c * 255.0 + 0.5).to_array().map(|v| v as u8),
+                    };
                 }
             }
         }
@@ -468,8 +554,12 @@ const GAMMA_STEPS: usize = 16384;
 
 impl ShadeTables {
     fn new(l: &Lighting) -> Self {
-        let specular = (0..=SPEC_STEPS).map(|i| (i as f32 / SPEC_STEPS as f32).powf(l.shininess)).collect();
-        let gamma = (0..=GAMMA_STEPS).map(|i| (i as f32 / GAMMA_STEPS as f32).powf(1.0 / 2.2)).collect();
+        let specular = (0..=SPEC_STEPS)
+            .map(|i| (i as f32 / SPEC_STEPS as f32).powf(l.shininess))
+            .collect();
+        let gamma = (0..=GAMMA_STEPS)
+            .map(|i| (i as f32 / GAMMA_STEPS as f32).powf(1.0 / 2.2))
+            .collect();
         ShadeTables { specular, gamma }
     }
 
@@ -510,7 +600,14 @@ impl ShadeTables {
 }
 
 /// Renders the listed cells and shades them: the CPU path end to end.
-pub fn render_rgba(mesh: &CellMesh, camera: &Camera, cells: &[u32], width: u32, height: u32, lighting: &Lighting) -> Vec<u8> {
+pub fn render_rgba(
+    mesh: &CellMesh,
+    camera: &Camera,
+    cells: &[u32],
+    width: u32,
+    height: u32,
+    lighting: &Lighting,
+) -> Vec<u8> {
     let view = View::new(camera, width, height);
     let mut frame = Frame::new(width, height);
     Rasterizer::lit(mesh, view, lighting).draw_cells(&mut frame, cells);
@@ -526,7 +623,12 @@ mod tests {
     /// triangle behind it facing away.
     fn wall() -> CellMesh {
         CellMesh {
-            positions: vec![[-5.0, -5.0, 10.0], [5.0, -5.0, 10.0], [5.0, 5.0, 10.0], [-5.0, 5.0, 10.0]],
+            positions: vec![
+                [-5.0, -5.0, 10.0],
+                [5.0, -5.0, 10.0],
+                [5.0, 5.0, 10.0],
+                [-5.0, 5.0, 10.0],
+            ],
             normals: vec![[0.0, 0.0, -1.0]; 4],
             // (b − a) × (c − a) must point toward the camera (−z).
             triangles: vec![[0, 2, 1], [0, 3, 2], [0, 1, 2]],
@@ -551,7 +653,10 @@ mod tests {
         // The back-facing triangle (id 2) is never drawn.
         assert!(!f.ids().any(|i| i == 2));
         // Depth is 10 mm everywhere on the wall.
-        for &Pixel { inv_depth: w, id, .. } in &f.pixels {
+        for &Pixel {
+            inv_depth: w, id, ..
+        } in &f.pixels
+        {
             if id != NO_TRIANGLE {
                 assert!((w - 0.1).abs() < 1e-6);
             }
@@ -571,8 +676,14 @@ mod tests {
 
     #[test]
     fn floor_and_ceil_match_the_library() {
-        for &x in &[-3.5, -1.0, -0.5, -0.0, 0.0, 0.25, 0.5, 1.0, 2.999, 3.0, 3.5, 9.0, 1e12, -1e12] {
-            assert_eq!(floor_clamped(x, 0, 5), (x.floor() as i64).clamp(-1, 5), "{x}");
+        for &x in &[
+            -3.5, -1.0, -0.5, -0.0, 0.0, 0.25, 0.5, 1.0, 2.999, 3.0, 3.5, 9.0, 1e12, -1e12,
+        ] {
+            assert_eq!(
+                floor_clamped(x, 0, 5),
+                (x.floor() as i64).clamp(-1, 5),
+                "{x}"
+            );
             assert_eq!(ceil_clamped(x, 0, 5), (x.ceil() as i64).clamp(0, 6), "{x}");
         }
         assert_eq!(floor_clamped(f64::NAN, 0, 5), -1);
@@ -584,7 +695,12 @@ mod tests {
         // A floor running from behind the camera to far ahead: half the screen below the
         // horizon is floor.
         let mesh = CellMesh {
-            positions: vec![[-100.0, -2.0, -50.0], [100.0, -2.0, -50.0], [100.0, -2.0, 500.0], [-100.0, -2.0, 500.0]],
+            positions: vec![
+                [-100.0, -2.0, -50.0],
+                [100.0, -2.0, -50.0],
+                [100.0, -2.0, 500.0],
+                [-100.0, -2.0, 500.0],
+            ],
             normals: vec![[0.0, 1.0, 0.0]; 4],
             triangles: vec![[0, 2, 1], [0, 3, 2]],
             cell_ranges: std::iter::once(0..2).collect(),
@@ -593,8 +709,14 @@ mod tests {
         };
         let mut f = Frame::new(32, 32);
         Rasterizer::new(&mesh, View::new(&camera(), 32, 32)).draw_cells(&mut f, &[0]);
-        let below = (16..32).flat_map(|y| (0..32).map(move |x| (x, y))).filter(|&(x, y)| f.id(y * 32 + x) != NO_TRIANGLE).count();
-        let above = (0..16).flat_map(|y| (0..32).map(move |x| (x, y))).filter(|&(x, y)| f.id(y * 32 + x) != NO_TRIANGLE).count();
+        let below = (16..32)
+            .flat_map(|y| (0..32).map(move |x| (x, y)))
+            .filter(|&(x, y)| f.id(y * 32 + x) != NO_TRIANGLE)
+            .count();
+        let above = (0..16)
+            .flat_map(|y| (0..32).map(move |x| (x, y)))
+            .filter(|&(x, y)| f.id(y * 32 + x) != NO_TRIANGLE)
+            .count();
         assert_eq!(above, 0);
         // The floor ends 500 mm ahead: rows just below the horizon see past its end.
         assert!(below > 14 * 32, "{below}");
@@ -617,8 +739,10 @@ mod tests {
         let at = |i: usize, j: usize| (j * (n + 1) + i) as u32;
         for j in 0..n {
             for i in 0..n {
-                mesh.triangles.push([at(i, j), at(i + 1, j + 1), at(i + 1, j)]);
-                mesh.triangles.push([at(i, j), at(i, j + 1), at(i + 1, j + 1)]);
+                mesh.triangles
+                    .push([at(i, j), at(i + 1, j + 1), at(i + 1, j)]);
+                mesh.triangles
+                    .push([at(i, j), at(i, j + 1), at(i + 1, j + 1)]);
             }
         }
         mesh.cell_ranges = std::iter::once(0..mesh.triangles.len() as u32).collect();
@@ -628,7 +752,15 @@ mod tests {
         // Centre (facing, nearest) brighter than the corner of the wall; background black.
         assert!(px(32, 32) > px(17, 17));
         assert_eq!(px(2, 2), 0);
-        let want = Lighting::default().rgb8(10.0 * (1.0 + 2.0 * (0.5f64 / 32.0).powi(2)).sqrt() as f32, 1.0);
-        assert!((px(32, 32) as i32 - want[0] as i32).abs() <= 1, "{} vs {}", px(32, 32), want[0]);
+        let want = Lighting::default().rgb8(
+            10.0 * (1.0 + 2.0 * (0.5f64 / 32.0).powi(2)).sqrt() as f32,
+            1.0,
+        );
+        assert!(
+            (px(32, 32) as i32 - want[0] as i32).abs() <= 1,
+            "{} vs {}",
+            px(32, 32),
+            want[0]
+        );
     }
 }

@@ -19,7 +19,13 @@ pub struct Lighting {
 
 impl Default for Lighting {
     fn default() -> Self {
-        Lighting { albedo: [0.82, 0.30, 0.20], ambient: 0.05, falloff_mm: 40.0, specular: 0.30, shininess: 30.0 }
+        Lighting {
+            albedo: [0.82, 0.30, 0.20],
+            ambient: 0.05,
+            falloff_mm: 40.0,
+            specular: 0.30,
+            shininess: 30.0,
+        }
     }
 }
 
@@ -63,7 +69,11 @@ mod tests {
         assert!(near[0] > far[0] && far[0] > 0);
         assert!(near[0] > grazing[0]);
         // Half the light at the falloff distance (diffuse part, facing the camera, no specular).
-        let l2 = Lighting { ambient: 0.0, specular: 0.0, ..l };
+        let l2 = Lighting {
+            ambient: 0.0,
+            specular: 0.0,
+            ..l
+        };
         let half = l2.linear(l.falloff_mm, 1.0)[0] / l2.linear(0.0, 1.0)[0];
         assert!((half - 0.5).abs() < 1e-6);
         // Facing away: ambient only.

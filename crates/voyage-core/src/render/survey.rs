@@ -8,7 +8,7 @@ use glam::{DQuat, DVec3};
 use serde::Serialize;
 
 use super::mesh::CellMesh;
-use super::raster::{shade, Frame, Rasterizer, View};
+use super::raster::{Frame, Rasterizer, View, shade};
 use super::shading::Lighting;
 use super::visibility::{Strategy, Visibility};
 use crate::camera::{Camera, Pose};
@@ -58,7 +58,15 @@ impl Survey {
 
 /// Draws each camera with `all` and with every other strategy (each keeping its own state
 /// from frame to frame, as in a flight) and compares the id buffers.
-pub fn survey(mesh: &CellMesh, cells: &Cells, cameras: &[Camera], width: u32, height: u32, strategies: &[Strategy], keep_lists: bool) -> Survey {
+pub fn survey(
+    mesh: &CellMesh,
+    cells: &Cells,
+    cameras: &[Camera],
+    width: u32,
+    height: u32,
+    strategies: &[Strategy],
+    keep_lists: bool,
+) -> Survey {
     let lighting = Lighting::default();
     let mut order = vec![Strategy::All];
     order.extend(strategies.iter().copied().filter(|&s| s != Strategy::All));
@@ -122,10 +130,21 @@ pub fn survey(mesh: &CellMesh, cells: &Cells, cameras: &[Camera], width: u32, he
     }
     let all = stats[0].mean_triangles;
     for st in &mut stats {
-        st.ratio_to_all = if st.mean_triangles > 0.0 { all / st.mean_triangles } else { 0.0 };
+        st.ratio_to_all = if st.mean_triangles > 0.0 {
+            all / st.mean_triangles
+        } else {
+            0.0
+        };
     }
     let exact = stats.iter().all(|s| s.inexact_frames == 0);
-    Survey { width, height, frames: cameras.len(), strategies: stats, shade_ms_mean: shade_ms / n, exact }
+    Survey {
+        width,
+        height,
+        frames: cameras.len(),
+        strategies: stats,
+        shade_ms_mean: shade_ms / n,
+        exact,
+    }
 }
 
 /// Random look-around: at `n` positions taken evenly from `poses`, a view in a uniformly

@@ -37,8 +37,8 @@ use rayon::prelude::*;
 use super::closeup::CloseupBox;
 use super::raster::View;
 use super::shading::encode;
-use crate::camera::Camera;
 use crate::Volume;
+use crate::camera::Camera;
 
 /// Half the edge of the box the window and `voyage render --translucency` colour (mm): a
 /// polyp and the wall around it.
@@ -58,7 +58,12 @@ pub enum Material {
 }
 
 impl Material {
-    pub const ALL: [Material; 4] = [Material::SoftTissue, Material::Fat, Material::Tagged, Material::Wall];
+    pub const ALL: [Material; 4] = [
+        Material::SoftTissue,
+        Material::Fat,
+        Material::Tagged,
+        Material::Wall,
+    ];
 
     /// Linear RGB: red for soft tissue (the finding that matters), yellow for fat, green for
     /// stool, a quiet blue for wall.
@@ -109,7 +114,15 @@ pub struct TranslucencyOptions {
 
 impl Default for TranslucencyOptions {
     fn default() -> Self {
-        TranslucencyOptions { air_hu: -500.0, fat_hu: -50.0, tagged_hu: 200.0, tagged_depth_mm: 2.0, polyp_depth_mm: 3.5, protrusion_mm: 1.5, falloff_mm: 40.0 }
+        TranslucencyOptions {
+            air_hu: -500.0,
+            fat_hu: -50.0,
+            tagged_hu: 200.0,
+            tagged_depth_mm: 2.0,
+            polyp_depth_mm: 3.5,
+            protrusion_mm: 1.5,
+            falloff_mm: 40.0,
+        }
     }
 }
 
@@ -136,7 +149,10 @@ impl Translucency {
     pub fn counts(&self) -> [usize; 4] {
         let mut n = [0; 4];
         for s in self.surfels.iter().flatten() {
-            n[Material::ALL.iter().position(|&m| m == s.material).unwrap_or(3)] += 1;
+            n[Material::ALL
+                .iter()
+                .position(|&m| m == s.material)
+                .unwrap_or(3)] += 1;
         }
         n
     }
@@ -144,7 +160,15 @@ impl Translucency {
 
 /// Renders the translucency view of `region` as seen by `camera`. `ct` is the CT the
 /// surface was cut from; `lumen` the colon's lumen mask (non-zero = lumen) on the same grid.
-pub fn render_translucency(ct: &Volume<i16>, lumen: &Volume<u8>, camera: &Camera, region: &CloseupBox, width: u32, height: u32, opts: &TranslucencyOptions) -> Translucency {
+pub fn render_translucency(
+    ct: &Volume<i16>,
+    lumen: &Volume<u8>,
+    camera: &Camera,
+    region: &CloseupBox,
+    width: u32,
+    height: u32,
+    opts: &TranslucencyOptions,
+) -> Translucency {
     let view = View::new(camera, width, height);
     let probe = Probe::new(ct, Some(lumen));
     let (lo, hi) = (region.min_mm(), region.max_mm());
@@ -156,7 +180,10 @@ pub fn render_translucency(ct: &Volume<i16>, lumen: &Volume<u8>, camera: &Camera
             let t_exit = ray_box_exit(view.eye, dir, lo, hi)?;
             let hit = probe.first_crossing(view.eye, dir, t_exit, opts.air_hu)?;
             let inside = hit.cmpge(lo - 1e-9).all() && hit.cmple(hi + 1e-9).all();
-            inside.then(|| Surfel { point: hit, material: probe.classify(hit, opts) })
+            inside.then(|| Surfel {
+                point: hit,
+                material: probe.classify(hit, opts),
+            })
         })
         .collect();
     let mut rgba = vec![0u8; surfels.len() * 4];
@@ -165,13 +192,24 @@ pub fn render_translucency(ct: &Volume<i16>, lumen: &Volume<u8>, camera: &Camera
             px.copy_from_slice(&shade(&probe, view.eye, s, opts));
         }
     }
-    Translucency { width, height, rgba, surfels }
+    Translucency {
+        width,
+        height,
+        rgba,
+        surfels,
+    }
 }
 
 /// The first surface point (the CT rising through `air_hu`) along the ray from `origin` in
 /// direction `dir` within `max_mm`: what the view shows there, for a translucency box
 /// around the view's centre.
-pub fn surface_point(ct: &Volume<i16>, origin: DVec3, dir: DVec3, max_mm: f64, air_hu: f32) -> Option<DVec3> {
+pub fn surface_point(
+    ct: &Volume<i16>,
+    origin: DVec3,
+    dir: DVec3,
+    max_mm: f64,
+    air_hu: f32,
+) -> Option<DVec3> {
     Probe::new(ct, None).first_crossing(origin, dir.normalize(), max_mm, air_hu)
 }
 
@@ -213,20 +251,35 @@ struct Probe<'a> {
 impl<'a> Probe<'a> {
     fn new(ct: &'a Volume<i16>, lumen: Option<&'a Volume<u8>>) -> Self {
         let s = ct.geometry().spacing_vec();
-        Probe { ct, lumen, inv_spacing: s.recip(), step: 0.5 * s.min_element() }
+        Probe {
+            ct,
+            lumen,
+            inv_spacing: s.recip(),
+            step: 0.5 * s.min_element(),
+        }
     }
 
     /// HU at a point; outside the grid, air.
     fn hu(&self, mm: DVec3) -> f32 {
         let p = mm * self.inv_spacing;
         let [nx, ny, nz] = self.ct.dims();
-        if p.x < 0.0 || p.y < 0.0 || p.z < 0.0 || p.x > (nx - 1) as f64 || p.y > (ny - 1) as f64 || p.z > (nz - 1) as f64 {
+        if p.x < 0.0
+            || p.y < 0.0
+            || p.z < 0.0
+            || p.x > (nx - 1) as f64
+            || p.y > (ny - 1) as f64
+            || p.z > (nz - 1) as f64
+        {
             return -1000.0;
         }
         let b = p.floor();
         let t = p - b;
         let (i, j, k) = (b.x as usize, b.y as usize, b.z as usize);
-        let (i1, j1, k1) = ((i + 1).min(nx - 1), (j + 1).min(ny - 1), (k + 1).min(nz - 1));
+        let (i1, j1, k1) = (
+            (i + 1).min(nx - 1),
+            (j + 1).min(ny - 1),
+            (k + 1).min(nz - 1),
+        );
         let v = |i, j, k| self.ct.get(i, j, k) as f64;
         let lerp = |a: f64, b: f64, t: f64| a + (b - a) * t;
         let x00 = lerp(v(i, j, k), v(i1, j, k), t.x);
@@ -238,14 +291,20 @@ impl<'a> Probe<'a> {
 
     fn in_lumen(&self, mm: DVec3) -> bool {
         let p = (mm * self.inv_spacing).round();
-        self.lumen.is_some_and(|l| l.geometry().contains_index(p) && l.get(p.x as usize, p.y as usize, p.z as usize) != 0)
+        self.lumen.is_some_and(|l| {
+            l.geometry().contains_index(p) && l.get(p.x as usize, p.y as usize, p.z as usize) != 0
+        })
     }
 
     /// ∇HU by central differences over ±`voxels` voxels: points from air into tissue.
     fn gradient(&self, mm: DVec3, voxels: f64) -> DVec3 {
         let h = self.ct.geometry().spacing_vec() * voxels;
         let d = |e: DVec3| (self.hu(mm + e) - self.hu(mm - e)) as f64;
-        DVec3::new(d(DVec3::X * h.x) / h.x, d(DVec3::Y * h.y) / h.y, d(DVec3::Z * h.z) / h.z)
+        DVec3::new(
+            d(DVec3::X * h.x) / h.x,
+            d(DVec3::Y * h.y) / h.y,
+            d(DVec3::Z * h.z) / h.z,
+        )
     }
 
     /// The first point along the ray (within `t_max` mm) where the CT rises through `level`,
@@ -306,17 +365,25 @@ impl<'a> Probe<'a> {
                 // Air beneath tissue that is not the lumen (through a fold) is a pocket, as
                 // in mottled stool; otherwise fat or lumen end the tissue here. Half a
                 // millimetre on tells air from fat past the partial-volume layer.
-                let air = (1..=2).map(|k| s + k as f64 * step).find(|&t| at(t) < o.air_hu);
+                let air = (1..=2)
+                    .map(|k| s + k as f64 * step)
+                    .find(|&t| at(t) < o.air_hu);
                 // The lumen mask may leave out the air's first, partial voxel.
                 let voxel = self.ct.geometry().spacing_vec().max_element();
-                let lumen = air.is_some_and(|t| self.in_lumen(p + t * n) || self.in_lumen(p + (t + voxel) * n));
+                let lumen = air.is_some_and(|t| {
+                    self.in_lumen(p + t * n) || self.in_lumen(p + (t + voxel) * n)
+                });
                 if shallow && air.is_some() && !lumen {
                     return Material::Tagged;
                 }
                 return if lumen {
                     // Tissue with the lumen on both sides stands out of the wall: a polyp
                     // seen from the side, or a fold.
-                    if s >= o.protrusion_mm as f64 { Material::SoftTissue } else { Material::Wall }
+                    if s >= o.protrusion_mm as f64 {
+                        Material::SoftTissue
+                    } else {
+                        Material::Wall
+                    }
                 } else if s >= o.polyp_depth_mm as f64 {
                     Material::SoftTissue
                 } else {
@@ -341,7 +408,13 @@ mod tests {
         let mut lumen = Volume::filled(g, 0u8).unwrap();
         for k in 0..40 {
             let z = k as f64 * 0.5;
-            let v: i16 = if z < 10.0 { -1000 } else if z < 10.0 + wall { 40 } else { beneath };
+            let v: i16 = if z < 10.0 {
+                -1000
+            } else if z < 10.0 + wall {
+                40
+            } else {
+                beneath
+            };
             for j in 0..24 {
                 for i in 0..24 {
                     ct.set(i, j, k, v);
@@ -353,8 +426,20 @@ mod tests {
     }
 
     fn class_at_centre(ct: &Volume<i16>, lumen: &Volume<u8>) -> Material {
-        let cam = Camera::new(crate::camera::Pose::looking(DVec3::new(6.0, 6.0, 2.0), DVec3::Z, DVec3::Y));
-        let t = render_translucency(ct, lumen, &cam, &CloseupBox::around(DVec3::new(6.0, 6.0, 10.0), 4.0), 16, 16, &TranslucencyOptions::default());
+        let cam = Camera::new(crate::camera::Pose::looking(
+            DVec3::new(6.0, 6.0, 2.0),
+            DVec3::Z,
+            DVec3::Y,
+        ));
+        let t = render_translucency(
+            ct,
+            lumen,
+            &cam,
+            &CloseupBox::around(DVec3::new(6.0, 6.0, 10.0), 4.0),
+            16,
+            16,
+            &TranslucencyOptions::default(),
+        );
         let s = t.surfels[8 * 16 + 8].expect("the wall is hit");
         assert!((s.point.z - 9.75).abs() < 0.3, "surface at {:?}", s.point);
         s.material
@@ -380,11 +465,26 @@ mod tests {
     #[test]
     fn nothing_outside_the_box_is_drawn() {
         let (ct, lumen) = slab(2.5, -100);
-        let cam = Camera::new(crate::camera::Pose::looking(DVec3::new(6.0, 6.0, 2.0), DVec3::Z, DVec3::Y));
-        let t = render_translucency(&ct, &lumen, &cam, &CloseupBox::around(DVec3::new(6.0, 6.0, 10.0), 1.0), 32, 32, &TranslucencyOptions::default());
+        let cam = Camera::new(crate::camera::Pose::looking(
+            DVec3::new(6.0, 6.0, 2.0),
+            DVec3::Z,
+            DVec3::Y,
+        ));
+        let t = render_translucency(
+            &ct,
+            &lumen,
+            &cam,
+            &CloseupBox::around(DVec3::new(6.0, 6.0, 10.0), 1.0),
+            32,
+            32,
+            &TranslucencyOptions::default(),
+        );
         for (s, px) in t.surfels.iter().zip(t.rgba.chunks_exact(4)) {
             match s {
-                Some(s) => assert!((s.point - DVec3::new(6.0, 6.0, 10.0)).abs().max_element() <= 1.0 + 1e-6 && px[3] > 0),
+                Some(s) => assert!(
+                    (s.point - DVec3::new(6.0, 6.0, 10.0)).abs().max_element() <= 1.0 + 1e-6
+                        && px[3] > 0
+                ),
                 None => assert_eq!(px, [0, 0, 0, 0]),
             }
         }

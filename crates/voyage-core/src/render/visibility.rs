@@ -29,7 +29,7 @@ use glam::DVec3;
 use serde::Serialize;
 
 use super::raster::{Frame, Rasterizer, View};
-use crate::cells::{convex_hull, Cells};
+use crate::cells::{Cells, convex_hull};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
 #[serde(rename_all = "lowercase")]
@@ -62,7 +62,10 @@ impl fmt::Display for Strategy {
 impl FromStr for Strategy {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        Strategy::ALL.into_iter().find(|k| k.name() == s).ok_or_else(|| format!("unknown visibility strategy '{s}' (all, lg, paper, ours)"))
+        Strategy::ALL
+            .into_iter()
+            .find(|k| k.name() == s)
+            .ok_or_else(|| format!("unknown visibility strategy '{s}' (all, lg, paper, ours)"))
     }
 }
 
@@ -110,10 +113,20 @@ impl Visibility {
             .iter()
             .map(|p| {
                 let normal = DVec3::from_array(p.normal);
-                PortalShape { corners: p.bounding_points(), normal, offset: normal.dot(DVec3::from_array(p.centre_mm)), half_thickness: p.half_thickness_mm }
+                PortalShape {
+                    corners: p.bounding_points(),
+                    normal,
+                    offset: normal.dot(DVec3::from_array(p.centre_mm)),
+                    half_thickness: p.half_thickness_mm,
+                }
             })
             .collect();
-        Visibility { strategy, coherence: strategy == Strategy::Paper, portals, last: None }
+        Visibility {
+            strategy,
+            coherence: strategy == Strategy::Paper,
+            portals,
+            last: None,
+        }
     }
 
     /// Forgets last frame (after a jump).
@@ -127,7 +140,10 @@ impl Visibility {
         let view = *raster.view();
         let ncells = cells.cells.len() as u32;
         let camera_cell = cells.cell_of_point(view.eye).map(|c| c as u32);
-        let mut drawn = Drawn { camera_cell, ..Drawn::default() };
+        let mut drawn = Drawn {
+            camera_cell,
+            ..Drawn::default()
+        };
         let Some(home) = camera_cell.filter(|_| self.strategy != Strategy::All) else {
             let all: Vec<u32> = (0..ncells).collect();
             drawn.triangles = raster.draw_cells(frame, &all);
@@ -161,7 +177,13 @@ impl Visibility {
             let mut cell = home;
             while let Some((portal, next)) = beyond(dir, cell, ncells) {
                 drawn.portals_tested += 1;
-                if !self.narrow(&mut region, portal, frame, &view, &mut drawn.depth_pixels_read) {
+                if !self.narrow(
+                    &mut region,
+                    portal,
+                    frame,
+                    &view,
+                    &mut drawn.depth_pixels_read,
+                ) {
                     break;
                 }
                 draw(next, &mut drawn, frame);
@@ -181,7 +203,10 @@ impl Visibility {
     pub fn select(&mut self, cells: &Cells, view: &View) -> Drawn {
         let ncells = cells.cells.len() as u32;
         let camera_cell = cells.cell_of_point(view.eye).map(|c| c as u32);
-        let mut drawn = Drawn { camera_cell, ..Drawn::default() };
+        let mut drawn = Drawn {
+            camera_cell,
+            ..Drawn::default()
+        };
         let Some(home) = camera_cell.filter(|_| self.strategy != Strategy::All) else {
             drawn.cells = (0..ncells).collect();
             return drawn;
@@ -192,7 +217,9 @@ impl Visibility {
             let mut cell = home;
             while let Some((portal, next)) = beyond(dir, cell, ncells) {
                 drawn.portals_tested += 1;
-                let Some(outline) = project_prism(&self.portals[portal].corners, view) else { break };
+                let Some(outline) = project_prism(&self.portals[portal].corners, view) else {
+                    break;
+                };
                 let open = match self.strategy {
                     Strategy::Lg => region.clip_rect(&outline, view),
                     _ => region.clip_hull(&outline, view),
@@ -209,7 +236,14 @@ impl Visibility {
 
     /// Narrows a sequence's region by the next portal; false when nothing can be seen
     /// through it any more.
-    fn narrow(&self, region: &mut Region, portal: usize, frame: &Frame, view: &View, reads: &mut usize) -> bool {
+    fn narrow(
+        &self,
+        region: &mut Region,
+        portal: usize,
+        frame: &Frame,
+        view: &View,
+        reads: &mut usize,
+    ) -> bool {
         let shape = &self.portals[portal];
         let Some(outline) = project_prism(&shape.corners, view) else {
             return false;
@@ -217,8 +251,14 @@ impl Visibility {
         match self.strategy {
             Strategy::All => true,
             Strategy::Lg => region.clip_rect(&outline, view),
-            Strategy::Paper => region.clip_rect(&outline, view) && region.drop_covered_rows(frame, outline.min_depth, reads),
-            Strategy::Ours => region.clip_hull(&outline, view) && region.trim_covered(frame, shape, outline.min_depth, view, reads),
+            Strategy::Paper => {
+                region.clip_rect(&outline, view)
+                    && region.drop_covered_rows(frame, outline.min_depth, reads)
+            }
+            Strategy::Ours => {
+                region.clip_hull(&outline, view)
+                    && region.trim_covered(frame, shape, outline.min_depth, view, reads)
+            }
         }
     }
 }
@@ -282,7 +322,11 @@ const SLACK_PX: f64 = 1e-3;
 
 impl Region {
     fn full(view: &View) -> Self {
-        Region { y0: 0, y1: view.height as i64 - 1, rows: vec![(0, view.width as i64 - 1); view.height as usize] }
+        Region {
+            y0: 0,
+            y1: view.height as i64 - 1,
+            rows: vec![(0, view.width as i64 - 1); view.height as usize],
+        }
     }
 
     fn is_empty(&self) -> bool {
@@ -302,7 +346,12 @@ impl Region {
 
     /// Intersects with the outline's bounding rectangle (LG, paper).
     fn clip_rect(&mut self, o: &Outline, view: &View) -> bool {
-        let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+        let (mut x0, mut x1, mut y0, mut y1) = (
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        );
         for &(x, y) in &o.hull {
             x0 = x0.min(x);
             x1 = x1.max(x);
@@ -362,7 +411,14 @@ impl Region {
 
     /// Ours: trims both ends of every row while the pixel is nearer than where its ray can
     /// first meet the portal's slab.
-    fn trim_covered(&mut self, frame: &Frame, portal: &PortalShape, min_depth: f64, view: &View, reads: &mut usize) -> bool {
+    fn trim_covered(
+        &mut self,
+        frame: &Frame,
+        portal: &PortalShape,
+        min_depth: f64,
+        view: &View,
+        reads: &mut usize,
+    ) -> bool {
         let bound = SlabBound::new(portal, view);
         let prism_bound = 1.0 / (min_depth * (1.0 - 1e-6));
         for y in self.y0.max(0)..=self.y1 {
@@ -402,9 +458,15 @@ impl SlabBound {
         } else if s > p.half_thickness {
             (-p.normal, -(p.offset + p.half_thickness))
         } else {
-            return SlabBound { plane: None, eye_side: 0.0 };
+            return SlabBound {
+                plane: None,
+                eye_side: 0.0,
+            };
         };
-        SlabBound { plane: Some((n, c)), eye_side: n.dot(view.eye) }
+        SlabBound {
+            plane: Some((n, c)),
+            eye_side: n.dot(view.eye),
+        }
     }
 
     /// The largest inverse depth (nearest point) at which the ray through pixel (x, y) can
@@ -430,13 +492,21 @@ impl SlabBound {
 fn centres(a: f64, b: f64, size: u32) -> (i64, i64) {
     let lo = (a - 0.5 - SLACK_PX).ceil().max(0.0);
     let hi = (b - 0.5 + SLACK_PX).floor().min(size as f64 - 1.0);
-    if lo > hi || hi < 0.0 { (1, 0) } else { (lo as i64, hi as i64) }
+    if lo > hi || hi < 0.0 {
+        (1, 0)
+    } else {
+        (lo as i64, hi as i64)
+    }
 }
 
 /// The x extent of a convex polygon along the horizontal line y (a line within the slack
 /// of the top or bottom vertex counts as touching it).
 fn hull_span(hull: &[(f64, f64)], y: f64) -> Option<(f64, f64)> {
-    let (ymin, ymax) = hull.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.1), b.max(p.1)));
+    let (ymin, ymax) = hull
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+            (a.min(p.1), b.max(p.1))
+        });
     if hull.is_empty() || y < ymin - SLACK_PX || y > ymax + SLACK_PX {
         return None;
     }
@@ -463,7 +533,13 @@ mod tests {
 
     #[test]
     fn hull_spans_cover_the_polygon() {
-        let sq = convex_hull(vec![(1.0, 1.0), (5.0, 1.0), (5.0, 5.0), (1.0, 5.0), (3.0, 3.0)]);
+        let sq = convex_hull(vec![
+            (1.0, 1.0),
+            (5.0, 1.0),
+            (5.0, 5.0),
+            (1.0, 5.0),
+            (3.0, 3.0),
+        ]);
         assert_eq!(sq.len(), 4);
         assert_eq!(hull_span(&sq, 2.0), Some((1.0, 5.0)));
         assert_eq!(hull_span(&sq, 6.0), None);

@@ -26,10 +26,10 @@ pub fn hu_cost(hu: Option<i16>) -> f32 {
         None => 1.0,
         Some(h) if h < -600 => 30.0, // gas that belongs to neither segment
         Some(h) if h < -150 => 10.0,
-        Some(h) if h < -30 => 6.0, // fat
-        Some(h) if h < 200 => 1.0, // collapsed bowel wall (and organs)
+        Some(h) if h < -30 => 6.0,  // fat
+        Some(h) if h < 200 => 1.0,  // collapsed bowel wall (and organs)
         Some(h) if h < 1200 => 0.7, // tagged fluid filling the bowel (and cancellous bone)
-        Some(_) => 40.0,           // cortical bone
+        Some(_) => 40.0,            // cortical bone
     }
 }
 
@@ -49,16 +49,33 @@ pub struct Path {
 /// The cheapest path from `a` to `b` through `ct` (or a mask's background when None), where
 /// `own(v)` says that voxel `v` lies in one of the two segments being joined and
 /// `other_gas(v)` that it is another gas region.
-pub fn cheapest_path(ct: Option<&Volume<i16>>, dims: [usize; 3], spacing: [f64; 3], a: [usize; 3], b: [usize; 3], own: impl Fn([usize; 3]) -> bool, other_gas: impl Fn([usize; 3]) -> bool) -> Option<Path> {
-    let dist_mm = (0..3).map(|x| ((a[x] as f64 - b[x] as f64) * spacing[x]).powi(2)).sum::<f64>().sqrt();
+pub fn cheapest_path(
+    ct: Option<&Volume<i16>>,
+    dims: [usize; 3],
+    spacing: [f64; 3],
+    a: [usize; 3],
+    b: [usize; 3],
+    own: impl Fn([usize; 3]) -> bool,
+    other_gas: impl Fn([usize; 3]) -> bool,
+) -> Option<Path> {
+    let dist_mm = (0..3)
+        .map(|x| ((a[x] as f64 - b[x] as f64) * spacing[x]).powi(2))
+        .sum::<f64>()
+        .sqrt();
     let pad_mm = 15.0 + 0.3 * dist_mm;
     let pad = spacing.map(|s| (pad_mm / s).ceil() as usize);
-    let bx = Bbox { lo: [0, 1, 2].map(|x| a[x].min(b[x])), hi: [0, 1, 2].map(|x| a[x].max(b[x])) }.grown(pad, dims);
+    let bx = Bbox {
+        lo: [0, 1, 2].map(|x| a[x].min(b[x])),
+        hi: [0, 1, 2].map(|x| a[x].max(b[x])),
+    }
+    .grown(pad, dims);
     let w = bx.widths();
     let n: usize = w.iter().product();
     // Blocks of f³ voxels when the box is large.
     let finest = spacing.iter().cloned().fold(f64::INFINITY, f64::min);
-    let f = ((n as f64 / MAX_BOX_VOXELS as f64).cbrt().ceil() as usize).max((MIN_BLOCK_MM / finest).round() as usize).max(1);
+    let f = ((n as f64 / MAX_BOX_VOXELS as f64).cbrt().ceil() as usize)
+        .max((MIN_BLOCK_MM / finest).round() as usize)
+        .max(1);
     let cw = w.map(|x| x.div_ceil(f));
     let cn = cw[0] * cw[1] * cw[2];
     let centre = |c: [usize; 3]| [0, 1, 2].map(|x| (bx.lo[x] + c[x] * f + f / 2).min(bx.hi[x]));
@@ -117,7 +134,10 @@ pub fn cheapest_path(ct: Option<&Volume<i16>>, dims: [usize; 3], spacing: [f64; 
                     }
                     let q = q.map(|x| x as usize);
                     let v = idx(q);
-                    let len = ((dx as f64 * step[0]).powi(2) + (dy as f64 * step[1]).powi(2) + (dz as f64 * step[2]).powi(2)).sqrt() as f32;
+                    let len = ((dx as f64 * step[0]).powi(2)
+                        + (dy as f64 * step[1]).powi(2)
+                        + (dz as f64 * step[2]).powi(2))
+                    .sqrt() as f32;
                     let nd = d + len * 0.5 * (cost[u] + cost[v]);
                     if nd < dist[v] {
                         dist[v] = nd;
@@ -137,7 +157,10 @@ pub fn cheapest_path(ct: Option<&Volume<i16>>, dims: [usize; 3], spacing: [f64; 
     }
     blocks.reverse();
     // Back to voxels: a straight line between consecutive block centres, ends exact.
-    let mut pts: Vec<[usize; 3]> = blocks.iter().map(|&i| centre([i % cw[0], (i / cw[0]) % cw[1], i / (cw[0] * cw[1])])).collect();
+    let mut pts: Vec<[usize; 3]> = blocks
+        .iter()
+        .map(|&i| centre([i % cw[0], (i / cw[0]) % cw[1], i / (cw[0] * cw[1])]))
+        .collect();
     pts[0] = a;
     let last = pts.len() - 1;
     pts[last] = b;
@@ -145,27 +168,49 @@ pub fn cheapest_path(ct: Option<&Volume<i16>>, dims: [usize; 3], spacing: [f64; 
     let mut length_mm = 0.0;
     let mut outside = (0.0, 0.0);
     for p in voxels.windows(2) {
-        let l = (0..3).map(|x| ((p[1][x] as f64 - p[0][x] as f64) * spacing[x]).powi(2)).sum::<f64>().sqrt();
+        let l = (0..3)
+            .map(|x| ((p[1][x] as f64 - p[0][x] as f64) * spacing[x]).powi(2))
+            .sum::<f64>()
+            .sqrt();
         length_mm += l;
         if !own(p[1]) {
-            let c = if other_gas(p[1]) { hu_cost(Some(-1000)) } else { hu_cost(ct.map(|ct| ct.get(p[1][0], p[1][1], p[1][2]))) };
+            let c = if other_gas(p[1]) {
+                hu_cost(Some(-1000))
+            } else {
+                hu_cost(ct.map(|ct| ct.get(p[1][0], p[1][1], p[1][2])))
+            };
             outside.0 += l * c as f64;
             outside.1 += l;
         }
     }
-    let mean_cost = if outside.1 > 0.0 { outside.0 / outside.1 } else { 1.0 };
-    Some(Path { voxels, length_mm, mean_cost })
+    let mean_cost = if outside.1 > 0.0 {
+        outside.0 / outside.1
+    } else {
+        1.0
+    };
+    Some(Path {
+        voxels,
+        length_mm,
+        mean_cost,
+    })
 }
 
 /// The voxels on straight lines through `pts` (26-connected, no repeats).
 fn line_voxels(pts: &[[usize; 3]]) -> Vec<[usize; 3]> {
     let mut out: Vec<[usize; 3]> = vec![pts[0]];
     for w in pts.windows(2) {
-        let (p, q) = (DVec3::from_array(w[0].map(|x| x as f64)), DVec3::from_array(w[1].map(|x| x as f64)));
+        let (p, q) = (
+            DVec3::from_array(w[0].map(|x| x as f64)),
+            DVec3::from_array(w[1].map(|x| x as f64)),
+        );
         let n = (q - p).abs().max_element().ceil() as usize;
         for t in 1..=n {
             let r = p + (q - p) * (t as f64 / n as f64);
-            let v = [r.x.round() as usize, r.y.round() as usize, r.z.round() as usize];
+            let v = [
+                r.x.round() as usize,
+                r.y.round() as usize,
+                r.z.round() as usize,
+            ];
             if out.last() != Some(&v) {
                 out.push(v);
             }
@@ -202,17 +247,45 @@ mod tests {
                 ct.set(t, 15, k, 40);
             }
         }
-        let p = cheapest_path(Some(&ct), ct.dims(), ct.spacing(), [5, 5, 5], [35, 5, 5], |_| false, |_| false).unwrap();
+        let p = cheapest_path(
+            Some(&ct),
+            ct.dims(),
+            ct.spacing(),
+            [5, 5, 5],
+            [35, 5, 5],
+            |_| false,
+            |_| false,
+        )
+        .unwrap();
         let block = (MIN_BLOCK_MM / spacing).round().max(1.0) as usize;
         let near_cord = |v: &[usize; 3]| {
             let lo = v.map(|x| x.saturating_sub(block));
-            (lo[2]..=v[2] + block).any(|k| (lo[1]..=v[1] + block).any(|j| (lo[0]..=v[0] + block).any(|i| i < 40 && j < 30 && k < 10 && ct.get(i, j, k) == 40)))
+            (lo[2]..=v[2] + block).any(|k| {
+                (lo[1]..=v[1] + block).any(|j| {
+                    (lo[0]..=v[0] + block)
+                        .any(|i| i < 40 && j < 30 && k < 10 && ct.get(i, j, k) == 40)
+                })
+            })
         };
-        assert!(p.voxels.iter().all(near_cord), "left the cord at spacing {spacing}");
+        assert!(
+            p.voxels.iter().all(near_cord),
+            "left the cord at spacing {spacing}"
+        );
         let cord_mm = 50.0 * spacing;
-        assert!(p.length_mm > 0.9 * cord_mm && p.length_mm < 1.3 * cord_mm, "{} mm along a {cord_mm} mm cord", p.length_mm);
+        assert!(
+            p.length_mm > 0.9 * cord_mm && p.length_mm < 1.3 * cord_mm,
+            "{} mm along a {cord_mm} mm cord",
+            p.length_mm
+        );
         // The ends are the given voxels, and the path is connected.
-        assert_eq!((p.voxels[0], p.voxels[p.voxels.len() - 1]), ([5, 5, 5], [35, 5, 5]));
-        assert!(p.voxels.windows(2).all(|w| (0..3).all(|x| w[0][x].abs_diff(w[1][x]) <= 1)));
+        assert_eq!(
+            (p.voxels[0], p.voxels[p.voxels.len() - 1]),
+            ([5, 5, 5], [35, 5, 5])
+        );
+        assert!(
+            p.voxels
+                .windows(2)
+                .all(|w| (0..3).all(|x| w[0][x].abs_diff(w[1][x]) <= 1))
+        );
     }
 }

@@ -54,7 +54,12 @@ impl Coarse {
     pub fn new(dims: [usize; 3], spacing: [f64; 3]) -> Coarse {
         let f = spacing.map(|s| ((BLOCK_MM / s).round() as usize).max(1));
         let cd = [0, 1, 2].map(|a| dims[a].div_ceil(f[a]));
-        Coarse { f, dims: cd, step_mm: [0, 1, 2].map(|a| spacing[a] * f[a] as f64), label: vec![u32::MAX; cd[0] * cd[1] * cd[2]] }
+        Coarse {
+            f,
+            dims: cd,
+            step_mm: [0, 1, 2].map(|a| spacing[a] * f[a] as f64),
+            label: vec![u32::MAX; cd[0] * cd[1] * cd[2]],
+        }
     }
 
     /// Marks voxels x0..x1 of row (j, k) as compartment `c`.
@@ -74,13 +79,20 @@ impl Coarse {
     }
 
     fn coords(&self, b: usize) -> [usize; 3] {
-        [b % self.dims[0], (b / self.dims[0]) % self.dims[1], b / (self.dims[0] * self.dims[1])]
+        [
+            b % self.dims[0],
+            (b / self.dims[0]) % self.dims[1],
+            b / (self.dims[0] * self.dims[1]),
+        ]
     }
 
     /// The voxel range of block `b`, for finding a voxel of it.
     pub fn voxels_of(&self, b: usize, vol_dims: [usize; 3]) -> Bbox {
         let c = self.coords(b);
-        Bbox { lo: [0, 1, 2].map(|a| c[a] * self.f[a]), hi: [0, 1, 2].map(|a| ((c[a] + 1) * self.f[a]).min(vol_dims[a]) - 1) }
+        Bbox {
+            lo: [0, 1, 2].map(|a| c[a] * self.f[a]),
+            hi: [0, 1, 2].map(|a| ((c[a] + 1) * self.f[a]).min(vol_dims[a]) - 1),
+        }
     }
 
     /// Geodesic distances (mm, 26-neighbours) from block `from` over the blocks of
@@ -105,14 +117,20 @@ impl Coarse {
                 for dy in -1i64..=1 {
                     for dx in -1i64..=1 {
                         let q = [p[0] as i64 + dx, p[1] as i64 + dy, p[2] as i64 + dz];
-                        if (dx, dy, dz) == (0, 0, 0) || (0..3).any(|a| q[a] < 0 || q[a] >= self.dims[a] as i64) {
+                        if (dx, dy, dz) == (0, 0, 0)
+                            || (0..3).any(|a| q[a] < 0 || q[a] >= self.dims[a] as i64)
+                        {
                             continue;
                         }
-                        let v = q[0] as usize + self.dims[0] * (q[1] as usize + self.dims[1] * q[2] as usize);
+                        let v = q[0] as usize
+                            + self.dims[0] * (q[1] as usize + self.dims[1] * q[2] as usize);
                         if self.label[v] != c {
                             continue;
                         }
-                        let len = ((dx as f64 * self.step_mm[0]).powi(2) + (dy as f64 * self.step_mm[1]).powi(2) + (dz as f64 * self.step_mm[2]).powi(2)).sqrt();
+                        let len = ((dx as f64 * self.step_mm[0]).powi(2)
+                            + (dy as f64 * self.step_mm[1]).powi(2)
+                            + (dz as f64 * self.step_mm[2]).powi(2))
+                        .sqrt();
                         let nd = d + len;
                         if nd < dist[v] {
                             dist[v] = nd;
@@ -128,10 +146,13 @@ impl Coarse {
     /// Centre of block `b`, volume-local mm.
     pub fn centre_mm(&self, b: usize) -> DVec3 {
         let c = self.coords(b);
-        DVec3::new((c[0] as f64 + 0.5) * self.step_mm[0], (c[1] as f64 + 0.5) * self.step_mm[1], (c[2] as f64 + 0.5) * self.step_mm[2])
+        DVec3::new(
+            (c[0] as f64 + 0.5) * self.step_mm[0],
+            (c[1] as f64 + 0.5) * self.step_mm[1],
+            (c[2] as f64 + 0.5) * self.step_mm[2],
+        )
     }
 }
-
 
 #[derive(Clone, Debug)]
 pub struct ChainOptions {
@@ -146,7 +167,11 @@ pub struct ChainOptions {
 
 impl Default for ChainOptions {
     fn default() -> Self {
-        ChainOptions { min_segment_ml: 5.0, max_gap_mm: 100.0, max_bridge_cost: 4.0 }
+        ChainOptions {
+            min_segment_ml: 5.0,
+            max_gap_mm: 100.0,
+            max_bridge_cost: 4.0,
+        }
     }
 }
 
@@ -163,7 +188,10 @@ pub struct Link {
 pub enum Left {
     TooSmall,
     TooFar(f64),
-    BridgeTooDear { gap_mm: f64, cost: f64 },
+    BridgeTooDear {
+        gap_mm: f64,
+        cost: f64,
+    },
     /// The user said it is not colon.
     Excluded,
 }
@@ -178,24 +206,43 @@ pub struct Chain {
 /// Orders the colon's compartments from `rectum` on. `candidate(c)`: big enough to be a
 /// segment; `bridge(from_block, to_block, a, b)`: the cheapest path between two blocks of
 /// compartments a and b.
-pub fn chain(coarse: &Coarse, comps: &[Compartment], rectum: u32, candidate: impl Fn(u32) -> bool, opts: &ChainOptions, mut bridge: impl FnMut(usize, usize, u32, u32) -> Option<Path>) -> Chain {
+pub fn chain(
+    coarse: &Coarse,
+    comps: &[Compartment],
+    rectum: u32,
+    candidate: impl Fn(u32) -> bool,
+    opts: &ChainOptions,
+    mut bridge: impl FnMut(usize, usize, u32, u32) -> Option<Path>,
+) -> Chain {
     let entry = coarse.block_of(comps[rectum as usize].lowest);
-    let mut links = vec![Link { comp: rectum, entry, exit: coarse.farthest(rectum, entry).0 }];
+    let mut links = vec![Link {
+        comp: rectum,
+        entry,
+        exit: coarse.farthest(rectum, entry).0,
+    }];
     let mut gaps = Vec::new();
     let mut left: Vec<(u32, Left)> = Vec::new();
     // Both ends of every candidate: a double sweep from its lowest voxel.
     let ends: Vec<Option<[usize; 2]>> = (0..comps.len() as u32)
         .map(|c| {
             (c != rectum && candidate(c)).then(|| {
-                let a = coarse.farthest(c, coarse.block_of(comps[c as usize].lowest)).0;
+                let a = coarse
+                    .farthest(c, coarse.block_of(comps[c as usize].lowest))
+                    .0;
                 [a, coarse.farthest(c, a).0]
             })
         })
         .collect();
-    let mut free: Vec<u32> = (0..comps.len() as u32).filter(|&c| ends[c as usize].is_some()).collect();
+    let mut free: Vec<u32> = (0..comps.len() as u32)
+        .filter(|&c| ends[c as usize].is_some())
+        .collect();
     loop {
-        let here = links.last().map(|l| (l.comp, coarse.centre_mm(l.exit), l.exit));
-        let Some((at_comp, at, exit)) = here else { break };
+        let here = links
+            .last()
+            .map(|l| (l.comp, coarse.centre_mm(l.exit), l.exit));
+        let Some((at_comp, at, exit)) = here else {
+            break;
+        };
         let mut options: Vec<(f64, u32, usize)> = free
             .iter()
             .flat_map(|&c| ends[c as usize].into_iter().flatten().map(move |e| (c, e)))
@@ -223,13 +270,23 @@ pub fn chain(coarse: &Coarse, comps: &[Compartment], rectum: u32, candidate: imp
                 }
                 Some(p) => {
                     left.retain(|(x, _)| *x != c);
-                    left.push((c, Left::BridgeTooDear { gap_mm: p.length_mm, cost: p.mean_cost }));
+                    left.push((
+                        c,
+                        Left::BridgeTooDear {
+                            gap_mm: p.length_mm,
+                            cost: p.mean_cost,
+                        },
+                    ));
                 }
                 None => {}
             }
         }
         let Some((_, c, e, p)) = best else { break };
-        links.push(Link { comp: c, entry: e, exit: coarse.farthest(c, e).0 });
+        links.push(Link {
+            comp: c,
+            entry: e,
+            exit: coarse.farthest(c, e).0,
+        });
         gaps.push(p);
         free.retain(|&x| x != c);
         left.retain(|(x, _)| *x != c);
@@ -237,8 +294,14 @@ pub fn chain(coarse: &Coarse, comps: &[Compartment], rectum: u32, candidate: imp
     // Whatever stayed free: too far from the chain's end (or its bridge too dear).
     for &c in &free {
         if !left.iter().any(|(x, _)| *x == c) {
-            let at = links.last().map_or(DVec3::ZERO, |l| coarse.centre_mm(l.exit));
-            let d = ends[c as usize].map_or(f64::INFINITY, |e| e.iter().map(|&b| coarse.centre_mm(b).distance(at)).fold(f64::INFINITY, f64::min));
+            let at = links
+                .last()
+                .map_or(DVec3::ZERO, |l| coarse.centre_mm(l.exit));
+            let d = ends[c as usize].map_or(f64::INFINITY, |e| {
+                e.iter()
+                    .map(|&b| coarse.centre_mm(b).distance(at))
+                    .fold(f64::INFINITY, f64::min)
+            });
             left.push((c, Left::TooFar(d)));
         }
     }
@@ -260,7 +323,11 @@ pub fn height(inferior: DVec3, p: DVec3) -> f64 {
 /// patient frame (u: right 0 → left 1; v: inferior 0 → superior 1).
 pub fn region(u: f64, v: f64) -> &'static str {
     if u > 0.68 {
-        if v > 0.8 { "splenic flexure" } else { "descending" }
+        if v > 0.8 {
+            "splenic flexure"
+        } else {
+            "descending"
+        }
     } else if u < 0.32 {
         if v > 0.8 {
             "hepatic flexure"
@@ -292,7 +359,17 @@ mod tests {
         let spans = [(0usize, 40usize), (60, 100), (130, 190)];
         let comps: Vec<Compartment> = spans
             .iter()
-            .map(|&(a, b)| Compartment { voxels: 1, gas_voxels: 1, sum_mm: DVec3::ZERO, bbox: Bbox { lo: [a, 8, 8], hi: [b - 1, 11, 11] }, lowest: [a, 9, 9], lowest_height: 0.0 })
+            .map(|&(a, b)| Compartment {
+                voxels: 1,
+                gas_voxels: 1,
+                sum_mm: DVec3::ZERO,
+                bbox: Bbox {
+                    lo: [a, 8, 8],
+                    hi: [b - 1, 11, 11],
+                },
+                lowest: [a, 9, 9],
+                lowest_height: 0.0,
+            })
             .collect();
         for (c, &(a, b)) in spans.iter().enumerate() {
             for k in 8..12 {
@@ -302,28 +379,85 @@ mod tests {
             }
         }
         let mut asked = Vec::new();
-        let ch = chain(&coarse, &comps, 0, |_| true, &ChainOptions::default(), |from, to, a, b| {
-            asked.push((a, b));
-            let (p, q) = (coarse.centre_mm(from), coarse.centre_mm(to));
-            Some(Path { voxels: vec![], length_mm: p.distance(q), mean_cost: 1.0 })
-        });
-        assert_eq!(ch.links.iter().map(|l| l.comp).collect::<Vec<_>>(), vec![0, 1, 2]);
-        assert_eq!(asked, vec![(0, 1), (0, 2), (1, 2)], "the nearest few are bridged to");
-        assert!((ch.gaps[0].length_mm - 20.0).abs() < 8.5 && (ch.gaps[1].length_mm - 30.0).abs() < 8.5);
+        let ch = chain(
+            &coarse,
+            &comps,
+            0,
+            |_| true,
+            &ChainOptions::default(),
+            |from, to, a, b| {
+                asked.push((a, b));
+                let (p, q) = (coarse.centre_mm(from), coarse.centre_mm(to));
+                Some(Path {
+                    voxels: vec![],
+                    length_mm: p.distance(q),
+                    mean_cost: 1.0,
+                })
+            },
+        );
+        assert_eq!(
+            ch.links.iter().map(|l| l.comp).collect::<Vec<_>>(),
+            vec![0, 1, 2]
+        );
+        assert_eq!(
+            asked,
+            vec![(0, 1), (0, 2), (1, 2)],
+            "the nearest few are bridged to"
+        );
+        assert!(
+            (ch.gaps[0].length_mm - 20.0).abs() < 8.5 && (ch.gaps[1].length_mm - 30.0).abs() < 8.5
+        );
         // The cheapest bridge wins, not the nearest end: through fat to 1 (20 mm at 6 per
         // mm), along collapsed bowel to 2 (90 mm at 1).
-        let lax = ChainOptions { max_bridge_cost: 10.0, ..Default::default() };
-        let ch = chain(&coarse, &comps, 0, |_| true, &lax, |from, to, _, b| {
-            let (p, q) = (coarse.centre_mm(from), coarse.centre_mm(to));
-            Some(Path { voxels: vec![], length_mm: p.distance(q), mean_cost: if b == 1 { 6.0 } else { 1.0 } })
-        });
-        assert_eq!(ch.links.iter().map(|l| l.comp).collect::<Vec<_>>(), vec![0, 2, 1]);
+        let lax = ChainOptions {
+            max_bridge_cost: 10.0,
+            ..Default::default()
+        };
+        let ch = chain(
+            &coarse,
+            &comps,
+            0,
+            |_| true,
+            &lax,
+            |from, to, _, b| {
+                let (p, q) = (coarse.centre_mm(from), coarse.centre_mm(to));
+                Some(Path {
+                    voxels: vec![],
+                    length_mm: p.distance(q),
+                    mean_cost: if b == 1 { 6.0 } else { 1.0 },
+                })
+            },
+        );
+        assert_eq!(
+            ch.links.iter().map(|l| l.comp).collect::<Vec<_>>(),
+            vec![0, 2, 1]
+        );
         // A bridge through fat leaves the segment out, and says why.
-        let ch = chain(&coarse, &comps, 0, |_| true, &ChainOptions::default(), |_, _, _, _| Some(Path { voxels: vec![], length_mm: 20.0, mean_cost: 6.0 }));
+        let ch = chain(
+            &coarse,
+            &comps,
+            0,
+            |_| true,
+            &ChainOptions::default(),
+            |_, _, _, _| {
+                Some(Path {
+                    voxels: vec![],
+                    length_mm: 20.0,
+                    mean_cost: 6.0,
+                })
+            },
+        );
         assert_eq!(ch.links.len(), 1);
-        assert!(ch.left.iter().any(|(c, l)| *c == 1 && matches!(l, Left::BridgeTooDear { .. })));
+        assert!(
+            ch.left
+                .iter()
+                .any(|(c, l)| *c == 1 && matches!(l, Left::BridgeTooDear { .. }))
+        );
         // Too far apart: not joined.
-        let far = ChainOptions { max_gap_mm: 10.0, ..Default::default() };
+        let far = ChainOptions {
+            max_gap_mm: 10.0,
+            ..Default::default()
+        };
         let ch = chain(&coarse, &comps, 0, |_| true, &far, |_, _, _, _| None);
         assert_eq!(ch.links.len(), 1);
         assert!(ch.left.iter().all(|(_, l)| matches!(l, Left::TooFar(_))));

@@ -21,8 +21,8 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::work::{Bbox, GAS, LAYER, POOL};
-use crate::anatomy::PatientFrame;
 use crate::Geometry;
+use crate::anatomy::PatientFrame;
 
 /// A pool deeper than this below its gas is not one colon segment's fluid.
 pub const MAX_DEPTH_MM: f64 = 60.0;
@@ -98,8 +98,21 @@ impl Line {
     /// The line meets `label` at position `pos` (voxel `idx`; a step along the line is
     /// `stride` in the volume's index). Pushes the pool's and the layer's voxels.
     #[inline]
-    fn visit(&mut self, pos: i64, label: u8, idx: usize, walk: &Walk, wide: impl Fn() -> bool, marks: &mut Vec<Mark>) {
-        let Walk { stride, gap_max, depth_max, narrow_below } = *walk;
+    fn visit(
+        &mut self,
+        pos: i64,
+        label: u8,
+        idx: usize,
+        walk: &Walk,
+        wide: impl Fn() -> bool,
+        marks: &mut Vec<Mark>,
+    ) {
+        let Walk {
+            stride,
+            gap_max,
+            depth_max,
+            narrow_below,
+        } = *walk;
         let gap = (pos - self.last).abs() - 1;
         match label {
             GAS => {
@@ -113,7 +126,13 @@ impl Line {
                 marks.push((idx, POOL));
                 self.state = 2;
             }
-            _ if self.state == 2 && gap == 0 && (pos - self.gas).abs() <= depth_max && ((pos - self.gas).abs() <= narrow_below || wide()) => marks.push((idx, POOL)),
+            _ if self.state == 2
+                && gap == 0
+                && (pos - self.gas).abs() <= depth_max
+                && ((pos - self.gas).abs() <= narrow_below || wide()) =>
+            {
+                marks.push((idx, POOL))
+            }
             _ => self.state = 0,
         }
         self.last = pos;
@@ -123,11 +142,26 @@ impl Line {
 /// Calls `f(line, pos, idx, label)` for every labelled voxel of `rows` inside `bx` on lines
 /// along `axis`, each line in the direction `sign`, lines of one slice together: slices are
 /// independent for `axis` 0 and 1 (run in parallel, one state per slice), not for 2.
-fn walk<S: Send>(rows: &LabelRows, bx: &Bbox, axis: usize, sign: i32, state: impl Fn() -> S + Sync, f: impl Fn(&mut S, usize, i64, usize, u8) + Sync) -> Vec<S> {
+fn walk<S: Send>(
+    rows: &LabelRows,
+    bx: &Bbox,
+    axis: usize,
+    sign: i32,
+    state: impl Fn() -> S + Sync,
+    f: impl Fn(&mut S, usize, i64, usize, u8) + Sync,
+) -> Vec<S> {
     let [nx, ny, _] = rows.dims;
-    let ks: Vec<usize> = if axis == 2 && sign < 0 { (bx.lo[2]..=bx.hi[2]).rev().collect() } else { (bx.lo[2]..=bx.hi[2]).collect() };
+    let ks: Vec<usize> = if axis == 2 && sign < 0 {
+        (bx.lo[2]..=bx.hi[2]).rev().collect()
+    } else {
+        (bx.lo[2]..=bx.hi[2]).collect()
+    };
     let slice = |s: &mut S, k: usize| {
-        let js: Vec<usize> = if axis == 1 && sign < 0 { (bx.lo[1]..=bx.hi[1]).rev().collect() } else { (bx.lo[1]..=bx.hi[1]).collect() };
+        let js: Vec<usize> = if axis == 1 && sign < 0 {
+            (bx.lo[1]..=bx.hi[1]).rev().collect()
+        } else {
+            (bx.lo[1]..=bx.hi[1]).collect()
+        };
         for j in js {
             let row = rows.row(j, k);
             let base = nx * (j + ny * k);
@@ -135,11 +169,16 @@ fn walk<S: Send>(rows: &LabelRows, bx: &Bbox, axis: usize, sign: i32, state: imp
                 let (line, pos) = match axis {
                     0 => (j - bx.lo[1], x as i64),
                     1 => (x - bx.lo[0], j as i64),
-                    _ => ((x - bx.lo[0]) + (j - bx.lo[1]) * (bx.hi[0] + 1 - bx.lo[0]), k as i64),
+                    _ => (
+                        (x - bx.lo[0]) + (j - bx.lo[1]) * (bx.hi[0] + 1 - bx.lo[0]),
+                        k as i64,
+                    ),
                 };
                 f(s, line, pos, base + x, label);
             };
-            let clip = |&(x0, x1, l): &(u32, u32, u8)| (x0.max(bx.lo[0] as u32), x1.min(bx.hi[0] as u32 + 1), l);
+            let clip = |&(x0, x1, l): &(u32, u32, u8)| {
+                (x0.max(bx.lo[0] as u32), x1.min(bx.hi[0] as u32 + 1), l)
+            };
             if axis == 0 && sign < 0 {
                 for (x0, x1, l) in row.iter().rev().map(clip) {
                     (x0..x1).rev().for_each(|x| visit(x as usize, l));
@@ -169,33 +208,101 @@ fn walk<S: Send>(rows: &LabelRows, bx: &Bbox, axis: usize, sign: i32, state: imp
 /// The colon's tagged fluid: the voxels (volume indices) of bright runs in the column under
 /// gas (POOL), and of the layer between them (LAYER). Gravity: LPS unit vector; `bright(v)`:
 /// whether voxel v is bright.
-pub fn pools(rows: &LabelRows, geom: &Geometry, bx: &Bbox, gravity_lps: DVec3, bright: impl Fn(usize) -> bool + Sync) -> Vec<Mark> {
+pub fn pools(
+    rows: &LabelRows,
+    geom: &Geometry,
+    bx: &Bbox,
+    gravity_lps: DVec3,
+    bright: impl Fn(usize) -> bool + Sync,
+) -> Vec<Mark> {
     let (axis, sign) = PatientFrame::of(geom).nearest_axis(gravity_lps);
     let step = geom.spacing[axis];
-    let stride = [1isize, geom.dims[0] as isize, (geom.dims[0] * geom.dims[1]) as isize][axis] * sign as isize;
-    let limits = Walk { stride, gap_max: max_gap(step), depth_max: (MAX_DEPTH_MM / step).round() as i64, narrow_below: (NARROW_BELOW_MM / step).round() as i64 };
+    let stride = [
+        1isize,
+        geom.dims[0] as isize,
+        (geom.dims[0] * geom.dims[1]) as isize,
+    ][axis]
+        * sign as isize;
+    let limits = Walk {
+        stride,
+        gap_max: max_gap(step),
+        depth_max: (MAX_DEPTH_MM / step).round() as i64,
+        narrow_below: (NARROW_BELOW_MM / step).round() as i64,
+    };
     let tube_steps = (TUBE_MM / step).ceil() as usize;
-    let wide = |v: usize| bright_run(geom, v, axis, sign, tube_steps, &bright) < tube_steps || (0..3).filter(|&a| a != axis).any(|a| chord_at_least(geom, v, a, WIDE_MM, &bright));
+    let wide = |v: usize| {
+        bright_run(geom, v, axis, sign, tube_steps, &bright) < tube_steps
+            || (0..3)
+                .filter(|&a| a != axis)
+                .any(|a| chord_at_least(geom, v, a, WIDE_MM, &bright))
+    };
     let w = bx.widths();
-    let lines = if axis == 2 { w[0] * w[1] } else { w[[1, 0, 0][axis]] };
-    let per = walk(rows, bx, axis, sign, || (vec![Line { last: i64::MIN / 2, ..Default::default() }; lines], Vec::new()), |(state, marks), line, pos, idx, label| {
-        state[line].visit(pos, label, idx, &limits, || wide(idx), marks);
-    });
+    let lines = if axis == 2 {
+        w[0] * w[1]
+    } else {
+        w[[1, 0, 0][axis]]
+    };
+    let per = walk(
+        rows,
+        bx,
+        axis,
+        sign,
+        || {
+            (
+                vec![
+                    Line {
+                        last: i64::MIN / 2,
+                        ..Default::default()
+                    };
+                    lines
+                ],
+                Vec::new(),
+            )
+        },
+        |(state, marks), line, pos, idx, label| {
+            state[line].visit(pos, label, idx, &limits, || wide(idx), marks);
+        },
+    );
     per.into_iter().flat_map(|(_, m)| m).collect()
 }
 
 /// How many bright voxels follow `v` along `axis` in direction `sign` (±1), counting up to
 /// `limit` at most and stopping at the volume's edge.
-fn bright_run(geom: &Geometry, v: usize, axis: usize, sign: i32, limit: usize, bright: impl Fn(usize) -> bool) -> usize {
+fn bright_run(
+    geom: &Geometry,
+    v: usize,
+    axis: usize,
+    sign: i32,
+    limit: usize,
+    bright: impl Fn(usize) -> bool,
+) -> usize {
     let stride = [1usize, geom.dims[0], geom.dims[0] * geom.dims[1]][axis];
     let at = geom.ijk(v)[axis];
-    let room = if sign > 0 { geom.dims[axis] - 1 - at } else { at };
-    (1..=limit.min(room)).take_while(|&t| bright(if sign > 0 { v + t * stride } else { v - t * stride })).count()
+    let room = if sign > 0 {
+        geom.dims[axis] - 1 - at
+    } else {
+        at
+    };
+    (1..=limit.min(room))
+        .take_while(|&t| {
+            bright(if sign > 0 {
+                v + t * stride
+            } else {
+                v - t * stride
+            })
+        })
+        .count()
 }
 
 /// Whether the run of bright voxels through voxel `v` along `axis` is at least `mm` long.
 /// Walks out from `v` both ways and stops as soon as it is.
-fn chord_at_least(geom: &Geometry, v: usize, axis: usize, mm: f64, bright: impl Fn(usize) -> bool) -> bool {
+fn chord_at_least(
+    geom: &Geometry,
+    v: usize,
+    axis: usize,
+    mm: f64,
+    bright: impl Fn(usize) -> bool,
+) -> bool {
     let need = (mm / geom.spacing[axis]).ceil() as usize;
     let up = bright_run(geom, v, axis, 1, need.saturating_sub(1), &bright);
     1 + up + bright_run(geom, v, axis, -1, need.saturating_sub(1 + up), &bright) >= need
@@ -208,18 +315,29 @@ pub fn level_counts(rows: &LabelRows, geom: &Geometry, bx: &Bbox) -> [[usize; 2]
     let w = bx.widths();
     for (axis, counts) in out.iter_mut().enumerate() {
         let gap_max = max_gap(geom.spacing[axis]);
-        let lines = if axis == 2 { w[0] * w[1] } else { w[[1, 0, 0][axis]] };
-        let per = walk(rows, bx, axis, 1, || (vec![(0u8, i64::MIN / 2); lines], [0usize; 2]), |(state, c), line, pos, _, label| {
-            let (last, at) = state[line];
-            if pos - at - 1 <= gap_max {
-                if label == BRIGHT && last == GAS {
-                    c[0] += 1;
-                } else if label == GAS && last == BRIGHT {
-                    c[1] += 1;
+        let lines = if axis == 2 {
+            w[0] * w[1]
+        } else {
+            w[[1, 0, 0][axis]]
+        };
+        let per = walk(
+            rows,
+            bx,
+            axis,
+            1,
+            || (vec![(0u8, i64::MIN / 2); lines], [0usize; 2]),
+            |(state, c), line, pos, _, label| {
+                let (last, at) = state[line];
+                if pos - at - 1 <= gap_max {
+                    if label == BRIGHT && last == GAS {
+                        c[0] += 1;
+                    } else if label == GAS && last == BRIGHT {
+                        c[1] += 1;
+                    }
                 }
-            }
-            state[line] = (label, pos);
-        });
+                state[line] = (label, pos);
+            },
+        );
         for (_, c) in per {
             counts[0] += c[0];
             counts[1] += c[1];
@@ -234,7 +352,9 @@ pub fn gravity_from_levels(rows: &LabelRows, geom: &Geometry, bx: &Bbox) -> Opti
     /// A level smaller than this (voxels of interface) is not evidence.
     const MIN_INTERFACE: usize = 40;
     let counts = level_counts(rows, geom, bx);
-    let mut dirs: Vec<(usize, usize, i32)> = (0..3).flat_map(|a| [(counts[a][0], a, 1), (counts[a][1], a, -1)]).collect();
+    let mut dirs: Vec<(usize, usize, i32)> = (0..3)
+        .flat_map(|a| [(counts[a][0], a, 1), (counts[a][1], a, -1)])
+        .collect();
     dirs.sort_by(|x, y| y.0.cmp(&x.0).then(x.1.cmp(&y.1)).then(y.2.cmp(&x.2)));
     let (best, axis, sign) = dirs[0];
     if best < MIN_INTERFACE || best < 3 * dirs[1].0 {
@@ -281,7 +401,11 @@ mod tests {
 
     fn rows_of(v: &Volume<u8>) -> LabelRows {
         let [nx, ny, nz] = v.dims();
-        let mut rows = LabelRows { runs: Vec::new(), row_start: vec![0], dims: v.dims() };
+        let mut rows = LabelRows {
+            runs: Vec::new(),
+            row_start: vec![0],
+            dims: v.dims(),
+        };
         for k in 0..nz {
             for j in 0..ny {
                 let row = &v.data()[nx * (j + ny * k)..nx * (j + ny * k + 1)];
@@ -304,7 +428,10 @@ mod tests {
 
     fn all(v: &Volume<u8>) -> Bbox {
         let d = v.dims();
-        Bbox { lo: [0; 3], hi: [d[0] - 1, d[1] - 1, d[2] - 1] }
+        Bbox {
+            lo: [0; 3],
+            hi: [d[0] - 1, d[1] - 1, d[2] - 1],
+        }
     }
 
     #[test]
@@ -312,7 +439,12 @@ mod tests {
         let v = scene();
         let bright = |i: usize| v.data()[i] == BRIGHT;
         let marks = pools(&rows_of(&v), v.geometry(), &all(&v), DVec3::Y, bright);
-        let at = |i, j, k| marks.iter().find(|m| m.0 == v.geometry().index(i, j, k)).map(|m| m.1);
+        let at = |i, j, k| {
+            marks
+                .iter()
+                .find(|m| m.0 == v.geometry().index(i, j, k))
+                .map(|m| m.1)
+        };
         assert_eq!(at(5, 8, 2), Some(LAYER));
         assert_eq!(at(5, 11, 2), Some(POOL));
         assert_eq!(at(5, 20, 2), None, "a loop behind two walls");
@@ -328,9 +460,19 @@ mod tests {
                 }
             }
         }
-        let marks = pools(&rows_of(&w), w.geometry(), &all(&w), DVec3::Y, |i| w.data()[i] == BRIGHT);
-        let at = |i, j, k| marks.iter().find(|m| m.0 == w.geometry().index(i, j, k)).map(|m| m.1);
-        assert_eq!((at(11, 13, 10), at(11, 15, 10), at(11, 20, 10)), (Some(POOL), None, None));
+        let marks = pools(&rows_of(&w), w.geometry(), &all(&w), DVec3::Y, |i| {
+            w.data()[i] == BRIGHT
+        });
+        let at = |i, j, k| {
+            marks
+                .iter()
+                .find(|m| m.0 == w.geometry().index(i, j, k))
+                .map(|m| m.1)
+        };
+        assert_eq!(
+            (at(11, 13, 10), at(11, 15, 10), at(11, 20, 10)),
+            (Some(POOL), None, None)
+        );
         // So does a wide one: a 16 mm ileum (the full-size phantom's, a real one's) taken
         // whole by a rule of bright 6 mm to one side.
         let mut w = v.clone();
@@ -342,9 +484,19 @@ mod tests {
                 }
             }
         }
-        let marks = pools(&rows_of(&w), w.geometry(), &all(&w), DVec3::Y, |i| w.data()[i] == BRIGHT);
-        let at = |i, j, k| marks.iter().find(|m| m.0 == w.geometry().index(i, j, k)).map(|m| m.1);
-        assert_eq!((at(12, 13, 20), at(12, 16, 20), at(12, 25, 20)), (Some(POOL), None, None));
+        let marks = pools(&rows_of(&w), w.geometry(), &all(&w), DVec3::Y, |i| {
+            w.data()[i] == BRIGHT
+        });
+        let at = |i, j, k| {
+            marks
+                .iter()
+                .find(|m| m.0 == w.geometry().index(i, j, k))
+                .map(|m| m.1)
+        };
+        assert_eq!(
+            (at(12, 13, 20), at(12, 16, 20), at(12, 25, 20)),
+            (Some(POOL), None, None)
+        );
         // Prone: gravity anterior, the fluid is above the gas: none joins.
         assert!(pools(&rows_of(&v), v.geometry(), &all(&v), -DVec3::Y, bright).is_empty());
     }
@@ -352,13 +504,27 @@ mod tests {
     #[test]
     fn gravity_is_read_from_the_level_in_any_storage_order() {
         let v = scene();
-        assert_eq!(gravity_from_levels(&rows_of(&v), v.geometry(), &all(&v)), Some(DVec3::Y));
-        for (perm, flip) in [([1, 0, 2], [true, false, false]), ([2, 1, 0], [false, true, true]), ([0, 2, 1], [false, false, true])] {
+        assert_eq!(
+            gravity_from_levels(&rows_of(&v), v.geometry(), &all(&v)),
+            Some(DVec3::Y)
+        );
+        for (perm, flip) in [
+            ([1, 0, 2], [true, false, false]),
+            ([2, 1, 0], [false, true, true]),
+            ([0, 2, 1], [false, false, true]),
+        ] {
             let r = v.reoriented(perm, flip).unwrap();
             let g = gravity_from_levels(&rows_of(&r), r.geometry(), &all(&r)).unwrap();
             assert!((g - DVec3::Y).length() < 1e-9, "{perm:?} {flip:?}: {g}");
             // And the same pool, whichever way the lines run in memory.
-            assert_eq!(pools(&rows_of(&r), r.geometry(), &all(&r), DVec3::Y, |i| r.data()[i] == BRIGHT).len(), 20 * 6 * 40, "{perm:?} {flip:?}");
+            assert_eq!(
+                pools(&rows_of(&r), r.geometry(), &all(&r), DVec3::Y, |i| r.data()
+                    [i]
+                    == BRIGHT)
+                .len(),
+                20 * 6 * 40,
+                "{perm:?} {flip:?}"
+            );
         }
     }
 }

@@ -43,7 +43,7 @@ use serde::Serialize;
 use crate::anatomy::{Orientation, PatientFrame, PatientPosition, PositionSource};
 use crate::{Error, Result, Volume};
 use chain::{Chain, ChainOptions, Coarse, Compartment, Left};
-use work::{Bbox, BRIDGE, GAS, LAYER, POOL};
+use work::{BRIDGE, Bbox, GAS, LAYER, POOL};
 
 #[derive(Clone, Debug)]
 pub struct SegmentOptions {
@@ -72,7 +72,17 @@ pub struct SegmentOptions {
 
 impl Default for SegmentOptions {
     fn default() -> Self {
-        SegmentOptions { air_hu: -500, seeds_mm: Vec::new(), exclude_mm: Vec::new(), mask: None, min_report_ml: 0.5, min_colon_ml: 10.0, fluid_hu: Some(200), position: None, chain: ChainOptions::default() }
+        SegmentOptions {
+            air_hu: -500,
+            seeds_mm: Vec::new(),
+            exclude_mm: Vec::new(),
+            mask: None,
+            min_report_ml: 0.5,
+            min_colon_ml: 10.0,
+            fluid_hu: Some(200),
+            position: None,
+            chain: ChainOptions::default(),
+        }
     }
 }
 
@@ -200,7 +210,13 @@ impl Runs {
 
     /// The runs where `keep(run)`, in the same rows.
     fn filtered(&self, keep: impl Fn(usize) -> bool) -> Runs {
-        let mut out = Runs { runs: Vec::new(), row_start: Vec::with_capacity(self.row_start.len()), hu_sum: Vec::new(), dark: Vec::new(), ny: self.ny };
+        let mut out = Runs {
+            runs: Vec::new(),
+            row_start: Vec::with_capacity(self.row_start.len()),
+            hu_sum: Vec::new(),
+            dark: Vec::new(),
+            ny: self.ny,
+        };
         out.row_start.push(0);
         for row in 0..self.row_start.len() - 1 {
             for r in self.row_start[row] as usize..self.row_start[row + 1] as usize {
@@ -239,7 +255,11 @@ pub fn segment(vol: &Volume<i16>, opts: &SegmentOptions) -> Result<Segmentation>
     perm.swap(axial, 2);
     let stored = vol.reoriented(perm, [false; 3])?;
     let swap = |p: DVec3| DVec3::new(p[perm[0]], p[perm[1]], p[perm[2]]);
-    let o = SegmentOptions { seeds_mm: opts.seeds_mm.iter().map(|&p| swap(p)).collect(), exclude_mm: opts.exclude_mm.iter().map(|&p| swap(p)).collect(), ..opts.clone() };
+    let o = SegmentOptions {
+        seeds_mm: opts.seeds_mm.iter().map(|&p| swap(p)).collect(),
+        exclude_mm: opts.exclude_mm.iter().map(|&p| swap(p)).collect(),
+        ..opts.clone()
+    };
     let s = segment_axial(&stored, &o, false)?;
     s.stored_back(perm, vol.geometry())
 }
@@ -254,39 +274,79 @@ impl Segmentation {
         self.seed_voxel = p(self.seed_voxel);
         self.extent = [p(self.extent[0]), p(self.extent[1])];
         for c in &mut self.components {
-            c.centroid_mm = [c.centroid_mm[perm[0]], c.centroid_mm[perm[1]], c.centroid_mm[perm[2]]];
+            c.centroid_mm = [
+                c.centroid_mm[perm[0]],
+                c.centroid_mm[perm[1]],
+                c.centroid_mm[perm[2]],
+            ];
             (c.bbox_lo, c.bbox_hi) = (p(c.bbox_lo), p(c.bbox_hi));
         }
         for g in &mut self.gaps {
             // Indices of the stored volume (dims permuted) into this one's.
             let sd = [0, 1, 2].map(|a| geom.dims[perm[a]]);
-            g.voxels = g.voxels.iter().map(|&i| {
-                let v = crate::volume::grid_ijk(sd, i);
-                geom.index(v[perm[0]], v[perm[1]], v[perm[2]])
-            }).collect();
+            g.voxels = g
+                .voxels
+                .iter()
+                .map(|&i| {
+                    let v = crate::volume::grid_ijk(sd, i);
+                    geom.index(v[perm[0]], v[perm[1]], v[perm[2]])
+                })
+                .collect();
             g.voxels.sort_unstable();
         }
         Ok(self)
     }
 }
 
-fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> Result<Segmentation> {
+fn segment_axial(
+    vol: &Volume<i16>,
+    opts: &SegmentOptions,
+    from_mask: bool,
+) -> Result<Segmentation> {
     let fluid_hu = opts.fluid_hu.filter(|_| !from_mask);
     // Air, its statistics and the bright runs of tagged fluid, all in one pass over the values.
-    let (runs, bright) = if from_mask { extract_runs(vol, Test::NonZero, None) } else { extract_runs(vol, Test::Below(opts.air_hu), fluid_hu) };
-    let inside = if from_mask { vec![true; runs.runs.len()] } else { inside_body(&runs, vol.dims()) };
+    let (runs, bright) = if from_mask {
+        extract_runs(vol, Test::NonZero, None)
+    } else {
+        extract_runs(vol, Test::Below(opts.air_hu), fluid_hu)
+    };
+    let inside = if from_mask {
+        vec![true; runs.runs.len()]
+    } else {
+        inside_body(&runs, vol.dims())
+    };
     let mut labels = UnionFind::new(runs.runs.len());
     connect_3d(&runs, &inside, vol.dims(), &mut labels);
     let (mut comps, mut run_comp) = component_stats(&runs, &inside, vol, &mut labels, from_mask);
     classify_lungs(&mut comps, from_mask);
-    let tubes = if from_mask { Vec::new() } else { tube::find(&runs, &inside, &run_comp, |c| c != u32::MAX && comps[c as usize].kind != ComponentKind::Lung, vol.dims(), vol.spacing()) };
+    let tubes = if from_mask {
+        Vec::new()
+    } else {
+        tube::find(
+            &runs,
+            &inside,
+            &run_comp,
+            |c| c != u32::MAX && comps[c as usize].kind != ComponentKind::Lung,
+            vol.dims(),
+            vol.spacing(),
+        )
+    };
     for t in &tubes {
         // Its air is the outside's, carried in.
         t.runs.iter().for_each(|&r| run_comp[r] = u32::MAX);
     }
-    let gas_at = |what: &str, mm: &DVec3| gas_component(&comps, &runs, &run_comp, vol, *mm, what, opts);
-    let seed_comps = opts.seeds_mm.iter().map(|mm| gas_at("the seed", mm)).collect::<Result<Vec<_>>>()?;
-    let exclude_comps = opts.exclude_mm.iter().map(|mm| gas_at("the point to exclude", mm)).collect::<Result<Vec<_>>>()?;
+    let gas_at =
+        |what: &str, mm: &DVec3| gas_component(&comps, &runs, &run_comp, vol, *mm, what, opts);
+    let seed_comps = opts
+        .seeds_mm
+        .iter()
+        .map(|mm| gas_at("the seed", mm))
+        .collect::<Result<Vec<_>>>()?;
+    let exclude_comps = opts
+        .exclude_mm
+        .iter()
+        .map(|mm| gas_at("the point to exclude", mm))
+        .collect::<Result<Vec<_>>>()?;
     let mut warnings = Vec::new();
 
     // Working labels in the volume that becomes the lumen.
@@ -303,29 +363,58 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
     // Fluid lies below the gas, at most a pool's depth away: everything from here on happens
     // in this box.
     let cbox = match bright {
-        Some(_) => gas_box.grown(vol.spacing().map(|s| (fluid::MAX_DEPTH_MM / s).ceil() as usize + 2), vol.dims()),
+        Some(_) => gas_box.grown(
+            vol.spacing()
+                .map(|s| (fluid::MAX_DEPTH_MM / s).ceil() as usize + 2),
+            vol.dims(),
+        ),
         None => gas_box,
     };
     let mut pooled = 0;
     let mut pool_rows = Vec::new();
     if let Some(bright) = &bright {
-        let rows = label_rows(&runs, |r| is_gas(run_comp[r]), bright, &cbox, vol.dims()[0], |_, _, _| true);
+        let rows = label_rows(
+            &runs,
+            |r| is_gas(run_comp[r]),
+            bright,
+            &cbox,
+            vol.dims()[0],
+            |_, _, _| true,
+        );
         // A level lies within a layer's thickness of gas: only gas near bright runs and bright
         // runs near gas (not bone, most of them) are looked at for it.
         let all = |_: usize| true;
-        let near_gas = |x: (u32, u32), j: usize, k: usize| runs_near(&runs, &|r| is_gas(run_comp[r]), x, j, k, 3);
-        let gas_near_bright = |r: usize| is_gas(run_comp[r]) && {
-            let (j, k) = row_of(&runs, r);
-            runs_near(bright, &all, (runs.runs[r].x0, runs.runs[r].x1), j, k, 3)
+        let near_gas = |x: (u32, u32), j: usize, k: usize| {
+            runs_near(&runs, &|r| is_gas(run_comp[r]), x, j, k, 3)
         };
-        let near = || label_rows(&runs, gas_near_bright, bright, &cbox, vol.dims()[0], near_gas);
+        let gas_near_bright = |r: usize| {
+            is_gas(run_comp[r]) && {
+                let (j, k) = row_of(&runs, r);
+                runs_near(bright, &all, (runs.runs[r].x0, runs.runs[r].x1), j, k, 3)
+            }
+        };
+        let near = || {
+            label_rows(
+                &runs,
+                gas_near_bright,
+                bright,
+                &cbox,
+                vol.dims()[0],
+                near_gas,
+            )
+        };
         if opts.position.is_none()
             && let Some(g) = fluid::gravity_from_levels(&near(), vol.geometry(), &cbox)
         {
-            orientation = Orientation::new(PatientPosition::from_gravity(g), PositionSource::AirFluidLevels);
+            orientation = Orientation::new(
+                PatientPosition::from_gravity(g),
+                PositionSource::AirFluidLevels,
+            );
         }
         let threshold = fluid_hu.unwrap_or(i16::MAX);
-        let marks = fluid::pools(&rows, vol.geometry(), &cbox, orientation.gravity(), |v| vol.data()[v] >= threshold);
+        let marks = fluid::pools(&rows, vol.geometry(), &cbox, orientation.gravity(), |v| {
+            vol.data()[v] >= threshold
+        });
         pooled = marks.len();
         pool_rows = vec![false; vol.dims()[1] * vol.dims()[2]];
         let nx = vol.dims()[0];
@@ -345,7 +434,9 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
     // Compartments: gas with its pools and layers.
     // Without pools they are the gas components, from their runs; with pools, from the labels.
     let cruns = if pooled > 0 {
-        let scan = |j: usize, k: usize| pool_rows[j + vol.dims()[1] * k] || runs.row(j, k).any(|r| is_gas(run_comp[r]));
+        let scan = |j: usize, k: usize| {
+            pool_rows[j + vol.dims()[1] * k] || runs.row(j, k).any(|r| is_gas(run_comp[r]))
+        };
         work_runs(&work, &cbox, scan, |x| x == GAS || x == POOL || x == LAYER)
     } else {
         runs.filtered(|r| is_gas(run_comp[r]))
@@ -353,7 +444,13 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
     let mut cuf = UnionFind::new(cruns.runs.len());
     connect_3d(&cruns, &vec![true; cruns.runs.len()], vol.dims(), &mut cuf);
     let frame = PatientFrame::of(vol.geometry());
-    let (compartments, crun_comp) = compartment_stats(&cruns, (pooled > 0).then_some(&work), &mut cuf, vol.geometry(), frame.inferior());
+    let (compartments, crun_comp) = compartment_stats(
+        &cruns,
+        (pooled > 0).then_some(&work),
+        &mut cuf,
+        vol.geometry(),
+        frame.inferior(),
+    );
     let voxel_ml = vol.spacing().iter().product::<f64>() / 1000.0;
     let comp_at = |v: [usize; 3]| cruns.at(v).map(|r| crun_comp[r]).filter(|&c| c != u32::MAX);
     // Every gas component's compartment.
@@ -364,18 +461,36 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
             gas_compartment[c as usize] = comp_at([runs.runs[r].x0 as usize, j, k]);
         }
     }
-    let seeded: Vec<u32> = seed_comps.iter().filter_map(|&c| gas_compartment[c]).collect();
-    let excluded: Vec<u32> = exclude_comps.iter().filter_map(|&c| gas_compartment[c]).collect();
+    let seeded: Vec<u32> = seed_comps
+        .iter()
+        .filter_map(|&c| gas_compartment[c])
+        .collect();
+    let excluded: Vec<u32> = exclude_comps
+        .iter()
+        .filter_map(|&c| gas_compartment[c])
+        .collect();
     if let Some(i) = seeded.iter().position(|c| excluded.contains(c)) {
-        return Err(Error::invalid(format!("the seed {} lies in gas also excluded (by another point)", vol.geometry().describe_point(opts.seeds_mm[i]))));
+        return Err(Error::invalid(format!(
+            "the seed {} lies in gas also excluded (by another point)",
+            vol.geometry().describe_point(opts.seeds_mm[i])
+        )));
     }
     // A segment: big enough, or seeded; never excluded.
-    let candidate = |c: u32| !excluded.contains(&c) && (compartments[c as usize].gas_voxels as f64 * voxel_ml >= opts.chain.min_segment_ml || seeded.contains(&c));
+    let candidate = |c: u32| {
+        !excluded.contains(&c)
+            && (compartments[c as usize].gas_voxels as f64 * voxel_ml >= opts.chain.min_segment_ml
+                || seeded.contains(&c))
+    };
     // The rectum: the candidate holding the lowest voxel in the patient frame (a seed makes
     // its gas a candidate; where it lies, not the seed, decides the rectum).
     let rectum = (0..compartments.len() as u32)
         .filter(|&c| candidate(c))
-        .max_by(|&a, &b| compartments[a as usize].lowest_height.total_cmp(&compartments[b as usize].lowest_height).then(b.cmp(&a)))
+        .max_by(|&a, &b| {
+            compartments[a as usize]
+                .lowest_height
+                .total_cmp(&compartments[b as usize].lowest_height)
+                .then(b.cmp(&a))
+        })
         .ok_or_else(|| no_colon(&comps, opts, from_mask))?;
 
     let mut coarse = Coarse::new(vol.dims(), vol.spacing());
@@ -384,7 +499,13 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
             for r in cruns.row(j, k) {
                 let c = crun_comp[r];
                 if c == rectum || candidate(c) {
-                    coarse.mark_run(cruns.runs[r].x0 as usize, cruns.runs[r].x1 as usize, j, k, c);
+                    coarse.mark_run(
+                        cruns.runs[r].x0 as usize,
+                        cruns.runs[r].x1 as usize,
+                        j,
+                        k,
+                        c,
+                    );
                 }
             }
         }
@@ -399,7 +520,9 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
             for j in bx.lo[1]..=bx.hi[1] {
                 for i in bx.lo[0]..=bx.hi[0] {
                     if comp_at([i, j, k]) == Some(c) {
-                        let d = (0..3).map(|a| mid[a].abs_diff([i, j, k][a]).pow(2)).sum::<usize>();
+                        let d = (0..3)
+                            .map(|a| mid[a].abs_diff([i, j, k][a]).pow(2))
+                            .sum::<usize>();
                         if best.is_none_or(|b| d < b.0) {
                             best = Some((d, [i, j, k]));
                         }
@@ -412,10 +535,18 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
     let bridge = |from: usize, to: usize, a: u32, b: u32| {
         let (va, vb) = (voxel_in(from, a)?, voxel_in(to, b)?);
         let own = |v: [usize; 3]| comp_at(v).is_some_and(|c| c == a || c == b);
-        let other = |v: [usize; 3]| matches!(work.get(v[0], v[1], v[2]), GAS | POOL | LAYER) && !own(v);
+        let other =
+            |v: [usize; 3]| matches!(work.get(v[0], v[1], v[2]), GAS | POOL | LAYER) && !own(v);
         bridge::cheapest_path(ct, dims, vol.spacing(), va, vb, own, other)
     };
-    let mut ch: Chain = chain::chain(&coarse, &compartments, rectum, candidate, &opts.chain, &bridge);
+    let mut ch: Chain = chain::chain(
+        &coarse,
+        &compartments,
+        rectum,
+        candidate,
+        &opts.chain,
+        &bridge,
+    );
     // A seed's gas is colon, wherever the chain went: joined at the chain's end.
     for &s in &seeded {
         if ch.links.iter().any(|l| l.comp == s) {
@@ -423,11 +554,26 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
         }
         let last = ch.links.last().map_or(0, |l| l.exit);
         let at = coarse.centre_mm(last);
-        let entry = [coarse.block_of(compartments[s as usize].lowest)].into_iter().chain([coarse.farthest(s, coarse.block_of(compartments[s as usize].lowest)).0]).min_by(|&x, &y| coarse.centre_mm(x).distance(at).total_cmp(&coarse.centre_mm(y).distance(at))).unwrap_or(0);
+        let entry = [coarse.block_of(compartments[s as usize].lowest)]
+            .into_iter()
+            .chain([coarse
+                .farthest(s, coarse.block_of(compartments[s as usize].lowest))
+                .0])
+            .min_by(|&x, &y| {
+                coarse
+                    .centre_mm(x)
+                    .distance(at)
+                    .total_cmp(&coarse.centre_mm(y).distance(at))
+            })
+            .unwrap_or(0);
         let from = ch.links.last().map(|l| l.comp).unwrap_or(rectum);
         if let Some(p) = bridge(last, entry, from, s) {
             warnings.push(format!("the seed's gas was not joined to the colon by itself: joined to its end through {:.0} mm of tissue", p.length_mm));
-            ch.links.push(chain::Link { comp: s, entry, exit: coarse.farthest(s, entry).0 });
+            ch.links.push(chain::Link {
+                comp: s,
+                entry,
+                exit: coarse.farthest(s, entry).0,
+            });
             ch.gaps.push(p);
             ch.left.retain(|(c, _)| *c != s);
         } else {
@@ -441,7 +587,11 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
         }
     }
 
-    let colon_gas_ml: f64 = ch.links.iter().map(|l| compartments[l.comp as usize].gas_voxels as f64 * voxel_ml).sum();
+    let colon_gas_ml: f64 = ch
+        .links
+        .iter()
+        .map(|l| compartments[l.comp as usize].gas_voxels as f64 * voxel_ml)
+        .sum();
     if seeded.is_empty() && colon_gas_ml < opts.min_colon_ml {
         return Err(no_colon(&comps, opts, from_mask));
     }
@@ -454,7 +604,13 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
     for p in &ch.gaps {
         let from = added.len();
         if let (Some(ct), Some(t)) = (ct, fluid_hu) {
-            fill_fluid(&mut work, &p.voxels, FILL_MM, |i| ct.data()[i] >= t, &mut added);
+            fill_fluid(
+                &mut work,
+                &p.voxels,
+                FILL_MM,
+                |i| ct.data()[i] >= t,
+                &mut added,
+            );
         }
         lay_bridge(&mut work, &p.voxels, bridge_radius_mm, &mut added);
         let mut v = added[from..].to_vec();
@@ -478,7 +634,10 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
     }
     let bridge_voxels = added.len();
     if ct.is_some() {
-        fluid_voxels += added.iter().filter(|&&v| vol.data()[v] >= fluid_hu.unwrap_or(i16::MAX)).count();
+        fluid_voxels += added
+            .iter()
+            .filter(|&&v| vol.data()[v] >= fluid_hu.unwrap_or(i16::MAX))
+            .count();
     }
     // Back to 0/1: every label lies in a compartment's runs, or on a bridge.
     let kept = |r: usize| crun_comp[r] != u32::MAX && in_colon[crun_comp[r] as usize];
@@ -490,31 +649,65 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
     let lumen_box = lumen_box.ok_or_else(|| Error::invalid("the colon holds no voxels"))?;
 
     // The source side: the middle of the rectum's lowest 2 mm.
-    let seed_voxel = lowest_middle(&cruns, &crun_comp, &compartments[rectum as usize], rectum, &geom, frame.inferior());
+    let seed_voxel = lowest_middle(
+        &cruns,
+        &crun_comp,
+        &compartments[rectum as usize],
+        rectum,
+        &geom,
+        frame.inferior(),
+    );
 
     // Reports.
-    let colon_lps = lps_box(&geom, &ch.links.iter().map(|l| compartments[l.comp as usize].bbox).fold(compartments[rectum as usize].bbox, |a, b| a.union(&b)));
+    let colon_lps = lps_box(
+        &geom,
+        &ch.links
+            .iter()
+            .map(|l| compartments[l.comp as usize].bbox)
+            .fold(compartments[rectum as usize].bbox, |a, b| a.union(&b)),
+    );
     let order_of = |c: u32| ch.links.iter().position(|l| l.comp == c);
     let mut classes = vec![ComponentKind::Other; compartments.len()];
     for (c, comp) in compartments.iter().enumerate() {
-        classes[c] = if order_of(c as u32).is_some() { ComponentKind::Colon } else { classify(comp, &geom, &colon_lps, voxel_ml) };
+        classes[c] = if order_of(c as u32).is_some() {
+            ComponentKind::Colon
+        } else {
+            classify(comp, &geom, &colon_lps, voxel_ml)
+        };
     }
     let mut segments: Vec<SegmentReport> = Vec::new();
     for (i, l) in ch.links.iter().enumerate() {
         let comp = &compartments[l.comp as usize];
-        let names: Vec<&str> = [coarse.centre_mm(l.entry), comp.centroid_mm(), coarse.centre_mm(l.exit)]
-            .iter()
-            .map(|&p| region_of(&geom, p, &colon_lps))
-            .fold(Vec::new(), |mut v, n| {
-                if v.last() != Some(&n) {
-                    v.push(n);
-                }
-                v
-            });
-        segments.push(segment_report(comp, &geom, names.join("–"), ComponentKind::Colon, Some(i), None, voxel_ml));
+        let names: Vec<&str> = [
+            coarse.centre_mm(l.entry),
+            comp.centroid_mm(),
+            coarse.centre_mm(l.exit),
+        ]
+        .iter()
+        .map(|&p| region_of(&geom, p, &colon_lps))
+        .fold(Vec::new(), |mut v, n| {
+            if v.last() != Some(&n) {
+                v.push(n);
+            }
+            v
+        });
+        segments.push(segment_report(
+            comp,
+            &geom,
+            names.join("–"),
+            ComponentKind::Colon,
+            Some(i),
+            None,
+            voxel_ml,
+        ));
     }
     let mut others: Vec<(u32, Left)> = ch.left.clone();
-    others.sort_by(|a, b| compartments[b.0 as usize].gas_voxels.cmp(&compartments[a.0 as usize].gas_voxels).then(a.0.cmp(&b.0)));
+    others.sort_by(|a, b| {
+        compartments[b.0 as usize]
+            .gas_voxels
+            .cmp(&compartments[a.0 as usize].gas_voxels)
+            .then(a.0.cmp(&b.0))
+    });
     for (c, why) in others {
         let comp = &compartments[c as usize];
         if (comp.gas_voxels as f64 * voxel_ml) < opts.min_report_ml {
@@ -522,10 +715,19 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
         }
         let kind = classes[c as usize];
         let reason = match why {
-            Left::TooSmall => format!("{:.1} ml of gas, less than a colon segment's {} ml", comp.gas_voxels as f64 * voxel_ml, opts.chain.min_segment_ml),
-            Left::TooFar(d) if d.is_finite() => format!("its nearest end is {d:.0} mm from the colon's end (more than {:.0} mm)", opts.chain.max_gap_mm),
+            Left::TooSmall => format!(
+                "{:.1} ml of gas, less than a colon segment's {} ml",
+                comp.gas_voxels as f64 * voxel_ml,
+                opts.chain.min_segment_ml
+            ),
+            Left::TooFar(d) if d.is_finite() => format!(
+                "its nearest end is {d:.0} mm from the colon's end (more than {:.0} mm)",
+                opts.chain.max_gap_mm
+            ),
             Left::TooFar(_) => "not reached from the colon's end".to_string(),
-            Left::BridgeTooDear { gap_mm, cost } => format!("the way to it ({gap_mm:.0} mm) crosses fat or bone, not collapsed bowel (cost {cost:.1} per mm)"),
+            Left::BridgeTooDear { gap_mm, cost } => format!(
+                "the way to it ({gap_mm:.0} mm) crosses fat or bone, not collapsed bowel (cost {cost:.1} per mm)"
+            ),
             Left::Excluded => EXCLUDED.to_string(),
         };
         let label = match kind {
@@ -533,7 +735,15 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
             ComponentKind::Stomach => "stomach",
             _ => "other",
         };
-        segments.push(segment_report(comp, &geom, label.to_string(), kind, None, Some(reason), voxel_ml));
+        segments.push(segment_report(
+            comp,
+            &geom,
+            label.to_string(),
+            kind,
+            None,
+            Some(reason),
+            voxel_ml,
+        ));
     }
     for t in &tubes {
         segments.push(tube_report(t, &runs, &geom, voxel_ml));
@@ -541,9 +751,19 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
     let mut gaps = Vec::new();
     for (i, p) in ch.gaps.iter().enumerate() {
         let ends = (p.voxels[0], p.voxels[p.voxels.len() - 1]);
-        let lps = |v: [usize; 3]| geom.index_to_patient(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64)).to_array();
+        let lps = |v: [usize; 3]| {
+            geom.index_to_patient(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64))
+                .to_array()
+        };
         let voxels = std::mem::take(&mut gap_voxels[i]);
-        gaps.push(Gap { between: [i, i + 1], length_mm: p.length_mm, from_lps_mm: lps(ends.0), to_lps_mm: lps(ends.1), mean_cost: p.mean_cost, voxels });
+        gaps.push(Gap {
+            between: [i, i + 1],
+            length_mm: p.length_mm,
+            from_lps_mm: lps(ends.0),
+            to_lps_mm: lps(ends.1),
+            mean_cost: p.mean_cost,
+            voxels,
+        });
         warnings.push(format!(
             "collapsed or fluid-filled stretch bridged: {:.0} mm between the {} and the {} segment, from LPS ({:.0}, {:.0}, {:.0})",
             p.length_mm,
@@ -554,8 +774,16 @@ fn segment_axial(vol: &Volume<i16>, opts: &SegmentOptions, from_mask: bool) -> R
             lps(ends.0)[2]
         ));
     }
-    for s in segments.iter().filter(|s| !s.kept && s.gas_ml >= LARGE_LEFT_ML && s.reason.as_deref() != Some(EXCLUDED)) {
-        warnings.push(format!("{:.0} ml of gas ({}) left out of the colon: {}", s.gas_ml, s.label, s.reason.as_deref().unwrap_or("")));
+    for s in segments
+        .iter()
+        .filter(|s| !s.kept && s.gas_ml >= LARGE_LEFT_ML && s.reason.as_deref() != Some(EXCLUDED))
+    {
+        warnings.push(format!(
+            "{:.0} ml of gas ({}) left out of the colon: {}",
+            s.gas_ml,
+            s.label,
+            s.reason.as_deref().unwrap_or("")
+        ));
     }
     // Gas components, labelled by their compartment.
     for (c, comp) in comps.iter_mut().enumerate() {
@@ -594,7 +822,8 @@ const FILL_MM: f64 = 25.0;
 pub fn is_mask(vol: &Volume<i16>) -> bool {
     // Chunks tested without an early exit inside (vector code); a CT fails on its first chunk.
     let chunks = || vol.data().par_chunks(1 << 14);
-    chunks().all(|c| c.iter().fold(true, |a, &v| a & (v as u16 <= 1))) && chunks().any(|c| c.iter().fold(false, |a, &v| a | (v == 1)))
+    chunks().all(|c| c.iter().fold(true, |a, &v| a & (v as u16 <= 1)))
+        && chunks().any(|c| c.iter().fold(false, |a, &v| a | (v == 1)))
 }
 
 /// Which values a pass collects runs of.
@@ -636,7 +865,10 @@ fn extract_runs(vol: &Volume<i16>, test: Test, bright: Option<i16>) -> (Runs, Op
                 for row in slice.chunks_exact(nx) {
                     let tests = (test, bright.map(Test::AtLeast));
                     row_bits(row, tests, words);
-                    air.add_row(&words.0, |x0, x1| if stats { run_stats(row, x0, x1) } else { None });
+                    air.add_row(
+                        &words.0,
+                        |x0, x1| if stats { run_stats(row, x0, x1) } else { None },
+                    );
                     if let Some(f) = &mut fluid {
                         f.add_row(&words.1, |_, _| None);
                     }
@@ -660,7 +892,12 @@ struct SliceRuns {
 
 impl SliceRuns {
     fn with_rows(ny: usize) -> Self {
-        SliceRuns { runs: Vec::new(), counts: Vec::with_capacity(ny), hu_sum: Vec::new(), dark: Vec::new() }
+        SliceRuns {
+            runs: Vec::new(),
+            counts: Vec::with_capacity(ny),
+            hu_sum: Vec::new(),
+            dark: Vec::new(),
+        }
     }
 
     /// The runs of one row's bits, each with `stats(x0, x1)` ((0, 0) where it gives none).
@@ -678,7 +915,13 @@ impl SliceRuns {
 
 impl Runs {
     fn concat(slices: impl IntoIterator<Item = SliceRuns>, ny: usize) -> Runs {
-        let mut out = Runs { runs: Vec::new(), row_start: vec![0], hu_sum: Vec::new(), dark: Vec::new(), ny };
+        let mut out = Runs {
+            runs: Vec::new(),
+            row_start: vec![0],
+            hu_sum: Vec::new(),
+            dark: Vec::new(),
+            ny,
+        };
         for s in slices {
             for c in s.counts {
                 let last = *out.row_start.last().unwrap_or(&0);
@@ -712,7 +955,10 @@ fn row_bits(row: &[i16], tests: (Test, Option<Test>), words: &mut (Vec<u64>, Vec
     let (chunks, rest) = row.as_chunks::<64>();
     let (a, b) = (&mut words.0, &mut words.1);
     match tests {
-        (t, None) => a.iter_mut().zip(chunks).for_each(|(w, c)| *w = word_bits(c, t)),
+        (t, None) => a
+            .iter_mut()
+            .zip(chunks)
+            .for_each(|(w, c)| *w = word_bits(c, t)),
         (t, Some(u)) => {
             for ((wa, wb), c) in a.iter_mut().zip(b.iter_mut()).zip(chunks) {
                 (*wa, *wb) = (word_bits(c, t), word_bits(c, u));
@@ -720,7 +966,11 @@ fn row_bits(row: &[i16], tests: (Test, Option<Test>), words: &mut (Vec<u64>, Vec
         }
     }
     if !rest.is_empty() {
-        let bits = |t: Test| rest.iter().enumerate().fold(0u64, |w, (i, &v)| w | (t.holds(v) as u64) << i);
+        let bits = |t: Test| {
+            rest.iter()
+                .enumerate()
+                .fold(0u64, |w, (i, &v)| w | (t.holds(v) as u64) << i)
+        };
         a[row.len() / 64] = bits(tests.0);
         if let Some(u) = tests.1 {
             b[row.len() / 64] = bits(u);
@@ -749,14 +999,17 @@ fn word_bits(v: &[i16; 64], test: Test) -> u64 {
                 }
             };
             (0..4).fold(0u64, |w, q| {
-                let m = _mm_movemask_epi8(_mm_packs_epi16(cmp(16 * q), cmp(16 * q + 8))) as u32 ^ invert;
+                let m = _mm_movemask_epi8(_mm_packs_epi16(cmp(16 * q), cmp(16 * q + 8))) as u32
+                    ^ invert;
                 w | (m as u64) << (16 * q)
             })
         }
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
-        v.iter().enumerate().fold(0u64, |w, (b, &x)| w | (test.holds(x) as u64) << b)
+        v.iter()
+            .enumerate()
+            .fold(0u64, |w, (b, &x)| w | (test.holds(x) as u64) << b)
     }
 }
 
@@ -784,7 +1037,12 @@ fn runs_of_bits(words: &[u64], mut f: impl FnMut(u32, u32)) {
 }
 
 /// Calls `f(a, b)` for every pair of runs, one in row `ra` and one in row `rb`, that share an x.
-fn for_overlaps(runs: &Runs, ra: std::ops::Range<usize>, rb: std::ops::Range<usize>, mut f: impl FnMut(usize, usize)) {
+fn for_overlaps(
+    runs: &Runs,
+    ra: std::ops::Range<usize>,
+    rb: std::ops::Range<usize>,
+    mut f: impl FnMut(usize, usize),
+) {
     let (mut a, mut b) = (ra.start, rb.start);
     while a < ra.end && b < rb.end {
         let (p, q) = (runs.runs[a], runs.runs[b]);
@@ -809,7 +1067,9 @@ fn inside_body(runs: &Runs, dims: [usize; 3]) -> Vec<bool> {
             let last = runs.row(ny - 1, k).end;
             let mut uf = UnionFind::new(last - first);
             for j in 1..ny {
-                for_overlaps(runs, runs.row(j - 1, k), runs.row(j, k), |a, b| uf.union(a - first, b - first));
+                for_overlaps(runs, runs.row(j - 1, k), runs.row(j, k), |a, b| {
+                    uf.union(a - first, b - first)
+                });
             }
             let mut outside = vec![false; last - first];
             for j in 0..ny {
@@ -855,7 +1115,13 @@ fn connect_3d(runs: &Runs, inside: &[bool], dims: [usize; 3], uf: &mut UnionFind
 }
 
 /// Per component statistics; returns the components and, per run, its component (or MAX).
-fn component_stats(runs: &Runs, inside: &[bool], vol: &Volume<i16>, uf: &mut UnionFind, from_mask: bool) -> (Vec<Component>, Vec<u32>) {
+fn component_stats(
+    runs: &Runs,
+    inside: &[bool],
+    vol: &Volume<i16>,
+    uf: &mut UnionFind,
+    from_mask: bool,
+) -> (Vec<Component>, Vec<u32>) {
     let [_, ny, nz] = vol.dims();
     let sp = vol.spacing();
     let mut comp_of_root = vec![u32::MAX; runs.runs.len()];
@@ -879,7 +1145,10 @@ fn component_stats(runs: &Runs, inside: &[bool], vol: &Volume<i16>, uf: &mut Uni
                 let root = uf.find(r);
                 if comp_of_root[root] == u32::MAX {
                     comp_of_root[root] = acc.len() as u32;
-                    acc.push(Acc { lo: [usize::MAX; 3], ..Default::default() });
+                    acc.push(Acc {
+                        lo: [usize::MAX; 3],
+                        ..Default::default()
+                    });
                 }
                 let c = comp_of_root[root];
                 run_comp[r] = c;
@@ -891,7 +1160,11 @@ fn component_stats(runs: &Runs, inside: &[bool], vol: &Volume<i16>, uf: &mut Uni
                 a.sum[1] += (j * len) as f64;
                 a.sum[2] += (k * len) as f64;
                 a.lo = [a.lo[0].min(run.x0 as usize), a.lo[1].min(j), a.lo[2].min(k)];
-                a.hi = [a.hi[0].max(run.x1 as usize - 1), a.hi[1].max(j), a.hi[2].max(k)];
+                a.hi = [
+                    a.hi[0].max(run.x1 as usize - 1),
+                    a.hi[1].max(j),
+                    a.hi[2].max(k),
+                ];
                 a.hu += runs.hu_sum[r];
                 a.dark += runs.dark[r] as u64;
             }
@@ -905,7 +1178,11 @@ fn component_stats(runs: &Runs, inside: &[bool], vol: &Volume<i16>, uf: &mut Uni
             Component {
                 voxels: a.n,
                 volume_ml: n * voxel_ml,
-                centroid_mm: [a.sum[0] / n * sp[0], a.sum[1] / n * sp[1], a.sum[2] / n * sp[2]],
+                centroid_mm: [
+                    a.sum[0] / n * sp[0],
+                    a.sum[1] / n * sp[1],
+                    a.sum[2] / n * sp[2],
+                ],
                 bbox_lo: a.lo,
                 bbox_hi: a.hi,
                 mean_hu: (!from_mask).then(|| a.hu as f64 / n),
@@ -931,25 +1208,49 @@ fn classify_lungs(comps: &mut [Component], from_mask: bool) {
 
 /// The gas component holding a point the user gave (`what`: "the seed", ...), or an error
 /// that says why there is none.
-fn gas_component(comps: &[Component], runs: &Runs, run_comp: &[u32], vol: &Volume<i16>, mm: DVec3, what: &str, opts: &SegmentOptions) -> Result<usize> {
+fn gas_component(
+    comps: &[Component],
+    runs: &Runs,
+    run_comp: &[u32],
+    vol: &Volume<i16>,
+    mm: DVec3,
+    what: &str,
+    opts: &SegmentOptions,
+) -> Result<usize> {
     let at = vol.geometry().describe_point(mm);
-    let [i, j, k] = voxel_of(vol, mm).ok_or_else(|| Error::invalid(format!("{what} {at} lies outside the volume")))?;
+    let [i, j, k] = voxel_of(vol, mm)
+        .ok_or_else(|| Error::invalid(format!("{what} {at} lies outside the volume")))?;
     match runs.at([i, j, k]).map(|r| run_comp[r]) {
         Some(c) if c != u32::MAX && comps[c as usize].kind != ComponentKind::Lung => Ok(c as usize),
-        Some(c) if c != u32::MAX => Err(Error::invalid(format!("{what} {at} lies in a lung, not in the bowel"))),
-        Some(_) => Err(Error::invalid(format!("{what} {at} lies in air outside the body"))),
-        None => Err(Error::invalid(format!("{what} {at} is not in gas (HU {} ≥ {})", vol.get(i, j, k), opts.air_hu))),
+        Some(c) if c != u32::MAX => Err(Error::invalid(format!(
+            "{what} {at} lies in a lung, not in the bowel"
+        ))),
+        Some(_) => Err(Error::invalid(format!(
+            "{what} {at} lies in air outside the body"
+        ))),
+        None => Err(Error::invalid(format!(
+            "{what} {at} is not in gas (HU {} ≥ {})",
+            vol.get(i, j, k),
+            opts.air_hu
+        ))),
     }
 }
 
 /// The error when no gas is big enough to be a colon.
 fn no_colon(comps: &[Component], opts: &SegmentOptions, from_mask: bool) -> Error {
-    let biggest = comps.iter().filter(|c| c.kind != ComponentKind::Lung).map(|c| c.volume_ml).fold(0.0, f64::max);
+    let biggest = comps
+        .iter()
+        .filter(|c| c.kind != ComponentKind::Lung)
+        .map(|c| c.volume_ml)
+        .fold(0.0, f64::max);
     if from_mask {
         return Error::invalid(if comps.is_empty() {
             "the mask holds no lumen: every voxel is 0".to_string()
         } else {
-            format!("the mask's largest lumen region is {biggest:.1} ml, too small for a colon (at least {} ml expected)", opts.min_colon_ml)
+            format!(
+                "the mask's largest lumen region is {biggest:.1} ml, too small for a colon (at least {} ml expected)",
+                opts.min_colon_ml
+            )
         });
     }
     Error::invalid(format!(
@@ -960,7 +1261,9 @@ fn no_colon(comps: &[Component], opts: &SegmentOptions, from_mask: bool) -> Erro
 
 fn voxel_of(vol: &Volume<i16>, mm: DVec3) -> Option<[usize; 3]> {
     let ijk = vol.geometry().local_to_index(mm).round();
-    vol.geometry().contains_index(ijk).then_some([ijk.x as usize, ijk.y as usize, ijk.z as usize])
+    vol.geometry()
+        .contains_index(ijk)
+        .then_some([ijk.x as usize, ijk.y as usize, ijk.z as usize])
 }
 
 /// (j, k) of run `r`'s row.
@@ -972,22 +1275,32 @@ fn row_of(runs: &Runs, r: usize) -> (usize, usize) {
 /// Writes `value(run)` over each run that has one, slice by slice in parallel.
 fn paint(work: &mut Volume<u8>, runs: &Runs, value: impl Fn(usize) -> Option<u8> + Sync) {
     let [nx, ny, _] = work.dims();
-    work.data_mut().par_chunks_mut(nx * ny).enumerate().for_each(|(k, slab)| {
-        for j in 0..ny {
-            for r in runs.row(j, k) {
-                if let Some(v) = value(r) {
-                    let run = runs.runs[r];
-                    slab[j * nx + run.x0 as usize..j * nx + run.x1 as usize].fill(v);
+    work.data_mut()
+        .par_chunks_mut(nx * ny)
+        .enumerate()
+        .for_each(|(k, slab)| {
+            for j in 0..ny {
+                for r in runs.row(j, k) {
+                    if let Some(v) = value(r) {
+                        let run = runs.runs[r];
+                        slab[j * nx + run.x0 as usize..j * nx + run.x1 as usize].fill(v);
+                    }
                 }
             }
-        }
-    });
+        });
 }
 
 /// The gas runs (where `gas(run)`) and the bright runs inside `bx`, merged row by row in x
 /// order, for the fluid's line walks.
 /// Bright runs only where `keep_bright((x0, x1), j, k)`.
-fn label_rows(runs: &Runs, gas: impl Fn(usize) -> bool + Sync, bright: &Runs, bx: &Bbox, nx: usize, keep_bright: impl Fn((u32, u32), usize, usize) -> bool + Sync) -> fluid::LabelRows {
+fn label_rows(
+    runs: &Runs,
+    gas: impl Fn(usize) -> bool + Sync,
+    bright: &Runs,
+    bx: &Bbox,
+    nx: usize,
+    keep_bright: impl Fn((u32, u32), usize, usize) -> bool + Sync,
+) -> fluid::LabelRows {
     let ny = runs.ny;
     let nz = (runs.row_start.len() - 1) / ny;
     let per_slice: Vec<(Vec<fluid::LabelRun>, Vec<u32>)> = (0..nz)
@@ -997,8 +1310,14 @@ fn label_rows(runs: &Runs, gas: impl Fn(usize) -> bool + Sync, bright: &Runs, bx
             for j in 0..ny {
                 let before = out.len();
                 if (bx.lo[1]..=bx.hi[1]).contains(&j) && (bx.lo[2]..=bx.hi[2]).contains(&k) {
-                    let g = runs.row(j, k).filter(|&r| gas(r)).map(|r| (runs.runs[r].x0, runs.runs[r].x1, GAS));
-                    let b = bright.row(j, k).map(|r| (bright.runs[r].x0, bright.runs[r].x1, fluid::BRIGHT)).filter(|r| keep_bright((r.0, r.1), j, k));
+                    let g = runs
+                        .row(j, k)
+                        .filter(|&r| gas(r))
+                        .map(|r| (runs.runs[r].x0, runs.runs[r].x1, GAS));
+                    let b = bright
+                        .row(j, k)
+                        .map(|r| (bright.runs[r].x0, bright.runs[r].x1, fluid::BRIGHT))
+                        .filter(|r| keep_bright((r.0, r.1), j, k));
                     out.extend(g.chain(b));
                     out[before..].sort_unstable_by_key(|r| r.0);
                 }
@@ -1007,7 +1326,11 @@ fn label_rows(runs: &Runs, gas: impl Fn(usize) -> bool + Sync, bright: &Runs, bx
             (out, counts)
         })
         .collect();
-    let mut rows = fluid::LabelRows { runs: Vec::new(), row_start: vec![0], dims: [nx, ny, nz] };
+    let mut rows = fluid::LabelRows {
+        runs: Vec::new(),
+        row_start: vec![0],
+        dims: [nx, ny, nz],
+    };
     for (r, c) in per_slice {
         for n in c {
             let last = *rows.row_start.last().unwrap_or(&0);
@@ -1020,12 +1343,29 @@ fn label_rows(runs: &Runs, gas: impl Fn(usize) -> bool + Sync, bright: &Runs, bx
 
 /// Whether a run where `keep(run)` lies within `d` voxels of x range `x` in row (j, k) or a
 /// row up to `d` steps away along y or z.
-fn runs_near(runs: &Runs, keep: &(impl Fn(usize) -> bool + Sync), x: (u32, u32), j: usize, k: usize, d: usize) -> bool {
+fn runs_near(
+    runs: &Runs,
+    keep: &(impl Fn(usize) -> bool + Sync),
+    x: (u32, u32),
+    j: usize,
+    k: usize,
+    d: usize,
+) -> bool {
     let nz = (runs.row_start.len() - 1) / runs.ny;
-    let near = |b: usize, c: usize| runs.row(b, c).any(|r| keep(r) && runs.runs[r].x0 < x.1 + d as u32 && runs.runs[r].x1 + d as u32 > x.0);
+    let near = |b: usize, c: usize| {
+        runs.row(b, c).any(|r| {
+            keep(r) && runs.runs[r].x0 < x.1 + d as u32 && runs.runs[r].x1 + d as u32 > x.0
+        })
+    };
     (0..=d).any(|s| {
-        let rows = [(j.wrapping_sub(s), k), (j + s, k), (j, k.wrapping_sub(s)), (j, k + s)];
-        rows.iter().any(|&(b, c)| b < runs.ny && c < nz && near(b, c))
+        let rows = [
+            (j.wrapping_sub(s), k),
+            (j + s, k),
+            (j, k.wrapping_sub(s)),
+            (j, k + s),
+        ];
+        rows.iter()
+            .any(|&(b, c)| b < runs.ny && c < nz && near(b, c))
     })
 }
 
@@ -1037,7 +1377,10 @@ fn runs_box(runs: &Runs, dims: [usize; 3], keep: impl Fn(usize) -> bool) -> Opti
         for j in 0..ny {
             for r in runs.row(j, k).filter(|&r| keep(r)) {
                 let run = runs.runs[r];
-                let x = Bbox { lo: [run.x0 as usize, j, k], hi: [run.x1 as usize - 1, j, k] };
+                let x = Bbox {
+                    lo: [run.x0 as usize, j, k],
+                    hi: [run.x1 as usize - 1, j, k],
+                };
                 b = Some(b.map_or(x, |y| y.union(&x)));
             }
         }
@@ -1047,7 +1390,12 @@ fn runs_box(runs: &Runs, dims: [usize; 3], keep: impl Fn(usize) -> bool) -> Opti
 
 /// Runs of the working labels where `keep(label)`, inside `bx` (rows outside it are empty).
 /// Only rows where `scan(j, k)` are read.
-fn work_runs(work: &Volume<u8>, bx: &Bbox, scan: impl Fn(usize, usize) -> bool + Sync, keep: impl Fn(u8) -> bool + Sync) -> Runs {
+fn work_runs(
+    work: &Volume<u8>,
+    bx: &Bbox,
+    scan: impl Fn(usize, usize) -> bool + Sync,
+    keep: impl Fn(u8) -> bool + Sync,
+) -> Runs {
     let [nx, ny, nz] = work.dims();
     let per_slice: Vec<SliceRuns> = (0..nz)
         .into_par_iter()
@@ -1055,10 +1403,16 @@ fn work_runs(work: &Volume<u8>, bx: &Bbox, scan: impl Fn(usize, usize) -> bool +
             let mut s = SliceRuns::with_rows(ny);
             for j in 0..ny {
                 let before = s.runs.len();
-                if (bx.lo[1]..=bx.hi[1]).contains(&j) && (bx.lo[2]..=bx.hi[2]).contains(&k) && scan(j, k) {
+                if (bx.lo[1]..=bx.hi[1]).contains(&j)
+                    && (bx.lo[2]..=bx.hi[2]).contains(&k)
+                    && scan(j, k)
+                {
                     let row = &work.data()[nx * (j + ny * k)..nx * (j + ny * k + 1)];
                     for r in crate::volume::runs_where(&row[bx.lo[0]..=bx.hi[0]], &keep) {
-                        s.runs.push(Run { x0: (r.start + bx.lo[0]) as u32, x1: (r.end + bx.lo[0]) as u32 });
+                        s.runs.push(Run {
+                            x0: (r.start + bx.lo[0]) as u32,
+                            x1: (r.end + bx.lo[0]) as u32,
+                        });
                         s.hu_sum.push(0);
                         s.dark.push(0);
                     }
@@ -1074,7 +1428,13 @@ fn work_runs(work: &Volume<u8>, bx: &Bbox, scan: impl Fn(usize, usize) -> bool +
 /// Compartments (6-connected runs of gas, pool and layer) with their statistics, and each
 /// run's compartment.
 /// `work`: the labels, to count gas among pools (None: every voxel is gas).
-fn compartment_stats(runs: &Runs, work: Option<&Volume<u8>>, uf: &mut UnionFind, geom: &crate::Geometry, inferior: DVec3) -> (Vec<Compartment>, Vec<u32>) {
+fn compartment_stats(
+    runs: &Runs,
+    work: Option<&Volume<u8>>,
+    uf: &mut UnionFind,
+    geom: &crate::Geometry,
+    inferior: DVec3,
+) -> (Vec<Compartment>, Vec<u32>) {
     let [nx, ny, nz] = geom.dims;
     let sp = geom.spacing;
     let mut of_root = vec![u32::MAX; runs.runs.len()];
@@ -1086,7 +1446,17 @@ fn compartment_stats(runs: &Runs, work: Option<&Volume<u8>>, uf: &mut UnionFind,
                 let root = uf.find(r);
                 if of_root[root] == u32::MAX {
                     of_root[root] = out.len() as u32;
-                    out.push(Compartment { voxels: 0, gas_voxels: 0, sum_mm: DVec3::ZERO, bbox: Bbox { lo: [usize::MAX; 3], hi: [0; 3] }, lowest: [0; 3], lowest_height: f64::NEG_INFINITY });
+                    out.push(Compartment {
+                        voxels: 0,
+                        gas_voxels: 0,
+                        sum_mm: DVec3::ZERO,
+                        bbox: Bbox {
+                            lo: [usize::MAX; 3],
+                            hi: [0; 3],
+                        },
+                        lowest: [0; 3],
+                        lowest_height: f64::NEG_INFINITY,
+                    });
                 }
                 let c = of_root[root];
                 run_comp[r] = c;
@@ -1095,12 +1465,35 @@ fn compartment_stats(runs: &Runs, work: Option<&Volume<u8>>, uf: &mut UnionFind,
                 let cm = &mut out[c as usize];
                 let n = x1 - x0;
                 cm.voxels += n;
-                cm.gas_voxels += work.map_or(n, |w| w.data()[nx * (j + ny * k) + x0..nx * (j + ny * k) + x1].iter().filter(|&&x| x == GAS).count());
-                cm.sum_mm += DVec3::new((x0 + x1 - 1) as f64 * 0.5 * sp[0] * n as f64, (j * n) as f64 * sp[1], (k * n) as f64 * sp[2]);
-                cm.bbox = Bbox { lo: [cm.bbox.lo[0].min(x0), cm.bbox.lo[1].min(j), cm.bbox.lo[2].min(k)], hi: [cm.bbox.hi[0].max(x1 - 1), cm.bbox.hi[1].max(j), cm.bbox.hi[2].max(k)] };
+                cm.gas_voxels += work.map_or(n, |w| {
+                    w.data()[nx * (j + ny * k) + x0..nx * (j + ny * k) + x1]
+                        .iter()
+                        .filter(|&&x| x == GAS)
+                        .count()
+                });
+                cm.sum_mm += DVec3::new(
+                    (x0 + x1 - 1) as f64 * 0.5 * sp[0] * n as f64,
+                    (j * n) as f64 * sp[1],
+                    (k * n) as f64 * sp[2],
+                );
+                cm.bbox = Bbox {
+                    lo: [
+                        cm.bbox.lo[0].min(x0),
+                        cm.bbox.lo[1].min(j),
+                        cm.bbox.lo[2].min(k),
+                    ],
+                    hi: [
+                        cm.bbox.hi[0].max(x1 - 1),
+                        cm.bbox.hi[1].max(j),
+                        cm.bbox.hi[2].max(k),
+                    ],
+                };
                 // The lowest voxel of the run lies at one of its ends.
                 for x in [x0, x1 - 1] {
-                    let h = chain::height(inferior, geom.index_to_local(DVec3::new(x as f64, j as f64, k as f64)));
+                    let h = chain::height(
+                        inferior,
+                        geom.index_to_local(DVec3::new(x as f64, j as f64, k as f64)),
+                    );
                     if h > cm.lowest_height {
                         cm.lowest_height = h;
                         cm.lowest = [x, j, k];
@@ -1115,23 +1508,41 @@ fn compartment_stats(runs: &Runs, work: Option<&Volume<u8>>, uf: &mut UnionFind,
 /// The voxel of compartment `c` nearest the middle of its lowest 2 mm (patient frame): the
 /// same place whatever the storage order, where the lowest single voxel would be picked by
 /// ties.
-fn lowest_middle(runs: &Runs, run_comp: &[u32], comp: &Compartment, c: u32, geom: &crate::Geometry, inferior: DVec3) -> [usize; 3] {
+fn lowest_middle(
+    runs: &Runs,
+    run_comp: &[u32],
+    comp: &Compartment,
+    c: u32,
+    geom: &crate::Geometry,
+    inferior: DVec3,
+) -> [usize; 3] {
     const SLAB_MM: f64 = 2.0;
     let floor = comp.lowest_height - SLAB_MM;
     let mut voxels = Vec::new();
     // The height along a row changes by inferior.x·sx per voxel: a row whose highest
     // possible value is below the slab is passed over.
-    let (x_lo, x_hi) = (comp.bbox.lo[0] as f64 * geom.spacing[0], comp.bbox.hi[0] as f64 * geom.spacing[0]);
+    let (x_lo, x_hi) = (
+        comp.bbox.lo[0] as f64 * geom.spacing[0],
+        comp.bbox.hi[0] as f64 * geom.spacing[0],
+    );
     let best_x = (inferior.x * x_lo).max(inferior.x * x_hi);
     for k in comp.bbox.lo[2]..=comp.bbox.hi[2] {
         for j in comp.bbox.lo[1]..=comp.bbox.hi[1] {
-            if best_x + inferior.y * j as f64 * geom.spacing[1] + inferior.z * k as f64 * geom.spacing[2] < floor {
+            if best_x
+                + inferior.y * j as f64 * geom.spacing[1]
+                + inferior.z * k as f64 * geom.spacing[2]
+                < floor
+            {
                 continue;
             }
             for r in runs.row(j, k).filter(|&r| run_comp[r] == c) {
                 let run = runs.runs[r];
                 for x in run.x0 as usize..run.x1 as usize {
-                    if chain::height(inferior, geom.index_to_local(DVec3::new(x as f64, j as f64, k as f64))) >= floor {
+                    if chain::height(
+                        inferior,
+                        geom.index_to_local(DVec3::new(x as f64, j as f64, k as f64)),
+                    ) >= floor
+                    {
                         voxels.push([x, j, k]);
                     }
                 }
@@ -1140,10 +1551,23 @@ fn lowest_middle(runs: &Runs, run_comp: &[u32], comp: &Compartment, c: u32, geom
     }
     let mm = |v: [usize; 3]| geom.index_to_local(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64));
     let mid = voxels.iter().map(|&v| mm(v)).sum::<DVec3>() / voxels.len().max(1) as f64;
-    voxels.into_iter().min_by(|&a, &b| mm(a).distance(mid).total_cmp(&mm(b).distance(mid)).then_with(|| {
-        let (p, q) = (geom.index_to_patient(DVec3::new(a[0] as f64, a[1] as f64, a[2] as f64)), geom.index_to_patient(DVec3::new(b[0] as f64, b[1] as f64, b[2] as f64)));
-        p.x.total_cmp(&q.x).then(p.y.total_cmp(&q.y)).then(p.z.total_cmp(&q.z))
-    })).unwrap_or(comp.lowest)
+    voxels
+        .into_iter()
+        .min_by(|&a, &b| {
+            mm(a)
+                .distance(mid)
+                .total_cmp(&mm(b).distance(mid))
+                .then_with(|| {
+                    let (p, q) = (
+                        geom.index_to_patient(DVec3::new(a[0] as f64, a[1] as f64, a[2] as f64)),
+                        geom.index_to_patient(DVec3::new(b[0] as f64, b[1] as f64, b[2] as f64)),
+                    );
+                    p.x.total_cmp(&q.x)
+                        .then(p.y.total_cmp(&q.y))
+                        .then(p.z.total_cmp(&q.z))
+                })
+        })
+        .unwrap_or(comp.lowest)
 }
 
 /// A tube of `radius_mm` around a bridge's path: BRIDGE where there is neither gas nor a pool.
@@ -1154,7 +1578,9 @@ fn lay_bridge(work: &mut Volume<u8>, path: &[[usize; 3]], radius_mm: f64, added:
     for dz in -r[2]..=r[2] {
         for dy in -r[1]..=r[1] {
             for dx in -r[0]..=r[0] {
-                let d2 = (dx as f64 * g.spacing[0]).powi(2) + (dy as f64 * g.spacing[1]).powi(2) + (dz as f64 * g.spacing[2]).powi(2);
+                let d2 = (dx as f64 * g.spacing[0]).powi(2)
+                    + (dy as f64 * g.spacing[1]).powi(2)
+                    + (dz as f64 * g.spacing[2]).powi(2);
                 if d2 <= radius_mm * radius_mm {
                     ball.push([dx, dy, dz]);
                 }
@@ -1179,11 +1605,21 @@ fn lay_bridge(work: &mut Volume<u8>, path: &[[usize; 3]], radius_mm: f64, added:
 
 /// Fluid filling a bridged stretch: the bright voxels reached from the path's bright voxels
 /// within `reach_mm`, through bright voxels.
-fn fill_fluid(work: &mut Volume<u8>, path: &[[usize; 3]], reach_mm: f64, bright: impl Fn(usize) -> bool, added: &mut Vec<usize>) {
+fn fill_fluid(
+    work: &mut Volume<u8>,
+    path: &[[usize; 3]],
+    reach_mm: f64,
+    bright: impl Fn(usize) -> bool,
+    added: &mut Vec<usize>,
+) {
     let g = work.geometry().clone();
     let step = g.spacing.iter().cloned().fold(f64::INFINITY, f64::min);
     let layers = (reach_mm / step).ceil() as usize;
-    let mut front: Vec<usize> = path.iter().map(|v| g.index(v[0], v[1], v[2])).filter(|&i| work.data()[i] == 0 && bright(i)).collect();
+    let mut front: Vec<usize> = path
+        .iter()
+        .map(|v| g.index(v[0], v[1], v[2]))
+        .filter(|&i| work.data()[i] == 0 && bright(i))
+        .collect();
     for &i in &front {
         work.data_mut()[i] = BRIDGE;
         added.push(i);
@@ -1193,7 +1629,14 @@ fn fill_fluid(work: &mut Volume<u8>, path: &[[usize; 3]], reach_mm: f64, bright:
         let mut next = Vec::new();
         for &i in &front {
             let [x, y, z] = g.ijk(i);
-            let n = [(x > 0).then(|| i - 1), (x + 1 < nx).then(|| i + 1), (y > 0).then(|| i - nx), (y + 1 < ny).then(|| i + nx), (z > 0).then(|| i - nx * ny), (z + 1 < nz).then(|| i + nx * ny)];
+            let n = [
+                (x > 0).then(|| i - 1),
+                (x + 1 < nx).then(|| i + 1),
+                (y > 0).then(|| i - nx),
+                (y + 1 < ny).then(|| i + nx),
+                (z > 0).then(|| i - nx * ny),
+                (z + 1 < nz).then(|| i + nx * ny),
+            ];
             for q in n.into_iter().flatten() {
                 if work.data()[q] == 0 && bright(q) {
                     work.data_mut()[q] = BRIDGE;
@@ -1225,7 +1668,12 @@ fn region_of(geom: &crate::Geometry, p: DVec3, colon: &[DVec3; 2]) -> &'static s
 
 /// Gas left out of the colon: stomach (high on the left), small bowel (small or narrow), or
 /// other.
-fn classify(comp: &Compartment, geom: &crate::Geometry, colon: &[DVec3; 2], voxel_ml: f64) -> ComponentKind {
+fn classify(
+    comp: &Compartment,
+    geom: &crate::Geometry,
+    colon: &[DVec3; 2],
+    voxel_ml: f64,
+) -> ComponentKind {
     let ml = comp.gas_voxels as f64 * voxel_ml;
     let c = geom.local_to_patient(comp.centroid_mm());
     let span = colon[1] - colon[0];
@@ -1237,10 +1685,22 @@ fn classify(comp: &Compartment, geom: &crate::Geometry, colon: &[DVec3; 2], voxe
     let b = lps_box(geom, &comp.bbox);
     let length = (b[1] - b[0]).length().max(1.0);
     let width = 2.0 * (ml * 1000.0 / (std::f64::consts::PI * length)).sqrt();
-    if ml < LARGE_LEFT_ML || width <= 25.0 { ComponentKind::SmallBowel } else { ComponentKind::Other }
+    if ml < LARGE_LEFT_ML || width <= 25.0 {
+        ComponentKind::SmallBowel
+    } else {
+        ComponentKind::Other
+    }
 }
 
-fn segment_report(comp: &Compartment, geom: &crate::Geometry, label: String, kind: ComponentKind, order: Option<usize>, reason: Option<String>, voxel_ml: f64) -> SegmentReport {
+fn segment_report(
+    comp: &Compartment,
+    geom: &crate::Geometry,
+    label: String,
+    kind: ComponentKind,
+    order: Option<usize>,
+    reason: Option<String>,
+    voxel_ml: f64,
+) -> SegmentReport {
     let b = lps_box(geom, &comp.bbox);
     SegmentReport {
         label,
@@ -1249,21 +1709,31 @@ fn segment_report(comp: &Compartment, geom: &crate::Geometry, label: String, kin
         gas_ml: comp.gas_voxels as f64 * voxel_ml,
         fluid_ml: (comp.voxels - comp.gas_voxels) as f64 * voxel_ml,
         extent_lps_mm: [b[0].to_array(), b[1].to_array()],
-        anchor_lps_mm: geom.index_to_patient(DVec3::from_array(comp.lowest.map(|x| x as f64))).to_array(),
+        anchor_lps_mm: geom
+            .index_to_patient(DVec3::from_array(comp.lowest.map(|x| x as f64)))
+            .to_array(),
         kept: order.is_some(),
         reason,
     }
 }
 
 /// A rectal tube as a gas region left out of the colon.
-fn tube_report(t: &tube::Tube, runs: &Runs, geom: &crate::Geometry, voxel_ml: f64) -> SegmentReport {
+fn tube_report(
+    t: &tube::Tube,
+    runs: &Runs,
+    geom: &crate::Geometry,
+    voxel_ml: f64,
+) -> SegmentReport {
     let mut bbox: Option<Bbox> = None;
     let mut voxels = 0usize;
     for &r in &t.runs {
         let (j, k) = row_of(runs, r);
         let run = runs.runs[r];
         voxels += (run.x1 - run.x0) as usize;
-        let b = Bbox { lo: [run.x0 as usize, j, k], hi: [run.x1 as usize - 1, j, k] };
+        let b = Bbox {
+            lo: [run.x0 as usize, j, k],
+            hi: [run.x1 as usize - 1, j, k],
+        };
         bbox = Some(bbox.map_or(b, |x| x.union(&b)));
     }
     let b = bbox.map_or([DVec3::ZERO; 2], |b| lps_box(geom, &b));
@@ -1278,7 +1748,10 @@ fn tube_report(t: &tube::Tube, runs: &Runs, geom: &crate::Geometry, voxel_ml: f6
         extent_lps_mm: [b[0].to_array(), b[1].to_array()],
         anchor_lps_mm: lps(t.entry),
         kept: false,
-        reason: Some(format!("a rectal tube, {:.0} mm from the skin to its tip at LPS ({:.0}, {:.0}, {:.0}): its air is not colon; the rectum starts at its tip", t.length_mm, tip[0], tip[1], tip[2])),
+        reason: Some(format!(
+            "a rectal tube, {:.0} mm from the skin to its tip at LPS ({:.0}, {:.0}, {:.0}): its air is not colon; the rectum starts at its tip",
+            t.length_mm, tip[0], tip[1], tip[2]
+        )),
     }
 }
 
@@ -1305,7 +1778,10 @@ struct UnionFind {
 
 impl UnionFind {
     fn new(n: usize) -> Self {
-        UnionFind { parent: (0..n as u32).collect(), size: vec![1; n] }
+        UnionFind {
+            parent: (0..n as u32).collect(),
+            size: vec![1; n],
+        }
     }
     fn find(&mut self, mut x: usize) -> usize {
         while self.parent[x] as usize != x {
@@ -1345,7 +1821,20 @@ mod tests {
             x ^= x << 17;
             x
         };
-        let values = [-1000i16, -501, -500, -499, 0, 1, 199, 200, 201, 1500, i16::MIN, i16::MAX];
+        let values = [
+            -1000i16,
+            -501,
+            -500,
+            -499,
+            0,
+            1,
+            199,
+            200,
+            201,
+            1500,
+            i16::MIN,
+            i16::MAX,
+        ];
         for len in [1usize, 5, 63, 64, 65, 127, 128, 130, 200, 512, 517] {
             for _ in 0..20 {
                 // Stretches of one value, so that runs are long enough to cross words.
@@ -1355,15 +1844,24 @@ mod tests {
                     let n = 1 + (next() % 90) as usize;
                     row.extend(std::iter::repeat_n(v, n.min(len - row.len())));
                 }
-                for tests in [(Test::Below(-500), Some(Test::AtLeast(200))), (Test::NonZero, None), (Test::AtLeast(-500), Some(Test::NonZero))] {
-                    let mut words = (vec![u64::MAX; len.div_ceil(64)], vec![u64::MAX; len.div_ceil(64)]);
+                for tests in [
+                    (Test::Below(-500), Some(Test::AtLeast(200))),
+                    (Test::NonZero, None),
+                    (Test::AtLeast(-500), Some(Test::NonZero)),
+                ] {
+                    let mut words = (
+                        vec![u64::MAX; len.div_ceil(64)],
+                        vec![u64::MAX; len.div_ceil(64)],
+                    );
                     row_bits(&row, tests, &mut words);
                     let found = |w: &[u64]| {
                         let mut v = Vec::new();
                         runs_of_bits(w, |a, b| v.push(a as usize..b as usize));
                         v
                     };
-                    let want = |t: Test| crate::volume::runs_where(&row, |v| t.holds(v)).collect::<Vec<_>>();
+                    let want = |t: Test| {
+                        crate::volume::runs_where(&row, |v| t.holds(v)).collect::<Vec<_>>()
+                    };
                     assert_eq!(found(&words.0), want(tests.0), "{tests:?} {row:?}");
                     if let Some(u) = tests.1 {
                         assert_eq!(found(&words.1), want(u), "{tests:?} {row:?}");
@@ -1381,14 +1879,27 @@ mod tests {
         for k in 0..40 {
             for j in 0..50 {
                 for i in 0..60 {
-                    let body = ((i as f64 - 30.0) / 27.0).powi(2) + ((j as f64 - 25.0) / 22.0).powi(2) < 1.0;
+                    let body = ((i as f64 - 30.0) / 27.0).powi(2)
+                        + ((j as f64 - 25.0) / 22.0).powi(2)
+                        < 1.0;
                     if !body {
                         continue;
                     }
-                    let tube = (i as f64 - 20.0).powi(2) + (j as f64 - 25.0).powi(2) < 36.0 && (3..37).contains(&k);
-                    let pocket = (i as f64 - 40.0).powi(2) + (j as f64 - 20.0).powi(2) + (k as f64 - 10.0).powi(2) < 6.0;
-                    let lung = (i as f64 - 40.0).powi(2) + (j as f64 - 30.0).powi(2) < 30.0 && k >= 30;
-                    let hu = if tube || pocket { -1000 } else if lung { -850 } else { 40 };
+                    let tube = (i as f64 - 20.0).powi(2) + (j as f64 - 25.0).powi(2) < 36.0
+                        && (3..37).contains(&k);
+                    let pocket = (i as f64 - 40.0).powi(2)
+                        + (j as f64 - 20.0).powi(2)
+                        + (k as f64 - 10.0).powi(2)
+                        < 6.0;
+                    let lung =
+                        (i as f64 - 40.0).powi(2) + (j as f64 - 30.0).powi(2) < 30.0 && k >= 30;
+                    let hu = if tube || pocket {
+                        -1000
+                    } else if lung {
+                        -850
+                    } else {
+                        40
+                    };
                     v.set(i, j, k, hu);
                 }
             }
@@ -1398,12 +1909,17 @@ mod tests {
 
     /// The toy's tube holds 5.6 ml of gas: below the default minimum for a colon.
     fn toy_options() -> SegmentOptions {
-        SegmentOptions { min_colon_ml: 1.0, ..Default::default() }
+        SegmentOptions {
+            min_colon_ml: 1.0,
+            ..Default::default()
+        }
     }
 
     #[test]
     fn too_little_gas_is_no_colon() {
-        let e = segment(&toy(), &SegmentOptions::default()).unwrap_err().to_string();
+        let e = segment(&toy(), &SegmentOptions::default())
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("no colon lumen") && e.contains("5.6 ml"), "{e}");
     }
 
@@ -1416,10 +1932,16 @@ mod tests {
         assert_eq!(s.lumen.get(40, 20, 10), 0, "small pocket taken");
         assert_eq!(s.lumen.get(40, 30, 35), 0, "lung taken");
         assert_eq!(s.lumen.get(0, 0, 0), 0, "outside air taken");
-        assert_eq!(s.lumen_voxels, s.lumen.data().iter().filter(|&&m| m == 1).count());
+        assert_eq!(
+            s.lumen_voxels,
+            s.lumen.data().iter().filter(|&&m| m == 1).count()
+        );
         assert!(s.components.iter().any(|c| c.kind == ComponentKind::Lung));
         assert_eq!(s.components[0].kind, ComponentKind::Colon);
-        assert_eq!(s.seed_voxel[2], 3, "automatic seed at the lowest slice of the colon");
+        assert_eq!(
+            s.seed_voxel[2], 3,
+            "automatic seed at the lowest slice of the colon"
+        );
     }
 
     #[test]
@@ -1431,18 +1953,47 @@ mod tests {
         // A seed in the pocket says it is colon: it joins, and so does the tube beside it
         // (a segment big enough, within reach), bridged, with a warning; the rectum side is
         // still the lowest colon gas, not the seed.
-        let seeded = SegmentOptions { seeds_mm: vec![DVec3::new(40.0, 20.0, 15.0)], ..Default::default() };
+        let seeded = SegmentOptions {
+            seeds_mm: vec![DVec3::new(40.0, 20.0, 15.0)],
+            ..Default::default()
+        };
         let s = segment(&v, &seeded).unwrap();
         assert_eq!(s.lumen.get(40, 20, 10), 1);
         assert_eq!(s.lumen.get(20, 25, 20), 1);
         assert_eq!(s.gaps.len(), 1);
-        assert!(s.warnings.iter().any(|w| w.contains("bridged")), "{:?}", s.warnings);
-        assert_eq!(s.seed_voxel[2], 3, "the source side is the lowest colon gas, not the seed");
-        let in_tissue = SegmentOptions { seeds_mm: vec![DVec3::new(30.0, 10.0, 30.0)], ..Default::default() };
-        assert!(segment(&v, &in_tissue).unwrap_err().to_string().contains("not in gas"));
-        let outside = SegmentOptions { seeds_mm: vec![DVec3::new(0.0, 0.0, 0.0)], ..Default::default() };
-        assert!(segment(&v, &outside).unwrap_err().to_string().contains("outside the body"));
-        let beyond = SegmentOptions { seeds_mm: vec![DVec3::new(500.0, 0.0, 0.0)], ..Default::default() };
+        assert!(
+            s.warnings.iter().any(|w| w.contains("bridged")),
+            "{:?}",
+            s.warnings
+        );
+        assert_eq!(
+            s.seed_voxel[2], 3,
+            "the source side is the lowest colon gas, not the seed"
+        );
+        let in_tissue = SegmentOptions {
+            seeds_mm: vec![DVec3::new(30.0, 10.0, 30.0)],
+            ..Default::default()
+        };
+        assert!(
+            segment(&v, &in_tissue)
+                .unwrap_err()
+                .to_string()
+                .contains("not in gas")
+        );
+        let outside = SegmentOptions {
+            seeds_mm: vec![DVec3::new(0.0, 0.0, 0.0)],
+            ..Default::default()
+        };
+        assert!(
+            segment(&v, &outside)
+                .unwrap_err()
+                .to_string()
+                .contains("outside the body")
+        );
+        let beyond = SegmentOptions {
+            seeds_mm: vec![DVec3::new(500.0, 0.0, 0.0)],
+            ..Default::default()
+        };
         assert!(segment(&v, &beyond).is_err());
     }
 
@@ -1460,6 +2011,11 @@ mod tests {
     fn no_gas_is_an_error() {
         let g = Geometry::new([10, 10, 10], [1.0; 3], [0.0; 3]).unwrap();
         let v = Volume::filled(g, 40i16).unwrap();
-        assert!(segment(&v, &SegmentOptions::default()).unwrap_err().to_string().contains("no colon"));
+        assert!(
+            segment(&v, &SegmentOptions::default())
+                .unwrap_err()
+                .to_string()
+                .contains("no colon")
+        );
     }
 }

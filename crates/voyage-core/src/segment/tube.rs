@@ -9,7 +9,7 @@
 //! narrow as a tube; where it widens is the tube's tip, in the rectum. The tube's air is
 //! then outside air, and the rectum begins at the tip.
 
-use super::{row_of, Runs};
+use super::{Runs, row_of};
 
 /// A tube's cross-section in an axial slice is at most this (mm²): an inner radius of 6 mm
 /// at 45° to the slice (real tubes are 3–8 mm wide inside).
@@ -33,7 +33,14 @@ pub struct Tube {
 /// Rectal tubes: for each component `c` (its runs `run_comp[r] == c`; u32::MAX for none)
 /// that touches outside air (`inside[r] == false`) across an axial slice, the narrow
 /// stretch from there on, if it is long enough to be a tube.
-pub fn find(runs: &Runs, inside: &[bool], run_comp: &[u32], is_gas: impl Fn(u32) -> bool, dims: [usize; 3], spacing: [f64; 3]) -> Vec<Tube> {
+pub fn find(
+    runs: &Runs,
+    inside: &[bool],
+    run_comp: &[u32],
+    is_gas: impl Fn(u32) -> bool,
+    dims: [usize; 3],
+    spacing: [f64; 3],
+) -> Vec<Tube> {
     let mut tubes: Vec<Tube> = Vec::new();
     for contact in contacts(runs, inside, run_comp, &is_gas, dims) {
         if tubes.iter().any(|t| t.comp == run_comp[contact.2]) {
@@ -48,7 +55,13 @@ pub fn find(runs: &Runs, inside: &[bool], run_comp: &[u32], is_gas: impl Fn(u32)
 
 /// Internal gas runs that overlap outside air in the next slice: (their slice, the step in k
 /// away from the outside air, the run).
-fn contacts(runs: &Runs, inside: &[bool], run_comp: &[u32], is_gas: &impl Fn(u32) -> bool, dims: [usize; 3]) -> Vec<(usize, i64, usize)> {
+fn contacts(
+    runs: &Runs,
+    inside: &[bool],
+    run_comp: &[u32],
+    is_gas: &impl Fn(u32) -> bool,
+    dims: [usize; 3],
+) -> Vec<(usize, i64, usize)> {
     let [_, ny, nz] = dims;
     let mut out = Vec::new();
     for k in 0..nz {
@@ -60,7 +73,9 @@ fn contacts(runs: &Runs, inside: &[bool], run_comp: &[u32], is_gas: &impl Fn(u32
                         continue;
                     }
                     let run = runs.runs[r];
-                    let touches = runs.row(j, kk as usize).any(|q| !inside[q] && runs.runs[q].x0 < run.x1 && run.x0 < runs.runs[q].x1);
+                    let touches = runs.row(j, kk as usize).any(|q| {
+                        !inside[q] && runs.runs[q].x0 < run.x1 && run.x0 < runs.runs[q].x1
+                    });
                     if touches {
                         out.push((k, -step, r));
                     }
@@ -75,7 +90,13 @@ fn contacts(runs: &Runs, inside: &[bool], run_comp: &[u32], is_gas: &impl Fn(u32
 /// gas of component `c` joined (in the slice) to the runs over the tube's runs of the slice
 /// before. Inside the rectum the tube's air is walled off by its plastic from the rectum's
 /// gas, so it is followed up to its tip, where it opens into the rectum and widens.
-fn follow(runs: &Runs, run_comp: &[u32], (k0, away, start): (usize, i64, usize), nz: usize, spacing: [f64; 3]) -> Option<Tube> {
+fn follow(
+    runs: &Runs,
+    run_comp: &[u32],
+    (k0, away, start): (usize, i64, usize),
+    nz: usize,
+    spacing: [f64; 3],
+) -> Option<Tube> {
     let c = run_comp[start];
     let max_voxels = (MAX_AREA_MM2 / (spacing[0] * spacing[1])).ceil() as usize;
     let nz = nz as i64;
@@ -99,7 +120,9 @@ fn follow(runs: &Runs, run_comp: &[u32], (k0, away, start): (usize, i64, usize),
             .flat_map(|&r| {
                 let (j, _) = row_of(runs, r);
                 let run = runs.runs[r];
-                runs.row(j, k as usize).filter(move |&q| run_comp[q] == c && runs.runs[q].x0 < run.x1 && run.x0 < runs.runs[q].x1)
+                runs.row(j, k as usize).filter(move |&q| {
+                    run_comp[q] == c && runs.runs[q].x0 < run.x1 && run.x0 < runs.runs[q].x1
+                })
             })
             .collect();
         match in_slice(runs, run_comp, c, over, max_voxels) {
@@ -108,14 +131,28 @@ fn follow(runs: &Runs, run_comp: &[u32], (k0, away, start): (usize, i64, usize),
         }
     }
     let d = [0, 1, 2].map(|a| (tip[a] - entry[a]) * spacing[a]);
-    let length_mm = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt().max(slices as f64 * spacing[2]);
-    (length_mm >= MIN_LENGTH_MM).then_some(Tube { comp: c, runs: taken, entry, tip, length_mm })
+    let length_mm = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        .sqrt()
+        .max(slices as f64 * spacing[2]);
+    (length_mm >= MIN_LENGTH_MM).then_some(Tube {
+        comp: c,
+        runs: taken,
+        entry,
+        tip,
+        length_mm,
+    })
 }
 
 /// The runs of component `c` joined to `seeds` within their slice (rows next to each other,
 /// overlapping); None when there are none or they hold more than `max_voxels` (wider than a
 /// tube: the rectum, or the gas the tube opens into).
-fn in_slice(runs: &Runs, run_comp: &[u32], c: u32, mut stack: Vec<usize>, max_voxels: usize) -> Option<Vec<usize>> {
+fn in_slice(
+    runs: &Runs,
+    run_comp: &[u32],
+    c: u32,
+    mut stack: Vec<usize>,
+    max_voxels: usize,
+) -> Option<Vec<usize>> {
     stack.sort_unstable();
     stack.dedup();
     let mut seen = stack.clone();
@@ -134,7 +171,11 @@ fn in_slice(runs: &Runs, run_comp: &[u32], c: u32, mut stack: Vec<usize>, max_vo
                 continue;
             }
             for q in runs.row(jj, k) {
-                if run_comp[q] == c && runs.runs[q].x0 < run.x1 && run.x0 < runs.runs[q].x1 && !seen.contains(&q) {
+                if run_comp[q] == c
+                    && runs.runs[q].x0 < run.x1
+                    && run.x0 < runs.runs[q].x1
+                    && !seen.contains(&q)
+                {
                     seen.push(q);
                     stack.push(q);
                 }

@@ -25,11 +25,17 @@ impl Bbox {
 
     /// The box grown by `by` voxels per axis, within `dims`.
     pub fn grown(&self, by: [usize; 3], dims: [usize; 3]) -> Bbox {
-        Bbox { lo: [0, 1, 2].map(|a| self.lo[a].saturating_sub(by[a])), hi: [0, 1, 2].map(|a| (self.hi[a] + by[a]).min(dims[a] - 1)) }
+        Bbox {
+            lo: [0, 1, 2].map(|a| self.lo[a].saturating_sub(by[a])),
+            hi: [0, 1, 2].map(|a| (self.hi[a] + by[a]).min(dims[a] - 1)),
+        }
     }
 
     pub fn union(&self, o: &Bbox) -> Bbox {
-        Bbox { lo: [0, 1, 2].map(|a| self.lo[a].min(o.lo[a])), hi: [0, 1, 2].map(|a| self.hi[a].max(o.hi[a])) }
+        Bbox {
+            lo: [0, 1, 2].map(|a| self.lo[a].min(o.lo[a])),
+            hi: [0, 1, 2].map(|a| self.hi[a].max(o.hi[a])),
+        }
     }
 }
 

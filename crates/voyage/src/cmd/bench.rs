@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 use serde::Serialize;
 use voyage_core::io::{self, LoadOptions};
@@ -132,7 +132,15 @@ struct LoadBench {
 pub fn run(a: &BenchArgs) -> Result<()> {
     match &a.what {
         BenchWhat::Load(l) => load(l),
-        BenchWhat::Prep(p) => super::bench_prep::run(p.inputs.clone(), !p.no_phantom, &p.dir, p.repeats, p.rounds, !p.no_reference, &p.common),
+        BenchWhat::Prep(p) => super::bench_prep::run(
+            p.inputs.clone(),
+            !p.no_phantom,
+            &p.dir,
+            p.repeats,
+            p.rounds,
+            !p.no_reference,
+            &p.common,
+        ),
         BenchWhat::Fly(f) => super::bench_fly::run(&f.inputs, !f.no_phantom, f.samples, &f.common),
         BenchWhat::Render(r) => {
             anyhow::ensure!((16..=4096).contains(&r.size), "--size must lie in 16..4096");
@@ -164,7 +172,10 @@ struct LoadRow {
 }
 
 fn load(a: &LoadBench) -> Result<()> {
-    rayon::ThreadPoolBuilder::new().num_threads(a.common.threads).build_global().ok();
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(a.common.threads)
+        .build_global()
+        .ok();
     let (series, nii) = prepare_load_files(&a.dir, a.small)?;
     let opts = LoadOptions::default();
     let mb = |v: &voyage_core::Volume<i16>| (v.data().len() * 2) as f64 / 1e6;
@@ -184,7 +195,14 @@ fn load(a: &LoadBench) -> Result<()> {
         }
     };
     let rows = vec![
-        row("DICOM series (uncompressed)", megabytes, dicom_ms, "pydicom+numpy", ref_dicom, 3.0),
+        row(
+            "DICOM series (uncompressed)",
+            megabytes,
+            dicom_ms,
+            "pydicom+numpy",
+            ref_dicom,
+            3.0,
+        ),
         row("NIfTI .nii.gz", megabytes, nii_ms, "nibabel", ref_nii, 1.0),
     ];
     if a.common.json {
@@ -196,7 +214,14 @@ fn load(a: &LoadBench) -> Result<()> {
     Ok(())
 }
 
-fn row(what: &'static str, megabytes: f64, ms: f64, reference: &'static str, ref_ms: Option<f64>, target: f64) -> LoadRow {
+fn row(
+    what: &'static str,
+    megabytes: f64,
+    ms: f64,
+    reference: &'static str,
+    ref_ms: Option<f64>,
+    target: f64,
+) -> LoadRow {
     LoadRow {
         what,
         megabytes,
@@ -211,9 +236,13 @@ fn row(what: &'static str, megabytes: f64, ms: f64, reference: &'static str, ref
 
 fn print_load_table(rows: &[LoadRow], threads: usize) {
     println!("load benchmark ({threads} thread(s), median of repeats, warm cache)");
-    println!("{:<30} {:>8} {:>10} {:>10} {:>16} {:>12} {:>9} {:>7}", "input", "MB", "voyage ms", "MB/s", "reference", "ref ms", "speedup", "target");
+    println!(
+        "{:<30} {:>8} {:>10} {:>10} {:>16} {:>12} {:>9} {:>7}",
+        "input", "MB", "voyage ms", "MB/s", "reference", "ref ms", "speedup", "target"
+    );
     for r in rows {
-        let opt = |v: Option<f64>, p: usize| v.map(|x| format!("{x:.p$}")).unwrap_or_else(|| "-".into());
+        let opt =
+            |v: Option<f64>, p: usize| v.map(|x| format!("{x:.p$}")).unwrap_or_else(|| "-".into());
         println!(
             "{:<30} {:>8.1} {:>10.1} {:>10.0} {:>16} {:>12} {:>8}× {:>6.0}×",
             r.what,
@@ -237,11 +266,16 @@ fn prepare_load_files(dir: &Path, small: bool) -> Result<(PathBuf, PathBuf)> {
     if stamp.exists() && series.is_dir() && nii.is_file() {
         return Ok((series, nii));
     }
-    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create folder", dir.display()))?;
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("{}: cannot create folder", dir.display()))?;
     eprintln!("making the colon phantom ({tag}) in {} ...", dir.display());
-    let p = phantom::colon(&ColonOptions { small, ..ColonOptions::default() })?;
+    let p = phantom::colon(&ColonOptions {
+        small,
+        ..ColonOptions::default()
+    })?;
     if series.exists() {
-        std::fs::remove_dir_all(&series).with_context(|| format!("{}: cannot clear", series.display()))?;
+        std::fs::remove_dir_all(&series)
+            .with_context(|| format!("{}: cannot clear", series.display()))?;
     }
     io::dicom_write::write_series(&series, &p.ct)?;
     io::nifti::save(&nii, &p.ct)?;
@@ -272,7 +306,8 @@ const LOAD_REFERENCE_PY: &str = include_str!("../../../../bench/load_reference.p
 fn run_reference(a: &LoadBench, series: &Path, nii: &Path) -> Result<(f64, f64)> {
     let python = find_python(a.common.python.as_deref())?;
     let script = a.dir.join("load_reference.py");
-    std::fs::write(&script, LOAD_REFERENCE_PY).with_context(|| format!("{}: cannot write", script.display()))?;
+    std::fs::write(&script, LOAD_REFERENCE_PY)
+        .with_context(|| format!("{}: cannot write", script.display()))?;
     // One more repeat than ours: the reference's first run is its warm-up.
     let out = Command::new(&python)
         .arg(&script)
@@ -282,11 +317,23 @@ fn run_reference(a: &LoadBench, series: &Path, nii: &Path) -> Result<(f64, f64)>
         .output()
         .with_context(|| format!("cannot run {}", python.display()))?;
     if !out.status.success() {
-        bail!("{} failed: {}", script.display(), String::from_utf8_lossy(&out.stderr).trim());
+        bail!(
+            "{} failed: {}",
+            script.display(),
+            String::from_utf8_lossy(&out.stderr).trim()
+        );
     }
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).context("reference printed no JSON")?;
+    let v: serde_json::Value =
+        serde_json::from_slice(&out.stdout).context("reference printed no JSON")?;
     let med = |key: &str| -> Result<f64> {
-        let mut t: Vec<f64> = v[key].as_array().context("bad reference JSON")?.iter().skip(1).filter_map(|x| x.as_f64()).map(|s| s * 1e3).collect();
+        let mut t: Vec<f64> = v[key]
+            .as_array()
+            .context("bad reference JSON")?
+            .iter()
+            .skip(1)
+            .filter_map(|x| x.as_f64())
+            .map(|s| s * 1e3)
+            .collect();
         if t.is_empty() {
             bail!("reference gave no timings for {key}");
         }

@@ -5,28 +5,40 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{bail, Result};
+use anyhow::{Result, bail};
 use glam::DVec3;
-use serde_json::{json, Value};
-use voyage_core::flight::{fly, FlightOptions};
+use serde_json::{Value, json};
+use voyage_core::Volume;
+use voyage_core::flight::{FlightOptions, fly};
 use voyage_core::io::{self, LoadOptions};
 use voyage_core::phantom::{self, ColonOptions};
-use voyage_core::potential::{BoxStore, BrickStore, Direction, DistanceStore, Navigable, PotentialField, PotentialParams, SortedStore};
-use voyage_core::prep::{prepare, PrepOptions, Study};
-use voyage_core::Volume;
+use voyage_core::potential::{
+    BoxStore, BrickStore, Direction, DistanceStore, Navigable, PotentialField, PotentialParams,
+    SortedStore,
+};
+use voyage_core::prep::{PrepOptions, Study, prepare};
 
 use super::bench::Common;
 
 pub fn run(inputs: &[PathBuf], phantoms: bool, samples: usize, common: &Common) -> Result<()> {
-    rayon::ThreadPoolBuilder::new().num_threads(common.threads).build_global().ok();
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(common.threads)
+        .build_global()
+        .ok();
     let mut cases: Vec<(String, Volume<i16>)> = Vec::new();
     if phantoms {
         eprintln!("making the phantoms ...");
         cases.push(("pipe phantom".into(), phantom::pipe(1)?.ct));
-        cases.push(("colon phantom (512×512×400)".into(), phantom::colon(&ColonOptions::default())?.ct));
+        cases.push((
+            "colon phantom (512×512×400)".into(),
+            phantom::colon(&ColonOptions::default())?.ct,
+        ));
     }
     for p in inputs {
-        cases.push((p.display().to_string(), io::load(p, &LoadOptions::default())?.volume));
+        cases.push((
+            p.display().to_string(),
+            io::load(p, &LoadOptions::default())?.volume,
+        ));
     }
     if cases.is_empty() {
         bail!("nothing to measure: give an input or leave the phantoms in");
@@ -38,7 +50,12 @@ pub fn run(inputs: &[PathBuf], phantoms: bool, samples: usize, common: &Common) 
         out.push(measure(&name, &study, samples)?);
     }
     if common.json {
-        println!("{}", serde_json::to_string_pretty(&json!({ "bench": "fly", "threads": common.threads, "cases": out }))?);
+        println!(
+            "{}",
+            serde_json::to_string_pretty(
+                &json!({ "bench": "fly", "threads": common.threads, "cases": out })
+            )?
+        );
     } else {
         for c in &out {
             print_case(c);
@@ -53,14 +70,34 @@ fn measure(name: &str, study: &Study, samples: usize) -> Result<Value> {
     let points = study.random_lumen_points(samples, 5);
     let g = study.ct.geometry();
     let layouts = vec![
-        layout("sorted list + binary search (paper)", &PotentialField::new(SortedStore::new(&nav)?, g), &points),
-        layout("8³ bricks (used)", &PotentialField::new(BrickStore::new(&nav)?, g), &points),
-        layout("dense box", &PotentialField::new(BoxStore::new(&nav)?, g), &points),
+        layout(
+            "sorted list + binary search (paper)",
+            &PotentialField::new(SortedStore::new(&nav)?, g),
+            &points,
+        ),
+        layout(
+            "8³ bricks (used)",
+            &PotentialField::new(BrickStore::new(&nav)?, g),
+            &points,
+        ),
+        layout(
+            "dense box",
+            &PotentialField::new(BoxStore::new(&nav)?, g),
+            &points,
+        ),
     ];
     let field = PotentialField::new(BrickStore::new(&nav)?, g);
     let mut flights = Vec::new();
     for dir in [Direction::Forward, Direction::Backward] {
-        let f = fly(&field, &study.centerline, dir, &FlightOptions { keep_poses: false, ..opts.clone() })?;
+        let f = fly(
+            &field,
+            &study.centerline,
+            dir,
+            &FlightOptions {
+                keep_poses: false,
+                ..opts.clone()
+            },
+        )?;
         flights.push(json!({
             "direction": dir.name(), "reached": f.reached, "frames": f.frames, "stalls": f.stalls,
             "step_ns": f.step_ns, "substeps_per_frame": f.substeps as f64 / f.frames.max(1) as f64,
@@ -87,7 +124,11 @@ fn layout<S: DistanceStore>(name: &str, f: &PotentialField<S>, points: &[DVec3])
     }
     let random_ns = t.elapsed().as_nanos() as f64 / points.len() as f64;
     let mut path: Vec<DVec3> = points.to_vec();
-    path.sort_by(|a, b| (a.z, a.y, a.x).partial_cmp(&(b.z, b.y, b.x)).unwrap_or(std::cmp::Ordering::Equal));
+    path.sort_by(|a, b| {
+        (a.z, a.y, a.x)
+            .partial_cmp(&(b.z, b.y, b.x))
+            .unwrap_or(std::cmp::Ordering::Equal)
+    });
     let t = Instant::now();
     for &x in &path {
         acc += f.sample(x, Direction::Forward).ds;
@@ -104,12 +145,31 @@ fn layout<S: DistanceStore>(name: &str, f: &PotentialField<S>, points: &[DVec3])
 }
 
 fn print_case(c: &Value) {
-    println!("{}: {} lumen voxels, {} navigable (core: Ds ≥ {:.2} mm)", c["case"].as_str().unwrap_or(""), c["lumen_voxels"], c["navigable_voxels"], c["core_mm"].as_f64().unwrap_or(0.0));
-    println!("  {:<38} {:>9} {:>14} {:>16} {:>12}", "layout", "MB", "sample ns", "sample ns", "∇V ns");
-    println!("  {:<38} {:>9} {:>14} {:>16} {:>12}", "", "", "(random)", "(coherent)", "(coherent)");
+    println!(
+        "{}: {} lumen voxels, {} navigable (core: Ds ≥ {:.2} mm)",
+        c["case"].as_str().unwrap_or(""),
+        c["lumen_voxels"],
+        c["navigable_voxels"],
+        c["core_mm"].as_f64().unwrap_or(0.0)
+    );
+    println!(
+        "  {:<38} {:>9} {:>14} {:>16} {:>12}",
+        "layout", "MB", "sample ns", "sample ns", "∇V ns"
+    );
+    println!(
+        "  {:<38} {:>9} {:>14} {:>16} {:>12}",
+        "", "", "(random)", "(coherent)", "(coherent)"
+    );
     for l in c["layouts"].as_array().into_iter().flatten() {
         let f = |k: &str| l[k].as_f64().unwrap_or(f64::NAN);
-        println!("  {:<38} {:>9.1} {:>14.1} {:>16.1} {:>12.1}", l["layout"].as_str().unwrap_or(""), f("megabytes"), f("sample_ns_random"), f("sample_ns_coherent"), f("gradient_ns"));
+        println!(
+            "  {:<38} {:>9.1} {:>14.1} {:>16.1} {:>12.1}",
+            l["layout"].as_str().unwrap_or(""),
+            f("megabytes"),
+            f("sample_ns_random"),
+            f("sample_ns_coherent"),
+            f("gradient_ns")
+        );
     }
     for fl in c["flights"].as_array().into_iter().flatten() {
         println!(

@@ -5,29 +5,47 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
-use serde_json::{json, Value};
-use voyage_core::distance::geodesic_distance;
-use voyage_core::io::{self, nifti, LoadOptions};
-use voyage_core::phantom::{self, ColonOptions};
-use voyage_core::prep::{prepare, PrepOptions, Study, Timings};
+use anyhow::{Context, Result, bail};
+use serde_json::{Value, json};
 use voyage_core::Volume;
+use voyage_core::distance::geodesic_distance;
+use voyage_core::io::{self, LoadOptions, nifti};
+use voyage_core::phantom::{self, ColonOptions};
+use voyage_core::prep::{PrepOptions, Study, Timings, prepare};
 
-use super::bench::{find_python, median, Common};
+use super::bench::{Common, find_python, median};
 
 const PREP_REFERENCE_PY: &str = include_str!("../../../../bench/prep_reference.py");
 
-pub fn run(inputs: Vec<PathBuf>, phantom: bool, dir: &Path, repeats: usize, rounds: usize, reference: bool, common: &Common) -> Result<()> {
+pub fn run(
+    inputs: Vec<PathBuf>,
+    phantom: bool,
+    dir: &Path,
+    repeats: usize,
+    rounds: usize,
+    reference: bool,
+    common: &Common,
+) -> Result<()> {
     let (threads, python, json_out) = (common.threads, common.python.as_deref(), common.json);
-    rayon::ThreadPoolBuilder::new().num_threads(threads).build_global().ok();
-    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create folder", dir.display()))?;
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build_global()
+        .ok();
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("{}: cannot create folder", dir.display()))?;
     let mut cases: Vec<(String, Volume<i16>)> = Vec::new();
     if phantom {
         eprintln!("making the colon phantom ...");
-        cases.push(("colon phantom (512×512×400)".into(), phantom::colon(&ColonOptions::default())?.ct));
+        cases.push((
+            "colon phantom (512×512×400)".into(),
+            phantom::colon(&ColonOptions::default())?.ct,
+        ));
     }
     for p in &inputs {
-        cases.push((p.display().to_string(), io::load(p, &LoadOptions::default())?.volume));
+        cases.push((
+            p.display().to_string(),
+            io::load(p, &LoadOptions::default())?.volume,
+        ));
     }
     if cases.is_empty() {
         bail!("nothing to measure: give an input or leave the phantom in");
@@ -63,7 +81,12 @@ pub fn run(inputs: Vec<PathBuf>, phantom: bool, dir: &Path, repeats: usize, roun
         results.push(report(&done, threads));
     }
     if json_out {
-        println!("{}", serde_json::to_string_pretty(&json!({"bench": "prep", "threads": threads, "repeats": repeats, "cases": results}))?);
+        println!(
+            "{}",
+            serde_json::to_string_pretty(
+                &json!({"bench": "prep", "threads": threads, "repeats": repeats, "cases": results})
+            )?
+        );
     } else {
         for r in &results {
             print_case(r);
@@ -84,7 +107,9 @@ struct Measured {
 
 impl Measured {
     fn study(&self) -> Result<&Study> {
-        self.study.as_ref().context("the study of this round was already let go")
+        self.study
+            .as_ref()
+            .context("the study of this round was already let go")
     }
 }
 
@@ -121,7 +146,14 @@ fn measure(name: &str, ct: Volume<i16>, repeats: usize) -> Result<Measured> {
         geodesic_distance(lumen, &study.ds.grid, study.source)?;
         single.push(t.elapsed().as_secs_f64() * 1e3);
     }
-    Ok(Measured { name: name.into(), dt_single_ms: median(&mut single), study: Some(study), timings, ct_mb, peak_rss_mb: super::prep::peak_rss_mb() })
+    Ok(Measured {
+        name: name.into(),
+        dt_single_ms: median(&mut single),
+        study: Some(study),
+        timings,
+        ct_mb,
+        peak_rss_mb: super::prep::peak_rss_mb(),
+    })
 }
 
 /// Starts the process's peak resident memory afresh (Linux; elsewhere nothing happens), so
@@ -130,10 +162,17 @@ fn reset_peak_rss() {
     let _ = std::fs::write("/proc/self/clear_refs", "5");
 }
 
-fn run_reference(python: Option<&Path>, dir: &Path, mask: &Path, source: [usize; 3], repeats: usize) -> Result<Value> {
+fn run_reference(
+    python: Option<&Path>,
+    dir: &Path,
+    mask: &Path,
+    source: [usize; 3],
+    repeats: usize,
+) -> Result<Value> {
     let python = find_python(python)?;
     let script = dir.join("prep_reference.py");
-    std::fs::write(&script, PREP_REFERENCE_PY).with_context(|| format!("{}: cannot write", script.display()))?;
+    std::fs::write(&script, PREP_REFERENCE_PY)
+        .with_context(|| format!("{}: cannot write", script.display()))?;
     let out = Command::new(&python)
         .arg(&script)
         .arg(mask)
@@ -143,7 +182,11 @@ fn run_reference(python: Option<&Path>, dir: &Path, mask: &Path, source: [usize;
         .output()
         .with_context(|| format!("cannot run {}", python.display()))?;
     if !out.status.success() {
-        bail!("{} failed: {}", script.display(), String::from_utf8_lossy(&out.stderr).trim());
+        bail!(
+            "{} failed: {}",
+            script.display(),
+            String::from_utf8_lossy(&out.stderr).trim()
+        );
     }
     serde_json::from_slice(&out.stdout).context("reference printed no JSON")
 }
@@ -151,14 +194,28 @@ fn run_reference(python: Option<&Path>, dir: &Path, mask: &Path, source: [usize;
 /// One case's rows from its rounds: per stage the median over rounds of voyage's and the
 /// reference's medians, and the median and range of the speedups paired within each round.
 fn report(rounds: &[(Measured, Value)], threads: usize) -> Value {
-    let Some((m, refs)) = rounds.last() else { return Value::Null };
+    let Some((m, refs)) = rounds.last() else {
+        return Value::Null;
+    };
     let Ok(s) = m.study() else { return Value::Null };
-    let row = |stage: &str, ours: fn(&Measured) -> f64, reference: &str, key: &str, target_ms: f64, target_ratio: Option<f64>| {
+    let row = |stage: &str,
+               ours: fn(&Measured) -> f64,
+               reference: &str,
+               key: &str,
+               target_ms: f64,
+               target_ratio: Option<f64>| {
         let ours_ms = median(&mut rounds.iter().map(|(m, _)| ours(m)).collect::<Vec<_>>());
         let ref_of = |refs: &Value| refs.get(key).and_then(|v| v["ms"].as_f64());
         let mut ref_ms: Vec<f64> = rounds.iter().filter_map(|(_, r)| ref_of(r)).collect();
-        let mut speedups: Vec<f64> = rounds.iter().filter_map(|(m, r)| ref_of(r).map(|x| x / ours(m))).collect();
-        let (lo, hi) = speedups.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &x| (lo.min(x), hi.max(x)));
+        let mut speedups: Vec<f64> = rounds
+            .iter()
+            .filter_map(|(m, r)| ref_of(r).map(|x| x / ours(m)))
+            .collect();
+        let (lo, hi) = speedups
+            .iter()
+            .fold((f64::INFINITY, 0.0f64), |(lo, hi), &x| {
+                (lo.min(x), hi.max(x))
+            });
         let has = !speedups.is_empty();
         json!({
             "stage": stage, "voyage_ms": ours_ms, "reference": reference,
@@ -201,8 +258,15 @@ fn report(rounds: &[(Measured, Value)], threads: usize) -> Value {
 
 /// Whether a row meets its targets: "yes", "NO", or "-" where it has none.
 fn met(r: &Value) -> &'static str {
-    let time = r["target_ms"].as_f64().filter(|&t| t > 0.0).zip(r["voyage_ms"].as_f64()).map(|(t, ms)| ms <= t);
-    let ratio = r["target_speedup"].as_f64().zip(r["speedup"].as_f64()).map(|(t, x)| x >= t);
+    let time = r["target_ms"]
+        .as_f64()
+        .filter(|&t| t > 0.0)
+        .zip(r["voyage_ms"].as_f64())
+        .map(|(t, ms)| ms <= t);
+    let ratio = r["target_speedup"]
+        .as_f64()
+        .zip(r["speedup"].as_f64())
+        .map(|(t, x)| x >= t);
     match (time, ratio) {
         (None, None) => "-",
         (a, b) if a.unwrap_or(true) && b.unwrap_or(true) => "yes",
@@ -222,10 +286,17 @@ fn print_case(c: &Value) {
         c["peak_rss_mb"].as_f64().unwrap_or(0.0),
         c["ct_mb"].as_f64().unwrap_or(0.0)
     );
-    println!("  {:<42} {:>10} {:<20} {:>10} {:>8} {:>13} {:>10} {:>8}  met", "stage", "voyage ms", "reference", "ref ms", "speedup", "(range)", "target ms", "target×");
+    println!(
+        "  {:<42} {:>10} {:<20} {:>10} {:>8} {:>13} {:>10} {:>8}  met",
+        "stage", "voyage ms", "reference", "ref ms", "speedup", "(range)", "target ms", "target×"
+    );
     let empty = vec![];
     for r in c["rows"].as_array().unwrap_or(&empty) {
-        let f = |v: &Value, p: usize| v.as_f64().map(|x| format!("{x:.p$}")).unwrap_or_else(|| "-".into());
+        let f = |v: &Value, p: usize| {
+            v.as_f64()
+                .map(|x| format!("{x:.p$}"))
+                .unwrap_or_else(|| "-".into())
+        };
         let range = match r["speedup_range"].as_array() {
             Some(a) if a.len() == 2 => format!("{}–{}", f(&a[0], 2), f(&a[1], 2)),
             _ => "-".into(),
@@ -239,7 +310,10 @@ fn print_case(c: &Value) {
             f(&r["speedup"], 2),
             range,
             f(&r["target_ms"], 0),
-            r["target_speedup"].as_f64().map(|x| format!("{x:.0}×")).unwrap_or_else(|| "-".into()),
+            r["target_speedup"]
+                .as_f64()
+                .map(|x| format!("{x:.0}×"))
+                .unwrap_or_else(|| "-".into()),
             met(r),
         );
     }

@@ -5,16 +5,16 @@
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Result};
-use serde_json::{json, Map, Value};
+use anyhow::{Result, bail};
+use serde_json::{Map, Value, json};
+use voyage_core::Volume;
 use voyage_core::camera::{Camera, Pose};
-use voyage_core::flight::{fly, FlightOptions};
+use voyage_core::flight::{FlightOptions, fly};
 use voyage_core::io::{self, LoadOptions};
 use voyage_core::phantom::{self, ColonOptions};
-use voyage_core::potential::{potential_field, Direction};
-use voyage_core::prep::{prepare, PrepOptions, Study};
-use voyage_core::render::{look_around, survey, CellMesh, Lighting, Strategy, Survey};
-use voyage_core::Volume;
+use voyage_core::potential::{Direction, potential_field};
+use voyage_core::prep::{PrepOptions, Study, prepare};
+use voyage_core::render::{CellMesh, Lighting, Strategy, Survey, look_around, survey};
 use voyage_render::GpuRenderer;
 
 use super::bench::Common;
@@ -31,16 +31,25 @@ pub struct Plan {
 }
 
 pub fn run(plan: &Plan, common: &Common) -> Result<()> {
-    rayon::ThreadPoolBuilder::new().num_threads(common.threads).build_global().ok();
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(common.threads)
+        .build_global()
+        .ok();
     let mut cases: Vec<(String, Volume<i16>)> = Vec::new();
     if plan.pipe {
         cases.push(("pipe phantom".into(), phantom::pipe(1)?.ct));
     }
     if plan.colon || (plan.inputs.is_empty() && !plan.pipe) {
-        cases.push(("colon phantom".into(), phantom::colon(&ColonOptions::default())?.ct));
+        cases.push((
+            "colon phantom".into(),
+            phantom::colon(&ColonOptions::default())?.ct,
+        ));
     }
     for p in &plan.inputs {
-        cases.push((p.display().to_string(), io::load(p, &LoadOptions::default())?.volume));
+        cases.push((
+            p.display().to_string(),
+            io::load(p, &LoadOptions::default())?.volume,
+        ));
     }
     let mut gpu = if plan.gpu {
         match GpuRenderer::new_headless() {
@@ -60,7 +69,11 @@ pub fn run(plan: &Plan, common: &Common) -> Result<()> {
         out.push(measure(&name, &study, plan, gpu.as_mut())?);
     }
     if common.json {
-        let v = if out.len() == 1 { out.remove(0) } else { Value::Array(out) };
+        let v = if out.len() == 1 {
+            out.remove(0)
+        } else {
+            Value::Array(out)
+        };
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         for c in &out {
@@ -89,16 +102,35 @@ fn measure(name: &str, study: &Study, plan: &Plan, gpu: Option<&mut GpuRenderer>
         cameras.extend((0..take).map(|i| Camera::new(f.poses[i * n / take])));
         all_poses.extend(f.poses);
     }
-    cameras.extend(look_around(&all_poses, plan.random, 11).into_iter().map(Camera::new));
+    cameras.extend(
+        look_around(&all_poses, plan.random, 11)
+            .into_iter()
+            .map(Camera::new),
+    );
     let mesh = CellMesh::new(&study.surface, &study.cells);
-    eprintln!("{name}: {} frames × {} strategies at {}² ...", cameras.len(), Strategy::ALL.len(), plan.size);
-    let s = survey(&mesh, &study.cells, &cameras, plan.size, plan.size, &Strategy::ALL, gpu.is_some());
+    eprintln!(
+        "{name}: {} frames × {} strategies at {}² ...",
+        cameras.len(),
+        Strategy::ALL.len(),
+        plan.size
+    );
+    let s = survey(
+        &mesh,
+        &study.cells,
+        &cameras,
+        plan.size,
+        plan.size,
+        &Strategy::ALL,
+        gpu.is_some(),
+    );
     let physics_ms = physics_ns.iter().sum::<f64>() / physics_ns.len() as f64 / 1e6;
     let gpu_times = match gpu {
         Some(g) => Some(gpu_figures(g, &mesh, &cameras, &s)?),
         None => None,
     };
-    Ok(report(name, study, &mesh, &s, physics_ms, &reached, gpu_times))
+    Ok(report(
+        name, study, &mesh, &s, physics_ms, &reached, gpu_times,
+    ))
 }
 
 /// Per strategy, GPU frames/s at 512² and 1024² drawing the cells the strategy chose.
@@ -107,27 +139,56 @@ struct GpuTimes {
     fps: Vec<(Strategy, f64, f64)>,
 }
 
-fn gpu_figures(g: &mut GpuRenderer, mesh: &CellMesh, cameras: &[Camera], s: &Survey) -> Result<GpuTimes> {
+fn gpu_figures(
+    g: &mut GpuRenderer,
+    mesh: &CellMesh,
+    cameras: &[Camera],
+    s: &Survey,
+) -> Result<GpuTimes> {
     g.upload(mesh)?;
     let lighting = Lighting::default();
     let mut fps = Vec::new();
     for st in &s.strategies {
-        let frames: Vec<(Camera, Vec<u32>)> = cameras.iter().copied().zip(st.cell_lists.iter().cloned()).collect();
+        let frames: Vec<(Camera, Vec<u32>)> = cameras
+            .iter()
+            .copied()
+            .zip(st.cell_lists.iter().cloned())
+            .collect();
         // Every frame at 512²; a third of them at 1024² (the CPU driver is slow there).
         let small = g.time_frames(&frames, 512, 512, &lighting)?;
         let sparse: Vec<(Camera, Vec<u32>)> = frames.iter().step_by(3).cloned().collect();
         let large = g.time_frames(&sparse, 1024, 1024, &lighting)?;
-        eprintln!("  GPU {}: {:.1} frames/s at 512², {:.1} at 1024²", st.strategy.name(), small.fps, large.fps);
+        eprintln!(
+            "  GPU {}: {:.1} frames/s at 512², {:.1} at 1024²",
+            st.strategy.name(),
+            small.fps,
+            large.fps
+        );
         fps.push((st.strategy, small.fps, large.fps));
     }
-    Ok(GpuTimes { adapter: g.adapter_summary(), fps })
+    Ok(GpuTimes {
+        adapter: g.adapter_summary(),
+        fps,
+    })
 }
 
-fn report(name: &str, study: &Study, mesh: &CellMesh, s: &Survey, physics_ms: f64, reached: &[bool], gpu: Option<GpuTimes>) -> Value {
+fn report(
+    name: &str,
+    study: &Study,
+    mesh: &CellMesh,
+    s: &Survey,
+    physics_ms: f64,
+    reached: &[bool],
+    gpu: Option<GpuTimes>,
+) -> Value {
     let mut strategies = Map::new();
     for st in &s.strategies {
         let cpu_ms = st.draw_ms_mean + s.shade_ms_mean + physics_ms;
-        let (g512, g1024) = gpu.as_ref().and_then(|g| g.fps.iter().find(|f| f.0 == st.strategy)).map(|f| (Some(f.1), Some(f.2))).unwrap_or((None, None));
+        let (g512, g1024) = gpu
+            .as_ref()
+            .and_then(|g| g.fps.iter().find(|f| f.0 == st.strategy))
+            .map(|f| (Some(f.1), Some(f.2)))
+            .unwrap_or((None, None));
         strategies.insert(
             st.strategy.name().into(),
             json!({
@@ -173,15 +234,26 @@ fn print_case(c: &Value) {
         c["size"],
         c["exact"]
     );
-    println!("  shading {:.2} ms/frame, physics {:.4} ms/frame", c["shade_ms"].as_f64().unwrap_or(0.0), c["physics_ms"].as_f64().unwrap_or(0.0));
+    println!(
+        "  shading {:.2} ms/frame, physics {:.4} ms/frame",
+        c["shade_ms"].as_f64().unwrap_or(0.0),
+        c["physics_ms"].as_f64().unwrap_or(0.0)
+    );
     if let Some(a) = c["gpu_adapter"].as_str() {
         println!("  GPU: {a}");
     }
-    println!("  {:<6} {:>11} {:>9} {:>7} {:>8} {:>10} {:>9} {:>10} {:>11}", "", "tris/frame", "max", "MC:x", "inexact", "CPU ms", "CPU fps", "GPU 512²", "GPU 1024²");
+    println!(
+        "  {:<6} {:>11} {:>9} {:>7} {:>8} {:>10} {:>9} {:>10} {:>11}",
+        "", "tris/frame", "max", "MC:x", "inexact", "CPU ms", "CPU fps", "GPU 512²", "GPU 1024²"
+    );
     for s in Strategy::ALL {
         let v = &c["strategies"][s.name()];
         let f = |k: &str| v[k].as_f64().unwrap_or(f64::NAN);
-        let g = |k: &str| v[k].as_f64().map(|x| format!("{x:.1}")).unwrap_or_else(|| "-".into());
+        let g = |k: &str| {
+            v[k].as_f64()
+                .map(|x| format!("{x:.1}"))
+                .unwrap_or_else(|| "-".into())
+        };
         println!(
             "  {:<6} {:>11.0} {:>9.0} {:>7.1} {:>8} {:>10.2} {:>9.1} {:>10} {:>11}",
             s.name(),

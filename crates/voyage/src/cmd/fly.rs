@@ -6,10 +6,10 @@ use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
 use serde_json::json;
 use voyage_core::export::trajectory::write_trajectory;
-use voyage_core::flight::{fly, Flight, FlightOptions};
-use voyage_core::potential::{potential_field, Direction};
+use voyage_core::flight::{Flight, FlightOptions, fly};
+use voyage_core::potential::{Direction, potential_field};
 
-use super::prep::{load_and_prepare, InputArgs, Prepared};
+use super::prep::{InputArgs, Prepared, load_and_prepare};
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum Directions {
@@ -71,7 +71,10 @@ impl PhysicsArgs {
         let mut o = FlightOptions::default();
         let set = |slot: &mut f64, v: Option<f64>, name: &str, min: f64| -> Result<()> {
             if let Some(v) = v {
-                anyhow::ensure!(v.is_finite() && v >= min, "--{name} must be a number ≥ {min}, not {v}");
+                anyhow::ensure!(
+                    v.is_finite() && v >= min,
+                    "--{name} must be a number ≥ {min}, not {v}"
+                );
                 *slot = v;
             }
             Ok(())
@@ -82,7 +85,10 @@ impl PhysicsArgs {
         set(&mut o.dynamics.kf, self.kf, "kf", 0.0)?;
         set(&mut o.dynamics.ka, self.ka, "ka", 0.0)?;
         set(&mut o.safety.min_wall_mm, self.min_wall, "min-wall", 0.0)?;
-        anyhow::ensure!(self.fps.is_finite() && self.fps >= 1.0 && self.fps <= 1000.0, "--fps must lie in 1..1000");
+        anyhow::ensure!(
+            self.fps.is_finite() && self.fps >= 1.0 && self.fps <= 1000.0,
+            "--fps must lie in 1..1000"
+        );
         o.fps = self.fps;
         o.modes.compass = !self.no_compass;
         o.modes.leveling = !self.no_leveling;
@@ -109,26 +115,42 @@ pub struct FlyArgs {
 
 pub fn run(a: &FlyArgs) -> Result<()> {
     let opts = a.physics.options()?;
-    let Prepared { study, geometry, .. } = load_and_prepare(&a.input)?;
+    let Prepared {
+        study, geometry, ..
+    } = load_and_prepare(&a.input)?;
     let opts = opts.fitted_to(&study);
-    let field = potential_field(&study, opts.safety.min_wall_mm).with_context(|| format!("{}", a.input.input.display()))?;
+    let field = potential_field(&study, opts.safety.min_wall_mm)
+        .with_context(|| format!("{}", a.input.input.display()))?;
     let mut flights: Vec<Flight> = Vec::new();
     for dir in a.direction.list() {
-        let f = fly(&field, &study.centerline, dir, &opts).with_context(|| format!("{}: {} flight", a.input.input.display(), dir.name()))?;
+        let f = fly(&field, &study.centerline, dir, &opts)
+            .with_context(|| format!("{}: {} flight", a.input.input.display(), dir.name()))?;
         flights.push(f);
     }
     if let Some(out) = &a.out {
         write_trajectory(out, &flights, &geometry, opts.fps)?;
     }
     if a.json {
-        let per: serde_json::Map<String, serde_json::Value> = flights.iter().map(|f| (f.direction.name().to_string(), summary(f))).collect();
-        println!("{}", serde_json::to_string_pretty(&json!({ "centerline_length_mm": study.centerline.length_mm, "directions": per }))?);
+        let per: serde_json::Map<String, serde_json::Value> = flights
+            .iter()
+            .map(|f| (f.direction.name().to_string(), summary(f)))
+            .collect();
+        println!(
+            "{}",
+            serde_json::to_string_pretty(
+                &json!({ "centerline_length_mm": study.centerline.length_mm, "directions": per })
+            )?
+        );
     } else {
         for f in &flights {
             println!(
                 "{:<8} {} in {} frames ({:.1} s simulated), path {:.0} mm, wall distance min {:.1} / mean {:.1} mm (mean radius {:.1}), {} stalls, physics {:.2} µs/frame",
                 f.direction.name(),
-                if f.reached { "reached" } else { "did NOT reach the goal" },
+                if f.reached {
+                    "reached"
+                } else {
+                    "did NOT reach the goal"
+                },
                 f.frames,
                 f.sim_seconds,
                 f.path_length_mm,

@@ -67,7 +67,10 @@ impl Info {
     pub fn print_text(&self) {
         let m = &self.meta;
         println!("{}", self.path);
-        println!("  format       {}", self.format.map(|f| format!("{f:?}")).unwrap_or("?".into()));
+        println!(
+            "  format       {}",
+            self.format.map(|f| format!("{f:?}")).unwrap_or("?".into())
+        );
         if let Some(modality) = &m.modality {
             println!("  modality     {modality}");
         }
@@ -86,24 +89,38 @@ impl Info {
         let [nx, ny, nz] = self.dims;
         let [sx, sy, sz] = self.spacing_mm;
         let [ex, ey, ez] = self.extent_mm;
-        println!("  dims         {nx} × {ny} × {nz}  ({:.1} MB as i16)", self.megabytes);
+        println!(
+            "  dims         {nx} × {ny} × {nz}  ({:.1} MB as i16)",
+            self.megabytes
+        );
         println!("  spacing      {sx:.4} × {sy:.4} × {sz:.4} mm");
         println!("  extent       {ex:.1} × {ey:.1} × {ez:.1} mm");
         let axes: Vec<char> = self.orientation.chars().collect();
-        println!("  orientation  {} (i→{}, j→{}, k→{})", self.orientation, axes[0], axes[1], axes[2]);
+        println!(
+            "  orientation  {} (i→{}, j→{}, k→{})",
+            self.orientation, axes[0], axes[1], axes[2]
+        );
         let [ox, oy, oz] = self.origin_lps_mm;
         println!("  origin       ({ox:.2}, {oy:.2}, {oz:.2}) mm LPS");
         println!("  HU range     {} .. {}", self.hu_min, self.hu_max);
         match self.position {
-            Some(p) => println!("  position     {p} (gravity {:?} LPS)", self.gravity_lps.unwrap_or_default()),
-            None => println!("  position     not in the file (prep reads it from the air–fluid levels, or --position)"),
+            Some(p) => println!(
+                "  position     {p} (gravity {:?} LPS)",
+                self.gravity_lps.unwrap_or_default()
+            ),
+            None => println!(
+                "  position     not in the file (prep reads it from the air–fluid levels, or --position)"
+            ),
         }
         for s in &m.other_series {
             println!(
                 "  other series {} ({} slices{})",
                 s.uid,
                 s.slices,
-                s.description.as_ref().map(|d| format!(", {d}")).unwrap_or_default()
+                s.description
+                    .as_ref()
+                    .map(|d| format!(", {d}"))
+                    .unwrap_or_default()
             );
         }
         for n in &m.notes {
@@ -113,7 +130,9 @@ impl Info {
 }
 
 pub fn run(a: &InfoArgs) -> Result<()> {
-    let opts = LoadOptions { series_uid: a.series.clone() };
+    let opts = LoadOptions {
+        series_uid: a.series.clone(),
+    };
     let loaded = io::load(&a.path, &opts)?;
     let info = Info::new(&a.path, &loaded);
     if a.json {

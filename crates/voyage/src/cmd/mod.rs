@@ -15,7 +15,11 @@ use std::path::PathBuf;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser, Debug)]
-#[command(name = "voyage", version, about = "Interactive virtual colonoscopy (Hong et al., Virtual Voyage, 1997)")]
+#[command(
+    name = "voyage",
+    version,
+    about = "Interactive virtual colonoscopy (Hong et al., Virtual Voyage, 1997)"
+)]
 pub struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -62,7 +66,12 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Info(a) => info::run(&a),
         Command::Phantom(a) => phantom::run(&a),
         Command::View(a) => crate::gui::view(&a),
-        Command::Demo { small, headless: true, out, .. } => phantom::demo(&out, small),
+        Command::Demo {
+            small,
+            headless: true,
+            out,
+            ..
+        } => phantom::demo(&out, small),
         Command::Demo { small, window, .. } => crate::gui::demo(&window, small),
         Command::Prep(a) => prep::run(&a),
         Command::Fly(a) => fly::run(&a),

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
-use voyage_core::io::{self, atomic::write_atomic, LoadOptions};
+use voyage_core::io::{self, LoadOptions, atomic::write_atomic};
 use voyage_core::phantom::{self, ColonOptions, Phantom};
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -85,8 +85,18 @@ pub fn run(a: &PhantomArgs) -> Result<()> {
     writable_format(&a.out)?;
     let t = Instant::now();
     let p = make(a)?;
-    eprintln!("made {:?} phantom in {:.2} s", a.kind, t.elapsed().as_secs_f64());
-    write_outputs(&p, &a.out, a.truth.as_deref(), a.mask.as_deref(), a.dicom.as_deref())
+    eprintln!(
+        "made {:?} phantom in {:.2} s",
+        a.kind,
+        t.elapsed().as_secs_f64()
+    );
+    write_outputs(
+        &p,
+        &a.out,
+        a.truth.as_deref(),
+        a.mask.as_deref(),
+        a.dicom.as_deref(),
+    )
 }
 
 fn make(a: &PhantomArgs) -> Result<Phantom> {
@@ -113,10 +123,18 @@ fn make(a: &PhantomArgs) -> Result<Phantom> {
 /// Writes the CT (any writable format, by extension), the truth JSON with its lumen mask,
 /// and optionally a DICOM series, which carries the patient's position (HFS, HFP). Every
 /// file is written atomically.
-pub fn write_outputs(p: &Phantom, out: &Path, truth: Option<&Path>, mask: Option<&Path>, dicom: Option<&Path>) -> Result<()> {
+pub fn write_outputs(
+    p: &Phantom,
+    out: &Path,
+    truth: Option<&Path>,
+    mask: Option<&Path>,
+    dicom: Option<&Path>,
+) -> Result<()> {
     save_volume(out, &p.ct)?;
     eprintln!("wrote {}", out.display());
-    let mask = mask.map(Path::to_path_buf).or_else(|| truth.map(mask_beside));
+    let mask = mask
+        .map(Path::to_path_buf)
+        .or_else(|| truth.map(mask_beside));
     if let Some(mask) = &mask {
         io::nifti::save(mask, &p.lumen)?;
         eprintln!("wrote {}", mask.display());
@@ -127,7 +145,10 @@ pub fn write_outputs(p: &Phantom, out: &Path, truth: Option<&Path>, mask: Option
         eprintln!("wrote {}", truth.display());
     }
     if let Some(dir) = dicom {
-        let opts = io::dicom_write::SeriesWriteOptions { patient_position: Some(p.truth.position.clone()), ..Default::default() };
+        let opts = io::dicom_write::SeriesWriteOptions {
+            patient_position: Some(p.truth.position.clone()),
+            ..Default::default()
+        };
         io::dicom_write::write_series_with(dir, &p.ct, &opts)?;
         eprintln!("wrote {} DICOM slices to {}", p.ct.dims()[2], dir.display());
     }
@@ -138,7 +159,10 @@ pub fn write_outputs(p: &Phantom, out: &Path, truth: Option<&Path>, mask: Option
 fn writable_format(path: &Path) -> Result<io::Format> {
     match io::detect_format(path).ok() {
         Some(f @ (io::Format::MetaImage | io::Format::Nrrd | io::Format::Nifti)) => Ok(f),
-        _ => anyhow::bail!("{}: give the output a .nii.gz, .nii, .mha or .nrrd name", path.display()),
+        _ => anyhow::bail!(
+            "{}: give the output a .nii.gz, .nii, .mha or .nrrd name",
+            path.display()
+        ),
     }
 }
 
@@ -147,14 +171,20 @@ fn save_volume(path: &Path, v: &voyage_core::Volume<i16>) -> Result<()> {
         Some(io::Format::MetaImage) => io::metaimage::save(path, v)?,
         Some(io::Format::Nrrd) => io::nrrd::save(path, v)?,
         Some(io::Format::Nifti) => io::nifti::save(path, v)?,
-        _ => anyhow::bail!("{}: give the output a .nii.gz, .nii, .mha or .nrrd name", path.display()),
+        _ => anyhow::bail!(
+            "{}: give the output a .nii.gz, .nii, .mha or .nrrd name",
+            path.display()
+        ),
     }
     Ok(())
 }
 
 /// `colon.json` → `colon.lumen.nii.gz`, beside it.
 fn mask_beside(truth: &Path) -> PathBuf {
-    let stem = truth.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "truth".into());
+    let stem = truth
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "truth".into());
     truth.with_file_name(format!("{stem}.lumen.nii.gz"))
 }
 
@@ -162,7 +192,10 @@ fn mask_beside(truth: &Path) -> PathBuf {
 fn truth_json(p: &Phantom, mask: Option<&Path>) -> Result<String> {
     let mut v: serde_json::Value = serde_json::from_str(&p.truth.to_json())?;
     if let (Some(m), Some(obj)) = (mask, v.as_object_mut()) {
-        let name = m.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        let name = m
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
         obj.insert("lumen_mask".into(), name.into());
     }
     Ok(serde_json::to_string_pretty(&v)? + "\n")
@@ -171,9 +204,13 @@ fn truth_json(p: &Phantom, mask: Option<&Path>) -> Result<String> {
 /// The default job until navigation exists: make the colon phantom, write it, read it back
 /// through the loader and describe it.
 pub fn demo(out: &Path, small: bool) -> Result<()> {
-    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create folder", out.display()))?;
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("{}: cannot create folder", out.display()))?;
     let t = Instant::now();
-    let p = phantom::colon(&ColonOptions { small, ..ColonOptions::default() })?;
+    let p = phantom::colon(&ColonOptions {
+        small,
+        ..ColonOptions::default()
+    })?;
     eprintln!(
         "made the colon phantom in {:.2} s: centerline {:.0} mm, {} polyps, {} folds",
         t.elapsed().as_secs_f64(),
@@ -195,10 +232,28 @@ pub fn demo(out: &Path, small: bool) -> Result<()> {
         b += (y != 0) as usize;
     }
     let t = &study.timings;
-    println!("preprocessed in {:.0} ms after loading:", t.total_after_load);
-    println!("  lumen        {} voxels, Dice {:.4} against the truth", study.segmentation.lumen_voxels, 2.0 * both as f64 / (a + b) as f64);
-    println!("  centerline   {:.0} mm (truth {:.0} mm)", study.centerline.length_mm, p.truth.centerline_length_mm);
-    println!("  surface      {} triangles in {} cells", study.surface.mesh.triangles.len(), study.cells.cells.len());
-    println!("  exports      {} files in {}", written.len(), out.join("prep").display());
+    println!(
+        "preprocessed in {:.0} ms after loading:",
+        t.total_after_load
+    );
+    println!(
+        "  lumen        {} voxels, Dice {:.4} against the truth",
+        study.segmentation.lumen_voxels,
+        2.0 * both as f64 / (a + b) as f64
+    );
+    println!(
+        "  centerline   {:.0} mm (truth {:.0} mm)",
+        study.centerline.length_mm, p.truth.centerline_length_mm
+    );
+    println!(
+        "  surface      {} triangles in {} cells",
+        study.surface.mesh.triangles.len(),
+        study.cells.cells.len()
+    );
+    println!(
+        "  exports      {} files in {}",
+        written.len(),
+        out.join("prep").display()
+    );
     Ok(())
 }

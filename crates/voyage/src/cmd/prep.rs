@@ -4,17 +4,17 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use glam::DVec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
+use voyage_core::Geometry;
+use voyage_core::anatomy::{PatientPosition, PositionSource};
 use voyage_core::export::study::write_study;
 use voyage_core::io::{self, LoadOptions};
-use voyage_core::prep::{prepare, PrepOptions, Stage, Study};
-use voyage_core::anatomy::{PatientPosition, PositionSource};
+use voyage_core::prep::{PrepOptions, Stage, Study, prepare};
 use voyage_core::segment::ComponentKind;
-use voyage_core::Geometry;
 
 #[derive(Clone, Copy, Debug, Default, ValueEnum)]
 pub enum Frame {
@@ -42,7 +42,8 @@ pub struct InputArgs {
 
 /// A DICOM PatientPosition code, any case.
 fn parse_position(s: &str) -> Result<PatientPosition, String> {
-    PatientPosition::parse(s).ok_or_else(|| format!("{s}: expected one of HFS, HFP, FFS, FFP, HFDR, HFDL, FFDR, FFDL"))
+    PatientPosition::parse(s)
+        .ok_or_else(|| format!("{s}: expected one of HFS, HFP, FFS, FFP, HFDR, HFDL, FFDR, FFDL"))
 }
 
 /// Corrections to the automatic choices: which gas is colon, where the flight starts and
@@ -113,7 +114,11 @@ pub struct PrepArgs {
 }
 
 pub fn parse_point(s: &str) -> Result<DVec3, String> {
-    let v: Vec<f64> = s.split(',').map(|x| x.trim().parse::<f64>()).collect::<Result<_, _>>().map_err(|e| format!("{s}: {e}"))?;
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{s}: {e}"))?;
     match v[..] {
         [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(DVec3::new(x, y, z)),
         _ => Err(format!("{s}: expected three numbers x,y,z")),
@@ -130,7 +135,12 @@ pub struct Prepared {
 /// Loads the input and runs the whole preprocessing (a progress bar on a terminal).
 pub fn load_and_prepare(a: &InputArgs) -> Result<Prepared> {
     let t0 = Instant::now();
-    let loaded = io::load(&a.input, &LoadOptions { series_uid: a.series.clone() })?;
+    let loaded = io::load(
+        &a.input,
+        &LoadOptions {
+            series_uid: a.series.clone(),
+        },
+    )?;
     let load_ms = t0.elapsed().as_secs_f64() * 1e3;
     let g = loaded.volume.geometry().clone();
     let mut opts = PrepOptions::default();
@@ -154,11 +164,19 @@ pub fn load_and_prepare(a: &InputArgs) -> Result<Prepared> {
     for w in &study.segmentation.warnings {
         eprintln!("warning: {}: {w}", a.input.display());
     }
-    Ok(Prepared { study, geometry: g, load_ms })
+    Ok(Prepared {
+        study,
+        geometry: g,
+        load_ms,
+    })
 }
 
 pub fn run(a: &PrepArgs) -> Result<()> {
-    let Prepared { study, geometry: g, load_ms } = load_and_prepare(&a.input)?;
+    let Prepared {
+        study,
+        geometry: g,
+        load_ms,
+    } = load_and_prepare(&a.input)?;
     let written = write_study(&a.out, &study)?;
     let summary = summary(&study, &g, load_ms);
     if a.json {
@@ -233,7 +251,16 @@ fn cleanse_summary(s: &Study) -> serde_json::Value {
 /// The surface's mean angle between neighbouring triangles (degrees) away from and near
 /// tagged material of the original CT (within 2 mm; None without any); None for a mask.
 fn roughness(s: &Study) -> Option<(Option<f64>, Option<f64>)> {
-    (!s.segmentation.from_mask).then(|| voyage_core::cleanse::roughness(&s.surface.mesh, &s.ct, voyage_core::segment::SegmentOptions::default().fluid_hu.unwrap_or(200), 2.0))
+    (!s.segmentation.from_mask).then(|| {
+        voyage_core::cleanse::roughness(
+            &s.surface.mesh,
+            &s.ct,
+            voyage_core::segment::SegmentOptions::default()
+                .fluid_hu
+                .unwrap_or(200),
+            2.0,
+        )
+    })
 }
 
 /// Each bridged gap with its span on the centerline.
@@ -258,48 +285,133 @@ fn gaps(s: &Study) -> Vec<serde_json::Value> {
 
 fn print_text(s: &Study, g: &Geometry, load_ms: f64) {
     let seg = &s.segmentation;
-    let colon_ml = seg.components.iter().find(|c| c.kind == ComponentKind::Colon).map_or(0.0, |c| c.volume_ml);
-    println!("lumen       {} voxels ({colon_ml:.0} ml of gas{}){}", seg.lumen_voxels, if seg.fluid_voxels > 0 { format!(", {} voxels of tagged fluid", seg.fluid_voxels) } else { String::new() }, if seg.from_mask { ", from a mask" } else { "" });
+    let colon_ml = seg
+        .components
+        .iter()
+        .find(|c| c.kind == ComponentKind::Colon)
+        .map_or(0.0, |c| c.volume_ml);
+    println!(
+        "lumen       {} voxels ({colon_ml:.0} ml of gas{}){}",
+        seg.lumen_voxels,
+        if seg.fluid_voxels > 0 {
+            format!(", {} voxels of tagged fluid", seg.fluid_voxels)
+        } else {
+            String::new()
+        },
+        if seg.from_mask { ", from a mask" } else { "" }
+    );
     for c in &seg.components {
-        println!("  gas       {:>9} voxels {:>8.1} ml  {:?}", c.voxels, c.volume_ml, c.kind);
+        println!(
+            "  gas       {:>9} voxels {:>8.1} ml  {:?}",
+            c.voxels, c.volume_ml, c.kind
+        );
     }
     if seg.small_components > 0 {
         println!("  gas       {} smaller pockets", seg.small_components);
     }
     let o = &seg.orientation;
-    println!("position    {} ({}; {})", o.position.code(), o.position.describe(), o.source.describe());
+    println!(
+        "position    {} ({}; {})",
+        o.position.code(),
+        o.position.describe(),
+        o.source.describe()
+    );
     for (i, sg) in seg.segments.iter().filter(|x| x.kept).enumerate() {
-        println!("  colon     {}. {:<36} {:>7.1} ml gas {:>7.1} ml fluid", i + 1, sg.label, sg.gas_ml, sg.fluid_ml);
+        println!(
+            "  colon     {}. {:<36} {:>7.1} ml gas {:>7.1} ml fluid",
+            i + 1,
+            sg.label,
+            sg.gas_ml,
+            sg.fluid_ml
+        );
     }
-    for (gap, span) in seg.gaps.iter().zip(s.collapsed_spans.iter().map(Some).chain(std::iter::repeat(None))) {
-        let at = span.map_or(String::new(), |a| format!(", centerline {:.0}–{:.0} mm", a[0], a[1]));
-        println!("  gap       {}→{}: {:.0} mm bridged{at}", gap.between[0] + 1, gap.between[1] + 1, gap.length_mm);
+    for (gap, span) in seg.gaps.iter().zip(
+        s.collapsed_spans
+            .iter()
+            .map(Some)
+            .chain(std::iter::repeat(None)),
+    ) {
+        let at = span.map_or(String::new(), |a| {
+            format!(", centerline {:.0}–{:.0} mm", a[0], a[1])
+        });
+        println!(
+            "  gap       {}→{}: {:.0} mm bridged{at}",
+            gap.between[0] + 1,
+            gap.between[1] + 1,
+            gap.length_mm
+        );
     }
     for sg in seg.segments.iter().filter(|x| !x.kept && x.gas_ml >= 5.0) {
-        println!("  left out  {:<36} {:>7.1} ml gas: {}", sg.label, sg.gas_ml, sg.reason.as_deref().unwrap_or(""));
+        println!(
+            "  left out  {:<36} {:>7.1} ml gas: {}",
+            sg.label,
+            sg.gas_ml,
+            sg.reason.as_deref().unwrap_or("")
+        );
     }
     let lps = |p: DVec3| g.local_to_patient(p);
-    println!("source      {:.1?} mm LPS (rectum)", lps(s.source_mm()).to_array());
-    println!("target      {:.1?} mm LPS (cecum)", lps(s.target_mm()).to_array());
-    println!("centerline  {:.0} mm, {} points", s.centerline.length_mm, s.centerline.points_mm.len());
-    println!("surface     {} triangles, {} vertices", s.surface.mesh.triangles.len(), s.surface.mesh.positions.len());
+    println!(
+        "source      {:.1?} mm LPS (rectum)",
+        lps(s.source_mm()).to_array()
+    );
+    println!(
+        "target      {:.1?} mm LPS (cecum)",
+        lps(s.target_mm()).to_array()
+    );
+    println!(
+        "centerline  {:.0} mm, {} points",
+        s.centerline.length_mm,
+        s.centerline.points_mm.len()
+    );
+    println!(
+        "surface     {} triangles, {} vertices",
+        s.surface.mesh.triangles.len(),
+        s.surface.mesh.positions.len()
+    );
     println!("cells       {}", s.cells.cells.len());
     if !s.cleansing.is_empty() {
         let r = roughness(s).map_or(String::new(), |(air, fluid)| {
             let deg = |x: Option<f64>| x.map_or("-".to_string(), |d| format!("{d:.1}°"));
-            format!("; surface roughness {} in air, {} where fluid lay", deg(air), deg(fluid))
+            format!(
+                "; surface roughness {} in air, {} where fluid lay",
+                deg(air),
+                deg(fluid)
+            )
         });
         let c = &s.cleansing;
-        let stool = if c.stool_lumps > 0 { format!(", {} lumps of tagged stool ({} voxels)", c.stool_lumps, c.stool_voxels) } else { String::new() };
-        println!("cleansing   {} voxels of tagged fluid made air{stool}, {} voxels changed{r}", c.tagged_voxels, c.len());
+        let stool = if c.stool_lumps > 0 {
+            format!(
+                ", {} lumps of tagged stool ({} voxels)",
+                c.stool_lumps, c.stool_voxels
+            )
+        } else {
+            String::new()
+        };
+        println!(
+            "cleansing   {} voxels of tagged fluid made air{stool}, {} voxels changed{r}",
+            c.tagged_voxels,
+            c.len()
+        );
     }
     if s.contact_voxels > 0 {
-        println!("contacts    {} lumen voxels made wall where loops of the colon touch", s.contact_voxels);
+        println!(
+            "contacts    {} lumen voxels made wall where loops of the colon touch",
+            s.contact_voxels
+        );
     }
     let t = &s.timings;
     println!(
         "time        load {load_ms:.0} ms; segment {:.0}, cleanse {:.0}, ds {:.0}, skeleton {:.0}, centerline {:.0}, contacts {:.0}, dt {:.0}, surface {:.0}, cells {:.0}; total after load {:.0} ms",
-        t.segment, t.cleanse, t.ds, t.skeleton, t.centerline, t.contacts, t.dt, t.surface, t.cells, t.total_after_load
+        t.segment,
+        t.cleanse,
+        t.ds,
+        t.skeleton,
+        t.centerline,
+        t.contacts,
+        t.dt,
+        t.surface,
+        t.cells,
+        t.total_after_load
     );
     if let Some(mb) = peak_rss_mb() {
         println!("memory      peak {mb:.0} MB");

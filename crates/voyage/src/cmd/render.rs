@@ -4,19 +4,22 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use voyage_core::camera::{Camera, Pose};
-use voyage_core::flight::{fly, Flight};
+use voyage_core::flight::{Flight, fly};
 use voyage_core::io::atomic::write_atomic;
-use voyage_core::potential::{potential_field, Direction};
+use voyage_core::potential::{Direction, potential_field};
 use voyage_core::prep::Study;
-use voyage_core::render::{render_translucency, shade, surface_point, CellMesh, CloseupBox, Frame, Lighting, Material, Rasterizer, Strategy, TranslucencyOptions, View, Visibility};
+use voyage_core::render::{
+    CellMesh, CloseupBox, Frame, Lighting, Material, Rasterizer, Strategy, TranslucencyOptions,
+    View, Visibility, render_translucency, shade, surface_point,
+};
 use voyage_render::GpuRenderer;
 
 use super::fly::PhysicsArgs;
-use super::prep::{load_and_prepare, InputArgs, Prepared};
+use super::prep::{InputArgs, Prepared, load_and_prepare};
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum OneDirection {
@@ -60,8 +63,15 @@ fn parse_strategy(s: &str) -> Result<Strategy, String> {
 
 impl ViewArgs {
     fn check(&self) -> Result<()> {
-        anyhow::ensure!((16..=8192).contains(&self.width) && (16..=8192).contains(&self.height), "--width and --height must lie in 16..8192");
-        anyhow::ensure!(self.fov.is_finite() && self.fov >= 10.0 && self.fov <= Camera::MAX_FOV_DEG, "--fov must lie in 10..{}", Camera::MAX_FOV_DEG);
+        anyhow::ensure!(
+            (16..=8192).contains(&self.width) && (16..=8192).contains(&self.height),
+            "--width and --height must lie in 16..8192"
+        );
+        anyhow::ensure!(
+            self.fov.is_finite() && self.fov >= 10.0 && self.fov <= Camera::MAX_FOV_DEG,
+            "--fov must lie in 10..{}",
+            Camera::MAX_FOV_DEG
+        );
         Ok(())
     }
 
@@ -123,9 +133,16 @@ pub struct MovieArgs {
 }
 
 fn parse_pose(s: &str) -> Result<Pose> {
-    let v: Vec<f64> = s.split(',').map(|x| x.trim().parse::<f64>()).collect::<Result<_, _>>().with_context(|| format!("--pose {s}"))?;
-    let a: [f64; 7] = v.try_into().map_err(|_| anyhow::anyhow!("--pose {s}: expected seven numbers x,y,z,qw,qx,qy,qz"))?;
-    Pose::from_array(a).with_context(|| format!("--pose {s}: not a position and a non-zero quaternion"))
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("--pose {s}"))?;
+    let a: [f64; 7] = v
+        .try_into()
+        .map_err(|_| anyhow::anyhow!("--pose {s}: expected seven numbers x,y,z,qw,qx,qy,qz"))?;
+    Pose::from_array(a)
+        .with_context(|| format!("--pose {s}: not a position and a non-zero quaternion"))
 }
 
 /// Draws frames with either renderer; the visibility strategy runs on the CPU in both cases
@@ -150,7 +167,14 @@ impl<'a> Renderer<'a> {
         } else {
             None
         };
-        Ok(Renderer { study, vis: Visibility::new(&study.cells, v.strategy), frame: Frame::new(v.width, v.height), mesh, gpu, lighting: Lighting::default() })
+        Ok(Renderer {
+            study,
+            vis: Visibility::new(&study.cells, v.strategy),
+            frame: Frame::new(v.width, v.height),
+            mesh,
+            gpu,
+            lighting: Lighting::default(),
+        })
     }
 
     /// RGBA8, top row first.
@@ -169,15 +193,19 @@ impl<'a> Renderer<'a> {
 pub fn write_png(path: &Path, rgba: &[u8], width: u32, height: u32) -> Result<()> {
     use image::ImageEncoder;
     write_atomic(path, |w| {
-        image::codecs::png::PngEncoder::new(w).write_image(rgba, width, height, image::ExtendedColorType::Rgba8).map_err(std::io::Error::other)
+        image::codecs::png::PngEncoder::new(w)
+            .write_image(rgba, width, height, image::ExtendedColorType::Rgba8)
+            .map_err(std::io::Error::other)
     })?;
     Ok(())
 }
 
 fn flight(study: &Study, physics: &PhysicsArgs, dir: OneDirection, input: &Path) -> Result<Flight> {
     let opts = physics.options()?.fitted_to(study);
-    let field = potential_field(study, opts.safety.min_wall_mm).with_context(|| input.display().to_string())?;
-    fly(&field, &study.centerline, dir.direction(), &opts).with_context(|| format!("{}: {} flight", input.display(), dir.direction().name()))
+    let field = potential_field(study, opts.safety.min_wall_mm)
+        .with_context(|| input.display().to_string())?;
+    fly(&field, &study.centerline, dir.direction(), &opts)
+        .with_context(|| format!("{}: {} flight", input.display(), dir.direction().name()))
 }
 
 pub fn render(a: &RenderArgs) -> Result<()> {
@@ -190,7 +218,12 @@ pub fn render(a: &RenderArgs) -> Result<()> {
             let f = flight(&study, &a.physics, a.direction, &a.input.input)?;
             match f.poses.get(n) {
                 Some(p) => *p,
-                None => bail!("--frame {n}: the {} flight has {} frames (0..{})", a.direction.direction().name(), f.poses.len(), f.poses.len().saturating_sub(1)),
+                None => bail!(
+                    "--frame {n}: the {} flight has {} frames (0..{})",
+                    a.direction.direction().name(),
+                    f.poses.len(),
+                    f.poses.len().saturating_sub(1)
+                ),
             }
         }
         (None, None) => bail!("give --frame N or --pose"),
@@ -202,21 +235,56 @@ pub fn render(a: &RenderArgs) -> Result<()> {
         translucency_over(&study, &camera, &mut rgba, a.view.width, a.view.height)?;
     }
     write_png(&a.out, &rgba, a.view.width, a.view.height)?;
-    println!("wrote {} ({}×{}, {})", a.out.display(), a.view.width, a.view.height, if a.view.gpu { "GPU" } else { "CPU" });
+    println!(
+        "wrote {} ({}×{}, {})",
+        a.out.display(),
+        a.view.width,
+        a.view.height,
+        if a.view.gpu { "GPU" } else { "CPU" }
+    );
     Ok(())
 }
 
 /// Blends the translucency view of the box around the surface point at the view's centre
 /// over `rgba` and says how many pixels each class has.
-fn translucency_over(study: &Study, camera: &Camera, rgba: &mut [u8], width: u32, height: u32) -> Result<()> {
+fn translucency_over(
+    study: &Study,
+    camera: &Camera,
+    rgba: &mut [u8],
+    width: u32,
+    height: u32,
+) -> Result<()> {
     let opts = TranslucencyOptions::default();
     let ct = study.cleansed_ct();
-    let centre = surface_point(&ct, camera.pose.position, camera.pose.z_body(), 200.0, opts.air_hu).context("--translucency: no surface at the view's centre within 200 mm")?;
-    let t = render_translucency(&ct, &study.segmentation.lumen, camera, &CloseupBox::around(centre, voyage_core::render::translucency::HALF_SIZE_MM), width, height, &opts);
+    let centre = surface_point(
+        &ct,
+        camera.pose.position,
+        camera.pose.z_body(),
+        200.0,
+        opts.air_hu,
+    )
+    .context("--translucency: no surface at the view's centre within 200 mm")?;
+    let t = render_translucency(
+        &ct,
+        &study.segmentation.lumen,
+        camera,
+        &CloseupBox::around(centre, voyage_core::render::translucency::HALF_SIZE_MM),
+        width,
+        height,
+        &opts,
+    );
     blend_over(rgba, &t.rgba);
     let counts = t.counts();
-    let parts: Vec<String> = Material::ALL.iter().zip(counts).map(|(m, n)| format!("{} {n}", m.name())).collect();
-    println!("translucency around {} (pixels): {}", ct.geometry().describe_point(centre), parts.join(", "));
+    let parts: Vec<String> = Material::ALL
+        .iter()
+        .zip(counts)
+        .map(|(m, n)| format!("{} {n}", m.name()))
+        .collect();
+    println!(
+        "translucency around {} (pixels): {}",
+        ct.geometry().describe_point(centre),
+        parts.join(", ")
+    );
     Ok(())
 }
 
@@ -235,18 +303,47 @@ pub fn movie(a: &MovieArgs) -> Result<()> {
     anyhow::ensure!(a.every >= 1, "--every must be at least 1");
     let Prepared { study, .. } = load_and_prepare(&a.input)?;
     let f = flight(&study, &a.physics, a.direction, &a.input.input)?;
-    std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create the folder", a.out.display()))?;
-    let poses: Vec<Pose> = f.poses.iter().copied().step_by(a.every).take(a.max_frames.unwrap_or(usize::MAX)).collect();
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("{}: cannot create the folder", a.out.display()))?;
+    let poses: Vec<Pose> = f
+        .poses
+        .iter()
+        .copied()
+        .step_by(a.every)
+        .take(a.max_frames.unwrap_or(usize::MAX))
+        .collect();
     let mut r = Renderer::new(&study, &a.view)?;
-    let bar = if std::io::IsTerminal::is_terminal(&std::io::stderr()) { ProgressBar::new(poses.len() as u64) } else { ProgressBar::hidden() };
-    bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} frames {eta}").unwrap_or_else(|_| ProgressStyle::default_bar()));
+    let bar = if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        ProgressBar::new(poses.len() as u64)
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} frames {eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
     for (i, pose) in poses.iter().enumerate() {
         let rgba = r.draw(&a.view.camera(*pose))?;
-        write_png(&a.out.join(format!("frame_{i:05}.png")), &rgba, a.view.width, a.view.height)?;
+        write_png(
+            &a.out.join(format!("frame_{i:05}.png")),
+            &rgba,
+            a.view.width,
+            a.view.height,
+        )?;
         bar.inc(1);
     }
     bar.finish_and_clear();
-    println!("wrote {} frames to {} ({} flight {})", poses.len(), a.out.display(), a.direction.direction().name(), if f.reached { "reached the goal" } else { "did not reach the goal" });
+    println!(
+        "wrote {} frames to {} ({} flight {})",
+        poses.len(),
+        a.out.display(),
+        a.direction.direction().name(),
+        if f.reached {
+            "reached the goal"
+        } else {
+            "did not reach the goal"
+        }
+    );
     if !a.no_mp4 {
         let fps = a.physics.fps / a.every as f64;
         match encode_mp4(&a.out, fps) {
@@ -266,9 +363,23 @@ fn encode_mp4(dir: &Path, fps: f64) -> Result<Option<PathBuf>> {
     let out = dir.join("flight.mp4");
     let tmp = dir.join(".flight.tmp.mp4");
     let status = Command::new("ffmpeg")
-        .args(["-y", "-loglevel", "error", "-framerate", &format!("{fps}"), "-i"])
+        .args([
+            "-y",
+            "-loglevel",
+            "error",
+            "-framerate",
+            &format!("{fps}"),
+            "-i",
+        ])
         .arg(dir.join("frame_%05d.png"))
-        .args(["-c:v", "libx264", "-pix_fmt", "yuv420p", "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2"])
+        .args([
+            "-c:v",
+            "libx264",
+            "-pix_fmt",
+            "yuv420p",
+            "-vf",
+            "pad=ceil(iw/2)*2:ceil(ih/2)*2",
+        ])
         .arg(&tmp)
         .status()
         .context("running ffmpeg")?;

@@ -12,21 +12,21 @@ use serde_json::json;
 use voyage_core::camera::Camera;
 use voyage_core::findings::{self, Findings};
 use voyage_core::potential::Direction;
-use voyage_core::render::closeup::{render_closeup, CloseupBox, TransferFunction};
+use voyage_core::render::closeup::{CloseupBox, TransferFunction, render_closeup};
 use voyage_core::render::shading::encode;
-use voyage_core::render::{render_translucency, Material, TranslucencyOptions};
+use voyage_core::render::{Material, TranslucencyOptions, render_translucency};
 
 use voyage_core::submarine::Input;
 
+use super::WindowArgs;
 use super::corrections::{self, Correction};
-use super::endoscopy::{label, ray_at, surface_point_on_screen, visible_centerline, Endoscope};
+use super::endoscopy::{Endoscope, label, ray_at, surface_point_on_screen, visible_centerline};
 use super::loader::{Job, Source};
 use super::pixels::WindowGpu;
 use super::scout::{ScoutMarks, ScoutView};
 use super::script::{Script, Step};
 use super::session::Session;
 use super::slices::{SliceAction, SlicePanel, SliceSource};
-use super::WindowArgs;
 
 /// What a click on the endoscopic view does.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -78,11 +78,17 @@ const HELP: &[(&str, &str)] = &[
     ("right button (drag)", "look around"),
     ("M", "marker on the surface under the cursor"),
     ("D", "measure: press on two surface points"),
-    ("1 / 2 / 3", "tool: steer / marker / measure (for the left button)"),
+    (
+        "1 / 2 / 3",
+        "tool: steer / marker / measure (for the left button)",
+    ),
     ("C / L / S", "compass / leveling / still mode"),
     ("G", "centerline overlay (green)"),
     ("V", "close-up volume rendering"),
-    ("T", "translucency: what lies beneath the surface (red soft tissue, yellow fat, green stool)"),
+    (
+        "T",
+        "translucency: what lies beneath the surface (red soft tissue, yellow fat, green stool)",
+    ),
     ("[ / ]", "narrower / wider field of view"),
     ("Ctrl+E", "export the findings"),
     ("H or F1", "this help"),
@@ -144,7 +150,12 @@ pub struct App {
 }
 
 impl App {
-    pub fn new(cc: &eframe::CreationContext<'_>, source: Option<Source>, args: WindowArgs, outcome: Arc<Mutex<Outcome>>) -> Self {
+    pub fn new(
+        cc: &eframe::CreationContext<'_>,
+        source: Option<Source>,
+        args: WindowArgs,
+        outcome: Arc<Mutex<Outcome>>,
+    ) -> Self {
         // Panels are not filled: the frame is cleared to the panel colour instead. On a CPU
         // Vulkan driver every shaded pixel costs, and filling the panels would shade the
         // whole window once more each frame.
@@ -221,7 +232,9 @@ impl App {
     /// Preprocesses the open study again with a correction, in the background; the session
     /// open stays in use until the new one is ready.
     fn correct(&mut self, c: Correction, ctx: &egui::Context) {
-        let (Some(s), Some(source)) = (&self.session, &self.source) else { return };
+        let (Some(s), Some(source)) = (&self.session, &self.source) else {
+            return;
+        };
         if self.job.is_some() {
             self.status = "a correction is still being preprocessed".into();
             return;
@@ -246,8 +259,20 @@ impl App {
         match result {
             Ok(mut s) => {
                 s.set_playing(!self.args.paused);
-                self.status = format!("{} ready in {:.1} s: centerline {:.0} mm, {} triangles in {} cells", s.name, seconds, s.study.centerline.length_mm, s.mesh.triangles.len(), s.mesh.cells());
-                self.scout = Some(ScoutView::new(s.study.ct.geometry(), PANEL_BACKGROUND, SCOUT_IMAGE, self.pixels_gpu));
+                self.status = format!(
+                    "{} ready in {:.1} s: centerline {:.0} mm, {} triangles in {} cells",
+                    s.name,
+                    seconds,
+                    s.study.centerline.length_mm,
+                    s.mesh.triangles.len(),
+                    s.mesh.cells()
+                );
+                self.scout = Some(ScoutView::new(
+                    s.study.ct.geometry(),
+                    PANEL_BACKGROUND,
+                    SCOUT_IMAGE,
+                    self.pixels_gpu,
+                ));
                 self.slices = SlicePanel::new(SLICE_IMAGES, self.pixels_gpu);
                 if s.study.segmentation.from_mask {
                     // A mask holds 0 and 1: show it as two greys, not as HU.
@@ -277,13 +302,33 @@ impl App {
 
     /// A correction's run is done: its session replaces the open one (findings, window and
     /// level kept: the CT is the same), or the error is shown and the open one stays.
-    fn corrected(&mut self, c: Correction, source: Source, result: anyhow::Result<Session>, seconds: f64) {
+    fn corrected(
+        &mut self,
+        c: Correction,
+        source: Source,
+        result: anyhow::Result<Session>,
+        seconds: f64,
+    ) {
         match result {
             Ok(mut s) => {
-                let was = self.session.as_ref().map_or(0.0, |o| o.study.centerline.length_mm);
+                let was = self
+                    .session
+                    .as_ref()
+                    .map_or(0.0, |o| o.study.centerline.length_mm);
                 s.set_playing(false);
-                let kept = s.study.segmentation.segments.iter().filter(|x| x.kept).count();
-                self.status = format!("{} in {seconds:.1} s: {kept} colon segment{}, centerline {:.0} mm (was {was:.0})", c.describe(), if kept == 1 { "" } else { "s" }, s.study.centerline.length_mm);
+                let kept = s
+                    .study
+                    .segmentation
+                    .segments
+                    .iter()
+                    .filter(|x| x.kept)
+                    .count();
+                self.status = format!(
+                    "{} in {seconds:.1} s: {kept} colon segment{}, centerline {:.0} mm (was {was:.0})",
+                    c.describe(),
+                    if kept == 1 { "" } else { "s" },
+                    s.study.centerline.length_mm
+                );
                 self.closeup = None;
                 self.translucency = None;
                 self.measure_from = None;
@@ -389,7 +434,8 @@ impl App {
         let (s, rect) = (self.session.as_ref()?, self.view_rect?);
         let cam = s.camera();
         let ray = ray_at(&cam, rect, at);
-        findings::pick(&s.mesh, Some(&self.last_cells), cam.pose.position, ray).or_else(|| findings::pick(&s.mesh, None, cam.pose.position, ray))
+        findings::pick(&s.mesh, Some(&self.last_cells), cam.pose.position, ray)
+            .or_else(|| findings::pick(&s.mesh, None, cam.pose.position, ray))
     }
 
     fn drop_marker(&mut self, at: Pos2) {
@@ -399,7 +445,11 @@ impl App {
         };
         let Some(s) = &self.session else { return };
         let note = std::mem::take(&mut self.note);
-        let label = self.findings.add_marker(hit.point, hit.normal, s.pose(), note).label.clone();
+        let label = self
+            .findings
+            .add_marker(hit.point, hit.normal, s.pose(), note)
+            .label
+            .clone();
         self.status = format!("marker {label} at {:.1} mm from the camera", hit.distance);
     }
 
@@ -428,11 +478,32 @@ impl App {
         let geometry = s.study.ct.geometry().clone();
         let result = findings::export_findings(&dir, &self.findings, &geometry, |_, m| {
             let cam = Camera::new(m.view).with_fov(s.fov);
-            let cells = voyage_core::render::Visibility::new(&s.study.cells, voyage_core::render::Strategy::Lg).select(&s.study.cells, &voyage_core::render::View::new(&cam, 512, 512)).cells;
-            Ok((512, 512, voyage_core::render::render_rgba(&s.mesh, &cam, &cells, 512, 512, &voyage_core::render::Lighting::default())))
+            let cells = voyage_core::render::Visibility::new(
+                &s.study.cells,
+                voyage_core::render::Strategy::Lg,
+            )
+            .select(
+                &s.study.cells,
+                &voyage_core::render::View::new(&cam, 512, 512),
+            )
+            .cells;
+            Ok((
+                512,
+                512,
+                voyage_core::render::render_rgba(
+                    &s.mesh,
+                    &cam,
+                    &cells,
+                    512,
+                    512,
+                    &voyage_core::render::Lighting::default(),
+                ),
+            ))
         });
         match result {
-            Ok(files) => self.status = format!("exported {} files to {}", files.len(), dir.display()),
+            Ok(files) => {
+                self.status = format!("exported {} files to {}", files.len(), dir.display())
+            }
             Err(e) => {
                 self.status = format!("export failed: {e}");
                 note_error(&self.outcome, format!("export: {e}"));
@@ -445,8 +516,12 @@ impl App {
         if self.session.is_none() || self.job.is_some() {
             return;
         }
-        let Some(script) = &mut self.script else { return };
-        let Some(step) = script.next_step() else { return };
+        let Some(script) = &mut self.script else {
+            return;
+        };
+        let Some(step) = script.next_step() else {
+            return;
+        };
         match step {
             Step::Wait(n) => script.busy = n,
             Step::Steer { at, frames } => {
@@ -464,7 +539,11 @@ impl App {
             }
             Step::Direction(d) => {
                 if let Some(s) = &mut self.session {
-                    s.set_direction(if d == "backward" { Direction::Backward } else { Direction::Forward });
+                    s.set_direction(if d == "backward" {
+                        Direction::Backward
+                    } else {
+                        Direction::Forward
+                    });
                 }
             }
             Step::Marker { at, note } => {
@@ -492,7 +571,9 @@ impl App {
             }
             Step::GoTo(label) => self.go_to_marker(&label),
             Step::Pose(a) => {
-                if let (Some(s), Some(p)) = (&mut self.session, voyage_core::camera::Pose::from_array(a)) {
+                if let (Some(s), Some(p)) =
+                    (&mut self.session, voyage_core::camera::Pose::from_array(a))
+                {
                     if s.sub.is_safe(&s.field, p.position) {
                         s.set_playing(false);
                         s.place(p);
@@ -531,7 +612,8 @@ impl App {
 
     /// A point of the view given as fractions of its size.
     fn view_point(&self, f: [f32; 2]) -> Option<Pos2> {
-        self.view_rect.map(|r| r.min + Vec2::new(f[0], f[1]) * r.size())
+        self.view_rect
+            .map(|r| r.min + Vec2::new(f[0], f[1]) * r.size())
     }
 
     fn go_to_marker(&mut self, label: &str) {
@@ -555,24 +637,37 @@ impl App {
         let outcome = self.outcome.clone();
         let ctx2 = ctx.clone();
         self.screenshot_pending = then_quit;
-        ctx.send_viewport_cmd(egui::ViewportCommand::Screenshot(egui::ScreenshotCallback::new(move |image| {
-            let (w, h) = (image.size[0] as u32, image.size[1] as u32);
-            let rgba: Vec<u8> = image.pixels.iter().flat_map(|c| c.to_array()).collect();
-            if let Err(e) = crate::cmd::render::write_png(&path, &rgba, w, h) {
-                note_error(&outcome, format!("{}: {e:#}", path.display()));
-            }
-            if then_quit {
-                ctx2.send_viewport_cmd(egui::ViewportCommand::Close);
-            }
-            ctx2.request_repaint();
-        })));
+        ctx.send_viewport_cmd(egui::ViewportCommand::Screenshot(
+            egui::ScreenshotCallback::new(move |image| {
+                let (w, h) = (image.size[0] as u32, image.size[1] as u32);
+                let rgba: Vec<u8> = image.pixels.iter().flat_map(|c| c.to_array()).collect();
+                if let Err(e) = crate::cmd::render::write_png(&path, &rgba, w, h) {
+                    note_error(&outcome, format!("{}: {e:#}", path.display()));
+                }
+                if then_quit {
+                    ctx2.send_viewport_cmd(egui::ViewportCommand::Close);
+                }
+                ctx2.request_repaint();
+            }),
+        ));
     }
 
     fn write_report(&mut self) {
-        let mean = |v: &VecDeque<f64>| if v.is_empty() { 0.0 } else { v.iter().sum::<f64>() / v.len() as f64 };
+        let mean = |v: &VecDeque<f64>| {
+            if v.is_empty() {
+                0.0
+            } else {
+                v.iter().sum::<f64>() / v.len() as f64
+            }
+        };
         let mut sorted: Vec<f64> = self.frame_ms.iter().copied().collect();
         sorted.sort_by(f64::total_cmp);
-        let pct = |q: f64| sorted.get(((sorted.len() as f64 - 1.0) * q).round() as usize).copied().unwrap_or(0.0);
+        let pct = |q: f64| {
+            sorted
+                .get(((sorted.len() as f64 - 1.0) * q).round() as usize)
+                .copied()
+                .unwrap_or(0.0)
+        };
         let rect = |r: Option<Rect>| r.map(|r| [r.left(), r.top(), r.right(), r.bottom()]);
         let report = json!({
             "ready": self.session.is_some(),
@@ -605,13 +700,31 @@ impl App {
                     ui.label(&s.name);
                 }
                 ui.separator();
-                ui.add(egui::TextEdit::singleline(&mut self.open_path).hint_text("CT folder or file, or lumen mask").desired_width(260.0));
+                ui.add(
+                    egui::TextEdit::singleline(&mut self.open_path)
+                        .hint_text("CT folder or file, or lumen mask")
+                        .desired_width(260.0),
+                );
                 if ui.button("Open").clicked() && !self.open_path.trim().is_empty() {
                     let path = PathBuf::from(self.open_path.trim());
-                    self.open(Source::File { path, mask: false, series: None, points: Default::default() }, ui.ctx());
+                    self.open(
+                        Source::File {
+                            path,
+                            mask: false,
+                            series: None,
+                            points: Default::default(),
+                        },
+                        ui.ctx(),
+                    );
                 }
                 if ui.button("Demo phantom").clicked() {
-                    self.open(Source::Phantom { small: false, points: Default::default() }, ui.ctx());
+                    self.open(
+                        Source::Phantom {
+                            small: false,
+                            points: Default::default(),
+                        },
+                        ui.ctx(),
+                    );
                 }
                 ui.separator();
                 if ui.button("Help (H)").clicked() {
@@ -623,9 +736,12 @@ impl App {
     }
 
     fn controls(&mut self, ui: &mut egui::Ui) {
-        egui::Panel::left("controls").resizable(false).exact_size(236.0).show(ui, |ui| {
-            egui::ScrollArea::vertical().show(ui, |ui| self.control_contents(ui));
-        });
+        egui::Panel::left("controls")
+            .resizable(false)
+            .exact_size(236.0)
+            .show(ui, |ui| {
+                egui::ScrollArea::vertical().show(ui, |ui| self.control_contents(ui));
+            });
     }
 
     fn control_contents(&mut self, ui: &mut egui::Ui) {
@@ -655,16 +771,35 @@ impl App {
         ui.heading("Colon");
         let busy = self.job.is_some();
         let mut asked = colon_summary(ui, &s.study, busy);
-        let n = self.source.as_ref().map_or(0, |x| corrections::count(x.points()));
+        let n = self
+            .source
+            .as_ref()
+            .map_or(0, |x| corrections::count(x.points()));
         if let Some(job) = &self.job {
             ui.add(egui::ProgressBar::new(job.fraction()).text(format!("again: {}", job.what)));
-        } else if n > 0 && ui.button(format!("Undo {n} correction{}", if n == 1 { "" } else { "s" })).on_hover_text("back to the colon found automatically").clicked() {
+        } else if n > 0
+            && ui
+                .button(format!(
+                    "Undo {n} correction{}",
+                    if n == 1 { "" } else { "s" }
+                ))
+                .on_hover_text("back to the colon found automatically")
+                .clicked()
+        {
             asked = Some(Correction::Reset);
         }
         if let Some(e) = &self.correction_error {
-            ui.label(RichText::new(e).small().color(Color32::from_rgb(255, 140, 120)));
+            ui.label(
+                RichText::new(e)
+                    .small()
+                    .color(Color32::from_rgb(255, 140, 120)),
+            );
         }
-        ui.label(RichText::new("right click on a slice: start / end here, gas is colon or not").small().color(Color32::from_gray(150)));
+        ui.label(
+            RichText::new("right click on a slice: start / end here, gas is colon or not")
+                .small()
+                .color(Color32::from_gray(150)),
+        );
         if let Some(c) = asked {
             self.correct(c, ui.ctx());
         }
@@ -680,20 +815,28 @@ impl App {
         ui.checkbox(&mut s.sub.modes.still, "still (S)");
         ui.checkbox(&mut self.show_centerline, "centerline (G)");
         ui.checkbox(&mut self.closeup_on, "close-up volume (V)");
-        ui.checkbox(&mut self.translucency_on, "translucency (T)").on_hover_text("what lies beneath the surface around the marker or the view's centre");
+        ui.checkbox(&mut self.translucency_on, "translucency (T)")
+            .on_hover_text("what lies beneath the surface around the marker or the view's centre");
         ui.separator();
         ui.heading("Findings");
         ui.horizontal(|ui| {
-            ui.selectable_value(&mut self.tool, Tool::Steer, "Steer").on_hover_text("1: hold the left button to push toward a point");
-            ui.selectable_value(&mut self.tool, Tool::Marker, "Marker").on_hover_text("2: click the surface (or M over it)");
-            ui.selectable_value(&mut self.tool, Tool::Measure, "Measure").on_hover_text("3: click two surface points (or D twice)");
+            ui.selectable_value(&mut self.tool, Tool::Steer, "Steer")
+                .on_hover_text("1: hold the left button to push toward a point");
+            ui.selectable_value(&mut self.tool, Tool::Marker, "Marker")
+                .on_hover_text("2: click the surface (or M over it)");
+            ui.selectable_value(&mut self.tool, Tool::Measure, "Measure")
+                .on_hover_text("3: click two surface points (or D twice)");
         });
         ui.add(egui::TextEdit::singleline(&mut self.note).hint_text("note for the next marker"));
         let mut go = None;
         let mut remove_marker = None;
         for (i, m) in self.findings.markers.iter().enumerate() {
             ui.horizontal(|ui| {
-                if ui.button(&m.label).on_hover_text("fly back to this marker").clicked() {
+                if ui
+                    .button(&m.label)
+                    .on_hover_text("fly back to this marker")
+                    .clicked()
+                {
                     go = Some(m.label.clone());
                 }
                 ui.label(if m.note.is_empty() { "—" } else { &m.note });
@@ -722,95 +865,132 @@ impl App {
         }
         ui.horizontal(|ui| {
             ui.add(egui::TextEdit::singleline(&mut self.export_dir).desired_width(120.0));
-            if ui.button("Export").on_hover_text("Ctrl+E: findings.json, Slicer .mrk.json and a PNG per marker").clicked() {
+            if ui
+                .button("Export")
+                .on_hover_text("Ctrl+E: findings.json, Slicer .mrk.json and a PNG per marker")
+                .clicked()
+            {
                 self.export(PathBuf::from(self.export_dir.clone()));
             }
         });
     }
 
     fn scout_panel(&mut self, ui: &mut egui::Ui) {
-        egui::Panel::right("scout").resizable(false).exact_size(360.0).show(ui, |ui| {
-            let (Some(s), Some(view)) = (&mut self.session, &mut self.scout) else {
-                ui.label("scout");
-                return;
-            };
-            let pose = s.pose();
-            let marks = ScoutMarks {
-                centerline: &s.study.centerline.points_mm,
-                markers: self.findings.markers.iter().map(|m| (m.label.clone(), m.position)).collect(),
-                submarine: pose.position,
-                view_dir: pose.z_body(),
-            };
-            if let Some(i) = view.show(ui, &s.scout, &marks) {
-                match s.jump_to_centerline(i) {
-                    Ok(()) => {
-                        self.slices.follow();
-                        self.status = format!("jumped to {:.0} mm along the centerline", s.study.centerline.arc_mm.get(i).copied().unwrap_or(0.0));
-                    }
-                    Err(e) => self.status = e,
-                }
-            }
-        });
-    }
-
-    fn slice_panel(&mut self, ui: &mut egui::Ui) {
-        egui::Panel::bottom("slices").resizable(false).exact_size(262.0).show(ui, |ui| {
-            let Some(s) = &mut self.session else { return };
-            let at = s.pose().position;
-            match self.slices.show(ui, SliceSource { ct: &s.study.ct, cleansing: &s.study.cleansing }, at, self.job.is_some()) {
-                Some(SliceAction::MoveTo(p)) => {
-                    let forward = s.pose().z_body();
-                    match s.jump_to(p, forward) {
+        egui::Panel::right("scout")
+            .resizable(false)
+            .exact_size(360.0)
+            .show(ui, |ui| {
+                let (Some(s), Some(view)) = (&mut self.session, &mut self.scout) else {
+                    ui.label("scout");
+                    return;
+                };
+                let pose = s.pose();
+                let marks = ScoutMarks {
+                    centerline: &s.study.centerline.points_mm,
+                    markers: self
+                        .findings
+                        .markers
+                        .iter()
+                        .map(|m| (m.label.clone(), m.position))
+                        .collect(),
+                    submarine: pose.position,
+                    view_dir: pose.z_body(),
+                };
+                if let Some(i) = view.show(ui, &s.scout, &marks) {
+                    match s.jump_to_centerline(i) {
                         Ok(()) => {
                             self.slices.follow();
-                            self.status = "moved to the point clicked".into();
+                            self.status = format!(
+                                "jumped to {:.0} mm along the centerline",
+                                s.study.centerline.arc_mm.get(i).copied().unwrap_or(0.0)
+                            );
                         }
                         Err(e) => self.status = e,
                     }
                 }
-                Some(SliceAction::Correct(c)) => self.correct(c, ui.ctx()),
-                None => {}
-            }
-        });
+            });
+    }
+
+    fn slice_panel(&mut self, ui: &mut egui::Ui) {
+        egui::Panel::bottom("slices")
+            .resizable(false)
+            .exact_size(262.0)
+            .show(ui, |ui| {
+                let Some(s) = &mut self.session else { return };
+                let at = s.pose().position;
+                match self.slices.show(
+                    ui,
+                    SliceSource {
+                        ct: &s.study.ct,
+                        cleansing: &s.study.cleansing,
+                    },
+                    at,
+                    self.job.is_some(),
+                ) {
+                    Some(SliceAction::MoveTo(p)) => {
+                        let forward = s.pose().z_body();
+                        match s.jump_to(p, forward) {
+                            Ok(()) => {
+                                self.slices.follow();
+                                self.status = "moved to the point clicked".into();
+                            }
+                            Err(e) => self.status = e,
+                        }
+                    }
+                    Some(SliceAction::Correct(c)) => self.correct(c, ui.ctx()),
+                    None => {}
+                }
+            });
     }
 
     fn endoscopy_panel(&mut self, ui: &mut egui::Ui, frame: &eframe::Frame, dt: f64) {
-        egui::CentralPanel::default().frame(egui::Frame::NONE).show(ui, |ui| {
-            if self.session.is_none() {
-                self.waiting(ui);
-                return;
-            }
-            let (rect, response) = ui.allocate_exact_size(ui.available_size(), Sense::click_and_drag());
-            self.view_rect = Some(rect);
-            let steering = self.steering(ui, rect, &response);
-            let Some(s) = &mut self.session else { return };
-            let cam = s.camera();
-            let mut input = Input::default();
-            if let Some(ray) = steering.push {
-                input.force = s.sub.push_toward(ray);
-            }
-            if steering.look != Vec2::ZERO {
-                // τ_option from the drag: the turn rate that keeps the view under the pointer
-                // (fov per view height), held against the angular friction ka.
-                let rad_per_point = s.fov.to_radians() / rect.height().max(1.0) as f64;
-                let rate = DVec3::new(steering.look.x as f64, steering.look.y as f64, 0.0) * rad_per_point / dt.max(1e-3);
-                let p = cam.pose;
-                input.torque = (-p.y_body() * rate.x + p.x_body() * rate.y) * s.sub.dynamics.ka;
-            }
-            s.step(dt, &input);
+        egui::CentralPanel::default()
+            .frame(egui::Frame::NONE)
+            .show(ui, |ui| {
+                if self.session.is_none() {
+                    self.waiting(ui);
+                    return;
+                }
+                let (rect, response) =
+                    ui.allocate_exact_size(ui.available_size(), Sense::click_and_drag());
+                self.view_rect = Some(rect);
+                let steering = self.steering(ui, rect, &response);
+                let Some(s) = &mut self.session else { return };
+                let cam = s.camera();
+                let mut input = Input::default();
+                if let Some(ray) = steering.push {
+                    input.force = s.sub.push_toward(ray);
+                }
+                if steering.look != Vec2::ZERO {
+                    // τ_option from the drag: the turn rate that keeps the view under the pointer
+                    // (fov per view height), held against the angular friction ka.
+                    let rad_per_point = s.fov.to_radians() / rect.height().max(1.0) as f64;
+                    let rate = DVec3::new(steering.look.x as f64, steering.look.y as f64, 0.0)
+                        * rad_per_point
+                        / dt.max(1e-3);
+                    let p = cam.pose;
+                    input.torque = (-p.y_body() * rate.x + p.x_body() * rate.y) * s.sub.dynamics.ka;
+                }
+                s.step(dt, &input);
 
-            let ppp = ui.ctx().pixels_per_point();
-            let size = [((rect.width() * ppp).round() as u32).max(16), ((rect.height() * ppp).round() as u32).max(16)];
-            let rs = frame.wgpu_render_state();
-            if let Err(e) = self.endoscope.render(ui.painter(), rect, rs, s, self.generation, size) {
-                self.status = format!("rendering failed: {e:#}");
-            }
-            self.last_cells = self.endoscope.last_cells.clone();
-            push_limited(&mut self.render_ms, self.endoscope.stats.render_ms);
-            self.closeup_overlay(ui, rect);
-            self.translucency_overlay(ui, rect);
-            self.overlays(ui, rect);
-        });
+                let ppp = ui.ctx().pixels_per_point();
+                let size = [
+                    ((rect.width() * ppp).round() as u32).max(16),
+                    ((rect.height() * ppp).round() as u32).max(16),
+                ];
+                let rs = frame.wgpu_render_state();
+                if let Err(e) =
+                    self.endoscope
+                        .render(ui.painter(), rect, rs, s, self.generation, size)
+                {
+                    self.status = format!("rendering failed: {e:#}");
+                }
+                self.last_cells = self.endoscope.last_cells.clone();
+                push_limited(&mut self.render_ms, self.endoscope.stats.render_ms);
+                self.closeup_overlay(ui, rect);
+                self.translucency_overlay(ui, rect);
+                self.overlays(ui, rect);
+            });
     }
 
     /// The mouse on the view: steering, looking, markers and measurements.
@@ -818,7 +998,8 @@ impl App {
         let mut out = Steering::default();
         let Some(s) = &self.session else { return out };
         let cam = s.camera();
-        let primary_down = response.is_pointer_button_down_on() && ui.input(|i| i.pointer.primary_down());
+        let primary_down =
+            response.is_pointer_button_down_on() && ui.input(|i| i.pointer.primary_down());
         if self.tool == Tool::Steer
             && primary_down
             && let Some(p) = ui.input(|i| i.pointer.interact_pos())
@@ -829,7 +1010,11 @@ impl App {
             out.look = response.drag_delta();
         }
         if let Some((at, frames)) = self.steer_script {
-            out.push = Some(ray_at(&cam, rect, rect.min + Vec2::new(at[0], at[1]) * rect.size()));
+            out.push = Some(ray_at(
+                &cam,
+                rect,
+                rect.min + Vec2::new(at[0], at[1]) * rect.size(),
+            ));
             self.steer_script = (frames > 1).then_some((at, frames - 1));
         }
         if let Some((d, frames)) = self.look_script {
@@ -866,9 +1051,31 @@ impl App {
             self.closeup = None;
             return;
         }
-        let (Some((cam, center)), Some(s)) = (self.overlay_target(rect), &self.session) else { return };
-        let region = CloseupBox { center, half_size_mm: 15.0 };
-        show_overlay(&mut self.closeup, ui, rect, "closeup", cam, center, |w, h| render_closeup(&s.study.ct, &cam, &region, w, h, &TransferFunction::tissue()));
+        let (Some((cam, center)), Some(s)) = (self.overlay_target(rect), &self.session) else {
+            return;
+        };
+        let region = CloseupBox {
+            center,
+            half_size_mm: 15.0,
+        };
+        show_overlay(
+            &mut self.closeup,
+            ui,
+            rect,
+            "closeup",
+            cam,
+            center,
+            |w, h| {
+                render_closeup(
+                    &s.study.ct,
+                    &cam,
+                    &region,
+                    w,
+                    h,
+                    &TransferFunction::tissue(),
+                )
+            },
+        );
     }
 
     /// The translucency view over the view: the surface in a box around the marker flown back
@@ -879,11 +1086,33 @@ impl App {
             self.translucency = None;
             return;
         }
-        let (Some((cam, center)), Some(s)) = (self.overlay_target(rect), &self.session) else { return };
-        let region = CloseupBox { center, half_size_mm: voyage_core::render::translucency::HALF_SIZE_MM };
-        show_overlay(&mut self.translucency, ui, rect, "translucency", cam, center, |w, h| {
-            render_translucency(s.surface_ct(), &s.study.segmentation.lumen, &cam, &region, w, h, &TranslucencyOptions::default()).rgba
-        });
+        let (Some((cam, center)), Some(s)) = (self.overlay_target(rect), &self.session) else {
+            return;
+        };
+        let region = CloseupBox {
+            center,
+            half_size_mm: voyage_core::render::translucency::HALF_SIZE_MM,
+        };
+        show_overlay(
+            &mut self.translucency,
+            ui,
+            rect,
+            "translucency",
+            cam,
+            center,
+            |w, h| {
+                render_translucency(
+                    s.surface_ct(),
+                    &s.study.segmentation.lumen,
+                    &cam,
+                    &region,
+                    w,
+                    h,
+                    &TranslucencyOptions::default(),
+                )
+                .rgba
+            },
+        );
         translucency_legend(&ui.painter_at(rect), rect);
     }
 
@@ -894,23 +1123,44 @@ impl App {
         let painter = ui.painter_at(rect);
         if self.show_centerline {
             for line in visible_centerline(s, &cam, rect, 250.0) {
-                painter.add(egui::Shape::line(line, Stroke::new(2.0, Color32::from_rgb(40, 230, 60))));
+                painter.add(egui::Shape::line(
+                    line,
+                    Stroke::new(2.0, Color32::from_rgb(40, 230, 60)),
+                ));
             }
         }
         for m in &self.findings.markers {
             if let Some(p) = surface_point_on_screen(s, &cam, rect, m.position) {
-                painter.circle(p, 6.0, Color32::from_rgba_unmultiplied(255, 230, 0, 90), Stroke::new(2.0, Color32::YELLOW));
-                label(&painter, p + Vec2::new(8.0, -20.0), &m.label, Color32::YELLOW);
+                painter.circle(
+                    p,
+                    6.0,
+                    Color32::from_rgba_unmultiplied(255, 230, 0, 90),
+                    Stroke::new(2.0, Color32::YELLOW),
+                );
+                label(
+                    &painter,
+                    p + Vec2::new(8.0, -20.0),
+                    &m.label,
+                    Color32::YELLOW,
+                );
             }
         }
         let measure_color = Color32::from_rgb(120, 220, 255);
         for m in &self.findings.measurements {
-            let (a, b) = (surface_point_on_screen(s, &cam, rect, m.a), surface_point_on_screen(s, &cam, rect, m.b));
+            let (a, b) = (
+                surface_point_on_screen(s, &cam, rect, m.a),
+                surface_point_on_screen(s, &cam, rect, m.b),
+            );
             if let (Some(a), Some(b)) = (a, b) {
                 painter.line_segment([a, b], Stroke::new(2.0, measure_color));
                 painter.circle_filled(a, 3.0, measure_color);
                 painter.circle_filled(b, 3.0, measure_color);
-                label(&painter, a.lerp(b, 0.5) + Vec2::new(6.0, 6.0), &format!("{} {:.1} mm", m.label, m.length_mm()), measure_color);
+                label(
+                    &painter,
+                    a.lerp(b, 0.5) + Vec2::new(6.0, 6.0),
+                    &format!("{} {:.1} mm", m.label, m.length_mm()),
+                    measure_color,
+                );
             }
         }
         if let Some(a) = self.measure_from
@@ -918,7 +1168,11 @@ impl App {
         {
             painter.circle_filled(p, 4.0, measure_color);
         }
-        let fps = if self.frame_ms.is_empty() { 0.0 } else { 1000.0 * self.frame_ms.len() as f64 / self.frame_ms.iter().sum::<f64>() };
+        let fps = if self.frame_ms.is_empty() {
+            0.0
+        } else {
+            1000.0 * self.frame_ms.len() as f64 / self.frame_ms.iter().sum::<f64>()
+        };
         let stats = &self.endoscope.stats;
         let readout = format!(
             "{:.1} ms/frame ({fps:.0} fps) · view {:.1} ms · {} cells, {}k triangles · {}",
@@ -926,22 +1180,56 @@ impl App {
             stats.render_ms,
             stats.cells,
             stats.triangles / 1000,
-            if self.endoscope.is_gpu() { "GPU" } else { "CPU" }
+            if self.endoscope.is_gpu() {
+                "GPU"
+            } else {
+                "CPU"
+            }
         );
-        label(&painter, rect.left_top() + Vec2::new(8.0, 8.0), &readout, Color32::from_gray(220));
+        label(
+            &painter,
+            rect.left_top() + Vec2::new(8.0, 8.0),
+            &readout,
+            Color32::from_gray(220),
+        );
         let mode = format!(
             "{} · {} · wall {:.1} mm{}{}{}",
             if s.playing { "flying" } else { "paused" },
-            if s.direction() == Direction::Forward { "rectum to cecum" } else { "cecum to rectum" },
+            if s.direction() == Direction::Forward {
+                "rectum to cecum"
+            } else {
+                "cecum to rectum"
+            },
             s.field.ds(s.sub.state.x),
-            if s.sub.modes.compass { " · compass" } else { "" },
-            if s.sub.modes.leveling { " · leveling" } else { "" },
+            if s.sub.modes.compass {
+                " · compass"
+            } else {
+                ""
+            },
+            if s.sub.modes.leveling {
+                " · leveling"
+            } else {
+                ""
+            },
             if s.sub.modes.still { " · still" } else { "" }
         );
-        label(&painter, rect.left_bottom() + Vec2::new(8.0, -26.0), &mode, Color32::from_gray(220));
+        label(
+            &painter,
+            rect.left_bottom() + Vec2::new(8.0, -26.0),
+            &mode,
+            Color32::from_gray(220),
+        );
         if let Some(span) = s.collapsed_here() {
-            let text = format!("collapsed segment, {:.0} mm: no air here, the flight keeps to the path", span[1] - span[0]);
-            label(&painter, rect.left_top() + Vec2::new(8.0, 30.0), &text, Color32::from_rgb(255, 190, 120));
+            let text = format!(
+                "collapsed segment, {:.0} mm: no air here, the flight keeps to the path",
+                span[1] - span[0]
+            );
+            label(
+                &painter,
+                rect.left_top() + Vec2::new(8.0, 30.0),
+                &text,
+                Color32::from_rgb(255, 190, 120),
+            );
         }
         let tool = match (self.tool, self.measure_from.is_some()) {
             (Tool::Steer, _) => "hold left: steer · right-drag: look · H: help",
@@ -949,11 +1237,22 @@ impl App {
             (Tool::Measure, false) => "click: first point of the measurement",
             (Tool::Measure, true) => "click: second point",
         };
-        label(&painter, rect.right_bottom() + Vec2::new(-300.0, -26.0), tool, Color32::from_gray(200));
+        label(
+            &painter,
+            rect.right_bottom() + Vec2::new(-300.0, -26.0),
+            tool,
+            Color32::from_gray(200),
+        );
         // A small crosshair at the view's centre: where the close-up looks by default.
         let c = rect.center();
-        painter.line_segment([c - Vec2::new(6.0, 0.0), c + Vec2::new(6.0, 0.0)], Stroke::new(1.0, Color32::from_white_alpha(90)));
-        painter.line_segment([c - Vec2::new(0.0, 6.0), c + Vec2::new(0.0, 6.0)], Stroke::new(1.0, Color32::from_white_alpha(90)));
+        painter.line_segment(
+            [c - Vec2::new(6.0, 0.0), c + Vec2::new(6.0, 0.0)],
+            Stroke::new(1.0, Color32::from_white_alpha(90)),
+        );
+        painter.line_segment(
+            [c - Vec2::new(0.0, 6.0), c + Vec2::new(0.0, 6.0)],
+            Stroke::new(1.0, Color32::from_white_alpha(90)),
+        );
     }
 
     /// The view while nothing is open yet: progress, or the error and what to do.
@@ -977,15 +1276,20 @@ impl App {
 
     fn help(&mut self, ctx: &egui::Context) {
         let mut open = self.show_help;
-        egui::Window::new("Keys and mouse").open(&mut open).collapsible(false).resizable(false).anchor(egui::Align2::CENTER_CENTER, Vec2::ZERO).show(ctx, |ui| {
-            egui::Grid::new("keys").striped(true).show(ui, |ui| {
-                for (k, what) in HELP {
-                    ui.label(RichText::new(*k).strong());
-                    ui.label(*what);
-                    ui.end_row();
-                }
+        egui::Window::new("Keys and mouse")
+            .open(&mut open)
+            .collapsible(false)
+            .resizable(false)
+            .anchor(egui::Align2::CENTER_CENTER, Vec2::ZERO)
+            .show(ctx, |ui| {
+                egui::Grid::new("keys").striped(true).show(ui, |ui| {
+                    for (k, what) in HELP {
+                        ui.label(RichText::new(*k).strong());
+                        ui.label(*what);
+                        ui.end_row();
+                    }
+                });
             });
-        });
         self.show_help &= open;
     }
 
@@ -997,7 +1301,10 @@ impl App {
         }
         let Some(r) = self.view_rect else { return };
         let ppp = ctx.pixels_per_point();
-        println!("{}", json!({"ready": true, "view_px": [r.left() * ppp, r.top() * ppp, r.right() * ppp, r.bottom() * ppp]}));
+        println!(
+            "{}",
+            json!({"ready": true, "view_px": [r.left() * ppp, r.top() * ppp, r.right() * ppp, r.bottom() * ppp]})
+        );
         use std::io::Write;
         let _ = std::io::stdout().flush();
         self.announced = true;
@@ -1049,7 +1356,10 @@ impl eframe::App for App {
             (None, false) => 1.0 / 30.0,
         };
         if let Some(t) = self.last_frame {
-            push_limited(&mut self.frame_ms, now.duration_since(t).as_secs_f64() * 1e3);
+            push_limited(
+                &mut self.frame_ms,
+                now.duration_since(t).as_secs_f64() * 1e3,
+            );
             if let Some(cpu) = process_cpu_ms() {
                 push_limited(&mut self.cpu_at_frame_ms, cpu);
             }
@@ -1100,11 +1410,20 @@ impl eframe::App for App {
 /// The colon's segments, bridged gaps, the patient's position and the warnings, as
 /// preprocessing reported them. Each segment has a box to take it in or leave it out; the
 /// correction asked for, if any, is returned (`busy`: one is being preprocessed).
-fn colon_summary(ui: &mut egui::Ui, study: &voyage_core::prep::Study, busy: bool) -> Option<Correction> {
+fn colon_summary(
+    ui: &mut egui::Ui,
+    study: &voyage_core::prep::Study,
+    busy: bool,
+) -> Option<Correction> {
     let seg = &study.segmentation;
     let o = &seg.orientation;
     let kept = seg.segments.iter().filter(|s| s.kept).count();
-    ui.label(format!("{} ({}, {})", o.position.code(), o.position.describe(), o.source.describe()));
+    ui.label(format!(
+        "{} ({}, {})",
+        o.position.code(),
+        o.position.describe(),
+        o.source.describe()
+    ));
     let mut asked = None;
     egui::CollapsingHeader::new(format!("{kept} colon segment{} of {} gas regions", if kept == 1 { "" } else { "s" }, seg.segments.len()))
         .id_salt("segments")
@@ -1123,19 +1442,42 @@ fn colon_summary(ui: &mut egui::Ui, study: &voyage_core::prep::Study, busy: bool
                 }
             });
         });
-    for (gap, span) in seg.gaps.iter().zip(study.collapsed_spans.iter().map(Some).chain(std::iter::repeat(None))) {
-        let names = |i: usize| seg.segments.iter().find(|s| s.order == Some(i)).map_or("?", |s| s.label.as_str());
+    for (gap, span) in seg.gaps.iter().zip(
+        study
+            .collapsed_spans
+            .iter()
+            .map(Some)
+            .chain(std::iter::repeat(None)),
+    ) {
+        let names = |i: usize| {
+            seg.segments
+                .iter()
+                .find(|s| s.order == Some(i))
+                .map_or("?", |s| s.label.as_str())
+        };
         let at = span.map_or(String::new(), |a| format!(" at {:.0} mm", a[0]));
-        ui.label(format!("{} – {} gap {:.0} mm bridged{at}", names(gap.between[0]), names(gap.between[1]), gap.length_mm));
+        ui.label(format!(
+            "{} – {} gap {:.0} mm bridged{at}",
+            names(gap.between[0]),
+            names(gap.between[1]),
+            gap.length_mm
+        ));
     }
     if !seg.warnings.is_empty() {
-        egui::CollapsingHeader::new(RichText::new(format!("{} warning{}", seg.warnings.len(), if seg.warnings.len() == 1 { "" } else { "s" })).color(Color32::from_rgb(255, 190, 120)))
-            .id_salt("warnings")
-            .show(ui, |ui| {
-                for w in &seg.warnings {
-                    ui.label(RichText::new(w).small());
-                }
-            });
+        egui::CollapsingHeader::new(
+            RichText::new(format!(
+                "{} warning{}",
+                seg.warnings.len(),
+                if seg.warnings.len() == 1 { "" } else { "s" }
+            ))
+            .color(Color32::from_rgb(255, 190, 120)),
+        )
+        .id_salt("warnings")
+        .show(ui, |ui| {
+            for w in &seg.warnings {
+                ui.label(RichText::new(w).small());
+            }
+        });
     }
     asked
 }
@@ -1146,7 +1488,11 @@ fn colon_report(s: &Session, source: Option<&Source>) -> serde_json::Value {
     let seg = &s.study.segmentation;
     let cl = &s.study.centerline;
     let g = s.study.ct.geometry();
-    let lps = |i: usize| cl.points_mm.get(i).map(|&p| g.local_to_patient(DVec3::from_array(p)).to_array());
+    let lps = |i: usize| {
+        cl.points_mm
+            .get(i)
+            .map(|&p| g.local_to_patient(DVec3::from_array(p)).to_array())
+    };
     let points = source.map(|x| x.points().clone()).unwrap_or_default();
     let arr = |v: &[DVec3]| v.iter().map(|p| p.to_array()).collect::<Vec<_>>();
     json!({
@@ -1163,32 +1509,74 @@ fn colon_report(s: &Session, source: Option<&Source>) -> serde_json::Value {
 fn translucency_legend(painter: &egui::Painter, rect: Rect) {
     let row = 18.0;
     let top = rect.bottom() - 36.0 - row * Material::ALL.len() as f32;
-    painter.rect_filled(Rect::from_min_size(Pos2::new(rect.left() + 6.0, top - 4.0), Vec2::new(210.0, row * Material::ALL.len() as f32 + 8.0)), 4.0, Color32::from_black_alpha(160));
+    painter.rect_filled(
+        Rect::from_min_size(
+            Pos2::new(rect.left() + 6.0, top - 4.0),
+            Vec2::new(210.0, row * Material::ALL.len() as f32 + 8.0),
+        ),
+        4.0,
+        Color32::from_black_alpha(160),
+    );
     for (i, m) in Material::ALL.iter().enumerate() {
         let y = top + row * i as f32;
         let [r, g, b] = m.rgb().map(encode);
-        painter.rect_filled(Rect::from_min_size(Pos2::new(rect.left() + 12.0, y + 3.0), Vec2::splat(12.0)), 2.0, Color32::from_rgb(r, g, b));
-        painter.text(Pos2::new(rect.left() + 30.0, y + 9.0), egui::Align2::LEFT_CENTER, m.name(), egui::FontId::proportional(13.0), Color32::WHITE);
+        painter.rect_filled(
+            Rect::from_min_size(Pos2::new(rect.left() + 12.0, y + 3.0), Vec2::splat(12.0)),
+            2.0,
+            Color32::from_rgb(r, g, b),
+        );
+        painter.text(
+            Pos2::new(rect.left() + 30.0, y + 9.0),
+            egui::Align2::LEFT_CENTER,
+            m.name(),
+            egui::FontId::proportional(13.0),
+            Color32::WHITE,
+        );
     }
 }
 
 /// An image over the whole view made by `render` (width, height → RGBA, straight alpha) for
 /// a camera and a box's centre, redrawn only when they change, at half the view's resolution
 /// and at most 384 px wide: the box is small on screen and ray casting is the costly part.
-fn show_overlay(slot: &mut Option<Closeup>, ui: &egui::Ui, rect: Rect, name: &str, camera: Camera, center: DVec3, render: impl FnOnce(u32, u32) -> Vec<u8>) {
-    if !slot.as_ref().is_some_and(|c| c.camera == camera && c.center == center) {
+fn show_overlay(
+    slot: &mut Option<Closeup>,
+    ui: &egui::Ui,
+    rect: Rect,
+    name: &str,
+    camera: Camera,
+    center: DVec3,
+    render: impl FnOnce(u32, u32) -> Vec<u8>,
+) {
+    if !slot
+        .as_ref()
+        .is_some_and(|c| c.camera == camera && c.center == center)
+    {
         let w = (rect.width() * 0.5).clamp(64.0, 384.0) as u32;
         let h = ((w as f32) * rect.height() / rect.width()).max(16.0) as u32;
-        let image = egui::ColorImage::from_rgba_unmultiplied([w as usize, h as usize], &render(w, h));
+        let image =
+            egui::ColorImage::from_rgba_unmultiplied([w as usize, h as usize], &render(w, h));
         match slot {
             Some(c) => {
                 c.texture.set(image, egui::TextureOptions::LINEAR);
                 (c.camera, c.center) = (camera, center);
             }
-            None => *slot = Some(Closeup { texture: ui.ctx().load_texture(name, image, egui::TextureOptions::LINEAR), camera, center }),
+            None => {
+                *slot = Some(Closeup {
+                    texture: ui
+                        .ctx()
+                        .load_texture(name, image, egui::TextureOptions::LINEAR),
+                    camera,
+                    center,
+                })
+            }
         }
     }
     if let Some(c) = slot {
-        ui.painter().image(c.texture.id(), rect, Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)), Color32::WHITE);
+        ui.painter().image(
+            c.texture.id(),
+            rect,
+            Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)),
+            Color32::WHITE,
+        );
     }
 }

@@ -54,7 +54,8 @@ impl Correction {
                 Frame::Local => g.patient_to_local(lps),
             }
         };
-        let without = |list: &mut Vec<DVec3>, p: DVec3| list.retain(|q| q.distance(p) > SAME_POINT_MM);
+        let without =
+            |list: &mut Vec<DVec3>, p: DVec3| list.retain(|q| q.distance(p) > SAME_POINT_MM);
         match self {
             Correction::Source(p) => out.source = Some(frame(p)),
             Correction::Target(p) => out.target = Some(frame(p)),
@@ -70,7 +71,14 @@ impl Correction {
                 without(&mut out.exclude, p);
                 out.exclude.push(p);
             }
-            Correction::Reset => out = PointArgs { position: points.position, coords: points.coords, no_cleanse: points.no_cleanse, ..PointArgs::default() },
+            Correction::Reset => {
+                out = PointArgs {
+                    position: points.position,
+                    coords: points.coords,
+                    no_cleanse: points.no_cleanse,
+                    ..PointArgs::default()
+                }
+            }
         }
         out
     }
@@ -78,7 +86,10 @@ impl Correction {
 
 /// How many corrections `points` holds.
 pub fn count(points: &PointArgs) -> usize {
-    points.seed.len() + points.exclude.len() + points.source.is_some() as usize + points.target.is_some() as usize
+    points.seed.len()
+        + points.exclude.len()
+        + points.source.is_some() as usize
+        + points.target.is_some() as usize
 }
 
 #[cfg(test)]
@@ -89,12 +100,19 @@ mod tests {
     fn including_takes_back_an_exclusion_and_reset_keeps_the_position() {
         let g = Geometry::new([4, 4, 4], [1.0; 3], [0.0; 3]).unwrap();
         let p = [1.0, 2.0, 3.0];
-        let none = PointArgs { position: Some(voyage_core::anatomy::PatientPosition::Hfp), ..PointArgs::default() };
+        let none = PointArgs {
+            position: Some(voyage_core::anatomy::PatientPosition::Hfp),
+            ..PointArgs::default()
+        };
         let ex = Correction::Exclude(p).applied_to(&none, &g);
         assert_eq!((ex.exclude.len(), ex.seed.len()), (1, 0));
         let inc = Correction::Include(p).applied_to(&ex, &g);
         assert_eq!((inc.exclude.len(), inc.seed.len()), (0, 1));
-        assert_eq!(Correction::Include(p).applied_to(&inc, &g).seed.len(), 1, "the same point twice is one seed");
+        assert_eq!(
+            Correction::Include(p).applied_to(&inc, &g).seed.len(),
+            1,
+            "the same point twice is one seed"
+        );
         let s = Correction::Source([5.0, 5.0, 5.0]).applied_to(&inc, &g);
         assert_eq!(count(&s), 2);
         let r = Correction::Reset.applied_to(&s, &g);
@@ -106,17 +124,32 @@ mod tests {
         // A volume stored upside down: LPS and local mm differ.
         let mut g = Geometry::new([4, 4, 4], [1.0; 3], [10.0, 20.0, 30.0]).unwrap();
         g.set_direction_mat(glam::DMat3::from_diagonal(DVec3::new(1.0, 1.0, -1.0)));
-        let local = PointArgs { coords: Frame::Local, ..PointArgs::default() };
+        let local = PointArgs {
+            coords: Frame::Local,
+            ..PointArgs::default()
+        };
         let p = [11.0, 22.0, 28.0];
         let got = Correction::Target(p).applied_to(&local, &g).target.unwrap();
         assert!(g.local_to_patient(got).distance(DVec3::from_array(p)) < 1e-9);
-        let lps = Correction::Target(p).applied_to(&PointArgs::default(), &g).target.unwrap();
+        let lps = Correction::Target(p)
+            .applied_to(&PointArgs::default(), &g)
+            .target
+            .unwrap();
         assert_eq!(lps, DVec3::from_array(p));
     }
 
     #[test]
     fn script_form_reads() {
-        let c: Vec<Correction> = serde_json::from_str(r#"[{"include": [1, 2, 3]}, "reset", {"source": [0, 0, 0]}]"#).unwrap();
-        assert_eq!(c, vec![Correction::Include([1.0, 2.0, 3.0]), Correction::Reset, Correction::Source([0.0; 3])]);
+        let c: Vec<Correction> =
+            serde_json::from_str(r#"[{"include": [1, 2, 3]}, "reset", {"source": [0, 0, 0]}]"#)
+                .unwrap();
+        assert_eq!(
+            c,
+            vec![
+                Correction::Include([1.0, 2.0, 3.0]),
+                Correction::Reset,
+                Correction::Source([0.0; 3])
+            ]
+        );
     }
 }

@@ -7,14 +7,14 @@
 
 use std::time::Instant;
 
+use super::pixels::WindowGpu;
+use super::session::Session;
 use eframe::egui_wgpu;
 use egui::{Color32, ColorImage, Pos2, Rect, TextureHandle, TextureOptions, Vec2};
 use glam::DVec3;
 use voyage_core::camera::Camera;
-use voyage_core::render::{shade, Frame, Lighting, Rasterizer, View};
+use voyage_core::render::{Frame, Lighting, Rasterizer, View, shade};
 use voyage_render::DrawList;
-use super::pixels::WindowGpu;
-use super::session::Session;
 
 /// The view on the window's GPU renderer ([`WindowGpu`]).
 struct GpuView {
@@ -33,15 +33,29 @@ struct EndoscopeCallback {
 }
 
 impl egui_wgpu::CallbackTrait for EndoscopeCallback {
-    fn prepare(&self, _device: &wgpu::Device, _queue: &wgpu::Queue, _screen: &egui_wgpu::ScreenDescriptor, _encoder: &mut wgpu::CommandEncoder, resources: &mut egui_wgpu::CallbackResources) -> Vec<wgpu::CommandBuffer> {
+    fn prepare(
+        &self,
+        _device: &wgpu::Device,
+        _queue: &wgpu::Queue,
+        _screen: &egui_wgpu::ScreenDescriptor,
+        _encoder: &mut wgpu::CommandEncoder,
+        resources: &mut egui_wgpu::CallbackResources,
+    ) -> Vec<wgpu::CommandBuffer> {
         if let Some(g) = resources.get::<WindowGpu>() {
             // A size the device refuses leaves the view empty rather than stopping the window.
-            let _ = g.renderer.prepare(&self.camera, self.size[0], self.size[1], &self.lighting);
+            let _ = g
+                .renderer
+                .prepare(&self.camera, self.size[0], self.size[1], &self.lighting);
         }
         Vec::new()
     }
 
-    fn paint(&self, _info: egui::PaintCallbackInfo, pass: &mut wgpu::RenderPass<'static>, resources: &egui_wgpu::CallbackResources) {
+    fn paint(
+        &self,
+        _info: egui::PaintCallbackInfo,
+        pass: &mut wgpu::RenderPass<'static>,
+        resources: &egui_wgpu::CallbackResources,
+    ) {
         if let Some(g) = resources.get::<WindowGpu>() {
             let _ = g.renderer.draw_in_pass(pass, &self.list);
         }
@@ -74,14 +88,27 @@ impl Endoscope {
     /// is one and `cpu` is false.
     pub fn new(render_state: Option<&egui_wgpu::RenderState>, cpu: bool) -> Self {
         let gpu = render_state.filter(|_| !cpu).and_then(|rs| {
-            let name = rs.renderer.read().callback_resources.get::<WindowGpu>().map(|g| format!("GPU: {}", g.renderer.adapter_summary()))?;
+            let name = rs
+                .renderer
+                .read()
+                .callback_resources
+                .get::<WindowGpu>()
+                .map(|g| format!("GPU: {}", g.renderer.adapter_summary()))?;
             Some((GpuView { uploaded: u64::MAX }, name))
         });
         let (gpu, renderer_name) = match gpu {
             Some((g, name)) => (Some(g), name),
             None => (None, "CPU reference renderer".to_string()),
         };
-        Endoscope { gpu, cpu_frame: None, cpu_texture: None, lighting: Lighting::default(), stats: FrameStats::default(), last_cells: Vec::new(), renderer_name }
+        Endoscope {
+            gpu,
+            cpu_frame: None,
+            cpu_texture: None,
+            lighting: Lighting::default(),
+            stats: FrameStats::default(),
+            last_cells: Vec::new(),
+            renderer_name,
+        }
     }
 
     pub fn is_gpu(&self) -> bool {
@@ -90,45 +117,94 @@ impl Endoscope {
 
     /// Draws the view of `session`'s camera at `size` physical pixels into `rect` of the
     /// painter. `generation` changes whenever a new study is opened.
-    pub fn render(&mut self, painter: &egui::Painter, rect: Rect, render_state: Option<&egui_wgpu::RenderState>, session: &mut Session, generation: u64, size: [u32; 2]) -> anyhow::Result<()> {
+    pub fn render(
+        &mut self,
+        painter: &egui::Painter,
+        rect: Rect,
+        render_state: Option<&egui_wgpu::RenderState>,
+        session: &mut Session,
+        generation: u64,
+        size: [u32; 2],
+    ) -> anyhow::Result<()> {
         let clock = Instant::now();
         let camera = session.camera();
         match (&mut self.gpu, render_state) {
             (Some(gpu), Some(rs)) => {
                 if gpu.uploaded != generation {
-                    if let Some(g) = rs.renderer.write().callback_resources.get_mut::<WindowGpu>() {
+                    if let Some(g) = rs
+                        .renderer
+                        .write()
+                        .callback_resources
+                        .get_mut::<WindowGpu>()
+                    {
                         g.renderer.upload(&session.mesh)?;
                     }
                     gpu.uploaded = generation;
                 }
-                let drawn = session.vis.select(&session.study.cells, &View::new(&camera, size[0], size[1]));
+                let drawn = session
+                    .vis
+                    .select(&session.study.cells, &View::new(&camera, size[0], size[1]));
                 self.stats.cells = drawn.cells.len();
                 // What the GPU is given: the cells' triangles less their chunks outside the view.
-                let list = rs.renderer.read().callback_resources.get::<WindowGpu>().map(|g| g.renderer.draw_list(&drawn.cells, &camera, size[0], size[1])).transpose()?.unwrap_or_default();
+                let list = rs
+                    .renderer
+                    .read()
+                    .callback_resources
+                    .get::<WindowGpu>()
+                    .map(|g| {
+                        g.renderer
+                            .draw_list(&drawn.cells, &camera, size[0], size[1])
+                    })
+                    .transpose()?
+                    .unwrap_or_default();
                 self.stats.triangles = list.triangles();
                 self.last_cells = drawn.cells;
-                painter.add(egui_wgpu::Callback::new_paint_callback(rect, EndoscopeCallback { camera, list, size, lighting: self.lighting }));
+                painter.add(egui_wgpu::Callback::new_paint_callback(
+                    rect,
+                    EndoscopeCallback {
+                        camera,
+                        list,
+                        size,
+                        lighting: self.lighting,
+                    },
+                ));
             }
             _ => {
                 let id = self.draw_cpu(painter.ctx(), session, &camera, size);
-                painter.image(id, rect, Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)), Color32::WHITE);
+                painter.image(
+                    id,
+                    rect,
+                    Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)),
+                    Color32::WHITE,
+                );
             }
         }
         self.stats.render_ms = clock.elapsed().as_secs_f64() * 1e3;
         Ok(())
     }
 
-    fn draw_cpu(&mut self, ctx: &egui::Context, session: &mut Session, camera: &Camera, size: [u32; 2]) -> egui::TextureId {
+    fn draw_cpu(
+        &mut self,
+        ctx: &egui::Context,
+        session: &mut Session,
+        camera: &Camera,
+        size: [u32; 2],
+    ) -> egui::TextureId {
         let frame = match &mut self.cpu_frame {
             Some(f) if f.width == size[0] && f.height == size[1] => f,
             slot => slot.insert(Frame::new(size[0], size[1])),
         };
-        let raster = Rasterizer::lit(&session.mesh, View::new(camera, size[0], size[1]), &self.lighting);
+        let raster = Rasterizer::lit(
+            &session.mesh,
+            View::new(camera, size[0], size[1]),
+            &self.lighting,
+        );
         let drawn = session.vis.draw(frame, &raster, &session.study.cells);
         self.stats.cells = drawn.cells.len();
         self.stats.triangles = drawn.triangles;
         self.last_cells = drawn.cells;
-        let image = ColorImage::from_rgba_unmultiplied([size[0] as usize, size[1] as usize], &shade(frame));
+        let image =
+            ColorImage::from_rgba_unmultiplied([size[0] as usize, size[1] as usize], &shade(frame));
         match &mut self.cpu_texture {
             Some(t) => {
                 t.set(image, TextureOptions::LINEAR);
@@ -157,7 +233,10 @@ pub fn project(camera: &Camera, p: DVec3, aspect: f64) -> Option<Vec2> {
     let t = camera.tan_half_fov();
     let sx = e.dot(-pose.x_body()) / z / (t * aspect);
     let sy = e.dot(pose.y_body()) / z / t;
-    Some(Vec2::new(((sx + 1.0) * 0.5) as f32, ((1.0 - sy) * 0.5) as f32))
+    Some(Vec2::new(
+        ((sx + 1.0) * 0.5) as f32,
+        ((1.0 - sy) * 0.5) as f32,
+    ))
 }
 
 /// The ray through a point of the view rectangle.
@@ -172,7 +251,12 @@ pub fn ray_at(camera: &Camera, rect: Rect, at: Pos2) -> DVec3 {
 
 /// The centerline seen from the camera (paper: drawn in green), as polylines of the points
 /// within `reach_mm` that the camera can see.
-pub fn visible_centerline(session: &Session, camera: &Camera, rect: Rect, reach_mm: f64) -> Vec<Vec<Pos2>> {
+pub fn visible_centerline(
+    session: &Session,
+    camera: &Camera,
+    rect: Rect,
+    reach_mm: f64,
+) -> Vec<Vec<Pos2>> {
     let aspect = (rect.width() / rect.height().max(1.0)) as f64;
     let eye = camera.pose.position;
     let mut lines: Vec<Vec<Pos2>> = Vec::new();
@@ -185,7 +269,9 @@ pub fn visible_centerline(session: &Session, camera: &Camera, rect: Rect, reach_
             continue;
         }
         last = Some(p);
-        let seen = p.distance(eye) <= reach_mm && project(camera, p, aspect).is_some() && session.line_of_sight(eye, p, 0.0);
+        let seen = p.distance(eye) <= reach_mm
+            && project(camera, p, aspect).is_some()
+            && session.line_of_sight(eye, p, 0.0);
         match seen.then(|| project(camera, p, aspect)).flatten() {
             Some(f) => current.push(rect.min + f * rect.size()),
             None => {
@@ -204,11 +290,18 @@ pub fn visible_centerline(session: &Session, camera: &Camera, rect: Rect, reach_
 
 /// A point on the surface is drawn when the camera sees it: the straight line to it runs
 /// through the lumen up to the last millimetre or so (the point itself sits on the wall).
-pub fn surface_point_on_screen(session: &Session, camera: &Camera, rect: Rect, p: DVec3) -> Option<Pos2> {
+pub fn surface_point_on_screen(
+    session: &Session,
+    camera: &Camera,
+    rect: Rect,
+    p: DVec3,
+) -> Option<Pos2> {
     let aspect = (rect.width() / rect.height().max(1.0)) as f64;
     let f = project(camera, p, aspect)?;
     let skip = 1.5 * session.study.ct.geometry().spacing_vec().max_element();
-    session.line_of_sight(camera.pose.position, p, skip).then(|| rect.min + f * rect.size())
+    session
+        .line_of_sight(camera.pose.position, p, skip)
+        .then(|| rect.min + f * rect.size())
 }
 
 /// A readable label on the view: light text on a dark backing.

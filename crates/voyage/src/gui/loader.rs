@@ -2,13 +2,13 @@
 //! the window stays responsive and shows the progress.
 
 use std::path::PathBuf;
-use std::sync::mpsc::{channel, Receiver, TryRecvError};
+use std::sync::mpsc::{Receiver, TryRecvError, channel};
 use std::thread;
 
 use anyhow::Context as _;
 use voyage_core::io::{self, LoadOptions};
 use voyage_core::phantom::{self, ColonOptions};
-use voyage_core::prep::{prepare, PrepOptions, Stage};
+use voyage_core::prep::{PrepOptions, Stage, prepare};
 
 use super::session::Session;
 use crate::cmd::prep::PointArgs;
@@ -17,7 +17,12 @@ use crate::cmd::prep::PointArgs;
 #[derive(Clone, Debug)]
 pub enum Source {
     /// A CT (DICOM folder or file, NIfTI, MetaImage, NRRD) or a lumen mask.
-    File { path: PathBuf, mask: bool, series: Option<String>, points: PointArgs },
+    File {
+        path: PathBuf,
+        mask: bool,
+        series: Option<String>,
+        points: PointArgs,
+    },
     /// The built-in colon phantom, made on the fly.
     Phantom { small: bool, points: PointArgs },
 }
@@ -51,14 +56,21 @@ impl Source {
     /// often named after the patient; the last component is what the user chose to open).
     fn title(&self) -> String {
         match self {
-            Source::File { path, .. } => path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| path.display().to_string()),
+            Source::File { path, .. } => path
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_else(|| path.display().to_string()),
             Source::Phantom { .. } => "colon phantom".into(),
         }
     }
 }
 
 enum Message {
-    Progress { step: usize, of: usize, what: String },
+    Progress {
+        step: usize,
+        of: usize,
+        what: String,
+    },
     Done(Box<anyhow::Result<Session>>),
 }
 
@@ -84,7 +96,11 @@ impl Job {
             .name("voyage-open".into())
             .spawn(move || {
                 let progress = |step: usize, what: &str| {
-                    let _ = tx.send(Message::Progress { step, of: Stage::ALL.len() + EXTRA_STEPS, what: what.to_string() });
+                    let _ = tx.send(Message::Progress {
+                        step,
+                        of: Stage::ALL.len() + EXTRA_STEPS,
+                        what: what.to_string(),
+                    });
                     ctx.request_repaint();
                 };
                 let result = open(&src, &progress);
@@ -92,17 +108,31 @@ impl Job {
                 ctx.request_repaint();
             })
             .expect("spawning a thread");
-        Job { source, rx, step: 0, of: Stage::ALL.len() + EXTRA_STEPS, what: "starting".into(), started: std::time::Instant::now() }
+        Job {
+            source,
+            rx,
+            step: 0,
+            of: Stage::ALL.len() + EXTRA_STEPS,
+            what: "starting".into(),
+            started: std::time::Instant::now(),
+        }
     }
 
     /// The session when it is ready (Some(Err) when opening failed), None while working.
     pub fn poll(&mut self) -> Option<anyhow::Result<Session>> {
         loop {
             match self.rx.try_recv() {
-                Ok(Message::Progress { step, of, what }) => (self.step, self.of, self.what) = (step, of, what),
+                Ok(Message::Progress { step, of, what }) => {
+                    (self.step, self.of, self.what) = (step, of, what)
+                }
                 Ok(Message::Done(r)) => return Some(*r),
                 Err(TryRecvError::Empty) => return None,
-                Err(TryRecvError::Disconnected) => return Some(Err(anyhow::anyhow!("{}: opening stopped unexpectedly", self.source.describe()))),
+                Err(TryRecvError::Disconnected) => {
+                    return Some(Err(anyhow::anyhow!(
+                        "{}: opening stopped unexpectedly",
+                        self.source.describe()
+                    )));
+                }
             }
         }
     }
@@ -115,16 +145,30 @@ impl Job {
 fn open(source: &Source, progress: &dyn Fn(usize, &str)) -> anyhow::Result<Session> {
     let mut opts = PrepOptions::default();
     let ct = match source {
-        Source::File { path, mask, series, points } => {
+        Source::File {
+            path,
+            mask,
+            series,
+            points,
+        } => {
             progress(0, "reading");
-            let loaded = io::load(path, &LoadOptions { series_uid: series.clone() })?;
+            let loaded = io::load(
+                path,
+                &LoadOptions {
+                    series_uid: series.clone(),
+                },
+            )?;
             opts.segment.mask = mask.then_some(true);
             points.apply(loaded.volume.geometry(), &loaded.meta, &mut opts);
             loaded.volume
         }
         Source::Phantom { small, points } => {
             progress(0, "making the colon phantom");
-            let ct = phantom::colon(&ColonOptions { small: *small, ..ColonOptions::default() })?.ct;
+            let ct = phantom::colon(&ColonOptions {
+                small: *small,
+                ..ColonOptions::default()
+            })?
+            .ct;
             points.apply(ct.geometry(), &io::Meta::default(), &mut opts);
             ct
         }

@@ -15,7 +15,7 @@ mod slices;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
-use anyhow::{bail, Context as _};
+use anyhow::{Context as _, bail};
 use clap::Args;
 
 use app::{App, Outcome};
@@ -51,11 +51,20 @@ pub struct WindowArgs {
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
-    let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("{s}: expected WIDTHxHEIGHT, e.g. 1280x800"))?;
-    let parse = |v: &str| v.trim().parse::<u32>().ok().filter(|n| (320..=8192).contains(n));
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("{s}: expected WIDTHxHEIGHT, e.g. 1280x800"))?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .ok()
+            .filter(|n| (320..=8192).contains(n))
+    };
     match (parse(w), parse(h)) {
         (Some(w), Some(h)) => Ok((w, h)),
-        _ => Err(format!("{s}: width and height must be whole numbers from 320 to 8192")),
+        _ => Err(format!(
+            "{s}: width and height must be whole numbers from 320 to 8192"
+        )),
     }
 }
 
@@ -77,12 +86,23 @@ pub struct ViewArgs {
 }
 
 pub fn view(a: &ViewArgs) -> anyhow::Result<()> {
-    let source = a.input.clone().map(|path| Source::File { path, mask: a.mask, series: a.series.clone(), points: a.points.clone() });
+    let source = a.input.clone().map(|path| Source::File {
+        path,
+        mask: a.mask,
+        series: a.series.clone(),
+        points: a.points.clone(),
+    });
     run(source, &a.window)
 }
 
 pub fn demo(window: &WindowArgs, small: bool) -> anyhow::Result<()> {
-    run(Some(Source::Phantom { small, points: Default::default() }), window)
+    run(
+        Some(Source::Phantom {
+            small,
+            points: Default::default(),
+        }),
+        window,
+    )
 }
 
 /// Opens the window and returns when it is closed. In screenshot and script runs, errors met
@@ -91,7 +111,10 @@ pub fn demo(window: &WindowArgs, small: bool) -> anyhow::Result<()> {
 fn run(source: Option<Source>, w: &WindowArgs) -> anyhow::Result<()> {
     let outcome = Arc::new(Mutex::new(Outcome::default()));
     let options = eframe::NativeOptions {
-        viewport: egui::ViewportBuilder::default().with_inner_size([w.size.0 as f32, w.size.1 as f32]).with_min_inner_size([640.0, 480.0]).with_title("voyage"),
+        viewport: egui::ViewportBuilder::default()
+            .with_inner_size([w.size.0 as f32, w.size.1 as f32])
+            .with_min_inner_size([640.0, 480.0])
+            .with_title("voyage"),
         renderer: eframe::Renderer::Wgpu,
         // The endoscopic view is drawn inside egui's render pass and needs a depth buffer.
         depth_buffer: 32,
@@ -101,12 +124,25 @@ fn run(source: Option<Source>, w: &WindowArgs) -> anyhow::Result<()> {
         ..Default::default()
     };
     let (args, out) = (w.clone(), outcome.clone());
-    eframe::run_native("voyage", options, Box::new(move |cc| Ok(Box::new(App::new(cc, source, args, out)))))
-        .map_err(|e| anyhow::anyhow!("cannot open the window: {e} (a display is needed: set DISPLAY, or run under xvfb-run)"))?;
-    let o = outcome.lock().map_err(|_| anyhow::anyhow!("the window's state was lost"))?;
+    eframe::run_native(
+        "voyage",
+        options,
+        Box::new(move |cc| Ok(Box::new(App::new(cc, source, args, out)))),
+    )
+    .map_err(|e| {
+        anyhow::anyhow!(
+            "cannot open the window: {e} (a display is needed: set DISPLAY, or run under xvfb-run)"
+        )
+    })?;
+    let o = outcome
+        .lock()
+        .map_err(|_| anyhow::anyhow!("the window's state was lost"))?;
     if let (Some(path), Some(report)) = (&w.report, &o.report) {
         let text = serde_json::to_string_pretty(report)? + "\n";
-        voyage_core::io::atomic::write_atomic(path, |f| std::io::Write::write_all(f, text.as_bytes())).with_context(|| path.display().to_string())?;
+        voyage_core::io::atomic::write_atomic(path, |f| {
+            std::io::Write::write_all(f, text.as_bytes())
+        })
+        .with_context(|| path.display().to_string())?;
     }
     let unattended = w.screenshot.is_some() || w.script.is_some();
     if unattended && !o.errors.is_empty() {

@@ -26,9 +26,19 @@ impl WindowGpu {
     /// Puts one into `render_state`'s callback resources.
     pub fn install(render_state: &egui_wgpu::RenderState) {
         let (device, queue) = (render_state.device.clone(), render_state.queue.clone());
-        let renderer = GpuRenderer::for_pass(device.clone(), queue.clone(), render_state.target_format);
-        let images = PixelImages::new(device, queue, render_state.target_format, Some(voyage_render::DEPTH_FORMAT));
-        render_state.renderer.write().callback_resources.insert(WindowGpu { renderer, images });
+        let renderer =
+            GpuRenderer::for_pass(device.clone(), queue.clone(), render_state.target_format);
+        let images = PixelImages::new(
+            device,
+            queue,
+            render_state.target_format,
+            Some(voyage_render::DEPTH_FORMAT),
+        );
+        render_state
+            .renderer
+            .write()
+            .callback_resources
+            .insert(WindowGpu { renderer, images });
     }
 }
 
@@ -53,7 +63,14 @@ pub struct PanelImage {
 
 impl PanelImage {
     pub fn new(key: u64, name: &'static str, gpu: bool) -> Self {
-        PanelImage { key, name, gpu, size: [0, 0], pending: None, fallback: None }
+        PanelImage {
+            key,
+            name,
+            gpu,
+            size: [0, 0],
+            pending: None,
+            fallback: None,
+        }
     }
 
     /// The image shown from now on.
@@ -70,9 +87,15 @@ impl PanelImage {
             return;
         }
         let ppp = painter.ctx().pixels_per_point();
-        let rect = Rect::from_min_size(at, Vec2::new(self.size[0] as f32, self.size[1] as f32) / ppp);
+        let rect = Rect::from_min_size(
+            at,
+            Vec2::new(self.size[0] as f32, self.size[1] as f32) / ppp,
+        );
         if self.gpu {
-            let callback = PixelsCallback { key: self.key, upload: self.pending.take() };
+            let callback = PixelsCallback {
+                key: self.key,
+                upload: self.pending.take(),
+            };
             painter.add(egui_wgpu::Callback::new_paint_callback(rect, callback));
             return;
         }
@@ -80,11 +103,22 @@ impl PanelImage {
             let color = ColorImage::from_rgba_unmultiplied(image.size, &image.bytes);
             match &mut self.fallback {
                 Some(t) => t.set(color, TextureOptions::NEAREST),
-                None => self.fallback = Some(painter.ctx().load_texture(self.name, color, TextureOptions::NEAREST)),
+                None => {
+                    self.fallback = Some(painter.ctx().load_texture(
+                        self.name,
+                        color,
+                        TextureOptions::NEAREST,
+                    ))
+                }
             }
         }
         if let Some(t) = &self.fallback {
-            painter.image(t.id(), rect, Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)), Color32::WHITE);
+            painter.image(
+                t.id(),
+                rect,
+                Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)),
+                Color32::WHITE,
+            );
         }
     }
 }
@@ -95,17 +129,38 @@ struct PixelsCallback {
 }
 
 impl egui_wgpu::CallbackTrait for PixelsCallback {
-    fn prepare(&self, _device: &wgpu::Device, _queue: &wgpu::Queue, _screen: &egui_wgpu::ScreenDescriptor, _encoder: &mut wgpu::CommandEncoder, resources: &mut egui_wgpu::CallbackResources) -> Vec<wgpu::CommandBuffer> {
-        if let (Some(image), Some(WindowGpu { images, .. })) = (&self.upload, resources.get_mut::<WindowGpu>()) {
+    fn prepare(
+        &self,
+        _device: &wgpu::Device,
+        _queue: &wgpu::Queue,
+        _screen: &egui_wgpu::ScreenDescriptor,
+        _encoder: &mut wgpu::CommandEncoder,
+        resources: &mut egui_wgpu::CallbackResources,
+    ) -> Vec<wgpu::CommandBuffer> {
+        if let (Some(image), Some(WindowGpu { images, .. })) =
+            (&self.upload, resources.get_mut::<WindowGpu>())
+        {
             // A size the device refuses leaves the panel empty rather than stopping the window.
-            if images.set(self.key, [image.size[0] as u32, image.size[1] as u32], &image.bytes).is_err() {
+            if images
+                .set(
+                    self.key,
+                    [image.size[0] as u32, image.size[1] as u32],
+                    &image.bytes,
+                )
+                .is_err()
+            {
                 images.remove(self.key);
             }
         }
         Vec::new()
     }
 
-    fn paint(&self, info: egui::PaintCallbackInfo, pass: &mut wgpu::RenderPass<'static>, resources: &egui_wgpu::CallbackResources) {
+    fn paint(
+        &self,
+        info: egui::PaintCallbackInfo,
+        pass: &mut wgpu::RenderPass<'static>,
+        resources: &egui_wgpu::CallbackResources,
+    ) {
         if let Some(gpu) = resources.get::<WindowGpu>() {
             gpu.images.draw_in_pass(pass, self.key, top_left_px(&info));
         }

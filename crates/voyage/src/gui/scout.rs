@@ -13,8 +13,8 @@ use std::collections::HashMap;
 
 use egui::{Color32, Pos2, Rect, Sense, Shape, Stroke, Vec2};
 use glam::{DMat3, DVec3};
-use voyage_core::surface::Mesh;
 use voyage_core::Geometry;
+use voyage_core::surface::Mesh;
 
 use super::pixels::{PanelImage, Rgba};
 
@@ -60,10 +60,27 @@ impl ScoutMesh {
                 normals.push(n);
             }
         }
-        let (lo, hi) = positions.iter().fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
-        let center = if positions.is_empty() { DVec3::ZERO } else { 0.5 * (lo + hi) };
-        let radius = if positions.is_empty() { 1.0 } else { (0.5 * (hi - lo).length()).max(1.0) };
-        ScoutMesh { positions, triangles, normals, center, radius }
+        let (lo, hi) = positions.iter().fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+        );
+        let center = if positions.is_empty() {
+            DVec3::ZERO
+        } else {
+            0.5 * (lo + hi)
+        };
+        let radius = if positions.is_empty() {
+            1.0
+        } else {
+            (0.5 * (hi - lo).length()).max(1.0)
+        };
+        ScoutMesh {
+            positions,
+            triangles,
+            normals,
+            center,
+            radius,
+        }
     }
 }
 
@@ -112,7 +129,10 @@ struct Projection {
 impl Projection {
     fn to_screen(&self, p: DVec3) -> Pos2 {
         let d = p - self.center;
-        Pos2::new(self.origin.x + (d.dot(self.right) * self.scale) as f32, self.origin.y - (d.dot(self.up) * self.scale) as f32)
+        Pos2::new(
+            self.origin.x + (d.dot(self.right) * self.scale) as f32,
+            self.origin.y - (d.dot(self.up) * self.scale) as f32,
+        )
     }
 }
 
@@ -122,27 +142,53 @@ impl ScoutView {
     pub fn new(geometry: &Geometry, background: Color32, image_key: u64, gpu: bool) -> Self {
         // local = Dᵀ (patient − origin): a patient axis e is Dᵀ e in the local frame.
         let d = geometry.direction_mat().transpose();
-        ScoutView { yaw: 0.0, pitch: 0.0, zoom: 1.0, anatomy: d, cached: None, image: PanelImage::new(image_key, "scout", gpu), background }
+        ScoutView {
+            yaw: 0.0,
+            pitch: 0.0,
+            zoom: 1.0,
+            anatomy: d,
+            cached: None,
+            image: PanelImage::new(image_key, "scout", gpu),
+            background,
+        }
     }
 
     /// Front view (from the patient's anterior, the patient's right on the screen's left,
     /// head up), the radiologist's usual first look at a colon.
     fn projection(&self, mesh: &ScoutMesh, rect: Rect) -> Projection {
-        let (l, p, s) = (self.anatomy.x_axis, self.anatomy.y_axis, self.anatomy.z_axis);
+        let (l, p, s) = (
+            self.anatomy.x_axis,
+            self.anatomy.y_axis,
+            self.anatomy.z_axis,
+        );
         // Orbit: yaw about the body's long axis, then pitch about the screen's right.
         let yaw = DMat3::from_axis_angle(s, self.yaw);
         let (right0, forward0) = (yaw * l, yaw * p);
         let pitch = DMat3::from_axis_angle(right0, self.pitch);
         let (forward, up) = (pitch * forward0, pitch * s);
         let scale = 0.5 * rect.width().min(rect.height()) as f64 / mesh.radius * self.zoom;
-        Projection { right: right0, up, forward, center: mesh.center, scale, origin: rect.center() }
+        Projection {
+            right: right0,
+            up,
+            forward,
+            center: mesh.center,
+            scale,
+            origin: rect.center(),
+        }
     }
 
     /// Draws the scout into `ui`'s remaining space; returns the centerline point clicked,
     /// if a click landed within a few pixels of the centerline.
-    pub fn show(&mut self, ui: &mut egui::Ui, mesh: &ScoutMesh, marks: &ScoutMarks) -> Option<usize> {
+    pub fn show(
+        &mut self,
+        ui: &mut egui::Ui,
+        mesh: &ScoutMesh,
+        marks: &ScoutMarks,
+    ) -> Option<usize> {
         let (rect, response) = ui.allocate_exact_size(ui.available_size(), Sense::click_and_drag());
-        if response.dragged_by(egui::PointerButton::Primary) || response.dragged_by(egui::PointerButton::Secondary) {
+        if response.dragged_by(egui::PointerButton::Primary)
+            || response.dragged_by(egui::PointerButton::Secondary)
+        {
             let d = response.drag_delta();
             self.yaw += d.x as f64 * 0.01;
             self.pitch = (self.pitch + d.y as f64 * 0.01).clamp(-1.55, 1.55);
@@ -162,17 +208,35 @@ impl ScoutView {
         // Only the part the colon covers: the rest shows the window's colour anyway, and on a
         // CPU Vulkan driver every pixel drawn costs.
         let offset = self.surface(mesh, marks.centerline, &proj, rect, ppp);
-        let at = ((rect.min.to_vec2() * ppp).round() + Vec2::new(offset[0] as f32, offset[1] as f32)) / ppp;
+        let at = ((rect.min.to_vec2() * ppp).round()
+            + Vec2::new(offset[0] as f32, offset[1] as f32))
+            / ppp;
         self.image.paint(&painter, at.to_pos2());
 
-        let line: Vec<Pos2> = marks.centerline.iter().map(|p| proj.to_screen(DVec3::from_array(*p))).collect();
+        let line: Vec<Pos2> = marks
+            .centerline
+            .iter()
+            .map(|p| proj.to_screen(DVec3::from_array(*p)))
+            .collect();
         for (label, p) in &marks.markers {
             let s = proj.to_screen(*p);
             painter.circle_filled(s, 4.0, Color32::YELLOW);
-            painter.text(s + Vec2::new(6.0, -6.0), egui::Align2::LEFT_BOTTOM, label, egui::FontId::proportional(12.0), Color32::YELLOW);
+            painter.text(
+                s + Vec2::new(6.0, -6.0),
+                egui::Align2::LEFT_BOTTOM,
+                label,
+                egui::FontId::proportional(12.0),
+                Color32::YELLOW,
+            );
         }
         draw_submarine(&painter, &proj, marks.submarine, marks.view_dir);
-        painter.text(rect.left_top() + Vec2::new(6.0, 4.0), egui::Align2::LEFT_TOP, "scout · drag: orbit · scroll: zoom · click centerline: go", egui::FontId::proportional(11.0), Color32::from_gray(150));
+        painter.text(
+            rect.left_top() + Vec2::new(6.0, 4.0),
+            egui::Align2::LEFT_TOP,
+            "scout · drag: orbit · scroll: zoom · click centerline: go",
+            egui::FontId::proportional(11.0),
+            Color32::from_gray(150),
+        );
 
         if response.clicked() {
             let at = response.interact_pointer_pos()?;
@@ -199,14 +263,29 @@ impl ScoutView {
     /// edge-on are more opaque than faces seen head-on: the outline and the folds stand out
     /// while the far side shows through (an "x-ray" look). Returns where the image's
     /// top-left pixel lies in the panel.
-    fn surface(&mut self, mesh: &ScoutMesh, centerline: &[[f64; 3]], proj: &Projection, rect: Rect, ppp: f32) -> [usize; 2] {
-        let key = CacheKey { yaw: self.yaw, pitch: self.pitch, zoom: self.zoom, rect };
+    fn surface(
+        &mut self,
+        mesh: &ScoutMesh,
+        centerline: &[[f64; 3]],
+        proj: &Projection,
+        rect: Rect,
+        ppp: f32,
+    ) -> [usize; 2] {
+        let key = CacheKey {
+            yaw: self.yaw,
+            pitch: self.pitch,
+            zoom: self.zoom,
+            rect,
+        };
         if let Some((k, offset)) = &self.cached
             && *k == key
         {
             return *offset;
         }
-        let (w, h) = (((rect.width() * ppp).round() as usize).max(1), ((rect.height() * ppp).round() as usize).max(1));
+        let (w, h) = (
+            ((rect.width() * ppp).round() as usize).max(1),
+            ((rect.height() * ppp).round() as usize).max(1),
+        );
         let buf = rasterize(mesh, centerline, proj, rect, ppp, [w, h]);
         let (offset, image) = over_background(&buf, [w, h], self.background);
         self.image.set(image);
@@ -228,7 +307,13 @@ fn over_background(buf: &[[f32; 4]], size: [usize; 2], background: Color32) -> (
         }
     }
     if x0 >= x1 {
-        return ([0, 0], Rgba { size: [0, 0], bytes: Vec::new() });
+        return (
+            [0, 0],
+            Rgba {
+                size: [0, 0],
+                bytes: Vec::new(),
+            },
+        );
     }
     let bg = [background.r(), background.g(), background.b()].map(|c| c as f32 / 255.0);
     let mut bytes = Vec::with_capacity((x1 - x0) * (y1 - y0) * 4);
@@ -241,40 +326,78 @@ fn over_background(buf: &[[f32; 4]], size: [usize; 2], background: Color32) -> (
             bytes.push(255);
         }
     }
-    ([x0, y0], Rgba { size: [x1 - x0, y1 - y0], bytes })
+    (
+        [x0, y0],
+        Rgba {
+            size: [x1 - x0, y1 - y0],
+            bytes,
+        },
+    )
 }
 
 /// Alpha-blends the scout's triangles, in the mesh's order, into an image of `rect` at
 /// `ppp` pixels per point, `size` pixels (premultiplied colour, transparent where nothing
 /// is), and draws the centerline over them in green (the paper's colour).
-fn rasterize(mesh: &ScoutMesh, centerline: &[[f64; 3]], proj: &Projection, rect: Rect, ppp: f32, size: [usize; 2]) -> Vec<[f32; 4]> {
+fn rasterize(
+    mesh: &ScoutMesh,
+    centerline: &[[f64; 3]],
+    proj: &Projection,
+    rect: Rect,
+    ppp: f32,
+    size: [usize; 2],
+) -> Vec<[f32; 4]> {
     let [w, h] = size;
     let mut buf = vec![[0f32; 4]; w * h];
     let to_px = |p: DVec3| {
         let s = proj.to_screen(p);
-        [((s.x - rect.left()) * ppp) as f64, ((s.y - rect.top()) * ppp) as f64]
+        [
+            ((s.x - rect.left()) * ppp) as f64,
+            ((s.y - rect.top()) * ppp) as f64,
+        ]
     };
     for (t, n) in mesh.triangles.iter().zip(&mesh.normals) {
         let facing = n.dot(proj.forward).abs();
         let alpha = (0.05 + 0.40 * (1.0 - facing).powi(2)) as f32;
         let light = (0.55 + 0.45 * facing) as f32;
-        let color = [230.0 / 255.0 * light * alpha, 140.0 / 255.0 * light * alpha, 120.0 / 255.0 * light * alpha, alpha];
+        let color = [
+            230.0 / 255.0 * light * alpha,
+            140.0 / 255.0 * light * alpha,
+            120.0 / 255.0 * light * alpha,
+            alpha,
+        ];
         let v = t.map(|i| to_px(mesh.positions[i as usize]));
         fill_triangle(&mut buf, w, h, v, color);
     }
     let green = [40.0 / 255.0, 220.0 / 255.0, 60.0 / 255.0, 1.0];
     for pair in centerline.windows(2) {
-        let (a, b) = (to_px(DVec3::from_array(pair[0])), to_px(DVec3::from_array(pair[1])));
+        let (a, b) = (
+            to_px(DVec3::from_array(pair[0])),
+            to_px(DVec3::from_array(pair[1])),
+        );
         stroke(&mut buf, w, h, a, b, (1.5 * ppp) as f64, green);
     }
     buf
 }
 
 /// Paints the pixels within `width / 2` of the segment a–b with an opaque colour.
-fn stroke(buf: &mut [[f32; 4]], w: usize, h: usize, a: [f64; 2], b: [f64; 2], width: f64, c: [f32; 4]) {
+fn stroke(
+    buf: &mut [[f32; 4]],
+    w: usize,
+    h: usize,
+    a: [f64; 2],
+    b: [f64; 2],
+    width: f64,
+    c: [f32; 4],
+) {
     let r = 0.5 * width.max(1.0);
-    let (x0, x1) = ((a[0].min(b[0]) - r).floor().max(0.0) as usize, ((a[0].max(b[0]) + r).ceil().max(0.0) as usize).min(w));
-    let (y0, y1) = ((a[1].min(b[1]) - r).floor().max(0.0) as usize, ((a[1].max(b[1]) + r).ceil().max(0.0) as usize).min(h));
+    let (x0, x1) = (
+        (a[0].min(b[0]) - r).floor().max(0.0) as usize,
+        ((a[0].max(b[0]) + r).ceil().max(0.0) as usize).min(w),
+    );
+    let (y0, y1) = (
+        (a[1].min(b[1]) - r).floor().max(0.0) as usize,
+        ((a[1].max(b[1]) + r).ceil().max(0.0) as usize).min(h),
+    );
     let d = [b[0] - a[0], b[1] - a[1]];
     let len2 = (d[0] * d[0] + d[1] * d[1]).max(1e-12);
     for y in y0..y1 {
@@ -292,21 +415,49 @@ fn stroke(buf: &mut [[f32; 4]], w: usize, h: usize, a: [f64; 2], b: [f64; 2], wi
 /// Blends a premultiplied colour "over" every pixel whose centre lies in the triangle
 /// (either winding: the scout shows both sides of the wall).
 fn fill_triangle(buf: &mut [[f32; 4]], w: usize, h: usize, v: [[f64; 2]; 3], c: [f32; 4]) {
-    let area = (v[1][0] - v[0][0]) * (v[2][1] - v[0][1]) - (v[1][1] - v[0][1]) * (v[2][0] - v[0][0]);
+    let area =
+        (v[1][0] - v[0][0]) * (v[2][1] - v[0][1]) - (v[1][1] - v[0][1]) * (v[2][0] - v[0][0]);
     if area.abs() < 1e-12 {
         return;
     }
-    let x0 = v.iter().map(|p| p[0]).fold(f64::INFINITY, f64::min).floor().max(0.0) as usize;
-    let x1 = (v.iter().map(|p| p[0]).fold(f64::NEG_INFINITY, f64::max).ceil().max(0.0) as usize).min(w);
-    let y0 = v.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min).floor().max(0.0) as usize;
-    let y1 = (v.iter().map(|p| p[1]).fold(f64::NEG_INFINITY, f64::max).ceil().max(0.0) as usize).min(h);
+    let x0 = v
+        .iter()
+        .map(|p| p[0])
+        .fold(f64::INFINITY, f64::min)
+        .floor()
+        .max(0.0) as usize;
+    let x1 = (v
+        .iter()
+        .map(|p| p[0])
+        .fold(f64::NEG_INFINITY, f64::max)
+        .ceil()
+        .max(0.0) as usize)
+        .min(w);
+    let y0 = v
+        .iter()
+        .map(|p| p[1])
+        .fold(f64::INFINITY, f64::min)
+        .floor()
+        .max(0.0) as usize;
+    let y1 = (v
+        .iter()
+        .map(|p| p[1])
+        .fold(f64::NEG_INFINITY, f64::max)
+        .ceil()
+        .max(0.0) as usize)
+        .min(h);
     let sign = area.signum();
-    let edge = |a: [f64; 2], b: [f64; 2], x: f64, y: f64| ((b[0] - a[0]) * (y - a[1]) - (b[1] - a[1]) * (x - a[0])) * sign;
+    let edge = |a: [f64; 2], b: [f64; 2], x: f64, y: f64| {
+        ((b[0] - a[0]) * (y - a[1]) - (b[1] - a[1]) * (x - a[0])) * sign
+    };
     for y in y0..y1 {
         let py = y as f64 + 0.5;
         for x in x0..x1 {
             let px = x as f64 + 0.5;
-            if edge(v[0], v[1], px, py) >= 0.0 && edge(v[1], v[2], px, py) >= 0.0 && edge(v[2], v[0], px, py) >= 0.0 {
+            if edge(v[0], v[1], px, py) >= 0.0
+                && edge(v[1], v[2], px, py) >= 0.0
+                && edge(v[2], v[0], px, py) >= 0.0
+            {
                 let d = &mut buf[y * w + x];
                 let k = 1.0 - c[3];
                 for i in 0..4 {
@@ -322,15 +473,28 @@ fn draw_submarine(painter: &egui::Painter, proj: &Projection, at: DVec3, dir: DV
     let s = proj.to_screen(at);
     let screen_dir = Vec2::new(dir.dot(proj.right) as f32, -dir.dot(proj.up) as f32);
     let len = screen_dir.length();
-    let tip = if len > 1e-3 { s + screen_dir / len * (18.0 * len.max(0.35)) } else { s };
+    let tip = if len > 1e-3 {
+        s + screen_dir / len * (18.0 * len.max(0.35))
+    } else {
+        s
+    };
     let color = Color32::from_rgb(60, 200, 255);
     painter.line_segment([s, tip], Stroke::new(2.5, color));
     if len > 1e-3 {
         let d = (tip - s).normalized();
         let n = Vec2::new(-d.y, d.x);
-        painter.add(Shape::convex_polygon(vec![tip + d * 6.0, tip + n * 4.0, tip - n * 4.0], color, Stroke::NONE));
+        painter.add(Shape::convex_polygon(
+            vec![tip + d * 6.0, tip + n * 4.0, tip - n * 4.0],
+            color,
+            Stroke::NONE,
+        ));
     }
-    painter.circle(s, 5.0, Color32::from_rgb(20, 60, 90), Stroke::new(2.0, color));
+    painter.circle(
+        s,
+        5.0,
+        Color32::from_rgb(20, 60, 90),
+        Stroke::new(2.0, color),
+    );
 }
 
 #[cfg(test)]

@@ -33,13 +33,26 @@ pub enum Step {
     /// "forward" (rectum → cecum) or "backward".
     Direction(String),
     /// Hold the left button on a point of the view for some frames (F_user, paper §3.3).
-    Steer { at: [f32; 2], frames: u32 },
+    Steer {
+        at: [f32; 2],
+        frames: u32,
+    },
     /// Right-drag by (dx, dy) points per frame for some frames (τ_option).
-    Look { dx: f32, dy: f32, frames: u32 },
+    Look {
+        dx: f32,
+        dy: f32,
+        frames: u32,
+    },
     /// Drop a marker on the surface under a point of the view.
-    Marker { at: [f32; 2], note: String },
+    Marker {
+        at: [f32; 2],
+        note: String,
+    },
     /// Measure between the surface points under two points of the view.
-    Measure { from: [f32; 2], to: [f32; 2] },
+    Measure {
+        from: [f32; 2],
+        to: [f32; 2],
+    },
     /// Jump to a point of the centerline: a fraction of its length from the rectum.
     Jump(f64),
     /// Put the camera at a pose [x, y, z, qw, qx, qy, qz] (volume-local mm, z_body = view,
@@ -77,9 +90,15 @@ pub struct Script {
 
 impl Script {
     pub fn load(path: &Path) -> anyhow::Result<Script> {
-        let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read the script", path.display()))?;
-        let steps: Vec<Step> = serde_json::from_str(&text).with_context(|| format!("{}: not a list of script steps", path.display()))?;
-        Ok(Script { steps, next: 0, busy: 0 })
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("{}: cannot read the script", path.display()))?;
+        let steps: Vec<Step> = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not a list of script steps", path.display()))?;
+        Ok(Script {
+            steps,
+            next: 0,
+            busy: 0,
+        })
     }
 
     /// The next step to start, unless the current one still runs.
@@ -107,7 +126,11 @@ mod tests {
         let doc = include_str!("script.rs");
         let start = doc.find("//! ```json").unwrap() + "//! ```json".len();
         let end = start + doc[start..].find("//! ```").unwrap();
-        let json: String = doc[start..end].lines().map(|l| l.trim_start_matches("//!")).collect::<Vec<_>>().join("\n");
+        let json: String = doc[start..end]
+            .lines()
+            .map(|l| l.trim_start_matches("//!"))
+            .collect::<Vec<_>>()
+            .join("\n");
         let steps: Vec<Step> = serde_json::from_str(&json).unwrap();
         assert_eq!(steps.len(), 9);
         assert!(matches!(steps[2], Step::Steer { frames: 40, .. }));

@@ -5,13 +5,13 @@
 use std::sync::OnceLock;
 
 use glam::DVec3;
+use voyage_core::Volume;
 use voyage_core::camera::{Camera, Pose};
-use voyage_core::flight::{start_pose, Autopilot, FlightOptions};
-use voyage_core::potential::{potential_field, BrickStore, Direction, PotentialField};
+use voyage_core::flight::{Autopilot, FlightOptions, start_pose};
+use voyage_core::potential::{BrickStore, Direction, PotentialField, potential_field};
 use voyage_core::prep::Study;
 use voyage_core::render::{CellMesh, Strategy, Visibility};
 use voyage_core::submarine::{Input, Submarine};
-use voyage_core::Volume;
 
 use super::scout::ScoutMesh;
 
@@ -55,14 +55,22 @@ impl Session {
     pub fn collapsed_here(&self) -> Option<[f64; 2]> {
         let x = self.sub.state.x;
         let cl = &self.study.centerline;
-        let (i, _) = cl.points_mm.iter().enumerate().map(|(i, p)| (i, glam::DVec3::from_array(*p).distance_squared(x))).min_by(|a, b| a.1.total_cmp(&b.1))?;
+        let (i, _) = cl
+            .points_mm
+            .iter()
+            .enumerate()
+            .map(|(i, p)| (i, glam::DVec3::from_array(*p).distance_squared(x)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))?;
         self.study.collapsed_at(cl.arc_mm[i])
     }
 
     /// Everything the window needs for a preprocessed study; the submarine waits at the
     /// rectum, looking up the colon.
     pub fn new(name: String, study: Study) -> anyhow::Result<Self> {
-        let opts = FlightOptions { keep_poses: false, ..FlightOptions::for_study(&study) };
+        let opts = FlightOptions {
+            keep_poses: false,
+            ..FlightOptions::for_study(&study)
+        };
         let field = potential_field(&study, opts.safety.min_wall_mm)?;
         let mesh = CellMesh::new(&study.surface, &study.cells);
         let scout = ScoutMesh::new(&study.surface.mesh, 4.0);
@@ -74,9 +82,27 @@ impl Session {
         sub.dynamics = opts.dynamics;
         sub.modes = opts.modes;
         sub.direction = dir;
-        let dt0 = field.sample(start.position, dir).dt.unwrap_or(f64::INFINITY);
+        let dt0 = field
+            .sample(start.position, dir)
+            .dt
+            .unwrap_or(f64::INFINITY);
         let pilot = Autopilot::new(&study.centerline, dir, &opts, start.position, dt0);
-        Ok(Session { name, study, field, mesh, scout, vis, sub, pilot, opts, playing: false, reached: false, fov: 90.0, start, cleansed: OnceLock::new() })
+        Ok(Session {
+            name,
+            study,
+            field,
+            mesh,
+            scout,
+            vis,
+            sub,
+            pilot,
+            opts,
+            playing: false,
+            reached: false,
+            fov: 90.0,
+            start,
+            cleansed: OnceLock::new(),
+        })
     }
 
     pub fn pose(&self) -> Pose {
@@ -93,7 +119,10 @@ impl Session {
 
     /// Dt toward the current goal at the submarine (mm).
     pub fn dt_to_goal(&self) -> f64 {
-        self.field.sample(self.sub.state.x, self.sub.direction).dt.unwrap_or(f64::INFINITY)
+        self.field
+            .sample(self.sub.state.x, self.sub.direction)
+            .dt
+            .unwrap_or(f64::INFINITY)
     }
 
     /// Turns the flight around (rectum → cecum or back) from where the submarine is.
@@ -104,7 +133,13 @@ impl Session {
         self.sub.direction = dir;
         self.reached = false;
         let x = self.sub.state.x;
-        self.pilot = Autopilot::new(&self.study.centerline, dir, &self.opts, x, self.dt_to_goal());
+        self.pilot = Autopilot::new(
+            &self.study.centerline,
+            dir,
+            &self.opts,
+            x,
+            self.dt_to_goal(),
+        );
         self.pilot.restart(self.sub.state.t, self.dt_to_goal(), x);
         if let Ok(p) = start_pose(&self.field, &self.study.centerline, dir, &self.opts) {
             self.start = p;
@@ -115,7 +150,8 @@ impl Session {
     pub fn set_playing(&mut self, on: bool) {
         if on && !self.playing {
             self.reached = false;
-            self.pilot.restart(self.sub.state.t, self.dt_to_goal(), self.sub.state.x);
+            self.pilot
+                .restart(self.sub.state.t, self.dt_to_goal(), self.sub.state.x);
         }
         self.playing = on;
     }
@@ -133,7 +169,8 @@ impl Session {
                 self.playing = false;
                 self.reached = true;
             } else if steering {
-                self.pilot.restart(self.sub.state.t, dt_now, self.sub.state.x);
+                self.pilot
+                    .restart(self.sub.state.t, dt_now, self.sub.state.x);
             } else if let Some(pose) = self.pilot.glide(self.sub.state.x, dt)
                 && self.sub.glide_to(&self.field, pose, dt)
             {
@@ -141,7 +178,15 @@ impl Session {
                 self.pilot.watch_from(self.sub.state.t, self.dt_to_goal());
                 return;
             } else {
-                input.force += self.pilot.input(self.sub.state.t, dt_now, self.sub.state.x, self.sub.potential.ct).force;
+                input.force += self
+                    .pilot
+                    .input(
+                        self.sub.state.t,
+                        dt_now,
+                        self.sub.state.x,
+                        self.sub.potential.ct,
+                    )
+                    .force;
             }
         }
         // Paused, the field is switched off (Ct = Cs = 0): the camera stays where it is
@@ -161,7 +206,10 @@ impl Session {
     /// set; otherwise says why not.
     pub fn jump_to(&mut self, x: DVec3, forward: DVec3) -> Result<(), String> {
         if !self.sub.is_safe(&self.field, x) {
-            return Err(format!("({:.0}, {:.0}, {:.0}) mm is not inside the colon at least {} mm from the wall", x.x, x.y, x.z, self.opts.safety.min_wall_mm));
+            return Err(format!(
+                "({:.0}, {:.0}, {:.0}) mm is not inside the colon at least {} mm from the wall",
+                x.x, x.y, x.z, self.opts.safety.min_wall_mm
+            ));
         }
         let up = -self.sub.dynamics.gravity;
         let pose = Pose::looking(x, forward, up);
@@ -221,7 +269,11 @@ impl Session {
             // The nearest voxel: + 0.5 and truncate, where `round` would be a libm call on
             // baseline x86-64.
             let h = a + d * s as f64 + 0.5;
-            if h.min_element() < 0.0 || h.x >= dims[0] as f64 || h.y >= dims[1] as f64 || h.z >= dims[2] as f64 {
+            if h.min_element() < 0.0
+                || h.x >= dims[0] as f64
+                || h.y >= dims[1] as f64
+                || h.z >= dims[2] as f64
+            {
                 return false;
             }
             if lumen.get(h.x as usize, h.y as usize, h.z as usize) == 0 {
@@ -235,7 +287,7 @@ impl Session {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use voyage_core::prep::{prepare, PrepOptions};
+    use voyage_core::prep::{PrepOptions, prepare};
 
     /// The plain form: each sample mapped from mm to the nearest voxel.
     fn reference(s: &Session, from: DVec3, to: DVec3, skip_end_mm: f64) -> bool {
@@ -246,8 +298,14 @@ mod tests {
         let n = ((len - skip_end_mm).max(0.0) / step).ceil() as usize;
         let dims = lumen.dims();
         (1..n).all(|k| {
-            let ijk = g.local_to_index(from + (to - from) * (k as f64 * step / len)).round();
-            ijk.min_element() >= 0.0 && ijk.x < dims[0] as f64 && ijk.y < dims[1] as f64 && ijk.z < dims[2] as f64 && lumen.get(ijk.x as usize, ijk.y as usize, ijk.z as usize) != 0
+            let ijk = g
+                .local_to_index(from + (to - from) * (k as f64 * step / len))
+                .round();
+            ijk.min_element() >= 0.0
+                && ijk.x < dims[0] as f64
+                && ijk.y < dims[1] as f64
+                && ijk.z < dims[2] as f64
+                && lumen.get(ijk.x as usize, ijk.y as usize, ijk.z as usize) != 0
         })
     }
 
@@ -256,7 +314,13 @@ mod tests {
         let p = voyage_core::phantom::pipe(1).unwrap();
         let study = prepare(p.ct, &PrepOptions::default(), |_| {}).unwrap();
         let s = Session::new("pipe".into(), study).unwrap();
-        let pts: Vec<DVec3> = s.study.centerline.points_mm.iter().map(|&p| DVec3::from_array(p)).collect();
+        let pts: Vec<DVec3> = s
+            .study
+            .centerline
+            .points_mm
+            .iter()
+            .map(|&p| DVec3::from_array(p))
+            .collect();
         // A few mm along the centerline: seen. From inside to 100 mm sideways: not.
         let (a, b) = (pts[pts.len() / 2], pts[pts.len() / 2 + 5]);
         assert!(s.line_of_sight(a, b, 0.0));
@@ -268,10 +332,21 @@ mod tests {
         for _ in 0..3000 {
             let i = rng.range(0.0, (pts.len() - 1) as f64) as usize;
             let j = rng.range(0.0, (pts.len() - 1) as f64) as usize;
-            let to = pts[j] + DVec3::new(rng.range(-20.0, 20.0), rng.range(-20.0, 20.0), rng.range(-20.0, 20.0));
+            let to = pts[j]
+                + DVec3::new(
+                    rng.range(-20.0, 20.0),
+                    rng.range(-20.0, 20.0),
+                    rng.range(-20.0, 20.0),
+                );
             let skip = if rng.range(0.0, 1.0) < 0.5 { 0.0 } else { 1.5 };
             let got = s.line_of_sight(pts[i], to, skip);
-            assert_eq!(got, reference(&s, pts[i], to, skip), "segment {:?} → {:?}", pts[i], to);
+            assert_eq!(
+                got,
+                reference(&s, pts[i], to, skip),
+                "segment {:?} → {:?}",
+                pts[i],
+                to
+            );
             seen += got as usize;
             n += 1;
         }

@@ -27,7 +27,11 @@ pub enum SliceAction {
 }
 
 /// Window / level presets (HU): name, width, centre.
-pub const PRESETS: [(&str, f64, f64); 3] = [("Colon", 1600.0, -300.0), ("Lung", 1500.0, -600.0), ("Soft tissue", 400.0, 40.0)];
+pub const PRESETS: [(&str, f64, f64); 3] = [
+    ("Colon", 1600.0, -300.0),
+    ("Lung", 1500.0, -600.0),
+    ("Soft tissue", 400.0, 40.0),
+];
 
 const SCROLL_PER_SLICE: f32 = 24.0;
 
@@ -64,7 +68,9 @@ fn patient_axes(g: &Geometry) -> [(usize, bool); 3] {
     let d = g.direction_mat();
     std::array::from_fn(|a| {
         let row = [d.x_axis[a], d.y_axis[a], d.z_axis[a]];
-        let c = (0..3).max_by(|&i, &j| row[i].abs().total_cmp(&row[j].abs())).unwrap_or(a);
+        let c = (0..3)
+            .max_by(|&i, &j| row[i].abs().total_cmp(&row[j].abs()))
+            .unwrap_or(a);
         (c, row[c] >= 0.0)
     })
 }
@@ -74,9 +80,21 @@ fn layout(g: &Geometry, plane: Plane) -> Layout {
     // (axis, patient coordinate grows toward screen +x / +y (down)).
     let along = |(c, grows): (usize, bool), want_growing: bool| (c, grows != want_growing);
     match plane {
-        Plane::Axial => Layout { x: along(l, true), y: along(p, true), fixed: s.0 },
-        Plane::Coronal => Layout { x: along(l, true), y: along(s, false), fixed: p.0 },
-        Plane::Sagittal => Layout { x: along(p, true), y: along(s, false), fixed: l.0 },
+        Plane::Axial => Layout {
+            x: along(l, true),
+            y: along(p, true),
+            fixed: s.0,
+        },
+        Plane::Coronal => Layout {
+            x: along(l, true),
+            y: along(s, false),
+            fixed: p.0,
+        },
+        Plane::Sagittal => Layout {
+            x: along(p, true),
+            y: along(s, false),
+            fixed: l.0,
+        },
     }
 }
 
@@ -113,8 +131,21 @@ impl SlicePanel {
     /// `image_keys`: the three slices' slots among the window's pixel images; `gpu`: the
     /// window's renderer holds them.
     pub fn new(image_keys: [u64; 3], gpu: bool) -> Self {
-        let views = std::array::from_fn(|i| SliceView { plane: Plane::ALL[i], offset: 0, scroll: 0.0, image: PanelImage::new(image_keys[i], Plane::ALL[i].name(), gpu), shows: None, menu_at: None });
-        SlicePanel { views, window: PRESETS[0].1, level: PRESETS[0].2, cleansed: false, outline: false }
+        let views = std::array::from_fn(|i| SliceView {
+            plane: Plane::ALL[i],
+            offset: 0,
+            scroll: 0.0,
+            image: PanelImage::new(image_keys[i], Plane::ALL[i].name(), gpu),
+            shows: None,
+            menu_at: None,
+        });
+        SlicePanel {
+            views,
+            window: PRESETS[0].1,
+            level: PRESETS[0].2,
+            cleansed: false,
+            outline: false,
+        }
     }
 
     /// Back to the slices through the submarine (after it moved somewhere new).
@@ -126,7 +157,13 @@ impl SlicePanel {
 
     /// The three slices side by side; returns what a click asked for, if anything. `busy`:
     /// a correction is being preprocessed (no other is offered meanwhile).
-    pub fn show(&mut self, ui: &mut egui::Ui, src: SliceSource, at: DVec3, busy: bool) -> Option<SliceAction> {
+    pub fn show(
+        &mut self,
+        ui: &mut egui::Ui,
+        src: SliceSource,
+        at: DVec3,
+        busy: bool,
+    ) -> Option<SliceAction> {
         let ct = src.ct;
         ui.horizontal(|ui| {
             ui.label("W/L:");
@@ -147,7 +184,8 @@ impl SlicePanel {
         let height = ui.available_height();
         ui.horizontal(|ui| {
             for i in 0..3 {
-                let (rect, response) = ui.allocate_exact_size(Vec2::new(width, height), Sense::click_and_drag());
+                let (rect, response) =
+                    ui.allocate_exact_size(Vec2::new(width, height), Sense::click_and_drag());
                 if let Some(p) = self.show_one(ui, i, src, at, rect, &response) {
                     clicked = Some(SliceAction::MoveTo(p));
                 }
@@ -159,7 +197,15 @@ impl SlicePanel {
         clicked
     }
 
-    fn show_one(&mut self, ui: &egui::Ui, i: usize, src: SliceSource, at: DVec3, rect: Rect, response: &egui::Response) -> Option<DVec3> {
+    fn show_one(
+        &mut self,
+        ui: &egui::Ui,
+        i: usize,
+        src: SliceSource,
+        at: DVec3,
+        rect: Rect,
+        response: &egui::Response,
+    ) -> Option<DVec3> {
         let ct = src.ct;
         let g = ct.geometry();
         let plane = self.views[i].plane;
@@ -180,7 +226,8 @@ impl SlicePanel {
                 v.scroll -= v.scroll.signum() * SCROLL_PER_SLICE;
             }
         }
-        let fixed = (at_index[lay.fixed] as i64 + self.views[i].offset).clamp(0, dims[lay.fixed] as i64 - 1) as usize;
+        let fixed = (at_index[lay.fixed] as i64 + self.views[i].offset)
+            .clamp(0, dims[lay.fixed] as i64 - 1) as usize;
         self.views[i].offset = fixed as i64 - at_index[lay.fixed] as i64;
         let (nx, ny) = (dims[lay.x.0], dims[lay.y.0]);
         let (sx, sy) = (g.spacing[lay.x.0], g.spacing[lay.y.0]);
@@ -189,14 +236,31 @@ impl SlicePanel {
         // The image at the size it is shown, on whole pixels: drawn pixel for pixel.
         let ppp = ui.ctx().pixels_per_point();
         let shown = Rect::from_center_size(rect.center() + Vec2::new(0.0, 8.0), size_mm * scale);
-        let px = [((shown.width() * ppp).round() as usize).max(1), ((shown.height() * ppp).round() as usize).max(1)];
-        let image_rect = Rect::from_min_size(((shown.min.to_vec2() * ppp).round() / ppp).to_pos2(), Vec2::new(px[0] as f32, px[1] as f32) / ppp);
-        let (cleansed, outline) = (self.cleansed && !src.cleansing.is_empty(), self.outline && !src.cleansing.is_empty());
+        let px = [
+            ((shown.width() * ppp).round() as usize).max(1),
+            ((shown.height() * ppp).round() as usize).max(1),
+        ];
+        let image_rect = Rect::from_min_size(
+            ((shown.min.to_vec2() * ppp).round() / ppp).to_pos2(),
+            Vec2::new(px[0] as f32, px[1] as f32) / ppp,
+        );
+        let (cleansed, outline) = (
+            self.cleansed && !src.cleansing.is_empty(),
+            self.outline && !src.cleansing.is_empty(),
+        );
         let key = (fixed, self.window, self.level, px, cleansed, outline);
         let view = &mut self.views[i];
         if view.shows != Some(key) {
-            let changes = (cleansed || outline).then(|| changes_in_plane(src.cleansing, ct.dims(), lay.fixed, fixed));
-            let shown = Shown { window: self.window, level: self.level, size: px, changes: changes.as_ref(), cleansed, outline };
+            let changes = (cleansed || outline)
+                .then(|| changes_in_plane(src.cleansing, ct.dims(), lay.fixed, fixed));
+            let shown = Shown {
+                window: self.window,
+                level: self.level,
+                size: px,
+                changes: changes.as_ref(),
+                cleansed,
+                outline,
+            };
             view.image.set(slice_image(ct, lay, fixed, &shown));
             view.shows = Some(key);
         }
@@ -206,22 +270,71 @@ impl SlicePanel {
         let to_screen = |ix: f64, iy: f64| {
             let u = if lay.x.1 { nx as f64 - 1.0 - ix } else { ix };
             let v = if lay.y.1 { ny as f64 - 1.0 - iy } else { iy };
-            Pos2::new(image_rect.left() + ((u + 0.5) / nx as f64) as f32 * image_rect.width(), image_rect.top() + ((v + 0.5) / ny as f64) as f32 * image_rect.height())
+            Pos2::new(
+                image_rect.left() + ((u + 0.5) / nx as f64) as f32 * image_rect.width(),
+                image_rect.top() + ((v + 0.5) / ny as f64) as f32 * image_rect.height(),
+            )
         };
         let c = to_screen(at_index[lay.x.0], at_index[lay.y.0]);
         let cross = Stroke::new(1.0, Color32::from_rgba_unmultiplied(60, 220, 255, 170));
-        painter.line_segment([Pos2::new(image_rect.left(), c.y), Pos2::new(c.x - 6.0, c.y)], cross);
-        painter.line_segment([Pos2::new(c.x + 6.0, c.y), Pos2::new(image_rect.right(), c.y)], cross);
-        painter.line_segment([Pos2::new(c.x, image_rect.top()), Pos2::new(c.x, c.y - 6.0)], cross);
-        painter.line_segment([Pos2::new(c.x, c.y + 6.0), Pos2::new(c.x, image_rect.bottom())], cross);
-        let label = format!("{} {}/{}{}", plane.name(), fixed + 1, dims[lay.fixed], if view.offset != 0 { format!(" ({:+})", view.offset) } else { String::new() });
-        painter.text(rect.left_top() + Vec2::new(4.0, 2.0), egui::Align2::LEFT_TOP, label, egui::FontId::proportional(11.0), Color32::from_gray(200));
+        painter.line_segment(
+            [Pos2::new(image_rect.left(), c.y), Pos2::new(c.x - 6.0, c.y)],
+            cross,
+        );
+        painter.line_segment(
+            [
+                Pos2::new(c.x + 6.0, c.y),
+                Pos2::new(image_rect.right(), c.y),
+            ],
+            cross,
+        );
+        painter.line_segment(
+            [Pos2::new(c.x, image_rect.top()), Pos2::new(c.x, c.y - 6.0)],
+            cross,
+        );
+        painter.line_segment(
+            [
+                Pos2::new(c.x, c.y + 6.0),
+                Pos2::new(c.x, image_rect.bottom()),
+            ],
+            cross,
+        );
+        let label = format!(
+            "{} {}/{}{}",
+            plane.name(),
+            fixed + 1,
+            dims[lay.fixed],
+            if view.offset != 0 {
+                format!(" ({:+})", view.offset)
+            } else {
+                String::new()
+            }
+        );
+        painter.text(
+            rect.left_top() + Vec2::new(4.0, 2.0),
+            egui::Align2::LEFT_TOP,
+            label,
+            egui::FontId::proportional(11.0),
+            Color32::from_gray(200),
+        );
         let (lx, rx) = match plane {
             Plane::Sagittal => ("A", "P"),
             _ => ("R", "L"),
         };
-        painter.text(Pos2::new(image_rect.left() + 3.0, image_rect.center().y), egui::Align2::LEFT_CENTER, lx, egui::FontId::proportional(11.0), Color32::from_gray(160));
-        painter.text(Pos2::new(image_rect.right() - 3.0, image_rect.center().y), egui::Align2::RIGHT_CENTER, rx, egui::FontId::proportional(11.0), Color32::from_gray(160));
+        painter.text(
+            Pos2::new(image_rect.left() + 3.0, image_rect.center().y),
+            egui::Align2::LEFT_CENTER,
+            lx,
+            egui::FontId::proportional(11.0),
+            Color32::from_gray(160),
+        );
+        painter.text(
+            Pos2::new(image_rect.right() - 3.0, image_rect.center().y),
+            egui::Align2::RIGHT_CENTER,
+            rx,
+            egui::FontId::proportional(11.0),
+            Color32::from_gray(160),
+        );
 
         // Screen → the voxel centre under it (the nearest, so a point given back to
         // segmentation lies in the voxel the user saw).
@@ -235,7 +348,10 @@ impl SlicePanel {
             g.index_to_local(DVec3::from_array(ijk).round())
         };
         if response.secondary_clicked() {
-            view.menu_at = response.interact_pointer_pos().filter(|p| image_rect.contains(*p)).map(to_local);
+            view.menu_at = response
+                .interact_pointer_pos()
+                .filter(|p| image_rect.contains(*p))
+                .map(to_local);
         }
         if response.clicked() {
             let p = response.interact_pointer_pos()?;
@@ -245,12 +361,24 @@ impl SlicePanel {
     }
 
     /// The right-click menu of slice `i`: the corrections at the point clicked.
-    fn menu(&mut self, i: usize, g: &Geometry, response: &egui::Response, busy: bool) -> Option<Correction> {
+    fn menu(
+        &mut self,
+        i: usize,
+        g: &Geometry,
+        response: &egui::Response,
+        busy: bool,
+    ) -> Option<Correction> {
         let at = self.views[i].menu_at?;
         let lps = g.local_to_patient(at).to_array();
         let mut chosen = None;
         response.context_menu(|ui| {
-            ui.label(egui::RichText::new(format!("LPS ({:.0}, {:.0}, {:.0}) mm", lps[0], lps[1], lps[2])).small());
+            ui.label(
+                egui::RichText::new(format!(
+                    "LPS ({:.0}, {:.0}, {:.0}) mm",
+                    lps[0], lps[1], lps[2]
+                ))
+                .small(),
+            );
             ui.add_enabled_ui(!busy, |ui| {
                 let items = [
                     ("Start here (rectum end)", Correction::Source(lps)),
@@ -282,9 +410,19 @@ struct Shown<'a> {
 }
 
 /// Cleansing's changes in the plane where index axis `axis` is `at`.
-fn changes_in_plane(c: &Cleansing, dims: [usize; 3], axis: usize, at: usize) -> HashMap<usize, i16> {
+fn changes_in_plane(
+    c: &Cleansing,
+    dims: [usize; 3],
+    axis: usize,
+    at: usize,
+) -> HashMap<usize, i16> {
     let stride = [1, dims[0], dims[0] * dims[1]][axis];
-    c.voxels().iter().zip(c.values()).filter(|&(&v, _)| (v as usize / stride) % dims[axis] == at).map(|(&v, &h)| (v as usize, h)).collect()
+    c.voxels()
+        .iter()
+        .zip(c.values())
+        .filter(|&(&v, _)| (v as usize / stride) % dims[axis] == at)
+        .map(|(&v, &h)| (v as usize, h))
+        .collect()
 }
 
 /// Outline colour of the cleansed voxels.
@@ -323,9 +461,16 @@ fn slice_image(ct: &Volume<i16>, lay: Layout, fixed: usize, shown: &Shown) -> Rg
             // A changed voxel whose neighbour on screen is not: the outline.
             let edge = shown.outline
                 && new.is_some()
-                && [(x.wrapping_sub(1), y), (x + 1, y), (x, y.wrapping_sub(1)), (x, y + 1)]
-                    .iter()
-                    .any(|&(a, b)| a >= size[0] || b >= size[1] || changed(base + ys[b] + xs[a]).is_none());
+                && [
+                    (x.wrapping_sub(1), y),
+                    (x + 1, y),
+                    (x, y.wrapping_sub(1)),
+                    (x, y + 1),
+                ]
+                .iter()
+                .any(|&(a, b)| {
+                    a >= size[0] || b >= size[1] || changed(base + ys[b] + xs[a]).is_none()
+                });
             if edge {
                 bytes.extend_from_slice(&OUTLINE);
                 continue;
@@ -376,23 +521,41 @@ mod tests {
     /// A volume whose voxel (i, j, k) holds i + 10 j + 100 k.
     fn numbered(dims: [usize; 3]) -> Volume<i16> {
         let g = Geometry::new(dims, [1.0; 3], [0.0; 3]).unwrap();
-        let data = (0..dims[2]).flat_map(|k| (0..dims[1]).flat_map(move |j| (0..dims[0]).map(move |i| (i + 10 * j + 100 * k) as i16))).collect();
+        let data = (0..dims[2])
+            .flat_map(|k| {
+                (0..dims[1])
+                    .flat_map(move |j| (0..dims[0]).map(move |i| (i + 10 * j + 100 * k) as i16))
+            })
+            .collect();
         Volume::from_vec(g, data).unwrap()
     }
 
     /// The value a grey pixel stands for under window 255, level 127.5 (grey = value).
     fn value(img: &Rgba, x: usize, y: usize) -> i16 {
         let p = &img.bytes[4 * (y * img.size[0] + x)..][..4];
-        assert_eq!((p[0], p[1], p[2], p[3]), (p[0], p[0], p[0], 255), "grey and opaque");
+        assert_eq!(
+            (p[0], p[1], p[2], p[3]),
+            (p[0], p[0], p[0], 255),
+            "grey and opaque"
+        );
         p[0] as i16
     }
 
     #[test]
     fn each_pixel_shows_the_voxel_under_its_centre() {
         // Same size: every voxel once. Half size: voxels 1, 3, 5, ... Double: each twice.
-        assert_eq!((0..6).map(|u| voxel_under(u, 6, 6)).collect::<Vec<_>>(), vec![0, 1, 2, 3, 4, 5]);
-        assert_eq!((0..3).map(|u| voxel_under(u, 6, 3)).collect::<Vec<_>>(), vec![1, 3, 5]);
-        assert_eq!((0..4).map(|u| voxel_under(u, 2, 4)).collect::<Vec<_>>(), vec![0, 0, 1, 1]);
+        assert_eq!(
+            (0..6).map(|u| voxel_under(u, 6, 6)).collect::<Vec<_>>(),
+            vec![0, 1, 2, 3, 4, 5]
+        );
+        assert_eq!(
+            (0..3).map(|u| voxel_under(u, 6, 3)).collect::<Vec<_>>(),
+            vec![1, 3, 5]
+        );
+        assert_eq!(
+            (0..4).map(|u| voxel_under(u, 2, 4)).collect::<Vec<_>>(),
+            vec![0, 0, 1, 1]
+        );
         assert_eq!(voxel_under(0, 5, 1), 2);
     }
 
@@ -401,7 +564,14 @@ mod tests {
         let ct = numbered([6, 5, 2]);
         let g = ct.geometry().clone();
         // Axial slice k = 1 at full size: x = i, y = j, values i + 10 j + 100.
-        let plain = |size| Shown { window: 255.0, level: 127.5, size, changes: None, cleansed: false, outline: false };
+        let plain = |size| Shown {
+            window: 255.0,
+            level: 127.5,
+            size,
+            changes: None,
+            cleansed: false,
+            outline: false,
+        };
         let a = slice_image(&ct, layout(&g, Plane::Axial), 1, &plain([6, 5]));
         for (x, y) in [(0, 0), (5, 0), (2, 3), (5, 4)] {
             assert_eq!(value(&a, x, y), (x + 10 * y + 100) as i16);
