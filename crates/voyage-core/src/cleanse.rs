@@ -387,21 +387,13 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
     }
     .cleanse(&lumps, &cube);
     let (stool_lumps, stool_voxels) = (lumps.len(), stool.tagged);
-    if !stool.voxels.is_empty() {
-        let mut all: Vec<(u32, i16)> = voxels
-            .into_iter()
-            .zip(cleansed)
-            .chain(
-                stool
-                    .voxels
-                    .iter()
-                    .copied()
-                    .zip(stool.values.iter().copied()),
-            )
-            .collect();
-        all.sort_unstable_by_key(|&(v, _)| v);
-        (voxels, cleansed) = all.into_iter().unzip();
-    }
+    let lump_changes: Vec<(u32, i16)> = stool
+        .voxels
+        .iter()
+        .copied()
+        .zip(stool.values.iter().copied())
+        .collect();
+    overwrite(&mut voxels, &mut cleansed, hu, &lump_changes);
 
     // 4. What is left outside the lumen where pools and lumps were, and that the wall
     // beyond does not hold: islands of partial-volume skin in the new lumen. They are air.
@@ -418,19 +410,8 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
     }
     .find(lo, hi);
     if !islands.is_empty() {
-        let mut all: Vec<(u32, i16)> = voxels
-            .into_iter()
-            .zip(cleansed)
-            .filter(|(v, _)| islands.binary_search(&(*v as usize)).is_err())
-            .collect();
-        all.extend(
-            islands
-                .iter()
-                .filter(|&&v| hu[v] != AIR_HU)
-                .map(|&v| (v as u32, AIR_HU)),
-        );
-        all.sort_unstable_by_key(|&(v, _)| v);
-        (voxels, cleansed) = all.into_iter().unzip();
+        let to_air: Vec<(u32, i16)> = islands.iter().map(|&v| (v as u32, AIR_HU)).collect();
+        overwrite(&mut voxels, &mut cleansed, hu, &to_air);
         let m = lumen.data();
         leave.retain(|v| islands.binary_search(v).is_err());
         join.extend(islands.iter().filter(|&&v| m[v] & 1 == 0));
@@ -475,12 +456,13 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
     }
 }
 
+/// Passes of [`peel_spurs`]: a spur up to this many voxels long goes.
+const SPUR_PASSES: usize = 4;
+
 /// Spurs of skin that the wall holds by one face, beside what cleansing changed: a voxel
 /// outside the lumen, below 0 HU (partial volume, not tissue), with five of its six face
 /// neighbours lumen, becomes air and lumen; again, for longer spurs. `voxels` stays
 /// ascending.
-const SPUR_PASSES: usize = 4;
-
 fn peel_spurs(
     m: &mut [u8],
     hu: &[i16],
@@ -502,17 +484,10 @@ fn peel_spurs(
     candidates.dedup();
     let mut peeled: Vec<(u32, i16)> = Vec::new();
     for _ in 0..SPUR_PASSES {
-        let value = |v: usize, voxels: &[u32], values: &[i16]| {
-            voxels
-                .binary_search(&(v as u32))
-                .map_or(hu[v], |n| values[n])
-        };
         let spurs: Vec<usize> = candidates
             .iter()
             .copied()
-            .filter(|&v| {
-                m[v] == 0 && value(v, voxels, values) < 0 && value(v, voxels, values) >= air_hu
-            })
+            .filter(|&v| m[v] == 0 && (air_hu..0).contains(&value_after(voxels, values, hu, v)))
             .filter(|&v| {
                 six.iter()
                     .filter(|&&d| m[(v as isize + d) as usize] & 1 != 0)
@@ -520,32 +495,53 @@ fn peel_spurs(
                     >= 5
             })
             .collect();
+        if spurs.is_empty() {
+            break;
+        }
         for &v in &spurs {
             m[v] = 1;
             join.push(v);
             peeled.push((v as u32, AIR_HU));
         }
-        if spurs.is_empty() {
-            break;
-        }
-    }
-    if peeled.is_empty() {
-        return;
     }
     peeled.sort_unstable();
-    let mut all: Vec<(u32, i16)> = voxels
+    overwrite(voxels, values, hu, &peeled);
+}
+
+/// A voxel's value once cleansed, from the change list `voxels` (ascending) / `values`.
+fn value_after(voxels: &[u32], values: &[i16], hu: &[i16], v: usize) -> i16 {
+    voxels
+        .binary_search(&(v as u32))
+        .map_or(hu[v], |n| values[n])
+}
+
+/// Writes `changes` (voxel and new value, ascending, each voxel once) over the change list
+/// `voxels` / `values` (ascending): a new value replaces the one listed, and a voxel given
+/// back its original value `hu` leaves the list.
+fn overwrite(voxels: &mut Vec<u32>, values: &mut Vec<i16>, hu: &[i16], changes: &[(u32, i16)]) {
+    if changes.is_empty() {
+        return;
+    }
+    let mut all: Vec<(u32, i16)> = Vec::with_capacity(voxels.len() + changes.len());
+    let mut old = voxels
         .iter()
         .copied()
         .zip(values.iter().copied())
-        .filter(|(v, _)| peeled.binary_search_by_key(v, |p| p.0).is_err())
-        .collect();
-    all.extend(
-        peeled
-            .iter()
-            .copied()
-            .filter(|&(v, _)| hu[v as usize] != AIR_HU),
-    );
-    all.sort_unstable_by_key(|&(v, _)| v);
+        .peekable();
+    let mut new = changes.iter().copied().peekable();
+    loop {
+        let next = match (old.peek(), new.peek()) {
+            (Some(&(a, _)), Some(&(b, _))) if a < b => old.next(),
+            (Some(&(a, _)), Some(&(b, _))) if a == b => {
+                old.next();
+                new.next()
+            }
+            (Some(_), None) => old.next(),
+            (_, Some(_)) => new.next(),
+            (None, None) => break,
+        };
+        all.extend(next.filter(|&(v, h)| hu[v as usize] != h));
+    }
     (*voxels, *values) = all.into_iter().unzip();
 }
 
@@ -716,9 +712,7 @@ struct Islands<'a> {
 
 impl Islands<'_> {
     fn value(&self, v: usize) -> i16 {
-        self.voxels
-            .binary_search(&(v as u32))
-            .map_or(self.hu[v], |n| self.values[n])
+        value_after(self.voxels, self.values, self.hu, v)
     }
 
     /// Outside the lumen once cleansed, at or above the air level.
@@ -1056,19 +1050,24 @@ mod tests {
         (ct, lumen)
     }
 
+    /// Cleanses [`scene`]'s CT (gravity +y) with tagged fluid at or above `fluid_hu`.
+    fn cleanse_scene(ct: &Volume<i16>, lumen: &mut Volume<u8>, fluid_hu: i16) -> Cleansing {
+        let scene = Scene {
+            ct,
+            lumen,
+            extent: [[3, 3, 3], [12, 10, 12]],
+            gravity_lps: DVec3::Y,
+            air_hu: -500,
+            fluid_hu,
+        };
+        cleanse(scene, &CleanseOptions::default())
+    }
+
     #[test]
     fn fluid_becomes_air_and_the_wall_is_cut_as_under_air() {
         let (mut ct, mut lumen) = scene();
         let original = ct.clone();
-        let scene = Scene {
-            ct: &ct,
-            lumen: &mut lumen,
-            extent: [[3, 3, 3], [12, 10, 12]],
-            gravity_lps: DVec3::Y,
-            air_hu: -500,
-            fluid_hu: 200,
-        };
-        let mut c = cleanse(scene, &CleanseOptions::default());
+        let mut c = cleanse_scene(&ct, &mut lumen, 200);
         assert!(!c.is_empty());
         c.swap(&mut ct);
         // Fluid and the level: air.
@@ -1111,15 +1110,7 @@ mod tests {
                 }
             }
         }
-        let scene = Scene {
-            ct: &ct,
-            lumen: &mut lumen,
-            extent: [[3, 3, 3], [12, 10, 12]],
-            gravity_lps: DVec3::Y,
-            air_hu: -500,
-            fluid_hu: 200,
-        };
-        let mut c = cleanse(scene, &CleanseOptions::default());
+        let mut c = cleanse_scene(&ct, &mut lumen, 200);
         c.swap(&mut ct);
         assert_eq!((ct.get(9, 6, 9), lumen.get(9, 6, 9)), (AIR_HU, 1));
         assert_eq!((ct.get(9, 8, 4), lumen.get(9, 8, 4)), (40, 0));
@@ -1128,15 +1119,7 @@ mod tests {
     #[test]
     fn no_tagged_fluid_changes_nothing() {
         let (ct, mut lumen) = scene();
-        let scene = Scene {
-            ct: &ct,
-            lumen: &mut lumen,
-            extent: [[3, 3, 3], [12, 10, 12]],
-            gravity_lps: DVec3::Y,
-            air_hu: -500,
-            fluid_hu: 1000,
-        };
-        assert!(cleanse(scene, &CleanseOptions::default()).is_empty());
+        assert!(cleanse_scene(&ct, &mut lumen, 1000).is_empty());
     }
 
     #[test]
