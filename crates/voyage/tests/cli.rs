@@ -1,6 +1,8 @@
 //! The `voyage` binary as a user meets it: exit codes, one-line errors naming the file,
 //! no patient identity in any output, and the phantom → file → info round trip.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -16,7 +18,7 @@ fn shared_data() -> Option<PathBuf> {
     if p.is_dir() {
         Some(p)
     } else {
-        skip("../shared/data not found");
+        common::skip("../shared/data not found");
         None
     }
 }
@@ -841,14 +843,4 @@ fn render_movie_and_bench_render_on_the_small_phantom() {
             < j["strategies"]["all"]["mean_triangles"].as_f64().unwrap()
     );
     std::fs::remove_dir_all(&dir).unwrap();
-}
-
-/// A test that cannot run here says so; where `VOYAGE_REQUIRE_ALL` is set (CI sets it) it
-/// fails instead, so that a skip is never a silent pass.
-fn skip(why: &str) {
-    assert!(
-        std::env::var_os("VOYAGE_REQUIRE_ALL").is_none(),
-        "cannot run: {why} (VOYAGE_REQUIRE_ALL is set)"
-    );
-    eprintln!("skipping: {why}");
 }

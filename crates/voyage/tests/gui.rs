@@ -2,6 +2,8 @@
 //! Mesa's CPU Vulkan driver: scripted actions (`--script`) and real X events (xdotool).
 //! Without Xvfb the tests say so and pass (scripts/deps.sh installs it; CI has it).
 
+mod common;
+
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -37,7 +39,7 @@ static NEXT_DISPLAY: AtomicU32 = AtomicU32::new(0);
 impl Display {
     fn start() -> Option<Display> {
         if !have("Xvfb") {
-            skip("Xvfb not installed (bash scripts/deps.sh installs it)");
+            common::skip("Xvfb not installed (bash scripts/deps.sh installs it)");
             return None;
         }
         for _ in 0..20 {
@@ -117,6 +119,65 @@ fn read_json(p: &Path) -> Value {
         &std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display())),
     )
     .unwrap()
+}
+
+/// `voyage phantom colon --small ARGS --out OUT`, which must succeed.
+fn small_colon(out: &Path, args: &[&str]) {
+    let made = Command::new(env!("CARGO_BIN_EXE_voyage"))
+        .args(["phantom", "colon", "--small"])
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap();
+    assert!(
+        made.status.success(),
+        "{}",
+        String::from_utf8_lossy(&made.stderr)
+    );
+}
+
+/// `voyage view CT ARGS --script` with `steps` (written to DIR/NAME.json), which must
+/// succeed; its `--report`.
+fn view_script(
+    display: &Display,
+    ct: &Path,
+    args: &[&str],
+    steps: Value,
+    dir: &Path,
+    name: &str,
+) -> Value {
+    let script = dir.join(format!("{name}.json"));
+    std::fs::write(&script, steps.to_string()).unwrap();
+    let report = dir.join(format!("{name}.report.json"));
+    let out = voyage(display)
+        .arg("view")
+        .arg(ct)
+        .args(args)
+        .arg("--script")
+        .arg(&script)
+        .arg("--report")
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    read_json(&report)
+}
+
+/// The endoscopic view's rectangle in the window (x0, y0, x1, y1), from a `--report`.
+fn view_rect(report: &Value) -> [f32; 4] {
+    let v: Vec<f32> = report["view_rect"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap() as f32)
+        .collect();
+    [v[0], v[1], v[2], v[3]]
 }
 
 /// Mean colour of a rectangle of the screenshot.
@@ -213,13 +274,7 @@ fn scripted_session_steers_marks_measures_exports_and_shows_three_panels() {
     // The screenshot: the whole window, with the three panels drawn.
     let img = image::open(&shot).unwrap().to_rgba8();
     assert_eq!((img.width(), img.height()), (1280, 800));
-    let view: Vec<f32> = r["view_rect"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap() as f32)
-        .collect();
-    let view = [view[0], view[1], view[2], view[3]];
+    let view = view_rect(&r);
     let pink = mean_rgb(&img, view);
     assert!(
         pink[0] > 90.0 && pink[0] > pink[1] + 30.0,
@@ -248,7 +303,7 @@ fn mouse_and_keys_drive_the_window() {
         return;
     };
     if !have("xdotool") {
-        skip("xdotool not installed (bash scripts/deps.sh installs it)");
+        common::skip("xdotool not installed (bash scripts/deps.sh installs it)");
         return;
     }
     let dir = scratch("xdotool");
@@ -372,23 +427,7 @@ fn corrections_rerun_the_preprocessing_and_the_colon_follows() {
     };
     let dir = scratch("correct");
     let ct = dir.join("collapsed.nii.gz");
-    let made = voyage(&display)
-        .args([
-            "phantom",
-            "colon",
-            "--small",
-            "--collapsed",
-            "descending",
-            "--out",
-        ])
-        .arg(&ct)
-        .output()
-        .unwrap();
-    assert!(
-        made.status.success(),
-        "{}",
-        String::from_utf8_lossy(&made.stderr)
-    );
+    small_colon(&ct, &["--collapsed", "descending"]);
     // The automatic colon: two segments, rectum first; each with a point in its gas.
     let prep = voyage(&display)
         .arg("prep")
@@ -422,25 +461,14 @@ fn corrections_rerun_the_preprocessing_and_the_colon_follows() {
     let full = auto["centerline_length_mm"].as_f64().unwrap();
 
     let run = |name: &str, steps: Value| -> Value {
-        let script = dir.join(format!("{name}.json"));
-        std::fs::write(&script, steps.to_string()).unwrap();
-        let report = dir.join(format!("{name}.report.json"));
-        let out = voyage(&display)
-            .arg("view")
-            .arg(&ct)
-            .args(["--paused", "--after-frames", "1"])
-            .arg("--script")
-            .arg(&script)
-            .arg("--report")
-            .arg(&report)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        read_json(&report)
+        view_script(
+            &display,
+            &ct,
+            &["--paused", "--after-frames", "1"],
+            steps,
+            &dir,
+            name,
+        )
     };
     // Leaving the far segment out: one segment, a shorter flight; then a point in tissue
     // said to be colon: refused with the reason, the colon stays.
@@ -522,53 +550,23 @@ fn slices_show_the_cleansed_ct_and_outline_it_on_request() {
     };
     let dir = scratch("cleansed");
     let ct = dir.join("tagged.nii.gz");
-    let made = Command::new(env!("CARGO_BIN_EXE_voyage"))
-        .args(["phantom", "colon", "--small", "--tagged-fluid", "--out"])
-        .arg(&ct)
-        .output()
-        .unwrap();
-    assert!(
-        made.status.success(),
-        "{}",
-        String::from_utf8_lossy(&made.stderr)
-    );
-    let script = dir.join("script.json");
+    small_colon(&ct, &["--tagged-fluid"]);
     let (plain, cleansed) = (dir.join("plain.png"), dir.join("cleansed.png"));
-    std::fs::write(
-        &script,
-        serde_json::json!([
-            {"wait": 3},
-            {"screenshot": plain},
-            {"slices_cleansed": true}, {"slices_outline": true}, {"wait": 3},
-            {"screenshot": cleansed},
-            {"quit": true}
-        ])
-        .to_string(),
-    )
-    .unwrap();
-    let report = dir.join("report.json");
-    let out = voyage(&display)
-        .arg("view")
-        .arg(&ct)
-        .args(["--paused", "--script"])
-        .arg(&script)
-        .arg("--report")
-        .arg(&report)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let r = read_json(&report);
-    let view: Vec<f32> = r["view_rect"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap() as f32)
-        .collect();
+    let steps = serde_json::json!([
+        {"wait": 3},
+        {"screenshot": plain},
+        {"slices_cleansed": true}, {"slices_outline": true}, {"wait": 3},
+        {"screenshot": cleansed},
+        {"quit": true}
+    ]);
+    let view = view_rect(&view_script(
+        &display,
+        &ct,
+        &["--paused"],
+        steps,
+        &dir,
+        "script",
+    ));
     let slices = [view[0], view[3] + 30.0, 1280.0, 800.0];
     let outline = |p: &image::Rgba<u8>| p[0] < 30 && p[1] > 180 && p[2] > 230;
     let grey = |p: &image::Rgba<u8>| p[0] == p[1] && p[1] == p[2];
@@ -603,18 +601,7 @@ fn translucency_tells_polyp_from_stool() {
     };
     let dir = scratch("translucency");
     let (ct, truth) = (dir.join("stool.nii.gz"), dir.join("truth.json"));
-    let made = Command::new(env!("CARGO_BIN_EXE_voyage"))
-        .args(["phantom", "colon", "--small", "--tagged-stool", "--out"])
-        .arg(&ct)
-        .arg("--truth")
-        .arg(&truth)
-        .output()
-        .unwrap();
-    assert!(
-        made.status.success(),
-        "{}",
-        String::from_utf8_lossy(&made.stderr)
-    );
+    small_colon(&ct, &["--tagged-stool", "--truth", truth.to_str().unwrap()]);
     let t = read_json(&truth);
     let v3 = |v: &Value| {
         DVec3::new(
@@ -622,6 +609,17 @@ fn translucency_tells_polyp_from_stool() {
             v[1].as_f64().unwrap(),
             v[2].as_f64().unwrap(),
         )
+    };
+    // The largest of a truth list of spheres (polyps, lumps): its centre and radius.
+    let largest = |key: &str| {
+        let d = |x: &Value| x["diameter_mm"].as_f64().unwrap();
+        let x = t[key]
+            .as_array()
+            .unwrap()
+            .iter()
+            .max_by(|a, b| d(a).total_cmp(&d(b)))
+            .unwrap();
+        (x.clone(), v3(&x["center_mm"]), d(x) / 2.0)
     };
     // Facing a sphere on the wall from 6 mm off its surface, along `into` (into the lumen).
     let facing = |c: DVec3, r: f64, into: DVec3| {
@@ -632,87 +630,36 @@ fn translucency_tells_polyp_from_stool() {
         )
         .to_array()
     };
-    let polyp = t["polyps"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .max_by(|a, b| {
-            a["diameter_mm"]
-                .as_f64()
-                .unwrap()
-                .total_cmp(&b["diameter_mm"].as_f64().unwrap())
-        })
-        .unwrap();
-    let at_polyp = facing(
-        v3(&polyp["center_mm"]),
-        polyp["diameter_mm"].as_f64().unwrap() / 2.0,
-        v3(&polyp["direction"]),
-    );
+    let (polyp, c, r) = largest("polyps");
+    let at_polyp = facing(c, r, v3(&polyp["direction"]));
+    let (_, c, r) = largest("stool");
     let axis: Vec<DVec3> = t["centerline_mm"]
         .as_array()
         .unwrap()
         .iter()
         .map(v3)
         .collect();
-    let lump = t["stool"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .max_by(|a, b| {
-            a["diameter_mm"]
-                .as_f64()
-                .unwrap()
-                .total_cmp(&b["diameter_mm"].as_f64().unwrap())
-        })
-        .unwrap();
-    let c = v3(&lump["center_mm"]);
     let near = axis
         .iter()
         .copied()
         .min_by(|a, b| a.distance(c).total_cmp(&b.distance(c)))
         .unwrap();
-    let at_lump = facing(
-        c,
-        lump["diameter_mm"].as_f64().unwrap() / 2.0,
-        (near - c).normalize(),
-    );
-    let script = dir.join("script.json");
+    let at_lump = facing(c, r, (near - c).normalize());
     let shots = ["plain", "polyp", "stool"].map(|n| dir.join(format!("{n}.png")));
-    std::fs::write(
-        &script,
-        serde_json::json!([
-            {"centerline": false}, {"wait": 3}, {"pose": at_polyp}, {"wait": 3}, {"screenshot": shots[0]},
-            {"translucency": true}, {"wait": 3}, {"screenshot": shots[1]},
-            {"pose": at_lump}, {"wait": 3}, {"screenshot": shots[2]},
-            {"quit": true}
-        ])
-        .to_string(),
-    )
-    .unwrap();
-    let report = dir.join("report.json");
-    let out = voyage(&display)
-        .arg("view")
-        .arg(&ct)
-        .args(["--paused", "--no-cleanse", "--script"])
-        .arg(&script)
-        .arg("--report")
-        .arg(&report)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let r = read_json(&report);
-    let view: Vec<f32> = r["view_rect"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap() as f32)
-        .collect();
-    let view = [view[0], view[1], view[2], view[3]];
+    let steps = serde_json::json!([
+        {"centerline": false}, {"wait": 3}, {"pose": at_polyp}, {"wait": 3}, {"screenshot": shots[0]},
+        {"translucency": true}, {"wait": 3}, {"screenshot": shots[1]},
+        {"pose": at_lump}, {"wait": 3}, {"screenshot": shots[2]},
+        {"quit": true}
+    ]);
+    let view = view_rect(&view_script(
+        &display,
+        &ct,
+        &["--paused", "--no-cleanse"],
+        steps,
+        &dir,
+        "script",
+    ));
     // Encoded colours: the mucosa's green is 0.63 of its red at any light, the
     // translucency's soft tissue 0.33; its stool is green.
     let red = |p: &image::Rgba<u8>| {
@@ -737,14 +684,4 @@ fn translucency_tells_polyp_from_stool() {
         "the stool is not green under translucency: {g2} pixels"
     );
     std::fs::remove_dir_all(&dir).unwrap();
-}
-
-/// A test that cannot run here says so; where `VOYAGE_REQUIRE_ALL` is set (CI sets it) it
-/// fails instead, so that a skip is never a silent pass.
-fn skip(why: &str) {
-    assert!(
-        std::env::var_os("VOYAGE_REQUIRE_ALL").is_none(),
-        "cannot run: {why} (VOYAGE_REQUIRE_ALL is set)"
-    );
-    eprintln!("skipping: {why}");
 }

@@ -434,17 +434,27 @@ mod tests {
         }
     }
 
+    /// `pools` over all of `v` with gravity +y, its BRIGHT voxels tagged.
+    fn supine_pools(v: &Volume<u8>) -> Vec<Mark> {
+        pools(&rows_of(v), v.geometry(), &all(v), DVec3::Y, |i| {
+            v.data()[i] == BRIGHT
+        })
+    }
+
+    /// The mark `pools` gave voxel (i, j, k) of `v`, if any.
+    fn mark_at(marks: &[Mark], v: &Volume<u8>, [i, j, k]: [usize; 3]) -> Option<u8> {
+        marks
+            .iter()
+            .find(|m| m.0 == v.geometry().index(i, j, k))
+            .map(|m| m.1)
+    }
+
     #[test]
     fn fluid_under_the_gas_joins_and_loops_stay_out() {
         let v = scene();
         let bright = |i: usize| v.data()[i] == BRIGHT;
-        let marks = pools(&rows_of(&v), v.geometry(), &all(&v), DVec3::Y, bright);
-        let at = |i, j, k| {
-            marks
-                .iter()
-                .find(|m| m.0 == v.geometry().index(i, j, k))
-                .map(|m| m.1)
-        };
+        let marks = supine_pools(&v);
+        let at = |i, j, k| mark_at(&marks, &v, [i, j, k]);
         assert_eq!(at(5, 8, 2), Some(LAYER));
         assert_eq!(at(5, 11, 2), Some(POOL));
         assert_eq!(at(5, 20, 2), None, "a loop behind two walls");
@@ -460,15 +470,8 @@ mod tests {
                 }
             }
         }
-        let marks = pools(&rows_of(&w), w.geometry(), &all(&w), DVec3::Y, |i| {
-            w.data()[i] == BRIGHT
-        });
-        let at = |i, j, k| {
-            marks
-                .iter()
-                .find(|m| m.0 == w.geometry().index(i, j, k))
-                .map(|m| m.1)
-        };
+        let marks = supine_pools(&w);
+        let at = |i, j, k| mark_at(&marks, &w, [i, j, k]);
         assert_eq!(
             (at(11, 13, 10), at(11, 15, 10), at(11, 20, 10)),
             (Some(POOL), None, None)
@@ -484,15 +487,8 @@ mod tests {
                 }
             }
         }
-        let marks = pools(&rows_of(&w), w.geometry(), &all(&w), DVec3::Y, |i| {
-            w.data()[i] == BRIGHT
-        });
-        let at = |i, j, k| {
-            marks
-                .iter()
-                .find(|m| m.0 == w.geometry().index(i, j, k))
-                .map(|m| m.1)
-        };
+        let marks = supine_pools(&w);
+        let at = |i, j, k| mark_at(&marks, &w, [i, j, k]);
         assert_eq!(
             (at(12, 13, 20), at(12, 16, 20), at(12, 25, 20)),
             (Some(POOL), None, None)
@@ -517,14 +513,7 @@ mod tests {
             let g = gravity_from_levels(&rows_of(&r), r.geometry(), &all(&r)).unwrap();
             assert!((g - DVec3::Y).length() < 1e-9, "{perm:?} {flip:?}: {g}");
             // And the same pool, whichever way the lines run in memory.
-            assert_eq!(
-                pools(&rows_of(&r), r.geometry(), &all(&r), DVec3::Y, |i| r.data()
-                    [i]
-                    == BRIGHT)
-                .len(),
-                20 * 6 * 40,
-                "{perm:?} {flip:?}"
-            );
+            assert_eq!(supine_pools(&r).len(), 20 * 6 * 40, "{perm:?} {flip:?}");
         }
     }
 }

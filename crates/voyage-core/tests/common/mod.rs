@@ -1,4 +1,5 @@
-//! Shared by the integration tests: the real colon mask from ../shared/data.
+//! Shared by the integration tests: the real colon mask from ../shared/data (and how a test
+//! without it skips), the phantom valve's mouth, a voxel's position.
 // Each test file uses its own part of this module.
 #![allow(dead_code)]
 
@@ -56,7 +57,7 @@ pub fn voxel_mm(g: &voyage_core::Geometry, v: usize) -> glam::DVec3 {
 
 /// A test that cannot run here says so; where `VOYAGE_REQUIRE_ALL` is set (CI sets it) it
 /// fails instead, so that a skip is never a silent pass.
-fn skip(why: &str) {
+pub fn skip(why: &str) {
     assert!(
         std::env::var_os("VOYAGE_REQUIRE_ALL").is_none(),
         "cannot run: {why} (VOYAGE_REQUIRE_ALL is set)"

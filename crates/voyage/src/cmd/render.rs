@@ -289,7 +289,7 @@ fn translucency_over(
 }
 
 /// `over` (straight alpha) composited onto the opaque `under`, both RGBA8.
-pub fn blend_over(under: &mut [u8], over: &[u8]) {
+fn blend_over(under: &mut [u8], over: &[u8]) {
     for (u, o) in under.chunks_exact_mut(4).zip(over.chunks_exact(4)) {
         let a = o[3] as u32;
         for c in 0..3 {
