@@ -4,7 +4,11 @@
 use std::path::PathBuf;
 
 pub fn scratch(name: &str) -> PathBuf {
-    let base = if std::path::Path::new("/dev/shm").is_dir() { PathBuf::from("/dev/shm") } else { std::env::temp_dir() };
+    let base = if std::path::Path::new("/dev/shm").is_dir() {
+        PathBuf::from("/dev/shm")
+    } else {
+        std::env::temp_dir()
+    };
     let dir = base.join(format!("voyage-fuzz-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("scratch folder");
     dir.join(name)
@@ -14,5 +18,5 @@ pub fn scratch(name: &str) -> PathBuf {
 pub fn load_as(name: &str, bytes: &[u8]) {
     let path = scratch(name);
     std::fs::write(&path, bytes).expect("write scratch file");
-    let _ = voyage_core::io::load(&path, &voyage_core::io::LoadOptions::default());
+    let _ = voyage_io::load(&path, &voyage_io::LoadOptions::default());
 }

@@ -9,8 +9,7 @@
 
 use glam::DVec3;
 
-use crate::field::BoxGrid;
-use crate::{Error, Geometry, Result, Volume};
+use crate::{Error, Geometry, Result, Volume, field::BoxGrid};
 
 pub struct Blocks {
     /// Voxels per block along each axis.
@@ -165,7 +164,7 @@ mod tests {
 
     #[test]
     fn pair_counts_equal_the_general_chunks() {
-        let mut rng = crate::phantom::rng::Rng::new(7, 1);
+        let mut rng = crate::rng::Rng::new(7, 1);
         for len in 0..70usize {
             let row: Vec<u8> = (0..len)
                 .map(|_| [0u8, 1, 1, 255][rng.range(0.0, 3.999) as usize])

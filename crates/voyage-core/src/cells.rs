@@ -19,10 +19,7 @@
 use glam::DVec3;
 use serde::Serialize;
 
-use crate::centerline::Centerline;
-use crate::field::Bricked;
-use crate::surface::Surface;
-use crate::{Error, Result, Volume};
+use crate::{Error, Result, Volume, centerline::Centerline, field::Bricked, surface::Surface};
 
 #[derive(Clone, Debug)]
 pub struct CellOptions {
@@ -493,7 +490,7 @@ fn plane_axes(n: DVec3) -> (DVec3, DVec3) {
 }
 
 /// The convex hull, counter-clockwise (collinear points dropped).
-pub(crate) fn convex_hull(pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
+pub fn convex_hull(pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
     monotone_chain(drop_interior(pts))
 }
 
@@ -618,11 +615,13 @@ fn norm(v: (f64, f64)) -> (f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Geometry;
-    use crate::centerline::{CenterlineOptions, centerline};
-    use crate::distance::{distance_to_wall, geodesic_distance};
-    use crate::field::bounding_box;
-    use crate::surface::extract_surface;
+    use crate::{
+        Geometry,
+        centerline::{CenterlineOptions, centerline},
+        distance::{distance_to_wall, geodesic_distance},
+        field::bounding_box,
+        surface::extract_surface,
+    };
 
     #[test]
     fn leaving_out_interior_points_keeps_the_hull() {
@@ -682,7 +681,7 @@ mod tests {
 
     #[test]
     fn radix_sorted_distances_match_a_comparison_sort() {
-        let mut rng = crate::phantom::rng::Rng::new(7, 1);
+        let mut rng = crate::rng::Rng::new(7, 1);
         let mut d: Vec<f32> = (0..5000).map(|_| rng.range(0.0, 3000.0) as f32).collect();
         d.extend([0.0, f32::INFINITY, 1e-30, 2999.99, 0.5, 0.5]);
         let mut want: Vec<f32> = d.iter().copied().filter(|x| x.is_finite()).collect();

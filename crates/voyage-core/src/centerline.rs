@@ -8,10 +8,12 @@
 use glam::DVec3;
 use serde::Serialize;
 
-use crate::distance::geodesic::Padded;
-use crate::field::Field;
-use crate::skeleton::{SkeletonOptions, colon_path, tree_search};
-use crate::{Result, Volume};
+use crate::{
+    Result, Volume,
+    distance::geodesic::Padded,
+    field::Field,
+    skeleton::{SkeletonOptions, colon_path, tree_search},
+};
 
 #[derive(Clone, Debug, Serialize)]
 pub struct Centerline {
@@ -265,8 +267,7 @@ mod tests {
     }
 
     use super::*;
-    use crate::Geometry;
-    use crate::distance::distance_to_wall;
+    use crate::{Geometry, distance::distance_to_wall};
 
     /// A torus-like bent tube (a half ring of radius 30 mm, tube radius 6 mm).
     fn bent_tube() -> (Volume<u8>, DVec3, f64) {

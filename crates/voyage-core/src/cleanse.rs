@@ -51,8 +51,7 @@
 //! The change is kept as a list of voxels with the other value (original or cleansed), so a
 //! CT can be switched between the two in place: no second copy of the volume.
 
-use crate::anatomy::PatientFrame;
-use crate::{Geometry, Volume};
+use crate::{Geometry, Volume, anatomy::PatientFrame};
 
 /// HU written for air.
 pub const AIR_HU: i16 = -1000;

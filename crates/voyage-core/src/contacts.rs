@@ -23,10 +23,12 @@
 
 use glam::DVec3;
 
-use crate::Volume;
-use crate::blocks::Blocks;
-use crate::distance::geodesic::{Padded, SearchOptions, dial};
-use crate::field::BoxGrid;
+use crate::{
+    Volume,
+    blocks::Blocks,
+    distance::geodesic::{Padded, SearchOptions, dial},
+    field::BoxGrid,
+};
 
 #[derive(Clone, Debug)]
 pub struct ContactOptions {
@@ -288,7 +290,7 @@ mod tests {
             dims: [7, 6, 5],
         });
         let n = pad.dims.iter().product::<usize>();
-        let mut rng = crate::phantom::rng::Rng::new(11, 2);
+        let mut rng = crate::rng::Rng::new(11, 2);
         let mut partial: Vec<u8> = (0..n).map(|_| (rng.range(0.0, 1.0) < 0.3) as u8).collect();
         partial.extend([0; 3]);
         let rows = pad.neighbour_row_starts();

@@ -13,13 +13,17 @@
 
 use glam::DVec3;
 
-use crate::blocks::Blocks;
-use crate::centerline::{Centerline, CenterlineOptions, cost_weight, refine_points};
-use crate::distance::distance_to_wall;
-use crate::distance::geodesic::{Geodesic, Padded, TreeStart, geodesic_distance_pair_like};
-use crate::field::{BoxGrid, Bricked, Field};
-use crate::skeleton::{SkeletonOptions, colon_path};
-use crate::{Error, Result, Volume};
+use crate::{
+    Error, Result, Volume,
+    blocks::Blocks,
+    centerline::{Centerline, CenterlineOptions, cost_weight, refine_points},
+    distance::{
+        distance_to_wall,
+        geodesic::{Geodesic, Padded, TreeStart, geodesic_distance_pair_like},
+    },
+    field::{BoxGrid, Bricked, Field},
+    skeleton::{SkeletonOptions, colon_path},
+};
 
 #[derive(Clone, Debug)]
 pub struct EndpointOptions {

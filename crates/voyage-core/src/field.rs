@@ -668,7 +668,7 @@ mod tests {
 
     #[test]
     fn first_and_last_agree_with_a_plain_scan() {
-        let mut rng = crate::phantom::rng::Rng::new(4, 1);
+        let mut rng = crate::rng::Rng::new(4, 1);
         for len in [0usize, 1, 31, 32, 33, 64, 100, 512] {
             for _ in 0..50 {
                 let row: Vec<u8> = (0..len)

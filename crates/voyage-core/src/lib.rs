@@ -1,13 +1,12 @@
-//! voyage-core: the virtual colonoscopy pipeline, free of GPU and GUI dependencies.
+//! voyage-core: a CT volume in, a prepared colon (`prep::Study`) out. No file formats, GPU or
+//! GUI: `voyage-io` loads and exports, `voyage-nav` flies, `voyage-view` draws.
 //!
-//! Data moves one way: `io` loads a CT into a [`Volume<i16>`] of Hounsfield units with its
-//! geometry; later stages (segmentation, distance fields, centerline, cells, surface,
-//! navigation) take values and return values. `phantom` makes synthetic scans with ground
-//! truth for tests and benchmarks.
+//! Data moves one way: a [`Volume<i16>`] of Hounsfield units with its geometry goes through
+//! segmentation, cleansing, distance fields, centerline, surface and cells (`prep::prepare`
+//! runs them in order); each stage takes values and returns values.
 
 pub mod anatomy;
 pub mod blocks;
-pub mod camera;
 pub mod cells;
 pub mod centerline;
 pub mod cleanse;
@@ -15,21 +14,15 @@ pub mod contacts;
 pub mod distance;
 pub mod endpoints;
 pub mod error;
-pub mod export;
 pub mod field;
-pub mod findings;
-pub mod flight;
-pub mod io;
 pub mod mem;
-pub mod phantom;
-pub mod potential;
 pub mod prep;
-pub mod render;
+pub mod rng;
 pub mod segment;
 pub mod skeleton;
-pub mod submarine;
 pub mod surface;
 pub mod volume;
 
 pub use error::{Error, Result};
+pub use prep::Study;
 pub use volume::{Geometry, Volume};

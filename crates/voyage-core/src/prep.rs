@@ -7,19 +7,18 @@ use std::time::Instant;
 use glam::DVec3;
 use serde::Serialize;
 
-use crate::cells::{CellOptions, Cells, build_cells};
-use crate::centerline::{Centerline, CenterlineOptions};
-use crate::cleanse::{CleanseOptions, Cleansing, Scene, cleanse};
-use crate::contacts::{ContactOptions, cut_contacts};
-use crate::distance::distance_to_wall_in;
-use crate::endpoints::{
-    self, EndpointOptions, centre_skeleton, dt_fields, trace_skeleton, uses_blocks,
+use crate::{
+    Result, Volume,
+    cells::{CellOptions, Cells, build_cells},
+    centerline::{Centerline, CenterlineOptions},
+    cleanse::{CleanseOptions, Cleansing, Scene, cleanse},
+    contacts::{ContactOptions, cut_contacts},
+    distance::distance_to_wall_in,
+    endpoints::{self, EndpointOptions, centre_skeleton, dt_fields, trace_skeleton, uses_blocks},
+    field::{BoxGrid, Bricked},
+    segment::{SegmentOptions, Segmentation, segment},
+    surface::{Surface, extract_surface},
 };
-use crate::field::BoxGrid;
-use crate::field::Bricked;
-use crate::segment::{SegmentOptions, Segmentation, segment};
-use crate::surface::{Surface, extract_surface};
-use crate::{Result, Volume};
 
 #[derive(Clone, Debug)]
 pub struct PrepOptions {
@@ -157,7 +156,7 @@ impl Study {
     /// `n` points drawn uniformly in the lumen's box, kept where the nearest voxel is lumen
     /// (many lie within a voxel of the wall): for tests and benchmarks of the fields.
     pub fn random_lumen_points(&self, n: usize, seed: u64) -> Vec<DVec3> {
-        let mut rng = crate::phantom::rng::Rng::new(seed, 1);
+        let mut rng = crate::rng::Rng::new(seed, 1);
         let grid = &self.ds.grid;
         let mut out = Vec::with_capacity(n);
         while out.len() < n {

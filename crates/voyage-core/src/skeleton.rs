@@ -28,8 +28,10 @@
 
 use std::collections::HashMap;
 
-use crate::distance::geodesic::{Padded, Search, SearchOptions, dial};
-use crate::{Error, Result};
+use crate::{
+    Error, Result,
+    distance::geodesic::{Padded, Search, SearchOptions, dial},
+};
 
 #[derive(Clone, Debug)]
 pub struct SkeletonOptions {
@@ -612,10 +614,12 @@ fn longest_path(
 mod tests {
     use glam::DVec3;
 
-    use crate::centerline::CenterlineOptions;
-    use crate::distance::distance_to_wall;
-    use crate::endpoints::{EndpointOptions, find_endpoints};
-    use crate::{Geometry, Volume};
+    use crate::{
+        Geometry, Volume,
+        centerline::CenterlineOptions,
+        distance::distance_to_wall,
+        endpoints::{EndpointOptions, find_endpoints},
+    };
 
     const R: f64 = 6.0;
     const LEG: f64 = 80.0;

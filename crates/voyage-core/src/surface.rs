@@ -15,8 +15,7 @@ use std::sync::OnceLock;
 
 use glam::Vec3;
 
-use crate::field::BoxGrid;
-use crate::{Result, Volume};
+use crate::{Result, Volume, field::BoxGrid};
 
 /// A triangle mesh in volume-local mm.
 #[derive(Clone, Debug, Default)]
@@ -507,8 +506,7 @@ fn edge_vertex(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Geometry;
-    use crate::field::bounding_box;
+    use crate::{Geometry, field::bounding_box};
     use std::collections::HashMap;
 
     fn ball(dims: [usize; 3], sp: [f64; 3], c: [f64; 3], r: f64) -> Volume<u8> {

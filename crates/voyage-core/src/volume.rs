@@ -108,6 +108,11 @@ impl Geometry {
 
     /// Continuous voxel index → volume-local millimetres.
     #[inline]
+    /// The centre of voxel `index` (flat, x fastest) in volume-local mm.
+    pub fn voxel_local(&self, index: usize) -> DVec3 {
+        self.index_to_local(DVec3::from_array(self.ijk(index).map(|x| x as f64)))
+    }
+
     pub fn index_to_local(&self, ijk: DVec3) -> DVec3 {
         ijk * self.spacing_vec()
     }
@@ -501,7 +506,7 @@ mod tests {
 
     #[test]
     fn runs_agree_with_a_plain_scan() {
-        let mut rng = crate::phantom::rng::Rng::new(7, 1);
+        let mut rng = crate::rng::Rng::new(7, 1);
         for len in [0usize, 1, 15, 16, 17, 40, 512] {
             for p in [0.02, 0.5, 0.98] {
                 let row: Vec<i16> = (0..len)

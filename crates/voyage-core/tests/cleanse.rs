@@ -2,16 +2,16 @@
 //! without it: the anatomy is the same (the truth lumens are equal voxel for voxel), so the
 //! fluid-free phantom's surface is the true wall that the cleansed surface must find.
 
-mod common;
-
 use std::collections::HashMap;
 
 use glam::DVec3;
-use voyage_core::Volume;
-use voyage_core::cleanse::roughness;
-use voyage_core::phantom::{self, ColonOptions, Phantom, label};
-use voyage_core::prep::{PrepOptions, Study, prepare};
-use voyage_core::surface::Mesh;
+use voyage_core::{
+    Volume,
+    cleanse::roughness,
+    prep::{PrepOptions, Study, prepare},
+    surface::Mesh,
+};
+use voyage_phantom::{self as phantom, ColonOptions, Phantom, label};
 
 /// Distance from `p` to triangle abc (Ericson, Real-Time Collision Detection 5.1.5).
 fn to_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> f64 {
@@ -119,7 +119,7 @@ fn former_fluid(mesh: &Mesh, p: &Phantom, cleansed: &Volume<i16>) -> Vec<DVec3> 
     };
     // The ileocecal valve's opening, which the fluid-free phantom has not.
     let voxel = g.spacing.iter().cloned().fold(0.0, f64::max);
-    let valve = common::valve_mouth(&p.truth);
+    let valve = p.truth.valve_mouth();
     (0..mesh.positions.len() as u32)
         .map(|i| vertex(mesh, i))
         .filter(|v| valve.is_none_or(|(c, ileum)| v.distance(c) > 2.0 * ileum + 2.0 * voxel))
@@ -297,7 +297,7 @@ fn lumps_gone(
         let (c, r) = (DVec3::from_array(lump.center_mm), lump.diameter_mm / 2.0);
         let stool_left = |v: usize| ct.data()[v] >= 200 && p.labels.data()[v] == label::STOOL;
         let tagged = (0..ct.data().len())
-            .filter(|&v| stool_left(v) && common::voxel_mm(g, v).distance(c) <= r + 1.0)
+            .filter(|&v| stool_left(v) && g.voxel_local(v).distance(c) <= r + 1.0)
             .count();
         // Fluid that segmentation left out of the colon (the fluid check counts it) is no
         // lump: the surface by it is not asked about here.
@@ -361,7 +361,7 @@ fn lumps_gone(
 }
 
 /// Polyps of at least 3 mm whose centre lies under their segment's pool level.
-fn submerged_polyps(p: &Phantom) -> Vec<&voyage_core::phantom::PolypTruth> {
+fn submerged_polyps(p: &Phantom) -> Vec<&voyage_phantom::PolypTruth> {
     p.truth
         .polyps
         .iter()
@@ -450,14 +450,14 @@ fn small_bowel_contrast_stays() {
     let study = prepare(p.ct.clone(), &PrepOptions::default(), |_| {}).unwrap();
     let ct = study.cleansed_ct();
     let g = p.ct.geometry();
-    let (mouth, ileum) = common::valve_mouth(&p.truth).unwrap();
+    let (mouth, ileum) = p.truth.valve_mouth().unwrap();
     let (mut loops, mut changed) = (0usize, 0usize);
     for (v, (&before, &after)) in p.ct.data().iter().zip(ct.data()).enumerate() {
         if p.labels.data()[v] != label::SMALL_BOWEL_FLUID {
             continue;
         }
         loops += 1;
-        if before != after && common::voxel_mm(g, v).distance(mouth) > 1.5 * ileum {
+        if before != after && g.voxel_local(v).distance(mouth) > 1.5 * ileum {
             changed += 1;
         }
     }

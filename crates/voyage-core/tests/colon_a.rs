@@ -4,11 +4,15 @@
 
 use voyage_core::prep::{PrepOptions, prepare};
 
-mod common;
+/// The colon-a mask of the shared data as loaded (0/1 labels as i16), or None (skipped).
+fn colon_a_volume() -> Option<voyage_core::Volume<i16>> {
+    let path = voyage_phantom::fixtures::colon_a_path()?;
+    Some(voyage_io::load(&path, &Default::default()).unwrap().volume)
+}
 
 #[test]
 fn colon_a_centerline_runs_rectum_to_cecum() {
-    let Some(ct) = common::colon_a_volume() else {
+    let Some(ct) = colon_a_volume() else {
         return;
     };
     let dims = ct.dims();
@@ -63,7 +67,7 @@ fn colon_a_centerline_runs_rectum_to_cecum() {
 /// ends that gave 442 mm of a 3014 mm colon, with the halfway target 2439 mm.
 #[test]
 fn colon_a_given_endpoints_keep_to_the_colon_between_them() {
-    let Some(ct) = common::colon_a_volume() else {
+    let Some(ct) = colon_a_volume() else {
         return;
     };
     let auto = prepare(ct.clone(), &PrepOptions::default(), |_| {}).unwrap();
@@ -125,7 +129,7 @@ fn colon_a_given_endpoints_keep_to_the_colon_between_them() {
 /// (thresholding, outside air, components) runs on it; the result must agree with the mask's.
 #[test]
 fn colon_a_as_a_pseudo_ct() {
-    let Some(mask) = common::colon_a_volume() else {
+    let Some(mask) = colon_a_volume() else {
         return;
     };
     let ct = pseudo_ct(&mask);

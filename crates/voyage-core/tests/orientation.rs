@@ -4,12 +4,14 @@
 //! NIfTI and DICOM; lumen, source, target and centerline must agree.
 
 use glam::DVec3;
-use voyage_core::Volume;
-use voyage_core::anatomy::PositionSource;
-use voyage_core::io::{LoadOptions, load};
-use voyage_core::phantom::{self, ColonOptions};
-use voyage_core::prep::{PrepOptions, Study, prepare};
-use voyage_core::segment::{SegmentOptions, segment};
+use voyage_core::{
+    Volume,
+    anatomy::PositionSource,
+    prep::{PrepOptions, Study, prepare},
+    segment::{SegmentOptions, segment},
+};
+use voyage_io::{LoadOptions, load};
+use voyage_phantom::{self as phantom, ColonOptions};
 
 fn phantom_ct() -> Volume<i16> {
     phantom::colon(&ColonOptions {
@@ -119,9 +121,9 @@ fn nifti_and_dicom_stored_upside_down_give_the_same_colon() {
     // Slices in the other order (k runs toward the feet), as many converters write them.
     let flipped = ct.reoriented([0, 1, 2], [false, true, true]).unwrap();
     let nii = dir.join("flipped.nii.gz");
-    voyage_core::io::nifti::save_i16(&nii, &flipped).unwrap();
+    voyage_io::nifti::save_i16(&nii, &flipped).unwrap();
     let dcm = dir.join("dicom");
-    voyage_core::io::dicom_write::write_series(&dcm, &ct).unwrap();
+    voyage_io::dicom_write::write_series(&dcm, &ct).unwrap();
     for path in [nii, dcm] {
         let loaded = load(&path, &LoadOptions::default()).unwrap().volume;
         let study = prepare(loaded, &PrepOptions::default(), |_| {}).unwrap();

@@ -2,8 +2,8 @@
 //! polyps on the surface, the cells.
 
 use glam::{DVec3, Vec3};
-use voyage_core::phantom::{self, ColonOptions, Phantom};
 use voyage_core::prep::{PrepOptions, Study, prepare};
+use voyage_phantom::{self as phantom, ColonOptions, Phantom};
 
 fn dice(a: &[u8], b: &[u8]) -> f64 {
     let (mut both, mut na, mut nb) = (0usize, 0usize, 0usize);

@@ -3,11 +3,13 @@
 //! out; the patient's position decides on which side fluid lies.
 
 use glam::DVec3;
-use voyage_core::Volume;
-use voyage_core::anatomy::{PatientPosition, PositionSource};
-use voyage_core::phantom::{self, ColonOptions, Phantom};
-use voyage_core::prep::{PrepOptions, prepare};
-use voyage_core::segment::{SegmentOptions, segment};
+use voyage_core::{
+    Volume,
+    anatomy::{PatientPosition, PositionSource},
+    prep::{PrepOptions, prepare},
+    segment::{SegmentOptions, segment},
+};
+use voyage_phantom::{self as phantom, ColonOptions, Phantom};
 
 fn small(opts: ColonOptions) -> Phantom {
     phantom::colon(&ColonOptions {

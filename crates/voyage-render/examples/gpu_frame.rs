@@ -8,11 +8,11 @@
 use std::error::Error;
 
 use glam::DVec3;
-use voyage_core::camera::{Camera, Pose};
-use voyage_core::phantom;
 use voyage_core::prep::{PrepOptions, prepare};
-use voyage_core::render::{CellMesh, Lighting};
+use voyage_nav::{Camera, Pose};
+use voyage_phantom as phantom;
 use voyage_render::GpuRenderer;
+use voyage_view::{CellMesh, Lighting};
 
 fn main() -> Result<(), Box<dyn Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();

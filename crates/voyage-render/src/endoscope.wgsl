@@ -1,5 +1,5 @@
 // Endoscopic view: one light at the camera, lit per vertex (Gouraud) like the CPU reference
-// renderer. The vertex stage is voyage_core::render::shading::Lighting::linear and the
+// renderer. The vertex stage is voyage_view::Lighting::linear and the
 // display gamma, term for term; the fragment stage writes the interpolated colour, so the
 // GPU image equals the CPU one within rounding.
 

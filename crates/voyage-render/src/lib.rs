@@ -2,14 +2,14 @@
 //!
 //! It knows nothing of the viewer. voyage-core decides *what* to draw (a [`CellMesh`] and,
 //! per frame, the list of cells the visibility step kept); this crate draws exactly that,
-//! lit exactly like the CPU reference renderer (`voyage_core::render`), so that every image
+//! lit exactly like the CPU reference renderer (`voyage_view`), so that every image
 //! test can use the deterministic CPU renderer and the GPU is checked against it.
 //!
 //! Headless use (tests, benchmarks, export):
 //!
 //! ```no_run
 //! # use voyage_render::GpuRenderer;
-//! # fn demo(mesh: &voyage_core::render::CellMesh, camera: &voyage_core::camera::Camera) -> Result<(), voyage_render::RenderError> {
+//! # fn demo(mesh: &voyage_view::CellMesh, camera: &voyage_nav::Camera) -> Result<(), voyage_render::RenderError> {
 //! let mut gpu = GpuRenderer::new_headless()?;
 //! gpu.upload(mesh)?;
 //! let cells: Vec<u32> = (0..mesh.cells() as u32).collect();
@@ -22,7 +22,7 @@
 //! render pass;
 //! [`PixelImages`] copies the panels' images into the same pass pixel for pixel.
 //!
-//! [`CellMesh`]: voyage_core::render::CellMesh
+//! [`CellMesh`]: voyage_view::CellMesh
 
 mod device;
 mod error;

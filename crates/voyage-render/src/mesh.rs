@@ -13,8 +13,8 @@ use std::ops::Range;
 
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
-use voyage_core::camera::Camera;
-use voyage_core::render::CellMesh;
+use voyage_nav::Camera;
+use voyage_view::CellMesh;
 use wgpu::util::DeviceExt;
 
 use crate::error::RenderError;
@@ -355,7 +355,7 @@ mod tests {
         ));
     }
 
-    use voyage_core::camera::Pose;
+    use voyage_nav::Pose;
 
     fn camera() -> Camera {
         // At the origin looking along +x, up +z, 90° vertical field of view.

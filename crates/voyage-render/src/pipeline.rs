@@ -6,11 +6,9 @@
 //! triangle is counter-clockwise in NDC (y up), so the front face is `Ccw` and the wall's
 //! outer side (`Back`) is never drawn; the CPU renderer keeps the same triangles.
 
-use crate::mesh::Vertex;
 #[cfg(doc)]
 use crate::target::COLOR_FORMAT;
-use crate::target::DEPTH_FORMAT;
-use crate::uniforms::Uniforms;
+use crate::{mesh::Vertex, target::DEPTH_FORMAT, uniforms::Uniforms};
 
 pub(crate) struct EndoscopePipeline {
     pub pipeline: wgpu::RenderPipeline,

@@ -6,15 +6,17 @@
 
 use std::time::Instant;
 
-use voyage_core::camera::Camera;
-use voyage_core::render::{CellMesh, Lighting};
+use voyage_nav::Camera;
+use voyage_view::{CellMesh, Lighting};
 
-use crate::device;
-use crate::error::RenderError;
-use crate::mesh::{Frustum, GpuMesh};
-use crate::pipeline::EndoscopePipeline;
-use crate::target::OffscreenTarget;
-use crate::uniforms::Uniforms;
+use crate::{
+    device,
+    error::RenderError,
+    mesh::{Frustum, GpuMesh},
+    pipeline::EndoscopePipeline,
+    target::OffscreenTarget,
+    uniforms::Uniforms,
+};
 
 /// One frame's draws ([`GpuRenderer::draw_list`]): index ranges into the uploaded mesh.
 #[derive(Clone, Debug, Default)]

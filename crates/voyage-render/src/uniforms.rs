@@ -12,8 +12,8 @@
 
 use bytemuck::{Pod, Zeroable};
 use glam::DMat4;
-use voyage_core::camera::Camera;
-use voyage_core::render::Lighting;
+use voyage_nav::Camera;
+use voyage_view::Lighting;
 
 /// Mirrors `struct Uniforms` in `endoscope.wgsl` (112 bytes).
 #[repr(C)]
@@ -54,7 +54,7 @@ impl Uniforms {
 mod tests {
     use super::*;
     use glam::{DVec3, Vec4};
-    use voyage_core::camera::Pose;
+    use voyage_nav::Pose;
 
     #[test]
     fn size_matches_the_wgsl_struct() {

@@ -1,4 +1,4 @@
-//! The GPU image against the CPU reference renderer (`voyage_core::render::render_rgba`) on
+//! The GPU image against the CPU reference renderer (`voyage_view::render_rgba`) on
 //! a real scene: the paper's pipe phantom, prepared by voyage-core, seen from points of its
 //! centerline looking along it, every cell drawn.
 //!
@@ -20,11 +20,11 @@
 use std::sync::OnceLock;
 
 use glam::DVec3;
-use voyage_core::camera::{Camera, Pose};
-use voyage_core::phantom;
 use voyage_core::prep::{PrepOptions, Study, prepare};
-use voyage_core::render::{CellMesh, Lighting, render_rgba};
+use voyage_nav::{Camera, Pose};
+use voyage_phantom as phantom;
 use voyage_render::GpuRenderer;
+use voyage_view::{CellMesh, Lighting, render_rgba};
 
 /// Share of pixels that may have a channel differing by more than 8/255.
 const MAX_FAR_OFF: f64 = 0.01;

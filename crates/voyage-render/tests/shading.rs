@@ -6,9 +6,9 @@
 //! No adapter is a failure, not a skip: CI installs lavapipe (mesa-vulkan-drivers).
 
 use glam::DVec3;
-use voyage_core::camera::{Camera, Pose};
-use voyage_core::render::{CellMesh, Lighting};
+use voyage_nav::{Camera, Pose};
 use voyage_render::GpuRenderer;
+use voyage_view::{CellMesh, Lighting};
 
 fn gpu() -> GpuRenderer {
     GpuRenderer::new_headless().unwrap_or_else(|e| panic!("{e}"))
@@ -188,7 +188,7 @@ fn colour_matches_the_cpu_renderer_and_the_lighting_formula() {
     };
     for l in [Lighting::default(), shiny] {
         let img = gpu.render(&cam, &cells, w, h, &l).unwrap();
-        let cpu = voyage_core::render::render_rgba(&m, &cam, &cells, w, h, &l);
+        let cpu = voyage_view::render_rgba(&m, &cam, &cells, w, h, &l);
         let (mut worst_cpu, mut worst_formula) = (0, 0);
         for y in 0..h {
             for x in 0..w {

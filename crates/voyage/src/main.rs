@@ -11,7 +11,7 @@ use clap::Parser;
 
 fn main() -> ExitCode {
     quiet_vulkan_layer();
-    voyage_core::error::install_panic_hook();
+    voyage_io::install_panic_hook();
     let cli = cmd::Cli::parse();
     match cmd::run(cli) {
         Ok(()) => ExitCode::SUCCESS,

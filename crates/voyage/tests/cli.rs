@@ -1,10 +1,10 @@
 //! The `voyage` binary as a user meets it: exit codes, one-line errors naming the file,
 //! no patient identity in any output, and the phantom → file → info round trip.
 
-mod common;
-
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::{
+    path::{Path, PathBuf},
+    process::{Command, Output},
+};
 
 fn voyage(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_voyage"))
@@ -13,15 +13,7 @@ fn voyage(args: &[&str]) -> Output {
         .expect("run voyage")
 }
 
-fn shared_data() -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
-    if p.is_dir() {
-        Some(p)
-    } else {
-        common::skip("../shared/data not found");
-        None
-    }
-}
+use voyage_phantom::fixtures::shared_data;
 
 fn scratch(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("voyage-cli-{name}-{}", std::process::id()));
@@ -231,8 +223,10 @@ fn bad_arguments_are_refused() {
 /// fuzzer). voyage turns that into its usual one-line error, with no panic report or backtrace.
 #[test]
 fn a_panicking_decoder_still_gives_one_line() {
-    use dicom_core::value::{PixelFragmentSequence, PrimitiveValue};
-    use dicom_core::{DataElement, VR};
+    use dicom_core::{
+        DataElement, VR,
+        value::{PixelFragmentSequence, PrimitiveValue},
+    };
     use dicom_dictionary_std::tags;
     let dir = scratch("rle");
     let ct = dir.join("ct.nii");
@@ -672,7 +666,7 @@ fn fly_reports_both_directions_and_writes_a_trajectory() {
         assert!(f["min_wall_distance_mm"].as_f64().unwrap() >= 1.0);
     }
     // The trajectory holds one pose per frame (plus the start) for each direction.
-    let poses = voyage_core::export::trajectory::read_poses(&traj).unwrap();
+    let poses = voyage_io::export::trajectory::read_poses(&traj).unwrap();
     assert_eq!(poses.len(), 2);
     assert_eq!(
         poses[0].len() as u64,
@@ -762,7 +756,7 @@ fn render_movie_and_bench_render_on_the_small_phantom() {
         traj.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", text(&o));
-    let pose = voyage_core::export::trajectory::read_poses(&traj).unwrap()[0][40];
+    let pose = voyage_io::export::trajectory::read_poses(&traj).unwrap()[0][40];
     let pose_arg = pose.to_array().map(|v| format!("{v}")).join(",");
     let again = dir.join("pose.png");
     let o = voyage(&[

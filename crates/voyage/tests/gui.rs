@@ -2,13 +2,13 @@
 //! Mesa's CPU Vulkan driver: scripted actions (`--script`) and real X events (xdotool).
 //! Without Xvfb the tests say so and pass (scripts/deps.sh installs it; CI has it).
 
-mod common;
-
-use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::sync::atomic::{AtomicU32, Ordering};
-use std::time::{Duration, Instant};
+use std::{
+    io::{BufRead, BufReader},
+    path::{Path, PathBuf},
+    process::{Child, Command, Stdio},
+    sync::atomic::{AtomicU32, Ordering},
+    time::{Duration, Instant},
+};
 
 use glam::{DQuat, DVec3};
 use serde_json::Value;
@@ -39,7 +39,7 @@ static NEXT_DISPLAY: AtomicU32 = AtomicU32::new(0);
 impl Display {
     fn start() -> Option<Display> {
         if !have("Xvfb") {
-            common::skip("Xvfb not installed (bash scripts/deps.sh installs it)");
+            voyage_phantom::fixtures::skip("Xvfb not installed (bash scripts/deps.sh installs it)");
             return None;
         }
         for _ in 0..20 {
@@ -303,7 +303,7 @@ fn mouse_and_keys_drive_the_window() {
         return;
     };
     if !have("xdotool") {
-        common::skip("xdotool not installed (bash scripts/deps.sh installs it)");
+        voyage_phantom::fixtures::skip("xdotool not installed (bash scripts/deps.sh installs it)");
         return;
     }
     let dir = scratch("xdotool");
@@ -623,12 +623,8 @@ fn translucency_tells_polyp_from_stool() {
     };
     // Facing a sphere on the wall from 6 mm off its surface, along `into` (into the lumen).
     let facing = |c: DVec3, r: f64, into: DVec3| {
-        voyage_core::camera::Pose::looking(
-            c + (r + 6.0) * into,
-            -into,
-            into.any_orthonormal_vector(),
-        )
-        .to_array()
+        voyage_nav::Pose::looking(c + (r + 6.0) * into, -into, into.any_orthonormal_vector())
+            .to_array()
     };
     let (polyp, c, r) = largest("polyps");
     let at_polyp = facing(c, r, v3(&polyp["direction"]));

@@ -13,9 +13,11 @@
 
 use rayon::prelude::*;
 
-use crate::field::{BoxGrid, Field, bounding_box};
-use crate::volume::{next_run, runs_where};
-use crate::{Error, Result, Volume};
+use crate::{
+    Error, Result, Volume,
+    field::{BoxGrid, Field, bounding_box},
+    volume::{next_run, runs_where},
+};
 
 /// Ds over the lumen's bounding box (grown by one voxel): distance in mm to the nearest wall
 /// for lumen voxels (mask ≠ 0), 0 elsewhere.

@@ -6,8 +6,10 @@
 //! may be emptied in any order and the result is the exact Dijkstra distance. Each voxel costs
 //! a push and a pop into a `Vec`, not a heap's log n.
 
-use crate::field::{BoxGrid, BrickMarks, Bricked};
-use crate::{Error, Result, Volume};
+use crate::{
+    Error, Result, Volume,
+    field::{BoxGrid, BrickMarks, Bricked, Field},
+};
 
 /// Dt and what the search learned on the way.
 #[derive(Clone, Debug)]
@@ -116,6 +118,46 @@ pub fn geodesic_distance_pair_like<U>(
         dist,
     };
     Ok([geodesic(&first, first_dist), geodesic(&second, second_dist)])
+}
+
+/// Dt to both ends over the lumen's **core**, the voxels of `mask` whose Ds (`ds`, over the
+/// lumen's box) is at least `min_ds_mm`: `[to target, to source]`, +∞ outside the core.
+/// The ends are the first and the last of `path_mm` (volume-local mm, source first) that lie
+/// in the core. None when no path point lies in the core or the ends are not joined in it.
+pub fn core_distances(
+    mask: &Volume<u8>,
+    ds: &Field<f32>,
+    min_ds_mm: f64,
+    path_mm: &[[f64; 3]],
+) -> Option<[Field<f32>; 2]> {
+    let grid = &ds.grid;
+    let mut pad = Padded::new(mask, grid);
+    let padded_ds = pad.pad(&ds.data, 0.0);
+    for (m, &d) in pad.inside.iter_mut().zip(&padded_ds) {
+        if (d as f64) < min_ds_mm {
+            *m = 0;
+        }
+    }
+    let sp = mask.spacing();
+    let in_core = |p: &[f64; 3]| {
+        let v = [0, 1, 2].map(|a| (p[a] / sp[a]).round().max(0.0) as usize);
+        pad.index_of_global(v).filter(|&i| pad.inside[i] != 0)
+    };
+    let s = path_mm.iter().find_map(in_core)?;
+    let t = path_mm.iter().rev().find_map(in_core)?;
+    let (to_t, to_s) = rayon::join(
+        || dial(&pad, &[t], sp, &SearchOptions::default()),
+        || dial(&pad, &[s], sp, &SearchOptions::default()),
+    );
+    if !to_t.dist[s].is_finite() {
+        return None;
+    }
+    let field = |d: Vec<f32>| Field {
+        grid: grid.clone(),
+        geometry: mask.geometry().clone(),
+        data: pad.unpad(d),
+    };
+    Some([field(to_t.dist), field(to_s.dist)])
 }
 
 /// The plain search from `source` over `grid`, its distances left unfinished ([`finish`]);
@@ -850,11 +892,8 @@ fn weighted_row_improvements(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Geometry;
-    use crate::distance::distance_to_wall;
-    use crate::field::bounding_box;
-    use std::cmp::Reverse;
-    use std::collections::BinaryHeap;
+    use crate::{Geometry, distance::distance_to_wall, field::bounding_box};
+    use std::{cmp::Reverse, collections::BinaryHeap};
 
     /// Textbook Dijkstra with a binary heap in f64, over the whole volume.
     fn reference(mask: &Volume<u8>, src: [usize; 3]) -> Vec<f64> {

@@ -6,8 +6,7 @@
 //! dearer, so the path follows the collapsed bowel rather than cutting across the mesentery.
 //! The search runs on a box around both ends, on blocks when that box is large.
 
-use std::cmp::Reverse;
-use std::collections::BinaryHeap;
+use std::{cmp::Reverse, collections::BinaryHeap};
 
 use glam::DVec3;
 

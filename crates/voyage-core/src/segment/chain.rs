@@ -8,13 +8,14 @@
 //! entered, and goes on to the nearest free end of another compartment, bridged by the
 //! cheapest path through the CT ([`super::bridge`]), while one lies within `max_gap_mm`.
 
-use std::cmp::Reverse;
-use std::collections::BinaryHeap;
+use std::{cmp::Reverse, collections::BinaryHeap};
 
 use glam::DVec3;
 
-use super::bridge::Path;
-use super::work::{Bbox, Key};
+use super::{
+    bridge::Path,
+    work::{Bbox, Key},
+};
 
 /// How many of the nearest free compartments are bridged to at each step.
 const CANDIDATES: usize = 3;

@@ -21,8 +21,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::work::{Bbox, GAS, LAYER, POOL};
-use crate::Geometry;
-use crate::anatomy::PatientFrame;
+use crate::{Geometry, anatomy::PatientFrame};
 
 /// A pool deeper than this below its gas is not one colon segment's fluid.
 pub const MAX_DEPTH_MM: f64 = 60.0;

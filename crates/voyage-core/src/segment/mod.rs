@@ -40,8 +40,10 @@ use glam::DVec3;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::anatomy::{Orientation, PatientFrame, PatientPosition, PositionSource};
-use crate::{Error, Result, Volume};
+use crate::{
+    Error, Result, Volume,
+    anatomy::{Orientation, PatientFrame, PatientPosition, PositionSource},
+};
 use chain::{Chain, ChainOptions, Coarse, Compartment, Left};
 use work::{BRIDGE, Bbox, GAS, LAYER, POOL};
 

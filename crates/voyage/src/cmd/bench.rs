@@ -3,15 +3,17 @@
 //! Timings are medians of several repeats after one warm-up, with the page cache warm for
 //! both sides, so that the comparison is of decoding work, not of the disk.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
-use std::time::Instant;
+use std::{
+    path::{Path, PathBuf},
+    process::Command,
+    time::Instant,
+};
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 use serde::Serialize;
-use voyage_core::io::{self, LoadOptions};
-use voyage_core::phantom::{self, ColonOptions};
+use voyage_io::{self as io, LoadOptions};
+use voyage_phantom::{self as phantom, ColonOptions};
 
 #[derive(Args, Debug)]
 pub struct BenchArgs {

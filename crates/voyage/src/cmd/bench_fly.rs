@@ -2,21 +2,21 @@
 //! storage layout (the paper's sorted lumen list, bricks, the dense box), and the physics per
 //! frame of the automatic flights both ways.
 
-use std::path::PathBuf;
-use std::time::Instant;
+use std::{path::PathBuf, time::Instant};
 
 use anyhow::{Result, bail};
 use glam::DVec3;
 use serde_json::{Value, json};
-use voyage_core::Volume;
-use voyage_core::flight::{FlightOptions, fly};
-use voyage_core::io::{self, LoadOptions};
-use voyage_core::phantom::{self, ColonOptions};
-use voyage_core::potential::{
-    BoxStore, BrickStore, Direction, DistanceStore, Navigable, PotentialField, PotentialParams,
-    SortedStore,
+use voyage_core::{
+    Volume,
+    prep::{PrepOptions, Study, prepare},
 };
-use voyage_core::prep::{PrepOptions, Study, prepare};
+use voyage_io::{self as io, LoadOptions};
+use voyage_nav::{
+    BoxStore, BrickStore, Direction, DistanceStore, FlightOptions, Navigable, PotentialField,
+    PotentialParams, SortedStore, fly,
+};
+use voyage_phantom::{self as phantom, ColonOptions};
 
 use super::bench::Common;
 

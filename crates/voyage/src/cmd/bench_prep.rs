@@ -1,17 +1,21 @@
 //! `voyage bench prep`: the preprocessing stage by stage, beside the reference libraries on
 //! the same lumen mask in the same run.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
-use std::time::Instant;
+use std::{
+    path::{Path, PathBuf},
+    process::Command,
+    time::Instant,
+};
 
 use anyhow::{Context, Result, bail};
 use serde_json::{Value, json};
-use voyage_core::Volume;
-use voyage_core::distance::geodesic_distance;
-use voyage_core::io::{self, LoadOptions, nifti};
-use voyage_core::phantom::{self, ColonOptions};
-use voyage_core::prep::{PrepOptions, Study, Timings, prepare};
+use voyage_core::{
+    Volume,
+    distance::geodesic_distance,
+    prep::{PrepOptions, Study, Timings, prepare},
+};
+use voyage_io::{self as io, LoadOptions, nifti};
+use voyage_phantom::{self as phantom, ColonOptions};
 
 use super::bench::{Common, find_python, median};
 

@@ -7,15 +7,15 @@ use std::path::PathBuf;
 
 use anyhow::{Result, bail};
 use serde_json::{Map, Value, json};
-use voyage_core::Volume;
-use voyage_core::camera::{Camera, Pose};
-use voyage_core::flight::{FlightOptions, fly};
-use voyage_core::io::{self, LoadOptions};
-use voyage_core::phantom::{self, ColonOptions};
-use voyage_core::potential::{Direction, potential_field};
-use voyage_core::prep::{PrepOptions, Study, prepare};
-use voyage_core::render::{CellMesh, Lighting, Strategy, Survey, look_around, survey};
+use voyage_core::{
+    Volume,
+    prep::{PrepOptions, Study, prepare},
+};
+use voyage_io::{self as io, LoadOptions};
+use voyage_nav::{Camera, Direction, FlightOptions, Pose, fly, potential_field};
+use voyage_phantom::{self as phantom, ColonOptions};
 use voyage_render::GpuRenderer;
+use voyage_view::{CellMesh, Lighting, Strategy, Survey, look_around, survey};
 
 use super::bench::Common;
 

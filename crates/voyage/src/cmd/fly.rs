@@ -5,9 +5,8 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
 use serde_json::json;
-use voyage_core::export::trajectory::write_trajectory;
-use voyage_core::flight::{Flight, FlightOptions, fly};
-use voyage_core::potential::{Direction, potential_field};
+use voyage_io::export::trajectory::write_trajectory;
+use voyage_nav::{Direction, Flight, FlightOptions, fly, potential_field};
 
 use super::prep::{InputArgs, Prepared, load_and_prepare};
 

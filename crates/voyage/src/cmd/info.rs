@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::Args;
 use serde::Serialize;
-use voyage_core::io::{self, LoadOptions, Loaded};
+use voyage_io::{self as io, LoadOptions, Loaded};
 
 #[derive(Args, Debug)]
 pub struct InfoArgs {

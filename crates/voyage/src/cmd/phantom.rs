@@ -1,12 +1,14 @@
 //! `voyage phantom` and `voyage demo`: synthetic scans with ground truth.
 
-use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::{
+    path::{Path, PathBuf},
+    time::Instant,
+};
 
 use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
-use voyage_core::io::{self, LoadOptions, atomic::write_atomic};
-use voyage_core::phantom::{self, ColonOptions, Phantom};
+use voyage_io::{self as io, LoadOptions, write_atomic};
+use voyage_phantom::{self as phantom, ColonOptions, Phantom};
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum Kind {
@@ -224,7 +226,7 @@ pub fn demo(out: &Path, small: bool) -> Result<()> {
     super::info::Info::new(&ct, &loaded).print_text();
     // The preprocessing on what was read back, checked against the phantom's truth.
     let study = voyage_core::prep::prepare(loaded.volume, &Default::default(), |_| {})?;
-    let written = voyage_core::export::study::write_study(&out.join("prep"), &study)?;
+    let written = voyage_io::export::study::write_study(&out.join("prep"), &study)?;
     let (mut both, mut a, mut b) = (0usize, 0usize, 0usize);
     for (&x, &y) in p.lumen.data().iter().zip(study.segmentation.lumen.data()) {
         both += (x != 0 && y != 0) as usize;

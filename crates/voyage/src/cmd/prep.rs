@@ -1,20 +1,19 @@
 //! `voyage prep INPUT --out DIR`: the whole preprocessing, with its exports.
 
-use std::io::IsTerminal;
-use std::path::PathBuf;
-use std::time::Instant;
+use std::{io::IsTerminal, path::PathBuf, time::Instant};
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use glam::DVec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
-use voyage_core::Geometry;
-use voyage_core::anatomy::{PatientPosition, PositionSource};
-use voyage_core::export::study::write_study;
-use voyage_core::io::{self, LoadOptions};
-use voyage_core::prep::{PrepOptions, Stage, Study, prepare};
-use voyage_core::segment::ComponentKind;
+use voyage_core::{
+    Geometry,
+    anatomy::{PatientPosition, PositionSource},
+    prep::{PrepOptions, Stage, Study, prepare},
+    segment::ComponentKind,
+};
+use voyage_io::{self as io, LoadOptions, export::study::write_study};
 
 #[derive(Clone, Copy, Debug, Default, ValueEnum)]
 pub enum Frame {

@@ -1,25 +1,27 @@
 //! `voyage render` (one endoscopic frame to a PNG) and `voyage movie` (every frame of an
 //! automatic flight), on the CPU reference renderer or, with `--gpu`, on wgpu.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::{
+    path::{Path, PathBuf},
+    process::Command,
+};
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
-use voyage_core::camera::{Camera, Pose};
-use voyage_core::flight::{Flight, fly};
-use voyage_core::io::atomic::write_atomic;
-use voyage_core::potential::{Direction, potential_field};
 use voyage_core::prep::Study;
-use voyage_core::render::{
+use voyage_io::write_atomic;
+use voyage_nav::{Camera, Direction, Flight, Pose, fly, potential_field};
+use voyage_render::GpuRenderer;
+use voyage_view::{
     CellMesh, CloseupBox, Frame, Lighting, Material, Rasterizer, Strategy, TranslucencyOptions,
     View, Visibility, render_translucency, shade, surface_point,
 };
-use voyage_render::GpuRenderer;
 
-use super::fly::PhysicsArgs;
-use super::prep::{InputArgs, Prepared, load_and_prepare};
+use super::{
+    fly::PhysicsArgs,
+    prep::{InputArgs, Prepared, load_and_prepare},
+};
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum OneDirection {
@@ -268,7 +270,7 @@ fn translucency_over(
         &ct,
         &study.segmentation.lumen,
         camera,
-        &CloseupBox::around(centre, voyage_core::render::translucency::HALF_SIZE_MM),
+        &CloseupBox::around(centre, voyage_view::HALF_SIZE_MM),
         width,
         height,
         &opts,

@@ -1,32 +1,36 @@
 //! The navigator window: a control strip on the left, the endoscopic view in the middle,
 //! the scout on the right, the slices along the bottom (paper Fig. 8).
 
-use std::collections::{BTreeMap, VecDeque};
-use std::path::PathBuf;
-use std::sync::{Arc, Mutex};
-use std::time::Instant;
+use std::{
+    collections::{BTreeMap, VecDeque},
+    path::PathBuf,
+    sync::{Arc, Mutex},
+    time::Instant,
+};
 
 use egui::{Color32, Key, Modifiers, Pos2, Rect, RichText, Sense, Stroke, Vec2};
 use glam::DVec3;
 use serde_json::json;
-use voyage_core::camera::Camera;
-use voyage_core::findings::{self, Findings};
-use voyage_core::potential::Direction;
-use voyage_core::render::closeup::{CloseupBox, TransferFunction, render_closeup};
-use voyage_core::render::shading::encode;
-use voyage_core::render::{Material, TranslucencyOptions, render_translucency};
+use voyage_io::export::export_findings;
+use voyage_nav::{Camera, Direction};
+use voyage_view::{
+    CloseupBox, Findings, Hit, Material, TransferFunction, TranslucencyOptions, encode, pick,
+    render_closeup, render_translucency,
+};
 
-use voyage_core::submarine::Input;
+use voyage_nav::Input;
 
-use super::WindowArgs;
-use super::corrections::{self, Correction};
-use super::endoscopy::{Endoscope, label, ray_at, surface_point_on_screen, visible_centerline};
-use super::loader::{Job, Source};
-use super::pixels::WindowGpu;
-use super::scout::{ScoutMarks, ScoutView};
-use super::script::{Script, Step};
-use super::session::Session;
-use super::slices::{SliceAction, SlicePanel, SliceSource};
+use super::{
+    WindowArgs,
+    corrections::{self, Correction},
+    endoscopy::{Endoscope, label, ray_at, surface_point_on_screen, visible_centerline},
+    loader::{Job, Source},
+    pixels::WindowGpu,
+    scout::{ScoutMarks, ScoutView},
+    script::{Script, Step},
+    session::Session,
+    slices::{SliceAction, SlicePanel, SliceSource},
+};
 
 /// What a click on the endoscopic view does.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -430,12 +434,12 @@ impl App {
     }
 
     /// The surface point under a point of the view (searching the cells last drawn first).
-    fn pick(&self, at: Pos2) -> Option<findings::Hit> {
+    fn pick(&self, at: Pos2) -> Option<Hit> {
         let (s, rect) = (self.session.as_ref()?, self.view_rect?);
         let cam = s.camera();
         let ray = ray_at(&cam, rect, at);
-        findings::pick(&s.mesh, Some(&self.last_cells), cam.pose.position, ray)
-            .or_else(|| findings::pick(&s.mesh, None, cam.pose.position, ray))
+        pick(&s.mesh, Some(&self.last_cells), cam.pose.position, ray)
+            .or_else(|| pick(&s.mesh, None, cam.pose.position, ray))
     }
 
     fn drop_marker(&mut self, at: Pos2) {
@@ -476,27 +480,21 @@ impl App {
             return;
         };
         let geometry = s.study.ct.geometry().clone();
-        let result = findings::export_findings(&dir, &self.findings, &geometry, |_, m| {
+        let result = export_findings(&dir, &self.findings, &geometry, |_, m| {
             let cam = Camera::new(m.view).with_fov(s.fov);
-            let cells = voyage_core::render::Visibility::new(
-                &s.study.cells,
-                voyage_core::render::Strategy::Lg,
-            )
-            .select(
-                &s.study.cells,
-                &voyage_core::render::View::new(&cam, 512, 512),
-            )
-            .cells;
+            let cells = voyage_view::Visibility::new(&s.study.cells, voyage_view::Strategy::Lg)
+                .select(&s.study.cells, &voyage_view::View::new(&cam, 512, 512))
+                .cells;
             Ok((
                 512,
                 512,
-                voyage_core::render::render_rgba(
+                voyage_view::render_rgba(
                     &s.mesh,
                     &cam,
                     &cells,
                     512,
                     512,
-                    &voyage_core::render::Lighting::default(),
+                    &voyage_view::Lighting::default(),
                 ),
             ))
         });
@@ -571,9 +569,7 @@ impl App {
             }
             Step::GoTo(label) => self.go_to_marker(&label),
             Step::Pose(a) => {
-                if let (Some(s), Some(p)) =
-                    (&mut self.session, voyage_core::camera::Pose::from_array(a))
-                {
+                if let (Some(s), Some(p)) = (&mut self.session, voyage_nav::Pose::from_array(a)) {
                     if s.sub.is_safe(&s.field, p.position) {
                         s.set_playing(false);
                         s.place(p);
@@ -1091,7 +1087,7 @@ impl App {
         };
         let region = CloseupBox {
             center,
-            half_size_mm: voyage_core::render::translucency::HALF_SIZE_MM,
+            half_size_mm: voyage_view::HALF_SIZE_MM,
         };
         show_overlay(
             &mut self.translucency,

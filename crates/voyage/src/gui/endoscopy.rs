@@ -7,14 +7,13 @@
 
 use std::time::Instant;
 
-use super::pixels::WindowGpu;
-use super::session::Session;
+use super::{pixels::WindowGpu, session::Session};
 use eframe::egui_wgpu;
 use egui::{Color32, ColorImage, Pos2, Rect, TextureHandle, TextureOptions, Vec2};
 use glam::DVec3;
-use voyage_core::camera::Camera;
-use voyage_core::render::{Frame, Lighting, Rasterizer, View, shade};
+use voyage_nav::Camera;
 use voyage_render::DrawList;
+use voyage_view::{Frame, Lighting, Rasterizer, View, shade};
 
 /// The view on the window's GPU renderer ([`WindowGpu`]).
 struct GpuView {

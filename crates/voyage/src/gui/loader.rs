@@ -1,14 +1,16 @@
 //! Opening a study in the background: load, preprocess, build what the window needs, while
 //! the window stays responsive and shows the progress.
 
-use std::path::PathBuf;
-use std::sync::mpsc::{Receiver, TryRecvError, channel};
-use std::thread;
+use std::{
+    path::PathBuf,
+    sync::mpsc::{Receiver, TryRecvError, channel},
+    thread,
+};
 
 use anyhow::Context as _;
-use voyage_core::io::{self, LoadOptions};
-use voyage_core::phantom::{self, ColonOptions};
 use voyage_core::prep::{PrepOptions, Stage, prepare};
+use voyage_io::{self as io, LoadOptions};
+use voyage_phantom::{self as phantom, ColonOptions};
 
 use super::session::Session;
 use crate::cmd::prep::PointArgs;

@@ -12,8 +12,10 @@ mod script;
 mod session;
 mod slices;
 
-use std::path::PathBuf;
-use std::sync::{Arc, Mutex};
+use std::{
+    path::PathBuf,
+    sync::{Arc, Mutex},
+};
 
 use anyhow::{Context as _, bail};
 use clap::Args;
@@ -139,10 +141,8 @@ fn run(source: Option<Source>, w: &WindowArgs) -> anyhow::Result<()> {
         .map_err(|_| anyhow::anyhow!("the window's state was lost"))?;
     if let (Some(path), Some(report)) = (&w.report, &o.report) {
         let text = serde_json::to_string_pretty(report)? + "\n";
-        voyage_core::io::atomic::write_atomic(path, |f| {
-            std::io::Write::write_all(f, text.as_bytes())
-        })
-        .with_context(|| path.display().to_string())?;
+        voyage_io::write_atomic(path, |f| std::io::Write::write_all(f, text.as_bytes()))
+            .with_context(|| path.display().to_string())?;
     }
     let unattended = w.screenshot.is_some() || w.script.is_some();
     if unattended && !o.errors.is_empty() {

@@ -5,13 +5,12 @@
 use std::sync::OnceLock;
 
 use glam::DVec3;
-use voyage_core::Volume;
-use voyage_core::camera::{Camera, Pose};
-use voyage_core::flight::{Autopilot, FlightOptions, start_pose};
-use voyage_core::potential::{BrickStore, Direction, PotentialField, potential_field};
-use voyage_core::prep::Study;
-use voyage_core::render::{CellMesh, Strategy, Visibility};
-use voyage_core::submarine::{Input, Submarine};
+use voyage_core::{Volume, prep::Study};
+use voyage_nav::{
+    Autopilot, BrickStore, Camera, Direction, FlightOptions, Input, Pose, PotentialField,
+    Submarine, potential_field, start_pose,
+};
+use voyage_view::{CellMesh, Strategy, Visibility};
 
 use super::scout::ScoutMesh;
 
@@ -220,7 +219,7 @@ impl Session {
     /// Puts the submarine at rest at `pose` (which must be safe: a pose it had before).
     pub fn place(&mut self, pose: Pose) {
         let t = self.sub.state.t;
-        self.sub.state = voyage_core::submarine::State::at(pose);
+        self.sub.state = voyage_nav::State::at(pose);
         self.sub.state.t = t;
         self.vis.reset();
         self.reached = false;
@@ -311,7 +310,7 @@ mod tests {
 
     #[test]
     fn line_of_sight_agrees_with_the_voxel_walk_and_sees_along_the_pipe_not_through_its_wall() {
-        let p = voyage_core::phantom::pipe(1).unwrap();
+        let p = voyage_phantom::pipe(1).unwrap();
         let study = prepare(p.ct, &PrepOptions::default(), |_| {}).unwrap();
         let s = Session::new("pipe".into(), study).unwrap();
         let pts: Vec<DVec3> = s
@@ -327,7 +326,7 @@ mod tests {
         let side = (b - a).any_orthonormal_vector();
         assert!(!s.line_of_sight(a, a + 100.0 * side, 0.0));
         // Many segments between centerline points, and out toward the wall and beyond.
-        let mut rng = voyage_core::phantom::rng::Rng::new(7, 1);
+        let mut rng = voyage_core::rng::Rng::new(7, 1);
         let (mut seen, mut n) = (0, 0);
         for _ in 0..3000 {
             let i = rng.range(0.0, (pts.len() - 1) as f64) as usize;

@@ -11,11 +11,12 @@ use std::collections::HashMap;
 
 use egui::{Color32, Pos2, Rect, Sense, Stroke, Vec2};
 use glam::DVec3;
-use voyage_core::cleanse::Cleansing;
-use voyage_core::{Geometry, Volume};
+use voyage_core::{Geometry, Volume, cleanse::Cleansing};
 
-use super::corrections::Correction;
-use super::pixels::{PanelImage, Rgba};
+use super::{
+    corrections::Correction,
+    pixels::{PanelImage, Rgba},
+};
 
 /// What a click on a slice asks for.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -1,0 +1,13 @@
+//! Exports that other tools open. With the loaders, the only place that writes files; every file
+//! is written atomically (temp + rename). Patient coordinates (LPS mm) are used here, at the
+//! edge, and nowhere inside the pipeline. No patient identity is ever written.
+
+mod findings;
+pub mod markups;
+pub mod mesh;
+pub mod study;
+pub mod trajectory;
+
+pub use findings::export_findings;
+pub use markups::{MarkupsPoint, write_markups_curve};
+pub use mesh::{write_ply, write_stl};

@@ -1,0 +1,140 @@
+//! The files `voyage prep` writes from a [`Study`].
+
+use std::path::{Path, PathBuf};
+
+use glam::DVec3;
+use serde_json::json;
+
+use super::{MarkupsPoint, write_markups_curve, write_ply, write_stl};
+use crate::{atomic::write_atomic, nifti};
+use voyage_core::{Result, prep::Study};
+
+/// Writes every export of a study into `dir`; returns the paths written.
+///
+/// All or nothing: the files are written into a staging folder inside `dir` and moved into
+/// place only when every one of them is complete, so a failure (a full disk, a folder in the
+/// way) leaves `dir` as it was, never a new lumen beside an old surface. A `dir` this call
+/// created is removed again.
+pub fn write_study(dir: &Path, study: &Study) -> Result<Vec<PathBuf>> {
+    let created = !dir.exists();
+    std::fs::create_dir_all(dir).map_err(|e| voyage_core::Error::io(dir, e))?;
+    let staging = dir.join(format!(".voyage-prep-{}", std::process::id()));
+    let result = std::fs::create_dir(&staging)
+        .map_err(|e| voyage_core::Error::io(&staging, e))
+        .and_then(|()| write_files(&staging, study))
+        .and_then(|names| move_into(dir, &staging, &names));
+    let _ = std::fs::remove_dir_all(&staging);
+    if result.is_err() && created {
+        let _ = std::fs::remove_dir(dir);
+    }
+    result
+}
+
+/// Moves the staged files into `dir`, after checking that none would land on a folder.
+fn move_into(dir: &Path, staging: &Path, names: &[&str]) -> Result<Vec<PathBuf>> {
+    let paths: Vec<PathBuf> = names.iter().map(|n| dir.join(n)).collect();
+    if let Some(p) = paths.iter().find(|p| p.is_dir()) {
+        return Err(voyage_core::Error::format(
+            p,
+            "a folder is in the way of this export",
+        ));
+    }
+    for (name, p) in names.iter().zip(&paths) {
+        std::fs::rename(staging.join(name), p).map_err(|e| voyage_core::Error::io(p, e))?;
+    }
+    Ok(paths)
+}
+
+/// Writes the exports into `dir`; returns their file names.
+fn write_files(dir: &Path, study: &Study) -> Result<Vec<&'static str>> {
+    let g = study.ct.geometry();
+    let mut out = Vec::new();
+    let mut put = |name: &'static str| {
+        out.push(name);
+        dir.join(name)
+    };
+    nifti::save(&put("lumen.nii.gz"), &study.segmentation.lumen)?;
+    nifti::save_slices(&put("ds.nii.gz"), g, |k, out: &mut [f32]| {
+        study.ds.fill_slice(k, out)
+    })?;
+    if !study.cleansing.is_empty() {
+        nifti::save_slices(&put("cleansed.nii.gz"), g, |k, out: &mut [i16]| {
+            study.cleansing.fill_slice(&study.ct, k, out)
+        })?;
+    }
+    let cl = &study.centerline;
+    let lps: Vec<[f64; 3]> = cl
+        .points_mm
+        .iter()
+        .map(|p| g.local_to_patient(DVec3::from_array(*p)).to_array())
+        .collect();
+    let cl_json = json!({
+        "frame": "points_mm: volume-local mm (x = i·sx, y = j·sy, z = k·sz); points_lps_mm: DICOM patient LPS",
+        "length_mm": cl.length_mm,
+        "source_mm": study.source_mm().to_array(),
+        "target_mm": study.target_mm().to_array(),
+        "points_mm": cl.points_mm,
+        "points_lps_mm": lps,
+        "arc_mm": cl.arc_mm,
+        "radius_mm": cl.radius_mm,
+        // Stretches (arc mm from the source, start and end) through bridged gaps: collapsed
+        // or fluid-filled bowel, no air.
+        "collapsed_arc_mm": study.collapsed_spans,
+    });
+    write_json(&put("centerline.json"), &cl_json)?;
+    let points: Vec<MarkupsPoint> = lps
+        .iter()
+        .step_by(5)
+        .chain(lps.last())
+        .enumerate()
+        .map(|(i, p)| MarkupsPoint {
+            label: format!("CL-{}", i + 1),
+            position_lps: *p,
+            description: String::new(),
+        })
+        .collect();
+    write_markups_curve(&put("centerline.mrk.json"), "Centerline", &points)?;
+    write_ply(&put("surface.ply"), &study.surface.mesh, g)?;
+    write_stl(&put("surface.stl"), &study.surface.mesh, g)?;
+    let cells: Vec<_> = study
+        .cells
+        .cells
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let portal = |p: Option<usize>| {
+                p.map(|p| {
+                    let portal = &study.cells.portals[p];
+                    json!({
+                        "index": p,
+                        "centre_mm": portal.centre_mm,
+                        "normal": portal.normal,
+                        "polygon_mm": portal.polygon_mm,
+                        "polygon_lps_mm": portal.polygon_mm.iter().map(|q| g.local_to_patient(DVec3::from_array(*q)).to_array()).collect::<Vec<_>>(),
+                        "half_thickness_mm": portal.half_thickness_mm,
+                    })
+                })
+            };
+            json!({
+                "cell": i,
+                "triangles": c.triangles.len(),
+                "voxels": c.voxels,
+                "centerline_span": [c.centerline_span.0, c.centerline_span.1],
+                "arc_mm": [cl.arc_mm[c.centerline_span.0], cl.arc_mm[c.centerline_span.1]],
+                "portal_back": portal(c.portal_back),
+                "portal_front": portal(c.portal_front),
+            })
+        })
+        .collect();
+    write_json(
+        &put("cells.json"),
+        &json!({ "frame": "volume-local mm, with LPS copies", "cells": cells }),
+    )?;
+    Ok(out)
+}
+
+/// A JSON value, pretty-printed, written atomically.
+pub(crate) fn write_json(path: &Path, v: &serde_json::Value) -> Result<()> {
+    let text = serde_json::to_string_pretty(v).expect("plain data") + "\n";
+    write_atomic(path, |w| w.write_all(text.as_bytes()))
+}

@@ -1,0 +1,163 @@
+//! voyage's files: loading and saving volumes, and the exports other tools open. The only
+//! crate that touches files; the pipeline (`voyage-core`) takes values and returns values.
+//!
+//! [`load`] takes a path and returns a HU volume with geometry in the DICOM patient frame
+//! (LPS), whatever the format: a DICOM series folder or file (also multi-frame), NIfTI-1
+//! (.nii, .nii.gz; RAS converted to LPS), MetaImage (.mha, .mhd + raw) or NRRD.
+
+mod atomic;
+pub mod dicom;
+pub mod dicom_write;
+pub mod metaimage;
+pub mod nifti;
+pub mod nrrd;
+mod panic;
+
+pub mod export;
+
+pub use atomic::write_atomic;
+pub use panic::install_panic_hook;
+
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+
+use voyage_core::{Error, Result, Volume};
+
+/// Choices the user can make when loading.
+#[derive(Clone, Debug, Default)]
+pub struct LoadOptions {
+    /// DICOM: the SeriesInstanceUID to load when a folder holds several series.
+    pub series_uid: Option<String>,
+}
+
+/// The file formats voyage reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Format {
+    Dicom,
+    Nifti,
+    MetaImage,
+    Nrrd,
+}
+
+/// What a loader learned besides the voxels. Never holds patient name or ID.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Meta {
+    pub format: Option<Format>,
+    /// e.g. "CT"; None when the format does not say.
+    pub modality: Option<String>,
+    pub series_uid: Option<String>,
+    pub series_description: Option<String>,
+    /// Transfer syntax name(s) seen (DICOM only).
+    pub transfer_syntaxes: Vec<String>,
+    /// Number of files read (DICOM: slices; others: 1 or 2).
+    pub files: usize,
+    /// Other series found beside the chosen one: (uid, description, slice count).
+    pub other_series: Vec<SeriesSummary>,
+    /// Things the loader did that the user should know (series chosen, tilt corrected...).
+    pub notes: Vec<String>,
+    /// DICOM PatientPosition (0018,5100), when the file says and the code is known.
+    #[serde(skip)]
+    pub position: Option<voyage_core::anatomy::PatientPosition>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct SeriesSummary {
+    pub uid: String,
+    pub description: Option<String>,
+    pub modality: Option<String>,
+    pub slices: usize,
+}
+
+/// A loaded volume of Hounsfield units (or labels, for masks) and what came with it.
+#[derive(Clone, Debug)]
+pub struct Loaded {
+    pub volume: Volume<i16>,
+    pub meta: Meta,
+}
+
+/// Loads any supported volume from a path (file or DICOM folder).
+pub fn load(path: &Path, opts: &LoadOptions) -> Result<Loaded> {
+    let md = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+    if md.is_dir() {
+        return dicom::load_dir(path, opts);
+    }
+    match detect_format(path)? {
+        Format::Nifti => nifti::load(path),
+        Format::MetaImage => metaimage::load(path),
+        Format::Nrrd => nrrd::load(path),
+        Format::Dicom => dicom::load_file(path, opts),
+    }
+}
+
+/// Decides the format of a file from its name, then from its first bytes.
+pub fn detect_format(path: &Path) -> Result<Format> {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    if name.ends_with(".nii") || name.ends_with(".nii.gz") {
+        return Ok(Format::Nifti);
+    }
+    if name.ends_with(".mha") || name.ends_with(".mhd") {
+        return Ok(Format::MetaImage);
+    }
+    if name.ends_with(".nrrd") || name.ends_with(".nhdr") {
+        return Ok(Format::Nrrd);
+    }
+    let mut head = [0u8; 352];
+    let n = read_prefix(path, &mut head)?;
+    let head = &head[..n];
+    if n >= 132 && &head[128..132] == b"DICM" {
+        return Ok(Format::Dicom);
+    }
+    if head.starts_with(b"NRRD") {
+        return Ok(Format::Nrrd);
+    }
+    if n >= 348 && (&head[344..348] == b"n+1\0" || &head[344..348] == b"ni1\0") {
+        return Ok(Format::Nifti);
+    }
+    if name.ends_with(".dcm")
+        || name.ends_with(".dicom")
+        || !name.contains('.')
+        || name.starts_with("ct.")
+    {
+        // DICOM files without the preamble (old ACR-NEMA style) and extension-less names.
+        return Ok(Format::Dicom);
+    }
+    Err(Error::format(
+        path,
+        "unknown file format (expected DICOM, NIfTI, MetaImage or NRRD)",
+    ))
+}
+
+fn read_prefix(path: &Path, buf: &mut [u8]) -> Result<usize> {
+    use std::io::Read;
+    let mut f = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut n = 0;
+    while n < buf.len() {
+        match f.read(&mut buf[n..]) {
+            Ok(0) => break,
+            Ok(k) => n += k,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(Error::io(path, e)),
+        }
+    }
+    Ok(n)
+}
+
+/// Attaches a path to an error that did not have one.
+pub(crate) fn at(path: &Path) -> impl Fn(Error) -> Error + '_ {
+    move |e| match e {
+        Error::Invalid(msg) => Error::format(path, msg),
+        other => other,
+    }
+}
+
+/// Returns the path with its extension(s) replaced, e.g. for the .raw of a .mhd.
+pub(crate) fn sibling(path: &Path, file_name: &str) -> PathBuf {
+    path.parent()
+        .map(|p| p.join(file_name))
+        .unwrap_or_else(|| PathBuf::from(file_name))
+}

@@ -1,0 +1,502 @@
+//! Automatic flight: the submarine left to the potential field, from one end of the colon to
+//! the other, at a fixed frame rate, with local minima of V (paper Fig. 3d) detected and
+//! escaped.
+//!
+//! A **stall** is a stretch of `stall_window_s` simulated seconds in which Dt fell by less
+//! than `stall_progress_mm`. The escape pulls the submarine toward a centerline point ahead
+//! (out of the pocket, toward the goal) with a force of `escape_factor`·Ct for `escape_s`
+//! seconds — the user's click of §3.3, made by the autopilot — 1.5 times harder for each
+//! stall in a row. A flight that stalls `max_stalls` times, or runs past
+//! `max_sim_s`, ends unreached (a permanent stall).
+
+use std::time::Instant;
+
+use glam::DVec3;
+use serde::Serialize;
+
+use crate::{
+    camera::Pose,
+    potential::{Direction, DistanceStore, PotentialField, PotentialParams},
+    submarine::{Dynamics, Input, Modes, Safety, Submarine},
+};
+use voyage_core::{Error, Result, centerline::Centerline};
+
+#[derive(Clone, Debug)]
+pub struct FlightOptions {
+    pub fps: f64,
+    pub potential: PotentialParams,
+    pub dynamics: Dynamics,
+    pub modes: Modes,
+    pub safety: Safety,
+    /// The goal is reached when Dt ≤ this (mm); None: 10 mm or the lumen radius at the goal,
+    /// whichever is larger.
+    pub reach_mm: Option<f64>,
+    /// None: centerline length / 5 mm/s + 60 s.
+    pub max_sim_s: Option<f64>,
+    pub stall_window_s: f64,
+    pub stall_progress_mm: f64,
+    pub escape_s: f64,
+    pub escape_factor: f64,
+    pub max_stalls: usize,
+    /// Keep every frame's pose (for trajectories and movies).
+    pub keep_poses: bool,
+    /// Stretches of the centerline (arc mm from the source) through bridged gaps, which the
+    /// flight glides along at `glide_mm_s` (see [`Autopilot::glide`]).
+    pub collapsed_spans: Vec<[f64; 2]>,
+    pub glide_mm_s: f64,
+}
+
+impl Default for FlightOptions {
+    fn default() -> Self {
+        FlightOptions {
+            fps: 30.0,
+            potential: PotentialParams::default(),
+            dynamics: Dynamics::default(),
+            modes: Modes {
+                compass: true,
+                leveling: true,
+                still: false,
+            },
+            safety: Safety::default(),
+            reach_mm: None,
+            max_sim_s: None,
+            stall_window_s: 2.0,
+            stall_progress_mm: 3.0,
+            escape_s: 1.5,
+            escape_factor: 1.5,
+            max_stalls: 60,
+            keep_poses: true,
+            collapsed_spans: Vec::new(),
+            glide_mm_s: 10.0,
+        }
+    }
+}
+
+impl FlightOptions {
+    /// The defaults, fitted to the study (see [`FlightOptions::fitted_to`]).
+    pub fn for_study(study: &voyage_core::prep::Study) -> FlightOptions {
+        FlightOptions::default().fitted_to(study)
+    }
+
+    /// These options with gravity from the study's patient position and its bridged gaps.
+    pub fn fitted_to(self, study: &voyage_core::prep::Study) -> FlightOptions {
+        FlightOptions {
+            dynamics: self.dynamics.with_gravity_along(study.gravity_local()),
+            collapsed_spans: study.collapsed_spans.clone(),
+            ..self
+        }
+    }
+}
+
+/// The outcome of one automatic flight.
+#[derive(Clone, Debug, Serialize)]
+pub struct Flight {
+    pub direction: Direction,
+    pub reached: bool,
+    pub frames: usize,
+    pub sim_seconds: f64,
+    pub min_wall_distance_mm: f64,
+    pub mean_wall_distance_mm: f64,
+    /// Mean lumen radius (Ds of the nearest centerline point) along the flight.
+    pub mean_local_radius_mm: f64,
+    pub stalls: usize,
+    pub path_length_mm: f64,
+    /// Mean wall time of the physics per frame (ns).
+    pub step_ns: f64,
+    pub substeps: usize,
+    pub clipped_substeps: usize,
+    /// Dt left to the goal at the end (mm).
+    pub final_dt_mm: f64,
+    /// Mean angle between z_body and the direction of travel (the path's tangent over ±¼ s),
+    /// degrees, over frames that moved.
+    pub mean_heading_error_deg: f64,
+    #[serde(skip)]
+    pub poses: Vec<Pose>,
+}
+
+/// The centerline as the flight sees it: points from the flight's start to its goal.
+struct Guide {
+    points: Vec<DVec3>,
+    radius: Vec<f64>,
+    /// Arc length from the flight's start (mm).
+    arc: Vec<f64>,
+}
+
+impl Guide {
+    fn new(cl: &Centerline, dir: Direction) -> Self {
+        let mut points: Vec<DVec3> = cl.points_mm.iter().map(|p| DVec3::from_array(*p)).collect();
+        let mut radius = cl.radius_mm.clone();
+        let mut arc: Vec<f64> = cl.arc_mm.clone();
+        if dir == Direction::Backward {
+            points.reverse();
+            radius.reverse();
+            arc = arc.iter().rev().map(|a| cl.length_mm - a).collect();
+        }
+        Guide {
+            points,
+            radius,
+            arc,
+        }
+    }
+
+    /// The point at arc length `s` (mm from the flight's start) and the index after it.
+    fn at_arc(&self, s: f64) -> (DVec3, usize) {
+        let i = self
+            .arc
+            .partition_point(|&a| a < s)
+            .clamp(1, self.points.len() - 1);
+        let (a, b) = (self.arc[i - 1], self.arc[i]);
+        let t = if b > a {
+            ((s - a) / (b - a)).clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+        (self.points[i - 1].lerp(self.points[i], t), i)
+    }
+    fn nearest(&self, x: DVec3) -> usize {
+        let mut best = (f64::INFINITY, 0);
+        for (i, p) in self.points.iter().enumerate() {
+            let d = p.distance_squared(x);
+            if d < best.0 {
+                best = (d, i);
+            }
+        }
+        best.1
+    }
+    /// Unit direction of the centerline toward the goal at point i.
+    fn ahead(&self, i: usize) -> DVec3 {
+        let n = self.points.len();
+        let a = i.min(n - 1);
+        let b = (i + 5).min(n - 1);
+        let a = if a == b { a.saturating_sub(5) } else { a };
+        (self.points[b] - self.points[a]).normalize_or_zero()
+    }
+    /// Unit direction from `x` to the centerline point twice the local radius (at least
+    /// 10 mm) beyond point i: out of a pocket and on.
+    fn toward_ahead(&self, i: usize, x: DVec3) -> DVec3 {
+        let reach = (2.0 * self.radius[i]).max(10.0);
+        let mut j = i;
+        while j + 1 < self.points.len() && self.points[j].distance(self.points[i]) < reach {
+            j += 1;
+        }
+        (self.points[j] - x)
+            .try_normalize()
+            .unwrap_or_else(|| self.ahead(i))
+    }
+}
+
+/// The autopilot of a flight, frame by frame: it watches progress toward the goal and,
+/// when the submarine stalls in a local minimum of V, pushes it toward the centerline ahead
+/// (see the module comment). [`fly`] uses it without a user; the navigator uses it while
+/// the flight plays, beside the user's own force.
+pub struct Autopilot {
+    guide: Guide,
+    stall_window_s: f64,
+    stall_progress_mm: f64,
+    escape_s: f64,
+    escape_factor: f64,
+    /// Start of the current stall window: (time, Dt then).
+    window_start: (f64, f64),
+    escape_until: f64,
+    in_a_row: usize,
+    near: usize,
+    /// The goal counts as reached when Dt is at most this (mm).
+    pub reach_mm: f64,
+    /// Stalls detected so far.
+    pub stalls: usize,
+    /// Arc ranges (mm from the flight's start) glided along: bridged gaps with the narrowing
+    /// before them, where the wall term of V would hold the submarine back.
+    glides: Vec<[f64; 2]>,
+    glide_mm_s: f64,
+    /// Where the glide has got to (arc mm), while gliding.
+    glide_arc: Option<f64>,
+    /// The glide that last reached its end: not glided again from inside it.
+    glided: Option<usize>,
+    up: DVec3,
+}
+
+/// A glide starts this far (mm) before a bridged gap: the lumen narrows toward it and the
+/// wall term would stop the submarine there.
+const GLIDE_BEFORE_MM: f64 = 25.0;
+/// ... and ends this far past it.
+const GLIDE_AFTER_MM: f64 = 5.0;
+
+impl Autopilot {
+    /// An autopilot for a flight in direction `dir` starting at `x`, where Dt is `dt_now`.
+    pub fn new(
+        cl: &Centerline,
+        dir: Direction,
+        opts: &FlightOptions,
+        x: DVec3,
+        dt_now: f64,
+    ) -> Self {
+        let guide = Guide::new(cl, dir);
+        let near = guide.nearest(x);
+        let goal_radius = *guide.radius.last().unwrap_or(&0.0);
+        let reach_mm = opts.reach_mm.unwrap_or(goal_radius.max(10.0));
+        let glides = opts
+            .collapsed_spans
+            .iter()
+            .map(|s| match dir {
+                Direction::Forward => [s[0], s[1]],
+                Direction::Backward => [cl.length_mm - s[1], cl.length_mm - s[0]],
+            })
+            .map(|s| [s[0] - GLIDE_BEFORE_MM, s[1] + GLIDE_AFTER_MM])
+            .collect();
+        Autopilot {
+            glides,
+            glide_mm_s: opts.glide_mm_s,
+            glide_arc: None,
+            glided: None,
+            up: -opts.dynamics.gravity,
+            reach_mm,
+            guide,
+            stall_window_s: opts.stall_window_s,
+            stall_progress_mm: opts.stall_progress_mm,
+            escape_s: opts.escape_s,
+            escape_factor: opts.escape_factor,
+            window_start: (0.0, dt_now),
+            escape_until: f64::NEG_INFINITY,
+            in_a_row: 0,
+            near,
+            stalls: 0,
+        }
+    }
+
+    /// The autopilot's force for the frame starting at time `t` with the submarine at `x`
+    /// and Dt = `dt_now`: zero, or an escape push scaled by Ct.
+    pub fn input(&mut self, t: f64, dt_now: f64, x: DVec3, ct: f64) -> Input {
+        // Stall: too little progress over the window (not while escaping). Each stall in a
+        // row pushes harder.
+        if t >= self.escape_until && t - self.window_start.0 >= self.stall_window_s {
+            if self.window_start.1 - dt_now < self.stall_progress_mm {
+                self.stalls += 1;
+                self.in_a_row += 1;
+                self.escape_until = t + self.escape_s;
+            } else {
+                self.in_a_row = 0;
+            }
+            self.window_start = (t, dt_now);
+        }
+        let mut input = Input::default();
+        if t < self.escape_until {
+            let boost = 1.5f64.powi(self.in_a_row.saturating_sub(1).min(8) as i32);
+            input.force =
+                self.guide.toward_ahead(self.near, x) * self.escape_factor * boost * ct.max(1.0);
+        }
+        input
+    }
+
+    /// Restarts the stall watch (the user steered, or the submarine was moved): what happens
+    /// next is not the field's doing.
+    pub fn restart(&mut self, t: f64, dt_now: f64, x: DVec3) {
+        self.watch_from(t, dt_now);
+        self.near = self.guide.nearest(x);
+        self.glide_arc = None;
+        self.glided = None;
+    }
+
+    /// Starts the stall watch afresh (a glide is progress, not a stall).
+    pub fn watch_from(&mut self, t: f64, dt_now: f64) {
+        self.window_start = (t, dt_now);
+        self.escape_until = f64::NEG_INFINITY;
+        self.in_a_row = 0;
+    }
+
+    /// Follows the submarine to `x` after a frame; returns the index of the nearest point of
+    /// the guide (the centerline from the flight's start to its goal).
+    pub fn moved_to(&mut self, x: DVec3) -> usize {
+        self.near = nearest_from(&self.guide, x, self.near);
+        self.near
+    }
+
+    /// In a bridged gap (or the narrowing before it): the pose `dt` seconds further along the
+    /// centerline at the glide speed, looking ahead; None elsewhere. There is no air in the
+    /// gap for the field to act in: the flight keeps to the path, slowly.
+    pub fn glide(&mut self, x: DVec3, dt: f64) -> Option<Pose> {
+        let i = self.moved_to(x);
+        let here = self
+            .glide_arc
+            .unwrap_or(self.guide.arc[i])
+            .max(self.guide.arc[i]);
+        let k = self
+            .glides
+            .iter()
+            .position(|g| g[0] <= here && here < g[1])?;
+        if self.glided == Some(k) && self.glide_arc.is_none() {
+            return None;
+        }
+        let end = self.glides[k][1].min(*self.guide.arc.last()?);
+        let next = (here + self.glide_mm_s * dt).min(end);
+        self.glide_arc = (next < end).then_some(next);
+        self.glided = Some(k);
+        let (p, j) = self.guide.at_arc(next);
+        Some(Pose::looking(
+            p,
+            self.guide.ahead(j.saturating_sub(1)),
+            self.up,
+        ))
+    }
+
+    /// Lumen radius at the guide's point `i` (mm).
+    pub fn radius(&self, i: usize) -> f64 {
+        self.guide.radius[i]
+    }
+}
+
+/// Where a flight starts: the first centerline point from the start end that lies in the
+/// safe set, looking along the centerline, up against gravity.
+pub fn start_pose<S: DistanceStore>(
+    field: &PotentialField<S>,
+    cl: &Centerline,
+    dir: Direction,
+    opts: &FlightOptions,
+) -> Result<Pose> {
+    if cl.points_mm.len() < 2 {
+        return Err(Error::invalid("the centerline is empty"));
+    }
+    let guide = Guide::new(cl, dir);
+    let up = -opts.dynamics.gravity;
+    for (i, &p) in guide.points.iter().enumerate() {
+        let s = field.sample(p, dir);
+        if s.lumen_corners == 8 && s.ds >= opts.safety.min_wall_mm {
+            return Ok(Pose::looking(p, guide.ahead(i), up));
+        }
+    }
+    Err(Error::invalid(format!(
+        "no centerline point lies in the lumen at least {} mm from the wall",
+        opts.safety.min_wall_mm
+    )))
+}
+
+/// Flies from one end to the other without a user.
+pub fn fly<S: DistanceStore>(
+    field: &PotentialField<S>,
+    cl: &Centerline,
+    dir: Direction,
+    opts: &FlightOptions,
+) -> Result<Flight> {
+    let guide = Guide::new(cl, dir);
+    let pose = start_pose(field, cl, dir, opts)?;
+    let mut sub = Submarine::new(field, pose, opts.safety)?;
+    sub.potential = opts.potential;
+    sub.dynamics = opts.dynamics;
+    sub.modes = opts.modes;
+    sub.direction = dir;
+
+    let max_sim = opts.max_sim_s.unwrap_or(cl.length_mm / 5.0 + 60.0);
+    let frame_dt = 1.0 / opts.fps;
+
+    let mut f = Flight {
+        direction: dir,
+        reached: false,
+        frames: 0,
+        sim_seconds: 0.0,
+        min_wall_distance_mm: f64::INFINITY,
+        mean_wall_distance_mm: 0.0,
+        mean_local_radius_mm: 0.0,
+        stalls: 0,
+        path_length_mm: 0.0,
+        step_ns: 0.0,
+        substeps: 0,
+        clipped_substeps: 0,
+        final_dt_mm: f64::INFINITY,
+        mean_heading_error_deg: 0.0,
+        poses: Vec::new(),
+    };
+    let dt_at = |x: DVec3| field.sample(x, dir).dt.unwrap_or(f64::INFINITY);
+    let (mut wall_sum, mut radius_sum) = (0.0, 0.0);
+    let mut physics_ns = 0u128;
+    let mut pilot = Autopilot::new(cl, dir, opts, sub.state.x, dt_at(sub.state.x));
+    let reach = pilot.reach_mm;
+    let mut track: Vec<(DVec3, DVec3)> = Vec::new();
+    if opts.keep_poses {
+        f.poses.push(sub.pose());
+    }
+    loop {
+        let t = sub.state.t;
+        let dt_now = dt_at(sub.state.x);
+        f.final_dt_mm = dt_now;
+        if dt_now <= reach {
+            f.reached = true;
+            break;
+        }
+        if t >= max_sim || pilot.stalls >= opts.max_stalls {
+            break;
+        }
+        let before = sub.state.x;
+        let clock = Instant::now();
+        match pilot.glide(sub.state.x, frame_dt) {
+            Some(pose) if sub.glide_to(field, pose, frame_dt) => {
+                pilot.watch_from(sub.state.t, dt_at(sub.state.x));
+            }
+            _ => {
+                let input = pilot.input(t, dt_now, sub.state.x, sub.potential.ct);
+                let r = sub.step(field, frame_dt, &input);
+                f.substeps += r.substeps;
+                f.clipped_substeps += r.clipped;
+            }
+        }
+        physics_ns += clock.elapsed().as_nanos();
+        f.frames += 1;
+
+        let x = sub.state.x;
+        f.path_length_mm += x.distance(before);
+        let ds = field.ds(x);
+        f.min_wall_distance_mm = f.min_wall_distance_mm.min(ds);
+        wall_sum += ds;
+        radius_sum += guide.radius[pilot.moved_to(x)];
+        track.push((x, sub.pose().z_body()));
+        if opts.keep_poses {
+            f.poses.push(sub.pose());
+        }
+    }
+    f.sim_seconds = sub.state.t;
+    f.stalls = pilot.stalls;
+    if f.frames > 0 {
+        f.mean_wall_distance_mm = wall_sum / f.frames as f64;
+        f.mean_local_radius_mm = radius_sum / f.frames as f64;
+        f.step_ns = physics_ns as f64 / f.frames as f64;
+    } else {
+        f.min_wall_distance_mm = field.ds(sub.state.x);
+        f.mean_wall_distance_mm = f.min_wall_distance_mm;
+    }
+    f.mean_heading_error_deg = mean_heading_error(&track, opts.fps);
+    Ok(f)
+}
+
+/// Mean angle (degrees) between the view z_body and the direction of travel: the path's
+/// tangent by central differences over ±¼ s, on frames that moved at least 2 mm in that time.
+fn mean_heading_error(track: &[(DVec3, DVec3)], fps: f64) -> f64 {
+    let k = (0.25 * fps).round().max(1.0) as usize;
+    let (mut sum, mut n) = (0.0, 0usize);
+    for i in k..track.len().saturating_sub(k) {
+        let travel = track[i + k].0 - track[i - k].0;
+        if travel.length() >= 2.0 {
+            sum += track[i].1.angle_between(travel).to_degrees();
+            n += 1;
+        }
+    }
+    if n == 0 { 0.0 } else { sum / n as f64 }
+}
+
+/// The nearest centerline point, searched near the last one first (a flight moves a little
+/// per frame), falling back to all points when the local best is far.
+fn nearest_from(guide: &Guide, x: DVec3, last: usize) -> usize {
+    let n = guide.points.len();
+    let lo = last.saturating_sub(40);
+    let hi = (last + 40).min(n);
+    let (mut best, mut bi) = (f64::INFINITY, last);
+    for i in lo..hi {
+        let d = guide.points[i].distance_squared(x);
+        if d < best {
+            best = d;
+            bi = i;
+        }
+    }
+    if best.sqrt() > guide.radius[bi].max(5.0) {
+        guide.nearest(x)
+    } else {
+        bi
+    }
+}

@@ -1,0 +1,20 @@
+//! Navigation through a prepared colon ([`voyage_core::Study`]): the camera, the potential
+//! field that pulls it from rectum to cecum (paper Eq. 2), the submarine that obeys it
+//! (Eqs. 3–9) and never leaves the safe set, and the automatic flight with its stall watch.
+//!
+//! Everything is in volume-local millimetres, like the study.
+
+mod camera;
+mod flight;
+mod potential;
+mod submarine;
+
+pub use camera::{Camera, Pose};
+pub use flight::{Autopilot, Flight, FlightOptions, fly, start_pose};
+pub use potential::{
+    BoxStore, BrickStore, DS_FLOOR_MM, Direction, DistanceStore, Navigable, PotentialField,
+    PotentialParams, Sample, SortedStore, Voxel, potential_field,
+};
+pub use submarine::{
+    Dynamics, Forces, Input, Modes, Safety, State, StepReport, Submarine, delta_q, euler_step,
+};

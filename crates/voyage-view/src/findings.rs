@@ -1,0 +1,324 @@
+//! The radiologist's findings: markers dropped on the colon wall under the mouse cursor, each
+//! with a note and the camera pose to fly back to; two-click measurements in mm. Their
+//! export is `voyage_io::export_findings`.
+//!
+//! Everything here is in volume-local mm, the frame of the mesh and of the camera's poses;
+//! LPS appears only in the exported files.
+
+use std::ops::Range;
+
+use glam::DVec3;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use voyage_nav::Pose;
+
+use crate::mesh::CellMesh;
+
+/// Where a ray first meets the surface.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Volume-local mm.
+    pub point: DVec3,
+    /// Unit geometric normal of the triangle, facing the ray's origin (into the lumen).
+    pub normal: DVec3,
+    /// Index into `mesh.triangles` (the draw index, as in the rasterizer's id buffer).
+    pub triangle: u32,
+    /// From the ray's origin to `point`, mm.
+    pub distance: f64,
+}
+
+/// The nearest front-facing triangle along the ray from `origin` along `dir` (any length),
+/// searching only `cells` (those the renderer drew) or, with `None`, every cell. Back faces
+/// are ignored as the renderer culls them, so a click always lands on what the user sees;
+/// ties go to the smaller triangle index, as in the rasterizer's id buffer.
+pub fn pick(mesh: &CellMesh, cells: Option<&[u32]>, origin: DVec3, dir: DVec3) -> Option<Hit> {
+    let dir = dir.try_normalize()?;
+    if !origin.is_finite() {
+        return None;
+    }
+    let in_range = |r: &Range<u32>| nearest_in_range(mesh, r.clone(), origin, dir);
+    // A click searches about a million triangles; cells are the natural parallel chunks.
+    let best = match cells {
+        Some(list) => list
+            .par_iter()
+            .filter_map(|&c| mesh.cell_ranges.get(c as usize))
+            .filter_map(in_range)
+            .min_by(nearer),
+        None => mesh
+            .cell_ranges
+            .par_iter()
+            .filter_map(in_range)
+            .min_by(nearer),
+    }?;
+    let (distance, triangle) = best;
+    let [a, b, c] = triangle_points(mesh, triangle);
+    Some(Hit {
+        point: origin + dir * distance,
+        normal: (b - a).cross(c - a).normalize(),
+        triangle,
+        distance,
+    })
+}
+
+/// Orders (distance, triangle) candidates: nearer first, then the smaller triangle.
+fn nearer(x: &(f64, u32), y: &(f64, u32)) -> std::cmp::Ordering {
+    x.0.total_cmp(&y.0).then(x.1.cmp(&y.1))
+}
+
+fn nearest_in_range(
+    mesh: &CellMesh,
+    range: Range<u32>,
+    origin: DVec3,
+    dir: DVec3,
+) -> Option<(f64, u32)> {
+    let mut best: Option<(f64, u32)> = None;
+    for t in range {
+        let [a, b, c] = triangle_points(mesh, t);
+        if let Some(d) = intersect_front(origin, dir, a, b, c) {
+            // Ascending t: a strictly nearer hit replaces, an equal one keeps the smaller id.
+            if best.is_none_or(|(bd, _)| d < bd) {
+                best = Some((d, t));
+            }
+        }
+    }
+    best
+}
+
+#[inline]
+fn triangle_points(mesh: &CellMesh, t: u32) -> [DVec3; 3] {
+    mesh.triangles[t as usize].map(|v| DVec3::from_array(mesh.positions[v as usize].map(f64::from)))
+}
+
+/// Möller–Trumbore, front faces only: the distance along the unit `dir` where the ray meets
+/// triangle (a, b, c), if it does in front of the origin and against the normal
+/// (b − a) × (c − a). Edges are inclusive so that a ray through a shared edge hits a triangle.
+#[inline]
+fn intersect_front(origin: DVec3, dir: DVec3, a: DVec3, b: DVec3, c: DVec3) -> Option<f64> {
+    let e1 = b - a;
+    let e2 = c - a;
+    let p = dir.cross(e2);
+    // det = −dir · (e1 × e2): positive exactly when the ray meets the face from its normal's
+    // side. Back faces, edge-on and degenerate triangles (and NaN) fail here.
+    let det = e1.dot(p);
+    if det <= 0.0 || det.is_nan() {
+        return None;
+    }
+    let s = origin - a;
+    let u = s.dot(p);
+    if u < 0.0 || u > det {
+        return None;
+    }
+    let q = s.cross(e1);
+    let v = dir.dot(q);
+    if v < 0.0 || u + v > det {
+        return None;
+    }
+    let t = e2.dot(q) / det;
+    (t > 0.0).then_some(t)
+}
+
+/// A finding on the wall.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Marker {
+    pub label: String,
+    pub note: String,
+    /// Volume-local mm.
+    pub position: DVec3,
+    /// Unit normal of the wall there, into the lumen.
+    pub normal: DVec3,
+    /// The camera when the marker was dropped, to fly back to.
+    pub view: Pose,
+}
+
+/// A distance between two points on the wall (two clicks).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Measurement {
+    pub label: String,
+    /// Volume-local mm.
+    pub a: DVec3,
+    pub b: DVec3,
+}
+
+impl Measurement {
+    /// Volume-local mm are real mm (spacing applied), so this is the physical distance.
+    pub fn length_mm(&self) -> f64 {
+        (self.b - self.a).length()
+    }
+}
+
+/// Everything the radiologist noted on one study.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Findings {
+    pub markers: Vec<Marker>,
+    pub measurements: Vec<Measurement>,
+}
+
+impl Findings {
+    /// Adds a marker labelled M1, M2, ... (one past the highest number in use, so that a
+    /// label the radiologist may already have quoted never names a different finding while
+    /// it exists); returns it.
+    pub fn add_marker(
+        &mut self,
+        position: DVec3,
+        normal: DVec3,
+        view: Pose,
+        note: impl Into<String>,
+    ) -> &Marker {
+        let label = next_label("M", self.markers.iter().map(|m| m.label.as_str()));
+        self.markers.push(Marker {
+            label,
+            note: note.into(),
+            position,
+            normal,
+            view,
+        });
+        self.markers.last().expect("just pushed")
+    }
+
+    /// Adds a measurement labelled L1, L2, ...; returns it.
+    pub fn add_measurement(&mut self, a: DVec3, b: DVec3) -> &Measurement {
+        let label = next_label("L", self.measurements.iter().map(|m| m.label.as_str()));
+        self.measurements.push(Measurement { label, a, b });
+        self.measurements.last().expect("just pushed")
+    }
+
+    pub fn marker(&self, label: &str) -> Option<&Marker> {
+        self.markers.iter().find(|m| m.label == label)
+    }
+
+    /// For editing a marker's note.
+    pub fn marker_mut(&mut self, label: &str) -> Option<&mut Marker> {
+        self.markers.iter_mut().find(|m| m.label == label)
+    }
+
+    pub fn measurement(&self, label: &str) -> Option<&Measurement> {
+        self.measurements.iter().find(|m| m.label == label)
+    }
+
+    pub fn remove_marker(&mut self, label: &str) -> Option<Marker> {
+        let i = self.markers.iter().position(|m| m.label == label)?;
+        Some(self.markers.remove(i))
+    }
+
+    pub fn remove_measurement(&mut self, label: &str) -> Option<Measurement> {
+        let i = self.measurements.iter().position(|m| m.label == label)?;
+        Some(self.measurements.remove(i))
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.markers.is_empty() && self.measurements.is_empty()
+    }
+}
+
+/// `prefix` followed by one more than the highest number among `labels` of that form.
+fn next_label<'a>(prefix: &str, labels: impl Iterator<Item = &'a str>) -> String {
+    let max = labels
+        .filter_map(|l| l.strip_prefix(prefix)?.parse::<u64>().ok())
+        .max()
+        .unwrap_or(0);
+    format!("{prefix}{}", max + 1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two squares facing −z (toward a camera at the origin looking along +z), two triangles
+    /// each, one cell each: x, y ∈ [−1, 1] at z = 10 (cell 0) and at z = 5 (cell 1).
+    fn two_walls() -> CellMesh {
+        let mut mesh = CellMesh::default();
+        for z in [10.0f32, 5.0] {
+            let base = mesh.positions.len() as u32;
+            mesh.positions.extend([
+                [-1.0, -1.0, z],
+                [-1.0, 1.0, z],
+                [1.0, -1.0, z],
+                [1.0, 1.0, z],
+            ]);
+            mesh.normals.extend([[0.0, 0.0, -1.0]; 4]);
+            let start = mesh.triangles.len() as u32;
+            mesh.triangles
+                .extend([[base, base + 1, base + 2], [base + 1, base + 3, base + 2]]);
+            mesh.cell_ranges.push(start..start + 2);
+        }
+        mesh
+    }
+
+    fn one_wall() -> CellMesh {
+        let mut mesh = two_walls();
+        mesh.triangles.truncate(2);
+        mesh.cell_ranges.truncate(1);
+        mesh
+    }
+
+    #[test]
+    fn pick_hits_the_front_face() {
+        let mesh = one_wall();
+        let hit = pick(&mesh, None, DVec3::ZERO, DVec3::new(0.02, -0.03, 1.0) * 3.0).unwrap();
+        assert!(
+            (hit.point - DVec3::new(0.2, -0.3, 10.0)).length() < 1e-12,
+            "{hit:?}"
+        );
+        assert!((hit.distance - hit.point.length()).abs() < 1e-12);
+        assert_eq!(hit.normal, DVec3::new(0.0, 0.0, -1.0));
+        assert_eq!(hit.triangle, 0);
+        // The other triangle of the square (upper right half).
+        assert_eq!(
+            pick(&mesh, None, DVec3::ZERO, DVec3::new(0.05, 0.05, 1.0))
+                .unwrap()
+                .triangle,
+            1
+        );
+    }
+
+    #[test]
+    fn pick_misses_beside_behind_and_back_faces() {
+        let mesh = one_wall();
+        assert_eq!(pick(&mesh, None, DVec3::ZERO, DVec3::X), None);
+        assert_eq!(pick(&mesh, None, DVec3::new(5.0, 5.0, 0.0), DVec3::Z), None);
+        // The wall lies behind the origin.
+        assert_eq!(pick(&mesh, None, DVec3::ZERO, -DVec3::Z), None);
+        // From beyond the wall looking back: its back face, culled as the renderer does.
+        assert_eq!(
+            pick(&mesh, None, DVec3::new(0.1, 0.2, 20.0), -DVec3::Z),
+            None
+        );
+        // No direction, or a NaN one.
+        assert_eq!(pick(&mesh, None, DVec3::ZERO, DVec3::ZERO), None);
+        assert_eq!(pick(&mesh, None, DVec3::ZERO, DVec3::NAN), None);
+    }
+
+    #[test]
+    fn pick_takes_the_nearest_in_the_cells_asked() {
+        let mesh = two_walls();
+        let (o, d) = (DVec3::new(0.3, 0.1, 0.0), DVec3::Z);
+        let hit = pick(&mesh, None, o, d).unwrap();
+        assert!(
+            (hit.distance - 5.0).abs() < 1e-12 && hit.triangle >= 2,
+            "{hit:?}"
+        );
+        assert_eq!(pick(&mesh, Some(&[0, 1]), o, d), Some(hit));
+        // Only the far wall's cell drawn: the far wall.
+        let far = pick(&mesh, Some(&[0]), o, d).unwrap();
+        assert!((far.distance - 10.0).abs() < 1e-12 && far.triangle < 2);
+        // Starting between the walls: the near one is behind.
+        assert!(
+            (pick(&mesh, None, DVec3::new(0.3, 0.1, 7.0), d)
+                .unwrap()
+                .distance
+                - 3.0)
+                .abs()
+                < 1e-12
+        );
+        // No cells, or a cell that does not exist: nothing.
+        assert_eq!(pick(&mesh, Some(&[]), o, d), None);
+        assert_eq!(pick(&mesh, Some(&[7]), o, d), None);
+    }
+
+    #[test]
+    fn a_ray_through_a_shared_edge_hits_the_smaller_triangle() {
+        // The diagonal from (−1, 1) to (1, −1) is shared by triangles 0 and 1.
+        let hit = pick(&one_wall(), None, DVec3::ZERO, DVec3::Z).unwrap();
+        assert_eq!(hit.triangle, 0);
+    }
+}

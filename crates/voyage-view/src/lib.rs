@@ -1,0 +1,29 @@
+//! What the camera sees, without a GPU: the reference rasterizer (depth and triangle-id buffers), the
+//! endoscope shading both renderers share, the surface laid out by cell, and the visibility
+//! strategies that choose which cells to draw (paper §4.3); close-up volume rendering of
+//! the CT in a small box (paper Fig. 9); and the translucency view, the surface coloured by
+//! what lies beneath it.
+//! Markers and measurements ([`Findings`]) are picked on the same surface ([`pick`]).
+
+mod closeup;
+mod findings;
+mod mesh;
+mod raster;
+mod shading;
+#[cfg(feature = "survey")]
+mod survey;
+mod translucency;
+mod visibility;
+
+pub use closeup::{CloseupBox, MAX_HALF_SIZE_MM, TfPoint, TransferFunction, render_closeup};
+pub use findings::{Findings, Hit, Marker, Measurement, pick};
+pub use mesh::{CellMesh, DISPLAY_NORMAL_PASSES, smooth_normals};
+pub use raster::{Frame, NO_TRIANGLE, Pixel, Rasterizer, View, render_rgba, shade};
+pub use shading::{Lighting, encode};
+#[cfg(feature = "survey")]
+pub use survey::{StrategyStats, Survey, look_around, survey};
+pub use translucency::{
+    HALF_SIZE_MM, Material, Surfel, Translucency, TranslucencyOptions, render_translucency,
+    surface_point,
+};
+pub use visibility::{Drawn, Strategy, Visibility};
