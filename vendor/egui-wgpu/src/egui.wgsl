@@ -133,7 +133,7 @@ fn wrap_texel_coord(coord: vec2<i32>, texture_size: vec2<i32>) -> vec2<i32> {
 }
 
 
-// voyage's one change to egui-wgpu 0.37.0 (vendor/egui-wgpu/VOYAGE.md): hardware filtering
+// voyage's change 1 of 2 to egui-wgpu 0.37.0 (vendor/egui-wgpu/VOYAGE.md): hardware filtering
 // only. Upstream branches here on `r_locals.predictable_texture_filtering` (a uniform, off
 // in eframe) to a manual bilinear path with integer modulo wrapping. A GPU skips the branch
 // not taken; Mesa's CPU Vulkan driver (lavapipe) runs both sides under a mask for every
