@@ -44,23 +44,36 @@ impl Default for PrepOptions {
     }
 }
 
-/// The stages, in order, for progress reports.
+/// The stages of [`prepare`] in the order they run: what progress hears of and what
+/// [`Timings`] times (one vocabulary for both).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Stage {
+    /// The colon from the CT: gas, tagged fluid, the chain of segments, the lumen.
     Segment,
-    Centerline,
+    /// Electronic cleansing (costs nothing without tagged fluid).
+    Cleanse,
+    /// The skeleton search: endpoints and the raw centerline path.
+    Skeleton,
+    /// Walls where loops touch.
+    Contacts,
     Ds,
+    /// The centerline centred on Ds's ridge and smoothed.
+    Centerline,
+    /// Both Dt fields.
     Dt,
     Surface,
     Cells,
 }
 
 impl Stage {
-    pub const ALL: [Stage; 6] = [
+    pub const ALL: [Stage; 9] = [
         Stage::Segment,
-        Stage::Centerline,
+        Stage::Cleanse,
+        Stage::Skeleton,
+        Stage::Contacts,
         Stage::Ds,
+        Stage::Centerline,
         Stage::Dt,
         Stage::Surface,
         Stage::Cells,
@@ -68,32 +81,80 @@ impl Stage {
     pub fn name(self) -> &'static str {
         match self {
             Stage::Segment => "segment",
+            Stage::Cleanse => "cleanse",
+            Stage::Skeleton => "skeleton",
+            Stage::Contacts => "contacts",
             Stage::Ds => "ds",
-            Stage::Dt => "dt",
             Stage::Centerline => "centerline",
+            Stage::Dt => "dt",
             Stage::Surface => "surface",
             Stage::Cells => "cells",
         }
     }
+    /// The stage's place in [`Stage::ALL`].
+    pub fn index(self) -> usize {
+        self as usize
+    }
 }
 
-/// Wall time per stage, in ms.
-#[derive(Clone, Debug, Default, Serialize)]
+/// Wall time per stage in ms (`timings[Stage::Ds]`), and in all after loading. As JSON: one
+/// number per stage name, then `total_after_load`.
+#[derive(Clone, Debug, Default)]
 pub struct Timings {
-    pub segment: f64,
-    /// Electronic cleansing (0 without tagged fluid).
-    pub cleanse: f64,
-    /// The skeleton search: endpoints and the raw centerline path.
-    pub skeleton: f64,
-    /// Walls where loops touch.
-    pub contacts: f64,
-    pub ds: f64,
-    /// The two Dt fields.
-    pub dt: f64,
-    pub centerline: f64,
-    pub surface: f64,
-    pub cells: f64,
+    ms: [f64; Stage::ALL.len()],
     pub total_after_load: f64,
+}
+
+impl std::ops::Index<Stage> for Timings {
+    type Output = f64;
+    fn index(&self, stage: Stage) -> &f64 {
+        &self.ms[stage.index()]
+    }
+}
+
+impl std::ops::IndexMut<Stage> for Timings {
+    fn index_mut(&mut self, stage: Stage) -> &mut f64 {
+        &mut self.ms[stage.index()]
+    }
+}
+
+impl Serialize for Timings {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let mut map = s.serialize_map(Some(Stage::ALL.len() + 1))?;
+        for stage in Stage::ALL {
+            map.serialize_entry(stage.name(), &self[stage])?;
+        }
+        map.serialize_entry("total_after_load", &self.total_after_load)?;
+        map.end()
+    }
+}
+
+/// Times the stages one after another and tells `progress` as each starts.
+struct Laps<F: FnMut(Stage)> {
+    timings: Timings,
+    running: Option<(Stage, Instant)>,
+    progress: F,
+}
+
+impl<F: FnMut(Stage)> Laps<F> {
+    fn new(progress: F) -> Self {
+        Laps {
+            timings: Timings::default(),
+            running: None,
+            progress,
+        }
+    }
+    fn start(&mut self, stage: Stage) {
+        self.stop();
+        (self.progress)(stage);
+        self.running = Some((stage, Instant::now()));
+    }
+    fn stop(&mut self) {
+        if let Some((stage, since)) = self.running.take() {
+            self.timings[stage] += since.elapsed().as_secs_f64() * 1e3;
+        }
+    }
 }
 
 /// Everything preprocessing produces. Geometry in volume-local mm.
@@ -190,19 +251,14 @@ impl Study {
 pub fn prepare(
     mut ct: Volume<i16>,
     opts: &PrepOptions,
-    mut progress: impl FnMut(Stage),
+    progress: impl FnMut(Stage),
 ) -> Result<Study> {
     let start = Instant::now();
-    let mut t = Timings::default();
-    let mut clock = Instant::now();
-    let mut lap = |slot: &mut f64| {
-        *slot = clock.elapsed().as_secs_f64() * 1e3;
-        clock = Instant::now();
-    };
+    let mut laps = Laps::new(progress);
 
-    progress(Stage::Segment);
+    laps.start(Stage::Segment);
     let mut seg = segment(&ct, &opts.segment)?;
-    lap(&mut t.segment);
+    laps.start(Stage::Cleanse);
     let mut cleansing = match (&opts.cleanse, opts.segment.fluid_hu) {
         // A tagged exam: segmentation found tagged fluid in the colon (then stool on the
         // wall is cleansed too; an exam without fluid costs nothing).
@@ -220,11 +276,10 @@ pub fn prepare(
         _ => Cleansing::default(),
     };
     seg.lumen_voxels = seg.lumen_voxels + cleansing.joined_lumen - cleansing.left_lumen;
-    lap(&mut t.cleanse);
 
     // The skeleton search runs on blocks with their own Ds when the lumen is large, so the
     // voxels' Ds waits until the contacts are cut; on a small lumen it needs Ds first.
-    progress(Stage::Centerline);
+    laps.start(Stage::Skeleton);
     // Every Ds below is over this box: cutting contacts only takes lumen away, and a box
     // larger than the lumen's own changes no distance.
     let grid = BoxGrid::around(seg.extent, 1, seg.lumen.dims());
@@ -242,7 +297,7 @@ pub fn prepare(
         &opts.endpoints,
         &opts.centerline,
     )?;
-    lap(&mut t.skeleton);
+    laps.start(Stage::Contacts);
 
     // No wall at the ends: source and target stay lumen.
     let keep = [
@@ -263,21 +318,19 @@ pub fn prepare(
         keep_mm,
         &opts.contacts,
     )?;
-    lap(&mut t.contacts);
 
-    progress(Stage::Ds);
+    laps.start(Stage::Ds);
     let ds_box = match early_ds {
         Some(d) if taken.is_empty() => d,
         _ => distance_to_wall_in(&seg.lumen, grid.clone()),
     };
-    lap(&mut t.ds);
+    laps.start(Stage::Centerline);
     let mut ends = centre_skeleton(&seg.lumen, &ds_box, &sk, &opts.centerline)?;
     // Ds moves into bricks, and the Dt searches work in its box array.
     let mut ds = Bricked::from_field(&ds_box, 0.0);
     let scratch = ds_box.data;
-    lap(&mut t.centerline);
 
-    progress(Stage::Dt);
+    laps.start(Stage::Dt);
     let (mut dt_target, mut dt_source) =
         dt_fields(&seg.lumen, &ds, ends.source, ends.target, scratch)?;
     let joined =
@@ -301,20 +354,18 @@ pub fn prepare(
     }
     seg.lumen_voxels -= contact_voxels;
     let (source, target, cl) = (ends.source, ends.target, ends.centerline);
-    lap(&mut t.dt);
 
-    progress(Stage::Surface);
+    laps.start(Stage::Surface);
     // The surface is cut from the cleansed CT: swapped in for it, and back.
     cleansing.swap(&mut ct);
     let iso = if seg.from_mask { None } else { Some(&ct) };
     let surface = extract_surface(&seg.lumen, iso, &ds.grid, opts.segment.air_hu as f32);
     cleansing.swap(&mut ct);
     let surface = surface?;
-    lap(&mut t.surface);
 
-    progress(Stage::Cells);
+    laps.start(Stage::Cells);
     let cells = build_cells(&seg.lumen, &dt_source.dist, &cl, &surface, &opts.cells)?;
-    lap(&mut t.cells);
+    laps.stop();
 
     let collapsed_spans = collapsed_spans(&cl, &seg);
     if opts.endpoints.source_mm.is_none() || opts.endpoints.target_mm.is_none() {
@@ -327,7 +378,8 @@ pub fn prepare(
         );
         seg.warnings.extend(w);
     }
-    t.total_after_load = start.elapsed().as_secs_f64() * 1e3;
+    let mut timings = laps.timings;
+    timings.total_after_load = start.elapsed().as_secs_f64() * 1e3;
     Ok(Study {
         ct,
         segmentation: seg,
@@ -342,7 +394,7 @@ pub fn prepare(
         collapsed_spans,
         surface,
         cells,
-        timings: t,
+        timings,
     })
 }
 

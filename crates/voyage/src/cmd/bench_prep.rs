@@ -12,7 +12,7 @@ use serde_json::{Value, json};
 use voyage_core::{
     Volume,
     distance::geodesic_distance,
-    prep::{PrepOptions, Study, Timings, prepare},
+    prep::{PrepOptions, Stage, Study, Timings, prepare},
 };
 use voyage_io::{self as io, LoadOptions, nifti};
 use voyage_phantom::{self as phantom, ColonOptions};
@@ -130,19 +130,12 @@ fn measure(name: &str, ct: Volume<i16>, repeats: usize) -> Result<Measured> {
         study = prepare(ct.clone(), &opts, |_| {})?;
         runs.push(study.timings.clone());
     }
-    let med = |f: fn(&Timings) -> f64| median(&mut runs.iter().map(f).collect::<Vec<_>>());
-    let timings = Timings {
-        segment: med(|t| t.segment),
-        cleanse: med(|t| t.cleanse),
-        ds: med(|t| t.ds),
-        skeleton: med(|t| t.skeleton),
-        contacts: med(|t| t.contacts),
-        dt: med(|t| t.dt),
-        centerline: med(|t| t.centerline),
-        surface: med(|t| t.surface),
-        cells: med(|t| t.cells),
-        total_after_load: med(|t| t.total_after_load),
-    };
+    let med = |f: &dyn Fn(&Timings) -> f64| median(&mut runs.iter().map(f).collect::<Vec<_>>());
+    let mut timings = Timings::default();
+    for stage in Stage::ALL {
+        timings[stage] = med(&|t| t[stage]);
+    }
+    timings.total_after_load = med(&|t| t.total_after_load);
     let lumen = &study.segmentation.lumen;
     let mut single = Vec::new();
     for _ in 0..repeats.max(1) {
@@ -243,18 +236,18 @@ fn report(rounds: &[(Measured, Value)], threads: usize) -> Value {
         "peak_rss_mb": m.peak_rss_mb,
         "reference_triangles": refs.get("vtk_flying_edges").and_then(|v| v.get("triangles")).cloned(),
         "rows": [
-            row("segment", |m| m.timings.segment, "-", "", 60.0, None),
-            row("cleanse (0 without tagged fluid)", |m| m.timings.cleanse, "-", "", 150.0, None),
-            row("ds", |m| m.timings.ds, "edt (1 thread)", "edt", 100.0, Some(5.0)),
-            row("ds", |m| m.timings.ds, "scipy.ndimage EDT", "scipy_edt", 100.0, None),
+            row("segment", |m| m.timings[Stage::Segment], "-", "", 60.0, None),
+            row("cleanse (0 without tagged fluid)", |m| m.timings[Stage::Cleanse], "-", "", 150.0, None),
+            row("ds", |m| m.timings[Stage::Ds], "edt (1 thread)", "edt", 100.0, Some(5.0)),
+            row("ds", |m| m.timings[Stage::Ds], "scipy.ndimage EDT", "scipy_edt", 100.0, None),
             row("one Dt", |m| m.dt_single_ms, "dijkstra3d", "dijkstra3d", 100.0, Some(4.0)),
-            row("endpoints + skeleton path", |m| m.timings.skeleton, "-", "", 200.0, None),
-            row("centerline refinement", |m| m.timings.centerline, "-", "", 50.0, None),
-            row("touching loops (on the skeleton's blocks)", |m| m.timings.contacts, "-", "", f64::NAN, None),
-            row("both Dt fields", |m| m.timings.dt, "-", "", 200.0, None),
-            row("surface", |m| m.timings.surface, "VTK flying edges", "vtk_flying_edges", 80.0, Some(1.0)),
-            row("surface", |m| m.timings.surface, "scikit-image", "skimage_marching_cubes", 80.0, None),
-            row("cells", |m| m.timings.cells, "-", "", 50.0, None),
+            row("endpoints + skeleton path", |m| m.timings[Stage::Skeleton], "-", "", 200.0, None),
+            row("centerline refinement", |m| m.timings[Stage::Centerline], "-", "", 50.0, None),
+            row("touching loops (on the skeleton's blocks)", |m| m.timings[Stage::Contacts], "-", "", f64::NAN, None),
+            row("both Dt fields", |m| m.timings[Stage::Dt], "-", "", 200.0, None),
+            row("surface", |m| m.timings[Stage::Surface], "VTK flying edges", "vtk_flying_edges", 80.0, Some(1.0)),
+            row("surface", |m| m.timings[Stage::Surface], "scikit-image", "skimage_marching_cubes", 80.0, None),
+            row("cells", |m| m.timings[Stage::Cells], "-", "", 50.0, None),
             row("total after load", |m| m.timings.total_after_load, "-", "", 500.0, None),
         ],
     })

@@ -200,6 +200,8 @@ fn progress_bar() -> Option<ProgressBar> {
 
 fn summary(s: &Study, g: &Geometry, load_ms: f64) -> serde_json::Value {
     let t = &s.timings;
+    let mut timings_ms = json!(t);
+    timings_ms["load"] = json!(load_ms);
     json!({
         "lumen_voxels": s.segmentation.lumen_voxels,
         "from_mask": s.segmentation.from_mask,
@@ -221,19 +223,7 @@ fn summary(s: &Study, g: &Geometry, load_ms: f64) -> serde_json::Value {
         "triangles": s.surface.mesh.triangles.len(),
         "cleanse": cleanse_summary(s),
         "surface_roughness": roughness(s).map(|(air, fluid)| json!({"air_deg": air, "fluid_deg": fluid})),
-        "timings_ms": {
-            "load": load_ms,
-            "segment": t.segment,
-            "cleanse": t.cleanse,
-            "ds": t.ds,
-            "skeleton": t.skeleton,
-            "contacts": t.contacts,
-            "dt": t.dt,
-            "centerline": t.centerline,
-            "cells": t.cells,
-            "surface": t.surface,
-            "total_after_load": t.total_after_load,
-        },
+        "timings_ms": timings_ms,
         "peak_rss_mb": peak_rss_mb(),
     })
 }
@@ -399,17 +389,13 @@ fn print_text(s: &Study, g: &Geometry, load_ms: f64) {
         );
     }
     let t = &s.timings;
+    let stages: Vec<String> = Stage::ALL
+        .iter()
+        .map(|&stage| format!("{} {:.0}", stage.name(), t[stage]))
+        .collect();
     println!(
-        "time        load {load_ms:.0} ms; segment {:.0}, cleanse {:.0}, ds {:.0}, skeleton {:.0}, centerline {:.0}, contacts {:.0}, dt {:.0}, surface {:.0}, cells {:.0}; total after load {:.0} ms",
-        t.segment,
-        t.cleanse,
-        t.ds,
-        t.skeleton,
-        t.centerline,
-        t.contacts,
-        t.dt,
-        t.surface,
-        t.cells,
+        "time        load {load_ms:.0} ms; {}; total after load {:.0} ms",
+        stages.join(", "),
         t.total_after_load
     );
     if let Some(mb) = peak_rss_mb() {
