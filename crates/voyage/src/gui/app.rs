@@ -74,30 +74,151 @@ const PANEL_BACKGROUND: Color32 = Color32::from_gray(27);
 const SLICE_IMAGES: [u64; 3] = [0, 1, 2];
 const SCOUT_IMAGE: u64 = 3;
 
-const HELP: &[(&str, &str)] = &[
-    ("Space", "play / pause the automatic flight"),
-    ("R", "reverse the direction (rectum / cecum)"),
-    ("Home", "back to the start of the flight"),
-    ("left button (hold)", "push the submarine toward that point"),
-    ("right button (drag)", "look around"),
-    ("M", "marker on the surface under the cursor"),
-    ("D", "measure: press on two surface points"),
-    (
-        "1 / 2 / 3",
-        "tool: steer / marker / measure (for the left button)",
-    ),
-    ("C / L / S", "compass / leveling / still mode"),
-    ("G", "centerline overlay (green)"),
-    ("V", "close-up volume rendering"),
-    (
-        "T",
-        "translucency: what lies beneath the surface (red soft tissue, yellow fat, green stool)",
-    ),
-    ("[ / ]", "narrower / wider field of view"),
-    ("Ctrl+E", "export the findings"),
-    ("H or F1", "this help"),
-    ("Esc", "close the help, cancel a measurement"),
-    ("Ctrl+Q", "quit"),
+/// What the user asks of the window, from a key, a control or a script: [`App::apply`]
+/// carries it out, so the three cannot disagree.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Action {
+    Quit,
+    ExportFindings,
+    ToggleHelp,
+    /// Close the help, cancel a measurement.
+    Cancel,
+    Toggle(Switch),
+    Set(Switch, bool),
+    Tool(Tool),
+    PlayPause,
+    Reverse,
+    Restart,
+    NarrowerView,
+    WiderView,
+    /// A marker on the surface under the mouse cursor (in the view).
+    MarkerUnderCursor,
+    /// One end of a measurement on the surface under the mouse cursor (in the view).
+    MeasureUnderCursor,
+}
+
+/// The window's on/off settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Switch {
+    Centerline,
+    Closeup,
+    Translucency,
+    Compass,
+    Leveling,
+    Still,
+}
+
+const NONE: Modifiers = Modifiers::NONE;
+const CTRL: Modifiers = Modifiers::COMMAND;
+
+/// One row of the help: what it says, and the keys that do it (none for the mouse's rows).
+struct Binding {
+    keys: &'static str,
+    what: &'static str,
+    bound: &'static [(Modifiers, Key, Action)],
+}
+
+/// The keymap: [`App::shortcuts`] dispatches from it and the help shows it.
+const KEYMAP: &[Binding] = &[
+    Binding {
+        keys: "Space",
+        what: "play / pause the automatic flight",
+        bound: &[(NONE, Key::Space, Action::PlayPause)],
+    },
+    Binding {
+        keys: "R",
+        what: "reverse the direction (rectum / cecum)",
+        bound: &[(NONE, Key::R, Action::Reverse)],
+    },
+    Binding {
+        keys: "Home",
+        what: "back to the start of the flight",
+        bound: &[(NONE, Key::Home, Action::Restart)],
+    },
+    Binding {
+        keys: "left button (hold)",
+        what: "push the submarine toward that point",
+        bound: &[],
+    },
+    Binding {
+        keys: "right button (drag)",
+        what: "look around",
+        bound: &[],
+    },
+    Binding {
+        keys: "M",
+        what: "marker on the surface under the cursor",
+        bound: &[(NONE, Key::M, Action::MarkerUnderCursor)],
+    },
+    Binding {
+        keys: "D",
+        what: "measure: press on two surface points",
+        bound: &[(NONE, Key::D, Action::MeasureUnderCursor)],
+    },
+    Binding {
+        keys: "1 / 2 / 3",
+        what: "tool: steer / marker / measure (for the left button)",
+        bound: &[
+            (NONE, Key::Num1, Action::Tool(Tool::Steer)),
+            (NONE, Key::Num2, Action::Tool(Tool::Marker)),
+            (NONE, Key::Num3, Action::Tool(Tool::Measure)),
+        ],
+    },
+    Binding {
+        keys: "C / L / S",
+        what: "compass / leveling / still mode",
+        bound: &[
+            (NONE, Key::C, Action::Toggle(Switch::Compass)),
+            (NONE, Key::L, Action::Toggle(Switch::Leveling)),
+            (NONE, Key::S, Action::Toggle(Switch::Still)),
+        ],
+    },
+    Binding {
+        keys: "G",
+        what: "centerline overlay (green)",
+        bound: &[(NONE, Key::G, Action::Toggle(Switch::Centerline))],
+    },
+    Binding {
+        keys: "V",
+        what: "close-up volume rendering",
+        bound: &[(NONE, Key::V, Action::Toggle(Switch::Closeup))],
+    },
+    Binding {
+        keys: "T",
+        what: "translucency: what lies beneath the surface (red soft tissue, yellow fat, green stool)",
+        bound: &[(NONE, Key::T, Action::Toggle(Switch::Translucency))],
+    },
+    Binding {
+        keys: "[ / ]",
+        what: "narrower / wider field of view",
+        bound: &[
+            (NONE, Key::OpenBracket, Action::NarrowerView),
+            (NONE, Key::CloseBracket, Action::WiderView),
+        ],
+    },
+    Binding {
+        keys: "Ctrl+E",
+        what: "export the findings",
+        bound: &[(CTRL, Key::E, Action::ExportFindings)],
+    },
+    Binding {
+        keys: "H or F1",
+        what: "this help",
+        bound: &[
+            (NONE, Key::H, Action::ToggleHelp),
+            (NONE, Key::F1, Action::ToggleHelp),
+        ],
+    },
+    Binding {
+        keys: "Esc",
+        what: "close the help, cancel a measurement",
+        bound: &[(NONE, Key::Escape, Action::Cancel)],
+    },
+    Binding {
+        keys: "Ctrl+Q",
+        what: "quit",
+        bound: &[(CTRL, Key::Q, Action::Quit)],
+    },
 ];
 
 pub struct App {
@@ -352,80 +473,84 @@ impl App {
         }
     }
 
-    /// Keyboard shortcuts (not while a text field has the keyboard).
+    /// Keyboard shortcuts from [`KEYMAP`] (not while a text field has the keyboard).
     fn shortcuts(&mut self, ctx: &egui::Context) {
         if ctx.egui_wants_keyboard_input() {
             return;
         }
-        let pressed = |k: Key| ctx.input_mut(|i| i.consume_key(Modifiers::NONE, k));
-        if ctx.input_mut(|i| i.consume_key(Modifiers::COMMAND, Key::Q)) {
-            self.quit(ctx);
+        for binding in KEYMAP {
+            for &(modifiers, key, action) in binding.bound {
+                if ctx.input_mut(|i| i.consume_key(modifiers, key)) {
+                    self.apply(action, ctx);
+                }
+            }
         }
-        if ctx.input_mut(|i| i.consume_key(Modifiers::COMMAND, Key::E)) {
-            self.export(PathBuf::from(self.export_dir.clone()));
+    }
+
+    /// Carries out what a key, a control or a script asked. Actions on the flight wait for
+    /// a study; the ones under the cursor need the cursor in the view.
+    fn apply(&mut self, action: Action, ctx: &egui::Context) {
+        let cursor = ctx
+            .input(|i| i.pointer.hover_pos())
+            .filter(|p| self.view_rect.is_some_and(|r| r.contains(*p)));
+        match action {
+            Action::Quit => self.quit(ctx),
+            Action::ExportFindings => self.export(PathBuf::from(self.export_dir.clone())),
+            Action::ToggleHelp => self.show_help = !self.show_help,
+            Action::Cancel => {
+                self.show_help = false;
+                self.measure_from = None;
+            }
+            Action::Toggle(switch) => {
+                if let Some(on) = self.switch(switch) {
+                    *on = !*on;
+                }
+            }
+            Action::Set(switch, value) => {
+                if let Some(on) = self.switch(switch) {
+                    *on = value;
+                }
+            }
+            Action::Tool(tool) => self.tool = tool,
+            Action::MarkerUnderCursor => {
+                if let Some(p) = cursor {
+                    self.drop_marker(p);
+                }
+            }
+            Action::MeasureUnderCursor => {
+                if let Some(p) = cursor {
+                    self.measure_point(p);
+                }
+            }
+            Action::PlayPause | Action::Reverse | Action::Restart => {
+                let Some(s) = &mut self.session else { return };
+                match action {
+                    Action::PlayPause => s.set_playing(!s.playing),
+                    Action::Reverse => s.set_direction(s.direction().reversed()),
+                    _ => s.restart(),
+                }
+            }
+            Action::NarrowerView | Action::WiderView => {
+                let Some(s) = &mut self.session else { return };
+                s.fov = if action == Action::NarrowerView {
+                    (s.fov - 5.0).max(30.0)
+                } else {
+                    (s.fov + 5.0).min(Camera::MAX_FOV_DEG)
+                };
+            }
         }
-        if pressed(Key::H) || pressed(Key::F1) {
-            self.show_help = !self.show_help;
-        }
-        if pressed(Key::Escape) {
-            self.show_help = false;
-            self.measure_from = None;
-        }
-        if pressed(Key::G) {
-            self.show_centerline = !self.show_centerline;
-        }
-        if pressed(Key::V) {
-            self.closeup_on = !self.closeup_on;
-        }
-        if pressed(Key::T) {
-            self.translucency_on = !self.translucency_on;
-        }
-        if pressed(Key::Num1) {
-            self.tool = Tool::Steer;
-        }
-        if pressed(Key::Num2) {
-            self.tool = Tool::Marker;
-        }
-        if pressed(Key::Num3) {
-            self.tool = Tool::Measure;
-        }
-        let hover = ctx.input(|i| i.pointer.hover_pos());
-        let Some(s) = &mut self.session else { return };
-        if pressed(Key::Space) {
-            s.set_playing(!s.playing);
-        }
-        if pressed(Key::R) {
-            s.set_direction(s.direction().reversed());
-        }
-        if pressed(Key::Home) {
-            s.restart();
-        }
-        if pressed(Key::C) {
-            s.sub.modes.compass = !s.sub.modes.compass;
-        }
-        if pressed(Key::L) {
-            s.sub.modes.leveling = !s.sub.modes.leveling;
-        }
-        if pressed(Key::S) {
-            s.sub.modes.still = !s.sub.modes.still;
-        }
-        if pressed(Key::OpenBracket) {
-            s.fov = (s.fov - 5.0).max(30.0);
-        }
-        if pressed(Key::CloseBracket) {
-            s.fov = (s.fov + 5.0).min(Camera::MAX_FOV_DEG);
-        }
-        let in_view = hover.filter(|p| self.view_rect.is_some_and(|r| r.contains(*p)));
-        if pressed(Key::M)
-            && let Some(p) = in_view
-        {
-            self.drop_marker(p);
-        }
-        if pressed(Key::D)
-            && let Some(p) = in_view
-        {
-            self.measure_point(p);
-        }
+    }
+
+    /// The setting behind a switch (the submarine's modes only while a study is open).
+    fn switch(&mut self, switch: Switch) -> Option<&mut bool> {
+        Some(match switch {
+            Switch::Centerline => &mut self.show_centerline,
+            Switch::Closeup => &mut self.closeup_on,
+            Switch::Translucency => &mut self.translucency_on,
+            Switch::Compass => &mut self.session.as_mut()?.sub.modes.compass,
+            Switch::Leveling => &mut self.session.as_mut()?.sub.modes.leveling,
+            Switch::Still => &mut self.session.as_mut()?.sub.modes.still,
+        })
     }
 
     fn quit(&mut self, ctx: &egui::Context) {
@@ -579,9 +704,9 @@ impl App {
                     }
                 }
             }
-            Step::Closeup(on) => self.closeup_on = on,
-            Step::Translucency(on) => self.translucency_on = on,
-            Step::Centerline(on) => self.show_centerline = on,
+            Step::Closeup(on) => self.apply(Action::Set(Switch::Closeup, on), ctx),
+            Step::Translucency(on) => self.apply(Action::Set(Switch::Translucency, on), ctx),
+            Step::Centerline(on) => self.apply(Action::Set(Switch::Centerline, on), ctx),
             Step::SlicesCleansed(on) => self.slices.cleansed = on,
             Step::SlicesOutline(on) => self.slices.outline = on,
             Step::Record(name) => {
@@ -724,7 +849,7 @@ impl App {
                 }
                 ui.separator();
                 if ui.button("Help (H)").clicked() {
-                    self.show_help = !self.show_help;
+                    self.apply(Action::ToggleHelp, &ui.ctx().clone());
                 }
                 ui.label(RichText::new(&self.status).color(Color32::from_gray(170)));
             });
@@ -745,14 +870,15 @@ impl App {
             ui.label("No study open.");
             return;
         };
+        let mut actions = Vec::new();
         ui.heading("Flight");
         ui.horizontal(|ui| {
             let text = if s.playing { "Pause" } else { "Play" };
             if ui.button(text).on_hover_text("Space").clicked() {
-                s.set_playing(!s.playing);
+                actions.push(Action::PlayPause);
             }
             if ui.button("Start over").on_hover_text("Home").clicked() {
-                s.restart();
+                actions.push(Action::Restart);
             }
         });
         let mut dir = s.direction();
@@ -806,23 +932,41 @@ impl App {
         ui.add(egui::Slider::new(&mut s.sub.potential.rho, 2.0..=60.0).text("ρ mm"));
         ui.add(egui::Slider::new(&mut s.sub.dynamics.user_force, 0.0..=2000.0).text("|F_user|"));
         ui.add(egui::Slider::new(&mut s.fov, 30.0..=Camera::MAX_FOV_DEG).text("FOV °"));
-        ui.checkbox(&mut s.sub.modes.compass, "compass (C)");
-        ui.checkbox(&mut s.sub.modes.leveling, "leveling (L)");
-        ui.checkbox(&mut s.sub.modes.still, "still (S)");
-        ui.checkbox(&mut self.show_centerline, "centerline (G)");
-        ui.checkbox(&mut self.closeup_on, "close-up volume (V)");
-        ui.checkbox(&mut self.translucency_on, "translucency (T)")
-            .on_hover_text("what lies beneath the surface around the marker or the view's centre");
+        for (switch, text, hover) in [
+            (Switch::Compass, "compass (C)", ""),
+            (Switch::Leveling, "leveling (L)", ""),
+            (Switch::Still, "still (S)", ""),
+            (Switch::Centerline, "centerline (G)", ""),
+            (Switch::Closeup, "close-up volume (V)", ""),
+            (
+                Switch::Translucency,
+                "translucency (T)",
+                "what lies beneath the surface around the marker or the view's centre",
+            ),
+        ] {
+            let mut on = self.switch(switch).is_some_and(|on| *on);
+            let mut box_ = ui.checkbox(&mut on, text);
+            if !hover.is_empty() {
+                box_ = box_.on_hover_text(hover);
+            }
+            if box_.changed() {
+                actions.push(Action::Set(switch, on));
+            }
+        }
         ui.separator();
         ui.heading("Findings");
+        let mut tool = self.tool;
         ui.horizontal(|ui| {
-            ui.selectable_value(&mut self.tool, Tool::Steer, "Steer")
+            ui.selectable_value(&mut tool, Tool::Steer, "Steer")
                 .on_hover_text("1: hold the left button to push toward a point");
-            ui.selectable_value(&mut self.tool, Tool::Marker, "Marker")
+            ui.selectable_value(&mut tool, Tool::Marker, "Marker")
                 .on_hover_text("2: click the surface (or M over it)");
-            ui.selectable_value(&mut self.tool, Tool::Measure, "Measure")
+            ui.selectable_value(&mut tool, Tool::Measure, "Measure")
                 .on_hover_text("3: click two surface points (or D twice)");
         });
+        if tool != self.tool {
+            actions.push(Action::Tool(tool));
+        }
         ui.add(egui::TextEdit::singleline(&mut self.note).hint_text("note for the next marker"));
         let mut go = None;
         let mut remove_marker = None;
@@ -866,9 +1010,13 @@ impl App {
                 .on_hover_text("Ctrl+E: findings.json, Slicer .mrk.json and a PNG per marker")
                 .clicked()
             {
-                self.export(PathBuf::from(self.export_dir.clone()));
+                actions.push(Action::ExportFindings);
             }
         });
+        let ctx = ui.ctx().clone();
+        for action in actions {
+            self.apply(action, &ctx);
+        }
     }
 
     fn scout_panel(&mut self, ui: &mut egui::Ui) {
@@ -1279,9 +1427,9 @@ impl App {
             .anchor(egui::Align2::CENTER_CENTER, Vec2::ZERO)
             .show(ctx, |ui| {
                 egui::Grid::new("keys").striped(true).show(ui, |ui| {
-                    for (k, what) in HELP {
-                        ui.label(RichText::new(*k).strong());
-                        ui.label(*what);
+                    for binding in KEYMAP {
+                        ui.label(RichText::new(binding.keys).strong());
+                        ui.label(binding.what);
                         ui.end_row();
                     }
                 });
