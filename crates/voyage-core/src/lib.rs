@@ -12,14 +12,12 @@ pub mod centerline;
 pub mod cleanse;
 pub mod contacts;
 pub mod distance;
-pub mod endpoints;
 pub mod error;
 pub mod field;
 pub mod mem;
 pub mod prep;
 pub mod rng;
 pub mod segment;
-pub mod skeleton;
 pub mod surface;
 pub mod volume;
 

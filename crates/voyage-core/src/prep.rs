@@ -10,11 +10,12 @@ use serde::Serialize;
 use crate::{
     Result, Volume,
     cells::{CellOptions, Cells, build_cells},
-    centerline::{Centerline, CenterlineOptions},
+    centerline::{
+        self, Centerline, CenterlineOptions, centre_skeleton, trace_skeleton, uses_blocks,
+    },
     cleanse::{CleanseOptions, Cleansing, Scene, cleanse},
     contacts::{ContactOptions, cut_contacts},
-    distance::distance_to_wall_in,
-    endpoints::{self, EndpointOptions, centre_skeleton, dt_fields, trace_skeleton, uses_blocks},
+    distance::{distance_to_wall_in, dt_fields},
     field::{BoxGrid, Bricked},
     segment::{SegmentOptions, Segmentation, segment},
     surface::{Surface, extract_surface},
@@ -25,7 +26,7 @@ pub struct PrepOptions {
     pub segment: SegmentOptions,
     /// Electronic cleansing of the colon's tagged fluid ([`crate::cleanse`]); None: off.
     pub cleanse: Option<CleanseOptions>,
-    pub endpoints: EndpointOptions,
+    /// The ends (given or found), the skeleton search and the refinement.
     pub centerline: CenterlineOptions,
     pub cells: CellOptions,
     pub contacts: ContactOptions,
@@ -36,7 +37,6 @@ impl Default for PrepOptions {
         PrepOptions {
             segment: SegmentOptions::default(),
             cleanse: Some(CleanseOptions::default()),
-            endpoints: EndpointOptions::default(),
             centerline: CenterlineOptions::default(),
             cells: CellOptions::default(),
             contacts: ContactOptions::default(),
@@ -294,7 +294,6 @@ pub fn prepare(
         seg.lumen_voxels,
         seg.seed_voxel,
         early_ds.as_ref(),
-        &opts.endpoints,
         &opts.centerline,
     )?;
     laps.start(Stage::Contacts);
@@ -302,10 +301,10 @@ pub fn prepare(
     // No wall at the ends: source and target stay lumen.
     let keep = [
         sk.given_source
-            .map(|v| endpoints::mm_of(&seg.lumen, v))
+            .map(|v| centerline::mm_of(&seg.lumen, v))
             .unwrap_or(sk.path_mm[0]),
         sk.given_target
-            .map(|v| endpoints::mm_of(&seg.lumen, v))
+            .map(|v| centerline::mm_of(&seg.lumen, v))
             .unwrap_or(sk.path_mm[sk.path_mm.len() - 1]),
     ];
     let keep_mm = 2.0 * seg.lumen.spacing().iter().cloned().fold(0.0, f64::max);
@@ -368,13 +367,13 @@ pub fn prepare(
     laps.stop();
 
     let collapsed_spans = collapsed_spans(&cl, &seg);
-    if opts.endpoints.source_mm.is_none() || opts.endpoints.target_mm.is_none() {
+    if opts.centerline.source_mm.is_none() || opts.centerline.target_mm.is_none() {
         let w = anatomical_checks(
             &seg,
             source,
             target,
-            opts.endpoints.source_mm.is_none(),
-            opts.endpoints.target_mm.is_none(),
+            opts.centerline.source_mm.is_none(),
+            opts.centerline.target_mm.is_none(),
         );
         seg.warnings.extend(w);
     }

@@ -83,8 +83,8 @@ fn colon_a_given_endpoints_keep_to_the_colon_between_them() {
         (at(total / 2.0), first),
     ] {
         let mut opts = PrepOptions::default();
-        opts.endpoints.source_mm = Some(point(from));
-        opts.endpoints.target_mm = Some(point(to));
+        opts.centerline.source_mm = Some(point(from));
+        opts.centerline.target_mm = Some(point(to));
         let s = prepare(ct.clone(), &opts, |_| {}).unwrap();
         let cl = &s.centerline;
         let expected = (arc[from] - arc[to]).abs();

@@ -231,8 +231,8 @@ fn given_endpoints_and_their_errors() {
     })
     .unwrap();
     let mut opts = PrepOptions::default();
-    opts.endpoints.source_mm = Some(DVec3::from_array(p.truth.target_mm));
-    opts.endpoints.target_mm = Some(DVec3::from_array(p.truth.source_mm));
+    opts.centerline.source_mm = Some(DVec3::from_array(p.truth.target_mm));
+    opts.centerline.target_mm = Some(DVec3::from_array(p.truth.source_mm));
     let s = prepare(p.ct.clone(), &opts, |_| {}).unwrap();
     let mean = mean_distance_to_truth(&s.centerline.points_mm, &p.truth.centerline_mm);
     assert!(mean <= 2.0, "swapped ends: mean distance {mean:.2} mm");
@@ -247,7 +247,7 @@ fn given_endpoints_and_their_errors() {
         "swapped ends: {:.0} mm, truth {truth_len:.0} mm",
         s.centerline.length_mm
     );
-    opts.endpoints.target_mm = opts.endpoints.source_mm;
+    opts.centerline.target_mm = opts.centerline.source_mm;
     let e = prepare(p.ct.clone(), &opts, |_| {})
         .unwrap_err()
         .to_string();

@@ -87,8 +87,8 @@ impl PointArgs {
         };
         opts.segment.seeds_mm = self.seed.iter().map(|&p| to_local(p)).collect();
         opts.segment.exclude_mm = self.exclude.iter().map(|&p| to_local(p)).collect();
-        opts.endpoints.source_mm = self.source.map(to_local);
-        opts.endpoints.target_mm = self.target.map(to_local);
+        opts.centerline.source_mm = self.source.map(to_local);
+        opts.centerline.target_mm = self.target.map(to_local);
         opts.segment.position = match (self.position, meta.position) {
             (Some(p), _) => Some((p, PositionSource::Given)),
             (None, Some(p)) => Some((p, PositionSource::Dicom)),

@@ -11,7 +11,7 @@
 //! could otherwise have visited. So:
 //!
 //! 1. One minimum-cost search from the source (cost per mm 1 + K·((Dmax − Ds)/Dmax)^p, see
-//!    [`cost_weight`](crate::centerline::cost_weight)), recording each voxel's predecessor:
+//!    [`cost_weight`](super::cost_weight)), recording each voxel's predecessor:
 //!    a shortest-path tree whose paths keep to the middle of the lumen.
 //! 2. TEASAR-like branches (Sato et al. 2000): repeatedly the farthest wide voxel (Ds ≥ a
 //!    fraction of Dmax) not yet covered is traced back along the tree until it meets the
@@ -28,6 +28,7 @@
 
 use std::collections::HashMap;
 
+use super::CenterlineOptions;
 use crate::{
     Error, Result,
     distance::geodesic::{Padded, Search, SearchOptions, dial},
@@ -35,8 +36,6 @@ use crate::{
 
 #[derive(Clone, Debug)]
 pub struct SkeletonOptions {
-    /// Branch tips are voxels with Ds ≥ this fraction of the largest Ds.
-    pub min_width: f64,
     /// A branch covers the voxels within `cover_scale`·Ds + `cover_mm` of it.
     pub cover_scale: f64,
     pub cover_mm: f64,
@@ -51,7 +50,6 @@ pub struct SkeletonOptions {
 impl Default for SkeletonOptions {
     fn default() -> Self {
         SkeletonOptions {
-            min_width: 0.25,
             cover_scale: 2.0,
             cover_mm: 5.0,
             meet_scale: 3.0,
@@ -121,7 +119,7 @@ const SKELETON: u8 = 2;
 /// The raw centerline (padded indices, source → target): the longest simple path from
 /// `source` through the skeleton graph, ending at `target` when given, else where the longest
 /// path ends (the cecum). `tree` is the weighted search from `source`; `ds` is Ds in the
-/// padded layout.
+/// padded layout. The steps of the module's docs, one function each.
 pub(crate) fn colon_path(
     pad: &Padded,
     tree: &Tree,
@@ -129,80 +127,157 @@ pub(crate) fn colon_path(
     spacing: [f64; 3],
     source: usize,
     target: Option<usize>,
-    opts: &SkeletonOptions,
+    opts: &CenterlineOptions,
 ) -> Result<(Vec<usize>, SkeletonStats)> {
+    let unreachable =
+        || Error::invalid("the target cannot be reached from the source through the lumen");
     if let Some(t) = target
         && !tree.dist[t].is_finite()
     {
-        return Err(Error::invalid(
-            "the target cannot be reached from the source through the lumen",
-        ));
+        return Err(unreachable());
     }
-    let n = pad.inside.len();
-    let dmax = tree
-        .order
-        .iter()
-        .map(|&v| ds[v as usize])
-        .fold(0.0f32, f32::max);
-    let floor = (opts.min_width as f32 * dmax).min(dmax);
-    // Tip candidates, farthest first.
-    let mut cand: Vec<(u32, u32)> = tree
-        .order
-        .iter()
-        .filter(|&&v| ds[v as usize] >= floor && ds[v as usize] > 0.0)
-        .map(|&v| (tree.dist[v as usize].to_bits(), v))
-        .collect();
-    cand.sort_unstable_by(|a, b| b.cmp(a));
-
-    let mut flags = vec![0u8; n];
-    let mut nodes: Vec<Node> = Vec::new();
-    let mut ord_of: HashMap<usize, u32> = HashMap::new();
-    let mut branches: Vec<Branch> = Vec::new();
-    let sp = spacing.map(|s| s as f32);
-    let dims = pad.dims;
-    let step_len = |a: usize, b: usize| -> f32 {
-        let (pa, pb) = (ijk(a, dims), ijk(b, dims));
-        (0..3)
-            .map(|k| ((pa[k] as f32 - pb[k] as f32) * sp[k]).powi(2))
-            .sum::<f32>()
-            .sqrt()
+    // 2. Branches.
+    let sk = SkeletonTree::trace(pad, tree, ds, spacing, source, opts);
+    // 3. Cycles: the owner of every voxel is the nearest skeleton voxel through the lumen (a
+    // geodesic Voronoi partition by the skeleton), reached by the way `near` records.
+    let near = tree_search(pad, &sk.voxels(), spacing, None, None);
+    let owner = sk.owners(&near);
+    let meetings = sk.meetings(&near, &owner, ds, opts);
+    // 4. The graph and its longest simple path.
+    let target_owner = match target.map(|t| owner[t]) {
+        Some(u32::MAX) => return Err(unreachable()),
+        o => o,
     };
-
-    // The first branch: from the source itself (so that the source is a skeleton voxel).
-    let mut tips: Vec<usize> = cand.iter().map(|c| c.1 as usize).collect();
-    if tips.is_empty() {
-        tips.push(source);
+    let graph = Graph::build(&sk, &near, &meetings, source, target_owner);
+    let goal = target_owner.map(|o| graph.node_of[&o]);
+    let lengths: Vec<f32> = graph.edges.iter().map(|e| e.length).collect();
+    let (best, steps) = longest_path(
+        &graph.adj,
+        &lengths,
+        graph.start,
+        goal,
+        opts.skeleton.search_budget,
+    );
+    let best = best.ok_or_else(|| {
+        Error::invalid("the target cannot be reached from the source through the skeleton")
+    })?;
+    let (mut out, length) = graph.voxels_along(&best, source);
+    if let Some(t) = target {
+        // From the target's owner out to the target itself.
+        out.extend(sk.walk_to_skeleton(&near, t).iter().rev().skip(1));
     }
-    let mut next_tip = 0usize;
-    let mut first = true;
-    loop {
-        let tip = if first {
-            let t = tips[0];
-            next_tip = 1;
-            t
-        } else {
-            let mut found = None;
-            while next_tip < tips.len() {
-                let t = tips[next_tip];
-                next_tip += 1;
-                if flags[t] == 0 {
-                    found = Some(t);
-                    break;
-                }
-            }
-            match found {
-                Some(t) => t,
-                None => break,
-            }
+    let out = erase_returns(&out, ds, sk.dims, sk.sp);
+    let stats = SkeletonStats {
+        branches: sk.branches.len(),
+        skeleton_voxels: sk.nodes.len(),
+        meetings: meetings.len(),
+        graph_nodes: graph.node_ords.len(),
+        graph_edges: graph.edges.len(),
+        search_steps: steps,
+        path_mm: length,
+    };
+    Ok((out, stats))
+}
+
+/// The skeleton as a tree of branches traced back along the minimum-cost tree (step 2).
+struct SkeletonTree {
+    nodes: Vec<Node>,
+    /// Skeleton ordinal of each skeleton voxel (padded index).
+    ord_of: HashMap<usize, u32>,
+    branches: Vec<Branch>,
+    /// `COVERED` and `SKELETON` per padded voxel.
+    flags: Vec<u8>,
+    dims: [usize; 3],
+    sp: [f32; 3],
+}
+
+/// Where two search fronts from skeleton points far apart met (step 3): the skeleton
+/// ordinals of the two owners and the two touching voxels.
+#[derive(Clone, Copy)]
+struct Meeting {
+    a: u32,
+    b: u32,
+    u: usize,
+    w: usize,
+}
+
+impl SkeletonTree {
+    /// TEASAR-like branches: the farthest wide voxel not yet covered, traced back along the
+    /// tree to the skeleton, then a tube around it covered; the first branch starts at the
+    /// source itself (so that the source is a skeleton voxel).
+    fn trace(
+        pad: &Padded,
+        tree: &Tree,
+        ds: &[f32],
+        spacing: [f64; 3],
+        source: usize,
+        opts: &CenterlineOptions,
+    ) -> SkeletonTree {
+        let dmax = tree
+            .order
+            .iter()
+            .map(|&v| ds[v as usize])
+            .fold(0.0f32, f32::max);
+        let floor = (opts.min_width as f32 * dmax).min(dmax);
+        // Tip candidates, farthest first.
+        let mut cand: Vec<(u32, u32)> = tree
+            .order
+            .iter()
+            .filter(|&&v| ds[v as usize] >= floor && ds[v as usize] > 0.0)
+            .map(|&v| (tree.dist[v as usize].to_bits(), v))
+            .collect();
+        cand.sort_unstable_by(|a, b| b.cmp(a));
+        let mut tips: Vec<usize> = cand.iter().map(|c| c.1 as usize).collect();
+        if tips.is_empty() {
+            tips.push(source);
+        }
+        let mut sk = SkeletonTree {
+            nodes: Vec::new(),
+            ord_of: HashMap::new(),
+            branches: Vec::new(),
+            flags: vec![0u8; pad.inside.len()],
+            dims: pad.dims,
+            sp: spacing.map(|s| s as f32),
         };
-        // Trace back until the skeleton (or the source).
+        let mut next_tip = 0usize;
+        let mut first = true;
+        loop {
+            let tip = if first {
+                next_tip = 1;
+                tips[0]
+            } else {
+                let Some(i) = (next_tip..tips.len()).find(|&i| sk.flags[tips[i]] == 0) else {
+                    break;
+                };
+                next_tip = i + 1;
+                tips[i]
+            };
+            sk.add_branch(tree, ds, tip, first, opts);
+            first = false;
+            if sk.branches.len() > 20_000 {
+                break;
+            }
+        }
+        sk
+    }
+
+    /// Traces `tip` back until the skeleton (or the source), adds the branch and covers a
+    /// tube around it: balls every third of a radius.
+    fn add_branch(
+        &mut self,
+        tree: &Tree,
+        ds: &[f32],
+        tip: usize,
+        first: bool,
+        opts: &CenterlineOptions,
+    ) {
         let mut path = vec![tip];
         let mut v = tip;
         let mut attach = None;
         loop {
-            if !first && flags[v] & SKELETON != 0 {
+            if !first && self.flags[v] & SKELETON != 0 {
                 path.pop();
-                attach = Some(ord_of[&v]);
+                attach = Some(self.ord_of[&v]);
                 break;
             }
             match tree.parent_of(v) {
@@ -214,79 +289,94 @@ pub(crate) fn colon_path(
             }
         }
         if path.is_empty() {
-            continue;
+            return;
         }
         path.reverse();
-        let b = branches.len() as u32;
+        let b = self.branches.len() as u32;
+        let nodes = &self.nodes;
         let (mut arc, mut prev, depth) = match attach {
             Some(a) => (
                 nodes[a as usize].arc,
                 Some(nodes[a as usize].idx),
-                branches[nodes[a as usize].branch as usize].depth + 1,
+                self.branches[nodes[a as usize].branch as usize].depth + 1,
             ),
             None => (0.0, None, 0),
         };
         let mut ords = Vec::with_capacity(path.len());
         for &v in &path {
             if let Some(p) = prev {
-                arc += step_len(p, v);
+                arc += self.step_len(p, v);
             }
             prev = Some(v);
-            let o = nodes.len() as u32;
-            nodes.push(Node {
+            let o = self.nodes.len() as u32;
+            self.nodes.push(Node {
                 idx: v,
                 branch: b,
                 arc,
             });
-            ord_of.insert(v, o);
-            flags[v] |= SKELETON | COVERED;
+            self.ord_of.insert(v, o);
+            self.flags[v] |= SKELETON | COVERED;
             ords.push(o);
         }
-        // Cover a tube around the branch: balls every third of a radius.
         let mut since = f32::INFINITY;
         for (i, &o) in ords.iter().enumerate() {
-            let nd = nodes[o as usize];
-            let r = opts.cover_scale as f32 * ds[nd.idx] + opts.cover_mm as f32;
+            let nd = self.nodes[o as usize];
+            let r = opts.skeleton.cover_scale as f32 * ds[nd.idx] + opts.skeleton.cover_mm as f32;
             if i > 0 {
-                since += nd.arc - nodes[ords[i - 1] as usize].arc;
+                since += nd.arc - self.nodes[ords[i - 1] as usize].arc;
             }
             if since >= r / 3.0 || i + 1 == ords.len() {
-                stamp(&mut flags, dims, nd.idx, r, sp);
+                stamp(&mut self.flags, self.dims, nd.idx, r, self.sp);
                 since = 0.0;
             }
         }
-        branches.push(Branch {
+        self.branches.push(Branch {
             ords,
             attach,
             depth,
         });
-        first = false;
-        if branches.len() > 20_000 {
-            break;
+    }
+
+    /// The length of a step between two voxels (mm).
+    fn step_len(&self, a: usize, b: usize) -> f32 {
+        let (pa, pb) = (ijk(a, self.dims), ijk(b, self.dims));
+        (0..3)
+            .map(|k| ((pa[k] as f32 - pb[k] as f32) * self.sp[k]).powi(2))
+            .sum::<f32>()
+            .sqrt()
+    }
+
+    /// Every skeleton voxel (padded indices), in skeleton order.
+    fn voxels(&self) -> Vec<usize> {
+        self.nodes.iter().map(|nd| nd.idx).collect()
+    }
+
+    /// The skeleton ordinal owning each voxel `near` reached (`u32::MAX` elsewhere).
+    fn owners(&self, near: &Tree) -> Vec<u32> {
+        let mut owner = vec![u32::MAX; self.flags.len()];
+        for &v in &near.order {
+            let v = v as usize;
+            owner[v] = if self.flags[v] & SKELETON != 0 {
+                self.ord_of[&v]
+            } else {
+                near.parent_of(v).map_or(u32::MAX, |p| owner[p])
+            };
         }
+        owner
     }
 
-    // Owner of every voxel: the nearest skeleton voxel through the lumen (a geodesic Voronoi
-    // partition by the skeleton), and the way there.
-    let near = tree_search(
-        pad,
-        &nodes.iter().map(|nd| nd.idx).collect::<Vec<_>>(),
-        spacing,
-        None,
-        None,
-    );
-    let mut owner = vec![u32::MAX; n];
-    for &v in &near.order {
-        let v = v as usize;
-        owner[v] = if flags[v] & SKELETON != 0 {
-            ord_of[&v]
-        } else {
-            near.parent_of(v).map_or(u32::MAX, |p| owner[p])
-        };
+    /// The way from `v` up `near`'s tree to its skeleton voxel, `v` first.
+    fn walk_to_skeleton(&self, near: &Tree, v: usize) -> Vec<usize> {
+        let mut walk = vec![v];
+        while owner_of_walk(&self.flags, walk[walk.len() - 1]) {
+            walk.push(near.parent_of(walk[walk.len() - 1]).unwrap());
+        }
+        walk
     }
 
-    // Tree distance along the skeleton between two skeleton voxels.
-    let tree_dist = |a: u32, b: u32| -> f32 {
+    /// Distance along the skeleton between two skeleton voxels.
+    fn tree_dist(&self, a: u32, b: u32) -> f32 {
+        let (nodes, branches) = (&self.nodes, &self.branches);
         let (mut x, mut y) = (a, b);
         while nodes[x as usize].branch != nodes[y as usize].branch {
             let (bx, by) = (
@@ -301,186 +391,198 @@ pub(crate) fn colon_path(
         }
         let lca = nodes[x as usize].arc.min(nodes[y as usize].arc);
         nodes[a as usize].arc + nodes[b as usize].arc - 2.0 * lca
-    };
-
-    // Meeting places: touching voxels owned by skeleton points far apart along the skeleton.
-    let half: Vec<isize> = near.nbrs.iter().map(|n| n.0).filter(|&o| o > 0).collect();
-    let mut meets: Vec<(f32, u32, u32, usize, usize)> = Vec::new();
-    for &u in &near.order {
-        let u = u as usize;
-        let a = owner[u];
-        if a == u32::MAX {
-            continue;
-        }
-        for &off in &half {
-            let w = (u as isize + off) as usize;
-            let b = owner[w];
-            if b == u32::MAX || b == a {
-                continue;
-            }
-            let (na, nb) = (nodes[a as usize], nodes[b as usize]);
-            let thr = opts.meet_scale as f32 * (ds[na.idx] + ds[nb.idx]) + opts.meet_mm as f32;
-            let gap = (na.arc - nb.arc).abs();
-            if na.branch == nb.branch && gap <= thr {
-                continue;
-            }
-            if gap > thr || tree_dist(a, b) > thr {
-                let (a, b, u, w) = if a < b { (a, b, u, w) } else { (b, a, w, u) };
-                meets.push((ds[u] + ds[w], a, b, u, w));
-            }
-        }
-    }
-    // One meeting per cluster: the widest place first, then drop the meetings near it.
-    meets.sort_unstable_by(|x, y| y.0.total_cmp(&x.0));
-    let mut kept: Vec<(u32, u32, usize, usize)> = Vec::new();
-    for &(_, a, b, u, w) in &meets {
-        let (na, nb) = (nodes[a as usize], nodes[b as usize]);
-        let near = kept.iter().any(|&(ka, kb, _, _)| {
-            let (ka, kb) = (nodes[ka as usize], nodes[kb as usize]);
-            let ra = opts.meet_scale as f32 * ds[ka.idx] + opts.meet_mm as f32;
-            let rb = opts.meet_scale as f32 * ds[kb.idx] + opts.meet_mm as f32;
-            let close = |x: Node, y: Node, r: f32| {
-                x.branch == y.branch && (x.arc - y.arc).abs() <= r || x.idx == y.idx
-            };
-            (close(na, ka, ra) && close(nb, kb, rb)) || (close(na, kb, rb) && close(nb, ka, ra))
-        });
-        if !near {
-            kept.push((a, b, u, w));
-        }
     }
 
-    // The graph: nodes at the source, tips, junctions, meeting ends and the target's owner.
-    let target_owner = target.map(|t| owner[t]);
-    let mut is_node: HashMap<u32, usize> = HashMap::new();
-    let mut node_ord: Vec<u32> = Vec::new();
-    let mut add_node = |o: u32, is_node: &mut HashMap<u32, usize>| -> usize {
-        *is_node.entry(o).or_insert_with(|| {
-            node_ord.push(o);
-            node_ord.len() - 1
+    /// Meeting places: touching voxels owned by skeleton points far apart along the
+    /// skeleton; one per cluster, the widest place first.
+    fn meetings(
+        &self,
+        near: &Tree,
+        owner: &[u32],
+        ds: &[f32],
+        opts: &CenterlineOptions,
+    ) -> Vec<Meeting> {
+        let nodes = &self.nodes;
+        let (meet_scale, meet_mm) = (
+            opts.skeleton.meet_scale as f32,
+            opts.skeleton.meet_mm as f32,
+        );
+        let half: Vec<isize> = near.nbrs.iter().map(|n| n.0).filter(|&o| o > 0).collect();
+        // (width, a, b, u, w): sorted as such (the order of equal widths depends on it).
+        let mut meets: Vec<(f32, u32, u32, usize, usize)> = Vec::new();
+        for &u in &near.order {
+            let u = u as usize;
+            let a = owner[u];
+            if a == u32::MAX {
+                continue;
+            }
+            for &off in &half {
+                let w = (u as isize + off) as usize;
+                let b = owner[w];
+                if b == u32::MAX || b == a {
+                    continue;
+                }
+                let (na, nb) = (nodes[a as usize], nodes[b as usize]);
+                let thr = meet_scale * (ds[na.idx] + ds[nb.idx]) + meet_mm;
+                let gap = (na.arc - nb.arc).abs();
+                if na.branch == nb.branch && gap <= thr {
+                    continue;
+                }
+                if gap > thr || self.tree_dist(a, b) > thr {
+                    let (a, b, u, w) = if a < b { (a, b, u, w) } else { (b, a, w, u) };
+                    meets.push((ds[u] + ds[w], a, b, u, w));
+                }
+            }
+        }
+        meets.sort_unstable_by(|x, y| y.0.total_cmp(&x.0));
+        let mut kept: Vec<Meeting> = Vec::new();
+        for &(_, a, b, u, w) in &meets {
+            let m = Meeting { a, b, u, w };
+            let (na, nb) = (nodes[m.a as usize], nodes[m.b as usize]);
+            let near = kept.iter().any(|k| {
+                let (ka, kb) = (nodes[k.a as usize], nodes[k.b as usize]);
+                let ra = meet_scale * ds[ka.idx] + meet_mm;
+                let rb = meet_scale * ds[kb.idx] + meet_mm;
+                let close = |x: Node, y: Node, r: f32| {
+                    x.branch == y.branch && (x.arc - y.arc).abs() <= r || x.idx == y.idx
+                };
+                (close(na, ka, ra) && close(nb, kb, rb)) || (close(na, kb, rb) && close(nb, ka, ra))
+            });
+            if !near {
+                kept.push(m);
+            }
+        }
+        kept
+    }
+}
+
+/// One edge of the skeleton graph: its end nodes, its length (mm) and its voxels from
+/// `from` to `to`.
+struct Edge {
+    from: usize,
+    to: usize,
+    length: f32,
+    voxels: Vec<usize>,
+}
+
+/// The skeleton graph (step 4): nodes at the source, the tips, the junctions, the meetings'
+/// ends and the target's owner; edges along the branches between them and across each
+/// meeting.
+struct Graph {
+    /// The skeleton ordinal of each graph node, and back.
+    node_ords: Vec<u32>,
+    node_of: HashMap<u32, usize>,
+    edges: Vec<Edge>,
+    /// Per node: (neighbour, edge), longer edges first.
+    adj: Vec<Vec<(usize, usize)>>,
+    start: usize,
+}
+
+impl Graph {
+    fn build(
+        sk: &SkeletonTree,
+        near: &Tree,
+        meetings: &[Meeting],
+        source: usize,
+        target_owner: Option<u32>,
+    ) -> Graph {
+        let mut g = Graph {
+            node_ords: Vec::new(),
+            node_of: HashMap::new(),
+            edges: Vec::new(),
+            adj: Vec::new(),
+            start: 0,
+        };
+        let src_ord = sk.ord_of[&source];
+        g.add_node(src_ord);
+        for br in &sk.branches {
+            g.add_node(*br.ords.last().unwrap());
+            if let Some(a) = br.attach {
+                g.add_node(a);
+            }
+        }
+        for m in meetings {
+            g.add_node(m.a);
+            g.add_node(m.b);
+        }
+        if let Some(o) = target_owner {
+            g.add_node(o);
+        }
+        for br in &sk.branches {
+            let chain: Vec<u32> = br
+                .attach
+                .into_iter()
+                .chain(br.ords.iter().copied())
+                .collect();
+            let mut last = 0usize;
+            for i in 1..chain.len() {
+                if let Some(&to) = g.node_of.get(&chain[i]) {
+                    g.edges.push(Edge {
+                        from: g.node_of[&chain[last]],
+                        to,
+                        length: sk.nodes[chain[i] as usize].arc
+                            - sk.nodes[chain[last] as usize].arc,
+                        voxels: chain[last..=i]
+                            .iter()
+                            .map(|&o| sk.nodes[o as usize].idx)
+                            .collect(),
+                    });
+                    last = i;
+                }
+            }
+        }
+        for m in meetings {
+            let mut voxels = sk.walk_to_skeleton(near, m.u);
+            voxels.reverse();
+            voxels.extend(sk.walk_to_skeleton(near, m.w));
+            g.edges.push(Edge {
+                from: g.node_of[&m.a],
+                to: g.node_of[&m.b],
+                length: voxels.windows(2).map(|x| sk.step_len(x[0], x[1])).sum(),
+                voxels,
+            });
+        }
+        g.adj = vec![Vec::new(); g.node_ords.len()];
+        for (e, edge) in g.edges.iter().enumerate() {
+            if edge.from != edge.to {
+                g.adj[edge.from].push((edge.to, e));
+                g.adj[edge.to].push((edge.from, e));
+            }
+        }
+        // Longer edges first: the first paths found are good ones when the budget runs out.
+        for l in &mut g.adj {
+            l.sort_by(|x, y| g.edges[y.1].length.total_cmp(&g.edges[x.1].length));
+        }
+        g.start = g.node_of[&src_ord];
+        g
+    }
+
+    fn add_node(&mut self, ord: u32) -> usize {
+        *self.node_of.entry(ord).or_insert_with(|| {
+            self.node_ords.push(ord);
+            self.node_ords.len() - 1
         })
-    };
-    let src_ord = ord_of[&source];
-    add_node(src_ord, &mut is_node);
-    for br in &branches {
-        add_node(*br.ords.last().unwrap(), &mut is_node);
-        if let Some(a) = br.attach {
-            add_node(a, &mut is_node);
-        }
     }
-    for &(a, b, _, _) in &kept {
-        add_node(a, &mut is_node);
-        add_node(b, &mut is_node);
-    }
-    if let Some(o) = target_owner {
-        if o == u32::MAX {
-            return Err(Error::invalid(
-                "the target cannot be reached from the source through the lumen",
-            ));
-        }
-        add_node(o, &mut is_node);
-    }
-    // Edges: (from node, to node, length mm, voxel path from → to).
-    let mut edges: Vec<(usize, usize, f32, Vec<usize>)> = Vec::new();
-    for br in &branches {
-        let chain: Vec<u32> = br
-            .attach
-            .into_iter()
-            .chain(br.ords.iter().copied())
-            .collect();
-        let mut last = 0usize;
-        for i in 1..chain.len() {
-            if let Some(&to) = is_node.get(&chain[i]) {
-                let from = is_node[&chain[last]];
-                let len = nodes[chain[i] as usize].arc - nodes[chain[last] as usize].arc;
-                edges.push((
-                    from,
-                    to,
-                    len,
-                    chain[last..=i]
-                        .iter()
-                        .map(|&o| nodes[o as usize].idx)
-                        .collect(),
-                ));
-                last = i;
+
+    /// The voxels along a path of edges from the start node (`source` first), and its
+    /// length (mm).
+    fn voxels_along(&self, path: &[usize], source: usize) -> (Vec<usize>, f64) {
+        let mut out = vec![source];
+        let mut at = self.start;
+        let mut length = 0.0f64;
+        for &e in path {
+            let edge = &self.edges[e];
+            length += edge.length as f64;
+            if edge.from == at {
+                out.extend(edge.voxels.iter().skip(1));
+                at = edge.to;
+            } else {
+                out.extend(edge.voxels.iter().rev().skip(1));
+                at = edge.from;
             }
         }
+        (out, length)
     }
-    for &(a, b, u, w) in &kept {
-        let mut pa = vec![u];
-        while owner_of_walk(&flags, pa[pa.len() - 1]) {
-            let p = near.parent_of(pa[pa.len() - 1]).unwrap();
-            pa.push(p);
-        }
-        let mut pb = vec![w];
-        while owner_of_walk(&flags, pb[pb.len() - 1]) {
-            let p = near.parent_of(pb[pb.len() - 1]).unwrap();
-            pb.push(p);
-        }
-        pa.reverse();
-        pa.extend(pb);
-        let len: f32 = pa.windows(2).map(|x| step_len(x[0], x[1])).sum();
-        edges.push((is_node[&a], is_node[&b], len, pa));
-    }
-    let nn = node_ord.len();
-    let mut adj: Vec<Vec<(usize, usize)>> = vec![Vec::new(); nn];
-    for (e, &(f, t, _, _)) in edges.iter().enumerate() {
-        if f != t {
-            adj[f].push((t, e));
-            adj[t].push((f, e));
-        }
-    }
-    // Longer edges first: the first paths found are good ones when the budget runs out.
-    for l in &mut adj {
-        l.sort_by(|x, y| edges[y.1].2.total_cmp(&edges[x.1].2));
-    }
-    let start = is_node[&src_ord];
-    let goal = target_owner.map(|o| is_node[&o]);
-    let (best, steps) = longest_path(
-        &adj,
-        &edges.iter().map(|e| e.2).collect::<Vec<_>>(),
-        start,
-        goal,
-        opts.search_budget,
-    );
-    let best = best.ok_or_else(|| {
-        Error::invalid("the target cannot be reached from the source through the skeleton")
-    })?;
-
-    // Voxels along the chosen edges.
-    let mut out = vec![source];
-    let mut at = start;
-    let mut length = 0.0f64;
-    for &e in &best {
-        let (f, t, len, ref vox) = edges[e];
-        length += len as f64;
-        if f == at {
-            out.extend(vox.iter().skip(1));
-            at = t;
-        } else {
-            out.extend(vox.iter().rev().skip(1));
-            at = f;
-        }
-    }
-    if let Some(t) = target {
-        // From the target's owner out to the target itself.
-        let mut tail = vec![t];
-        while owner_of_walk(&flags, tail[tail.len() - 1]) {
-            let p = near.parent_of(tail[tail.len() - 1]).unwrap();
-            tail.push(p);
-        }
-        out.extend(tail.iter().rev().skip(1));
-    }
-    let out = erase_returns(&out, ds, dims, sp);
-    let stats = SkeletonStats {
-        branches: branches.len(),
-        skeleton_voxels: nodes.len(),
-        meetings: kept.len(),
-        graph_nodes: nn,
-        graph_edges: edges.len(),
-        search_steps: steps,
-        path_mm: length,
-    };
-    Ok((out, stats))
 }
 
 /// Cuts out every excursion that comes back into the lumen ball (radius Ds) of an earlier
@@ -616,9 +718,8 @@ mod tests {
 
     use crate::{
         Geometry, Volume,
-        centerline::CenterlineOptions,
+        centerline::{CenterlineOptions, find_endpoints},
         distance::distance_to_wall,
-        endpoints::{EndpointOptions, find_endpoints},
     };
 
     const R: f64 = 6.0;
@@ -677,14 +778,7 @@ mod tests {
         let m = serpentine(bridge);
         let ds = distance_to_wall(&m).unwrap();
         let seed = [(OFF.x - R + 1.0) as usize, OFF.y as usize, OFF.z as usize];
-        let e = find_endpoints(
-            &m,
-            &ds,
-            seed,
-            &EndpointOptions::default(),
-            &CenterlineOptions::default(),
-        )
-        .unwrap();
+        let e = find_endpoints(&m, &ds, seed, &CenterlineOptions::default()).unwrap();
         let cl = &e.centerline;
         let pts: Vec<DVec3> = cl
             .points_mm

@@ -5,7 +5,7 @@
 //! The automatic source is the rectum: the candidate nearest the seed (the colon's lowest
 //! voxel, where the rectal tube enters), by the centerline's cost. The automatic target is the
 //! cecum, the colon's other end: the end of the longest simple path from the source through
-//! the lumen's skeleton graph (see [`crate::skeleton`]), not the point farthest from the
+//! the lumen's skeleton graph (`graph.rs`), not the point farthest from the
 //! source: in real scans loops of the colon touch, often over wide contacts, and every
 //! shortest path (plain or centred) cuts through the contacts, so the farthest point by any
 //! distance is somewhere in the middle of the colon. Only voxels at least `min_width` of the
@@ -13,36 +13,20 @@
 
 use glam::DVec3;
 
+use super::{
+    CenterlineOptions,
+    graph::colon_path,
+    refine::{Centerline, cost_weight, refine_points},
+};
 use crate::{
     Error, Result, Volume,
     blocks::Blocks,
-    centerline::{Centerline, CenterlineOptions, cost_weight, refine_points},
     distance::{
         distance_to_wall,
-        geodesic::{Geodesic, Padded, TreeStart, geodesic_distance_pair_like},
+        geodesic::{Padded, TreeStart},
     },
-    field::{BoxGrid, Bricked, Field},
-    skeleton::{SkeletonOptions, colon_path},
+    field::{BoxGrid, Field},
 };
-
-#[derive(Clone, Debug)]
-pub struct EndpointOptions {
-    /// User-given source / target, volume-local mm.
-    pub source_mm: Option<DVec3>,
-    pub target_mm: Option<DVec3>,
-    /// Candidates for an automatic endpoint have Ds ≥ this fraction of the largest Ds.
-    pub min_width: f64,
-}
-
-impl Default for EndpointOptions {
-    fn default() -> Self {
-        EndpointOptions {
-            source_mm: None,
-            target_mm: None,
-            min_width: 0.25,
-        }
-    }
-}
 
 #[derive(Clone, Debug)]
 pub struct Endpoints {
@@ -63,13 +47,13 @@ pub struct Skeleton {
 
 /// Whether the skeleton search runs on 2×2×2 blocks: when the lumen is large and finely
 /// sampled (the path is then centred on the voxels' Ds anyway).
-pub fn uses_blocks(lumen: &Volume<u8>, lumen_voxels: usize, cl_opts: &CenterlineOptions) -> bool {
+pub fn uses_blocks(lumen: &Volume<u8>, lumen_voxels: usize, opts: &CenterlineOptions) -> bool {
     let finest = lumen
         .spacing()
         .iter()
         .cloned()
         .fold(f64::INFINITY, f64::min);
-    finest < cl_opts.coarse_below_mm && lumen_voxels > cl_opts.coarse_above_voxels
+    finest < opts.coarse_below_mm && lumen_voxels > opts.coarse_above_voxels
 }
 
 /// Finds (or checks) the endpoints and traces the raw colon path through the lumen inside
@@ -82,8 +66,7 @@ pub fn trace_skeleton(
     lumen_voxels: usize,
     seed: [usize; 3],
     fine_ds: Option<&Field<f32>>,
-    opts: &EndpointOptions,
-    cl_opts: &CenterlineOptions,
+    opts: &CenterlineOptions,
 ) -> Result<Skeleton> {
     let given_source = opts
         .source_mm
@@ -101,7 +84,7 @@ pub fn trace_skeleton(
             lumen.geometry().describe_point(mm_of(lumen, s))
         )));
     }
-    if uses_blocks(lumen, lumen_voxels, cl_opts) {
+    if uses_blocks(lumen, lumen_voxels, opts) {
         let blocks = Blocks::new(lumen, grid, 2)?;
         let ds = distance_to_wall(&blocks.mask)?;
         let to_block = |v: [usize; 3]| blocks.nearest_full(v);
@@ -112,7 +95,6 @@ pub fn trace_skeleton(
             given_source.map(to_block).transpose()?,
             given_target.map(to_block).transpose()?,
             opts,
-            cl_opts,
         )?;
         let path_mm = voxels.iter().map(|&v| blocks.centre_mm(v)).collect();
         return Ok(Skeleton {
@@ -130,7 +112,7 @@ pub fn trace_skeleton(
             &own
         }
     };
-    let voxels = skeleton_path(lumen, ds, seed, given_source, given_target, opts, cl_opts)?;
+    let voxels = skeleton_path(lumen, ds, seed, given_source, given_target, opts)?;
     Ok(Skeleton {
         path_mm: voxels.iter().map(|v| mm_of(lumen, *v)).collect(),
         given_source,
@@ -145,7 +127,7 @@ pub fn centre_skeleton(
     lumen: &Volume<u8>,
     ds: &Field<f32>,
     sk: &Skeleton,
-    cl_opts: &CenterlineOptions,
+    opts: &CenterlineOptions,
 ) -> Result<Endpoints> {
     let path_mm = &sk.path_mm;
     let source = match sk.given_source {
@@ -163,7 +145,7 @@ pub fn centre_skeleton(
     pts[0] = mm_of(lumen, source);
     let last = pts.len() - 1;
     pts[last] = mm_of(lumen, target);
-    let centerline = refine_points(pts, ds, cl_opts);
+    let centerline = refine_points(pts, ds, opts);
     Ok(Endpoints {
         source,
         target,
@@ -177,30 +159,11 @@ pub fn find_endpoints(
     lumen: &Volume<u8>,
     ds: &Field<f32>,
     seed: [usize; 3],
-    opts: &EndpointOptions,
-    cl_opts: &CenterlineOptions,
+    opts: &CenterlineOptions,
 ) -> Result<Endpoints> {
     let lumen_voxels = ds.data.iter().filter(|&&d| d > 0.0).count();
-    let sk = trace_skeleton(lumen, &ds.grid, lumen_voxels, seed, Some(ds), opts, cl_opts)?;
-    centre_skeleton(lumen, ds, &sk, cl_opts)
-}
-
-/// Dt to the target and Dt to the source over the lumen of Ds's box, in Ds's bricks.
-///
-/// One after the other although they are independent: each search works in a box-sized
-/// array (130 MB on a full colon) before its result goes into bricks, and two at once would
-/// break preprocessing's memory budget (3× the CT) for a gain only on more than one core.
-///
-/// `scratch`: memory to search in (Ds's box array, done with): fresh memory costs page faults.
-pub fn dt_fields(
-    lumen: &Volume<u8>,
-    ds: &Bricked<f32>,
-    source: [usize; 3],
-    target: [usize; 3],
-    scratch: Vec<f32>,
-) -> Result<(Geodesic, Geodesic)> {
-    let [to_target, to_source] = geodesic_distance_pair_like(lumen, ds, [target, source], scratch)?;
-    Ok((to_target, to_source))
+    let sk = trace_skeleton(lumen, &ds.grid, lumen_voxels, seed, Some(ds), opts)?;
+    centre_skeleton(lumen, ds, &sk, opts)
 }
 
 /// The raw colon path (voxels of `lumen`, source → target) from the skeleton graph.
@@ -216,19 +179,14 @@ fn skeleton_path(
     seed: [usize; 3],
     given_source: Option<[usize; 3]>,
     given_target: Option<[usize; 3]>,
-    opts: &EndpointOptions,
-    cl_opts: &CenterlineOptions,
+    opts: &CenterlineOptions,
 ) -> Result<Vec<[usize; 3]>> {
     let pad = Padded::new(lumen, &ds.grid);
     let sp = lumen.spacing();
     let ds_pad = pad.pad(&ds.data, 0.0);
-    let weight = cost_weight(&ds_pad, cl_opts);
+    let weight = cost_weight(&ds_pad, opts);
     let dmax = ds.data.iter().cloned().fold(0.0f32, f32::max);
     let floor = (opts.min_width as f32 * dmax).min(dmax);
-    let sk_opts = SkeletonOptions {
-        min_width: opts.min_width,
-        ..cl_opts.skeleton.clone()
-    };
     let start = TreeStart::new(&pad, &weight);
     // The search stops at the first wide voxel it settles: the nearest.
     let wide = |v: usize| ds_pad[v] > 0.0 && ds_pad[v] >= floor;
@@ -250,7 +208,7 @@ fn skeleton_path(
             return Err(unreachable(v, what));
         }
     }
-    let (colon, _stats) = colon_path(&pad, &tree, &ds_pad, sp, rectum, None, &sk_opts)?;
+    let (colon, _stats) = colon_path(&pad, &tree, &ds_pad, sp, rectum, None, opts)?;
     let colon: Vec<[usize; 3]> = colon.iter().map(|&i| pad.global_of_index(i)).collect();
     let place = |v: Option<[usize; 3]>, default: usize| match v {
         None => Some(default),
@@ -275,7 +233,7 @@ fn skeleton_path(
     let s = pad.lumen_index(given_source.unwrap_or(pad.global_of_index(rectum)))?;
     let tree = TreeStart::new(&pad, &weight).search(&pad, &[s], sp, &weight);
     let t_given = given_target.map(|t| pad.lumen_index(t)).transpose()?;
-    let (path, _stats) = colon_path(&pad, &tree, &ds_pad, sp, s, t_given, &sk_opts)?;
+    let (path, _stats) = colon_path(&pad, &tree, &ds_pad, sp, s, t_given, opts)?;
     Ok(path.iter().map(|&i| pad.global_of_index(i)).collect())
 }
 
