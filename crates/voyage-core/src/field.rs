@@ -315,29 +315,6 @@ impl<T: Copy + PartialEq> Bricked<T> {
         )
     }
 
-    /// [`Bricked::from_rows_like`] from a box-layout array whose row (j, k) starts at
-    /// `src[row_start(j, k)]`, each value read through `take`, which may also change it: one
-    /// pass both stores a field and readies its array for other use (a second search).
-    pub fn from_rows_like_taking<U, S>(
-        like: &Bricked<U>,
-        outside: T,
-        src: &mut [S],
-        row_start: impl Fn(usize, usize) -> usize,
-        take: impl Fn(&mut S) -> T,
-    ) -> Self {
-        Bricked::fill_with(
-            &like.grid,
-            &like.geometry,
-            like.layout.clone(),
-            outside,
-            |j, k, ci, dst| {
-                for (d, s) in dst.iter_mut().zip(&mut src[row_start(j, k) + ci..]) {
-                    *d = take(s);
-                }
-            },
-        )
-    }
-
     fn fill<'a, S: Copy + 'a>(
         grid: &BoxGrid,
         geometry: &Geometry,

@@ -15,6 +15,7 @@ pub mod distance;
 pub mod error;
 pub mod field;
 pub mod mem;
+pub mod navigable;
 pub mod prep;
 pub mod rng;
 pub mod segment;

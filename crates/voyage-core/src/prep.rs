@@ -15,8 +15,12 @@ use crate::{
     },
     cleanse::{CleanseOptions, Cleansing, Scene, cleanse},
     contacts::{ContactOptions, cut_contacts},
-    distance::{distance_to_wall_in, dt_fields},
+    distance::{
+        distance_to_wall_in,
+        geodesic::{SearchMemory, geodesic_distance_like},
+    },
     field::{BoxGrid, Bricked},
+    navigable::{DEFAULT_MIN_WALL_MM, Navigable},
     segment::{SegmentOptions, Segmentation, segment},
     surface::{Surface, extract_surface},
 };
@@ -30,6 +34,8 @@ pub struct PrepOptions {
     pub centerline: CenterlineOptions,
     pub cells: CellOptions,
     pub contacts: ContactOptions,
+    /// The camera's distance from the wall the navigable core is made for (`Study::nav`).
+    pub min_wall_mm: f64,
 }
 
 impl Default for PrepOptions {
@@ -40,6 +46,7 @@ impl Default for PrepOptions {
             centerline: CenterlineOptions::default(),
             cells: CellOptions::default(),
             contacts: ContactOptions::default(),
+            min_wall_mm: DEFAULT_MIN_WALL_MM,
         }
     }
 }
@@ -60,14 +67,16 @@ pub enum Stage {
     Ds,
     /// The centerline centred on Ds's ridge and smoothed.
     Centerline,
-    /// Both Dt fields.
+    /// Dt from the source over the whole lumen (for the cells).
     Dt,
+    /// Both Dt over the navigable core ([`crate::navigable`]).
+    Nav,
     Surface,
     Cells,
 }
 
 impl Stage {
-    pub const ALL: [Stage; 9] = [
+    pub const ALL: [Stage; 10] = [
         Stage::Segment,
         Stage::Cleanse,
         Stage::Skeleton,
@@ -75,6 +84,7 @@ impl Stage {
         Stage::Ds,
         Stage::Centerline,
         Stage::Dt,
+        Stage::Nav,
         Stage::Surface,
         Stage::Cells,
     ];
@@ -89,6 +99,7 @@ impl Stage {
             Stage::Dt => "dt",
             Stage::Surface => "surface",
             Stage::Cells => "cells",
+            Stage::Nav => "nav",
         }
     }
     /// The stage's place in [`Stage::ALL`].
@@ -169,10 +180,11 @@ pub struct Study {
     /// Ds: distance to the wall (mm), over the lumen's box, in the bricks that hold lumen
     /// (0 elsewhere).
     pub ds: Bricked<f32>,
-    /// Dt to the target (fly forward) and to the source (fly backward), mm; +∞ outside (and
-    /// in bricks with no lumen, which are not stored).
-    pub dt_target: Bricked<f32>,
+    /// Dt from the source over the whole lumen, mm; +∞ outside. The cells are cut on it.
     pub dt_source: Bricked<f32>,
+    /// Dt to both ends over the navigable core, for the camera's default distance from the
+    /// wall ([`Study::navigable`] for another).
+    pub nav: Navigable,
     pub source: [usize; 3],
     pub target: [usize; 3],
     /// Lumen voxels left out of Dt where loops of the colon touch ([`crate::contacts`]).
@@ -214,29 +226,16 @@ impl Study {
             self.source[2] as f64,
         ))
     }
-    /// `n` points drawn uniformly in the lumen's box, kept where the nearest voxel is lumen
-    /// (many lie within a voxel of the wall): for tests and benchmarks of the fields.
-    pub fn random_lumen_points(&self, n: usize, seed: u64) -> Vec<DVec3> {
-        let mut rng = crate::rng::Rng::new(seed, 1);
-        let grid = &self.ds.grid;
-        let mut out = Vec::with_capacity(n);
-        while out.len() < n {
-            let ijk = DVec3::new(
-                grid.lo[0] as f64 + rng.range(0.0, (grid.dims[0] - 1) as f64),
-                grid.lo[1] as f64 + rng.range(0.0, (grid.dims[1] - 1) as f64),
-                grid.lo[2] as f64 + rng.range(0.0, (grid.dims[2] - 1) as f64),
-            );
-            let v = ijk.round();
-            if self
-                .segmentation
-                .lumen
-                .get(v.x as usize, v.y as usize, v.z as usize)
-                != 0
-            {
-                out.push(self.ct.geometry().index_to_local(ijk));
-            }
+    /// The navigable core for a camera kept `min_wall_mm` from the wall: the study's own when
+    /// it was made for that distance, else made now.
+    pub fn navigable(&self, min_wall_mm: f64) -> Result<std::borrow::Cow<'_, Navigable>> {
+        if self.nav.min_wall_mm == min_wall_mm {
+            return Ok(std::borrow::Cow::Borrowed(&self.nav));
         }
-        out
+        let lumen = &self.segmentation.lumen;
+        let mut memory = SearchMemory::default();
+        Navigable::new(lumen, &self.ds, &self.centerline, min_wall_mm, &mut memory)
+            .map(std::borrow::Cow::Owned)
     }
     pub fn target_mm(&self) -> DVec3 {
         self.ct.geometry().index_to_local(DVec3::new(
@@ -327,15 +326,14 @@ pub fn prepare(
     let mut ends = centre_skeleton(&seg.lumen, &ds_box, &sk, &opts.centerline)?;
     // Ds moves into bricks, and the Dt searches work in its box array.
     let mut ds = Bricked::from_field(&ds_box, 0.0);
-    let scratch = ds_box.data;
+    let mut memory = SearchMemory::from(ds_box.data);
 
     laps.start(Stage::Dt);
-    let (mut dt_target, mut dt_source) =
-        dt_fields(&seg.lumen, &ds, ends.source, ends.target, scratch)?;
+    let mut dt_source = geodesic_distance_like(&seg.lumen, &ds, ends.source, &mut memory)?;
     let joined =
-        |dt: &crate::distance::Geodesic, source: [usize; 3]| dt.dist.get(source).is_finite();
+        |dt: &crate::distance::Geodesic, target: [usize; 3]| dt.dist.get(target).is_finite();
     let mut contact_voxels = taken.len();
-    if contact_voxels > 0 && !joined(&dt_target, ends.source) {
+    if contact_voxels > 0 && !joined(&dt_source, ends.target) {
         // The walls closed the colon itself (a path across a contact): go without.
         for &v in &taken {
             seg.lumen.data_mut()[v] = 1;
@@ -344,15 +342,20 @@ pub fn prepare(
         let ds_box = distance_to_wall_in(&seg.lumen, grid.clone());
         ends = centre_skeleton(&seg.lumen, &ds_box, &sk, &opts.centerline)?;
         ds = Bricked::from_field(&ds_box, 0.0);
-        (dt_target, dt_source) = dt_fields(&seg.lumen, &ds, ends.source, ends.target, ds_box.data)?;
+        memory = SearchMemory::from(ds_box.data);
+        dt_source = geodesic_distance_like(&seg.lumen, &ds, ends.source, &mut memory)?;
     }
-    if !joined(&dt_target, ends.source) {
+    if !joined(&dt_source, ends.target) {
         return Err(crate::Error::invalid(
             "the target cannot be reached from the source through the lumen",
         ));
     }
     seg.lumen_voxels -= contact_voxels;
     let (source, target, cl) = (ends.source, ends.target, ends.centerline);
+
+    laps.start(Stage::Nav);
+    let nav = Navigable::new(&seg.lumen, &ds, &cl, opts.min_wall_mm, &mut memory)?;
+    drop(memory);
 
     laps.start(Stage::Surface);
     // The surface is cut from the cleansed CT: swapped in for it, and back.
@@ -384,8 +387,8 @@ pub fn prepare(
         segmentation: seg,
         cleansing,
         ds,
-        dt_target: dt_target.dist,
         dt_source: dt_source.dist,
+        nav,
         source,
         target,
         contact_voxels,

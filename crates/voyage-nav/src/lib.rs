@@ -12,9 +12,11 @@ mod submarine;
 pub use camera::{Camera, Pose};
 pub use flight::{Autopilot, Flight, FlightOptions, fly, start_pose};
 pub use potential::{
-    BoxStore, BrickStore, DS_FLOOR_MM, Direction, DistanceStore, Navigable, PotentialField,
-    PotentialParams, Sample, SortedStore, Voxel, potential_field,
+    BoxStore, BrickStore, DS_FLOOR_MM, Direction, DistanceStore, PotentialField, PotentialParams,
+    Sample, SortedStore, Voxel, potential_field,
 };
 pub use submarine::{
     Dynamics, Forces, Input, Modes, Safety, State, StepReport, Submarine, delta_q, euler_step,
 };
+/// The navigable core's Dt, made by `prepare` (`Study::nav`, `Study::navigable`).
+pub use voyage_core::navigable::Navigable;

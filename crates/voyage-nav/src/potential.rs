@@ -21,9 +21,7 @@
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use voyage_core::{
-    Error, Geometry, Result, distance::geodesic::core_distances, field::Field, prep::Study,
-};
+use voyage_core::{Error, Geometry, Result, navigable::Navigable, prep::Study};
 
 /// Ds below this (mm) is evaluated as this in Eq. 2.
 pub const DS_FLOOR_MM: f64 = 0.05;
@@ -111,67 +109,21 @@ pub trait DistanceStore: Send + Sync {
     fn voxels(&self) -> usize;
 }
 
-/// The distances navigation uses: Ds, and Dt to the target and to the source over the
-/// **navigable core** of the lumen, the voxels at least `core_mm` from the wall.
-///
-/// Why not the study's Dt over every lumen voxel: a shortest path hugs the wall and slips
-/// through channels one voxel wide (leaks in the mask, crevices between folds) that the
-/// camera, kept `min_wall_mm` from the wall, cannot follow; Dt's pull then holds it against
-/// the wall at the channel's mouth, a local minimum no escape force leaves for long (seen on
-/// colon-a). Over the core, Dt only leads where the camera fits. Voxels outside the core are
-/// not navigable (absent from the stores).
-pub struct Navigable {
-    pub ds: Field<f32>,
-    /// [to the target, to the source].
-    pub dt: [Field<f32>; 2],
-    pub core_mm: f64,
-}
-
-impl Navigable {
-    /// The core is as wide as `min_wall_mm` at least and half the centerline's narrowest
-    /// radius (at most 3 mm), narrowed in halves until source and target are joined.
-    pub fn new(study: &Study, min_wall_mm: f64) -> Result<Self> {
-        let narrowest = study
-            .centerline
-            .radius_mm
-            .iter()
-            .cloned()
-            .fold(f64::INFINITY, f64::min);
-        let mut core = (0.5 * narrowest).clamp(min_wall_mm, 3.0f64.max(min_wall_mm));
-        let ds = study.ds.to_field();
-        loop {
-            if let Some(dt) = core_dt(study, &ds, core) {
-                return Ok(Navigable {
-                    ds,
-                    dt,
-                    core_mm: core,
-                });
-            }
-            if core <= 1e-3 {
-                return Err(Error::invalid(
-                    "the target cannot be reached from the source through the lumen",
-                ));
-            }
-            core = if core * 0.5 < 0.25 { 0.0 } else { core * 0.5 };
-        }
-    }
-}
-
-/// Dt to both ends over voxels with Ds ≥ `core` (None when the ends are not joined). The ends
-/// are the centerline's first and last points that lie in the core.
-fn core_dt(study: &Study, ds: &Field<f32>, core: f64) -> Option<[Field<f32>; 2]> {
-    let lumen = &study.segmentation.lumen;
-    core_distances(lumen, ds, core, &study.centerline.points_mm)
-}
-
-/// Navigable voxels: lumen with finite Dt both ways. Visited in the order of their volume
-/// index.
-fn lumen_voxels(nav: &Navigable, mut f: impl FnMut([usize; 3], Voxel)) {
-    let grid = &nav.ds.grid;
-    for (b, &ds) in nav.ds.data.iter().enumerate() {
-        let (t, s) = (nav.dt[0].data[b], nav.dt[1].data[b]);
-        if ds > 0.0 && t.is_finite() && s.is_finite() {
-            f(grid.global_of_index(b), Voxel { ds, dt: [t, s] });
+/// Navigable voxels (lumen with finite Dt both ways over the core), brick by brick: `f`
+/// hears of each with its volume voxel.
+fn navigable_voxels(study: &Study, nav: &Navigable, mut f: impl FnMut([usize; 3], Voxel)) {
+    let ds = &study.ds;
+    let [to_t, to_s] = [nav.dt[0].values(), nav.dt[1].values()];
+    // The core's Dt lie in Ds's bricks, slot for slot.
+    assert!(to_t.len() == ds.values().len() && to_s.len() == ds.values().len());
+    for (at, &d) in ds.values().iter().enumerate() {
+        let (t, s) = (to_t[at], to_s[at]);
+        if d > 0.0 && t.is_finite() && s.is_finite() {
+            let l = ds.box_voxel(at);
+            f(
+                [0, 1, 2].map(|a| l[a] + ds.grid.lo[a]),
+                Voxel { ds: d, dt: [t, s] },
+            );
         }
     }
 }
@@ -184,20 +136,19 @@ pub struct SortedStore {
 }
 
 impl SortedStore {
-    pub fn new(nav: &Navigable) -> Result<Self> {
-        let d = nav.ds.geometry.dims;
+    pub fn new(study: &Study, nav: &Navigable) -> Result<Self> {
+        let d = study.ds.geometry.dims;
         if d.iter().product::<usize>() > u32::MAX as usize {
             return Err(Error::invalid(
                 "the volume has more voxels than a 32-bit index holds",
             ));
         }
-        let mut index = Vec::new();
-        let mut values = Vec::new();
-        // The box is visited k, j, i: volume indices come out sorted.
-        lumen_voxels(nav, |g, v| {
-            index.push((g[0] + d[0] * (g[1] + d[1] * g[2])) as u32);
-            values.push(v);
+        let mut pairs = Vec::new();
+        navigable_voxels(study, nav, |g, v| {
+            pairs.push(((g[0] + d[0] * (g[1] + d[1] * g[2])) as u32, v));
         });
+        pairs.sort_unstable_by_key(|p| p.0);
+        let (index, values) = pairs.into_iter().unzip();
         Ok(SortedStore {
             dims: d.map(|x| x as i64),
             index,
@@ -244,14 +195,14 @@ pub struct BrickStore {
 }
 
 impl BrickStore {
-    pub fn new(nav: &Navigable) -> Result<Self> {
-        let grid = &nav.ds.grid;
+    pub fn new(study: &Study, nav: &Navigable) -> Result<Self> {
+        let grid = &study.ds.grid;
         let lo = grid.lo.map(|x| x as i64);
         let nb = grid.dims.map(|x| x.div_ceil(BRICK) as i64);
         let mut table = vec![NO_BRICK; (nb[0] * nb[1] * nb[2]) as usize];
         let mut bricks: Vec<Voxel> = Vec::new();
         let mut voxels = 0;
-        lumen_voxels(nav, |g, v| {
+        navigable_voxels(study, nav, |g, v| {
             let l = [0, 1, 2].map(|a| g[a] as i64 - lo[a]);
             let t = Self::brick_of(nb, l);
             if table[t] == NO_BRICK {
@@ -319,11 +270,11 @@ pub struct BoxStore {
 }
 
 impl BoxStore {
-    pub fn new(nav: &Navigable) -> Result<Self> {
-        let grid = &nav.ds.grid;
+    pub fn new(study: &Study, nav: &Navigable) -> Result<Self> {
+        let grid = &study.ds.grid;
         let mut values = vec![OUTSIDE; grid.len()];
         let mut voxels = 0;
-        lumen_voxels(nav, |g, v| {
+        navigable_voxels(study, nav, |g, v| {
             let l = [0, 1, 2].map(|a| g[a] - grid.lo[a]);
             values[grid.index(l[0], l[1], l[2])] = v;
             voxels += 1;
@@ -506,9 +457,9 @@ impl<S: DistanceStore> PotentialField<S> {
 /// The field navigation uses: bricks over the navigable core for a camera kept
 /// `min_wall_mm` from the wall.
 pub fn potential_field(study: &Study, min_wall_mm: f64) -> Result<PotentialField<BrickStore>> {
-    let nav = Navigable::new(study, min_wall_mm)?;
+    let nav = study.navigable(min_wall_mm)?;
     Ok(PotentialField::new(
-        BrickStore::new(&nav)?,
+        BrickStore::new(study, &nav)?,
         study.ct.geometry(),
     ))
 }

@@ -106,7 +106,8 @@ pub struct Safety {
 impl Default for Safety {
     fn default() -> Self {
         Safety {
-            min_wall_mm: 1.0,
+            // The navigable core `prepare` makes is for this distance.
+            min_wall_mm: voyage_core::navigable::DEFAULT_MIN_WALL_MM,
             voxel_fraction: 0.9,
             ds_fraction: 0.25,
             max_substep_s: 1.0 / 60.0,

@@ -42,18 +42,19 @@ fn full_colon(seed: u64) -> Study {
 }
 
 fn field(study: &Study, nav: &Navigable) -> PotentialField<BrickStore> {
-    PotentialField::new(BrickStore::new(nav).unwrap(), study.ct.geometry())
+    PotentialField::new(BrickStore::new(study, nav).unwrap(), study.ct.geometry())
 }
 
-/// Trilinear Ds and Dt written out from the box fields, with the documented edge rule
+/// Trilinear Ds and Dt written out from the bricked fields, with the documented edge rule
 /// (non-lumen corners: Ds 0; Dt over lumen corners, renormalised), and Eq. 2 typed in.
 fn direct_v(
+    study: &Study,
     nav: &Navigable,
     mm: DVec3,
     p: &PotentialParams,
     slot: usize,
 ) -> Option<(f64, f64, f64)> {
-    let g = &nav.ds.geometry;
+    let g = &study.ds.geometry;
     let x = g.local_to_index(mm);
     let b = x.floor();
     let t = x - b;
@@ -68,9 +69,9 @@ fn direct_v(
             (b.y + o[1]) as usize,
             (b.z + o[2]) as usize,
         ];
-        let d_t = nav.dt[slot].get_global(v, f32::INFINITY);
-        let d_o = nav.dt[1 - slot].get_global(v, f32::INFINITY);
-        let d_s = nav.ds.get_global(v, 0.0);
+        let d_t = nav.dt[slot].get(v);
+        let d_o = nav.dt[1 - slot].get(v);
+        let d_s = study.ds.get(v);
         if d_t.is_finite() && d_o.is_finite() && d_s > 0.0 {
             ds += w * d_s as f64;
             dt += w * d_t as f64;
@@ -93,9 +94,9 @@ fn direct_v(
 #[test]
 fn potential_matches_a_direct_evaluation_of_eq2() {
     let study = small_colon(3);
-    let nav = Navigable::new(&study, 1.0).unwrap();
+    let nav = study.navigable(1.0).unwrap();
     let f = field(&study, &nav);
-    let sorted = PotentialField::new(SortedStore::new(&nav).unwrap(), study.ct.geometry());
+    let sorted = PotentialField::new(SortedStore::new(&study, &nav).unwrap(), study.ct.geometry());
     assert_eq!(f.store().voxels(), sorted.store().voxels());
     let params = [
         PotentialParams::default(),
@@ -116,12 +117,15 @@ fn potential_matches_a_direct_evaluation_of_eq2() {
         },
     ];
     let (mut inside, mut edge) = (0, 0);
-    for (i, x) in study.random_lumen_points(4000, 7).into_iter().enumerate() {
+    for (i, x) in voyage_phantom::fixtures::random_lumen_points(&study, 4000, 7)
+        .into_iter()
+        .enumerate()
+    {
         let p = &params[i % params.len()];
         for dir in [Direction::Forward, Direction::Backward] {
             let slot = (dir == Direction::Backward) as usize;
             let ours = f.value(x, p, dir);
-            let reference = direct_v(&nav, x, p, slot);
+            let reference = direct_v(&study, &nav, x, p, slot);
             assert_eq!(ours.is_some(), reference.is_some(), "defined at {x}");
             if let (Some(v), Some((r, _, _))) = (ours, reference) {
                 assert!(
@@ -148,7 +152,8 @@ fn potential_matches_a_direct_evaluation_of_eq2() {
                     let mut h = DVec3::ZERO;
                     h[a] = 0.5 * study.ct.spacing()[a];
                     let side = |y: DVec3| {
-                        direct_v(&nav, y, p, slot).map_or_else(|| p.value(0.0, centre), |r| r.0)
+                        direct_v(&study, &nav, y, p, slot)
+                            .map_or_else(|| p.value(0.0, centre), |r| r.0)
                     };
                     let fd = (side(x + h) - side(x - h)) / (2.0 * h[a]);
                     assert!(
@@ -301,7 +306,7 @@ fn assert_safe(study: &Study, x: DVec3, min_wall: f64, what: &str) {
 /// ≥ 10⁵ steps of random forces, torques, parameters, modes, directions and frame times.
 fn random_walk(study: &Study, steps: usize, seed: u64, what: &str) {
     let safety = Safety::default();
-    let nav = Navigable::new(study, safety.min_wall_mm).unwrap();
+    let nav = study.navigable(safety.min_wall_mm).unwrap();
     let f = field(study, &nav);
     let opts = FlightOptions::default();
     let pose = start_pose(&f, &study.centerline, Direction::Forward, &opts).unwrap();
@@ -400,7 +405,7 @@ fn check_flight(f: &Flight, what: &str) {
 }
 
 fn flights(study: &Study, opts: &FlightOptions, what: &str) -> Vec<Flight> {
-    let nav = Navigable::new(study, opts.safety.min_wall_mm).unwrap();
+    let nav = study.navigable(opts.safety.min_wall_mm).unwrap();
     let f = field(study, &nav);
     [Direction::Forward, Direction::Backward]
         .into_iter()
@@ -502,7 +507,7 @@ fn leveling_keeps_the_up_vector_against_gravity() {
 #[test]
 fn still_mode_turns_the_view_but_not_the_camera() {
     let study = small_colon(4);
-    let nav = Navigable::new(&study, 1.0).unwrap();
+    let nav = study.navigable(1.0).unwrap();
     let f = field(&study, &nav);
     let opts = FlightOptions::default();
     let pose = start_pose(&f, &study.centerline, Direction::Forward, &opts).unwrap();
@@ -537,7 +542,7 @@ fn still_mode_turns_the_view_but_not_the_camera() {
 #[test]
 fn a_click_pushes_the_camera_toward_the_pixel() {
     let study = full_colon(1);
-    let nav = Navigable::new(&study, 1.0).unwrap();
+    let nav = study.navigable(1.0).unwrap();
     let f = field(&study, &nav);
     let opts = FlightOptions::default();
     let pose = start_pose(&f, &study.centerline, Direction::Forward, &opts).unwrap();
@@ -589,7 +594,7 @@ fn a_click_pushes_the_camera_toward_the_pixel() {
 #[test]
 fn an_unsafe_start_is_refused() {
     let study = small_colon(5);
-    let nav = Navigable::new(&study, 1.0).unwrap();
+    let nav = study.navigable(1.0).unwrap();
     let f = field(&study, &nav);
     let outside = Pose::looking(DVec3::new(1.0, 1.0, 1.0), DVec3::Z, DVec3::Y);
     let e = Submarine::new(&f, outside, Safety::default())

@@ -1,8 +1,11 @@
-//! For tests: the real data beside the checkout (`../shared/data`) and how a test that cannot
+//! For tests and benchmarks: random points in a study's lumen; the real data beside the checkout (`../shared/data`) and how a test that cannot
 //! run says so. Where `VOYAGE_REQUIRE_ALL` is set (CI sets it) such a test fails instead, so
 //! that a skip is never a silent pass.
 
 use std::path::PathBuf;
+
+use glam::DVec3;
+use voyage_core::Study;
 
 /// `../shared/data` beside the checkout, or None after [`skip`] where it is not there.
 pub fn shared_data() -> Option<PathBuf> {
@@ -33,4 +36,29 @@ pub fn skip(why: &str) {
         "cannot run: {why} (VOYAGE_REQUIRE_ALL is set)"
     );
     eprintln!("skipping: {why}");
+}
+
+/// `n` points drawn uniformly in the lumen's box, kept where the nearest voxel is lumen
+/// (many lie within a voxel of the wall): for tests and benchmarks of the fields.
+pub fn random_lumen_points(study: &Study, n: usize, seed: u64) -> Vec<DVec3> {
+    let mut rng = voyage_core::rng::Rng::new(seed, 1);
+    let grid = &study.ds.grid;
+    let mut out = Vec::with_capacity(n);
+    while out.len() < n {
+        let ijk = DVec3::new(
+            grid.lo[0] as f64 + rng.range(0.0, (grid.dims[0] - 1) as f64),
+            grid.lo[1] as f64 + rng.range(0.0, (grid.dims[1] - 1) as f64),
+            grid.lo[2] as f64 + rng.range(0.0, (grid.dims[2] - 1) as f64),
+        );
+        let v = ijk.round();
+        if study
+            .segmentation
+            .lumen
+            .get(v.x as usize, v.y as usize, v.z as usize)
+            != 0
+        {
+            out.push(study.ct.geometry().index_to_local(ijk));
+        }
+    }
+    out
 }

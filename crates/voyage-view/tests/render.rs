@@ -8,9 +8,7 @@ compile_error!(
 
 use glam::DVec3;
 use voyage_core::prep::{PrepOptions, Study, prepare};
-use voyage_nav::{
-    BrickStore, Camera, Direction, FlightOptions, Navigable, Pose, PotentialField, fly,
-};
+use voyage_nav::{BrickStore, Camera, Direction, FlightOptions, Pose, PotentialField, fly};
 use voyage_phantom::{self as phantom, ColonOptions, Phantom};
 use voyage_view::{
     CellMesh, Frame, NO_TRIANGLE, Rasterizer, Strategy, View, Visibility, look_around, survey,
@@ -27,8 +25,8 @@ fn colon_a_study() -> Option<voyage_core::Study> {
 /// Poses along both automatic flights (`per_flight` each, evenly spaced, in flight order so
 /// the paper's temporal coherence is exercised) and `random` look-around views.
 fn flight_cameras(study: &Study, per_flight: usize, random: usize) -> Vec<Camera> {
-    let nav = Navigable::new(study, 1.0).unwrap();
-    let field = PotentialField::new(BrickStore::new(&nav).unwrap(), study.ct.geometry());
+    let nav = study.navigable(1.0).unwrap();
+    let field = PotentialField::new(BrickStore::new(study, &nav).unwrap(), study.ct.geometry());
     let mut all: Vec<Pose> = Vec::new();
     let mut cameras = Vec::new();
     for d in [Direction::Forward, Direction::Backward] {

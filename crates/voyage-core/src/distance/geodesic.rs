@@ -11,18 +11,16 @@
 //! distance; the nine rows of three neighbours are compared four wide (SSE, weighted or not)
 //! into one mask per voxel, and the rows of the voxel 16 places ahead in the bucket are
 //! prefetched. Fresh box-sized memory costs a page fault per page (up to a third of a search
-//! on a VM), so [`geodesic_distance_like`] searches in memory handed to it (prep hands over Ds's
-//! box array, allocated with room for the padded layout) and writes Dt straight into Ds's
-//! bricks; [`geodesic_distance_pair_like`] (prep's two Dt) runs the second search in the
-//! first's array, the pass that moves the first's distances into bricks turning each value
-//! back into a start (`restart`). [`geodesic_distance`] marks the bricks holding lumen while it
+//! on a VM), so the searches work in a [`SearchMemory`] their caller owns (prep's starts as Ds's box
+//! array, allocated with room for the padded layout), and [`geodesic_distance_like`] writes Dt
+//! straight into Ds's bricks. [`geodesic_distance`] marks the bricks holding lumen while it
 //! lays out its start (`BrickMarks`), so finishing makes no pass over the box to find them.
 //! `TreeStart` keeps a weighted tree search's arrays for several searches: one stopped early is
 //! rewound over the neighbourhoods of the voxels it settled. Timings: BENCHMARKS.md.
 
 use crate::{
     Error, Result, Volume,
-    field::{BoxGrid, BrickMarks, Bricked, Field},
+    field::{BoxGrid, BrickMarks, Bricked},
 };
 
 /// Dt and what the search learned on the way.
@@ -60,118 +58,111 @@ pub fn geodesic_distance(
     })
 }
 
+/// The memory the searches work in, reused from one search to the next by whoever runs
+/// several (`prepare`): a fresh box-sized array costs a page fault per page, which on some
+/// machines costs as much as the search itself. Any length; a search grows it as it needs.
+#[derive(Debug, Default)]
+pub struct SearchMemory {
+    dist: Vec<f32>,
+}
+
+impl From<Vec<f32>> for SearchMemory {
+    /// Memory some other field is done with (prep hands over Ds's box array, allocated with
+    /// room for the padded layout).
+    fn from(dist: Vec<f32>) -> Self {
+        SearchMemory { dist }
+    }
+}
+
 /// [`geodesic_distance`] over the box of `like` and stored in the bricks it stores, which must
 /// hold every lumen voxel of the box (Ds's bricks do): the finishing pass then reads those
-/// bricks only. The search works in `scratch`'s memory (any length) and hands it back for the
-/// next one: a fresh box-sized array costs a page fault per page, which on some machines costs
-/// as much as the search itself.
+/// bricks only. The search works in `memory`.
 pub fn geodesic_distance_like<U>(
     mask: &Volume<u8>,
     like: &Bricked<U>,
     source: [usize; 3],
-    scratch: Vec<f32>,
-) -> Result<(Geodesic, Vec<f32>)> {
-    let (shape, r) = search_from(mask, &like.grid, source, scratch, None)?;
+    memory: &mut SearchMemory,
+) -> Result<Geodesic> {
+    let (shape, r) = search_from(
+        mask,
+        &like.grid,
+        source,
+        std::mem::take(&mut memory.dist),
+        None,
+    )?;
     let dist =
         Bricked::from_rows_like(like, f32::INFINITY, |j, k| shape.row(&r.dist, j, k), finish);
-    Ok((
-        Geodesic {
-            farthest: shape.global_of_index(r.far),
-            max_mm: r.far_d,
-            reached: r.reached,
-            dist,
-        },
-        r.dist,
-    ))
-}
-
-/// [`geodesic_distance_like`] from two sources in turn (Dt to the target, and to the source).
-/// The pass that moves the first search's distances into bricks also turns its array back
-/// into a start (every lumen voxel of the box lies in those bricks), so the second search
-/// needs no new one from the mask.
-pub fn geodesic_distance_pair_like<U>(
-    mask: &Volume<u8>,
-    like: &Bricked<U>,
-    sources: [[usize; 3]; 2],
-    scratch: Vec<f32>,
-) -> Result<[Geodesic; 2]> {
-    let (shape, mut first) = search_from(mask, &like.grid, sources[0], scratch, None)?;
-    let second_src = source_index(mask, &shape, sources[1])?;
-    let first_dist = Bricked::from_rows_like_taking(
-        like,
-        f32::INFINITY,
-        &mut first.dist,
-        |j, k| shape.row_start(j, k),
-        |d| {
-            let done = finish(*d);
-            *d = restart(*d);
-            done
-        },
-    );
-    let second = dial_impl::<false, false>(
-        &shape,
-        std::mem::take(&mut first.dist),
-        Vec::new(),
-        &[second_src],
-        mask.spacing(),
-        &[],
-        None,
-        None,
-        false,
-    );
-    let second_dist = Bricked::from_rows_like(
-        like,
-        f32::INFINITY,
-        |j, k| shape.row(&second.dist, j, k),
-        finish,
-    );
-    let geodesic = |r: &Search, dist| Geodesic {
+    memory.dist = r.dist;
+    Ok(Geodesic {
         farthest: shape.global_of_index(r.far),
         max_mm: r.far_d,
         reached: r.reached,
         dist,
-    };
-    Ok([geodesic(&first, first_dist), geodesic(&second, second_dist)])
+    })
 }
 
 /// Dt to both ends over the lumen's **core**, the voxels of `mask` whose Ds (`ds`, over the
-/// lumen's box) is at least `min_ds_mm`: `[to target, to source]`, +∞ outside the core.
-/// The ends are the first and the last of `path_mm` (volume-local mm, source first) that lie
-/// in the core. None when no path point lies in the core or the ends are not joined in it.
+/// lumen's box, in bricks holding every lumen voxel) is at least `min_ds_mm`: `[to target,
+/// to source]` in `ds`'s bricks, +∞ outside the core. The ends are the first and the last of
+/// `path_mm` (volume-local mm, source first) that lie in the core. None when no path point
+/// lies in the core or the ends are not joined in it. The searches work in `memory`, one
+/// after the other.
 pub fn core_distances(
     mask: &Volume<u8>,
-    ds: &Field<f32>,
+    ds: &Bricked<f32>,
     min_ds_mm: f64,
     path_mm: &[[f64; 3]],
-) -> Option<[Field<f32>; 2]> {
-    let grid = &ds.grid;
-    let mut pad = Padded::new(mask, grid);
-    let padded_ds = pad.pad(&ds.data, 0.0);
-    for (m, &d) in pad.inside.iter_mut().zip(&padded_ds) {
-        if (d as f64) < min_ds_mm {
-            *m = 0;
-        }
-    }
+    memory: &mut SearchMemory,
+) -> Option<[Bricked<f32>; 2]> {
+    let shape = Padded::shape(&ds.grid);
+    let outside_core = |d: f32| (d as f64) < min_ds_mm;
     let sp = mask.spacing();
     let in_core = |p: &[f64; 3]| {
         let v = [0, 1, 2].map(|a| (p[a] / sp[a]).round().max(0.0) as usize);
-        pad.index_of_global(v).filter(|&i| pad.inside[i] != 0)
+        let i = shape.index_of_global(v)?;
+        (mask.data()[mask.geometry().index(v[0], v[1], v[2])] != 0 && !outside_core(ds.get(v)))
+            .then_some(i)
     };
     let s = path_mm.iter().find_map(in_core)?;
     let t = path_mm.iter().rev().find_map(in_core)?;
-    let (to_t, to_s) = rayon::join(
-        || dial(&pad, &[t], sp, &SearchOptions::default()),
-        || dial(&pad, &[s], sp, &SearchOptions::default()),
-    );
-    if !to_t.dist[s].is_finite() {
+    // The start from the mask with the lumen outside the core made wall (every lumen voxel
+    // lies in Ds's bricks).
+    let search = |from: usize, memory: &mut SearchMemory| {
+        let mut start = shape.start_from_mask(mask, std::mem::take(&mut memory.dist), None);
+        for (at, &d) in ds.values().iter().enumerate() {
+            if outside_core(d) {
+                let l = ds.box_voxel(at);
+                if (0..3).all(|a| l[a] < ds.grid.dims[a]) {
+                    start[shape.row_start(l[1], l[2]) + l[0]] = 0.0;
+                }
+            }
+        }
+        dial_impl::<false, false>(
+            &shape,
+            start,
+            Vec::new(),
+            &[from],
+            sp,
+            &[],
+            None,
+            None,
+            false,
+        )
+    };
+    let bricked = |r: Search, memory: &mut SearchMemory| {
+        let dist =
+            Bricked::from_rows_like(ds, f32::INFINITY, |j, k| shape.row(&r.dist, j, k), finish);
+        memory.dist = r.dist;
+        dist
+    };
+    let to_t = search(t, memory);
+    if !finish(to_t.dist[s]).is_finite() {
+        memory.dist = to_t.dist;
         return None;
     }
-    let field = |d: Vec<f32>| Field {
-        grid: grid.clone(),
-        geometry: mask.geometry().clone(),
-        data: pad.unpad(d),
-    };
-    Some([field(to_t.dist), field(to_s.dist)])
+    let to_target = bricked(to_t, memory);
+    let to_s = search(s, memory);
+    Some([to_target, bricked(to_s, memory)])
 }
 
 /// The plain search from `source` over `grid`, its distances left unfinished ([`finish`]);
@@ -610,14 +601,6 @@ fn finish(d: f32) -> f32 {
     }
 }
 
-/// A finished search's working value turned back into a start ([`start_from_inside`]): walls
-/// (exactly +0.0, never written) stay 0, every lumen voxel (settled, with the sign bit set,
-/// −0.0 for the source, or unreached, +∞) becomes +∞.
-#[inline]
-fn restart(d: f32) -> f32 {
-    if d.to_bits() == 0 { 0.0 } else { f32::INFINITY }
-}
-
 /// `W`: weighted; `T`: record the tree. Monomorphised so the plain search pays for neither.
 ///
 /// `dist`: the starting distances (see [`start_from_inside`]); `parent`, with `T`: all
@@ -994,21 +977,11 @@ mod tests {
             // Into Ds's bricks: the same distances.
             // Into Ds's bricks, in memory left over from another search: the same distances.
             let ds = Bricked::from_field(&distance_to_wall(&m).unwrap(), 0.0);
-            let (fresh, used) = geodesic_distance_like(&m, &ds, [0, 0, 0], vec![7.0; 10]).unwrap();
+            let mut memory = SearchMemory::from(vec![7.0; 10]);
+            let fresh = geodesic_distance_like(&m, &ds, [0, 0, 0], &mut memory).unwrap();
             assert_eq!(fresh.dist.to_volume().unwrap(), got);
-            let (reused, used) = geodesic_distance_like(&m, &ds, [0, 0, 0], used).unwrap();
+            let reused = geodesic_distance_like(&m, &ds, [0, 0, 0], &mut memory).unwrap();
             assert_eq!(reused.dist.to_volume().unwrap(), got);
-            // Two searches in one array, the second started from what the first left: each as
-            // if alone (the second from the first's farthest voxel, the source's own −0 included).
-            let (alone, _) = geodesic_distance_like(&m, &ds, geo.farthest, Vec::new()).unwrap();
-            let [a, b] =
-                geodesic_distance_pair_like(&m, &ds, [[0, 0, 0], geo.farthest], used).unwrap();
-            assert_eq!(a.dist.to_volume().unwrap(), got);
-            assert_eq!(b.dist.to_volume().unwrap(), alone.dist.to_volume().unwrap());
-            assert_eq!(
-                (b.reached, b.farthest, b.max_mm),
-                (alone.reached, alone.farthest, alone.max_mm)
-            );
             let mut reached = 0;
             for (idx, (&a, &b)) in got.data().iter().zip(&want).enumerate() {
                 if b.is_infinite() {

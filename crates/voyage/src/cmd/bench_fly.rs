@@ -13,8 +13,8 @@ use voyage_core::{
 };
 use voyage_io::{self as io, LoadOptions};
 use voyage_nav::{
-    BoxStore, BrickStore, Direction, DistanceStore, FlightOptions, Navigable, PotentialField,
-    PotentialParams, SortedStore, fly,
+    BoxStore, BrickStore, Direction, DistanceStore, FlightOptions, PotentialField, PotentialParams,
+    SortedStore, fly,
 };
 use voyage_phantom::{self as phantom, ColonOptions};
 
@@ -66,27 +66,27 @@ pub fn run(inputs: &[PathBuf], phantoms: bool, samples: usize, common: &Common) 
 
 fn measure(name: &str, study: &Study, samples: usize) -> Result<Value> {
     let opts = FlightOptions::for_study(study);
-    let nav = Navigable::new(study, opts.safety.min_wall_mm)?;
-    let points = study.random_lumen_points(samples, 5);
+    let nav = study.navigable(opts.safety.min_wall_mm)?;
+    let points = phantom::fixtures::random_lumen_points(study, samples, 5);
     let g = study.ct.geometry();
     let layouts = vec![
         layout(
             "sorted list + binary search (paper)",
-            &PotentialField::new(SortedStore::new(&nav)?, g),
+            &PotentialField::new(SortedStore::new(study, &nav)?, g),
             &points,
         ),
         layout(
             "8³ bricks (used)",
-            &PotentialField::new(BrickStore::new(&nav)?, g),
+            &PotentialField::new(BrickStore::new(study, &nav)?, g),
             &points,
         ),
         layout(
             "dense box",
-            &PotentialField::new(BoxStore::new(&nav)?, g),
+            &PotentialField::new(BoxStore::new(study, &nav)?, g),
             &points,
         ),
     ];
-    let field = PotentialField::new(BrickStore::new(&nav)?, g);
+    let field = PotentialField::new(BrickStore::new(study, &nav)?, g);
     let mut flights = Vec::new();
     for dir in [Direction::Forward, Direction::Backward] {
         let f = fly(
