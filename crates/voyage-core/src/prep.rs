@@ -34,8 +34,9 @@ pub struct PrepOptions {
     pub centerline: CenterlineOptions,
     pub cells: CellOptions,
     pub contacts: ContactOptions,
-    /// The camera's distance from the wall the navigable core is made for (`Study::nav`).
-    pub min_wall_mm: f64,
+    /// The camera's distance from the wall the navigable core is made for (`Study::nav`);
+    /// None: no navigable core (a run that only exports, as `voyage prep`).
+    pub nav_min_wall_mm: Option<f64>,
 }
 
 impl Default for PrepOptions {
@@ -46,7 +47,7 @@ impl Default for PrepOptions {
             centerline: CenterlineOptions::default(),
             cells: CellOptions::default(),
             contacts: ContactOptions::default(),
-            min_wall_mm: DEFAULT_MIN_WALL_MM,
+            nav_min_wall_mm: Some(DEFAULT_MIN_WALL_MM),
         }
     }
 }
@@ -184,7 +185,7 @@ pub struct Study {
     pub dt_source: Bricked<f32>,
     /// Dt to both ends over the navigable core, for the camera's default distance from the
     /// wall ([`Study::navigable`] for another).
-    pub nav: Navigable,
+    pub nav: Option<Navigable>,
     pub source: [usize; 3],
     pub target: [usize; 3],
     /// Lumen voxels left out of Dt where loops of the colon touch ([`crate::contacts`]).
@@ -229,8 +230,8 @@ impl Study {
     /// The navigable core for a camera kept `min_wall_mm` from the wall: the study's own when
     /// it was made for that distance, else made now.
     pub fn navigable(&self, min_wall_mm: f64) -> Result<std::borrow::Cow<'_, Navigable>> {
-        if self.nav.min_wall_mm == min_wall_mm {
-            return Ok(std::borrow::Cow::Borrowed(&self.nav));
+        if let Some(nav) = self.nav.as_ref().filter(|n| n.min_wall_mm == min_wall_mm) {
+            return Ok(std::borrow::Cow::Borrowed(nav));
         }
         let lumen = &self.segmentation.lumen;
         let mut memory = SearchMemory::default();
@@ -353,8 +354,13 @@ pub fn prepare(
     seg.lumen_voxels -= contact_voxels;
     let (source, target, cl) = (ends.source, ends.target, ends.centerline);
 
-    laps.start(Stage::Nav);
-    let nav = Navigable::new(&seg.lumen, &ds, &cl, opts.min_wall_mm, &mut memory)?;
+    let nav = match opts.nav_min_wall_mm {
+        Some(wall) => {
+            laps.start(Stage::Nav);
+            Some(Navigable::new(&seg.lumen, &ds, &cl, wall, &mut memory)?)
+        }
+        None => None,
+    };
     drop(memory);
 
     laps.start(Stage::Surface);

@@ -212,7 +212,10 @@ fn the_same_study_whatever_the_threads() {
     );
     for i in 0..2 {
         assert!(
-            same(a.nav.dt[i].values(), b.nav.dt[i].values()),
+            same(
+                a.nav.as_ref().unwrap().dt[i].values(),
+                b.nav.as_ref().unwrap().dt[i].values()
+            ),
             "the navigable core's Dt {i} differs"
         );
     }

@@ -2,8 +2,9 @@
 //!
 //! V(X) = Ct·Dt(X) + Cs·(ρ/Ds(X) − 1)²  where 0 < Ds(X) < ρ,  else Ct·Dt(X).
 //!
-//! Only the distances are stored; V is evaluated from them at each sample, so Ct, Cs and ρ
-//! change at any moment without recomputing anything. Two storages of the lumen voxels'
+//! Ds is the study's; Dt is over the navigable core, made by `prepare` (`Study::nav`, see
+//! `voyage_core::navigable`). Only the distances are stored; V is evaluated from them at each
+//! sample, so Ct, Cs and ρ change at any moment without recomputing anything. Two storages of the lumen voxels'
 //! distances sit behind one trait so that they can be measured against each other
 //! (`voyage bench fly`): the paper's list of lumen voxels sorted by index and found by binary
 //! search ([`SortedStore`]), and 8³ bricks over the lumen's box where only bricks holding

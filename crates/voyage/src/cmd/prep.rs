@@ -131,8 +131,9 @@ pub struct Prepared {
     pub load_ms: f64,
 }
 
-/// Loads the input and runs the whole preprocessing (a progress bar on a terminal).
-pub fn load_and_prepare(a: &InputArgs) -> Result<Prepared> {
+/// Loads the input and runs the whole preprocessing (a progress bar on a terminal), with the
+/// navigable core for a camera `nav_min_wall_mm` from the wall (None: no navigation).
+pub fn load_and_prepare(a: &InputArgs, nav_min_wall_mm: Option<f64>) -> Result<Prepared> {
     let t0 = Instant::now();
     let loaded = io::load(
         &a.input,
@@ -145,6 +146,7 @@ pub fn load_and_prepare(a: &InputArgs) -> Result<Prepared> {
     let mut opts = PrepOptions::default();
     a.points.apply(&g, &loaded.meta, &mut opts);
     opts.segment.mask = a.mask.then_some(true);
+    opts.nav_min_wall_mm = nav_min_wall_mm;
 
     let bar = progress_bar();
     let study = prepare(loaded.volume, &opts, |stage| {
@@ -175,7 +177,7 @@ pub fn run(a: &PrepArgs) -> Result<()> {
         study,
         geometry: g,
         load_ms,
-    } = load_and_prepare(&a.input)?;
+    } = load_and_prepare(&a.input, None)?;
     let written = write_study(&a.out, &study)?;
     let summary = summary(&study, &g, load_ms);
     if a.json {

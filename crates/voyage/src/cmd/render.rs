@@ -213,7 +213,8 @@ fn flight(study: &Study, physics: &PhysicsArgs, dir: OneDirection, input: &Path)
 pub fn render(a: &RenderArgs) -> Result<()> {
     a.view.check()?;
     let pose = a.pose.as_deref().map(parse_pose).transpose()?;
-    let Prepared { study, .. } = load_and_prepare(&a.input)?;
+    let wall = a.physics.options()?.safety.min_wall_mm;
+    let Prepared { study, .. } = load_and_prepare(&a.input, Some(wall))?;
     let pose = match (pose, a.frame) {
         (Some(p), _) => p,
         (None, Some(n)) => {
@@ -303,7 +304,8 @@ fn blend_over(under: &mut [u8], over: &[u8]) {
 pub fn movie(a: &MovieArgs) -> Result<()> {
     a.view.check()?;
     anyhow::ensure!(a.every >= 1, "--every must be at least 1");
-    let Prepared { study, .. } = load_and_prepare(&a.input)?;
+    let wall = a.physics.options()?.safety.min_wall_mm;
+    let Prepared { study, .. } = load_and_prepare(&a.input, Some(wall))?;
     let f = flight(&study, &a.physics, a.direction, &a.input.input)?;
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("{}: cannot create the folder", a.out.display()))?;
