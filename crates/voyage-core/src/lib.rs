@@ -19,6 +19,7 @@ pub mod navigable;
 pub mod prep;
 pub mod rng;
 pub mod segment;
+mod simd;
 pub mod surface;
 pub mod volume;
 

@@ -38,18 +38,7 @@ pub(crate) fn prefetch<T>(s: &[T], at: usize) {
     }
 }
 
-/// Asks the cache for the line holding `p`. Any address will do: a prefetch never faults and
-/// has no effect but on the cache.
-#[inline(always)]
-pub(crate) fn prefetch_address<T>(p: *const T) {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: the prefetch instruction reads nothing and cannot fault.
-    unsafe {
-        std::arch::x86_64::_mm_prefetch(p as *const i8, std::arch::x86_64::_MM_HINT_T0)
-    };
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = p;
-}
+pub(crate) use crate::simd::prefetch_address;
 
 #[cfg(target_os = "linux")]
 fn advise_huge<T>(v: &Vec<T>) {

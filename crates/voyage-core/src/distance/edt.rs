@@ -107,7 +107,7 @@ const DIRECT_MAX: usize = 160;
 /// [`lower_envelope`] (so where both pick the same site the result is the same bits).
 fn direct_envelope(run: &mut [f32], h: f32, s: &mut Scratch) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
+    if crate::simd::avx2() {
         // SAFETY: the CPU has AVX2 (checked just now).
         return unsafe { direct_envelope_avx2(run, h, s) };
     }
@@ -129,43 +129,14 @@ unsafe fn direct_envelope_avx2(run: &mut [f32], h: f32, s: &mut Scratch) {
         // SAFETY: AVX2 is enabled here; each group lies within `pos` and `out` (length m).
         q += unsafe {
             match (m - q) / 8 {
-                1 => direct_group_avx2::<1>(sites, &pos[q..], &mut out[q..]),
-                2 => direct_group_avx2::<2>(sites, &pos[q..], &mut out[q..]),
-                3 => direct_group_avx2::<3>(sites, &pos[q..], &mut out[q..]),
-                _ => direct_group_avx2::<4>(sites, &pos[q..], &mut out[q..]),
+                1 => crate::simd::min_parabolas_avx2::<1>(sites, &pos[q..], &mut out[q..]),
+                2 => crate::simd::min_parabolas_avx2::<2>(sites, &pos[q..], &mut out[q..]),
+                3 => crate::simd::min_parabolas_avx2::<3>(sites, &pos[q..], &mut out[q..]),
+                _ => crate::simd::min_parabolas_avx2::<4>(sites, &pos[q..], &mut out[q..]),
             }
         };
     }
     run.copy_from_slice(&out[..n]);
-}
-
-/// The least of `out`'s first 8·B entries and every site's parabola at their positions;
-/// returns how many entries it did.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn direct_group_avx2<const B: usize>(
-    (sp, sf): (&[f32], &[f32]),
-    pos: &[f32],
-    out: &mut [f32],
-) -> usize {
-    use std::arch::x86_64::*;
-    assert!(pos.len() >= 8 * B && out.len() >= 8 * B);
-    // SAFETY (loads and stores): 8·B entries of each, asserted above.
-    let p: [__m256; B] =
-        std::array::from_fn(|b| unsafe { _mm256_loadu_ps(pos.as_ptr().add(8 * b)) });
-    let mut acc: [__m256; B] =
-        std::array::from_fn(|b| unsafe { _mm256_loadu_ps(out.as_ptr().add(8 * b)) });
-    for (&pt, &ft) in sp.iter().zip(sf) {
-        let (pt, ft) = (_mm256_set1_ps(pt), _mm256_set1_ps(ft));
-        for b in 0..B {
-            let d = _mm256_sub_ps(p[b], pt);
-            acc[b] = _mm256_min_ps(_mm256_add_ps(_mm256_mul_ps(d, d), ft), acc[b]);
-        }
-    }
-    for (b, a) in acc.iter().enumerate() {
-        unsafe { _mm256_storeu_ps(out.as_mut_ptr().add(8 * b), *a) };
-    }
-    8 * B
 }
 
 /// Positions `q·h` and the walls' parabolas (the nearer wall, at −h or n·h), for all of

@@ -823,24 +823,7 @@ fn row_code(r: usize, lane: usize) -> usize {
 /// `du`) improves (its candidate `du + len[lane]` is smaller), as bits.
 #[inline(always)]
 fn row_improvements(dist: &[f32], at: usize, du: f32, len: &[f32; 4]) -> u32 {
-    let d = &dist[at..at + 4];
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::{
-            _mm_add_ps, _mm_cmplt_ps, _mm_loadu_ps, _mm_movemask_ps, _mm_set1_ps,
-        };
-        // SAFETY: SSE is part of x86_64; `d` and `len` hold four floats.
-        unsafe {
-            let c = _mm_add_ps(_mm_set1_ps(du), _mm_loadu_ps(len.as_ptr()));
-            _mm_movemask_ps(_mm_cmplt_ps(c, _mm_loadu_ps(d.as_ptr()))) as u32
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        (0..4)
-            .filter(|&l| du + len[l] < d[l])
-            .fold(0u32, |m, l| m | 1 << l)
-    }
+    crate::simd::lanes_improved(&dist[at..], du, len)
 }
 
 /// [`row_improvements`] of a weighted search: lane l's candidate is
@@ -854,36 +837,12 @@ fn weighted_row_improvements(
     wu: f32,
     len: &[f32; 4],
 ) -> u32 {
-    let d = &dist[at..at + 4];
     // The fourth lane (never a neighbour: its length is +∞) may lie past the weights' end.
     let w = match weight.get(at..at + 4) {
         Some(w) => [w[0], w[1], w[2], w[3]],
         None => [weight[at], weight[at + 1], weight[at + 2], 0.0],
     };
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::{
-            _mm_add_ps, _mm_cmplt_ps, _mm_loadu_ps, _mm_movemask_ps, _mm_mul_ps, _mm_set1_ps,
-        };
-        // SAFETY: SSE is part of x86_64; `d`, `w` and `len` hold four floats.
-        unsafe {
-            let half_len = _mm_mul_ps(_mm_loadu_ps(len.as_ptr()), _mm_set1_ps(0.5));
-            let c = _mm_add_ps(
-                _mm_set1_ps(du),
-                _mm_mul_ps(
-                    half_len,
-                    _mm_add_ps(_mm_set1_ps(wu), _mm_loadu_ps(w.as_ptr())),
-                ),
-            );
-            _mm_movemask_ps(_mm_cmplt_ps(c, _mm_loadu_ps(d.as_ptr()))) as u32
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        (0..4)
-            .filter(|&l| du + len[l] * 0.5 * (wu + w[l]) < d[l])
-            .fold(0u32, |m, l| m | 1 << l)
-    }
+    crate::simd::weighted_lanes_improved(&dist[at..], du, wu, &w, len)
 }
 
 #[cfg(test)]

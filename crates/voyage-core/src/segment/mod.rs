@@ -43,6 +43,7 @@ use serde::Serialize;
 use crate::{
     Error, Result, Volume,
     anatomy::{Orientation, PatientFrame, PatientPosition, PositionSource},
+    simd::{self, Test},
 };
 use chain::{Chain, ChainOptions, Coarse, Compartment, Left};
 use work::{BRIDGE, Bbox, GAS, LAYER, POOL};
@@ -828,28 +829,6 @@ pub fn is_mask(vol: &Volume<i16>) -> bool {
         && chunks().any(|c| c.iter().fold(false, |a, &v| a | (v == 1)))
 }
 
-/// Which values a pass collects runs of.
-#[derive(Clone, Copy, Debug)]
-enum Test {
-    /// Below the threshold: air in a CT.
-    Below(i16),
-    /// At or above the threshold: tagged fluid (and bone).
-    AtLeast(i16),
-    /// Not 0: a mask's labels.
-    NonZero,
-}
-
-impl Test {
-    #[inline(always)]
-    fn holds(self, v: i16) -> bool {
-        match self {
-            Test::Below(t) => v < t,
-            Test::AtLeast(t) => v >= t,
-            Test::NonZero => v != 0,
-        }
-    }
-}
-
 /// The runs of `test` (the air, with HU statistics when it is `Below`) and, with `bright`, the
 /// runs at or above it, from one read of the values.
 fn extract_runs(vol: &Volume<i16>, test: Test, bright: Option<i16>) -> (Runs, Option<Runs>) {
@@ -960,10 +939,10 @@ fn row_bits(row: &[i16], tests: (Test, Option<Test>), words: &mut (Vec<u64>, Vec
         (t, None) => a
             .iter_mut()
             .zip(chunks)
-            .for_each(|(w, c)| *w = word_bits(c, t)),
+            .for_each(|(w, c)| *w = simd::mask64(c, t)),
         (t, Some(u)) => {
             for ((wa, wb), c) in a.iter_mut().zip(b.iter_mut()).zip(chunks) {
-                (*wa, *wb) = (word_bits(c, t), word_bits(c, u));
+                (*wa, *wb) = (simd::mask64(c, t), simd::mask64(c, u));
             }
         }
     }
@@ -977,41 +956,6 @@ fn row_bits(row: &[i16], tests: (Test, Option<Test>), words: &mut (Vec<u64>, Vec
         if let Some(u) = tests.1 {
             b[row.len() / 64] = bits(u);
         }
-    }
-}
-
-/// The 64 bits of one word of [`row_bits`]: SSE2 compares, 16 voxels per mask.
-#[inline(always)]
-fn word_bits(v: &[i16; 64], test: Test) -> u64 {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::*;
-        // SAFETY: SSE2 is part of x86_64; each load reads 8 of the 64 values.
-        unsafe {
-            let (t, invert) = match test {
-                Test::Below(t) => (_mm_set1_epi16(t), 0),
-                Test::AtLeast(t) => (_mm_set1_epi16(t), 0xFFFF),
-                Test::NonZero => (_mm_setzero_si128(), 0xFFFF),
-            };
-            let cmp = |at: usize| {
-                let x = _mm_loadu_si128(v.as_ptr().add(at) as *const __m128i);
-                match test {
-                    Test::NonZero => _mm_cmpeq_epi16(x, t),
-                    _ => _mm_cmplt_epi16(x, t),
-                }
-            };
-            (0..4).fold(0u64, |w, q| {
-                let m = _mm_movemask_epi8(_mm_packs_epi16(cmp(16 * q), cmp(16 * q + 8))) as u32
-                    ^ invert;
-                w | (m as u64) << (16 * q)
-            })
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        v.iter()
-            .enumerate()
-            .fold(0u64, |w, (b, &x)| w | (test.holds(x) as u64) << b)
     }
 }
 
