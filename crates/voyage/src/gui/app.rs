@@ -2,7 +2,7 @@
 //! the scout on the right, the slices along the bottom (paper Fig. 8).
 
 use std::{
-    collections::{BTreeMap, VecDeque},
+    collections::BTreeMap,
     path::PathBuf,
     sync::{Arc, Mutex},
     time::Instant,
@@ -24,8 +24,10 @@ use super::{
     WindowArgs,
     corrections::{self, Correction},
     endoscopy::{Endoscope, label, ray_at, surface_point_on_screen, visible_centerline},
+    frame_times::FrameTimes,
     loader::{Job, Source},
     pixels::WindowGpu,
+    report::{MarkerReport, Report},
     scout::{ScoutMarks, ScoutView},
     script::{Script, Step},
     session::Session,
@@ -253,13 +255,7 @@ pub struct App {
     translucency_on: bool,
     translucency: Option<Closeup>,
     status: String,
-    frame_ms: VecDeque<f64>,
-    render_ms: VecDeque<f64>,
-    /// The process's CPU time (all threads, the CPU Vulkan driver's included) at each of the
-    /// frames in `frame_ms`, in ms: on a CPU driver the work per frame, steadier than the
-    /// wall time on a busy machine.
-    cpu_at_frame_ms: VecDeque<f64>,
-    last_frame: Option<Instant>,
+    times: FrameTimes,
     /// Frames drawn since the study became ready (or failed).
     frames: u64,
     view_rect: Option<Rect>,
@@ -329,10 +325,7 @@ impl App {
             translucency_on: false,
             translucency: None,
             status: String::new(),
-            frame_ms: VecDeque::new(),
-            render_ms: VecDeque::new(),
-            cpu_at_frame_ms: VecDeque::new(),
-            last_frame: None,
+            times: FrameTimes::default(),
             frames: 0,
             view_rect: None,
             last_cells: Vec::new(),
@@ -774,42 +767,38 @@ impl App {
     }
 
     fn write_report(&mut self) {
-        let mean = |v: &VecDeque<f64>| {
-            if v.is_empty() {
-                0.0
-            } else {
-                v.iter().sum::<f64>() / v.len() as f64
-            }
-        };
-        let mut sorted: Vec<f64> = self.frame_ms.iter().copied().collect();
-        sorted.sort_by(f64::total_cmp);
-        let pct = |q: f64| {
-            sorted
-                .get(((sorted.len() as f64 - 1.0) * q).round() as usize)
-                .copied()
-                .unwrap_or(0.0)
-        };
-        let rect = |r: Option<Rect>| r.map(|r| [r.left(), r.top(), r.right(), r.bottom()]);
-        let report = json!({
-            "ready": self.session.is_some(),
-            "error": self.error,
-            "frames": self.frames,
-            "renderer": self.endoscope.renderer_name,
-            "pose": self.session.as_ref().map(|s| s.pose().to_array()),
-            "playing": self.session.as_ref().map(|s| s.playing),
-            "recorded": self.recorded,
-            "markers": self.findings.markers.iter().map(|m| json!({"label": m.label, "note": m.note, "position_mm": m.position.to_array()})).collect::<Vec<_>>(),
-            "measurements_mm": self.findings.measurements.iter().map(|m| m.length_mm()).collect::<Vec<_>>(),
-            "frame_ms": {"mean": mean(&self.frame_ms), "median": pct(0.5), "p95": pct(0.95), "frames": self.frame_ms.len(), "fps": if mean(&self.frame_ms) > 0.0 { 1000.0 / mean(&self.frame_ms) } else { 0.0 }, "cpu_ms": cpu_per_frame(&self.cpu_at_frame_ms)},
-            "render_ms": mean(&self.render_ms),
-            "view_rect": rect(self.view_rect),
-            "cells": self.endoscope.stats.cells,
-            "triangles": self.endoscope.stats.triangles,
-            "colon": self.session.as_ref().map(|s| colon_report(s, self.source.as_ref())),
-            "correction_error": self.correction_error,
-        });
+        let report = serde_json::to_value(self.report()).expect("a report is plain data");
         if let Ok(mut o) = self.outcome.lock() {
             o.report = Some(report);
+        }
+    }
+
+    fn report(&self) -> Report {
+        let s = self.session.as_ref();
+        Report {
+            ready: s.is_some(),
+            error: self.error.clone(),
+            frames: self.frames,
+            renderer: self.endoscope.renderer_name.clone(),
+            pose: s.map(|s| s.pose().to_array()),
+            playing: s.map(|s| s.playing),
+            recorded: self.recorded.clone(),
+            markers: self.findings.markers.iter().map(MarkerReport::of).collect(),
+            measurements_mm: self
+                .findings
+                .measurements
+                .iter()
+                .map(|m| m.length_mm())
+                .collect(),
+            frame_ms: self.times.summary(),
+            render_ms: self.times.mean_render_ms(),
+            view_rect: self
+                .view_rect
+                .map(|r| [r.left(), r.top(), r.right(), r.bottom()]),
+            cells: self.endoscope.stats.cells,
+            triangles: self.endoscope.stats.triangles,
+            colon: s.map(|s| colon_report(s, self.source.as_ref())),
+            correction_error: self.correction_error.clone(),
         }
     }
 
@@ -1130,7 +1119,7 @@ impl App {
                     self.status = format!("rendering failed: {e:#}");
                 }
                 self.last_cells = self.endoscope.last_cells.clone();
-                push_limited(&mut self.render_ms, self.endoscope.stats.render_ms);
+                self.times.record_render(self.endoscope.stats.render_ms);
                 self.closeup_overlay(ui, rect);
                 self.translucency_overlay(ui, rect);
                 self.overlays(ui, rect);
@@ -1312,15 +1301,11 @@ impl App {
         {
             painter.circle_filled(p, 4.0, measure_color);
         }
-        let fps = if self.frame_ms.is_empty() {
-            0.0
-        } else {
-            1000.0 * self.frame_ms.len() as f64 / self.frame_ms.iter().sum::<f64>()
-        };
+        let fps = self.times.fps();
         let stats = &self.endoscope.stats;
         let readout = format!(
             "{:.1} ms/frame ({fps:.0} fps) · view {:.1} ms · {} cells, {}k triangles · {}",
-            self.frame_ms.back().copied().unwrap_or(0.0),
+            self.times.last_frame_ms(),
             stats.render_ms,
             stats.cells,
             stats.triangles / 1000,
@@ -1462,29 +1447,6 @@ fn note_error(outcome: &Mutex<Outcome>, msg: String) {
     }
 }
 
-/// User + system time of this process so far (Linux's /proc; its clock ticks are 1/100 s).
-fn process_cpu_ms() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
-    // The fields after the command name, which is in parentheses and may hold spaces.
-    let rest = &stat[stat.rfind(')')? + 1..];
-    let mut fields = rest.split_whitespace().skip(11);
-    let (utime, stime): (f64, f64) = (fields.next()?.parse().ok()?, fields.next()?.parse().ok()?);
-    Some((utime + stime) * 10.0)
-}
-
-/// Mean CPU ms per frame over the frames `cumulative` covers.
-fn cpu_per_frame(cumulative: &VecDeque<f64>) -> Option<f64> {
-    let (first, last) = (cumulative.front()?, cumulative.back()?);
-    (cumulative.len() > 1).then(|| (last - first) / (cumulative.len() - 1) as f64)
-}
-
-fn push_limited(v: &mut VecDeque<f64>, x: f64) {
-    if v.len() >= 240 {
-        v.pop_front();
-    }
-    v.push_back(x);
-}
-
 impl eframe::App for App {
     fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
         let ctx = ui.ctx().clone();
@@ -1494,21 +1456,11 @@ impl eframe::App for App {
         // is done, follows the clock (a mouse held for 0.6 s turns the view as far at 30 as at
         // 100 frames/s).
         let scripted = self.script.as_ref().is_some_and(|s| !s.finished());
-        let dt = match (self.last_frame, scripted || self.args.screenshot.is_some()) {
-            (_, true) => 1.0 / 30.0,
-            (Some(t), false) => now.duration_since(t).as_secs_f64(),
-            (None, false) => 1.0 / 30.0,
+        let since = self.times.tick(now);
+        let dt = match (since, scripted || self.args.screenshot.is_some()) {
+            (Some(s), false) => s,
+            _ => 1.0 / 30.0,
         };
-        if let Some(t) = self.last_frame {
-            push_limited(
-                &mut self.frame_ms,
-                now.duration_since(t).as_secs_f64() * 1e3,
-            );
-            if let Some(cpu) = process_cpu_ms() {
-                push_limited(&mut self.cpu_at_frame_ms, cpu);
-            }
-        }
-        self.last_frame = Some(now);
 
         self.poll_job();
         self.shortcuts(&ctx);

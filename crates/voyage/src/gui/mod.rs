@@ -5,8 +5,10 @@
 mod app;
 mod corrections;
 mod endoscopy;
+mod frame_times;
 mod loader;
 mod pixels;
+mod report;
 mod scout;
 mod script;
 mod session;

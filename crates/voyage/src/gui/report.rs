@@ -1,0 +1,54 @@
+//! The navigator's state on closing (`--report`): what tests and scripted demonstrations read
+//! back. Never anything about the patient's identity.
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+use voyage_view::Marker;
+
+use super::frame_times::FrameSummary;
+
+#[derive(Serialize)]
+pub struct Report {
+    /// A study is open.
+    pub ready: bool,
+    pub error: Option<String>,
+    /// Frames drawn since the study became ready (or failed).
+    pub frames: u64,
+    pub renderer: String,
+    /// Camera [x, y, z, qw, qx, qy, qz], volume-local mm.
+    pub pose: Option<[f64; 7]>,
+    pub playing: Option<bool>,
+    /// Poses a script recorded, by name.
+    pub recorded: BTreeMap<String, [f64; 7]>,
+    pub markers: Vec<MarkerReport>,
+    pub measurements_mm: Vec<f64>,
+    pub frame_ms: FrameSummary,
+    /// Mean time to draw the view, ms.
+    pub render_ms: f64,
+    /// The view's rectangle in window points [left, top, right, bottom].
+    pub view_rect: Option<[f32; 4]>,
+    /// Cells and triangles drawn in the last frame.
+    pub cells: usize,
+    pub triangles: usize,
+    /// The colon's segments, gaps and corrections.
+    pub colon: Option<serde_json::Value>,
+    pub correction_error: Option<String>,
+}
+
+#[derive(Serialize)]
+pub struct MarkerReport {
+    pub label: String,
+    pub note: String,
+    pub position_mm: [f64; 3],
+}
+
+impl MarkerReport {
+    pub fn of(m: &Marker) -> Self {
+        MarkerReport {
+            label: m.label.clone(),
+            note: m.note.clone(),
+            position_mm: m.position.to_array(),
+        }
+    }
+}
