@@ -23,12 +23,7 @@
 
 use glam::DVec3;
 
-use crate::{
-    Volume,
-    blocks::Blocks,
-    distance::geodesic::{Padded, SearchOptions, dial},
-    field::BoxGrid,
-};
+use crate::{Volume, blocks::Blocks, distance::geodesic::Padded, field::BoxGrid};
 
 #[derive(Clone, Debug)]
 pub struct ContactOptions {
@@ -184,15 +179,7 @@ fn label_blocks(pad: &PaddedBlocks, blocks: &Blocks, points: &[DVec3]) -> Vec<u1
         }
     }
     let spacing = blocks.mask.spacing();
-    let search = dial(
-        pad,
-        &sources,
-        spacing,
-        &SearchOptions {
-            tree: true,
-            ..Default::default()
-        },
-    );
+    let search = pad.search(spacing).tree().from(&sources);
     for &u in &search.order {
         let u = u as usize;
         if let Some(p) = search.parent_of(u) {

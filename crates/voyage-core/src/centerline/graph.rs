@@ -31,7 +31,7 @@ use std::collections::HashMap;
 use super::CenterlineOptions;
 use crate::{
     Error, Result,
-    distance::geodesic::{Padded, Search, SearchOptions, dial},
+    distance::geodesic::{Padded, Search},
 };
 
 #[derive(Clone, Debug)]
@@ -61,27 +61,6 @@ impl Default for SkeletonOptions {
 
 /// A minimum-cost search with predecessors and settling order.
 pub(crate) type Tree = Search;
-
-/// A weighted (or plain) search from `sources` that records its tree; stops early, after
-/// settling it, at the first voxel where `stop` holds.
-pub(crate) fn tree_search(
-    pad: &Padded,
-    sources: &[usize],
-    spacing: [f64; 3],
-    weight: Option<&[f32]>,
-    stop: Option<&dyn Fn(usize) -> bool>,
-) -> Tree {
-    dial(
-        pad,
-        sources,
-        spacing,
-        &SearchOptions {
-            weight,
-            tree: true,
-            stop,
-        },
-    )
-}
 
 /// One skeleton voxel.
 #[derive(Clone, Copy, Debug)]
@@ -140,7 +119,7 @@ pub(crate) fn colon_path(
     let sk = SkeletonTree::trace(pad, tree, ds, spacing, source, opts);
     // 3. Cycles: the owner of every voxel is the nearest skeleton voxel through the lumen (a
     // geodesic Voronoi partition by the skeleton), reached by the way `near` records.
-    let near = tree_search(pad, &sk.voxels(), spacing, None, None);
+    let near = pad.search(spacing).tree().from(&sk.voxels());
     let owner = sk.owners(&near);
     let meetings = sk.meetings(&near, &owner, ds, opts);
     // 4. The graph and its longest simple path.

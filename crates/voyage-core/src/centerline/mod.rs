@@ -24,7 +24,7 @@ pub(crate) use refine::arc_lengths;
 pub use refine::{Centerline, cost_weight, refine, refine_points};
 
 use crate::{Result, Volume, distance::geodesic::Padded, field::Field};
-use graph::{colon_path, tree_search};
+use graph::colon_path;
 
 #[derive(Clone, Debug)]
 pub struct CenterlineOptions {
@@ -83,7 +83,11 @@ pub fn centerline(
     let weight = cost_weight(&ds_pad, opts);
     let src = pad.lumen_index(source)?;
     let dst = pad.lumen_index(target)?;
-    let tree = tree_search(&pad, &[src], mask.spacing(), Some(&weight), None);
+    let tree = pad
+        .search(mask.spacing())
+        .weighted(&weight)
+        .tree()
+        .from(&[src]);
     let (path, _) = colon_path(&pad, &tree, &ds_pad, mask.spacing(), src, Some(dst), opts)?;
     let voxels: Vec<[usize; 3]> = path.iter().map(|&i| pad.global_of_index(i)).collect();
     Ok(refine(&voxels, mask, ds, opts))

@@ -137,17 +137,7 @@ pub fn core_distances(
                 }
             }
         }
-        dial_impl::<false, false>(
-            &shape,
-            start,
-            Vec::new(),
-            &[from],
-            sp,
-            &[],
-            None,
-            None,
-            false,
-        )
+        shape.search(sp).start(start).unfinished().from(&[from])
     };
     let bricked = |r: Search, memory: &mut SearchMemory| {
         let dist =
@@ -177,17 +167,11 @@ fn search_from(
     let shape = Padded::shape(grid);
     let src = source_index(mask, &shape, source)?;
     let dist = shape.start_from_mask(mask, scratch, marks);
-    let r = dial_impl::<false, false>(
-        &shape,
-        dist,
-        Vec::new(),
-        &[src],
-        mask.spacing(),
-        &[],
-        None,
-        None,
-        false,
-    );
+    let r = shape
+        .search(mask.spacing())
+        .start(dist)
+        .unfinished()
+        .from(&[src]);
     Ok((shape, r))
 }
 
@@ -225,16 +209,96 @@ impl Search {
     }
 }
 
-/// How a search runs.
-#[derive(Default)]
-pub struct SearchOptions<'a> {
+/// One search over a padded grid, set up step by step ([`Padded::search`]) and run by
+/// [`SearchBuilder::from`], which picks the kernel monomorphised for what was asked. Dial's
+/// algorithm: with a weight the bucket width is the shortest edge times the smallest weight,
+/// which keeps the buckets exact.
+#[must_use]
+pub struct SearchBuilder<'a> {
+    pad: &'a Padded,
+    spacing: [f64; 3],
+    weight: Option<&'a [f32]>,
+    /// The weight's smallest and largest value over the lumen, when known.
+    range: Option<(f32, f32)>,
+    tree: Option<Vec<u8>>,
+    stop: Option<&'a dyn Fn(usize) -> bool>,
+    start: Option<Vec<f32>>,
+    finish: bool,
+}
+
+impl<'a> SearchBuilder<'a> {
     /// Per-voxel cost weight (padded layout, > 0 on lumen voxels): an edge u–v costs its
     /// length times (w(u) + w(v)) / 2.
-    pub weight: Option<&'a [f32]>,
+    pub fn weighted(mut self, weight: &'a [f32]) -> Self {
+        self.weight = Some(weight);
+        self
+    }
+
+    /// [`SearchBuilder::weighted`] with the weight's smallest and largest value over the
+    /// lumen already known.
+    pub(crate) fn weighted_in(mut self, weight: &'a [f32], range: (f32, f32)) -> Self {
+        self.weight = Some(weight);
+        self.range = Some(range);
+        self
+    }
+
     /// Record predecessors and the settling order.
-    pub tree: bool,
-    /// Stop, after settling it, at the first voxel where this holds.
-    pub stop: Option<&'a dyn Fn(usize) -> bool>,
+    pub fn tree(self) -> Self {
+        let n = self.pad.inside.len();
+        self.tree_in(vec![NO_PARENT; n])
+    }
+
+    /// [`SearchBuilder::tree`] in `parent` (all [`NO_PARENT`], as long as the padded grid).
+    pub(crate) fn tree_in(mut self, parent: Vec<u8>) -> Self {
+        self.tree = Some(parent);
+        self
+    }
+
+    /// Stop, after settling it, at the first voxel where `stop` holds.
+    pub fn stop_at(mut self, stop: &'a dyn Fn(usize) -> bool) -> Self {
+        self.stop = Some(stop);
+        self
+    }
+
+    /// Start from these distances (see [`start_from_inside`]) instead of the grid's mask.
+    pub(crate) fn start(mut self, dist: Vec<f32>) -> Self {
+        self.start = Some(dist);
+        self
+    }
+
+    /// Leave the distances as the search leaves them, for the caller to [`finish`].
+    pub(crate) fn unfinished(mut self) -> Self {
+        self.finish = false;
+        self
+    }
+
+    /// Runs the search from `sources` (padded indices of lumen voxels).
+    pub fn from(self, sources: &[usize]) -> Search {
+        let pad = self.pad;
+        let dist = self.start.unwrap_or_else(|| start_from_inside(pad));
+        let (tree, parent) = match self.tree {
+            Some(p) => (true, p),
+            None => (false, Vec::new()),
+        };
+        let weight = self.weight.unwrap_or(&[]);
+        let run = match (self.weight.is_some(), tree) {
+            (true, true) => dial_impl::<true, true>,
+            (true, false) => dial_impl::<true, false>,
+            (false, true) => dial_impl::<false, true>,
+            (false, false) => dial_impl::<false, false>,
+        };
+        run(
+            pad,
+            dist,
+            parent,
+            sources,
+            self.spacing,
+            weight,
+            self.range,
+            self.stop,
+            self.finish,
+        )
+    }
 }
 
 /// The box's mask with one layer of zeros around it, so that the 26 neighbours of every lumen
@@ -246,6 +310,20 @@ pub struct Padded {
 }
 
 impl Padded {
+    /// A search over this grid with edge lengths from `spacing` (mm).
+    pub fn search(&self, spacing: [f64; 3]) -> SearchBuilder<'_> {
+        SearchBuilder {
+            pad: self,
+            spacing,
+            weight: None,
+            range: None,
+            tree: None,
+            stop: None,
+            start: None,
+            finish: true,
+        }
+    }
+
     pub fn new(mask: &Volume<u8>, grid: &BoxGrid) -> Self {
         let mut pad = Padded::shape(grid);
         pad.inside = pad.lay_out_mask(mask, 0, 0u8, |m| (m != 0) as u8, Vec::new(), None);
@@ -434,49 +512,6 @@ impl Padded {
     }
 }
 
-/// Dial's algorithm over the padded grid from several sources.
-///
-/// With a weight the bucket width is the shortest edge times the smallest weight, which keeps
-/// the buckets exact.
-pub fn dial(pad: &Padded, sources: &[usize], spacing: [f64; 3], opts: &SearchOptions) -> Search {
-    let start = start_from_inside(pad);
-    let parent = if opts.tree {
-        vec![NO_PARENT; pad.inside.len()]
-    } else {
-        Vec::new()
-    };
-    match (opts.weight, opts.tree) {
-        (Some(w), true) => dial_impl::<true, true>(
-            pad, start, parent, sources, spacing, w, None, opts.stop, true,
-        ),
-        (Some(w), false) => dial_impl::<true, false>(
-            pad, start, parent, sources, spacing, w, None, opts.stop, true,
-        ),
-        (None, true) => dial_impl::<false, true>(
-            pad,
-            start,
-            parent,
-            sources,
-            spacing,
-            &[],
-            None,
-            opts.stop,
-            true,
-        ),
-        (None, false) => dial_impl::<false, false>(
-            pad,
-            start,
-            parent,
-            sources,
-            spacing,
-            &[],
-            None,
-            opts.stop,
-            true,
-        ),
-    }
-}
-
 /// The working arrays of weighted tree searches over one padded grid at their start
 /// (distances as [`start_from_inside`], no predecessors) and the weight's range over the lumen,
 /// which sets the buckets: made once for several searches, as a search that stops after a few
@@ -512,17 +547,11 @@ impl TreeStart {
         spacing: [f64; 3],
         weight: &[f32],
     ) -> Search {
-        dial_impl::<true, true>(
-            pad,
-            self.dist,
-            self.parent,
-            sources,
-            spacing,
-            weight,
-            Some(self.range),
-            None,
-            true,
-        )
+        pad.search(spacing)
+            .weighted_in(weight, self.range)
+            .tree_in(self.parent)
+            .start(self.dist)
+            .from(sources)
     }
 
     /// The last voxel the weighted search from `sources` settles: the first where `stop` holds
@@ -536,17 +565,14 @@ impl TreeStart {
         stop: &dyn Fn(usize) -> bool,
     ) -> (Option<usize>, TreeStart) {
         let range = self.range;
-        let r = dial_impl::<true, true>(
-            pad,
-            self.dist,
-            self.parent,
-            sources,
-            spacing,
-            weight,
-            Some(range),
-            Some(stop),
-            false,
-        );
+        let r = pad
+            .search(spacing)
+            .weighted_in(weight, range)
+            .tree_in(self.parent)
+            .start(self.dist)
+            .stop_at(stop)
+            .unfinished()
+            .from(sources);
         let (mut dist, mut parent) = (r.dist, r.parent);
         // Every value the search wrote belongs to a voxel it settled or to one of their
         // neighbours (improved from them): walls, never written, are exactly +0.
@@ -983,16 +1009,11 @@ mod tests {
                 }
             }
             let src = pad.lumen_index([0, 0, 0]).unwrap();
-            let r = dial(
-                &pad,
-                &[src],
-                m.spacing(),
-                &SearchOptions {
-                    weight: Some(&weight),
-                    tree: true,
-                    stop: None,
-                },
-            );
+            let r = pad
+                .search(m.spacing())
+                .weighted(&weight)
+                .tree()
+                .from(&[src]);
             let want = reference_weighted(&m, [0, 0, 0], |v| w_of(v) as f64);
             let mut reached = 0;
             for (i, &inside) in pad.inside.iter().enumerate() {
