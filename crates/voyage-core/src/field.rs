@@ -128,21 +128,6 @@ impl<T: Copy> Field<T> {
     }
 }
 
-/// The part of a volume inside a box, as a flat vector in box order.
-pub fn crop<T: Copy>(vol: &Volume<T>, grid: &BoxGrid) -> Vec<T> {
-    let mut out = Vec::with_capacity(grid.len());
-    let [bx, by, bz] = grid.dims;
-    for k in 0..bz {
-        for j in 0..by {
-            let start = vol
-                .geometry()
-                .index(grid.lo[0], j + grid.lo[1], k + grid.lo[2]);
-            out.extend_from_slice(&vol.data()[start..start + bx]);
-        }
-    }
-    out
-}
-
 impl Field<f32> {
     /// Trilinear interpolation at a volume-local position (mm); corners outside the box
     /// count as `outside`.

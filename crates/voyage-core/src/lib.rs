@@ -1,28 +1,40 @@
-//! voyage-core: a CT volume in, a prepared colon (`prep::Study`) out. No file formats, GPU or
+//! voyage-core: a CT volume in, a prepared colon ([`Study`]) out. No file formats, GPU or
 //! GUI: `voyage-io` loads and exports, `voyage-nav` flies, `voyage-view` draws.
 //!
 //! Data moves one way: a [`Volume<i16>`] of Hounsfield units with its geometry goes through
-//! segmentation, cleansing, distance fields, centerline, surface and cells (`prep::prepare`
-//! runs them in order); each stage takes values and returns values.
+//! the stages of [`Stage`] (segmentation, cleansing, skeleton, contacts, Ds, centerline, Dt,
+//! the navigable core, surface, cells); [`prepare`] runs them in order, and each stage takes
+//! values and returns values. The modules are private: what other crates use is re-exported
+//! here.
 
-pub mod anatomy;
-pub mod blocks;
-pub mod cells;
-pub mod centerline;
-pub mod cleanse;
-pub mod contacts;
-pub mod distance;
-pub mod error;
-pub mod field;
-pub mod mem;
-pub mod navigable;
-pub mod prep;
+mod anatomy;
+mod blocks;
+mod cells;
+mod centerline;
+mod cleanse;
+mod contacts;
+mod distance;
+mod error;
+mod field;
+mod mem;
+mod navigable;
+mod prep;
 pub mod rng;
-pub mod segment;
+mod segment;
 mod simd;
-pub mod surface;
-pub mod volume;
+mod surface;
+mod volume;
 
+pub use anatomy::{Orientation, PatientFrame, PatientPosition, PositionSource};
+pub use cells::{CellOptions, Cells, convex_hull};
+pub use centerline::{Centerline, CenterlineOptions, SkeletonOptions};
+pub use cleanse::{CleanseOptions, Cleansing, roughness};
+pub use contacts::ContactOptions;
+pub use distance::{Geodesic, distance_to_wall, geodesic_distance};
 pub use error::{Error, Result};
-pub use prep::Study;
-pub use volume::{Geometry, Volume};
+pub use field::{BoxGrid, Bricked, Field, bounding_box};
+pub use navigable::{DEFAULT_MIN_WALL_MM, Navigable};
+pub use prep::{PrepOptions, Stage, Study, Timings, prepare};
+pub use segment::{ComponentKind, SegmentOptions, Segmentation, segment};
+pub use surface::{Mesh, Surface};
+pub use volume::{Geometry, IDENTITY, Volume, check_dims};

@@ -28,7 +28,7 @@ use crate::{
 #[derive(Clone, Debug)]
 pub struct PrepOptions {
     pub segment: SegmentOptions,
-    /// Electronic cleansing of the colon's tagged fluid ([`crate::cleanse`]); None: off.
+    /// Electronic cleansing of the colon's tagged fluid (`cleanse.rs`); None: off.
     pub cleanse: Option<CleanseOptions>,
     /// The ends (given or found), the skeleton search and the refinement.
     pub centerline: CenterlineOptions,
@@ -70,7 +70,7 @@ pub enum Stage {
     Centerline,
     /// Dt from the source over the whole lumen (for the cells).
     Dt,
-    /// Both Dt over the navigable core ([`crate::navigable`]).
+    /// Both Dt over the navigable core ([`Navigable`]).
     Nav,
     Surface,
     Cells,
@@ -188,7 +188,7 @@ pub struct Study {
     pub nav: Option<Navigable>,
     pub source: [usize; 3],
     pub target: [usize; 3],
-    /// Lumen voxels left out of Dt where loops of the colon touch ([`crate::contacts`]).
+    /// Lumen voxels left out of Dt where loops of the colon touch (`contacts.rs`).
     pub contact_voxels: usize,
     pub centerline: Centerline,
     /// Stretches of the centerline (arc mm from the source, start and end) that cross a

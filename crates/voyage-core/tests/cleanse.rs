@@ -5,12 +5,7 @@
 use std::collections::HashMap;
 
 use glam::DVec3;
-use voyage_core::{
-    Volume,
-    cleanse::roughness,
-    prep::{PrepOptions, Study, prepare},
-    surface::Mesh,
-};
+use voyage_core::{Mesh, PrepOptions, Study, Volume, prepare, roughness};
 use voyage_phantom::{self as phantom, ColonOptions, Phantom, label};
 
 /// Distance from `p` to triangle abc (Ericson, Real-Time Collision Detection 5.1.5).

@@ -2,7 +2,7 @@
 //! touching over wide contacts). Needs `../shared/data`; skips with a message without it. Run
 //! in release mode (`cargo test --release -p voyage-core --test colon_a`).
 
-use voyage_core::prep::{PrepOptions, prepare};
+use voyage_core::{PrepOptions, prepare};
 
 /// The colon-a mask of the shared data as loaded (0/1 labels as i16), or None (skipped).
 fn colon_a_volume() -> Option<voyage_core::Volume<i16>> {

@@ -4,12 +4,7 @@
 //! NIfTI and DICOM; lumen, source, target and centerline must agree.
 
 use glam::DVec3;
-use voyage_core::{
-    Volume,
-    anatomy::PositionSource,
-    prep::{PrepOptions, Study, prepare},
-    segment::{SegmentOptions, segment},
-};
+use voyage_core::{PositionSource, PrepOptions, SegmentOptions, Study, Volume, prepare, segment};
 use voyage_io::{LoadOptions, load};
 use voyage_phantom::{self as phantom, ColonOptions};
 

@@ -2,7 +2,7 @@
 //! polyps on the surface, the cells.
 
 use glam::{DVec3, Vec3};
-use voyage_core::prep::{PrepOptions, Study, prepare};
+use voyage_core::{PrepOptions, Study, prepare};
 use voyage_phantom::{self as phantom, ColonOptions, Phantom};
 
 fn dice(a: &[u8], b: &[u8]) -> f64 {

@@ -4,10 +4,7 @@
 
 use glam::DVec3;
 use voyage_core::{
-    Volume,
-    anatomy::{PatientPosition, PositionSource},
-    prep::{PrepOptions, prepare},
-    segment::{SegmentOptions, segment},
+    PatientPosition, PositionSource, PrepOptions, SegmentOptions, Volume, prepare, segment,
 };
 use voyage_phantom::{self as phantom, ColonOptions, Phantom};
 
@@ -184,8 +181,7 @@ fn excluded_gas_leaves_the_colon_and_the_rectum_moves_to_the_lowest_of_the_rest(
                 .anchor_lps_mm,
         ))
     };
-    let count =
-        |s: &voyage_core::segment::Segmentation| s.lumen.data().iter().filter(|&&m| m != 0).count();
+    let count = |s: &voyage_core::Segmentation| s.lumen.data().iter().filter(|&&m| m != 0).count();
 
     // The far segment out: only the rectum's side is left, no gap, and it says why.
     let far_out = segment(
@@ -217,7 +213,7 @@ fn excluded_gas_leaves_the_colon_and_the_rectum_moves_to_the_lowest_of_the_rest(
     )
     .unwrap();
     assert_eq!(near_out.segments.iter().filter(|s| s.kept).count(), 1);
-    let lowest = |s: &voyage_core::segment::Segmentation| {
+    let lowest = |s: &voyage_core::Segmentation| {
         g.index_to_patient(DVec3::from_array(s.seed_voxel.map(|x| x as f64)))
     };
     assert!(
@@ -285,7 +281,7 @@ fn the_rectal_tube_is_not_colon_and_the_rectum_starts_at_its_tip() {
         let tube = s
             .segments
             .iter()
-            .find(|x| x.kind == voyage_core::segment::ComponentKind::RectalTube)
+            .find(|x| x.kind == voyage_core::ComponentKind::RectalTube)
             .unwrap_or_else(|| panic!("small {small}: no rectal tube among {:?}", s.segments));
         assert!(
             !tube.kept

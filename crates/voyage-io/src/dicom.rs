@@ -63,7 +63,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::{Format, LoadOptions, Loaded, Meta, SeriesSummary};
-use voyage_core::{Error, Geometry, Result, Volume, volume::check_dims};
+use voyage_core::{Error, Geometry, Result, Volume, check_dims};
 
 /// Value given to voxels of a tilt-corrected grid that no acquired slice covers (air).
 pub const OUTSIDE_HU: i16 = -1024;
@@ -1108,7 +1108,7 @@ fn load_series(headers: Vec<Header>) -> Result<Loaded> {
     }
     let volume = Volume::from_vec(geometry, data).map_err(super::at(&first.path))?;
     let position = first.position.as_deref().filter(|p| !p.trim().is_empty());
-    let known = position.and_then(voyage_core::anatomy::PatientPosition::parse);
+    let known = position.and_then(voyage_core::PatientPosition::parse);
     if let (Some(code), None) = (position, known) {
         notes.push(format!("PatientPosition {code:?} is not one of HFS, HFP, FFS, FFP, HFDR, HFDL, FFDR, FFDL: ignored"));
     }

@@ -59,7 +59,7 @@ pub struct Meta {
     pub notes: Vec<String>,
     /// DICOM PatientPosition (0018,5100), when the file says and the code is known.
     #[serde(skip)]
-    pub position: Option<voyage_core::anatomy::PatientPosition>,
+    pub position: Option<voyage_core::PatientPosition>,
 }
 
 #[derive(Clone, Debug, Serialize)]

@@ -31,7 +31,7 @@ use glam::{DMat3, DQuat, DVec3};
 
 use self::shared::{Endian, Rescale, Scalar};
 use super::{Format, Loaded, Meta, at};
-use voyage_core::{Error, Geometry, Result, Volume, volume::check_dims};
+use voyage_core::{Error, Geometry, Result, Volume, check_dims};
 
 /// Size of the NIfTI-1 header proper.
 const HEADER_LEN: usize = 348;
@@ -652,7 +652,7 @@ pub(crate) mod shared {
 
     use glam::{DMat3, DVec3};
 
-    use voyage_core::{Error, Geometry, Result, volume::check_dims};
+    use voyage_core::{Error, Geometry, Result, check_dims};
 
     /// Opens a volume file for buffered reading, with its length; an empty file is an error.
     pub fn open_nonempty(path: &Path) -> Result<(BufReader<std::fs::File>, u64)> {

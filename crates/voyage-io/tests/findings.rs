@@ -10,10 +10,7 @@ use std::{
 
 use glam::DVec3;
 use serde_json::Value;
-use voyage_core::{
-    Geometry,
-    prep::{PrepOptions, Study, prepare},
-};
+use voyage_core::{Geometry, PrepOptions, Study, prepare};
 use voyage_io::export::{
     export_findings,
     markups::{MarkupsPoint, write_markups_curve},
@@ -29,7 +26,7 @@ use voyage_view::{
 fn colon_a_study() -> Option<voyage_core::Study> {
     let path = voyage_phantom::fixtures::colon_a_path()?;
     let mask = voyage_io::load(&path, &Default::default()).unwrap().volume;
-    Some(voyage_core::prep::prepare(mask, &Default::default(), |_| {}).unwrap())
+    Some(voyage_core::prepare(mask, &Default::default(), |_| {}).unwrap())
 }
 
 fn temp_dir(name: &str) -> PathBuf {

@@ -219,7 +219,7 @@ fn nifti_round_trip_nii_and_gz() {
 #[test]
 fn nifti_qform_and_no_transform() {
     let dir = TempDir::new("nifti-qform");
-    for direction in [TURNED_FLIPPED, oblique(), voyage_core::volume::IDENTITY] {
+    for direction in [TURNED_FLIPPED, oblique(), voyage_core::IDENTITY] {
         let vol = synthetic(direction);
         let p = dir.join("q.nii");
         nifti::save(&p, &vol).unwrap();
@@ -522,7 +522,7 @@ fn real_colon_a_mask() {
     // uint16, sform code 1 = diag(-0.82, -0.82, 1.25) in RAS: axes run L, P, S, so the
     // LPS direction is the identity; the origin's x and y flip sign.
     assert_eq!(g.orientation_code(), "LPS");
-    assert_eq!(g.direction, voyage_core::volume::IDENTITY);
+    assert_eq!(g.direction, voyage_core::IDENTITY);
     let expected_origin = [-210.0, -229.9, -469.28];
     assert!(
         g.origin
@@ -663,7 +663,7 @@ fn huge_or_bad_dims_fail_fast() {
 fn sheared_sform_is_refused() {
     let dir = TempDir::new("shear");
     let p = dir.join("shear.nii");
-    nifti::save(&p, &synthetic(voyage_core::volume::IDENTITY)).unwrap();
+    nifti::save(&p, &synthetic(voyage_core::IDENTITY)).unwrap();
     let mut bytes = std::fs::read(&p).unwrap();
     bytes[284..288].copy_from_slice(&0.3f32.to_le_bytes()); // srow_x[1]: j leans into x
     bytes[252..254].copy_from_slice(&0i16.to_le_bytes()); // no qform to fall back on

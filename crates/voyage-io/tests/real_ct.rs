@@ -2,7 +2,7 @@
 //! must lie in the colon (an automatic segmenter's colon mask is beside the CT), and nothing
 //! may come from the lungs or from outside the body.
 
-use voyage_core::segment::{ComponentKind, SegmentOptions, segment};
+use voyage_core::{ComponentKind, SegmentOptions, segment};
 use voyage_io::{LoadOptions, load};
 
 #[test]

@@ -19,7 +19,7 @@ use crate::{
     potential::{Direction, DistanceStore, PotentialField, PotentialParams},
     submarine::{Dynamics, Input, Modes, Safety, Submarine},
 };
-use voyage_core::{Error, Result, centerline::Centerline};
+use voyage_core::{Centerline, Error, Result};
 
 #[derive(Clone, Debug)]
 pub struct FlightOptions {
@@ -74,12 +74,12 @@ impl Default for FlightOptions {
 
 impl FlightOptions {
     /// The defaults, fitted to the study (see [`FlightOptions::fitted_to`]).
-    pub fn for_study(study: &voyage_core::prep::Study) -> FlightOptions {
+    pub fn for_study(study: &voyage_core::Study) -> FlightOptions {
         FlightOptions::default().fitted_to(study)
     }
 
     /// These options with gravity from the study's patient position and its bridged gaps.
-    pub fn fitted_to(self, study: &voyage_core::prep::Study) -> FlightOptions {
+    pub fn fitted_to(self, study: &voyage_core::Study) -> FlightOptions {
         FlightOptions {
             dynamics: self.dynamics.with_gravity_along(study.gravity_local()),
             collapsed_spans: study.collapsed_spans.clone(),

@@ -19,4 +19,4 @@ pub use submarine::{
     Dynamics, Forces, Input, Modes, Safety, State, StepReport, Submarine, delta_q, euler_step,
 };
 /// The navigable core's Dt, made by `prepare` (`Study::nav`, `Study::navigable`).
-pub use voyage_core::navigable::Navigable;
+pub use voyage_core::Navigable;

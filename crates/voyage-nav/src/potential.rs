@@ -22,7 +22,7 @@
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use voyage_core::{Error, Geometry, Result, navigable::Navigable, prep::Study};
+use voyage_core::{Error, Geometry, Navigable, Result, Study};
 
 /// Ds below this (mm) is evaluated as this in Eq. 2.
 pub const DS_FLOOR_MM: f64 = 0.05;

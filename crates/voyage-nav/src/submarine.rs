@@ -107,7 +107,7 @@ impl Default for Safety {
     fn default() -> Self {
         Safety {
             // The navigable core `prepare` makes is for this distance.
-            min_wall_mm: voyage_core::navigable::DEFAULT_MIN_WALL_MM,
+            min_wall_mm: voyage_core::DEFAULT_MIN_WALL_MM,
             voxel_fraction: 0.9,
             ds_fraction: 0.25,
             max_substep_s: 1.0 / 60.0,

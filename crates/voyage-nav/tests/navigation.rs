@@ -3,10 +3,7 @@
 //! steps, and automatic flights on the phantoms and on colon-a.
 
 use glam::{DMat3, DQuat, DVec3};
-use voyage_core::{
-    prep::{PrepOptions, Study, prepare},
-    rng::Rng,
-};
+use voyage_core::{PrepOptions, Study, prepare, rng::Rng};
 use voyage_nav::{
     BrickStore, Camera, DS_FLOOR_MM, Direction, DistanceStore, Dynamics, Flight, FlightOptions,
     Forces, Input, Modes, Navigable, Pose, PotentialField, PotentialParams, Safety, SortedStore,
@@ -19,7 +16,7 @@ use voyage_phantom::{self as phantom, ColonOptions};
 fn colon_a_study() -> Option<voyage_core::Study> {
     let path = voyage_phantom::fixtures::colon_a_path()?;
     let mask = voyage_io::load(&path, &Default::default()).unwrap().volume;
-    Some(voyage_core::prep::prepare(mask, &Default::default(), |_| {}).unwrap())
+    Some(voyage_core::prepare(mask, &Default::default(), |_| {}).unwrap())
 }
 
 fn small_colon(seed: u64) -> Study {

@@ -4,10 +4,7 @@
 //! colon must be found whole, rectum to cecum, and flown both ways.
 
 use glam::DVec3;
-use voyage_core::{
-    prep::{PrepOptions, prepare},
-    segment::{SegmentOptions, segment},
-};
+use voyage_core::{PrepOptions, SegmentOptions, prepare, segment};
 use voyage_nav::{Direction, FlightOptions, fly, potential_field};
 use voyage_phantom::{self as phantom, ColonOptions, label};
 

@@ -1082,14 +1082,14 @@ fn segmentation_extent_is_the_lumen_bounding_box_with_and_without_fluid() {
             tagged_fluid: fluid,
             ..ColonOptions::default()
         });
-        let seg = voyage_core::segment::segment(&p.ct, &Default::default()).expect("segment");
+        let seg = voyage_core::segment(&p.ct, &Default::default()).expect("segment");
         assert_eq!(
             seg.fluid_voxels > 0,
             fluid,
             "fluid taken: {}",
             seg.fluid_voxels
         );
-        let b = voyage_core::field::bounding_box(&seg.lumen, 0, |v| v != 0).expect("lumen");
+        let b = voyage_core::bounding_box(&seg.lumen, 0, |v| v != 0).expect("lumen");
         let last = [0, 1, 2].map(|a| b.lo[a] + b.dims[a] - 1);
         assert_eq!(seg.extent, [b.lo, last], "fluid {fluid}");
     }

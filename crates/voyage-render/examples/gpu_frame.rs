@@ -8,7 +8,7 @@
 use std::error::Error;
 
 use glam::DVec3;
-use voyage_core::prep::{PrepOptions, prepare};
+use voyage_core::{PrepOptions, prepare};
 use voyage_nav::{Camera, Pose};
 use voyage_phantom as phantom;
 use voyage_render::GpuRenderer;

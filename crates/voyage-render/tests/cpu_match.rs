@@ -20,7 +20,7 @@
 use std::sync::OnceLock;
 
 use glam::DVec3;
-use voyage_core::prep::{PrepOptions, Study, prepare};
+use voyage_core::{PrepOptions, Study, prepare};
 use voyage_nav::{Camera, Pose};
 use voyage_phantom as phantom;
 use voyage_render::GpuRenderer;

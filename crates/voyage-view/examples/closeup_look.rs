@@ -6,10 +6,7 @@
 use std::{path::Path, time::Instant};
 
 use glam::DVec3;
-use voyage_core::{
-    Geometry, Volume,
-    prep::{PrepOptions, Study, prepare},
-};
+use voyage_core::{Geometry, PrepOptions, Study, Volume, prepare};
 use voyage_nav::{Camera, Pose};
 use voyage_phantom::{self as phantom, ColonOptions, Phantom, Truth};
 use voyage_view::{

@@ -6,7 +6,7 @@
 use std::path::Path;
 
 use glam::DVec3;
-use voyage_core::prep::{PrepOptions, Study, prepare};
+use voyage_core::{PrepOptions, Study, prepare};
 use voyage_nav::{Camera, Pose};
 use voyage_phantom::{self as phantom, ColonOptions, Phantom};
 use voyage_view::{CellMesh, Lighting, render_rgba};

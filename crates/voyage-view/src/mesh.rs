@@ -5,7 +5,7 @@ use std::ops::Range;
 
 use glam::Vec3;
 
-use voyage_core::{cells::Cells, surface::Surface};
+use voyage_core::{Cells, Surface};
 
 #[derive(Clone, Debug, Default)]
 pub struct CellMesh {

@@ -13,7 +13,7 @@ use super::{
     shading::Lighting,
     visibility::{Strategy, Visibility},
 };
-use voyage_core::{cells::Cells, rng::Rng};
+use voyage_core::{Cells, rng::Rng};
 use voyage_nav::{Camera, Pose};
 
 #[derive(Clone, Debug, Serialize)]

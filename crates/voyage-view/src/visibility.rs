@@ -28,7 +28,7 @@ use glam::DVec3;
 use serde::Serialize;
 
 use super::raster::{Frame, Rasterizer, View};
-use voyage_core::cells::{Cells, convex_hull};
+use voyage_core::{Cells, convex_hull};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
 #[serde(rename_all = "lowercase")]

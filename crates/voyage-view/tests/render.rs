@@ -7,7 +7,7 @@ compile_error!(
 );
 
 use glam::DVec3;
-use voyage_core::prep::{PrepOptions, Study, prepare};
+use voyage_core::{PrepOptions, Study, prepare};
 use voyage_nav::{BrickStore, Camera, Direction, FlightOptions, Pose, PotentialField, fly};
 use voyage_phantom::{self as phantom, ColonOptions, Phantom};
 use voyage_view::{
@@ -19,7 +19,7 @@ use voyage_view::{
 fn colon_a_study() -> Option<voyage_core::Study> {
     let path = voyage_phantom::fixtures::colon_a_path()?;
     let mask = voyage_io::load(&path, &Default::default()).unwrap().volume;
-    Some(voyage_core::prep::prepare(mask, &Default::default(), |_| {}).unwrap())
+    Some(voyage_core::prepare(mask, &Default::default(), |_| {}).unwrap())
 }
 
 /// Poses along both automatic flights (`per_flight` each, evenly spaced, in flight order so

@@ -3,10 +3,7 @@
 //! and each lump of stool (in air, uncleansed) as tagged, each in ≥ 90 % of its pixels.
 
 use glam::DVec3;
-use voyage_core::{
-    Volume,
-    prep::{PrepOptions, Study, prepare},
-};
+use voyage_core::{PrepOptions, Study, Volume, prepare};
 use voyage_nav::{Camera, Pose};
 use voyage_phantom::{self as phantom, ColonOptions, Phantom, label};
 use voyage_view::{CloseupBox, Material, TranslucencyOptions, render_translucency};

@@ -153,6 +153,7 @@ pub fn centre_skeleton(
     })
 }
 
+#[cfg(test)]
 /// The skeleton search and the centring in one: endpoints and centerline of the lumen whose
 /// Ds is `ds`.
 pub fn find_endpoints(
@@ -208,7 +209,7 @@ fn skeleton_path(
             return Err(unreachable(v, what));
         }
     }
-    let (colon, _stats) = colon_path(&pad, &tree, &ds_pad, sp, rectum, None, opts)?;
+    let colon = colon_path(&pad, &tree, &ds_pad, sp, rectum, None, opts)?;
     let colon: Vec<[usize; 3]> = colon.iter().map(|&i| pad.global_of_index(i)).collect();
     let place = |v: Option<[usize; 3]>, default: usize| match v {
         None => Some(default),
@@ -233,7 +234,7 @@ fn skeleton_path(
     let s = pad.lumen_index(given_source.unwrap_or(pad.global_of_index(rectum)))?;
     let tree = TreeStart::new(&pad, &weight).search(&pad, &[s], sp, &weight);
     let t_given = given_target.map(|t| pad.lumen_index(t)).transpose()?;
-    let (path, _stats) = colon_path(&pad, &tree, &ds_pad, sp, s, t_given, opts)?;
+    let path = colon_path(&pad, &tree, &ds_pad, sp, s, t_given, opts)?;
     Ok(path.iter().map(|&i| pad.global_of_index(i)).collect())
 }
 

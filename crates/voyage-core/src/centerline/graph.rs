@@ -11,7 +11,7 @@
 //! could otherwise have visited. So:
 //!
 //! 1. One minimum-cost search from the source (cost per mm 1 + K·((Dmax − Ds)/Dmax)^p, see
-//!    [`cost_weight`](super::cost_weight)), recording each voxel's predecessor:
+//!    `refine::cost_weight`), recording each voxel's predecessor:
 //!    a shortest-path tree whose paths keep to the middle of the lumen.
 //! 2. TEASAR-like branches (Sato et al. 2000): repeatedly the farthest wide voxel (Ds ≥ a
 //!    fraction of Dmax) not yet covered is traced back along the tree until it meets the
@@ -80,18 +80,6 @@ struct Branch {
     depth: u32,
 }
 
-/// What [`colon_path`] found, for reports and tests.
-#[derive(Clone, Debug, Default)]
-pub struct SkeletonStats {
-    pub branches: usize,
-    pub skeleton_voxels: usize,
-    pub meetings: usize,
-    pub graph_nodes: usize,
-    pub graph_edges: usize,
-    pub search_steps: usize,
-    pub path_mm: f64,
-}
-
 const COVERED: u8 = 1;
 const SKELETON: u8 = 2;
 
@@ -107,7 +95,7 @@ pub(crate) fn colon_path(
     source: usize,
     target: Option<usize>,
     opts: &CenterlineOptions,
-) -> Result<(Vec<usize>, SkeletonStats)> {
+) -> Result<Vec<usize>> {
     let unreachable =
         || Error::invalid("the target cannot be reached from the source through the lumen");
     if let Some(t) = target
@@ -130,7 +118,7 @@ pub(crate) fn colon_path(
     let graph = Graph::build(&sk, &near, &meetings, source, target_owner);
     let goal = target_owner.map(|o| graph.node_of[&o]);
     let lengths: Vec<f32> = graph.edges.iter().map(|e| e.length).collect();
-    let (best, steps) = longest_path(
+    let (best, _) = longest_path(
         &graph.adj,
         &lengths,
         graph.start,
@@ -140,22 +128,13 @@ pub(crate) fn colon_path(
     let best = best.ok_or_else(|| {
         Error::invalid("the target cannot be reached from the source through the skeleton")
     })?;
-    let (mut out, length) = graph.voxels_along(&best, source);
+    let mut out = graph.voxels_along(&best, source);
     if let Some(t) = target {
         // From the target's owner out to the target itself.
         out.extend(sk.walk_to_skeleton(&near, t).iter().rev().skip(1));
     }
     let out = erase_returns(&out, ds, sk.dims, sk.sp);
-    let stats = SkeletonStats {
-        branches: sk.branches.len(),
-        skeleton_voxels: sk.nodes.len(),
-        meetings: meetings.len(),
-        graph_nodes: graph.node_ords.len(),
-        graph_edges: graph.edges.len(),
-        search_steps: steps,
-        path_mm: length,
-    };
-    Ok((out, stats))
+    Ok(out)
 }
 
 /// The skeleton as a tree of branches traced back along the minimum-cost tree (step 2).
@@ -543,15 +522,12 @@ impl Graph {
         })
     }
 
-    /// The voxels along a path of edges from the start node (`source` first), and its
-    /// length (mm).
-    fn voxels_along(&self, path: &[usize], source: usize) -> (Vec<usize>, f64) {
+    /// The voxels along a path of edges from the start node (`source` first).
+    fn voxels_along(&self, path: &[usize], source: usize) -> Vec<usize> {
         let mut out = vec![source];
         let mut at = self.start;
-        let mut length = 0.0f64;
         for &e in path {
             let edge = &self.edges[e];
-            length += edge.length as f64;
             if edge.from == at {
                 out.extend(edge.voxels.iter().skip(1));
                 at = edge.to;
@@ -560,7 +536,7 @@ impl Graph {
                 at = edge.from;
             }
         }
-        (out, length)
+        out
     }
 }
 

@@ -16,15 +16,21 @@ mod refine;
 
 use glam::DVec3;
 
-pub use ends::{
-    Endpoints, Skeleton, centre_skeleton, find_endpoints, mm_of, trace_skeleton, uses_blocks,
-};
-pub use graph::{SkeletonOptions, SkeletonStats};
+#[cfg(test)]
+pub(crate) use ends::find_endpoints;
+pub use ends::{centre_skeleton, mm_of, trace_skeleton, uses_blocks};
+pub use graph::SkeletonOptions;
+pub use refine::Centerline;
 pub(crate) use refine::arc_lengths;
-pub use refine::{Centerline, cost_weight, refine, refine_points};
+#[cfg(test)]
+use refine::refine;
 
+#[cfg(test)]
 use crate::{Result, Volume, distance::geodesic::Padded, field::Field};
+#[cfg(test)]
 use graph::colon_path;
+#[cfg(test)]
+use refine::cost_weight;
 
 #[derive(Clone, Debug)]
 pub struct CenterlineOptions {
@@ -44,10 +50,10 @@ pub struct CenterlineOptions {
     /// and the lumen has more voxels than `coarse_above_voxels`.
     pub coarse_below_mm: f64,
     pub coarse_above_voxels: usize,
-    /// The cost weight's power p and scale K (see [`cost_weight`]).
+    /// The cost weight's power p and scale K (see `refine.rs`).
     pub penalty_power: u32,
     pub penalty_scale: f64,
-    /// The skeleton graph the path is chosen from (see [`graph`]).
+    /// The skeleton graph the path is chosen from (see `graph.rs`).
     pub skeleton: SkeletonOptions,
 }
 
@@ -69,6 +75,7 @@ impl Default for CenterlineOptions {
     }
 }
 
+#[cfg(test)]
 /// The centerline from `source` to `target` (volume voxels in the lumen): the longest simple
 /// path between them through the skeleton graph, centred and smoothed.
 pub fn centerline(
@@ -88,7 +95,7 @@ pub fn centerline(
         .weighted(&weight)
         .tree()
         .from(&[src]);
-    let (path, _) = colon_path(&pad, &tree, &ds_pad, mask.spacing(), src, Some(dst), opts)?;
+    let path = colon_path(&pad, &tree, &ds_pad, mask.spacing(), src, Some(dst), opts)?;
     let voxels: Vec<[usize; 3]> = path.iter().map(|&i| pad.global_of_index(i)).collect();
     Ok(refine(&voxels, mask, ds, opts))
 }

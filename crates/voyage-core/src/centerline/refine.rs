@@ -6,7 +6,9 @@ use glam::DVec3;
 use serde::Serialize;
 
 use super::CenterlineOptions;
-use crate::{Volume, field::Field};
+#[cfg(test)]
+use crate::Volume;
+use crate::field::Field;
 
 #[derive(Clone, Debug, Serialize)]
 pub struct Centerline {
@@ -20,6 +22,7 @@ pub struct Centerline {
 }
 
 /// Centres, smooths and resamples a voxel path from source to target.
+#[cfg(test)]
 pub fn refine(
     voxels: &[[usize; 3]],
     mask: &Volume<u8>,

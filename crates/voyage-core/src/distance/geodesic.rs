@@ -189,8 +189,6 @@ pub struct Search {
     pub far: usize,
     pub far_d: f32,
     pub reached: usize,
-    /// Queue pushes (≥ reached; the excess is voxels improved after first being queued).
-    pub pushes: usize,
     /// With `tree`: per voxel, the index into `nbrs` of the offset to its predecessor
     /// ([`NO_PARENT`] for sources and unreached voxels), and the voxels in settling order.
     pub parent: Vec<u8>,
@@ -229,6 +227,7 @@ pub struct SearchBuilder<'a> {
 impl<'a> SearchBuilder<'a> {
     /// Per-voxel cost weight (padded layout, > 0 on lumen voxels): an edge u–v costs its
     /// length times (w(u) + w(v)) / 2.
+    #[cfg(test)]
     pub fn weighted(mut self, weight: &'a [f32]) -> Self {
         self.weight = Some(weight);
         self
@@ -492,24 +491,6 @@ impl Padded {
         }
         out
     }
-
-    /// A padded-layout field in the box layout. In place: every row moves to a lower index
-    /// (the padding comes before it), so rows are copied forward and the tail dropped, without
-    /// a second field-sized buffer.
-    pub fn unpad(&self, mut v: Vec<f32>) -> Vec<f32> {
-        let [bx, by, bz] = self.grid.dims;
-        let mut at = 0;
-        for k in 0..bz {
-            for j in 0..by {
-                // The row's start ≥ at: going forward never overwrites a value not yet read.
-                v.copy_within(self.row_start(j, k)..self.row_start(j, k) + bx, at);
-                at += bx;
-            }
-        }
-        v.truncate(at);
-        v.shrink_to_fit();
-        v
-    }
 }
 
 /// The working arrays of weighted tree searches over one padded grid at their start
@@ -685,7 +666,6 @@ fn dial_impl<const W: bool, const T: bool>(
         .map(|&(off, _)| nbrs.iter().position(|&(o, _)| o == -off).unwrap_or(0) as u8)
         .collect();
     let mut pending = 0usize;
-    let mut pushes = 0usize;
     for &s in sources {
         if dist[s] > 0.0 {
             dist[s] = 0.0;
@@ -741,7 +721,6 @@ fn dial_impl<const W: bool, const T: bool>(
                         if !(old.is_finite() && ((old * inv_width) as usize).max(current) == b) {
                             buckets[b & wrap].push(v as u32);
                             pending += 1;
-                            pushes += 1;
                         }
                     }};
                 }
@@ -788,7 +767,6 @@ fn dial_impl<const W: bool, const T: bool>(
         far,
         far_d,
         reached,
-        pushes,
         parent,
         order,
         nbrs,

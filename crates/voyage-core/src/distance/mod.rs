@@ -5,4 +5,4 @@ pub mod edt;
 pub mod geodesic;
 
 pub use edt::{distance_to_wall, distance_to_wall_in};
-pub use geodesic::{Geodesic, geodesic_distance, geodesic_distance_like};
+pub use geodesic::{Geodesic, geodesic_distance};

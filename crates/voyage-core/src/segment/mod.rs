@@ -89,8 +89,6 @@ impl Default for SegmentOptions {
     }
 }
 
-pub use chain::ChainOptions as SegmentChainOptions;
-
 /// What a gas component is taken to be.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -101,7 +99,7 @@ pub enum ComponentKind {
     SmallBowel,
     /// Large gas high on the patient's left, not joined to the colon.
     Stomach,
-    /// The air in a rectal tube, from outside the body into the rectum ([`tube`]).
+    /// The air in a rectal tube, from outside the body into the rectum (`segment/tube.rs`).
     RectalTube,
     Other,
 }

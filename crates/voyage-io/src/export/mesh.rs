@@ -8,7 +8,7 @@ use std::path::Path;
 use glam::{DMat3, DVec3, Vec3};
 
 use crate::atomic::write_atomic;
-use voyage_core::{Geometry, Result, surface::Mesh};
+use voyage_core::{Geometry, Mesh, Result};
 
 /// Volume-local → patient: a rotation and a translation, applied in f64.
 struct ToPatient {

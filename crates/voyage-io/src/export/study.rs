@@ -7,7 +7,7 @@ use serde_json::json;
 
 use super::{MarkupsPoint, write_markups_curve, write_ply, write_stl};
 use crate::{atomic::write_atomic, nifti};
-use voyage_core::{Result, prep::Study};
+use voyage_core::{Result, Study};
 
 /// Writes every export of a study into `dir`; returns the paths written.
 ///

@@ -7,10 +7,7 @@ use std::{path::PathBuf, time::Instant};
 use anyhow::{Result, bail};
 use glam::DVec3;
 use serde_json::{Value, json};
-use voyage_core::{
-    Volume,
-    prep::{PrepOptions, Study, prepare},
-};
+use voyage_core::{PrepOptions, Study, Volume, prepare};
 use voyage_io::{self as io, LoadOptions};
 use voyage_nav::{
     BoxStore, BrickStore, Direction, DistanceStore, FlightOptions, PotentialField, PotentialParams,

@@ -9,11 +9,7 @@ use std::{
 
 use anyhow::{Context, Result, bail};
 use serde_json::{Value, json};
-use voyage_core::{
-    Volume,
-    distance::geodesic_distance,
-    prep::{PrepOptions, Stage, Study, Timings, prepare},
-};
+use voyage_core::{PrepOptions, Stage, Study, Timings, Volume, geodesic_distance, prepare};
 use voyage_io::{self as io, LoadOptions, nifti};
 use voyage_phantom::{self as phantom, ColonOptions};
 

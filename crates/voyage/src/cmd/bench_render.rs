@@ -7,10 +7,7 @@ use std::path::PathBuf;
 
 use anyhow::{Result, bail};
 use serde_json::{Map, Value, json};
-use voyage_core::{
-    Volume,
-    prep::{PrepOptions, Study, prepare},
-};
+use voyage_core::{PrepOptions, Study, Volume, prepare};
 use voyage_io::{self as io, LoadOptions};
 use voyage_nav::{Camera, Direction, FlightOptions, Pose, fly, potential_field};
 use voyage_phantom::{self as phantom, ColonOptions};

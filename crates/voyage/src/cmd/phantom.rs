@@ -225,7 +225,7 @@ pub fn demo(out: &Path, small: bool) -> Result<()> {
     let loaded = io::load(&ct, &LoadOptions::default())?;
     super::info::Info::new(&ct, &loaded).print_text();
     // The preprocessing on what was read back, checked against the phantom's truth.
-    let study = voyage_core::prep::prepare(loaded.volume, &Default::default(), |_| {})?;
+    let study = voyage_core::prepare(loaded.volume, &Default::default(), |_| {})?;
     let written = voyage_io::export::study::write_study(&out.join("prep"), &study)?;
     let (mut both, mut a, mut b) = (0usize, 0usize, 0usize);
     for (&x, &y) in p.lumen.data().iter().zip(study.segmentation.lumen.data()) {

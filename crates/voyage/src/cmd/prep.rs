@@ -8,10 +8,7 @@ use glam::DVec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use voyage_core::{
-    Geometry,
-    anatomy::{PatientPosition, PositionSource},
-    prep::{PrepOptions, Stage, Study, prepare},
-    segment::ComponentKind,
+    ComponentKind, Geometry, PatientPosition, PositionSource, PrepOptions, Stage, Study, prepare,
 };
 use voyage_io::{self as io, LoadOptions, export::study::write_study};
 
@@ -243,10 +240,10 @@ fn cleanse_summary(s: &Study) -> serde_json::Value {
 /// tagged material of the original CT (within 2 mm; None without any); None for a mask.
 fn roughness(s: &Study) -> Option<(Option<f64>, Option<f64>)> {
     (!s.segmentation.from_mask).then(|| {
-        voyage_core::cleanse::roughness(
+        voyage_core::roughness(
             &s.surface.mesh,
             &s.ct,
-            voyage_core::segment::SegmentOptions::default()
+            voyage_core::SegmentOptions::default()
                 .fluid_hu
                 .unwrap_or(200),
             2.0,

@@ -9,7 +9,7 @@ use std::{
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
-use voyage_core::prep::Study;
+use voyage_core::Study;
 use voyage_io::write_atomic;
 use voyage_nav::{Camera, Direction, Flight, Pose, fly, potential_field};
 use voyage_render::GpuRenderer;

@@ -1506,11 +1506,7 @@ impl eframe::App for App {
 /// The colon's segments, bridged gaps, the patient's position and the warnings, as
 /// preprocessing reported them. Each segment has a box to take it in or leave it out; the
 /// correction asked for, if any, is returned (`busy`: one is being preprocessed).
-fn colon_summary(
-    ui: &mut egui::Ui,
-    study: &voyage_core::prep::Study,
-    busy: bool,
-) -> Option<Correction> {
+fn colon_summary(ui: &mut egui::Ui, study: &voyage_core::Study, busy: bool) -> Option<Correction> {
     let seg = &study.segmentation;
     let o = &seg.orientation;
     let kept = seg.segments.iter().filter(|s| s.kept).count();

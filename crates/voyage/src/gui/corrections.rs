@@ -101,7 +101,7 @@ mod tests {
         let g = Geometry::new([4, 4, 4], [1.0; 3], [0.0; 3]).unwrap();
         let p = [1.0, 2.0, 3.0];
         let none = PointArgs {
-            position: Some(voyage_core::anatomy::PatientPosition::Hfp),
+            position: Some(voyage_core::PatientPosition::Hfp),
             ..PointArgs::default()
         };
         let ex = Correction::Exclude(p).applied_to(&none, &g);

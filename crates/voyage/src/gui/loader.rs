@@ -8,7 +8,7 @@ use std::{
 };
 
 use anyhow::Context as _;
-use voyage_core::prep::{PrepOptions, Stage, prepare};
+use voyage_core::{PrepOptions, Stage, prepare};
 use voyage_io::{self as io, LoadOptions};
 use voyage_phantom::{self as phantom, ColonOptions};
 

@@ -13,7 +13,7 @@ use std::collections::HashMap;
 
 use egui::{Color32, Pos2, Rect, Sense, Shape, Stroke, Vec2};
 use glam::{DMat3, DVec3};
-use voyage_core::{Geometry, surface::Mesh};
+use voyage_core::{Geometry, Mesh};
 
 use super::pixels::{PanelImage, Rgba};
 

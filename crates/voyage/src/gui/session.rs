@@ -5,7 +5,7 @@
 use std::sync::OnceLock;
 
 use glam::DVec3;
-use voyage_core::{Volume, prep::Study};
+use voyage_core::{Study, Volume};
 use voyage_nav::{
     Autopilot, BrickStore, Camera, Direction, FlightOptions, Input, Pose, PotentialField,
     Submarine, potential_field, start_pose,
@@ -286,7 +286,7 @@ impl Session {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use voyage_core::prep::{PrepOptions, prepare};
+    use voyage_core::{PrepOptions, prepare};
 
     /// The plain form: each sample mapped from mm to the nearest voxel.
     fn reference(s: &Session, from: DVec3, to: DVec3, skip_end_mm: f64) -> bool {

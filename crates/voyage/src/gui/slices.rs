@@ -11,7 +11,7 @@ use std::collections::HashMap;
 
 use egui::{Color32, Pos2, Rect, Sense, Stroke, Vec2};
 use glam::DVec3;
-use voyage_core::{Geometry, Volume, cleanse::Cleansing};
+use voyage_core::{Cleansing, Geometry, Volume};
 
 use super::{
     corrections::Correction,
