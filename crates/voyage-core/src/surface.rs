@@ -507,6 +507,77 @@ fn edge_vertex(
     id
 }
 
+/// The surface's roughness: the mean angle (degrees) between neighbouring triangles, apart
+/// for the rest (air) and for triangles near tagged material in the original CT (a voxel at
+/// or above `fluid_hu` at the triangle's centre, or 1 mm or `near_mm` from it along an
+/// axis). None for a class with no triangle pair.
+pub fn roughness(
+    mesh: &Mesh,
+    ct: &Volume<i16>,
+    fluid_hu: i16,
+    near_mm: f64,
+) -> (Option<f64>, Option<f64>) {
+    use rayon::prelude::*;
+    let g: &crate::Geometry = ct.geometry();
+    let tri = &mesh.triangles;
+    let pos = &mesh.positions;
+    let normal = |t: &[u32; 3]| {
+        let p = t.map(|i| glam::Vec3::from_array(pos[i as usize]));
+        (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero()
+    };
+    // Samples: the centre, and 1 mm and `near_mm` from it along each axis.
+    let mut offsets = vec![glam::DVec3::ZERO];
+    for a in 0..3 {
+        for d in [-near_mm, -1.0, 1.0, near_mm] {
+            let mut o = glam::DVec3::ZERO;
+            o[a] = d;
+            offsets.push(o);
+        }
+    }
+    let near_fluid: Vec<bool> = tri
+        .par_iter()
+        .map(|t| {
+            let c = t.iter().fold(glam::DVec3::ZERO, |s, &i| {
+                s + glam::Vec3::from_array(pos[i as usize]).as_dvec3()
+            }) / 3.0;
+            offsets.iter().any(|&o| {
+                let q = [0, 1, 2].map(|a| ((c[a] + o[a]) / g.spacing[a]).round() as i64);
+                (0..3).all(|a| q[a] >= 0 && q[a] < g.dims[a] as i64)
+                    && ct.data()[g.index(q[0] as usize, q[1] as usize, q[2] as usize)] >= fluid_hu
+            })
+        })
+        .collect();
+    // Neighbouring triangles share an edge: sort the edges, pairs are adjacent.
+    let mut edges: Vec<(u64, u32)> = tri
+        .iter()
+        .enumerate()
+        .flat_map(|(n, t)| {
+            (0..3).map(move |e| {
+                let (a, b) = (t[e], t[(e + 1) % 3]);
+                (((a.min(b) as u64) << 32) | a.max(b) as u64, n as u32)
+            })
+        })
+        .collect();
+    edges.par_sort_unstable();
+    let mut sums = [(0f64, 0usize); 2];
+    for w in edges.windows(2) {
+        if w[0].0 != w[1].0 {
+            continue;
+        }
+        let (a, b) = (&tri[w[0].1 as usize], &tri[w[1].1 as usize]);
+        let angle = normal(a)
+            .dot(normal(b))
+            .clamp(-1.0, 1.0)
+            .acos()
+            .to_degrees() as f64;
+        let class = (near_fluid[w[0].1 as usize] || near_fluid[w[1].1 as usize]) as usize;
+        sums[class].0 += angle;
+        sums[class].1 += 1;
+    }
+    let mean = |(s, n): (f64, usize)| (n > 0).then(|| s / n as f64);
+    (mean(sums[0]), mean(sums[1]))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
