@@ -19,7 +19,7 @@
 use glam::DVec3;
 use serde::Serialize;
 
-use crate::{Error, Result, Volume, centerline::Centerline, field::Bricked, surface::Surface};
+use crate::{Error, Result, Volume, centerline::Centerline, grid::Bricked, surface::Surface};
 
 #[derive(Clone, Debug)]
 pub struct CellOptions {
@@ -619,7 +619,7 @@ mod tests {
         Geometry,
         centerline::{CenterlineOptions, centerline},
         distance::{distance_to_wall, geodesic_distance},
-        field::bounding_box,
+        grid::bounding_box,
         surface::extract_surface,
     };
 

@@ -14,7 +14,7 @@
 //! one: Dt follows the colon, the surface closes over the contact (no view into the next
 //! loop), and the cells stay a chain.
 //!
-//! The search runs on blocks ([`crate::blocks`]): the skeleton's 2×2×2 blocks on a large lumen
+//! The search runs on blocks ([`crate::grid::Blocks`]): the skeleton's 2×2×2 blocks on a large lumen
 //! (an eighth of the voxels; the search and the scan of neighbour pairs cost 2.6 s on the
 //! voxels of colon-a), single voxels on a small one. Each block takes one label (a partial
 //! block, the label of the nearest labelled block); every pair of neighbouring lumen voxels in
@@ -23,7 +23,7 @@
 
 use glam::DVec3;
 
-use crate::{Volume, blocks::Blocks, distance::geodesic::Padded, field::BoxGrid};
+use crate::{Volume, grid::Blocks, grid::BoxGrid, grid::Padded};
 
 #[derive(Clone, Debug)]
 pub struct ContactOptions {

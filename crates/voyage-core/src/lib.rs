@@ -8,14 +8,13 @@
 //! here.
 
 mod anatomy;
-mod blocks;
 mod cells;
 mod centerline;
 mod cleanse;
 mod contacts;
 mod distance;
 mod error;
-mod field;
+mod grid;
 mod mem;
 mod navigable;
 mod prep;
@@ -32,7 +31,7 @@ pub use cleanse::{CleanseOptions, Cleansing};
 pub use contacts::ContactOptions;
 pub use distance::{Geodesic, distance_to_wall, geodesic_distance};
 pub use error::{Error, Result};
-pub use field::{BoxGrid, Bricked, Field, bounding_box};
+pub use grid::{BoxGrid, Bricked, Field, bounding_box};
 pub use navigable::{DEFAULT_MIN_WALL_MM, Navigable};
 pub use prep::{PrepOptions, Stage, Study, Timings, prepare};
 pub use segment::{ComponentKind, SegmentOptions, Segmentation, segment};

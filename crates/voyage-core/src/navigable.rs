@@ -11,7 +11,7 @@ use crate::{
     Error, Result, Volume,
     centerline::Centerline,
     distance::geodesic::{SearchMemory, core_distances},
-    field::Bricked,
+    grid::Bricked,
 };
 
 /// The submarine's default distance from the wall (mm), for which `prepare` computes the

@@ -19,7 +19,7 @@ use crate::{
         distance_to_wall_in,
         geodesic::{SearchMemory, geodesic_distance_like},
     },
-    field::{BoxGrid, Bricked},
+    grid::{BoxGrid, Bricked},
     navigable::{DEFAULT_MIN_WALL_MM, Navigable},
     segment::{SegmentOptions, Segmentation, segment},
     surface::{Surface, extract_surface},

@@ -19,7 +19,7 @@ use std::sync::OnceLock;
 
 use glam::Vec3;
 
-use crate::{Result, Volume, field::BoxGrid};
+use crate::{Result, Volume, grid::BoxGrid};
 
 /// A triangle mesh in volume-local mm.
 #[derive(Clone, Debug, Default)]
@@ -158,7 +158,7 @@ impl<'a> Scalar<'a> {
     fn row_span(&self, j: usize, k: usize) -> (usize, usize) {
         let found = self
             .mask_row(j, k)
-            .and_then(|row| crate::field::first_and_last(row, &|m: u8| m != 0));
+            .and_then(|row| crate::grid::first_and_last(row, &|m: u8| m != 0));
         found.map_or((0, 0), |(first, last)| (first + 1, last + 2))
     }
 
@@ -581,7 +581,7 @@ pub fn roughness(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{Geometry, field::bounding_box};
+    use crate::{Geometry, grid::bounding_box};
     use std::collections::HashMap;
 
     fn ball(dims: [usize; 3], sp: [f64; 3], c: [f64; 3], r: f64) -> Volume<u8> {

@@ -20,12 +20,9 @@ use super::{
 };
 use crate::{
     Error, Result, Volume,
-    blocks::Blocks,
-    distance::{
-        distance_to_wall,
-        geodesic::{Padded, TreeStart},
-    },
-    field::{BoxGrid, Field},
+    distance::{distance_to_wall, geodesic::TreeStart},
+    grid::Blocks,
+    grid::{BoxGrid, Field, Padded},
 };
 
 #[derive(Clone, Debug)]

@@ -29,10 +29,7 @@
 use std::collections::HashMap;
 
 use super::CenterlineOptions;
-use crate::{
-    Error, Result,
-    distance::geodesic::{Padded, Search},
-};
+use crate::{Error, Result, distance::geodesic::Search, grid::Padded};
 
 #[derive(Clone, Debug)]
 pub struct SkeletonOptions {

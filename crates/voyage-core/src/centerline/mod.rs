@@ -26,7 +26,7 @@ pub(crate) use refine::arc_lengths;
 use refine::refine;
 
 #[cfg(test)]
-use crate::{Result, Volume, distance::geodesic::Padded, field::Field};
+use crate::{Result, Volume, grid::Field, grid::Padded};
 #[cfg(test)]
 use graph::colon_path;
 #[cfg(test)]

@@ -8,7 +8,7 @@ use serde::Serialize;
 use super::CenterlineOptions;
 #[cfg(test)]
 use crate::Volume;
-use crate::field::Field;
+use crate::grid::Field;
 
 #[derive(Clone, Debug, Serialize)]
 pub struct Centerline {

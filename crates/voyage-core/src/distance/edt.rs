@@ -20,7 +20,7 @@ use rayon::prelude::*;
 
 use crate::{
     Error, Result, Volume,
-    field::{BoxGrid, Field, bounding_box},
+    grid::{BoxGrid, Field, bounding_box},
     volume::{next_run, runs_where},
 };
 
@@ -248,7 +248,7 @@ fn pass_x(mask: &Volume<u8>, grid: &BoxGrid, h: f64) -> (Vec<f32>, Vec<Span>, Ve
     // Room for the Dt searches, which work in this memory after it (prep).
     let mut f = crate::mem::filled_with_room(
         grid.len(),
-        super::geodesic::Padded::shape(grid).search_len(),
+        crate::grid::Padded::shape(grid).search_len(),
         0.0f32,
     );
     let runs: Vec<Vec<(u32, u32, u32)>> = f
@@ -466,7 +466,7 @@ mod tests {
     fn matches_brute_force_anisotropic() {
         for (seed, fill) in [(1, 0.9), (2, 0.97), (3, 0.6), (4, 1.0)] {
             let m = random_mask([13, 11, 9], [0.82, 0.7, 1.25], seed, fill);
-            let ds = crate::field::Bricked::from_field(&distance_to_wall(&m).unwrap(), 0.0)
+            let ds = crate::grid::Bricked::from_field(&distance_to_wall(&m).unwrap(), 0.0)
                 .to_volume()
                 .unwrap();
             let want = brute(&m);
@@ -484,7 +484,7 @@ mod tests {
     fn long_runs_match_brute_force() {
         for (seed, fill) in [(5, 0.995), (6, 1.0)] {
             let m = random_mask([4, DIRECT_MAX + 40, 5], [0.82, 0.7, 1.25], seed, fill);
-            let ds = crate::field::Bricked::from_field(&distance_to_wall(&m).unwrap(), 0.0)
+            let ds = crate::grid::Bricked::from_field(&distance_to_wall(&m).unwrap(), 0.0)
                 .to_volume()
                 .unwrap();
             for (idx, (&got, &w)) in ds.data().iter().zip(&brute(&m)).enumerate() {

@@ -9,7 +9,7 @@
 
 use glam::DVec3;
 
-use crate::{Error, Geometry, Result, Volume, field::BoxGrid};
+use crate::{Error, Geometry, Result, Volume, grid::BoxGrid};
 
 pub struct Blocks {
     /// Voxels per block along each axis.
