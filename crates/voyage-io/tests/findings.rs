@@ -18,7 +18,8 @@ use voyage_io::export::{
 use voyage_nav::{Camera, Pose};
 use voyage_phantom::{self as phantom, Phantom, PolypTruth};
 use voyage_view::{
-    CellMesh, Findings, Frame, Hit, NO_TRIANGLE, Rasterizer, Strategy, View, Visibility, pick,
+    CellMesh, Findings, Frame, Hit, NO_TRIANGLE, Rasterizer, Shading, Strategy, View, Visibility,
+    pick,
 };
 
 /// The colon-a mask of the shared data preprocessed with the default options, or None
@@ -302,7 +303,7 @@ fn two_clicks_measure_the_pipes_polyps_within_half_a_millimetre() {
         // What the navigator shows: the visible cells of the camera's position.
         let drawn = Visibility::new(&study.cells, Strategy::Ours).draw(
             &mut frame,
-            &Rasterizer::new(&mesh, View::new(&camera, W, W)),
+            &Rasterizer::new(&mesh, View::new(&camera, W, W), &Shading::default()),
             &study.cells,
         );
         let centre = (W as i64 / 2, W as i64 / 2);
@@ -387,6 +388,7 @@ fn pick_on_colon_a_is_quick_and_lands_where_the_frame_shows() {
     let (mut t_all, mut t_drawn, mut n, mut agree, mut covered) =
         (Vec::new(), Vec::new(), 0usize, 0usize, 0usize);
     let mut visibility = Visibility::new(&study.cells, Strategy::Ours);
+    let shading = Shading::default();
     for k in 1..=12 {
         let i = k * (cl.points_mm.len() - 2) / 13;
         let (p, q) = (
@@ -398,7 +400,7 @@ fn pick_on_colon_a_is_quick_and_lands_where_the_frame_shows() {
         visibility.reset();
         let drawn = visibility.draw(
             &mut frame,
-            &Rasterizer::new(&mesh, View::new(&camera, size, size)),
+            &Rasterizer::new(&mesh, View::new(&camera, size, size), &shading),
             &study.cells,
         );
         for (fx, fy) in [(0.5, 0.5), (0.2, 0.3), (0.8, 0.25), (0.3, 0.8), (0.7, 0.7)] {

@@ -18,7 +18,7 @@ mod visibility;
 pub use closeup::{CloseupBox, MAX_HALF_SIZE_MM, TfPoint, TransferFunction, render_closeup};
 pub use findings::{Findings, Hit, Marker, Measurement, pick};
 pub use mesh::{CellMesh, DISPLAY_NORMAL_PASSES, smooth_normals};
-pub use raster::{Frame, NO_TRIANGLE, Pixel, Rasterizer, View, render_rgba, shade};
+pub use raster::{Frame, NO_TRIANGLE, Pixel, Rasterizer, Shading, View, render_rgba, shade};
 pub use shading::{Lighting, encode};
 #[cfg(feature = "survey")]
 pub use survey::{StrategyStats, Survey, look_around, survey};

@@ -198,25 +198,19 @@ pub struct Rasterizer<'a> {
     mesh: &'a CellMesh,
     view: View,
     xf: EyeXf,
-    lighting: Lighting,
-    tables: std::rc::Rc<ShadeTables>,
+    shading: &'a Shading,
     /// The current cell's transformed vertices.
     scratch: RefCell<Vec<Vertex>>,
 }
 
 impl<'a> Rasterizer<'a> {
-    /// With the default [`Lighting`].
-    pub fn new(mesh: &'a CellMesh, view: View) -> Self {
-        Self::lit(mesh, view, &Lighting::default())
-    }
-
-    pub fn lit(mesh: &'a CellMesh, view: View, lighting: &Lighting) -> Self {
+    /// Draws `mesh` as `view` sees it, lit by `shading` (made once for many frames).
+    pub fn new(mesh: &'a CellMesh, view: View, shading: &'a Shading) -> Self {
         Rasterizer {
             mesh,
             xf: EyeXf::new(&view),
             view,
-            lighting: *lighting,
-            tables: ShadeTables::cached(lighting),
+            shading,
             scratch: RefCell::new(Vec::new()),
         }
     }
@@ -304,8 +298,9 @@ impl<'a> Rasterizer<'a> {
         } else {
             0.0
         };
-        let att = 1.0 / (1.0 + d2 / (self.lighting.falloff_mm * self.lighting.falloff_mm));
-        let c = self.tables.encoded(&self.lighting, att, ndl);
+        let l = &self.shading.lighting;
+        let att = 1.0 / (1.0 + d2 / (l.falloff_mm * l.falloff_mm));
+        let c = self.shading.tables.encoded(l, att, ndl);
         v.color.set(c);
         c
     }
@@ -540,6 +535,33 @@ pub fn shade(frame: &Frame) -> Vec<u8> {
     out
 }
 
+/// The lighting the CPU rasterizer shades with, and its tables: whoever draws frames makes
+/// one and keeps it (building the tables costs about as much as lighting a small frame).
+pub struct Shading {
+    lighting: Lighting,
+    tables: ShadeTables,
+}
+
+impl Shading {
+    pub fn new(lighting: &Lighting) -> Self {
+        Shading {
+            lighting: *lighting,
+            tables: ShadeTables::new(lighting),
+        }
+    }
+
+    pub fn lighting(&self) -> &Lighting {
+        &self.lighting
+    }
+}
+
+impl Default for Shading {
+    /// The default [`Lighting`].
+    fn default() -> Self {
+        Shading::new(&Lighting::default())
+    }
+}
+
 /// Tables for the two powers per vertex (specular and display gamma), which would otherwise
 /// cost more than the rest of the lighting; both agree with the exact formula that the GPU
 /// evaluates to far below one 8-bit level.
@@ -560,24 +582,6 @@ impl ShadeTables {
             .map(|i| (i as f32 / GAMMA_STEPS as f32).powf(1.0 / 2.2))
             .collect();
         ShadeTables { specular, gamma }
-    }
-
-    /// The tables for this lighting, built once per thread and lighting.
-    fn cached(lighting: &Lighting) -> std::rc::Rc<ShadeTables> {
-        thread_local! {
-            static TABLES: RefCell<Option<(Lighting, std::rc::Rc<ShadeTables>)>> = const { RefCell::new(None) };
-        }
-        TABLES.with(|t| {
-            let mut t = t.borrow_mut();
-            match &*t {
-                Some((l, tables)) if l == lighting => tables.clone(),
-                _ => {
-                    let tables = std::rc::Rc::new(ShadeTables::new(lighting));
-                    *t = Some((*lighting, tables.clone()));
-                    tables
-                }
-            }
-        })
     }
 
     /// Display values (0..1, gamma applied) of [`Lighting::linear`]; the gamma table is
@@ -609,7 +613,7 @@ pub fn render_rgba(
 ) -> Vec<u8> {
     let view = View::new(camera, width, height);
     let mut frame = Frame::new(width, height);
-    Rasterizer::lit(mesh, view, lighting).draw_cells(&mut frame, cells);
+    Rasterizer::new(mesh, view, &Shading::new(lighting)).draw_cells(&mut frame, cells);
     shade(&frame)
 }
 
@@ -646,7 +650,7 @@ mod tests {
         let mesh = wall();
         let mut f = Frame::new(64, 64);
         let view = View::new(&camera(), 64, 64);
-        Rasterizer::new(&mesh, view).draw_cells(&mut f, &[0, 1]);
+        Rasterizer::new(&mesh, view, &Shading::default()).draw_cells(&mut f, &[0, 1]);
         // 90° fov: the 10 mm half-width at 10 mm covers half the half-screen → 32 pixels.
         assert_eq!(f.covered(), 32 * 32);
         // The back-facing triangle (id 2) is never drawn.
@@ -663,13 +667,13 @@ mod tests {
         // Drawing in the other order gives the same buffers, and so does the per-cell vertex
         // path.
         let mut g = Frame::new(64, 64);
-        Rasterizer::new(&mesh, view).draw_cells(&mut g, &[1, 0]);
+        Rasterizer::new(&mesh, view, &Shading::default()).draw_cells(&mut g, &[1, 0]);
         assert_eq!(f, g);
         let mut indexed = mesh.clone();
         indexed.index_cells();
         assert!(indexed.is_indexed() && !mesh.is_indexed());
         let mut h = Frame::new(64, 64);
-        Rasterizer::new(&indexed, view).draw_cells(&mut h, &[1, 0]);
+        Rasterizer::new(&indexed, view, &Shading::default()).draw_cells(&mut h, &[1, 0]);
         assert_eq!(f, h);
     }
 
@@ -707,7 +711,8 @@ mod tests {
             ..CellMesh::default()
         };
         let mut f = Frame::new(32, 32);
-        Rasterizer::new(&mesh, View::new(&camera(), 32, 32)).draw_cells(&mut f, &[0]);
+        Rasterizer::new(&mesh, View::new(&camera(), 32, 32), &Shading::default())
+            .draw_cells(&mut f, &[0]);
         let below = (16..32)
             .flat_map(|y| (0..32).map(move |x| (x, y)))
             .filter(|&(x, y)| f.id(y * 32 + x) != NO_TRIANGLE)

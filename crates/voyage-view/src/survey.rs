@@ -9,7 +9,7 @@ use serde::Serialize;
 
 use super::{
     mesh::CellMesh,
-    raster::{Frame, Rasterizer, View, shade},
+    raster::{Frame, Rasterizer, Shading, View, shade},
     shading::Lighting,
     visibility::{Strategy, Visibility},
 };
@@ -92,9 +92,10 @@ pub fn survey(
     let mut reference = Frame::new(width, height);
     let mut frame = Frame::new(width, height);
     let mut shade_ms = 0.0;
+    let shading = Shading::new(&lighting);
     for camera in cameras {
         let view = View::new(camera, width, height);
-        let raster = Rasterizer::lit(mesh, view, &lighting);
+        let raster = Rasterizer::new(mesh, view, &shading);
         for (k, (v, st)) in vis.iter_mut().zip(stats.iter_mut()).enumerate() {
             let target = if k == 0 { &mut reference } else { &mut frame };
             let t = Instant::now();

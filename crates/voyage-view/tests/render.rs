@@ -11,7 +11,8 @@ use voyage_core::{PrepOptions, Study, prepare};
 use voyage_nav::{BrickStore, Camera, Direction, FlightOptions, Pose, PotentialField, fly};
 use voyage_phantom::{self as phantom, ColonOptions, Phantom};
 use voyage_view::{
-    CellMesh, Frame, NO_TRIANGLE, Rasterizer, Strategy, View, Visibility, look_around, survey,
+    CellMesh, Frame, NO_TRIANGLE, Rasterizer, Shading, Strategy, View, Visibility, look_around,
+    survey,
 };
 
 /// The colon-a mask of the shared data preprocessed with the default options, or None
@@ -96,13 +97,14 @@ fn check_exact_and_reduced(study: &Study, what: &str, min_paper_ratio: f64) {
 fn check_select_is_exact(study: &Study, mesh: &CellMesh, cameras: &[Camera], what: &str) {
     let all: Vec<u32> = (0..study.cells.cells.len() as u32).collect();
     let all_triangles = mesh.triangles_in(&all) as f64;
+    let shading = Shading::default();
     for strategy in [Strategy::Lg, Strategy::Ours] {
         let mut vis = Visibility::new(&study.cells, strategy);
         let mut drawn = 0.0;
         let sample: Vec<&Camera> = cameras.iter().step_by(3).collect();
         for cam in &sample {
             let view = View::new(cam, 256, 256);
-            let raster = Rasterizer::new(mesh, view);
+            let raster = Rasterizer::new(mesh, view, &shading);
             let (mut reference, mut culled) = (Frame::new(256, 256), Frame::new(256, 256));
             raster.draw_cells(&mut reference, &all);
             let cells = vis.select(&study.cells, &view).cells;
@@ -178,7 +180,7 @@ fn the_pipe_shows_its_three_polyps() {
         let mut frame = Frame::new(512, 512);
         let cell = study.cells.cell_of_point(eye).unwrap() as u32;
         assert!(cell < mesh.cells() as u32);
-        Rasterizer::new(&mesh, view)
+        Rasterizer::new(&mesh, view, &Shading::default())
             .draw_cells(&mut frame, &(0..mesh.cells() as u32).collect::<Vec<_>>());
         let seen = pixels_on(&frame, &mesh, c, polyp.diameter_mm / 2.0 + 0.5);
         // Its disc seen from ~35 mm covers ≈ π(256·r/35)² pixels; at least a fifth must show.

@@ -14,7 +14,7 @@ use voyage_io::write_atomic;
 use voyage_nav::{Camera, Direction, Flight, Pose, fly, potential_field};
 use voyage_render::GpuRenderer;
 use voyage_view::{
-    CellMesh, CloseupBox, Frame, Lighting, Material, Rasterizer, Strategy, TranslucencyOptions,
+    CellMesh, CloseupBox, Frame, Material, Rasterizer, Shading, Strategy, TranslucencyOptions,
     View, Visibility, render_translucency, shade, surface_point,
 };
 
@@ -155,7 +155,7 @@ pub struct Renderer<'a> {
     vis: Visibility,
     frame: Frame,
     gpu: Option<GpuRenderer>,
-    lighting: Lighting,
+    shading: Shading,
 }
 
 impl<'a> Renderer<'a> {
@@ -175,7 +175,7 @@ impl<'a> Renderer<'a> {
             frame: Frame::new(v.width, v.height),
             mesh,
             gpu,
-            lighting: Lighting::default(),
+            shading: Shading::default(),
         })
     }
 
@@ -183,10 +183,10 @@ impl<'a> Renderer<'a> {
     pub fn draw(&mut self, camera: &Camera) -> Result<Vec<u8>> {
         let (w, h) = (self.frame.width, self.frame.height);
         let view = View::new(camera, w, h);
-        let raster = Rasterizer::lit(&self.mesh, view, &self.lighting);
+        let raster = Rasterizer::new(&self.mesh, view, &self.shading);
         let drawn = self.vis.draw(&mut self.frame, &raster, &self.study.cells);
         match &mut self.gpu {
-            Some(g) => Ok(g.render(camera, &drawn.cells, w, h, &self.lighting)?),
+            Some(g) => Ok(g.render(camera, &drawn.cells, w, h, self.shading.lighting())?),
             None => Ok(shade(&self.frame)),
         }
     }

@@ -13,7 +13,7 @@ use egui::{Color32, ColorImage, Pos2, Rect, TextureHandle, TextureOptions, Vec2}
 use glam::DVec3;
 use voyage_nav::Camera;
 use voyage_render::DrawList;
-use voyage_view::{Frame, Lighting, Rasterizer, View, shade};
+use voyage_view::{Frame, Lighting, Rasterizer, Shading, View, shade};
 
 /// The view on the window's GPU renderer ([`WindowGpu`]).
 struct GpuView {
@@ -74,7 +74,7 @@ pub struct Endoscope {
     gpu: Option<GpuView>,
     cpu_frame: Option<Frame>,
     cpu_texture: Option<TextureHandle>,
-    lighting: Lighting,
+    shading: Shading,
     pub stats: FrameStats,
     /// The cells drawn in the last frame (picking searches them first).
     pub last_cells: Vec<u32>,
@@ -103,7 +103,7 @@ impl Endoscope {
             gpu,
             cpu_frame: None,
             cpu_texture: None,
-            lighting: Lighting::default(),
+            shading: Shading::default(),
             stats: FrameStats::default(),
             last_cells: Vec::new(),
             renderer_name,
@@ -164,7 +164,7 @@ impl Endoscope {
                         camera,
                         list,
                         size,
-                        lighting: self.lighting,
+                        lighting: *self.shading.lighting(),
                     },
                 ));
             }
@@ -193,10 +193,10 @@ impl Endoscope {
             Some(f) if f.width == size[0] && f.height == size[1] => f,
             slot => slot.insert(Frame::new(size[0], size[1])),
         };
-        let raster = Rasterizer::lit(
+        let raster = Rasterizer::new(
             &session.mesh,
             View::new(camera, size[0], size[1]),
-            &self.lighting,
+            &self.shading,
         );
         let drawn = session.vis.draw(frame, &raster, &session.study.cells);
         self.stats.cells = drawn.cells.len();
