@@ -6,14 +6,18 @@
 
 mod camera;
 mod flight;
+#[cfg(feature = "layouts")]
+mod layouts;
 mod potential;
 mod submarine;
 
 pub use camera::{Camera, Pose};
 pub use flight::{Autopilot, Flight, FlightOptions, fly, start_pose};
+#[cfg(feature = "layouts")]
+pub use layouts::{BoxStore, SortedStore};
 pub use potential::{
-    BoxStore, BrickStore, DS_FLOOR_MM, Direction, DistanceStore, PotentialField, PotentialParams,
-    Sample, SortedStore, Voxel, potential_field,
+    BrickStore, DS_FLOOR_MM, Direction, DistanceStore, PotentialField, PotentialParams, Sample,
+    Voxel, potential_field,
 };
 pub use submarine::{
     Dynamics, Forces, Input, Modes, Safety, State, StepReport, Submarine, delta_q, euler_step,

@@ -2,6 +2,11 @@
 //! integrator against hand-computed steps of Eqs. 5–9, the safety invariant under 10⁵ random
 //! steps, and automatic flights on the phantoms and on colon-a.
 
+#[cfg(not(feature = "layouts"))]
+compile_error!(
+    "tests/navigation.rs needs voyage-nav's `layouts` feature: cargo test -p voyage-nav --features layouts (cargo test --workspace turns it on)"
+);
+
 use glam::{DMat3, DQuat, DVec3};
 use voyage_core::{PrepOptions, Study, prepare, rng::Rng};
 use voyage_nav::{
