@@ -1,0 +1,204 @@
+//! The architecture's layering, checked on the sources: the workspace's crates depend only on
+//! crates below them; voyage-core depends on no file-format, codec, image, GPU or GUI crate;
+//! and inside it every module imports only modules that come before it in the order the CT
+//! goes through `prepare` (no cycles, nothing climbs back up).
+
+use std::{collections::BTreeSet, path::Path};
+
+/// voyage-core's top-level modules, each after everything it may use.
+const ORDER: [&str; 16] = [
+    "error",
+    "rng",
+    "volume",
+    "simd",
+    "mem",
+    "grid",
+    "anatomy",
+    "distance",
+    "segment",
+    "cleanse",
+    "surface",
+    "centerline",
+    "contacts",
+    "cells",
+    "navigable",
+    "prep",
+];
+
+/// The only crates voyage-core may depend on (not dev-dependencies).
+const ALLOWED_DEPENDENCIES: [&str; 5] = ["glam", "thiserror", "serde", "rayon", "libc"];
+
+fn src() -> &'static Path {
+    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/src"))
+}
+
+/// The source files of a top-level module (`name.rs`, or every file under `name/`).
+fn files_of(module: &str) -> Vec<std::path::PathBuf> {
+    let file = src().join(format!("{module}.rs"));
+    if file.exists() {
+        return vec![file];
+    }
+    let mut out = Vec::new();
+    let mut stack = vec![src().join(module)];
+    while let Some(dir) = stack.pop() {
+        for entry in std::fs::read_dir(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display())) {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+            } else if path.extension().is_some_and(|e| e == "rs") {
+                out.push(path);
+            }
+        }
+    }
+    out
+}
+
+/// The top-level modules `text` names through `crate::` (its unit tests and comments left out).
+fn uses(text: &str) -> BTreeSet<String> {
+    let code = match text.find("#[cfg(test)]\nmod tests") {
+        Some(t) => &text[..t],
+        None => text,
+    };
+    let code: String = code
+        .lines()
+        .filter(|l| !l.trim_start().starts_with("//"))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let mut out = BTreeSet::new();
+    for (at, _) in code.match_indices("crate::") {
+        let rest = &code[at + "crate::".len()..];
+        if let Some(group) = rest.strip_prefix('{') {
+            // `use crate::{a::X, b, c::{...}}`: the first name of every item of the group.
+            let end = group.find("};").unwrap_or(group.len());
+            let mut depth = 0;
+            let mut item_start = true;
+            let mut name = String::new();
+            for ch in group[..end].chars() {
+                match ch {
+                    '{' => depth += 1,
+                    '}' => depth -= 1,
+                    ',' if depth == 0 => {
+                        if !name.is_empty() {
+                            out.insert(std::mem::take(&mut name));
+                        }
+                        item_start = true;
+                    }
+                    c if item_start && (c.is_alphanumeric() || c == '_') => name.push(c),
+                    _ if item_start && !name.is_empty() => {
+                        out.insert(std::mem::take(&mut name));
+                        item_start = false;
+                    }
+                    _ => {}
+                }
+            }
+            if !name.is_empty() {
+                out.insert(name);
+            }
+        } else {
+            let name: String = rest
+                .chars()
+                .take_while(|c| c.is_alphanumeric() || *c == '_')
+                .collect();
+            out.insert(name);
+        }
+    }
+    out
+}
+
+#[test]
+fn modules_only_use_modules_before_them() {
+    let mut seen = BTreeSet::new();
+    for (rank, module) in ORDER.iter().enumerate() {
+        let files = files_of(module);
+        assert!(!files.is_empty(), "module {module} not found");
+        for file in files {
+            let text = std::fs::read_to_string(&file).unwrap();
+            for used in uses(&text) {
+                let Some(r) = ORDER.iter().position(|m| *m == used) else {
+                    continue; // a re-exported name at the crate root (Error, Volume ...)
+                };
+                assert!(
+                    r <= rank,
+                    "{} uses crate::{used}, which comes after {module} in the pipeline",
+                    file.display()
+                );
+            }
+        }
+        seen.insert(*module);
+    }
+    // Every module of lib.rs is in the order.
+    let lib = std::fs::read_to_string(src().join("lib.rs")).unwrap();
+    for line in lib.lines() {
+        let line = line.trim_start_matches("pub ");
+        if let Some(name) = line.strip_prefix("mod ") {
+            let name = name.trim_end_matches(';');
+            assert!(
+                seen.contains(name),
+                "lib.rs has module {name}, not in ORDER"
+            );
+        }
+    }
+}
+
+#[test]
+fn depends_on_no_file_format_or_gui_crate() {
+    let manifest =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/Cargo.toml")).unwrap();
+    for name in dependencies(&manifest) {
+        assert!(
+            ALLOWED_DEPENDENCIES.contains(&name.as_str()),
+            "voyage-core depends on {name} (allowed: {ALLOWED_DEPENDENCIES:?})"
+        );
+    }
+}
+
+/// The workspace's crates, each above every crate it may depend on.
+const CRATES: [&str; 7] = [
+    "voyage-core",
+    "voyage-phantom",
+    "voyage-nav",
+    "voyage-view",
+    "voyage-io",
+    "voyage-render",
+    "voyage",
+];
+
+/// The names under a manifest's normal dependency sections.
+fn dependencies(manifest: &str) -> Vec<String> {
+    let mut section = "";
+    let mut out = Vec::new();
+    for line in manifest.lines() {
+        let line = line.trim();
+        if line.starts_with('[') {
+            section = line;
+            continue;
+        }
+        let normal = section == "[dependencies]" || section.ends_with(".dependencies]");
+        if normal && !line.is_empty() && !line.starts_with('#') {
+            out.push(line.split(['=', '.']).next().unwrap().trim().to_string());
+        }
+    }
+    out
+}
+
+#[test]
+fn crates_depend_only_on_crates_below_them() {
+    let crates = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
+    for (rank, name) in CRATES.iter().enumerate() {
+        let manifest = std::fs::read_to_string(crates.join(name).join("Cargo.toml")).unwrap();
+        for dep in dependencies(&manifest) {
+            if let Some(r) = CRATES.iter().position(|c| *c == dep) {
+                assert!(r < rank, "{name} depends on {dep}, which is not below it");
+            }
+        }
+    }
+}
+
+#[test]
+fn the_checker_sees_grouped_and_plain_uses() {
+    let text = "use crate::{\n    Error, Volume,\n    grid::{BoxGrid, Padded},\n    distance::geodesic::X,\n};\nfn f() { crate::mem::filled(1, 0); }\n";
+    let got = uses(text);
+    for want in ["grid", "distance", "mem", "Error", "Volume"] {
+        assert!(got.contains(want), "{want} not in {got:?}");
+    }
+}
