@@ -23,7 +23,10 @@
 
 use glam::DVec3;
 
-use crate::{Volume, grid::Blocks, grid::BoxGrid, grid::Padded};
+use crate::{
+    Volume,
+    grid::{Blocks, BoxGrid, PadIndex, Padded},
+};
 
 #[derive(Clone, Debug)]
 pub struct ContactOptions {
@@ -82,7 +85,7 @@ pub fn cut_contacts(
     let g = lumen.geometry().clone();
     for (pi, _) in contact.iter().enumerate().filter(|(_, c)| **c) {
         let a = labels[pi];
-        for u in blocks.voxels(pad.global_of_index(pi), dims) {
+        for u in blocks.voxels(pad.global_of_index(PadIndex(pi)), dims) {
             if lumen.get(u[0], u[1], u[2]) == 0 {
                 continue;
             }
@@ -93,7 +96,7 @@ pub fn cut_contacts(
                 let Some(b) = blocks
                     .block_of_voxel(v)
                     .and_then(|c| pad.index_of_global(c))
-                    .map(|q| labels[q])
+                    .map(|q| labels[q.0])
                 else {
                     continue;
                 };
@@ -154,7 +157,7 @@ fn padded_blocks(blocks: &Blocks) -> PaddedBlocks {
         if c > 0 && c < full {
             let q = grid.global_of_index(b);
             if let Some(i) = pad.index_of_global(q) {
-                partial[i] = 1;
+                partial[i.0] = 1;
             }
         }
     }
@@ -171,10 +174,10 @@ fn label_blocks(pad: &PaddedBlocks, blocks: &Blocks, points: &[DVec3]) -> Vec<u1
         if let Some(i) = blocks
             .block_of_mm(*p)
             .and_then(|c| pad.index_of_global(c))
-            .filter(|&i| pad.inside[i] != 0)
-            && labels[i] == NO_LABEL
+            .filter(|&i| pad.inside[i.0] != 0)
+            && labels[i.0] == NO_LABEL
         {
-            labels[i] = l as u16;
+            labels[i.0] = l as u16;
             sources.push(i);
         }
     }

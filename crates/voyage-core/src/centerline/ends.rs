@@ -201,7 +201,7 @@ fn skeleton_path(
     };
     for (v, what) in [(given_source, "source"), (given_target, "target")] {
         if let Some(v) = v
-            && !tree.dist[pad.lumen_index(v)?].is_finite()
+            && !tree.dist[pad.lumen_index(v)?.0].is_finite()
         {
             return Err(unreachable(v, what));
         }
@@ -256,7 +256,7 @@ fn place_on_path(
         .min_by(|x, y| x.1.total_cmp(&y.1))?;
     let width = pad
         .index_of_global(path[at])
-        .map_or(0.0, |i| ds_pad[i] as f64);
+        .map_or(0.0, |i| ds_pad[i.0] as f64);
     let reach = 2.0 * width + 2.0 * sp.iter().map(|x| x * x).sum::<f64>().sqrt();
     (d2 <= reach * reach).then_some(at)
 }

@@ -29,7 +29,11 @@
 use std::collections::HashMap;
 
 use super::CenterlineOptions;
-use crate::{Error, Result, distance::geodesic::Search, grid::Padded};
+use crate::{
+    Error, Result,
+    distance::geodesic::Search,
+    grid::{PadIndex, Padded},
+};
 
 #[derive(Clone, Debug)]
 pub struct SkeletonOptions {
@@ -89,10 +93,11 @@ pub(crate) fn colon_path(
     tree: &Tree,
     ds: &[f32],
     spacing: [f64; 3],
-    source: usize,
-    target: Option<usize>,
+    source: PadIndex,
+    target: Option<PadIndex>,
     opts: &CenterlineOptions,
-) -> Result<Vec<usize>> {
+) -> Result<Vec<PadIndex>> {
+    let (source, target) = (source.0, target.map(|t| t.0));
     let unreachable =
         || Error::invalid("the target cannot be reached from the source through the lumen");
     if let Some(t) = target
@@ -131,7 +136,7 @@ pub(crate) fn colon_path(
         out.extend(sk.walk_to_skeleton(&near, t).iter().rev().skip(1));
     }
     let out = erase_returns(&out, ds, sk.dims, sk.sp);
-    Ok(out)
+    Ok(out.into_iter().map(PadIndex).collect())
 }
 
 /// The skeleton as a tree of branches traced back along the minimum-cost tree (step 2).
@@ -301,9 +306,9 @@ impl SkeletonTree {
             .sqrt()
     }
 
-    /// Every skeleton voxel (padded indices), in skeleton order.
-    fn voxels(&self) -> Vec<usize> {
-        self.nodes.iter().map(|nd| nd.idx).collect()
+    /// Every skeleton voxel, in skeleton order.
+    fn voxels(&self) -> Vec<PadIndex> {
+        self.nodes.iter().map(|nd| PadIndex(nd.idx)).collect()
     }
 
     /// The skeleton ordinal owning each voxel `near` reached (`u32::MAX` elsewhere).

@@ -20,7 +20,7 @@
 
 use crate::{
     Error, Result, Volume,
-    grid::{BoxGrid, BrickMarks, Bricked, Padded},
+    grid::{BoxGrid, BrickMarks, Bricked, PadIndex, Padded},
 };
 
 /// Dt and what the search learned on the way.
@@ -51,7 +51,7 @@ pub fn geodesic_distance(
     let (shape, r) = search_from(mask, grid, source, Vec::new(), Some(&mut marks))?;
     let dist = shape.finish_bricked(&r.dist, mask.geometry(), marks);
     Ok(Geodesic {
-        farthest: shape.global_of_index(r.far),
+        farthest: shape.global_of_index(PadIndex(r.far)),
         max_mm: r.far_d,
         reached: r.reached,
         dist,
@@ -94,7 +94,7 @@ pub fn geodesic_distance_like<U>(
         Bricked::from_rows_like(like, f32::INFINITY, |j, k| shape.row(&r.dist, j, k), finish);
     memory.dist = r.dist;
     Ok(Geodesic {
-        farthest: shape.global_of_index(r.far),
+        farthest: shape.global_of_index(PadIndex(r.far)),
         max_mm: r.far_d,
         reached: r.reached,
         dist,
@@ -127,7 +127,7 @@ pub fn core_distances(
     let t = path_mm.iter().rev().find_map(in_core)?;
     // The start from the mask with the lumen outside the core made wall (every lumen voxel
     // lies in Ds's bricks).
-    let search = |from: usize, memory: &mut SearchMemory| {
+    let search = |from: PadIndex, memory: &mut SearchMemory| {
         let mut start = shape.start_from_mask(mask, std::mem::take(&mut memory.dist), None);
         for (at, &d) in ds.values().iter().enumerate() {
             if outside_core(d) {
@@ -146,7 +146,7 @@ pub fn core_distances(
         dist
     };
     let to_t = search(t, memory);
-    if !finish(to_t.dist[s]).is_finite() {
+    if !finish(to_t.dist[s.0]).is_finite() {
         memory.dist = to_t.dist;
         return None;
     }
@@ -176,7 +176,7 @@ fn search_from(
 }
 
 /// The padded index of `source`, which must be lumen.
-fn source_index(mask: &Volume<u8>, shape: &Padded, source: [usize; 3]) -> Result<usize> {
+fn source_index(mask: &Volume<u8>, shape: &Padded, source: [usize; 3]) -> Result<PadIndex> {
     shape
         .index_of_global(source)
         .filter(|_| mask.get(source[0], source[1], source[2]) != 0)
@@ -271,8 +271,9 @@ impl<'a> SearchBuilder<'a> {
         self
     }
 
-    /// Runs the search from `sources` (padded indices of lumen voxels).
-    pub fn from(self, sources: &[usize]) -> Search {
+    /// Runs the search from `sources` (lumen voxels).
+    pub fn from(self, sources: &[PadIndex]) -> Search {
+        let sources: Vec<usize> = sources.iter().map(|s| s.0).collect();
         let pad = self.pad;
         let dist = self.start.unwrap_or_else(|| start_from_inside(pad));
         let (tree, parent) = match self.tree {
@@ -290,7 +291,7 @@ impl<'a> SearchBuilder<'a> {
             pad,
             dist,
             parent,
-            sources,
+            &sources,
             self.spacing,
             weight,
             self.range,
@@ -386,7 +387,7 @@ impl TreeStart {
     pub(crate) fn search(
         self,
         pad: &Padded,
-        sources: &[usize],
+        sources: &[PadIndex],
         spacing: [f64; 3],
         weight: &[f32],
     ) -> Search {
@@ -402,11 +403,11 @@ impl TreeStart {
     pub(crate) fn nearest(
         self,
         pad: &Padded,
-        sources: &[usize],
+        sources: &[PadIndex],
         spacing: [f64; 3],
         weight: &[f32],
         stop: &dyn Fn(usize) -> bool,
-    ) -> (Option<usize>, TreeStart) {
+    ) -> (Option<PadIndex>, TreeStart) {
         let range = self.range;
         let r = pad
             .search(spacing)
@@ -432,7 +433,7 @@ impl TreeStart {
             }
         }
         (
-            r.order.last().map(|&u| u as usize),
+            r.order.last().map(|&u| PadIndex(u as usize)),
             TreeStart {
                 dist,
                 parent,
@@ -844,7 +845,7 @@ mod tests {
             let mut weight = vec![1.0f32; pad.inside.len()];
             for (i, slot) in weight.iter_mut().enumerate() {
                 if pad.inside[i] != 0 {
-                    let g = pad.global_of_index(i);
+                    let g = pad.global_of_index(PadIndex(i));
                     *slot = w_of(m.geometry().index(g[0], g[1], g[2]));
                 }
             }
@@ -860,7 +861,7 @@ mod tests {
                 if inside == 0 {
                     continue;
                 }
-                let g = pad.global_of_index(i);
+                let g = pad.global_of_index(PadIndex(i));
                 let b = want[m.geometry().index(g[0], g[1], g[2])];
                 let a = r.dist[i] as f64;
                 if b.is_infinite() {
@@ -877,7 +878,7 @@ mod tests {
                 );
                 // The tree: each voxel's distance is its parent's plus the edge between them.
                 if let Some(p) = r.parent_of(i) {
-                    let (gp, gi) = (pad.global_of_index(p), g);
+                    let (gp, gi) = (pad.global_of_index(PadIndex(p)), g);
                     let len = (0..3)
                         .map(|a| ((gp[a] as f64 - gi[a] as f64) * m.spacing()[a]).powi(2))
                         .sum::<f64>()
@@ -888,7 +889,7 @@ mod tests {
                         "seed {seed}: tree edge to {g:?}"
                     );
                 } else {
-                    assert_eq!(i, src);
+                    assert_eq!(i, src.0);
                 }
             }
             assert_eq!(r.reached, reached);
@@ -904,7 +905,7 @@ mod tests {
                 let (last, back) = start.nearest(&pad, &[src], m.spacing(), &weight, &stop);
                 assert_eq!(
                     last,
-                    Some(r.order[settle - 1] as usize),
+                    Some(PadIndex(r.order[settle - 1] as usize)),
                     "seed {seed}: settled {settle}"
                 );
                 start = back;

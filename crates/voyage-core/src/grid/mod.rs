@@ -2,8 +2,8 @@
 //! voxel): the box itself and fields over it ([`BoxGrid`], [`Field`]); the same box kept only
 //! in the 8³ bricks that hold lumen ([`Bricked`]); the box with a layer of wall around it, the
 //! searches' layout ([`Padded`]); and the box in f³ blocks for the coarse searches
-//! ([`Blocks`]). Volume, box, brick and padded indices are all `usize`: each layout converts
-//! only through its own `index_of_global` / `global_of_index`.
+//! ([`Blocks`]). Each layout converts to and from volume voxels through its own
+//! `index_of_global` / `global_of_index`; a padded index is a [`PadIndex`].
 
 mod blocks;
 mod field;
@@ -12,4 +12,4 @@ mod padded;
 pub use blocks::Blocks;
 pub(crate) use field::first_and_last;
 pub use field::{BoxGrid, BrickMarks, Bricked, Field, bounding_box};
-pub use padded::Padded;
+pub use padded::{PadIndex, Padded};

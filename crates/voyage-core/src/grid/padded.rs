@@ -13,6 +13,12 @@ pub struct Padded {
     pub(crate) inside: Vec<u8>,
 }
 
+/// An index into the padded layout (a search's arrays; [`Padded::index_of_global`] and
+/// [`Padded::global_of_index`] convert), never a volume's or the box's flat index: those are
+/// plain `usize`, and the type keeps them apart where one becomes the other.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct PadIndex(pub usize);
+
 impl Padded {
     pub fn new(mask: &Volume<u8>, grid: &BoxGrid) -> Self {
         let mut pad = Padded::shape(grid);
@@ -86,18 +92,23 @@ impl Padded {
     }
 
     /// Padded index of a volume voxel that must be lumen.
-    pub fn lumen_index(&self, v: [usize; 3]) -> Result<usize> {
+    pub fn lumen_index(&self, v: [usize; 3]) -> Result<PadIndex> {
         self.index_of_global(v)
-            .filter(|&i| self.inside[i] != 0)
+            .filter(|&i| self.inside[i.0] != 0)
             .ok_or_else(|| Error::invalid(format!("the voxel {v:?} is not in the lumen")))
     }
 
-    pub fn index_of_global(&self, g: [usize; 3]) -> Option<usize> {
+    /// The padded index of a volume voxel (None outside the box).
+    pub fn index_of_global(&self, g: [usize; 3]) -> Option<PadIndex> {
         let l = self.grid.index_of_global(g).map(|i| self.grid.ijk(i))?;
-        Some(l[0] + 1 + self.dims[0] * (l[1] + 1 + self.dims[1] * (l[2] + 1)))
+        Some(PadIndex(
+            l[0] + 1 + self.dims[0] * (l[1] + 1 + self.dims[1] * (l[2] + 1)),
+        ))
     }
 
-    pub fn global_of_index(&self, idx: usize) -> [usize; 3] {
+    /// The volume voxel of a padded index.
+    pub fn global_of_index(&self, idx: PadIndex) -> [usize; 3] {
+        let idx = idx.0;
         let [nx, ny, _] = self.dims;
         let p = [idx % nx, (idx / nx) % ny, idx / (nx * ny)];
         [0, 1, 2].map(|a| p[a] - 1 + self.grid.lo[a])
