@@ -33,6 +33,7 @@ use crate::{
     Error, Result,
     distance::geodesic::Search,
     grid::{PadIndex, Padded},
+    volume::grid_ijk,
 };
 
 #[derive(Clone, Debug)]
@@ -299,7 +300,7 @@ impl SkeletonTree {
 
     /// The length of a step between two voxels (mm).
     fn step_len(&self, a: usize, b: usize) -> f32 {
-        let (pa, pb) = (ijk(a, self.dims), ijk(b, self.dims));
+        let (pa, pb) = (grid_ijk(self.dims, a), grid_ijk(self.dims, b));
         (0..3)
             .map(|k| ((pa[k] as f32 - pb[k] as f32) * self.sp[k]).powi(2))
             .sum::<f32>()
@@ -549,7 +550,7 @@ fn erase_returns(path: &[usize], ds: &[f32], dims: [usize; 3], sp: [f32; 3]) -> 
     let pos: Vec<[f32; 3]> = path
         .iter()
         .map(|&v| {
-            let p = ijk(v, dims);
+            let p = grid_ijk(dims, v);
             [
                 p[0] as f32 * sp[0],
                 p[1] as f32 * sp[1],
@@ -578,17 +579,9 @@ fn owner_of_walk(flags: &[u8], v: usize) -> bool {
     flags[v] & SKELETON == 0
 }
 
-fn ijk(idx: usize, dims: [usize; 3]) -> [usize; 3] {
-    [
-        idx % dims[0],
-        (idx / dims[0]) % dims[1],
-        idx / (dims[0] * dims[1]),
-    ]
-}
-
 /// Marks the voxels within `r` mm of voxel `c` as covered.
 fn stamp(flags: &mut [u8], dims: [usize; 3], c: usize, r: f32, sp: [f32; 3]) {
-    let p = ijk(c, dims);
+    let p = grid_ijk(dims, c);
     let ext = [0, 1, 2].map(|a| (r / sp[a]).floor() as isize);
     let lo = [0, 1, 2].map(|a| (p[a] as isize - ext[a]).max(0) as usize);
     let hi = [0, 1, 2].map(|a| ((p[a] as isize + ext[a]) as usize).min(dims[a] - 1));

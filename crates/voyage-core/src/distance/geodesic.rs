@@ -36,6 +36,18 @@ pub struct Geodesic {
     pub reached: usize,
 }
 
+impl Geodesic {
+    /// `dist` (the search's distances, finished) with what search `r` over `shape` learned.
+    fn found(shape: &Padded, r: &Search, dist: Bricked<f32>) -> Self {
+        Geodesic {
+            farthest: shape.global_of_index(PadIndex(r.far)),
+            max_mm: r.far_d,
+            reached: r.reached,
+            dist,
+        }
+    }
+}
+
 /// Shortest-path distances from `source` (a lumen voxel) to every lumen voxel of `mask`
 /// inside `grid`.
 ///
@@ -50,12 +62,7 @@ pub fn geodesic_distance(
     let mut marks = BrickMarks::new(grid);
     let (shape, r) = search_from(mask, grid, source, Vec::new(), Some(&mut marks))?;
     let dist = shape.finish_bricked(&r.dist, mask.geometry(), marks);
-    Ok(Geodesic {
-        farthest: shape.global_of_index(PadIndex(r.far)),
-        max_mm: r.far_d,
-        reached: r.reached,
-        dist,
-    })
+    Ok(Geodesic::found(&shape, &r, dist))
 }
 
 /// The memory the searches work in, reused from one search to the next by whoever runs
@@ -92,13 +99,9 @@ pub fn geodesic_distance_like<U>(
     )?;
     let dist =
         Bricked::from_rows_like(like, f32::INFINITY, |j, k| shape.row(&r.dist, j, k), finish);
+    let found = Geodesic::found(&shape, &r, dist);
     memory.dist = r.dist;
-    Ok(Geodesic {
-        farthest: shape.global_of_index(PadIndex(r.far)),
-        max_mm: r.far_d,
-        reached: r.reached,
-        dist,
-    })
+    Ok(found)
 }
 
 /// Dt to both ends over the lumen's **core**, the voxels of `mask` whose Ds (`ds`, over the
@@ -120,8 +123,7 @@ pub fn core_distances(
     let in_core = |p: &[f64; 3]| {
         let v = [0, 1, 2].map(|a| (p[a] / sp[a]).round().max(0.0) as usize);
         let i = shape.index_of_global(v)?;
-        (mask.data()[mask.geometry().index(v[0], v[1], v[2])] != 0 && !outside_core(ds.get(v)))
-            .then_some(i)
+        (mask.get(v[0], v[1], v[2]) != 0 && !outside_core(ds.get(v))).then_some(i)
     };
     let s = path_mm.iter().find_map(in_core)?;
     let t = path_mm.iter().rev().find_map(in_core)?;

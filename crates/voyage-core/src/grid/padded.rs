@@ -3,7 +3,10 @@
 //! the volume's border.
 
 use super::{BoxGrid, BrickMarks};
-use crate::{Error, Result, Volume};
+use crate::{
+    Error, Result, Volume,
+    volume::{grid_ijk, grid_index},
+};
 
 /// The box's mask with one layer of zeros around it, so that the 26 neighbours of every lumen
 /// voxel are valid indices even where the box touches the volume's border.
@@ -101,16 +104,17 @@ impl Padded {
     /// The padded index of a volume voxel (None outside the box).
     pub fn index_of_global(&self, g: [usize; 3]) -> Option<PadIndex> {
         let l = self.grid.index_of_global(g).map(|i| self.grid.ijk(i))?;
-        Some(PadIndex(
-            l[0] + 1 + self.dims[0] * (l[1] + 1 + self.dims[1] * (l[2] + 1)),
-        ))
+        Some(PadIndex(grid_index(
+            self.dims,
+            l[0] + 1,
+            l[1] + 1,
+            l[2] + 1,
+        )))
     }
 
     /// The volume voxel of a padded index.
     pub fn global_of_index(&self, idx: PadIndex) -> [usize; 3] {
-        let idx = idx.0;
-        let [nx, ny, _] = self.dims;
-        let p = [idx % nx, (idx / nx) % ny, idx / (nx * ny)];
+        let p = grid_ijk(self.dims, idx.0);
         [0, 1, 2].map(|a| p[a] - 1 + self.grid.lo[a])
     }
 

@@ -515,21 +515,30 @@ impl App {
                     self.measure_point(p);
                 }
             }
-            Action::PlayPause | Action::Reverse | Action::Restart => {
-                let Some(s) = &mut self.session else { return };
-                match action {
-                    Action::PlayPause => s.set_playing(!s.playing),
-                    Action::Reverse => s.set_direction(s.direction().reversed()),
-                    _ => s.restart(),
+            Action::PlayPause => {
+                if let Some(s) = &mut self.session {
+                    s.set_playing(!s.playing);
                 }
             }
-            Action::NarrowerView | Action::WiderView => {
-                let Some(s) = &mut self.session else { return };
-                s.fov = if action == Action::NarrowerView {
-                    (s.fov - 5.0).max(30.0)
-                } else {
-                    (s.fov + 5.0).min(Camera::MAX_FOV_DEG)
-                };
+            Action::Reverse => {
+                if let Some(s) = &mut self.session {
+                    s.set_direction(s.direction().reversed());
+                }
+            }
+            Action::Restart => {
+                if let Some(s) = &mut self.session {
+                    s.restart();
+                }
+            }
+            Action::NarrowerView => {
+                if let Some(s) = &mut self.session {
+                    s.fov = (s.fov - 5.0).max(30.0);
+                }
+            }
+            Action::WiderView => {
+                if let Some(s) = &mut self.session {
+                    s.fov = (s.fov + 5.0).min(Camera::MAX_FOV_DEG);
+                }
             }
         }
     }
@@ -922,23 +931,23 @@ impl App {
         ui.add(egui::Slider::new(&mut s.sub.dynamics.user_force, 0.0..=2000.0).text("|F_user|"));
         ui.add(egui::Slider::new(&mut s.fov, 30.0..=Camera::MAX_FOV_DEG).text("FOV °"));
         for (switch, text, hover) in [
-            (Switch::Compass, "compass (C)", ""),
-            (Switch::Leveling, "leveling (L)", ""),
-            (Switch::Still, "still (S)", ""),
-            (Switch::Centerline, "centerline (G)", ""),
-            (Switch::Closeup, "close-up volume (V)", ""),
+            (Switch::Compass, "compass (C)", None),
+            (Switch::Leveling, "leveling (L)", None),
+            (Switch::Still, "still (S)", None),
+            (Switch::Centerline, "centerline (G)", None),
+            (Switch::Closeup, "close-up volume (V)", None),
             (
                 Switch::Translucency,
                 "translucency (T)",
-                "what lies beneath the surface around the marker or the view's centre",
+                Some("what lies beneath the surface around the marker or the view's centre"),
             ),
         ] {
             let mut on = self.switch(switch).is_some_and(|on| *on);
-            let mut box_ = ui.checkbox(&mut on, text);
-            if !hover.is_empty() {
-                box_ = box_.on_hover_text(hover);
+            let mut response = ui.checkbox(&mut on, text);
+            if let Some(hover) = hover {
+                response = response.on_hover_text(hover);
             }
-            if box_.changed() {
+            if response.changed() {
                 actions.push(Action::Set(switch, on));
             }
         }
