@@ -19,7 +19,12 @@
 use glam::DVec3;
 use serde::Serialize;
 
-use crate::{Error, Result, Volume, centerline::Centerline, grid::Bricked, surface::Surface};
+use crate::{
+    Error, Result, Volume,
+    centerline::Centerline,
+    grid::{BrickIndex, Bricked},
+    surface::Surface,
+};
 
 #[derive(Clone, Debug)]
 pub struct CellOptions {
@@ -432,7 +437,7 @@ fn boundary_points(
     let mut listed = vec![0u64; values.len().div_ceil(64)];
     for &here in below_cut {
         let here = here as usize;
-        let l = cells.box_voxel(here).map(|x| x as i64);
+        let l = cells.box_voxel(BrickIndex(here)).map(|x| x as i64);
         let a = values[here];
         let mut across = false;
         for o in &offs {
@@ -440,7 +445,7 @@ fn boundary_points(
             if (0..3).any(|ax| q[ax] < 0 || q[ax] >= dims[ax]) {
                 continue;
             }
-            let Some(there) = cells.index_of_box(q.map(|x| x as usize)) else {
+            let Some(BrickIndex(there)) = cells.index_of_box(q.map(|x| x as usize)) else {
                 continue;
             };
             let b = values[there];
@@ -470,7 +475,7 @@ fn boundary_points(
         .map(|v| {
             v.into_iter()
                 .map(|at| {
-                    let [i, j, k] = cells.box_voxel(at as usize);
+                    let [i, j, k] = cells.box_voxel(BrickIndex(at as usize));
                     DVec3::new(
                         ((i + lo[0]) as f64) * sp[0],
                         ((j + lo[1]) as f64) * sp[1],
@@ -619,6 +624,7 @@ mod tests {
         Geometry,
         centerline::{CenterlineOptions, centerline},
         distance::{distance_to_wall, geodesic_distance},
+        grid::BoxIndex,
         grid::bounding_box,
         surface::extract_surface,
     };
@@ -740,7 +746,7 @@ mod tests {
         for k in 0..nz {
             for j in 0..ny {
                 for i in 0..nx {
-                    let a = f.data[f.grid.index(i, j, k)];
+                    let a = f[f.grid.index(i, j, k)];
                     if a == u16::MAX {
                         continue;
                     }
@@ -761,7 +767,7 @@ mod tests {
                         {
                             continue;
                         }
-                        let b = f.data[f.grid.index(q[0] as usize, q[1] as usize, q[2] as usize)];
+                        let b = f[f.grid.index(q[0] as usize, q[1] as usize, q[2] as usize)];
                         if b != u16::MAX {
                             assert!((a as i32 - b as i32).abs() <= 1, "cells {a} and {b} touch");
                         }
@@ -774,7 +780,7 @@ mod tests {
             let mut legs = [false; 2];
             for (idx, &c) in f.data.iter().enumerate() {
                 if c == cell {
-                    let [i, j, _] = f.grid.global_of_index(idx);
+                    let [i, j, _] = f.grid.global_of_index(BoxIndex(idx));
                     if i < 50 {
                         legs[(j > 17) as usize] = true;
                     }

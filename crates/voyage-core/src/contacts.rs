@@ -25,7 +25,7 @@ use glam::DVec3;
 
 use crate::{
     Volume,
-    grid::{Blocks, BoxGrid, PadIndex, Padded},
+    grid::{Blocks, BoxGrid, BoxIndex, PadIndex, Padded},
 };
 
 #[derive(Clone, Debug)]
@@ -155,7 +155,7 @@ fn padded_blocks(blocks: &Blocks) -> PaddedBlocks {
     let mut partial = vec![0u8; pad.inside.len() + 3];
     for (b, &c) in blocks.count.iter().enumerate() {
         if c > 0 && c < full {
-            let q = grid.global_of_index(b);
+            let q = grid.global_of_index(BoxIndex(b));
             if let Some(i) = pad.index_of_global(q) {
                 partial[i.0] = 1;
             }

@@ -31,7 +31,7 @@ pub use cleanse::{CleanseOptions, Cleansing};
 pub use contacts::ContactOptions;
 pub use distance::{Geodesic, distance_to_wall, geodesic_distance};
 pub use error::{Error, Result};
-pub use grid::{BoxGrid, Bricked, Field, bounding_box};
+pub use grid::{BoxGrid, BoxIndex, BrickIndex, Bricked, Field, bounding_box};
 pub use navigable::{DEFAULT_MIN_WALL_MM, Navigable};
 pub use prep::{PrepOptions, Stage, Study, Timings, prepare};
 pub use segment::{ComponentKind, SegmentOptions, Segmentation, segment};

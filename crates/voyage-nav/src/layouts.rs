@@ -67,7 +67,7 @@ impl BoxStore {
         let mut voxels = 0;
         navigable_voxels(study, nav, |g, v| {
             let l = [0, 1, 2].map(|a| g[a] - grid.lo[a]);
-            values[grid.index(l[0], l[1], l[2])] = v;
+            values[grid.index(l[0], l[1], l[2]).0] = v;
             voxels += 1;
         });
         Ok(BoxStore {

@@ -22,7 +22,7 @@
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use voyage_core::{Error, Geometry, Navigable, Result, Study};
+use voyage_core::{BrickIndex, Error, Geometry, Navigable, Result, Study};
 
 /// Ds below this (mm) is evaluated as this in Eq. 2.
 pub const DS_FLOOR_MM: f64 = 0.05;
@@ -124,7 +124,7 @@ pub(crate) fn navigable_voxels(
     for (at, &d) in ds.values().iter().enumerate() {
         let (t, s) = (to_t[at], to_s[at]);
         if d > 0.0 && t.is_finite() && s.is_finite() {
-            let l = ds.box_voxel(at);
+            let l = ds.box_voxel(BrickIndex(at));
             f(
                 [0, 1, 2].map(|a| l[a] + ds.grid.lo[a]),
                 Voxel { ds: d, dt: [t, s] },

@@ -20,7 +20,7 @@
 
 use crate::{
     Error, Result, Volume,
-    grid::{BoxGrid, BrickMarks, Bricked, PadIndex, Padded},
+    grid::{BoxGrid, BrickIndex, BrickMarks, Bricked, PadIndex, Padded},
 };
 
 /// Dt and what the search learned on the way.
@@ -133,7 +133,7 @@ pub fn core_distances(
         let mut start = shape.start_from_mask(mask, std::mem::take(&mut memory.dist), None);
         for (at, &d) in ds.values().iter().enumerate() {
             if outside_core(d) {
-                let l = ds.box_voxel(at);
+                let l = ds.box_voxel(BrickIndex(at));
                 if (0..3).all(|a| l[a] < ds.grid.dims[a]) {
                     start[shape.row_start(l[1], l[2]) + l[0]] = 0.0;
                 }

@@ -4,6 +4,17 @@
 
 use crate::{Geometry, Result, Volume};
 
+/// A flat index into a [`BoxGrid`] (a [`Field`]'s data), never a volume's flat index or a
+/// padded one ([`crate::PadIndex`]): [`BoxGrid::index_of_global`] and
+/// [`BoxGrid::global_of_index`] convert.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct BoxIndex(pub usize);
+
+/// An index into a [`Bricked`] field's stored values ([`Bricked::values`]), brick by brick:
+/// [`Bricked::index_of_box`] and [`Bricked::box_voxel`] convert.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct BrickIndex(pub usize);
+
 /// An axis-aligned box of voxels inside a volume: `lo` is its first voxel, `dims` its size.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct BoxGrid {
@@ -31,17 +42,17 @@ impl BoxGrid {
     }
     /// Index inside the box of box-local voxel (i, j, k).
     #[inline]
-    pub fn index(&self, i: usize, j: usize, k: usize) -> usize {
-        crate::volume::grid_index(self.dims, i, j, k)
+    pub fn index(&self, i: usize, j: usize, k: usize) -> BoxIndex {
+        BoxIndex(crate::volume::grid_index(self.dims, i, j, k))
     }
     /// Box-local (i, j, k) of a box index.
     #[inline]
-    pub fn ijk(&self, index: usize) -> [usize; 3] {
-        crate::volume::grid_ijk(self.dims, index)
+    pub fn ijk(&self, index: BoxIndex) -> [usize; 3] {
+        crate::volume::grid_ijk(self.dims, index.0)
     }
     /// Box index of a volume voxel, or None when it lies outside the box.
     #[inline]
-    pub fn index_of_global(&self, g: [usize; 3]) -> Option<usize> {
+    pub fn index_of_global(&self, g: [usize; 3]) -> Option<BoxIndex> {
         let mut l = [0usize; 3];
         for a in 0..3 {
             l[a] = g[a].checked_sub(self.lo[a])?;
@@ -53,7 +64,7 @@ impl BoxGrid {
     }
     /// Volume voxel of a box index.
     #[inline]
-    pub fn global_of_index(&self, index: usize) -> [usize; 3] {
+    pub fn global_of_index(&self, index: BoxIndex) -> [usize; 3] {
         let [i, j, k] = self.ijk(index);
         [i + self.lo[0], j + self.lo[1], k + self.lo[2]]
     }
@@ -122,9 +133,22 @@ impl<T: Copy> Field<T> {
     /// Value at a volume voxel; `outside` when the voxel is not in the box.
     #[inline]
     pub fn get_global(&self, g: [usize; 3], outside: T) -> T {
-        self.grid
-            .index_of_global(g)
-            .map_or(outside, |i| self.data[i])
+        self.grid.index_of_global(g).map_or(outside, |i| self[i])
+    }
+}
+
+impl<T> std::ops::Index<BoxIndex> for Field<T> {
+    type Output = T;
+    #[inline]
+    fn index(&self, i: BoxIndex) -> &T {
+        &self.data[i.0]
+    }
+}
+
+impl<T> std::ops::IndexMut<BoxIndex> for Field<T> {
+    #[inline]
+    fn index_mut(&mut self, i: BoxIndex) -> &mut T {
+        &mut self.data[i.0]
     }
 }
 
@@ -357,7 +381,7 @@ impl<T: Copy + PartialEq> Bricked<T> {
             &f.grid,
             &f.geometry,
             outside,
-            |j, k| &f.data[f.grid.index(0, j, k)..][..bx],
+            |j, k| &f.data[f.grid.index(0, j, k).0..][..bx],
             |v| v != outside,
             |v| v,
         )
@@ -387,7 +411,7 @@ impl<T: Copy + PartialEq> Bricked<T> {
     #[inline]
     pub fn get_box(&self, l: [usize; 3]) -> T {
         self.index_of_box(l)
-            .map_or(self.outside, |at| self.data[at])
+            .map_or(self.outside, |at| self.data[at.0])
     }
 
     /// Value at a volume voxel (`outside` beyond the box).
@@ -405,7 +429,8 @@ impl<T: Copy + PartialEq> Bricked<T> {
 
     /// Box-local voxel of an index into [`Bricked::values`].
     #[inline]
-    pub fn box_voxel(&self, at: usize) -> [usize; 3] {
+    pub fn box_voxel(&self, at: BrickIndex) -> [usize; 3] {
+        let BrickIndex(at) = at;
         let bb = self.layout.brick_of_slot(at / BRICK_VOXELS);
         let o = at % BRICK_VOXELS;
         [
@@ -417,9 +442,9 @@ impl<T: Copy + PartialEq> Bricked<T> {
 
     /// Index into [`Bricked::values`] of box-local voxel `l`, None in an absent brick.
     #[inline]
-    pub fn index_of_box(&self, l: [usize; 3]) -> Option<usize> {
+    pub fn index_of_box(&self, l: [usize; 3]) -> Option<BrickIndex> {
         let slot = self.layout.slot_of(l);
-        (slot != ABSENT).then(|| slot as usize * BRICK_VOXELS + within_brick(l))
+        (slot != ABSENT).then(|| BrickIndex(slot as usize * BRICK_VOXELS + within_brick(l)))
     }
 
     /// The stored values, brick by brick (see [`Bricked::box_voxel`]); voxels of edge bricks
@@ -466,9 +491,9 @@ impl<T: Copy + PartialEq> Bricked<T> {
         let mut data = crate::mem::filled(self.grid.len(), self.outside);
         for k in 0..bz {
             for j in 0..by {
-                let row = &mut data[self.grid.index(0, j, k)..][..bx];
+                let row = &mut data[self.grid.index(0, j, k).0..][..bx];
                 for (c, chunk) in row.chunks_mut(BRICK).enumerate() {
-                    if let Some(at) = self.index_of_box([c * BRICK, j, k]) {
+                    if let Some(BrickIndex(at)) = self.index_of_box([c * BRICK, j, k]) {
                         chunk.copy_from_slice(&self.data[at..at + chunk.len()]);
                     }
                 }
@@ -587,7 +612,7 @@ mod tests {
         let mut data = vec![f32::INFINITY; grid.len()];
         // Values in the lower two of three layers of bricks only.
         for (n, v) in data.iter_mut().enumerate() {
-            let [_, j, k] = grid.ijk(n);
+            let [_, j, k] = grid.ijk(BoxIndex(n));
             if (n % 97 < 3 && k < 9) || (j == 17 && k < 16) {
                 *v = n as f32 * 0.5;
             }
@@ -612,10 +637,10 @@ mod tests {
         }
         // Every stored value sits at the box voxel `box_voxel` names, and back.
         for (at, &v) in b.values().iter().enumerate() {
-            let l = b.box_voxel(at);
+            let l = b.box_voxel(BrickIndex(at));
             if l.iter().zip(&grid.dims).all(|(&x, &d)| x < d) {
-                assert_eq!(v.to_bits(), f.data[grid.index(l[0], l[1], l[2])].to_bits());
-                assert_eq!(b.index_of_box(l), Some(at));
+                assert_eq!(v.to_bits(), f[grid.index(l[0], l[1], l[2])].to_bits());
+                assert_eq!(b.index_of_box(l), Some(BrickIndex(at)));
             } else {
                 assert_eq!(v, f32::INFINITY, "padding of an edge brick");
             }

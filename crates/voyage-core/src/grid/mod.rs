@@ -3,7 +3,8 @@
 //! in the 8³ bricks that hold lumen ([`Bricked`]); the box with a layer of wall around it, the
 //! searches' layout ([`Padded`]); and the box in f³ blocks for the coarse searches
 //! ([`Blocks`]). Each layout converts to and from volume voxels through its own
-//! `index_of_global` / `global_of_index`; a padded index is a [`PadIndex`].
+//! `index_of_global` / `global_of_index`, and each layout's flat index is its own type
+//! ([`BoxIndex`], [`BrickIndex`], [`PadIndex`]; a volume's is a plain `usize`).
 
 mod blocks;
 mod field;
@@ -11,5 +12,5 @@ mod padded;
 
 pub use blocks::Blocks;
 pub(crate) use field::first_and_last;
-pub use field::{BoxGrid, BrickMarks, Bricked, Field, bounding_box};
+pub use field::{BoxGrid, BoxIndex, BrickIndex, BrickMarks, Bricked, Field, bounding_box};
 pub use padded::{PadIndex, Padded};

@@ -17,8 +17,8 @@ pub struct Padded {
 }
 
 /// An index into the padded layout (a search's arrays; [`Padded::index_of_global`] and
-/// [`Padded::global_of_index`] convert), never a volume's or the box's flat index: those are
-/// plain `usize`, and the type keeps them apart where one becomes the other.
+/// [`Padded::global_of_index`] convert), never a volume's flat index (a plain `usize`) or the
+/// box's ([`crate::grid::BoxIndex`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct PadIndex(pub usize);
 
@@ -153,7 +153,7 @@ impl Padded {
         for k in 0..bz {
             for j in 0..by {
                 let d = self.row_start(j, k);
-                let s = self.grid.index(0, j, k);
+                let s = self.grid.index(0, j, k).0;
                 out[d..d + bx].copy_from_slice(&v[s..s + bx]);
             }
         }
