@@ -3,9 +3,12 @@
 //! strategies that choose which cells to draw (paper §4.3); close-up volume rendering of
 //! the CT in a small box (paper Fig. 9); and the translucency view, the surface coloured by
 //! what lies beneath it.
+//! Coverage of the mucosa: what the frames shown have shown, the unseen patches and a pose
+//! for each ([`Coverage`], [`review`]).
 //! Markers and measurements ([`Findings`]) are picked on the same surface ([`pick`]).
 
 mod closeup;
+mod coverage;
 mod findings;
 mod mesh;
 mod raster;
@@ -16,6 +19,10 @@ mod translucency;
 mod visibility;
 
 pub use closeup::{CloseupBox, MAX_HALF_SIZE_MM, TfPoint, TransferFunction, render_closeup};
+pub use coverage::{
+    Coverage, CoverageOptions, Lumen, Patch, REVIEW_ROUNDS, Reader, Reading, Visit, read_both_ways,
+    review, viewing_pose,
+};
 pub use findings::{Findings, Hit, Marker, Measurement, pick};
 pub use mesh::{CellMesh, DISPLAY_NORMAL_PASSES, smooth_normals};
 pub use raster::{Frame, NO_TRIANGLE, Pixel, Rasterizer, Shading, View, render_rgba, shade};

@@ -4,6 +4,7 @@ mod bench;
 mod bench_fly;
 mod bench_prep;
 mod bench_render;
+mod coverage;
 mod fly;
 mod info;
 mod phantom;
@@ -53,6 +54,9 @@ enum Command {
     Prep(prep::PrepArgs),
     /// Fly the camera through the colon automatically (both ways by default).
     Fly(fly::FlyArgs),
+    /// How much of the mucosa the automatic reading shows: one way, both ways, and after a
+    /// review of every unseen patch (with a pose that shows each).
+    Coverage(coverage::CoverageArgs),
     /// Benchmarks against reference libraries.
     Bench(bench::BenchArgs),
     /// One endoscopic frame to a PNG: frame N of the automatic flight, or a given pose.
@@ -75,6 +79,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Demo { small, window, .. } => crate::gui::demo(&window, small),
         Command::Prep(a) => prep::run(&a),
         Command::Fly(a) => fly::run(&a),
+        Command::Coverage(a) => coverage::run(&a),
         Command::Bench(a) => bench::run(&a),
         Command::Render(a) => render::render(&a),
         Command::Movie(a) => render::movie(&a),

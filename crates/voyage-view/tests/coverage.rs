@@ -1,0 +1,197 @@
+//! Coverage of the mucosa (issue 23): the two-way reading and the review on the colon
+//! phantom, against its truth polyps; and the bookkeeping's invariants.
+
+use glam::DVec3;
+use voyage_core::{PrepOptions, Study, prepare};
+use voyage_nav::{Camera, Pose};
+use voyage_phantom::{self as phantom, ColonOptions};
+use voyage_view::{CellMesh, Coverage, CoverageOptions, Reader, Reading, read_both_ways};
+
+fn camera() -> Camera {
+    Camera::new(Pose::looking(DVec3::ZERO, DVec3::Z, DVec3::Y))
+}
+
+fn indexed_mesh(study: &Study) -> CellMesh {
+    let mut mesh = CellMesh::new(&study.surface, &study.cells);
+    mesh.index_cells();
+    mesh
+}
+
+fn centroid(mesh: &CellMesh, t: u32) -> DVec3 {
+    mesh.triangles[t as usize]
+        .map(|v| DVec3::from_array(mesh.positions[v as usize].map(f64::from)))
+        .iter()
+        .sum::<DVec3>()
+        / 3.0
+}
+
+/// Seen share (by count) of the triangles on a polyp's head.
+fn polyp_seen(mesh: &CellMesh, seen: &Coverage, center: DVec3, radius: f64) -> (usize, f64) {
+    let on: Vec<u32> = (0..mesh.triangles.len() as u32)
+        .filter(|&t| centroid(mesh, t).distance(center) <= radius + 0.6)
+        .collect();
+    let n = on.iter().filter(|&&t| seen.is_seen(t)).count();
+    (on.len(), n as f64 / on.len().max(1) as f64)
+}
+
+fn check_reading(seed: u64) {
+    let p = phantom::colon(&ColonOptions {
+        seed,
+        ..Default::default()
+    })
+    .unwrap();
+    let study = prepare(p.ct, &PrepOptions::default(), |_| {}).unwrap();
+    let mesh = indexed_mesh(&study);
+    let r: Reading =
+        read_both_ways(&study, &mesh, CoverageOptions::default(), camera(), 256).unwrap();
+    let [one, two, after] = [&r.one_way, &r.two_way, &r.after_review].map(|c| c.percent());
+    eprintln!(
+        "seed {seed}: one way {one:.2} %, two ways {two:.2} %, after review {after:.2} % ({} patches, {} visits)",
+        r.patches.len(),
+        r.visits
+    );
+    assert!(
+        r.flights.iter().all(|f| f.reached),
+        "seed {seed}: a flight fell short"
+    );
+    assert!(
+        one < two,
+        "seed {seed}: one way {one:.2} % ≥ two ways {two:.2} %"
+    );
+    assert!(two >= 94.0, "seed {seed}: two ways {two:.2} % < 94 %");
+    assert!(
+        after >= 99.5,
+        "seed {seed}: after review {after:.2} % < 99.5 %"
+    );
+    assert!(!r.patches.is_empty(), "seed {seed}: nothing left to review");
+    // Every patch has a pose, in the lumen and clear of the wall, that looks at the patch.
+    for v in &r.patches {
+        let pose = v.pose.unwrap_or_else(|| {
+            panic!(
+                "seed {seed}: no pose for the {:.0} mm² patch",
+                v.patch.area_mm2
+            )
+        });
+        let ds = study.ds.sample(pose.position) as f64;
+        assert!(
+            ds >= 1.0,
+            "seed {seed}: a review pose {ds:.2} mm from the wall"
+        );
+        let to_patch = (v.patch.center_mm - pose.position).normalize();
+        assert!(
+            pose.z_body().dot(to_patch) > 0.999,
+            "seed {seed}: a pose looks away"
+        );
+        assert!(
+            pose.position.distance(v.patch.center_mm) <= 50.0,
+            "seed {seed}: a pose beyond the reading distance"
+        );
+    }
+    // Every truth polyp of 3 mm or more is seen, most of its head, by the two-way reading
+    // or the review.
+    for polyp in p.truth.polyps.iter().filter(|q| q.diameter_mm >= 3.0) {
+        let c = DVec3::from_array(polyp.center_mm);
+        let (n, two_way) = polyp_seen(&mesh, &r.two_way, c, polyp.diameter_mm / 2.0);
+        let (_, reviewed) = polyp_seen(&mesh, &r.after_review, c, polyp.diameter_mm / 2.0);
+        eprintln!(
+            "seed {seed}: {:.0} mm polyp in the {}{}: {n} triangles, {:.0} % seen both ways, {:.0} % after review",
+            polyp.diameter_mm,
+            polyp.segment,
+            if polyp.behind_fold {
+                ", behind a fold"
+            } else {
+                ""
+            },
+            two_way * 100.0,
+            reviewed * 100.0
+        );
+        assert!(n >= 10, "seed {seed}: no surface found on a polyp");
+        assert!(
+            reviewed >= 0.5,
+            "seed {seed}: a {:.0} mm polyp in the {} is {:.0} % seen",
+            polyp.diameter_mm,
+            polyp.segment,
+            reviewed * 100.0
+        );
+    }
+}
+
+#[test]
+fn two_way_reading_and_review_cover_the_phantom_seed_1() {
+    check_reading(1);
+}
+
+#[test]
+fn two_way_reading_and_review_cover_the_phantom_seed_2() {
+    check_reading(2);
+}
+
+fn small_study() -> Study {
+    let p = phantom::colon(&ColonOptions {
+        small: true,
+        ..Default::default()
+    })
+    .unwrap();
+    prepare(p.ct, &PrepOptions::default(), |_| {}).unwrap()
+}
+
+#[test]
+fn coverage_bookkeeping() {
+    let study = small_study();
+    let mesh = indexed_mesh(&study);
+    let options = CoverageOptions {
+        min_patch_mm2: 0.0,
+        ..Default::default()
+    };
+    let fresh = Coverage::new(&mesh, options);
+    // Nothing seen: the patches are the connected parts of the whole surface.
+    let whole: f64 = fresh.patches(&mesh).iter().map(|p| p.area_mm2).sum();
+    assert!((whole - fresh.total_mm2()).abs() < 1e-6 * fresh.total_mm2());
+    assert_eq!(fresh.percent(), 0.0);
+
+    // A view down the lumen from the centerline's middle shows something; the same view
+    // again shows nothing new; a reading distance below the nearest wall shows nothing.
+    let cl = &study.centerline.points_mm;
+    let i = cl.len() / 2;
+    let at = DVec3::from_array(cl[i]);
+    let ahead = DVec3::from_array(cl[i + 3]) - at;
+    let pose = Pose::looking(at, ahead, ahead.any_orthonormal_vector());
+    let mut reader = Reader::new(&mesh, &study.cells, camera(), 128, 128);
+    let mut seen = fresh.clone();
+    let first = reader.show(pose, &mut seen);
+    assert!(first > 0.0 && (seen.seen_mm2() - first).abs() < 1e-9);
+    assert_eq!(reader.show(pose, &mut seen), 0.0);
+    let near_wall = study.ds.sample(at) as f64;
+    let mut blind = Coverage::new(
+        &mesh,
+        CoverageOptions {
+            reading_distance_mm: 0.5 * near_wall,
+            ..options
+        },
+    );
+    assert_eq!(reader.show(pose, &mut blind), 0.0);
+
+    // Every triangle marked covers a pixel of the frame and faces the eye within 75°.
+    let ids: std::collections::HashSet<u32> = reader.frame().ids().collect();
+    for t in 0..mesh.triangles.len() as u32 {
+        if seen.is_seen(t) {
+            assert!(ids.contains(&t));
+            let [a, b, c] = mesh.triangles[t as usize]
+                .map(|v| DVec3::from_array(mesh.positions[v as usize].map(f64::from)));
+            let n = (b - a).cross(c - a).normalize();
+            let to_eye = (at - (a + b + c) / 3.0).normalize();
+            assert!(n.dot(to_eye) >= 75f64.to_radians().cos() - 1e-9);
+        }
+    }
+    // Union: what two readings saw together, counted once.
+    let back = Pose::looking(at, -ahead, ahead.any_orthonormal_vector());
+    let mut other = fresh.clone();
+    reader.show(back, &mut other);
+    let mut both = seen.clone();
+    both.union(&other);
+    assert!(both.seen_mm2() > seen.seen_mm2() && both.seen_mm2() > other.seen_mm2());
+    assert!(both.seen_mm2() <= seen.seen_mm2() + other.seen_mm2() + 1e-9);
+    let again = both.seen_mm2();
+    both.union(&seen);
+    assert_eq!(both.seen_mm2(), again);
+}

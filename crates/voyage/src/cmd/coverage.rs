@@ -1,0 +1,152 @@
+//! `voyage coverage INPUT`: how much of the mucosa the automatic reading shows: one way,
+//! both ways, then after a review of every unseen patch.
+
+use anyhow::{Context, Result};
+use clap::Args;
+use glam::DVec3;
+use serde_json::{Value, json};
+use voyage_nav::{Camera, FlightOptions, Pose};
+use voyage_view::{CellMesh, CoverageOptions, Visit, read_both_ways};
+
+use super::prep::{InputArgs, Prepared, load_and_prepare};
+
+#[derive(Args, Debug)]
+pub struct CoverageArgs {
+    #[command(flatten)]
+    pub input: InputArgs,
+    /// A triangle farther than this from the eye is not counted as seen (mm).
+    #[arg(long, default_value_t = CoverageOptions::default().reading_distance_mm)]
+    pub reading_distance: f64,
+    /// A triangle seen more obliquely than this is not counted (degrees from its normal).
+    #[arg(long, default_value_t = CoverageOptions::default().max_angle_deg)]
+    pub max_angle: f64,
+    /// Unseen patches smaller than this are not listed or reviewed (mm²).
+    #[arg(long, default_value_t = CoverageOptions::default().min_patch_mm2)]
+    pub min_patch: f64,
+    /// Side of the square frames the coverage is measured on (pixels).
+    #[arg(long, default_value_t = 256)]
+    pub size: u32,
+    /// The camera's vertical field of view (degrees).
+    #[arg(long, default_value_t = 90.0)]
+    pub fov: f64,
+    /// Print the result as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl CoverageArgs {
+    fn options(&self) -> Result<CoverageOptions> {
+        anyhow::ensure!(
+            self.reading_distance.is_finite() && self.reading_distance > 0.0,
+            "--reading-distance must be a positive number of mm, not {}",
+            self.reading_distance
+        );
+        anyhow::ensure!(
+            self.max_angle.is_finite() && self.max_angle > 0.0 && self.max_angle <= 90.0,
+            "--max-angle must lie in (0, 90] degrees, not {}",
+            self.max_angle
+        );
+        anyhow::ensure!(
+            self.min_patch.is_finite() && self.min_patch >= 0.0,
+            "--min-patch must be a number of mm² ≥ 0, not {}",
+            self.min_patch
+        );
+        anyhow::ensure!(
+            (16..=2048).contains(&self.size),
+            "--size must lie in 16..2048 pixels, not {}",
+            self.size
+        );
+        anyhow::ensure!(
+            self.fov.is_finite() && self.fov >= 10.0 && self.fov <= Camera::MAX_FOV_DEG,
+            "--fov must lie in 10..{} degrees, not {}",
+            Camera::MAX_FOV_DEG,
+            self.fov
+        );
+        Ok(CoverageOptions {
+            reading_distance_mm: self.reading_distance,
+            max_angle_deg: self.max_angle,
+            min_patch_mm2: self.min_patch,
+        })
+    }
+}
+
+pub fn run(a: &CoverageArgs) -> Result<()> {
+    let options = a.options()?;
+    let name = a.input.input.display().to_string();
+    let min_wall = FlightOptions::default().safety.min_wall_mm;
+    let Prepared {
+        study, geometry, ..
+    } = load_and_prepare(&a.input, Some(min_wall))?;
+    let mut mesh = CellMesh::new(&study.surface, &study.cells);
+    mesh.index_cells();
+    let camera = Camera::new(Pose::looking(DVec3::ZERO, DVec3::Z, DVec3::Y)).with_fov(a.fov);
+    let reading = read_both_ways(&study, &mesh, options, camera, a.size)
+        .with_context(|| format!("{name}: the two-way reading"))?;
+    for f in &reading.flights {
+        if !f.reached {
+            eprintln!(
+                "warning: {name}: the {} flight did not reach its goal ({:.0} mm short); coverage counts what it showed",
+                f.direction.name(),
+                f.final_dt_mm
+            );
+        }
+    }
+    let without_pose = reading.patches.iter().filter(|v| v.pose.is_none()).count();
+    if without_pose > 0 {
+        eprintln!(
+            "warning: {name}: {without_pose} unseen patch(es) have no viewpoint in the lumen that sees them"
+        );
+    }
+    let left = reading.after_review.patches(&mesh).len();
+    let [one_way, two_way, after_review] =
+        [&reading.one_way, &reading.two_way, &reading.after_review].map(|c| c.percent());
+    if a.json {
+        let patch_json = |v: &Visit| {
+            json!({
+                "area_mm2": v.patch.area_mm2,
+                "across_mm": v.patch.across_mm,
+                "center_lps_mm": geometry.local_to_patient(v.patch.center_mm).to_array(),
+                "arc_mm": v.patch.arc_mm(&study.centerline),
+                "pose": v.pose.map(|p| {
+                    let mut a = p.to_array();
+                    a[..3].copy_from_slice(&geometry.local_to_patient(p.position).to_array());
+                    a
+                }),
+            })
+        };
+        let out = json!({
+            "one_way_pct": one_way,
+            "two_way_pct": two_way,
+            "after_review_pct": after_review,
+            "surface_mm2": reading.after_review.total_mm2(),
+            "flights_reached": {
+                "forward": reading.flights[0].reached,
+                "backward": reading.flights[1].reached,
+            },
+            "options": options,
+            "frame_px": a.size,
+            "fov_deg": a.fov,
+            "unseen_patches": reading.patches.iter().map(patch_json).collect::<Vec<Value>>(),
+            "review_visits": reading.visits,
+            "patches_left_after_review": left,
+        });
+        println!("{}", serde_json::to_string_pretty(&out)?);
+    } else {
+        println!(
+            "coverage of the mucosa ({:.0} mm², seen within {:.0} mm and {:.0}°):",
+            reading.after_review.total_mm2(),
+            options.reading_distance_mm,
+            options.max_angle_deg
+        );
+        println!("  one way (rectum → cecum)   {one_way:5.1} %");
+        println!("  both ways                  {two_way:5.1} %");
+        println!(
+            "  after the review           {after_review:5.1} %  ({} patches ≥ {:.0} mm² visited, {} visits, {} left)",
+            reading.patches.len(),
+            options.min_patch_mm2,
+            reading.visits,
+            left
+        );
+    }
+    Ok(())
+}
