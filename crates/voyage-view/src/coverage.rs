@@ -472,7 +472,7 @@ pub fn review(
 
 /// Review rounds of [`read_both_ways`]: a patch a pose showed only in part is visited again,
 /// from the rest's own viewpoint.
-pub const REVIEW_ROUNDS: usize = 3;
+pub const REVIEW_ROUNDS: usize = 10;
 
 /// What a two-way reading with review showed.
 pub struct Reading {

@@ -3,7 +3,7 @@
 //! drawing everything, whether the image stayed exactly the same, the CPU renderer's frames/s
 //! on one core including the physics, and the GPU renderer's frames/s drawing the same cells.
 
-use std::path::PathBuf;
+use std::{path::PathBuf, time::Instant};
 
 use anyhow::{Result, bail};
 use serde_json::{Map, Value, json};
@@ -12,7 +12,10 @@ use voyage_io::{self as io, LoadOptions};
 use voyage_nav::{Camera, Direction, FlightOptions, Pose, fly, potential_field};
 use voyage_phantom::{self as phantom, ColonOptions};
 use voyage_render::GpuRenderer;
-use voyage_view::{CellMesh, Lighting, Strategy, Survey, look_around, survey};
+use voyage_view::{
+    CellMesh, Coverage, CoverageOptions, Frame, Lighting, Rasterizer, Reader, Shading, Strategy,
+    Survey, View, Visibility, look_around, survey,
+};
 
 use super::bench::Common;
 
@@ -121,13 +124,51 @@ fn measure(name: &str, study: &Study, plan: &Plan, gpu: Option<&mut GpuRenderer>
         gpu.is_some(),
     );
     let physics_ms = physics_ns.iter().sum::<f64>() / physics_ns.len() as f64 / 1e6;
+    let coverage = coverage_cost(&mesh, study, &cameras, plan.size);
     let gpu_times = match gpu {
         Some(g) => Some(gpu_figures(g, &mesh, &cameras, &s)?),
         None => None,
     };
-    Ok(report(
-        name, study, &mesh, &s, physics_ms, &reached, gpu_times,
-    ))
+    let mut out = report(name, study, &mesh, &s, physics_ms, &reached, gpu_times);
+    out["coverage"] = coverage;
+    Ok(out)
+}
+
+/// Window sizes of the coverage pass [`coverage_cost`] times on its own (the window marks
+/// coverage on a small CPU frame of the same view).
+const COVERAGE_SIDES: [u32; 2] = [96, 128];
+
+/// What coverage costs per frame, one thread: marking the id buffer of a frame drawn at
+/// `size`² (what a renderer's own id buffer would cost), and a whole coverage pass (exact
+/// culling, drawing, marking) at the small sizes the window uses.
+fn coverage_cost(mesh: &CellMesh, study: &Study, cameras: &[Camera], size: u32) -> Value {
+    let mut indexed = mesh.clone();
+    indexed.index_cells();
+    let shading = Shading::new(&Lighting::default());
+    let mut vis = Visibility::new(&study.cells, Strategy::Ours);
+    let mut frame = Frame::new(size, size);
+    let mut seen = Coverage::new(&indexed, CoverageOptions::default());
+    let mut mark_ms = 0.0;
+    for camera in cameras {
+        let view = View::new(camera, size, size);
+        frame.clear();
+        vis.draw(&mut frame, &Rasterizer::new(&indexed, view, &shading), &study.cells);
+        let t = Instant::now();
+        seen.mark(&frame, &view, &indexed);
+        mark_ms += t.elapsed().as_secs_f64() * 1e3;
+    }
+    let n = cameras.len().max(1) as f64;
+    let mut passes = Map::new();
+    for side in COVERAGE_SIDES {
+        let mut reader = Reader::new(&indexed, &study.cells, Camera::new(cameras[0].pose), side, side);
+        let mut seen = Coverage::new(&indexed, CoverageOptions::default());
+        let t = Instant::now();
+        for camera in cameras {
+            reader.show(camera.pose, &mut seen);
+        }
+        passes.insert(side.to_string(), json!(t.elapsed().as_secs_f64() * 1e3 / n));
+    }
+    json!({ "mark_ms": mark_ms / n, "pass_ms": passes })
 }
 
 /// Per strategy, GPU frames/s at 512² and 1024² drawing the cells the strategy chose.
@@ -242,6 +283,14 @@ fn print_case(c: &Value) {
     println!(
         "  {:<6} {:>11} {:>9} {:>7} {:>8} {:>10} {:>9} {:>10} {:>11}",
         "", "tris/frame", "max", "MC:x", "inexact", "CPU ms", "CPU fps", "GPU 512²", "GPU 1024²"
+    );
+    let cov = &c["coverage"];
+    println!(
+        "  coverage: marking a {}² frame's id buffer {:.2} ms/frame; a whole coverage pass (culling, drawing, marking) {:.2} ms at 96², {:.2} ms at 128²",
+        c["size"],
+        cov["mark_ms"].as_f64().unwrap_or(f64::NAN),
+        cov["pass_ms"]["96"].as_f64().unwrap_or(f64::NAN),
+        cov["pass_ms"]["128"].as_f64().unwrap_or(f64::NAN)
     );
     for s in Strategy::ALL {
         let v = &c["strategies"][s.name()];
