@@ -99,6 +99,11 @@ impl Coverage {
         self.total_mm2
     }
 
+    /// Area of triangle `t` (draw index), mm².
+    pub fn area_of(&self, t: u32) -> f32 {
+        self.area_mm2[t as usize]
+    }
+
     /// Whether triangle `t` (draw index) has been seen.
     pub fn is_seen(&self, t: u32) -> bool {
         self.seen[t as usize]
@@ -234,6 +239,9 @@ fn triangle_points(mesh: &CellMesh, t: u32) -> [DVec3; 3] {
     mesh.triangles[t as usize].map(|v| DVec3::from_array(mesh.positions[v as usize].map(f64::from)))
 }
 
+/// A patch's normal is the mean over its surface within this distance of its centre (mm).
+const NORMAL_RADIUS_MM: f64 = 4.0;
+
 /// A connected unseen part of the surface.
 #[derive(Clone, Debug)]
 pub struct Patch {
@@ -243,7 +251,7 @@ pub struct Patch {
     /// Volume-local mm: the centroid of the patch's triangle nearest the area-weighted
     /// centre, so that it lies on the patch even where the patch is curved.
     pub center_mm: DVec3,
-    /// Area-weighted mean normal (unit, into the lumen).
+    /// Area-weighted mean normal around the centre (unit, into the lumen).
     pub normal: DVec3,
     /// The largest distance from the centre to a vertex of the patch, times two (mm).
     pub across_mm: f64,
@@ -252,12 +260,9 @@ pub struct Patch {
 impl Patch {
     fn new(mesh: &CellMesh, triangles: Vec<u32>, area_mm2: f64) -> Patch {
         let mut weighted = DVec3::ZERO;
-        let mut normal = DVec3::ZERO;
         for &t in &triangles {
             let [a, b, c] = triangle_points(mesh, t);
-            let n = (b - a).cross(c - a);
-            weighted += (a + b + c) / 3.0 * (0.5 * n.length());
-            normal += 0.5 * n;
+            weighted += (a + b + c) / 3.0 * (0.5 * (b - a).cross(c - a).length());
         }
         let mean = weighted / area_mm2.max(f64::MIN_POSITIVE);
         let centroid = |t: u32| {
@@ -278,6 +283,16 @@ impl Patch {
                 .flat_map(|&t| triangle_points(mesh, t))
                 .map(|p| p.distance(center_mm))
                 .fold(0.0, f64::max);
+        // The normal around the centre, not the whole patch's: a long patch round a fold or
+        // a tube's whole wall has normals that cancel.
+        let normal: DVec3 = triangles
+            .iter()
+            .filter(|&&t| centroid(t).distance(center_mm) <= NORMAL_RADIUS_MM)
+            .map(|&t| {
+                let [a, b, c] = triangle_points(mesh, t);
+                (b - a).cross(c - a)
+            })
+            .sum();
         Patch {
             area_mm2,
             triangles,
@@ -375,50 +390,53 @@ fn viewpoint_along(c: DVec3, u: DVec3, max_t: f64, lumen: &Lumen) -> Option<DVec
 }
 
 /// Draws frames with the CPU rasterizer (exact culling) and marks what they show: the
-/// reading of a flight, a movie or a review when no window draws them.
-pub struct Reader<'a> {
-    mesh: &'a CellMesh,
-    cells: &'a Cells,
+/// reading of a flight, a movie, a review, or the window's frames (on a small frame of the
+/// same view). It owns the frame and the culling state from frame to frame.
+pub struct Reader {
     camera: Camera,
-    width: u32,
-    height: u32,
     shading: Shading,
     visibility: Visibility,
     frame: Frame,
 }
 
-impl<'a> Reader<'a> {
-    /// Frames of `width` × `height` through `camera`'s lens (its pose is replaced per frame).
-    pub fn new(
-        mesh: &'a CellMesh,
-        cells: &'a Cells,
-        camera: Camera,
-        width: u32,
-        height: u32,
-    ) -> Self {
+impl Reader {
+    /// Frames of `width` × `height` through `camera`'s lens (its pose is replaced per frame),
+    /// of the surface cut into `cells`.
+    pub fn new(cells: &Cells, camera: Camera, width: u32, height: u32) -> Self {
         Reader {
-            mesh,
-            cells,
             camera,
-            width,
-            height,
             shading: Shading::new(&Lighting::default()),
             visibility: Visibility::new(cells, Strategy::Ours),
             frame: Frame::new(width, height),
         }
     }
 
-    /// Draws the view from `pose` and marks it; returns the area newly seen (mm²).
-    pub fn show(&mut self, pose: Pose, coverage: &mut Coverage) -> f64 {
+    /// Another frame size and lens; the culling state is kept.
+    pub fn set_lens(&mut self, camera: Camera, width: u32, height: u32) {
+        self.camera = camera;
+        if (self.frame.width, self.frame.height) != (width, height) {
+            self.frame = Frame::new(width, height);
+        }
+    }
+
+    /// Draws `mesh` (cut into `cells`) from `pose` and marks what it shows; returns the area
+    /// newly seen (mm²).
+    pub fn show(
+        &mut self,
+        mesh: &CellMesh,
+        cells: &Cells,
+        pose: Pose,
+        coverage: &mut Coverage,
+    ) -> f64 {
         let camera = Camera {
             pose,
             ..self.camera
         };
-        let view = View::new(&camera, self.width, self.height);
-        let raster = Rasterizer::new(self.mesh, view, &self.shading);
+        let view = View::new(&camera, self.frame.width, self.frame.height);
+        let raster = Rasterizer::new(mesh, view, &self.shading);
         self.frame.clear();
-        self.visibility.draw(&mut self.frame, &raster, self.cells);
-        coverage.mark(&self.frame, &view, self.mesh)
+        self.visibility.draw(&mut self.frame, &raster, cells);
+        coverage.mark(&self.frame, &view, mesh)
     }
 
     /// The frame last drawn.
@@ -442,20 +460,22 @@ pub struct Visit {
 /// Returns the visits of all rounds in order.
 pub fn review(
     reader: &mut Reader,
+    mesh: &CellMesh,
+    cells: &Cells,
     coverage: &mut Coverage,
     lumen: &Lumen,
     rounds: usize,
 ) -> Vec<Visit> {
     let mut visits = Vec::new();
     for _ in 0..rounds {
-        let patches = coverage.patches(reader.mesh);
+        let patches = coverage.patches(mesh);
         if patches.is_empty() {
             break;
         }
         let mut shown = 0.0;
         for patch in patches {
-            let pose = viewing_pose(&patch, reader.mesh, lumen, coverage.options());
-            let shown_mm2 = pose.map_or(0.0, |p| reader.show(p, coverage));
+            let pose = viewing_pose(&patch, mesh, lumen, coverage.options());
+            let shown_mm2 = pose.map_or(0.0, |p| reader.show(mesh, cells, p, coverage));
             shown += shown_mm2;
             visits.push(Visit {
                 patch,
@@ -504,12 +524,13 @@ pub fn read_both_ways(
     let flight_opts = FlightOptions::for_study(study);
     let min_wall_mm = flight_opts.safety.min_wall_mm;
     let field = potential_field(study, min_wall_mm)?;
-    let mut reader = Reader::new(mesh, &study.cells, camera, size, size);
+    let cells = &study.cells;
+    let mut reader = Reader::new(cells, camera, size, size);
     let mut read_flight = |dir: Direction| -> Result<(Flight, Coverage)> {
         let flight = fly(&field, &study.centerline, dir, &flight_opts)?;
         let mut seen = Coverage::new(mesh, options);
         for &pose in &flight.poses {
-            reader.show(pose, &mut seen);
+            reader.show(mesh, cells, pose, &mut seen);
         }
         Ok((flight, seen))
     };
@@ -524,7 +545,14 @@ pub fn read_both_ways(
     };
     let mut after_review = two_way.clone();
     let first_round = two_way.patches(mesh).len();
-    let visits = review(&mut reader, &mut after_review, &lumen, REVIEW_ROUNDS);
+    let visits = review(
+        &mut reader,
+        mesh,
+        cells,
+        &mut after_review,
+        &lumen,
+        REVIEW_ROUNDS,
+    );
     let total_visits = visits.len();
     // The review's first round visits exactly the two-way reading's patches, in order.
     let patches = visits.into_iter().take(first_round).collect();

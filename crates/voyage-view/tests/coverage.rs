@@ -156,11 +156,12 @@ fn coverage_bookkeeping() {
     let at = DVec3::from_array(cl[i]);
     let ahead = DVec3::from_array(cl[i + 3]) - at;
     let pose = Pose::looking(at, ahead, ahead.any_orthonormal_vector());
-    let mut reader = Reader::new(&mesh, &study.cells, camera(), 128, 128);
+    let cells = &study.cells;
+    let mut reader = Reader::new(cells, camera(), 128, 128);
     let mut seen = fresh.clone();
-    let first = reader.show(pose, &mut seen);
+    let first = reader.show(&mesh, cells, pose, &mut seen);
     assert!(first > 0.0 && (seen.seen_mm2() - first).abs() < 1e-9);
-    assert_eq!(reader.show(pose, &mut seen), 0.0);
+    assert_eq!(reader.show(&mesh, cells, pose, &mut seen), 0.0);
     let near_wall = study.ds.sample(at) as f64;
     let mut blind = Coverage::new(
         &mesh,
@@ -169,7 +170,7 @@ fn coverage_bookkeeping() {
             ..options
         },
     );
-    assert_eq!(reader.show(pose, &mut blind), 0.0);
+    assert_eq!(reader.show(&mesh, cells, pose, &mut blind), 0.0);
 
     // Every triangle marked covers a pixel of the frame and faces the eye within 75°.
     let ids: std::collections::HashSet<u32> = reader.frame().ids().collect();
@@ -186,7 +187,7 @@ fn coverage_bookkeeping() {
     // Union: what two readings saw together, counted once.
     let back = Pose::looking(at, -ahead, ahead.any_orthonormal_vector());
     let mut other = fresh.clone();
-    reader.show(back, &mut other);
+    reader.show(&mesh, cells, back, &mut other);
     let mut both = seen.clone();
     both.union(&other);
     assert!(both.seen_mm2() > seen.seen_mm2() && both.seen_mm2() > other.seen_mm2());

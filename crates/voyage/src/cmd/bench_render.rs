@@ -152,7 +152,11 @@ fn coverage_cost(mesh: &CellMesh, study: &Study, cameras: &[Camera], size: u32) 
     for camera in cameras {
         let view = View::new(camera, size, size);
         frame.clear();
-        vis.draw(&mut frame, &Rasterizer::new(&indexed, view, &shading), &study.cells);
+        vis.draw(
+            &mut frame,
+            &Rasterizer::new(&indexed, view, &shading),
+            &study.cells,
+        );
         let t = Instant::now();
         seen.mark(&frame, &view, &indexed);
         mark_ms += t.elapsed().as_secs_f64() * 1e3;
@@ -160,11 +164,11 @@ fn coverage_cost(mesh: &CellMesh, study: &Study, cameras: &[Camera], size: u32) 
     let n = cameras.len().max(1) as f64;
     let mut passes = Map::new();
     for side in COVERAGE_SIDES {
-        let mut reader = Reader::new(&indexed, &study.cells, Camera::new(cameras[0].pose), side, side);
+        let mut reader = Reader::new(&study.cells, Camera::new(cameras[0].pose), side, side);
         let mut seen = Coverage::new(&indexed, CoverageOptions::default());
         let t = Instant::now();
         for camera in cameras {
-            reader.show(camera.pose, &mut seen);
+            reader.show(&indexed, &study.cells, camera.pose, &mut seen);
         }
         passes.insert(side.to_string(), json!(t.elapsed().as_secs_f64() * 1e3 / n));
     }

@@ -23,7 +23,8 @@ use voyage_nav::Input;
 use super::{
     WindowArgs,
     corrections::{self, Correction},
-    endoscopy::{Endoscope, label, ray_at, surface_point_on_screen, visible_centerline},
+    coverage::{Stage, WindowCoverage},
+    endoscopy::{Endoscope, label, project, ray_at, surface_point_on_screen, visible_centerline},
     frame_times::FrameTimes,
     loader::{Job, Source},
     pixels::WindowGpu,
@@ -97,6 +98,10 @@ enum Action {
     MarkerUnderCursor,
     /// One end of a measurement on the surface under the mouse cursor (in the view).
     MeasureUnderCursor,
+    /// Rectum → cecum, cecum → rectum, then every unseen patch (issue 23).
+    TwoWayReading,
+    /// Fly to the largest unseen patch and outline it.
+    NextUnseenPatch,
 }
 
 /// The window's on/off settings.
@@ -108,6 +113,8 @@ enum Switch {
     Compass,
     Leveling,
     Still,
+    /// Coverage marking of the frames shown.
+    Coverage,
 }
 
 const NONE: Modifiers = Modifiers::NONE;
@@ -174,6 +181,16 @@ const KEYMAP: &[Binding] = &[
             (NONE, Key::L, Action::Toggle(Switch::Leveling)),
             (NONE, Key::S, Action::Toggle(Switch::Still)),
         ],
+    },
+    Binding {
+        keys: "W",
+        what: "two-way reading: rectum to cecum, back, then every unseen patch",
+        bound: &[(NONE, Key::W, Action::TwoWayReading)],
+    },
+    Binding {
+        keys: "N",
+        what: "next unseen patch (largest first), outlined in orange",
+        bound: &[(NONE, Key::N, Action::NextUnseenPatch)],
     },
     Binding {
         keys: "G",
@@ -540,7 +557,41 @@ impl App {
                     s.fov = (s.fov + 5.0).min(Camera::MAX_FOV_DEG);
                 }
             }
+            Action::TwoWayReading => {
+                if let Some(s) = &mut self.session {
+                    s.coverage.on = true;
+                    s.start_reading();
+                    self.status = "two-way reading started".into();
+                }
+            }
+            Action::NextUnseenPatch => self.next_unseen_patch(),
         }
+    }
+
+    /// Flies to the largest unseen patch, or says why not.
+    fn next_unseen_patch(&mut self) {
+        let Some(s) = &mut self.session else { return };
+        let Some((patch, pose)) = s.coverage.next_patch(&s.mesh, &s.study) else {
+            self.status = format!(
+                "no unseen patch of {:.0} mm² or more is left",
+                s.coverage.session.options().min_patch_mm2
+            );
+            return;
+        };
+        let arc = patch.arc_mm(&s.study.centerline).unwrap_or(0.0);
+        self.status = match pose {
+            Some(p) if s.show_from(p) => {
+                self.slices.follow();
+                format!(
+                    "unseen patch: {:.0} mm², {:.0} mm across, {:.0} mm along the centerline",
+                    patch.area_mm2, patch.across_mm, arc
+                )
+            }
+            _ => format!(
+                "the largest unseen patch ({:.0} mm², {:.0} mm along the centerline) has no viewpoint in the lumen that sees it",
+                patch.area_mm2, arc
+            ),
+        };
     }
 
     /// The setting behind a switch (the submarine's modes only while a study is open).
@@ -552,6 +603,7 @@ impl App {
             Switch::Compass => &mut self.session.as_mut()?.sub.modes.compass,
             Switch::Leveling => &mut self.session.as_mut()?.sub.modes.leveling,
             Switch::Still => &mut self.session.as_mut()?.sub.modes.still,
+            Switch::Coverage => &mut self.session.as_mut()?.coverage.on,
         })
     }
 
@@ -641,6 +693,14 @@ impl App {
         if self.session.is_none() || self.job.is_some() {
             return;
         }
+        // A two-way reading holds the script until it is done.
+        if self
+            .session
+            .as_ref()
+            .is_some_and(|s| s.coverage.reading_running())
+        {
+            return;
+        }
         let Some(script) = &mut self.script else {
             return;
         };
@@ -706,6 +766,17 @@ impl App {
                     }
                 }
             }
+            Step::TwoWay(on) => {
+                if on {
+                    self.apply(Action::TwoWayReading, ctx);
+                }
+            }
+            Step::NextUnseen(on) => {
+                if on {
+                    self.apply(Action::NextUnseenPatch, ctx);
+                }
+            }
+            Step::Coverage(on) => self.apply(Action::Set(Switch::Coverage, on), ctx),
             Step::Closeup(on) => self.apply(Action::Set(Switch::Closeup, on), ctx),
             Step::Translucency(on) => self.apply(Action::Set(Switch::Translucency, on), ctx),
             Step::Centerline(on) => self.apply(Action::Set(Switch::Centerline, on), ctx),
@@ -807,6 +878,7 @@ impl App {
             cells: self.endoscope.stats.cells,
             triangles: self.endoscope.stats.triangles,
             colon: s.map(|s| colon_report(s, self.source.as_ref())),
+            coverage: s.map(|s| s.coverage.report()),
             correction_error: self.correction_error.clone(),
         }
     }
@@ -887,6 +959,8 @@ impl App {
             ui.label(RichText::new("goal reached").color(Color32::LIGHT_GREEN));
         }
         ui.label(format!("to the goal: {:.0} mm", s.dt_to_goal()));
+        ui.separator();
+        coverage_section(ui, &s.coverage, &mut actions);
         ui.separator();
         ui.heading("Colon");
         let busy = self.job.is_some();
@@ -1027,6 +1101,10 @@ impl App {
                     return;
                 };
                 let pose = s.pose();
+                let unseen = s
+                    .coverage
+                    .on
+                    .then(|| s.coverage.scout_tint(&s.mesh, &s.scout));
                 let marks = ScoutMarks {
                     centerline: &s.study.centerline.points_mm,
                     markers: self
@@ -1037,6 +1115,7 @@ impl App {
                         .collect(),
                     submarine: pose.position,
                     view_dir: pose.z_body(),
+                    unseen,
                 };
                 if let Some(i) = view.show(ui, &s.scout, &marks) {
                     match s.jump_to_centerline(i) {
@@ -1129,6 +1208,8 @@ impl App {
                 }
                 self.last_cells = self.endoscope.last_cells.clone();
                 self.times.record_render(self.endoscope.stats.render_ms);
+                s.mark_shown(&s.camera(), size, self.times.last_frame_ms());
+                s.step_reading();
                 self.closeup_overlay(ui, rect);
                 self.translucency_overlay(ui, rect);
                 self.overlays(ui, rect);
@@ -1269,6 +1350,14 @@ impl App {
                     line,
                     Stroke::new(2.0, Color32::from_rgb(40, 230, 60)),
                 ));
+            }
+        }
+        let aspect = (rect.width() / rect.height().max(1.0)) as f64;
+        let on_screen = |p: DVec3| project(&cam, p, aspect).map(|f| rect.min + f * rect.size());
+        let orange = Stroke::new(2.0, Color32::from_rgb(255, 150, 30));
+        for [a, b] in &s.coverage.outline {
+            if let (Some(a), Some(b)) = (on_screen(*a), on_screen(*b)) {
+                painter.line_segment([a, b], orange);
             }
         }
         for m in &self.findings.markers {
@@ -1515,6 +1604,64 @@ impl eframe::App for App {
 /// The colon's segments, bridged gaps, the patient's position and the warnings, as
 /// preprocessing reported them. Each segment has a box to take it in or leave it out; the
 /// correction asked for, if any, is returned (`busy`: one is being preprocessed).
+/// The coverage read-out and its controls.
+fn coverage_section(ui: &mut egui::Ui, c: &WindowCoverage, actions: &mut Vec<Action>) {
+    ui.heading("Coverage");
+    let o = c.session.options();
+    ui.label(format!(
+        "seen {:.1} % of the mucosa (this flight {:.1} %)",
+        c.session.percent(),
+        c.flight.percent()
+    ))
+    .on_hover_text(format!(
+        "area of the surface shown within {:.0} mm, facing the camera within {:.0}°, since the study opened",
+        o.reading_distance_mm, o.max_angle_deg
+    ));
+    if let Some(r) = &c.reading {
+        let pct = |v: Option<f64>| v.map_or("…".to_string(), |x| format!("{x:.1} %"));
+        let stage = match &r.stage {
+            Stage::Forward => "rectum to cecum".to_string(),
+            Stage::Backward => "cecum to rectum".to_string(),
+            Stage::Review { .. } => format!("review: patch {} of {}", r.visits, r.patches),
+            Stage::Done => "done".to_string(),
+        };
+        ui.label(format!("two-way reading: {stage}"));
+        ui.label(
+            RichText::new(format!(
+                "one way {} · both ways {} · after review {}",
+                pct(r.one_way_pct),
+                pct(r.two_way_pct),
+                pct(r.after_review_pct)
+            ))
+            .small(),
+        );
+    }
+    ui.horizontal(|ui| {
+        if ui
+            .button("Two-way reading")
+            .on_hover_text("W: rectum to cecum, back, then every unseen patch")
+            .clicked()
+        {
+            actions.push(Action::TwoWayReading);
+        }
+        if ui
+            .button("Next unseen")
+            .on_hover_text("N: fly to the largest unseen patch")
+            .clicked()
+        {
+            actions.push(Action::NextUnseenPatch);
+        }
+    });
+    let mut on = c.on;
+    if ui
+        .checkbox(&mut on, "mark what is shown")
+        .on_hover_text("coverage tracking; unseen mucosa is blue on the scout")
+        .changed()
+    {
+        actions.push(Action::Set(Switch::Coverage, on));
+    }
+}
+
 fn colon_summary(ui: &mut egui::Ui, study: &voyage_core::Study, busy: bool) -> Option<Correction> {
     let seg = &study.segmentation;
     let o = &seg.orientation;

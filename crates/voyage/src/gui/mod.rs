@@ -4,6 +4,7 @@
 
 mod app;
 mod corrections;
+mod coverage;
 mod endoscopy;
 mod frame_times;
 mod loader;

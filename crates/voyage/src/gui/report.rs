@@ -33,7 +33,35 @@ pub struct Report {
     pub triangles: usize,
     /// The colon's segments, gaps and corrections.
     pub colon: Option<serde_json::Value>,
+    /// What the frames shown showed of the mucosa, and the two-way reading.
+    pub coverage: Option<CoverageReport>,
     pub correction_error: Option<String>,
+}
+
+#[derive(Serialize)]
+pub struct CoverageReport {
+    pub on: bool,
+    /// Seen share of the mucosa since the study opened, and in the current flight (%).
+    pub session_pct: f64,
+    pub flight_pct: f64,
+    /// Mean time to mark a frame, ms (coverage's own cost per frame marked).
+    pub mark_ms: f64,
+    /// Frames shown from a new pose, and those marked (within the time budget).
+    pub frames_asked: u64,
+    pub frames_marked: u64,
+    pub reading: Option<ReadingReport>,
+}
+
+#[derive(Serialize)]
+pub struct ReadingReport {
+    /// "forward", "backward", "review" or "done".
+    pub stage: String,
+    pub one_way_pct: Option<f64>,
+    pub two_way_pct: Option<f64>,
+    pub after_review_pct: Option<f64>,
+    /// Unseen patches when the review began, and the visits it made.
+    pub patches: usize,
+    pub visits: usize,
 }
 
 #[derive(Serialize)]

@@ -25,6 +25,8 @@ pub struct ScoutMesh {
     pub normals: Vec<DVec3>,
     pub center: DVec3,
     pub radius: f64,
+    /// The scout vertex (cluster) of each surface vertex.
+    pub vertex_cluster: Vec<u32>,
 }
 
 impl ScoutMesh {
@@ -79,6 +81,7 @@ impl ScoutMesh {
             normals,
             center,
             radius,
+            vertex_cluster,
         }
     }
 }
@@ -90,6 +93,9 @@ pub struct ScoutMarks<'a> {
     pub markers: Vec<(String, DVec3)>,
     pub submarine: DVec3,
     pub view_dir: DVec3,
+    /// Per scout vertex, the share of its mucosa not yet seen, and a number that changes
+    /// whenever the shares do (None: no colouring).
+    pub unseen: Option<(&'a [f32], u64)>,
 }
 
 /// The scout's orbit camera and its cached mesh.
@@ -113,6 +119,7 @@ struct CacheKey {
     pitch: f64,
     zoom: f64,
     rect: Rect,
+    unseen: Option<u64>,
 }
 
 /// An orthographic view: screen right, screen up and the viewing direction in local mm.
@@ -206,7 +213,7 @@ impl ScoutView {
         let ppp = ui.ctx().pixels_per_point();
         // Only the part the colon covers: the rest shows the window's colour anyway, and on a
         // CPU Vulkan driver every pixel drawn costs.
-        let offset = self.surface(mesh, marks.centerline, &proj, rect, ppp);
+        let offset = self.surface(mesh, marks, &proj, rect, ppp);
         let at = ((rect.min.to_vec2() * ppp).round()
             + Vec2::new(offset[0] as f32, offset[1] as f32))
             / ppp;
@@ -265,7 +272,7 @@ impl ScoutView {
     fn surface(
         &mut self,
         mesh: &ScoutMesh,
-        centerline: &[[f64; 3]],
+        marks: &ScoutMarks,
         proj: &Projection,
         rect: Rect,
         ppp: f32,
@@ -275,6 +282,7 @@ impl ScoutView {
             pitch: self.pitch,
             zoom: self.zoom,
             rect,
+            unseen: marks.unseen.map(|(_, version)| version),
         };
         if let Some((k, offset)) = &self.cached
             && *k == key
@@ -285,7 +293,8 @@ impl ScoutView {
             ((rect.width() * ppp).round() as usize).max(1),
             ((rect.height() * ppp).round() as usize).max(1),
         );
-        let buf = rasterize(mesh, centerline, proj, rect, ppp, [w, h]);
+        let unseen = marks.unseen.map(|(shares, _)| shares);
+        let buf = rasterize(mesh, marks.centerline, unseen, proj, rect, ppp, [w, h]);
         let (offset, image) = over_background(&buf, [w, h], self.background);
         self.image.set(image);
         self.cached = Some((key, offset));
@@ -336,10 +345,13 @@ fn over_background(buf: &[[f32; 4]], size: [usize; 2], background: Color32) -> (
 
 /// Alpha-blends the scout's triangles, in the mesh's order, into an image of `rect` at
 /// `ppp` pixels per point, `size` pixels (premultiplied colour, transparent where nothing
-/// is), and draws the centerline over them in green (the paper's colour).
+/// is), and draws the centerline over them in green (the paper's colour). With `unseen`
+/// shares per vertex, mucosa not yet seen is blue, and more opaque, so that it shows
+/// through the rest.
 fn rasterize(
     mesh: &ScoutMesh,
     centerline: &[[f64; 3]],
+    unseen: Option<&[f32]>,
     proj: &Projection,
     rect: Rect,
     ppp: f32,
@@ -356,12 +368,23 @@ fn rasterize(
     };
     for (t, n) in mesh.triangles.iter().zip(&mesh.normals) {
         let facing = n.dot(proj.forward).abs();
-        let alpha = (0.05 + 0.40 * (1.0 - facing).powi(2)) as f32;
+        let share = unseen.map_or(0.0, |u| {
+            t.iter()
+                .map(|&v| u.get(v as usize).copied().unwrap_or(0.0))
+                .sum::<f32>()
+                / 3.0
+        });
+        // Unseen where most of the corners' mucosa is: blue, and opaque enough to show.
+        let blue = if share >= 0.5 { 1.0 } else { 0.0 };
+        let alpha = (0.05 + 0.40 * (1.0 - facing).powi(2)) as f32 * (1.0 - blue) + 0.55 * blue;
         let light = (0.55 + 0.45 * facing) as f32;
+        let base = [230.0, 140.0, 120.0].map(|c: f32| c / 255.0);
+        let unseen_rgb = [60.0, 120.0, 255.0].map(|c: f32| c / 255.0);
+        let rgb = [0, 1, 2].map(|i| base[i] * (1.0 - blue) + unseen_rgb[i] * blue);
         let color = [
-            230.0 / 255.0 * light * alpha,
-            140.0 / 255.0 * light * alpha,
-            120.0 / 255.0 * light * alpha,
+            rgb[0] * light * alpha,
+            rgb[1] * light * alpha,
+            rgb[2] * light * alpha,
             alpha,
         ];
         let v = t.map(|i| to_px(mesh.positions[i as usize]));

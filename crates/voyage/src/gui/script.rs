@@ -60,6 +60,13 @@ pub enum Step {
     Pose([f64; 7]),
     /// Fly back to a marker (by label, e.g. "M1").
     GoTo(String),
+    /// Run the two-way reading (rectum → cecum, back, then every unseen patch); the script
+    /// waits until it is done.
+    TwoWay(bool),
+    /// Fly to the largest unseen patch.
+    NextUnseen(bool),
+    /// Turn coverage marking on or off.
+    Coverage(bool),
     /// Toggle the close-up volume rendering, the translucency view or the centerline overlay.
     Closeup(bool),
     Translucency(bool),

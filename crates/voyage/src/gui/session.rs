@@ -12,7 +12,10 @@ use voyage_nav::{
 };
 use voyage_view::{CellMesh, Strategy, Visibility};
 
-use super::scout::ScoutMesh;
+use super::{
+    coverage::{Move, WindowCoverage},
+    scout::ScoutMesh,
+};
 
 /// Longest simulated step of one displayed frame: a slow frame must not fling the
 /// submarine (the physics sub-steps anyway; this keeps the flight's pace steady).
@@ -37,6 +40,8 @@ pub struct Session {
     pub fov: f64,
     /// Where the flight of the current direction starts.
     pub start: Pose,
+    /// What the frames shown have shown of the mucosa, and the two-way reading.
+    pub coverage: WindowCoverage,
     /// The cleansed CT, made the first time the translucency view asks for it.
     cleansed: OnceLock<Volume<i16>>,
 }
@@ -71,7 +76,10 @@ impl Session {
             ..FlightOptions::for_study(&study)
         };
         let field = potential_field(&study, opts.safety.min_wall_mm)?;
-        let mesh = CellMesh::new(&study.surface, &study.cells);
+        let mut mesh = CellMesh::new(&study.surface, &study.cells);
+        // Per-cell vertex lists: the CPU rasterizer's fast path (coverage, the CPU view).
+        mesh.index_cells();
+        let coverage = WindowCoverage::new(&mesh, &study.cells, opts.safety.min_wall_mm);
         let scout = ScoutMesh::new(&study.surface.mesh, 4.0);
         let vis = Visibility::new(&study.cells, Strategy::Ours);
         let dir = Direction::Forward;
@@ -100,6 +108,7 @@ impl Session {
             reached: false,
             fov: 90.0,
             start,
+            coverage,
             cleansed: OnceLock::new(),
         })
     }
@@ -131,6 +140,7 @@ impl Session {
         }
         self.sub.direction = dir;
         self.reached = false;
+        self.coverage.flight.clear();
         let x = self.sub.state.x;
         self.pilot = Autopilot::new(
             &self.study.centerline,
@@ -249,6 +259,61 @@ impl Session {
     pub fn restart(&mut self) {
         self.place(self.start);
         self.playing = false;
+        self.coverage.flight.clear();
+    }
+
+    /// Marks what `camera` shows in a view of `size` pixels as seen (`frame_ms`: the window's
+    /// last frame time, which bounds what marking may cost).
+    pub fn mark_shown(&mut self, camera: &Camera, size: [u32; 2], frame_ms: f64) {
+        self.coverage
+            .mark(&self.mesh, &self.study.cells, camera, size, frame_ms);
+    }
+
+    /// Carries out what the two-way reading asks this frame.
+    pub fn step_reading(&mut self) {
+        let wanted = self
+            .coverage
+            .step_reading(self.reached, &self.mesh, &self.study);
+        self.follow(wanted);
+    }
+
+    /// Starts the two-way reading: rectum → cecum, cecum → rectum, then the review.
+    pub fn start_reading(&mut self) {
+        let wanted = self.coverage.start_reading(&self.mesh);
+        self.follow(wanted);
+    }
+
+    fn follow(&mut self, wanted: Move) {
+        match wanted {
+            Move::Nothing => {}
+            Move::FlyForward | Move::FlyBackward => {
+                let dir = if matches!(wanted, Move::FlyForward) {
+                    Direction::Forward
+                } else {
+                    Direction::Backward
+                };
+                let from_start = dir == Direction::Forward;
+                self.set_direction(dir);
+                if from_start {
+                    self.restart();
+                }
+                self.set_playing(true);
+            }
+            Move::Place(pose) => {
+                self.show_from(pose);
+            }
+        }
+    }
+
+    /// Stops and stands at `pose` when it is in the safe set (a review's or a patch's pose
+    /// is in the lumen clear of the wall by Ds; the safe set is checked all the same).
+    pub fn show_from(&mut self, pose: Pose) -> bool {
+        if !self.sub.is_safe(&self.field, pose.position) {
+            return false;
+        }
+        self.set_playing(false);
+        self.place(pose);
+        true
     }
 
     /// Whether the straight segment `from → to` stays in the lumen, ignoring its last

@@ -1,0 +1,418 @@
+//! Coverage in the window: the frames shown mark the mucosa they show, on a small CPU frame
+//! of the same view (exact culling, [`voyage_view::Reader`]), so that it costs the same on
+//! any renderer and never reads a GPU buffer back. Marking is held to [`BUDGET_SHARE`] of the
+//! window's frame time: where a frame is cheap to mark every frame is, else every k-th
+//! (consecutive frames of a flight differ by a fraction of a millimetre), and a camera that
+//! stands still is marked once. The session's coverage counts every frame since the study
+//! opened; the flight's, the frames since the direction was last set.
+//! The two-way reading (rectum → cecum, cecum → rectum, then a review of every unseen
+//! patch) is a small state machine the window steps once per frame.
+
+use std::time::Instant;
+
+use glam::DVec3;
+use voyage_core::{Cells, Study};
+use voyage_nav::{Camera, Pose};
+use voyage_view::{
+    CellMesh, Coverage, CoverageOptions, Lumen, Patch, REVIEW_ROUNDS, Reader, viewing_pose,
+};
+
+use super::{
+    report::{CoverageReport, ReadingReport},
+    scout::ScoutMesh,
+};
+
+/// The share of the window's frame time marking may take.
+pub const BUDGET_SHARE: f64 = 0.08;
+
+/// Height (pixels) of the frame coverage is marked on; its width follows the view's aspect.
+pub const MARK_HEIGHT: u32 = 128;
+
+/// Patches "next unseen" tries for a viewpoint, largest first.
+const NEXT_TRIES: usize = 10;
+
+/// Frames the review stays at each patch (it marks every one of them).
+pub const DWELL_FRAMES: u32 = 20;
+
+pub struct WindowCoverage {
+    /// Marking is on (a switch, so its cost can be measured against none).
+    pub on: bool,
+    reader: Reader,
+    /// Everything shown since the study opened.
+    pub session: Coverage,
+    /// What the current flight (direction) has shown.
+    pub flight: Coverage,
+    /// The two-way reading, while it runs and after.
+    pub reading: Option<TwoWay>,
+    /// The patch last visited, outlined in the view: its boundary edges.
+    pub outline: Vec<[DVec3; 2]>,
+    last: Option<(Pose, f64, [u32; 2])>,
+    mark_ms: Vec<f64>,
+    /// Marking time the frames so far have allowed and not used (ms).
+    budget_ms: f64,
+    /// Frames that asked to be marked, and those that were.
+    pub frames_asked: u64,
+    pub frames_marked: u64,
+    /// The scout's colouring: unseen share per scout vertex, its version, and the session's
+    /// coverage it was made at, and when.
+    scout_tint: (Vec<f32>, u64, f64),
+    tinted_at: Option<Instant>,
+    /// The camera keeps this far from the wall (the session's safety margin).
+    min_wall_mm: f64,
+}
+
+/// Where the two-way reading is.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Stage {
+    Forward,
+    Backward,
+    /// At patch `index` of this round's list, for `dwell` more frames.
+    Review {
+        round: usize,
+        index: usize,
+        dwell: u32,
+    },
+    Done,
+}
+
+pub struct TwoWay {
+    pub stage: Stage,
+    /// What the reading showed (from its start).
+    pub seen: Coverage,
+    pub one_way_pct: Option<f64>,
+    pub two_way_pct: Option<f64>,
+    pub after_review_pct: Option<f64>,
+    /// This round's patches, largest first, and the poses that show them.
+    queue: Vec<(Patch, Option<Pose>)>,
+    /// Unseen patches when the review began, and the visits made.
+    pub patches: usize,
+    pub visits: usize,
+    /// Area the current round's visits newly showed (mm²).
+    round_shown: f64,
+}
+
+/// What the window must do for the reading this frame.
+pub enum Move {
+    Nothing,
+    /// Fly from the start of the direction, playing.
+    FlyForward,
+    FlyBackward,
+    /// Stand still at this pose.
+    Place(Pose),
+}
+
+impl WindowCoverage {
+    pub fn new(mesh: &CellMesh, cells: &Cells, min_wall_mm: f64) -> Self {
+        let options = CoverageOptions::default();
+        let lens = Camera::new(Pose::looking(DVec3::ZERO, DVec3::Z, DVec3::Y));
+        WindowCoverage {
+            on: true,
+            reader: Reader::new(cells, lens, MARK_HEIGHT, MARK_HEIGHT),
+            session: Coverage::new(mesh, options),
+            flight: Coverage::new(mesh, options),
+            reading: None,
+            outline: Vec::new(),
+            last: None,
+            mark_ms: Vec::new(),
+            budget_ms: 0.0,
+            frames_asked: 0,
+            frames_marked: 0,
+            scout_tint: (Vec::new(), 0, f64::NAN),
+            tinted_at: None,
+            min_wall_mm,
+        }
+    }
+
+    /// Marks what `camera` shows in a view of `size` pixels, unless the last frame marked
+    /// showed exactly that, or the budget is spent: `frame_ms` is the window's last frame
+    /// time, of which marking may take [`BUDGET_SHARE`].
+    pub fn mark(
+        &mut self,
+        mesh: &CellMesh,
+        cells: &Cells,
+        camera: &Camera,
+        size: [u32; 2],
+        frame_ms: f64,
+    ) {
+        if !self.on {
+            return;
+        }
+        let key = (camera.pose, camera.fov_y_deg, size);
+        if self.last == Some(key) {
+            return;
+        }
+        self.frames_asked += 1;
+        let cost = self.mean_mark_ms();
+        // A long stall (loading, a dialog) must not save up a burst of marking.
+        self.budget_ms = (self.budget_ms + BUDGET_SHARE * frame_ms).min(2.0 * cost + 1.0);
+        if self.budget_ms < cost {
+            return;
+        }
+        self.last = Some(key);
+        self.frames_marked += 1;
+        let clock = Instant::now();
+        let width = ((MARK_HEIGHT as f64 * size[0] as f64 / size[1].max(1) as f64).round() as u32)
+            .clamp(16, 4 * MARK_HEIGHT);
+        self.reader.set_lens(*camera, width, MARK_HEIGHT);
+        self.reader
+            .show(mesh, cells, camera.pose, &mut self.session);
+        // The same frame marks the flight's and the reading's coverage.
+        let frame = self.reader.frame();
+        let view = voyage_view::View::new(camera, width, MARK_HEIGHT);
+        self.flight.mark(frame, &view, mesh);
+        if let Some(r) = &mut self.reading {
+            let shown = r.seen.mark(frame, &view, mesh);
+            r.round_shown += shown;
+        }
+        let ms = clock.elapsed().as_secs_f64() * 1e3;
+        self.budget_ms -= ms;
+        self.mark_ms.push(ms);
+    }
+
+    /// A two-way reading is under way.
+    pub fn reading_running(&self) -> bool {
+        self.reading
+            .as_ref()
+            .is_some_and(|r| r.stage != Stage::Done)
+    }
+
+    /// Mean time to mark a frame (ms), over the frames marked.
+    pub fn mean_mark_ms(&self) -> f64 {
+        if self.mark_ms.is_empty() {
+            0.0
+        } else {
+            self.mark_ms.iter().sum::<f64>() / self.mark_ms.len() as f64
+        }
+    }
+
+    /// What the report says of coverage.
+    pub fn report(&self) -> CoverageReport {
+        CoverageReport {
+            on: self.on,
+            session_pct: self.session.percent(),
+            flight_pct: self.flight.percent(),
+            mark_ms: self.mean_mark_ms(),
+            frames_asked: self.frames_asked,
+            frames_marked: self.frames_marked,
+            reading: self.reading.as_ref().map(|r| ReadingReport {
+                stage: match r.stage {
+                    Stage::Forward => "forward",
+                    Stage::Backward => "backward",
+                    Stage::Review { .. } => "review",
+                    Stage::Done => "done",
+                }
+                .into(),
+                one_way_pct: r.one_way_pct,
+                two_way_pct: r.two_way_pct,
+                after_review_pct: r.after_review_pct,
+                patches: r.patches,
+                visits: r.visits,
+            }),
+        }
+    }
+
+    /// Starts the two-way reading afresh.
+    pub fn start_reading(&mut self, mesh: &CellMesh) -> Move {
+        self.reading = Some(TwoWay {
+            stage: Stage::Forward,
+            seen: Coverage::new(mesh, *self.session.options()),
+            one_way_pct: None,
+            two_way_pct: None,
+            after_review_pct: None,
+            queue: Vec::new(),
+            patches: 0,
+            visits: 0,
+            round_shown: 0.0,
+        });
+        self.flight.clear();
+        Move::FlyForward
+    }
+
+    /// One frame of the reading: `reached` says the flight of the current direction has
+    /// reached its goal.
+    pub fn step_reading(&mut self, reached: bool, mesh: &CellMesh, study: &Study) -> Move {
+        let Some(r) = &mut self.reading else {
+            return Move::Nothing;
+        };
+        match r.stage.clone() {
+            Stage::Forward if reached => {
+                r.one_way_pct = Some(r.seen.percent());
+                r.stage = Stage::Backward;
+                self.flight.clear();
+                Move::FlyBackward
+            }
+            Stage::Backward if reached => {
+                r.two_way_pct = Some(r.seen.percent());
+                r.queue = review_queue(&r.seen, mesh, study, self.min_wall_mm);
+                r.patches = r.queue.len();
+                r.round_shown = 0.0;
+                r.stage = Stage::Review {
+                    round: 0,
+                    index: 0,
+                    dwell: 0,
+                };
+                Move::Nothing
+            }
+            Stage::Review {
+                round,
+                index,
+                dwell,
+            } => {
+                if dwell > 0 {
+                    r.stage = Stage::Review {
+                        round,
+                        index,
+                        dwell: dwell - 1,
+                    };
+                    return Move::Nothing;
+                }
+                // The next patch this round that has a pose.
+                let next = (index..r.queue.len()).find(|&i| r.queue[i].1.is_some());
+                if let Some(i) = next {
+                    let (patch, pose) = &r.queue[i];
+                    self.outline = outline(patch, mesh);
+                    r.visits += 1;
+                    r.stage = Stage::Review {
+                        round,
+                        index: i + 1,
+                        dwell: DWELL_FRAMES,
+                    };
+                    return Move::Place(pose.expect("found with a pose"));
+                }
+                // The round is over: another, for what the poses left, while it shows more.
+                let again = round + 1 < REVIEW_ROUNDS && r.round_shown > 0.0;
+                r.queue = if again {
+                    review_queue(&r.seen, mesh, study, self.min_wall_mm)
+                } else {
+                    Vec::new()
+                };
+                if r.queue.is_empty() {
+                    r.after_review_pct = Some(r.seen.percent());
+                    r.stage = Stage::Done;
+                    self.outline.clear();
+                } else {
+                    r.round_shown = 0.0;
+                    r.stage = Stage::Review {
+                        round: round + 1,
+                        index: 0,
+                        dwell: 0,
+                    };
+                }
+                Move::Nothing
+            }
+            _ => Move::Nothing,
+        }
+    }
+
+    /// The largest unseen patch of the session that a pose shows (of the [`NEXT_TRIES`]
+    /// largest), with that pose; else the largest, with None. None when nothing is left. Its
+    /// outline is kept for the view.
+    pub fn next_patch(&mut self, mesh: &CellMesh, study: &Study) -> Option<(Patch, Option<Pose>)> {
+        let lumen = lumen(study, self.min_wall_mm);
+        let patches = self.session.patches(mesh);
+        let shown = patches.iter().take(NEXT_TRIES).find_map(|p| {
+            viewing_pose(p, mesh, &lumen, self.session.options())
+                .map(|pose| (p.clone(), Some(pose)))
+        });
+        let (patch, pose) = shown.or_else(|| patches.into_iter().next().map(|p| (p, None)))?;
+        self.outline = outline(&patch, mesh);
+        Some((patch, pose))
+    }
+
+    /// The scout's colouring (see [`unseen_by_cluster`]), made again when the session's
+    /// coverage has moved by [`TINT_STEP_PCT`], at most every [`TINT_EVERY_S`]: a new
+    /// colouring costs a pass over the surface and a redraw of the scout image.
+    pub fn scout_tint(&mut self, mesh: &CellMesh, scout: &ScoutMesh) -> (&[f32], u64) {
+        let pct = self.session.percent();
+        let (_, version, at) = &self.scout_tint;
+        let due = self
+            .tinted_at
+            .is_none_or(|t| t.elapsed().as_secs_f64() >= TINT_EVERY_S);
+        if at.is_nan() || due && (pct - at).abs() >= TINT_STEP_PCT {
+            self.tinted_at = Some(Instant::now());
+            let shares = unseen_by_cluster(
+                &self.session,
+                mesh,
+                &scout.vertex_cluster,
+                scout.positions.len(),
+            );
+            self.scout_tint = (shares, version + 1, pct);
+        }
+        (&self.scout_tint.0, self.scout_tint.1)
+    }
+}
+
+/// The scout is coloured again when the session's coverage has moved this far (percentage
+/// points), and at most this often (seconds).
+const TINT_STEP_PCT: f64 = 0.5;
+const TINT_EVERY_S: f64 = 2.0;
+
+/// Per scout vertex (a cluster of surface vertices), the unseen share of its area.
+fn unseen_by_cluster(
+    seen: &Coverage,
+    mesh: &CellMesh,
+    vertex_cluster: &[u32],
+    clusters: usize,
+) -> Vec<f32> {
+    let mut area = vec![0f32; clusters];
+    let mut unseen = vec![0f32; clusters];
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        let Some(&c) = vertex_cluster.get(tri[0] as usize) else {
+            continue;
+        };
+        let a = seen.area_of(t as u32);
+        area[c as usize] += a;
+        if !seen.is_seen(t as u32) {
+            unseen[c as usize] += a;
+        }
+    }
+    unseen
+        .iter()
+        .zip(&area)
+        .map(|(&u, &a)| if a > 0.0 { u / a } else { 0.0 })
+        .collect()
+}
+
+fn lumen(study: &Study, min_wall_mm: f64) -> Lumen<'_> {
+    Lumen {
+        ds: &study.ds,
+        min_wall_mm,
+        up: -study.gravity_local(),
+    }
+}
+
+/// The unseen patches, largest first, each with a pose that shows it.
+fn review_queue(
+    seen: &Coverage,
+    mesh: &CellMesh,
+    study: &Study,
+    min_wall_mm: f64,
+) -> Vec<(Patch, Option<Pose>)> {
+    let lumen = lumen(study, min_wall_mm);
+    seen.patches(mesh)
+        .into_iter()
+        .map(|p| {
+            let pose = viewing_pose(&p, mesh, &lumen, seen.options());
+            (p, pose)
+        })
+        .collect()
+}
+
+/// The edges of a patch's triangles that no other of its triangles shares: its outline.
+pub fn outline(patch: &Patch, mesh: &CellMesh) -> Vec<[DVec3; 2]> {
+    let mut count: std::collections::HashMap<[u32; 2], u32> = Default::default();
+    for &t in &patch.triangles {
+        let [a, b, c] = mesh.triangles[t as usize];
+        for (u, v) in [(a, b), (b, c), (c, a)] {
+            *count.entry([u.min(v), u.max(v)]).or_insert(0) += 1;
+        }
+    }
+    let at = |v: u32| DVec3::from_array(mesh.positions[v as usize].map(f64::from));
+    let mut edges: Vec<[u32; 2]> = count
+        .into_iter()
+        .filter(|&(_, n)| n == 1)
+        .map(|(e, _)| e)
+        .collect();
+    edges.sort_unstable();
+    edges.into_iter().map(|[u, v]| [at(u), at(v)]).collect()
+}
