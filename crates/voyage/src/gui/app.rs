@@ -1352,10 +1352,19 @@ impl App {
                 ));
             }
         }
+        // The patch visited: the edges of its outline the camera sees, within reading
+        // distance (a long patch's far edges would only clutter the view).
         let aspect = (rect.width() / rect.height().max(1.0)) as f64;
         let on_screen = |p: DVec3| project(&cam, p, aspect).map(|f| rect.min + f * rect.size());
         let orange = Stroke::new(2.0, Color32::from_rgb(255, 150, 30));
+        let reach = s.coverage.session.options().reading_distance_mm;
         for [a, b] in &s.coverage.outline {
+            let mid = 0.5 * (*a + *b);
+            if mid.distance(cam.pose.position) > reach
+                || surface_point_on_screen(s, &cam, rect, mid).is_none()
+            {
+                continue;
+            }
             if let (Some(a), Some(b)) = (on_screen(*a), on_screen(*b)) {
                 painter.line_segment([a, b], orange);
             }
