@@ -11,6 +11,7 @@ mod closeup;
 mod coverage;
 mod findings;
 mod mesh;
+mod polyp;
 mod raster;
 mod shading;
 #[cfg(feature = "survey")]
@@ -25,6 +26,7 @@ pub use coverage::{
 };
 pub use findings::{Findings, Hit, Marker, Measurement, pick};
 pub use mesh::{CellMesh, DISPLAY_NORMAL_PASSES, smooth_normals};
+pub use polyp::{MIN_HEIGHT_MM, PolypSize, measure_polyp};
 pub use raster::{Frame, NO_TRIANGLE, Pixel, Rasterizer, Shading, View, render_rgba, shade};
 pub use shading::{Lighting, encode};
 #[cfg(feature = "survey")]

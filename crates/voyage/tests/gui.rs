@@ -709,7 +709,11 @@ fn two_way_reading_runs_to_the_end_and_coverage_rises() {
     let c = &r["coverage"];
     let reading = &c["reading"];
     let pct = |k: &str| reading[k].as_f64().unwrap_or(f64::NAN);
-    let (one, two, after) = (pct("one_way_pct"), pct("two_way_pct"), pct("after_review_pct"));
+    let (one, two, after) = (
+        pct("one_way_pct"),
+        pct("two_way_pct"),
+        pct("after_review_pct"),
+    );
     eprintln!(
         "window: one way {one:.1} %, two ways {two:.1} %, after review {after:.1} %, {} patches, {} visits; marked {} of {} frames at {:.2} ms",
         reading["patches"], reading["visits"], c["frames_marked"], c["frames_asked"], c["mark_ms"]
@@ -720,15 +724,27 @@ fn two_way_reading_runs_to_the_end_and_coverage_rises() {
     // within a time budget, so a little less.
     assert!(after >= 94.0, "after review {after:.1} %");
     let patches = reading["patches"].as_u64().unwrap();
-    assert!(patches >= 3 && reading["visits"].as_u64().unwrap() >= patches, "{c}");
+    assert!(
+        patches >= 3 && reading["visits"].as_u64().unwrap() >= patches,
+        "{c}"
+    );
     assert!(c["session_pct"].as_f64().unwrap() >= after - 1e-9);
     // The scout shows the unseen mucosa in blue: much of it after 150 frames, little after.
     let view = view_rect(&r);
     let scout = [view[2] + 4.0, view[1] + 20.0, 1280.0, view[3]];
     let [partial, read] = shots.map(|s| image::open(&s).unwrap().to_rgba8());
-    let (before, left) = (count(&partial, scout, unseen_blue), count(&read, scout, unseen_blue));
+    let (before, left) = (
+        count(&partial, scout, unseen_blue),
+        count(&read, scout, unseen_blue),
+    );
     eprintln!("scout: {before} blue pixels after 150 frames, {left} after the reading");
-    assert!(before > 5000, "the scout shows no unseen mucosa: {before} pixels");
-    assert!(left * 5 < before, "the scout still shows {left} unseen pixels of {before}");
+    assert!(
+        before > 5000,
+        "the scout shows no unseen mucosa: {before} pixels"
+    );
+    assert!(
+        left * 5 < before,
+        "the scout still shows {left} unseen pixels of {before}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
