@@ -199,6 +199,58 @@ pub struct Study {
     pub timings: Timings,
 }
 
+/// Along the centerline from its rectum end, the rectum reaches this far (mm; the rectum is
+/// 12–15 cm long).
+pub const RECTUM_MM: f64 = 150.0;
+
+/// Dt from the source is shorter than the arc along the centerline by up to this fraction
+/// (the geodesic cuts the bends).
+const ARC_SLACK: f64 = 0.25;
+
+/// The colon's segments from the rectum to the cecum.
+pub const COLON_SEGMENTS: [&str; 8] = [
+    "rectum",
+    "sigmoid",
+    "descending",
+    "splenic flexure",
+    "transverse",
+    "hepatic flexure",
+    "ascending",
+    "cecum",
+];
+
+/// The non-decreasing sequence of labels (0..n) that differs from `wanted` in the fewest
+/// places (dynamic programming; ties go to the earlier label).
+fn monotone_labels(wanted: &[usize], n: usize) -> Vec<usize> {
+    if wanted.is_empty() {
+        return Vec::new();
+    }
+    // cost[i][k]: fewest disagreements over 0..=i with label k at i.
+    let mut cost = vec![vec![0u32; n]; wanted.len()];
+    for (i, &w) in wanted.iter().enumerate() {
+        let mut best_before = u32::MAX;
+        for k in 0..n {
+            let prev = if i == 0 {
+                0
+            } else {
+                best_before = best_before.min(cost[i - 1][k]);
+                best_before
+            };
+            cost[i][k] = prev + (w != k) as u32;
+        }
+    }
+    let mut labels = vec![0; wanted.len()];
+    let last = wanted.len() - 1;
+    let mut k = (0..n).min_by_key(|&k| (cost[last][k], k)).unwrap_or(0);
+    for i in (0..wanted.len()).rev() {
+        labels[i] = k;
+        if i > 0 {
+            k = (0..=k).min_by_key(|&j| (cost[i - 1][j], j)).unwrap_or(0);
+        }
+    }
+    labels
+}
+
 impl Study {
     /// The CT with the colon's tagged fluid made air (a copy; the CT itself when nothing was
     /// cleansed).
@@ -238,6 +290,70 @@ impl Study {
         Navigable::new(lumen, &self.ds, &self.centerline, min_wall_mm, &mut memory)
             .map(std::borrow::Cow::Owned)
     }
+    /// The centerline point nearest `p` (volume-local mm) of those as far from the source
+    /// along the centerline as `p` is through the lumen (Dt from the source, give or take
+    /// [`ARC_SLACK`]): where two loops lie side by side, the one `p` is in, not the one
+    /// across the wall. A point outside the lumen takes the nearest point of all.
+    fn nearest_centerline_point(&self, p: DVec3) -> Option<usize> {
+        let cl = &self.centerline;
+        let dt = self.dt_source.sample(p) as f64;
+        let near_dt =
+            |i: &usize| !dt.is_finite() || (cl.arc_mm[*i] - dt).abs() <= (ARC_SLACK * dt).max(50.0);
+        let d = |i: usize| DVec3::from_array(cl.points_mm[i]).distance_squared(p);
+        (0..cl.points_mm.len())
+            .filter(near_dt)
+            .min_by(|&a, &b| d(a).total_cmp(&d(b)))
+            .or_else(|| (0..cl.points_mm.len()).min_by(|&a, &b| d(a).total_cmp(&d(b))))
+    }
+
+    /// Arc length (mm from the centerline's rectum end, about the anal verge) of the
+    /// centerline point nearest `p` (volume-local mm, in the lumen: a point on the wall
+    /// moved a little along its normal).
+    pub fn arc_at(&self, p: DVec3) -> Option<f64> {
+        self.nearest_centerline_point(p)
+            .map(|i| self.centerline.arc_mm[i])
+    }
+
+    /// The colon segment `p` (volume-local mm, in the lumen) lies in: that of its centerline
+    /// point (see [`Study::arc_at`], [`Study::segments_along`]).
+    pub fn segment_at(&self, p: DVec3) -> &'static str {
+        self.nearest_centerline_point(p)
+            .map_or("colon", |i| self.segments_along()[i])
+    }
+
+    /// The segment of each centerline point, from the rectum end: the rectum for the first
+    /// [`RECTUM_MM`], then the segments in their anatomical order, each where the point's
+    /// place in the colon's box (patient frame) names it. The order is kept: the labels are
+    /// the monotone sequence that disagrees with the fewest places (a sigmoid loop that
+    /// wanders into the descending colon's corner stays sigmoid).
+    pub fn segments_along(&self) -> Vec<&'static str> {
+        let g = self.ct.geometry();
+        let grid = &self.ds.grid;
+        let hi = [0, 1, 2].map(|a| grid.lo[a] + grid.dims[a].saturating_sub(1));
+        let colon = g.patient_box(grid.lo, hi);
+        let cl = &self.centerline;
+        let wanted: Vec<usize> = cl
+            .points_mm
+            .iter()
+            .zip(&cl.arc_mm)
+            .map(|(p, &arc)| {
+                let name = if arc <= RECTUM_MM {
+                    "rectum"
+                } else {
+                    match crate::segment::region_of(g, DVec3::from_array(*p), &colon) {
+                        "rectosigmoid" => "sigmoid",
+                        region => region,
+                    }
+                };
+                COLON_SEGMENTS.iter().position(|&s| s == name).unwrap_or(0)
+            })
+            .collect();
+        monotone_labels(&wanted, COLON_SEGMENTS.len())
+            .into_iter()
+            .map(|i| COLON_SEGMENTS[i])
+            .collect()
+    }
+
     pub fn target_mm(&self) -> DVec3 {
         self.ct.geometry().index_to_local(DVec3::new(
             self.target[0] as f64,

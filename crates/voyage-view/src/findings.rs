@@ -117,11 +117,45 @@ fn intersect_front(origin: DVec3, dir: DVec3, a: DVec3, b: DVec3, c: DVec3) -> O
     (t > 0.0).then_some(t)
 }
 
+/// What a finding is, as a report names it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FindingKind {
+    Polyp,
+    Mass,
+    Diverticulum,
+    #[default]
+    Other,
+}
+
+impl FindingKind {
+    pub const ALL: [FindingKind; 4] = [
+        FindingKind::Polyp,
+        FindingKind::Mass,
+        FindingKind::Diverticulum,
+        FindingKind::Other,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            FindingKind::Polyp => "polyp",
+            FindingKind::Mass => "mass",
+            FindingKind::Diverticulum => "diverticulum",
+            FindingKind::Other => "other",
+        }
+    }
+}
+
 /// A finding on the wall.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Marker {
     pub label: String,
     pub note: String,
+    #[serde(default)]
+    pub kind: FindingKind,
+    /// Largest diameter (mm), from the 3D size tool ([`crate::measure_polyp`]).
+    #[serde(default)]
+    pub size_mm: Option<f64>,
     /// Volume-local mm.
     pub position: DVec3,
     /// Unit normal of the wall there, into the lumen.
@@ -168,6 +202,8 @@ impl Findings {
         self.markers.push(Marker {
             label,
             note: note.into(),
+            kind: FindingKind::Other,
+            size_mm: None,
             position,
             normal,
             view,
@@ -207,6 +243,70 @@ impl Findings {
 
     pub fn is_empty(&self) -> bool {
         self.markers.is_empty() && self.measurements.is_empty()
+    }
+}
+
+/// The exam's colonic category of ACR C-RADS (Zalis et al., Radiology 2005), from the
+/// findings: C0 an inadequate exam, C1 no polyp of 6 mm or more, C2 one or two polyps of
+/// 6–9 mm, C3 a polyp of 10 mm or more or three or more of 6–9 mm, C4 a mass likely
+/// malignant. Diverticula and other findings do not raise it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct CRads {
+    /// "C0" to "C4".
+    pub category: &'static str,
+    /// Why, in words.
+    pub reason: String,
+    /// Polyps without a size: the category holds only if they are under 6 mm.
+    pub unsized_polyps: Vec<String>,
+}
+
+/// Two-way coverage of the mucosa below this (%) makes the exam inadequate (C0).
+pub const C0_BELOW_COVERAGE_PCT: f64 = 90.0;
+
+/// The C-RADS category of `findings`; `coverage_pct` (the share of mucosa the reading saw,
+/// when known) below [`C0_BELOW_COVERAGE_PCT`] makes it C0.
+pub fn c_rads(findings: &Findings, coverage_pct: Option<f64>) -> CRads {
+    let polyps: Vec<&Marker> = findings
+        .markers
+        .iter()
+        .filter(|m| m.kind == FindingKind::Polyp)
+        .collect();
+    let unsized_polyps: Vec<String> = polyps
+        .iter()
+        .filter(|m| m.size_mm.is_none())
+        .map(|m| m.label.clone())
+        .collect();
+    let sizes: Vec<f64> = polyps.iter().filter_map(|m| m.size_mm).collect();
+    let large = sizes.iter().filter(|&&s| s >= 10.0).count();
+    let medium = sizes.iter().filter(|&&s| (6.0..10.0).contains(&s)).count();
+    let masses = findings
+        .markers
+        .iter()
+        .filter(|m| m.kind == FindingKind::Mass)
+        .count();
+    let (category, reason) = if masses > 0 {
+        ("C4", format!("{masses} colonic mass(es), likely malignant"))
+    } else if let Some(pct) = coverage_pct.filter(|&p| p < C0_BELOW_COVERAGE_PCT) {
+        (
+            "C0",
+            format!(
+                "inadequate: {pct:.1} % of the mucosa seen (under {C0_BELOW_COVERAGE_PCT:.0} %)"
+            ),
+        )
+    } else if large > 0 || medium >= 3 {
+        (
+            "C3",
+            format!("{large} polyp(s) ≥ 10 mm, {medium} of 6–9 mm: possibly advanced adenoma"),
+        )
+    } else if medium > 0 {
+        ("C2", format!("{medium} polyp(s) of 6–9 mm"))
+    } else {
+        ("C1", "no polyp of 6 mm or more".to_string())
+    };
+    CRads {
+        category,
+        reason,
+        unsized_polyps,
     }
 }
 

@@ -24,7 +24,9 @@ pub use coverage::{
     Coverage, CoverageOptions, Lumen, Patch, REVIEW_ROUNDS, Reader, Reading, Visit, read_both_ways,
     review, viewing_pose,
 };
-pub use findings::{Findings, Hit, Marker, Measurement, pick};
+pub use findings::{
+    C0_BELOW_COVERAGE_PCT, CRads, FindingKind, Findings, Hit, Marker, Measurement, c_rads, pick,
+};
 pub use mesh::{CellMesh, DISPLAY_NORMAL_PASSES, smooth_normals};
 pub use polyp::{MIN_HEIGHT_MM, PolypSize, measure_polyp};
 pub use raster::{Frame, NO_TRIANGLE, Pixel, Rasterizer, Shading, View, render_rgba, shade};

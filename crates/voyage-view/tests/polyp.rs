@@ -97,3 +97,44 @@ fn polyp_size_on_the_pipe_phantom_within_half_a_millimetre() {
     assert!(r.len() >= 2);
     check("pipe phantom", &r);
 }
+
+/// Each truth polyp's segment, as the report names it, and its distance from the rectum end.
+#[test]
+fn polyps_are_placed_in_their_segments() {
+    for seed in [1, 2] {
+        let p = phantom::colon(&ColonOptions {
+            seed,
+            ..Default::default()
+        })
+        .unwrap();
+        let study = prepare(p.ct, &PrepOptions::default(), |_| {}).unwrap();
+        for q in &p.truth.polyps {
+            // Just off the polyp's head, in the lumen, as a marker on it is.
+            let c = DVec3::from_array(q.center_mm)
+                + DVec3::from_array(q.direction) * (q.diameter_mm / 2.0 + 1.5);
+            let got = study.segment_at(c);
+            let arc = study.arc_at(c).unwrap();
+            eprintln!(
+                "seed {seed}: {} polyp at arc {:.0} (truth {:.0}): {got}",
+                q.segment, arc, q.arc_mm
+            );
+            // The centerline found runs a few % longer than the truth's (it follows the folds).
+            assert!(
+                (arc - q.arc_mm).abs() <= (0.04 * q.arc_mm).max(20.0),
+                "arc {arc:.0} against {:.0}",
+                q.arc_mm
+            );
+            // The truth has no flexures: a flexure is either of its neighbours.
+            let same = match got {
+                "splenic flexure" => ["descending", "transverse"].contains(&q.segment.as_str()),
+                "hepatic flexure" => ["transverse", "ascending"].contains(&q.segment.as_str()),
+                name => name == q.segment,
+            };
+            assert!(
+                same,
+                "seed {seed}: the {} polyp at arc {arc:.0} is said to be in the {got}",
+                q.segment
+            );
+        }
+    }
+}

@@ -1602,7 +1602,7 @@ fn lps_box(geom: &crate::Geometry, b: &Bbox) -> [DVec3; 2] {
 }
 
 /// The anatomical region of a volume-local point within the colon's LPS box.
-fn region_of(geom: &crate::Geometry, p: DVec3, colon: &[DVec3; 2]) -> &'static str {
+pub(crate) fn region_of(geom: &crate::Geometry, p: DVec3, colon: &[DVec3; 2]) -> &'static str {
     let q = geom.local_to_patient(p);
     let span = (colon[1] - colon[0]).max(DVec3::splat(1.0));
     let u = (q.x - colon[0].x) / span.x;
