@@ -5,6 +5,7 @@
 #     renderer runs (and is tested) where there is no GPU.
 #   libxkbcommon-x11-0, libx11-xcb1 — what the window (winit on X11) loads at run time.
 #   xvfb, xdotool — a virtual display and mouse/keyboard driver for the window's tests.
+#   chromium — headless, renders report.html in its test.
 # Idempotent; skips apt when everything is already there. Needs root (or sudo) for apt.
 set -euo pipefail
 need=()
@@ -19,6 +20,7 @@ command -v Xvfb >/dev/null 2>&1 || need+=(xvfb)
 command -v xvfb-run >/dev/null 2>&1 || need+=(xvfb)
 command -v xdotool >/dev/null 2>&1 || need+=(xdotool)
 command -v xauth >/dev/null 2>&1 || need+=(xauth)
+command -v chromium >/dev/null 2>&1 || need+=(chromium)
 if [ ${#need[@]} -eq 0 ]; then
   exit 0
 fi

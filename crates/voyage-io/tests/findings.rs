@@ -446,3 +446,36 @@ fn pick_on_colon_a_is_quick_and_lands_where_the_frame_shows() {
     );
     assert_eq!(agree, covered, "pick and the rasterizer disagree");
 }
+
+#[test]
+fn findings_json_reads_back_what_was_exported() {
+    let dir = temp_dir("roundtrip");
+    let mut f = sample_findings();
+    f.markers[0].kind = voyage_view::FindingKind::Polyp;
+    f.markers[0].size_mm = Some(6.25);
+    let g = tilted_geometry();
+    export_findings(&dir, &f, &g, |_, _| Ok((2, 2, vec![255; 16]))).unwrap();
+    let back = voyage_io::export::read_findings(&dir.join("findings.json"), &g).unwrap();
+    assert_eq!(back.markers.len(), 2);
+    for (a, b) in f.markers.iter().zip(&back.markers) {
+        assert_eq!(
+            (&a.label, &a.note, a.kind, a.size_mm),
+            (&b.label, &b.note, b.kind, b.size_mm)
+        );
+        assert!(a.position.distance(b.position) < 1e-9 && a.normal.distance(b.normal) < 1e-9);
+        assert!(a.view.position.distance(b.view.position) < 1e-9);
+    }
+    for (a, b) in f.measurements.iter().zip(&back.measurements) {
+        assert!((a.length_mm() - b.length_mm()).abs() < 1e-9 && a.label == b.label);
+    }
+    // Not a findings file: the error names the file.
+    let other = dir.join("findings.mrk.json");
+    let e = voyage_io::export::read_findings(&other, &g)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("findings.mrk.json") && e.contains("not a voyage findings.json"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

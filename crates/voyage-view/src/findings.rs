@@ -247,7 +247,8 @@ impl Findings {
 }
 
 /// The exam's colonic category of ACR C-RADS (Zalis et al., Radiology 2005), from the
-/// findings: C0 an inadequate exam, C1 no polyp of 6 mm or more, C2 one or two polyps of
+/// findings: C0 an inadequate exam (here: no finding of C2 or above, and too little of the
+/// mucosa seen to call it negative), C1 no polyp of 6 mm or more, C2 one or two polyps of
 /// 6–9 mm, C3 a polyp of 10 mm or more or three or more of 6–9 mm, C4 a mass likely
 /// malignant. Diverticula and other findings do not raise it.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -264,7 +265,7 @@ pub struct CRads {
 pub const C0_BELOW_COVERAGE_PCT: f64 = 90.0;
 
 /// The C-RADS category of `findings`; `coverage_pct` (the share of mucosa the reading saw,
-/// when known) below [`C0_BELOW_COVERAGE_PCT`] makes it C0.
+/// when known) below [`C0_BELOW_COVERAGE_PCT`] makes a negative reading C0.
 pub fn c_rads(findings: &Findings, coverage_pct: Option<f64>) -> CRads {
     let polyps: Vec<&Marker> = findings
         .markers
@@ -286,13 +287,6 @@ pub fn c_rads(findings: &Findings, coverage_pct: Option<f64>) -> CRads {
         .count();
     let (category, reason) = if masses > 0 {
         ("C4", format!("{masses} colonic mass(es), likely malignant"))
-    } else if let Some(pct) = coverage_pct.filter(|&p| p < C0_BELOW_COVERAGE_PCT) {
-        (
-            "C0",
-            format!(
-                "inadequate: {pct:.1} % of the mucosa seen (under {C0_BELOW_COVERAGE_PCT:.0} %)"
-            ),
-        )
     } else if large > 0 || medium >= 3 {
         (
             "C3",
@@ -300,6 +294,15 @@ pub fn c_rads(findings: &Findings, coverage_pct: Option<f64>) -> CRads {
         )
     } else if medium > 0 {
         ("C2", format!("{medium} polyp(s) of 6–9 mm"))
+    } else if let Some(pct) = coverage_pct.filter(|&p| p < C0_BELOW_COVERAGE_PCT) {
+        // A negative reading of too little mucosa is no negative exam; a positive finding
+        // stands however much was seen.
+        (
+            "C0",
+            format!(
+                "inadequate: no polyp of 6 mm or more, but only {pct:.1} % of the mucosa seen (under {C0_BELOW_COVERAGE_PCT:.0} %)"
+            ),
+        )
     } else {
         ("C1", "no polyp of 6 mm or more".to_string())
     };
@@ -413,6 +416,66 @@ mod tests {
         // No cells, or a cell that does not exist: nothing.
         assert_eq!(pick(&mesh, Some(&[]), o, d), None);
         assert_eq!(pick(&mesh, Some(&[7]), o, d), None);
+    }
+
+    fn with(kinds: &[(FindingKind, Option<f64>)]) -> Findings {
+        let mut f = Findings::default();
+        let pose = Pose::looking(DVec3::ZERO, DVec3::Z, DVec3::Y);
+        for &(kind, size) in kinds {
+            f.add_marker(DVec3::ZERO, DVec3::Z, pose, "");
+            let m = f.markers.last_mut().unwrap();
+            m.kind = kind;
+            m.size_mm = size;
+        }
+        f
+    }
+
+    #[test]
+    fn c_rads_follows_the_acr_categories() {
+        use FindingKind::*;
+        let cat = |k: &[(FindingKind, Option<f64>)], cov| c_rads(&with(k), cov).category;
+        assert_eq!(cat(&[], Some(97.0)), "C1");
+        assert_eq!(cat(&[(Polyp, Some(5.9)), (Diverticulum, None)], None), "C1");
+        assert_eq!(cat(&[(Polyp, Some(6.0))], None), "C2");
+        assert_eq!(cat(&[(Polyp, Some(6.0)), (Polyp, Some(9.9))], None), "C2");
+        assert_eq!(
+            cat(
+                &[(Polyp, Some(6.0)), (Polyp, Some(7.0)), (Polyp, Some(8.0))],
+                None
+            ),
+            "C3"
+        );
+        assert_eq!(cat(&[(Polyp, Some(10.0))], Some(99.0)), "C3");
+        assert_eq!(cat(&[(Mass, None), (Polyp, Some(4.0))], Some(50.0)), "C4");
+        // Too little seen: a negative reading is inadequate; a positive finding stands.
+        assert_eq!(cat(&[(Polyp, Some(4.0))], Some(85.0)), "C0");
+        assert_eq!(cat(&[(Polyp, Some(12.0))], Some(85.0)), "C3");
+        // An unsized polyp is named, so that the category is not read as final.
+        let r = c_rads(&with(&[(Polyp, None), (Other, Some(20.0))]), None);
+        assert_eq!(
+            (r.category, r.unsized_polyps),
+            ("C1", vec!["M1".to_string()])
+        );
+    }
+
+    #[test]
+    fn old_findings_without_kind_or_size_still_load() {
+        let pose = Pose::looking(DVec3::ZERO, DVec3::Z, DVec3::Y);
+        let mut json = serde_json::to_value(Marker {
+            label: "M1".into(),
+            note: String::new(),
+            kind: FindingKind::Polyp,
+            size_mm: Some(6.5),
+            position: DVec3::ZERO,
+            normal: DVec3::Z,
+            view: pose,
+        })
+        .unwrap();
+        assert_eq!(json["kind"], "polyp");
+        json.as_object_mut().unwrap().remove("kind");
+        json.as_object_mut().unwrap().remove("size_mm");
+        let m: Marker = serde_json::from_value(json).unwrap();
+        assert_eq!((m.kind, m.size_mm), (FindingKind::Other, None));
     }
 
     #[test]

@@ -123,8 +123,13 @@ fn read_json(p: &Path) -> Value {
 
 /// `voyage phantom colon --small ARGS --out OUT`, which must succeed.
 fn small_colon(out: &Path, args: &[&str]) {
+    colon(out, &[&["--small"], args].concat());
+}
+
+/// `voyage phantom colon ARGS --out OUT`, which must succeed.
+fn colon(out: &Path, args: &[&str]) {
     let made = Command::new(env!("CARGO_BIN_EXE_voyage"))
-        .args(["phantom", "colon", "--small"])
+        .args(["phantom", "colon"])
         .args(args)
         .arg("--out")
         .arg(out)
@@ -746,5 +751,126 @@ fn two_way_reading_runs_to_the_end_and_coverage_rises() {
         left * 5 < before,
         "the scout still shows {left} unseen pixels of {before}"
     );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The `data:` URLs of a report's images, decoded.
+fn embedded_pngs(html: &str) -> Vec<Vec<u8>> {
+    let decode = |s: &str| {
+        let value = |c: u8| match c {
+            b'A'..=b'Z' => c - b'A',
+            b'a'..=b'z' => c - b'a' + 26,
+            b'0'..=b'9' => c - b'0' + 52,
+            b'+' => 62,
+            _ => 63,
+        } as u32;
+        let mut out = Vec::new();
+        for chunk in s.as_bytes().chunks(4) {
+            let pad = chunk.iter().filter(|&&c| c == b'=').count();
+            let n = chunk
+                .iter()
+                .map(|&c| if c == b'=' { 0 } else { value(c) })
+                .fold(0u32, |n, v| n << 6 | v);
+            out.extend(&n.to_be_bytes()[1..4 - pad]);
+        }
+        out
+    };
+    html.split("src=\"data:image/png;base64,")
+        .skip(1)
+        .map(|rest| decode(&rest[..rest.find('"').unwrap()]))
+        .collect()
+}
+
+#[test]
+fn the_report_lists_the_polyps_with_sizes_segments_and_c_rads_and_their_views() {
+    let Some(display) = Display::start() else {
+        return;
+    };
+    let dir = scratch("report");
+    let (ct, truth) = (dir.join("colon.nii.gz"), dir.join("truth.json"));
+    // Full size: the small phantom's 1.5 mm voxels and narrow lumen are no place to size a
+    // polyp (voyage-view's tests/polyp.rs holds the tool to 0.5 mm on full-size phantoms).
+    colon(&ct, &["--truth", truth.to_str().unwrap()]);
+    let t = read_json(&truth);
+    let v3 = |v: &Value| {
+        DVec3::new(
+            v[0].as_f64().unwrap(),
+            v[1].as_f64().unwrap(),
+            v[2].as_f64().unwrap(),
+        )
+    };
+    let d = |x: &Value| x["diameter_mm"].as_f64().unwrap();
+    let polyp = t["polyps"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .max_by(|a, b| d(a).total_cmp(&d(b)))
+        .unwrap()
+        .clone();
+    let (c, r, into) = (
+        v3(&polyp["center_mm"]),
+        d(&polyp) / 2.0,
+        v3(&polyp["direction"]),
+    );
+    let facing =
+        voyage_nav::Pose::looking(c + (r + 6.0) * into, -into, into.any_orthonormal_vector());
+    let export = dir.join("export");
+    let steps = serde_json::json!([
+        {"centerline": false}, {"pose": facing.to_array()}, {"wait": 3},
+        {"polyp": {"at": [0.5, 0.5], "note": "sessile"}},
+        {"marker": {"at": [0.5, 0.5], "note": "also seen", "kind": "diverticulum"}},
+        {"export": export}, {"wait": 2}, {"quit": true}
+    ]);
+    let rep = view_script(&display, &ct, &["--paused"], steps, &dir, "script");
+    let markers = rep["markers"].as_array().unwrap();
+    assert_eq!(markers.len(), 2, "{rep}");
+    let size = markers[0]["size_mm"]
+        .as_f64()
+        .expect("the polyp has a size");
+    eprintln!(
+        "colon phantom: the {:.1} mm polyp measured {size:.2} mm in the window",
+        2.0 * r
+    );
+    assert!(
+        (size - 2.0 * r).abs() <= 0.5,
+        "{size:.2} against {:.1}",
+        2.0 * r
+    );
+    assert_eq!(markers[0]["kind"], "polyp");
+    let html = std::fs::read_to_string(export.join("report.html")).unwrap();
+    let expected = if size >= 10.0 {
+        "C3"
+    } else if size >= 6.0 {
+        "C2"
+    } else {
+        "C1"
+    };
+    assert!(
+        html.contains(&format!("<span id=\"c-rads\">{expected}</span>")),
+        "C-RADS {expected} missing"
+    );
+    let segment = polyp["segment"].as_str().unwrap();
+    let rows: Vec<&str> = html.split("<tr class=\"finding\">").skip(1).collect();
+    assert_eq!(rows.len(), 2);
+    assert!(
+        rows[0].contains("<td>polyp</td>") && rows[0].contains(&format!("<td>{size:.1} mm</td>")),
+        "{}",
+        rows[0]
+    );
+    assert!(
+        rows[0].contains(&format!("<td>{segment}</td>")),
+        "segment {segment} not in {}",
+        &rows[0][..300.min(rows[0].len())]
+    );
+    assert!(rows[1].contains("<td>diverticulum</td>"));
+    assert!(html.contains("id=\"coverage\""));
+    // The images are the marked views: the snapshots the export wrote, byte for byte.
+    let pngs = embedded_pngs(&html);
+    assert_eq!(pngs.len(), 2);
+    for (png, label) in pngs.iter().zip(["M1", "M2"]) {
+        let file = std::fs::read(export.join(format!("finding_{label}.png"))).unwrap();
+        assert!(png == &file, "{label}'s image is not its snapshot");
+        assert_eq!(image::load_from_memory(png).unwrap().width(), 512);
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -5,11 +5,12 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 use serde_json::json;
-use voyage_core::{Error, Geometry, Result};
-use voyage_view::{Findings, Marker};
+use voyage_core::{Error, Geometry, Result, Study};
+use voyage_view::{Findings, Marker, c_rads};
 
 use super::{
     markups::{MarkupsPoint, markups_line_node, markups_node, write_markups_nodes},
+    report::{Report, ReportCoverage, ReportFinding, write_report_html},
     study::write_json,
 };
 use crate::atomic::write_atomic;
@@ -27,24 +28,97 @@ pub fn export_findings(
     dir: &Path,
     findings: &Findings,
     geometry: &Geometry,
-    mut snapshot: impl FnMut(usize, &Marker) -> Result<(u32, u32, Vec<u8>)>,
+    snapshot: impl FnMut(usize, &Marker) -> Result<(u32, u32, Vec<u8>)>,
 ) -> Result<Vec<PathBuf>> {
+    Ok(write_findings(dir, findings, geometry, None, snapshot)?.0)
+}
+
+/// [`export_findings`] with each marker's segment and distance from the rectum end from
+/// `study`, then `report.html` ([`super::report`]): the same snapshots, the C-RADS category
+/// (with `coverage`'s two-way figure, where measured) and the coverage. `name` is the
+/// study's file name (no patient identity).
+pub fn export_reading(
+    dir: &Path,
+    findings: &Findings,
+    study: &Study,
+    name: &str,
+    coverage: ReportCoverage,
+    snapshot: impl FnMut(usize, &Marker) -> Result<(u32, u32, Vec<u8>)>,
+) -> Result<Vec<PathBuf>> {
+    let geometry = study.ct.geometry();
+    let (mut out, pngs) = write_findings(dir, findings, geometry, Some(study), snapshot)?;
+    let report = Report {
+        study: name.to_string(),
+        findings: findings
+            .markers
+            .iter()
+            .zip(pngs)
+            .map(|(m, png)| {
+                let place = placed(m, study);
+                ReportFinding {
+                    label: m.label.clone(),
+                    kind: m.kind.name().to_string(),
+                    size_mm: m.size_mm,
+                    segment: place.0.to_string(),
+                    from_rectum_mm: place.1,
+                    position_lps_mm: geometry.local_to_patient(m.position).to_array(),
+                    note: m.note.clone(),
+                    snapshot_png: png,
+                }
+            })
+            .collect(),
+        measurements: findings
+            .measurements
+            .iter()
+            .map(|m| (m.label.clone(), m.length_mm()))
+            .collect(),
+        c_rads: c_rads(findings, coverage.two_way_pct.or(coverage.session_pct)),
+        coverage,
+    };
+    let path = dir.join("report.html");
+    write_report_html(&path, &report)?;
+    out.push(path);
+    Ok(out)
+}
+
+/// A marker's segment and distance along the centerline from the rectum end, read just off
+/// the wall in the lumen.
+fn placed(m: &Marker, study: &Study) -> (&'static str, Option<f64>) {
+    let p = m.position + m.normal.normalize_or_zero() * OFF_WALL_MM;
+    (study.segment_at(p), study.arc_at(p))
+}
+
+/// How far into the lumen a marker's place is read (mm).
+const OFF_WALL_MM: f64 = 1.5;
+
+/// The snapshots, `findings.json` (with segments and distances where `study` is given) and
+/// `findings.mrk.json`; the paths written and each snapshot's PNG bytes.
+fn write_findings(
+    dir: &Path,
+    findings: &Findings,
+    geometry: &Geometry,
+    study: Option<&Study>,
+    mut snapshot: impl FnMut(usize, &Marker) -> Result<(u32, u32, Vec<u8>)>,
+) -> Result<(Vec<PathBuf>, Vec<Vec<u8>>)> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let names = snapshot_names(&findings.markers);
     let mut out = Vec::new();
+    let mut pngs = Vec::new();
     for (i, (marker, name)) in findings.markers.iter().zip(&names).enumerate() {
         let path = dir.join(name);
         let (width, height, rgba) = snapshot(i, marker)?;
-        write_png(&path, width, height, &rgba)?;
+        let png = encode_png(&path, width, height, &rgba)?;
+        write_atomic(&path, |w| w.write_all(&png))?;
+        pngs.push(png);
         out.push(path);
     }
     let path = dir.join("findings.json");
-    write_json(&path, &findings_json(findings, geometry, &names))?;
+    write_json(&path, &findings_json(findings, geometry, &names, study))?;
     out.push(path);
     let path = dir.join("findings.mrk.json");
     write_markups_nodes(&path, markups_nodes(findings, geometry))?;
     out.push(path);
-    Ok(out)
+    Ok((out, pngs))
 }
 
 /// `finding_<label>.png`, the label reduced to characters safe in any file system (labels
@@ -74,7 +148,8 @@ fn snapshot_names(markers: &[Marker]) -> Vec<String> {
     names
 }
 
-fn write_png(path: &Path, width: u32, height: u32, rgba: &[u8]) -> Result<()> {
+/// The RGBA image as PNG bytes; `path` names it in the error.
+fn encode_png(path: &Path, width: u32, height: u32, rgba: &[u8]) -> Result<Vec<u8>> {
     use image::ImageEncoder;
     let want = width as u64 * height as u64 * 4;
     if width == 0 || height == 0 || rgba.len() as u64 != want {
@@ -86,24 +161,34 @@ fn write_png(path: &Path, width: u32, height: u32, rgba: &[u8]) -> Result<()> {
             ),
         ));
     }
-    write_atomic(path, |w| {
-        image::codecs::png::PngEncoder::new(w)
-            .write_image(rgba, width, height, image::ExtendedColorType::Rgba8)
-            .map_err(std::io::Error::other)
-    })
+    let mut png = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut png)
+        .write_image(rgba, width, height, image::ExtendedColorType::Rgba8)
+        .map_err(|e| Error::format(path, format!("cannot encode the snapshot: {e}")))?;
+    Ok(png)
 }
 
 /// The report: LPS for other tools, volume-local mm and the pose for voyage itself. It
 /// carries nothing about the patient's identity (voyage never holds it).
-fn findings_json(findings: &Findings, g: &Geometry, snapshots: &[String]) -> serde_json::Value {
+fn findings_json(
+    findings: &Findings,
+    g: &Geometry,
+    snapshots: &[String],
+    study: Option<&Study>,
+) -> serde_json::Value {
     let markers: Vec<_> = findings
         .markers
         .iter()
         .zip(snapshots)
         .map(|(m, snap)| {
+            let place = study.map(|s| placed(m, s));
             json!({
                 "label": m.label,
                 "note": m.note,
+                "kind": m.kind.name(),
+                "size_mm": m.size_mm,
+                "segment": place.map(|p| p.0),
+                "from_rectum_mm": place.and_then(|p| p.1),
                 "position_lps_mm": g.local_to_patient(m.position).to_array(),
                 "position_mm": m.position.to_array(),
                 "normal_lps": normal_to_patient(g, m.normal).to_array(),
@@ -129,6 +214,60 @@ fn findings_json(findings: &Findings, g: &Geometry, snapshots: &[String]) -> ser
         "markers": markers,
         "measurements": measurements,
     })
+}
+
+/// Reads the markers and measurements back from a `findings.json` an export wrote (for
+/// `voyage report`), into the volume-local frame of `geometry`. Errors name the file and
+/// what is wrong with it.
+pub fn read_findings(path: &Path, geometry: &Geometry) -> Result<Findings> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let v: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| Error::format(path, format!("not JSON: {e}")))?;
+    let bad = |what: &str| Error::format(path, format!("not a voyage findings.json: {what}"));
+    let vec3 = |x: &serde_json::Value, key: &str| -> Result<DVec3> {
+        let a = x[key]
+            .as_array()
+            .filter(|a| a.len() == 3)
+            .ok_or_else(|| bad(&format!("no {key}")))?;
+        let f: Vec<f64> = a.iter().filter_map(|n| n.as_f64()).collect();
+        (f.len() == 3 && f.iter().all(|x| x.is_finite()))
+            .then(|| DVec3::new(f[0], f[1], f[2]))
+            .ok_or_else(|| bad(&format!("{key} is not three numbers")))
+    };
+    let text_of = |x: &serde_json::Value, key: &str| x[key].as_str().unwrap_or("").to_string();
+    let mut findings = Findings::default();
+    for m in v["markers"]
+        .as_array()
+        .ok_or_else(|| bad("no markers list"))?
+    {
+        let pose: Vec<f64> = m["view_pose_mm"]
+            .as_array()
+            .map(|a| a.iter().filter_map(|n| n.as_f64()).collect())
+            .unwrap_or_default();
+        let view = <[f64; 7]>::try_from(pose.as_slice())
+            .ok()
+            .and_then(voyage_nav::Pose::from_array)
+            .ok_or_else(|| bad("a marker's view_pose_mm is not a pose"))?;
+        let kind = serde_json::from_value(m["kind"].clone()).unwrap_or_default();
+        findings.markers.push(Marker {
+            label: text_of(m, "label"),
+            note: text_of(m, "note"),
+            kind,
+            size_mm: m["size_mm"].as_f64(),
+            position: geometry.patient_to_local(vec3(m, "position_lps_mm")?),
+            normal: (geometry.direction_mat().transpose() * vec3(m, "normal_lps")?)
+                .normalize_or_zero(),
+            view,
+        });
+    }
+    for m in v["measurements"].as_array().into_iter().flatten() {
+        findings.measurements.push(voyage_view::Measurement {
+            label: text_of(m, "label"),
+            a: geometry.patient_to_local(vec3(m, "a_lps_mm")?),
+            b: geometry.patient_to_local(vec3(m, "b_lps_mm")?),
+        });
+    }
+    Ok(findings)
 }
 
 /// Directions turn with the direction matrix alone (a rotation: no origin, no inverse transpose).

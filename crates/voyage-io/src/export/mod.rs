@@ -5,9 +5,11 @@
 mod findings;
 pub mod markups;
 pub mod mesh;
+pub mod report;
 pub mod study;
 pub mod trajectory;
 
-pub use findings::export_findings;
+pub use findings::{export_findings, export_reading, read_findings};
 pub use markups::{MarkupsPoint, write_markups_curve};
 pub use mesh::{write_ply, write_stl};
+pub use report::{Report, ReportCoverage, ReportFinding, write_report_html};

@@ -10,6 +10,7 @@ mod info;
 mod phantom;
 pub mod prep;
 pub mod render;
+mod report;
 
 use std::path::PathBuf;
 
@@ -57,6 +58,9 @@ enum Command {
     /// How much of the mucosa the automatic reading shows: one way, both ways, and after a
     /// review of every unseen patch (with a pose that shows each).
     Coverage(coverage::CoverageArgs),
+    /// The reading's report (report.html) from the findings the window exported: sizes,
+    /// segments, C-RADS, each marker's view, and the coverage of a two-way reading.
+    Report(report::ReportArgs),
     /// Benchmarks against reference libraries.
     Bench(bench::BenchArgs),
     /// One endoscopic frame to a PNG: frame N of the automatic flight, or a given pose.
@@ -80,6 +84,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Prep(a) => prep::run(&a),
         Command::Fly(a) => fly::run(&a),
         Command::Coverage(a) => coverage::run(&a),
+        Command::Report(a) => report::run(&a),
         Command::Bench(a) => bench::run(&a),
         Command::Render(a) => render::render(&a),
         Command::Movie(a) => render::movie(&a),

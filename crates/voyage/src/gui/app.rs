@@ -11,11 +11,11 @@ use std::{
 use egui::{Color32, Key, Modifiers, Pos2, Rect, RichText, Sense, Stroke, Vec2};
 use glam::DVec3;
 use serde_json::json;
-use voyage_io::export::export_findings;
+use voyage_io::export::{ReportCoverage, export_reading};
 use voyage_nav::{Camera, Direction};
 use voyage_view::{
-    CloseupBox, Findings, Hit, Material, TransferFunction, TranslucencyOptions, encode, pick,
-    render_closeup, render_translucency,
+    CloseupBox, FindingKind, Findings, Hit, Material, TransferFunction, TranslucencyOptions,
+    encode, pick, render_closeup, render_translucency,
 };
 
 use voyage_nav::Input;
@@ -44,6 +44,9 @@ enum Tool {
     Marker,
     /// Two clicks: the distance between two surface points.
     Measure,
+    /// Click a polyp: it is segmented, its largest diameter measured, and it becomes a
+    /// polyp finding with that size.
+    Polyp,
 }
 
 /// What the window leaves behind for `voyage view` to report after it closes.
@@ -98,6 +101,8 @@ enum Action {
     MarkerUnderCursor,
     /// One end of a measurement on the surface under the mouse cursor (in the view).
     MeasureUnderCursor,
+    /// Size the polyp under the mouse cursor and mark it.
+    PolypUnderCursor,
     /// Rectum → cecum, cecum → rectum, then every unseen patch (issue 23).
     TwoWayReading,
     /// Fly to the largest unseen patch and outline it.
@@ -160,17 +165,23 @@ const KEYMAP: &[Binding] = &[
         bound: &[(NONE, Key::M, Action::MarkerUnderCursor)],
     },
     Binding {
+        keys: "P",
+        what: "polyp under the cursor: segment it, measure its largest diameter, mark it",
+        bound: &[(NONE, Key::P, Action::PolypUnderCursor)],
+    },
+    Binding {
         keys: "D",
         what: "measure: press on two surface points",
         bound: &[(NONE, Key::D, Action::MeasureUnderCursor)],
     },
     Binding {
-        keys: "1 / 2 / 3",
-        what: "tool: steer / marker / measure (for the left button)",
+        keys: "1 / 2 / 3 / 4",
+        what: "tool: steer / marker / measure / polyp size (for the left button)",
         bound: &[
             (NONE, Key::Num1, Action::Tool(Tool::Steer)),
             (NONE, Key::Num2, Action::Tool(Tool::Marker)),
             (NONE, Key::Num3, Action::Tool(Tool::Measure)),
+            (NONE, Key::Num4, Action::Tool(Tool::Polyp)),
         ],
     },
     Binding {
@@ -260,6 +271,10 @@ pub struct App {
     pixels_gpu: bool,
     findings: Findings,
     tool: Tool,
+    /// The kind a new marker gets.
+    marker_kind: FindingKind,
+    /// The last polyp sized: the two surface points its diameter spans (drawn in the view).
+    polyp_span: Option<[DVec3; 2]>,
     measure_from: Option<DVec3>,
     note: String,
     export_dir: String,
@@ -331,6 +346,8 @@ impl App {
             pixels_gpu,
             findings: Findings::default(),
             tool: Tool::Steer,
+            marker_kind: FindingKind::Other,
+            polyp_span: None,
             measure_from: None,
             note: String::new(),
             export_dir: "findings".into(),
@@ -532,6 +549,11 @@ impl App {
                     self.measure_point(p);
                 }
             }
+            Action::PolypUnderCursor => {
+                if let Some(p) = cursor {
+                    self.size_polyp(p);
+                }
+            }
             Action::PlayPause => {
                 if let Some(s) = &mut self.session {
                     s.set_playing(!s.playing);
@@ -633,7 +655,40 @@ impl App {
             .add_marker(hit.point, hit.normal, s.pose(), note)
             .label
             .clone();
+        if let Some(m) = self.findings.marker_mut(&label) {
+            m.kind = self.marker_kind;
+        }
         self.status = format!("marker {label} at {:.1} mm from the camera", hit.distance);
+    }
+
+    /// Segments the polyp under `at`, measures its largest diameter and marks it as a polyp
+    /// of that size; says so when nothing stands out of the wall there.
+    fn size_polyp(&mut self, at: Pos2) {
+        let Some(hit) = self.pick(at) else {
+            self.status = "no surface under the cursor".into();
+            return;
+        };
+        let Some(s) = &self.session else { return };
+        let Some(size) = voyage_view::measure_polyp(&s.mesh, hit.point, hit.normal) else {
+            self.status = "no polyp there: nothing stands out of the wall under the cursor (or it is over 4 cm)".into();
+            return;
+        };
+        let note = std::mem::take(&mut self.note);
+        let pose = s.pose();
+        let label = self
+            .findings
+            .add_marker(hit.point, hit.normal, pose, note)
+            .label
+            .clone();
+        if let Some(m) = self.findings.marker_mut(&label) {
+            m.kind = FindingKind::Polyp;
+            m.size_mm = Some(size.diameter_mm);
+        }
+        self.polyp_span = Some(size.ends);
+        self.status = format!(
+            "polyp {label}: {:.1} mm (largest diameter), {:.1} mm high",
+            size.diameter_mm, size.height_mm
+        );
     }
 
     fn measure_point(&mut self, at: Pos2) {
@@ -658,8 +713,15 @@ impl App {
             self.status = "nothing to export: no study is open".into();
             return;
         };
-        let geometry = s.study.ct.geometry().clone();
-        let result = export_findings(&dir, &self.findings, &geometry, |_, m| {
+        let reading = s.coverage.report();
+        let coverage = ReportCoverage {
+            session_pct: Some(reading.session_pct),
+            one_way_pct: reading.reading.as_ref().and_then(|r| r.one_way_pct),
+            two_way_pct: reading.reading.as_ref().and_then(|r| r.two_way_pct),
+            after_review_pct: reading.reading.as_ref().and_then(|r| r.after_review_pct),
+            patches_left: None,
+        };
+        let result = export_reading(&dir, &self.findings, &s.study, &s.name, coverage, |_, m| {
             let cam = Camera::new(m.view).with_fov(s.fov);
             let cells = voyage_view::Visibility::new(&s.study.cells, voyage_view::Strategy::Lg)
                 .select(&s.study.cells, &voyage_view::View::new(&cam, 512, 512))
@@ -731,10 +793,18 @@ impl App {
                     });
                 }
             }
-            Step::Marker { at, note } => {
+            Step::Marker { at, note, kind } => {
                 self.note = note;
+                let before = std::mem::replace(&mut self.marker_kind, kind);
                 if let Some(p) = self.view_point(at) {
                     self.drop_marker(p);
+                }
+                self.marker_kind = before;
+            }
+            Step::Polyp { at, note } => {
+                self.note = note;
+                if let Some(p) = self.view_point(at) {
+                    self.size_polyp(p);
                 }
             }
             Step::Measure { from, to } => {
@@ -1035,7 +1105,16 @@ impl App {
                 .on_hover_text("2: click the surface (or M over it)");
             ui.selectable_value(&mut tool, Tool::Measure, "Measure")
                 .on_hover_text("3: click two surface points (or D twice)");
+            ui.selectable_value(&mut tool, Tool::Polyp, "Polyp")
+                .on_hover_text("4: click a polyp (or P over it): its largest diameter, marked");
         });
+        egui::ComboBox::from_label("kind of a new marker")
+            .selected_text(self.marker_kind.name())
+            .show_ui(ui, |ui| {
+                for kind in FindingKind::ALL {
+                    ui.selectable_value(&mut self.marker_kind, kind, kind.name());
+                }
+            });
         if tool != self.tool {
             actions.push(Action::Tool(tool));
         }
@@ -1051,6 +1130,8 @@ impl App {
                 {
                     go = Some(m.label.clone());
                 }
+                let size = m.size_mm.map(|s| format!(" {s:.1} mm")).unwrap_or_default();
+                ui.label(format!("{}{size}", m.kind.name()));
                 ui.label(if m.note.is_empty() { "—" } else { &m.note });
                 if ui.small_button("x").clicked() {
                     remove_marker = Some(i);
@@ -1250,6 +1331,7 @@ impl App {
             match self.tool {
                 Tool::Marker => self.drop_marker(p),
                 Tool::Measure => self.measure_point(p),
+                Tool::Polyp => self.size_polyp(p),
                 Tool::Steer => {}
             }
         }
@@ -1385,6 +1467,18 @@ impl App {
                 );
             }
         }
+        if let Some([a, b]) = self.polyp_span
+            && let (Some(pa), Some(pb)) = (on_screen(a), on_screen(b))
+        {
+            let violet = Color32::from_rgb(220, 120, 255);
+            painter.line_segment([pa, pb], Stroke::new(2.0, violet));
+            label(
+                &painter,
+                pb + Vec2::new(6.0, -8.0),
+                &format!("{:.1} mm", a.distance(b)),
+                violet,
+            );
+        }
         let measure_color = Color32::from_rgb(120, 220, 255);
         for m in &self.findings.measurements {
             let (a, b) = (
@@ -1472,6 +1566,7 @@ impl App {
             (Tool::Marker, _) => "click: marker on the surface",
             (Tool::Measure, false) => "click: first point of the measurement",
             (Tool::Measure, true) => "click: second point",
+            (Tool::Polyp, _) => "click a polyp: its size",
         };
         label(
             &painter,

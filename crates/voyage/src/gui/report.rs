@@ -68,6 +68,8 @@ pub struct ReadingReport {
 pub struct MarkerReport {
     pub label: String,
     pub note: String,
+    pub kind: &'static str,
+    pub size_mm: Option<f64>,
     pub position_mm: [f64; 3],
 }
 
@@ -76,6 +78,8 @@ impl MarkerReport {
         MarkerReport {
             label: m.label.clone(),
             note: m.note.clone(),
+            kind: m.kind.name(),
+            size_mm: m.size_mm,
             position_mm: m.position.to_array(),
         }
     }

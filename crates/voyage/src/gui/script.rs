@@ -43,9 +43,18 @@ pub enum Step {
         dy: f32,
         frames: u32,
     },
-    /// Drop a marker on the surface under a point of the view.
+    /// Drop a marker on the surface under a point of the view (`kind`: polyp, mass,
+    /// diverticulum or other, the default).
     Marker {
         at: [f32; 2],
+        note: String,
+        #[serde(default)]
+        kind: voyage_view::FindingKind,
+    },
+    /// Size the polyp under a point of the view and mark it.
+    Polyp {
+        at: [f32; 2],
+        #[serde(default)]
         note: String,
     },
     /// Measure between the surface points under two points of the view.

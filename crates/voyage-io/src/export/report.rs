@@ -1,0 +1,220 @@
+//! The reading's report as one self-contained HTML file (`report.html`): the findings with
+//! their kind, size, segment and distance from the rectum end, each with its snapshot
+//! embedded; the measurements; the exam's C-RADS category; the coverage of the mucosa. It
+//! opens in any browser without other files. It names the study by its file name only and
+//! carries no patient identity.
+
+use std::path::Path;
+
+use voyage_core::Result;
+use voyage_view::CRads;
+
+use crate::atomic::write_atomic;
+
+/// One finding as the report lists it.
+#[derive(Clone, Debug)]
+pub struct ReportFinding {
+    pub label: String,
+    /// "polyp", "mass", "diverticulum" or "other".
+    pub kind: String,
+    pub size_mm: Option<f64>,
+    pub segment: String,
+    /// Along the centerline from its rectum end (about the anal verge), mm.
+    pub from_rectum_mm: Option<f64>,
+    pub position_lps_mm: [f64; 3],
+    pub note: String,
+    /// The view from the marker's pose, as PNG bytes.
+    pub snapshot_png: Vec<u8>,
+}
+
+/// What the reading's coverage came to (%); None where it was not measured.
+#[derive(Clone, Debug, Default)]
+pub struct ReportCoverage {
+    pub session_pct: Option<f64>,
+    pub one_way_pct: Option<f64>,
+    pub two_way_pct: Option<f64>,
+    pub after_review_pct: Option<f64>,
+    /// Unseen patches left (≥ the listing threshold).
+    pub patches_left: Option<usize>,
+}
+
+#[derive(Clone, Debug)]
+pub struct Report {
+    /// The study's file or folder name (never a patient name).
+    pub study: String,
+    pub findings: Vec<ReportFinding>,
+    /// (label, length mm).
+    pub measurements: Vec<(String, f64)>,
+    pub c_rads: CRads,
+    pub coverage: ReportCoverage,
+}
+
+/// Writes `report` as self-contained HTML to `path` (atomically).
+pub fn write_report_html(path: &Path, report: &Report) -> Result<()> {
+    let html = report_html(report);
+    write_atomic(path, |w| w.write_all(html.as_bytes()))
+}
+
+/// The report's HTML text.
+pub fn report_html(r: &Report) -> String {
+    let mut h = String::new();
+    h.push_str("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n");
+    h.push_str(&format!(
+        "<title>CT colonography report: {}</title>\n",
+        escape(&r.study)
+    ));
+    h.push_str(STYLE);
+    h.push_str("</head>\n<body>\n");
+    h.push_str(&format!(
+        "<h1>CT colonography report</h1>\n<p class=\"study\">Study: {} &middot; voyage {}</p>\n",
+        escape(&r.study),
+        env!("CARGO_PKG_VERSION")
+    ));
+    h.push_str(&format!(
+        "<h2>Category: <span id=\"c-rads\">{}</span></h2>\n<p>{}</p>\n",
+        r.c_rads.category,
+        escape(&r.c_rads.reason)
+    ));
+    if !r.c_rads.unsized_polyps.is_empty() {
+        h.push_str(&format!(
+            "<p class=\"warn\">Polyps without a size: {}. The category holds only if they are under 6 mm.</p>\n",
+            escape(&r.c_rads.unsized_polyps.join(", "))
+        ));
+    }
+    h.push_str(&coverage_html(&r.coverage));
+    h.push_str(&findings_html(&r.findings));
+    if !r.measurements.is_empty() {
+        h.push_str("<h2>Measurements</h2>\n<table>\n<tr><th>Label</th><th>Length</th></tr>\n");
+        for (label, mm) in &r.measurements {
+            h.push_str(&format!(
+                "<tr><td>{}</td><td>{mm:.1} mm</td></tr>\n",
+                escape(label)
+            ));
+        }
+        h.push_str("</table>\n");
+    }
+    h.push_str(
+        "<p class=\"foot\">C-RADS: ACR CT Colonography Reporting and Data System (Zalis et al., Radiology 2005). Sizes: largest 3D diameter of the segmented polyp head. Positions: DICOM patient LPS, mm.</p>\n",
+    );
+    h.push_str("</body>\n</html>\n");
+    h
+}
+
+const STYLE: &str = "<style>\nbody{font-family:sans-serif;margin:2em;max-width:60em;color:#222}\ntable{border-collapse:collapse;margin:1em 0}\nth,td{border:1px solid #bbb;padding:.3em .6em;text-align:left;vertical-align:top}\nimg{width:256px;height:auto}\n.warn{color:#a40}\n.study,.foot{color:#666;font-size:.9em}\n</style>\n";
+
+fn coverage_html(c: &ReportCoverage) -> String {
+    let pct = |v: Option<f64>| v.map_or("not measured".to_string(), |x| format!("{x:.1} %"));
+    let mut h = String::from("<h2>Coverage of the mucosa</h2>\n<table id=\"coverage\">\n");
+    for (what, v) in [
+        ("One way (rectum to cecum)", c.one_way_pct),
+        ("Both ways", c.two_way_pct),
+        ("After the review of unseen patches", c.after_review_pct),
+        ("Whole session", c.session_pct),
+    ] {
+        h.push_str(&format!("<tr><th>{what}</th><td>{}</td></tr>\n", pct(v)));
+    }
+    if let Some(n) = c.patches_left {
+        h.push_str(&format!(
+            "<tr><th>Unseen patches left</th><td>{n}</td></tr>\n"
+        ));
+    }
+    h.push_str("</table>\n");
+    h
+}
+
+fn findings_html(findings: &[ReportFinding]) -> String {
+    if findings.is_empty() {
+        return "<h2>Findings</h2>\n<p>None marked.</p>\n".into();
+    }
+    let mut h = String::from(
+        "<h2>Findings</h2>\n<table id=\"findings\">\n<tr><th>Label</th><th>Kind</th><th>Size</th><th>Segment</th><th>From the rectum end</th><th>Position (LPS)</th><th>Note</th><th>View</th></tr>\n",
+    );
+    for f in findings {
+        let size = f
+            .size_mm
+            .map_or("&mdash;".to_string(), |s| format!("{s:.1} mm"));
+        let arc = f
+            .from_rectum_mm
+            .map_or("&mdash;".to_string(), |a| format!("{:.0} cm", a / 10.0));
+        let [x, y, z] = f.position_lps_mm;
+        h.push_str(&format!(
+            "<tr class=\"finding\"><td>{}</td><td>{}</td><td>{size}</td><td>{}</td><td>{arc}</td><td>{x:.1}, {y:.1}, {z:.1}</td><td>{}</td><td><img alt=\"view of {}\" src=\"data:image/png;base64,{}\"></td></tr>\n",
+            escape(&f.label),
+            escape(&f.kind),
+            escape(&f.segment),
+            escape(&f.note),
+            escape(&f.label),
+            base64(&f.snapshot_png)
+        ));
+    }
+    h.push_str("</table>\n");
+    h
+}
+
+/// Text made safe inside HTML elements and attribute values.
+pub fn escape(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&#39;"),
+            _ => out.push(c),
+        }
+    }
+    out
+}
+
+/// Standard base64 (RFC 4648, with padding), for the images' data URLs. Hand-written: no
+/// base64 crate is among the project's dependencies, and this is all the report needs.
+pub fn base64(bytes: &[u8]) -> String {
+    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
+    for chunk in bytes.chunks(3) {
+        let b = [
+            chunk[0],
+            chunk.get(1).copied().unwrap_or(0),
+            chunk.get(2).copied().unwrap_or(0),
+        ];
+        let n = (b[0] as u32) << 16 | (b[1] as u32) << 8 | b[2] as u32;
+        for i in 0..4 {
+            if i <= chunk.len() {
+                out.push(ALPHABET[(n >> (18 - 6 * i) & 63) as usize] as char);
+            } else {
+                out.push('=');
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn base64_matches_rfc_4648() {
+        for (raw, enc) in [
+            ("", ""),
+            ("f", "Zg=="),
+            ("fo", "Zm8="),
+            ("foo", "Zm9v"),
+            ("foob", "Zm9vYg=="),
+            ("fooba", "Zm9vYmE="),
+            ("foobar", "Zm9vYmFy"),
+        ] {
+            assert_eq!(base64(raw.as_bytes()), enc);
+        }
+        assert_eq!(base64(&[0xff, 0xfe, 0x00]), "//4A");
+    }
+
+    #[test]
+    fn notes_cannot_break_out_of_the_page() {
+        assert_eq!(
+            escape("<script>alert('x')</script> & \"q\""),
+            "&lt;script&gt;alert(&#39;x&#39;)&lt;/script&gt; &amp; &quot;q&quot;"
+        );
+    }
+}

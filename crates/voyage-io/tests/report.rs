@@ -1,0 +1,161 @@
+//! report.html: self-contained, well formed, and rendered by a browser (headless Chromium,
+//! from Debian) with its findings' images in it.
+
+use std::{path::PathBuf, process::Command};
+
+use voyage_io::export::{Report, ReportCoverage, ReportFinding, write_report_html};
+use voyage_view::CRads;
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir =
+        std::env::temp_dir().join(format!("voyage-report-test-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A `side`² PNG of one colour.
+fn png(side: u32, rgb: [u8; 3]) -> Vec<u8> {
+    let img = image::RgbaImage::from_pixel(side, side, image::Rgba([rgb[0], rgb[1], rgb[2], 255]));
+    let mut out = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut out, image::ImageFormat::Png).unwrap();
+    out.into_inner()
+}
+
+fn sample() -> Report {
+    Report {
+        study: "colon <1>.nii.gz".into(),
+        findings: vec![
+            ReportFinding {
+                label: "M1".into(),
+                kind: "polyp".into(),
+                size_mm: Some(7.25),
+                segment: "sigmoid".into(),
+                from_rectum_mm: Some(312.0),
+                position_lps_mm: [10.0, -20.5, 300.25],
+                note: "<b>not bold</b> & \"quoted\"".into(),
+                snapshot_png: png(64, [0, 200, 0]),
+            },
+            ReportFinding {
+                label: "M2".into(),
+                kind: "diverticulum".into(),
+                size_mm: None,
+                segment: "descending".into(),
+                from_rectum_mm: None,
+                position_lps_mm: [0.0; 3],
+                note: String::new(),
+                snapshot_png: png(64, [0, 0, 220]),
+            },
+        ],
+        measurements: vec![("L1".into(), 12.5)],
+        c_rads: CRads {
+            category: "C2",
+            reason: "1 polyp(s) of 6–9 mm".into(),
+            unsized_polyps: vec![],
+        },
+        coverage: ReportCoverage {
+            session_pct: Some(97.5),
+            one_way_pct: Some(76.0),
+            two_way_pct: Some(96.0),
+            after_review_pct: Some(99.6),
+            patches_left: Some(0),
+        },
+    }
+}
+
+/// Every element opened is closed, in order (void elements aside).
+fn balanced(html: &str) -> Result<(), String> {
+    let void = ["meta", "img", "br", "!DOCTYPE"];
+    let mut stack: Vec<String> = Vec::new();
+    for tag in html.split('<').skip(1) {
+        let end = tag.find('>').ok_or("unclosed <")?;
+        let inner = &tag[..end];
+        let name: String = inner
+            .trim_start_matches('/')
+            .chars()
+            .take_while(|c| c.is_ascii_alphanumeric() || *c == '!')
+            .collect();
+        if void.contains(&name.as_str()) {
+            continue;
+        }
+        if inner.starts_with('/') {
+            match stack.pop() {
+                Some(open) if open == name => {}
+                other => return Err(format!("</{name}> closes {other:?}")),
+            }
+        } else {
+            stack.push(name);
+        }
+    }
+    stack
+        .is_empty()
+        .then_some(())
+        .ok_or(format!("left open: {stack:?}"))
+}
+
+#[test]
+fn the_report_is_self_contained_and_well_formed() {
+    let dir = temp_dir("html");
+    let path = dir.join("report.html");
+    write_report_html(&path, &sample()).unwrap();
+    let html = std::fs::read_to_string(&path).unwrap();
+    balanced(&html).unwrap();
+    // Nothing outside the file: no links, scripts or sources but data URLs.
+    assert!(!html.contains("http://") && !html.contains("https://") && !html.contains("<script"));
+    assert_eq!(html.matches("src=\"data:image/png;base64,").count(), 2);
+    assert!(html.contains("&lt;b&gt;not bold&lt;/b&gt; &amp; &quot;quoted&quot;"));
+    assert!(html.contains("colon &lt;1&gt;.nii.gz"));
+    for text in [
+        "C2",
+        "7.2 mm",
+        "sigmoid",
+        "31 cm",
+        "99.6 %",
+        "12.5 mm",
+        "diverticulum",
+    ] {
+        assert!(html.contains(text), "{text} missing");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_browser_renders_the_report_with_its_images() {
+    if Command::new("chromium").arg("--version").output().is_err() {
+        voyage_phantom::fixtures::skip("chromium not installed (bash scripts/deps.sh installs it)");
+        return;
+    }
+    let dir = temp_dir("chromium");
+    let path = dir.join("report.html");
+    write_report_html(&path, &sample()).unwrap();
+    let shot = dir.join("shot.png");
+    let out = Command::new("chromium")
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--hide-scrollbars",
+        ])
+        .arg(format!("--screenshot={}", shot.display()))
+        .arg("--window-size=1200,1400")
+        .arg(format!("file://{}", path.display()))
+        .env("HOME", &dir)
+        .output()
+        .unwrap();
+    assert!(shot.exists(), "{}", String::from_utf8_lossy(&out.stderr));
+    let img = image::open(&shot).unwrap().to_rgb8();
+    let count = |rgb: [u8; 3]| {
+        img.pixels()
+            .filter(|p| p.0.iter().zip(rgb).all(|(&a, b)| a.abs_diff(b) <= 8))
+            .count()
+    };
+    // The two snapshots, drawn at 256 px wide (the page scales them up from 64).
+    let (green, blue) = (count([0, 200, 0]), count([0, 0, 220]));
+    assert!(
+        green > 200 * 200 && blue > 200 * 200,
+        "images not drawn: {green} green, {blue} blue pixels"
+    );
+    // And text: the page is mostly white with dark letters.
+    assert!(count([255, 255, 255]) > img.pixels().len() / 3);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
