@@ -226,18 +226,19 @@ fn monotone_labels(wanted: &[usize], n: usize) -> Vec<usize> {
         return Vec::new();
     }
     // cost[i][k]: fewest disagreements over 0..=i with label k at i.
-    let mut cost = vec![vec![0u32; n]; wanted.len()];
-    for (i, &w) in wanted.iter().enumerate() {
-        let mut best_before = u32::MAX;
-        for k in 0..n {
-            let prev = if i == 0 {
-                0
-            } else {
-                best_before = best_before.min(cost[i - 1][k]);
-                best_before
-            };
-            cost[i][k] = prev + (w != k) as u32;
-        }
+    let mut cost: Vec<Vec<u32>> = Vec::with_capacity(wanted.len());
+    for &w in wanted {
+        // The best over labels ≤ k at the point before (none before the first point).
+        let mut best_before = if cost.is_empty() { 0 } else { u32::MAX };
+        let row: Vec<u32> = (0..n)
+            .map(|k| {
+                if let Some(prev) = cost.last() {
+                    best_before = best_before.min(prev[k]);
+                }
+                best_before + (w != k) as u32
+            })
+            .collect();
+        cost.push(row);
     }
     let mut labels = vec![0; wanted.len()];
     let last = wanted.len() - 1;
@@ -584,4 +585,26 @@ fn anatomical_checks(
         ));
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::monotone_labels;
+
+    #[test]
+    fn monotone_labels_keep_the_order_and_disagree_least() {
+        // A stray label out of order costs one disagreement; of the equal answers the
+        // earlier label wins.
+        assert_eq!(
+            monotone_labels(&[0, 0, 2, 1, 1, 3, 3], 4),
+            [0, 0, 0, 1, 1, 3, 3]
+        );
+        assert_eq!(
+            monotone_labels(&[0, 0, 2, 2, 1, 2, 3], 4),
+            [0, 0, 2, 2, 2, 2, 3]
+        );
+        assert_eq!(monotone_labels(&[3, 2, 1, 0], 4), [0, 0, 0, 0]);
+        assert_eq!(monotone_labels(&[0, 1, 2, 7, 3, 4], 8), [0, 1, 2, 2, 3, 4]);
+        assert!(monotone_labels(&[], 8).is_empty());
+    }
 }

@@ -200,18 +200,30 @@ impl<'a> Neighbourhood<'a> {
             out.try_normalize()
                 .is_none_or(|out| self.normal(*v).dot(out) >= -SKIRT_COS)
         };
-        let flat: Vec<(DVec3, DVec3)> = bump
+        // The head in the wall's (u, v) plane; its largest extent is between two corners of
+        // its convex hull.
+        let at_uv: HashMap<(u64, u64), DVec3> = bump
             .iter()
             .filter(|v| head(v))
-            .map(|&v| (wall.across(self.position(v)), self.position(v)))
+            .map(|&v| {
+                let p = self.position(v);
+                let d = wall.across(p);
+                ((d.dot(wall.u).to_bits(), d.dot(wall.v).to_bits()), p)
+            })
             .collect();
-        let hull = convex_hull(&flat, wall);
+        let mut corners: Vec<(f64, f64)> = at_uv
+            .keys()
+            .map(|&(u, v)| (f64::from_bits(u), f64::from_bits(v)))
+            .collect();
+        corners.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+        let hull = voyage_core::convex_hull(corners);
         let (mut best, mut ends) = (0.0, [DVec3::ZERO; 2]);
         for (i, a) in hull.iter().enumerate() {
             for b in &hull[i + 1..] {
-                let d = a.0.distance(b.0);
+                let d = (a.0 - b.0).hypot(a.1 - b.1);
                 if d > best {
-                    (best, ends) = (d, [a.1, b.1]);
+                    let at = |q: &(f64, f64)| at_uv[&(q.0.to_bits(), q.1.to_bits())];
+                    (best, ends) = (d, [at(a), at(b)]);
                 }
             }
         }
@@ -283,8 +295,7 @@ impl Wall {
                 .iter()
                 .copied()
                 .filter(|&p| {
-                    let h = wall.height(p);
-                    h <= 0.5 * FIT_TOLERANCE_MM && h >= -2.0 * FIT_TOLERANCE_MM
+                    (-2.0 * FIT_TOLERANCE_MM..=0.5 * FIT_TOLERANCE_MM).contains(&wall.height(p))
                 })
                 .collect();
             if kept.len() == points.len() {
@@ -341,52 +352,17 @@ fn least_squares(points: &[DVec3], wall: &Wall) -> Option<[f64; 6]> {
             return None;
         }
         a.swap(col, pivot);
-        for row in 0..6 {
-            if row != col {
-                let f = a[row][col] / a[col][col];
-                for k in col..7 {
-                    a[row][k] -= f * a[col][k];
+        let pivot_row = a[col];
+        for (r, row) in a.iter_mut().enumerate() {
+            if r != col {
+                let f = row[col] / pivot_row[col];
+                for (x, p) in row.iter_mut().zip(&pivot_row).skip(col) {
+                    *x -= f * p;
                 }
             }
         }
     }
     Some(std::array::from_fn(|i| a[i][6] / a[i][i]))
-}
-
-/// The points (across-normal offset, position) on the convex hull of the offsets in the
-/// wall's (u, v) plane (Andrew's monotone chain): the largest extent is between two of them.
-fn convex_hull(points: &[(DVec3, DVec3)], wall: &Wall) -> Vec<(DVec3, DVec3)> {
-    let mut p: Vec<(f64, f64, usize)> = points
-        .iter()
-        .enumerate()
-        .map(|(i, (d, _))| (d.dot(wall.u), d.dot(wall.v), i))
-        .collect();
-    p.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
-    if p.len() < 3 {
-        return points.to_vec();
-    }
-    let cross = |o: (f64, f64, usize), a: (f64, f64, usize), b: (f64, f64, usize)| {
-        (a.0 - o.0) * (b.1 - o.1) - (a.1 - o.1) * (b.0 - o.0)
-    };
-    let mut hull: Vec<(f64, f64, usize)> = Vec::with_capacity(2 * p.len());
-    for pass in 0..2 {
-        let start = hull.len();
-        let iter: Box<dyn Iterator<Item = &(f64, f64, usize)>> = if pass == 0 {
-            Box::new(p.iter())
-        } else {
-            Box::new(p.iter().rev())
-        };
-        for &q in iter {
-            while hull.len() >= start + 2
-                && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0
-            {
-                hull.pop();
-            }
-            hull.push(q);
-        }
-        hull.pop();
-    }
-    hull.into_iter().map(|(_, _, i)| points[i]).collect()
 }
 
 /// A height and a vertex, ordered by height (then vertex) for the flood's queue.
