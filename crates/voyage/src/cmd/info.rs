@@ -23,7 +23,6 @@ pub struct InfoArgs {
 #[derive(Serialize)]
 pub struct Info {
     pub path: String,
-    pub format: Option<io::Format>,
     pub dims: [usize; 3],
     pub spacing_mm: [f64; 3],
     pub origin_lps_mm: [f64; 3],
@@ -38,6 +37,7 @@ pub struct Info {
     pub position: Option<&'static str>,
     /// Where gravity pulls (LPS unit vector), from the position.
     pub gravity_lps: Option<[f64; 3]>,
+    /// The loader's findings, `format` among them (flattened: each key once).
     #[serde(flatten)]
     pub meta: io::Meta,
 }
@@ -48,7 +48,6 @@ impl Info {
         let (lo, hi) = loaded.volume.min_max();
         Info {
             path: path.display().to_string(),
-            format: loaded.meta.format,
             dims: g.dims,
             spacing_mm: g.spacing,
             origin_lps_mm: g.origin,
@@ -69,7 +68,10 @@ impl Info {
         println!("{}", self.path);
         println!(
             "  format       {}",
-            self.format.map(|f| format!("{f:?}")).unwrap_or("?".into())
+            self.meta
+                .format
+                .map(|f| format!("{f:?}"))
+                .unwrap_or("?".into())
         );
         if let Some(modality) = &m.modality {
             println!("  modality     {modality}");
