@@ -372,8 +372,17 @@ fn prep_writes_its_exports_and_reports_json() {
         "--json",
         "--position",
         "hfp",
+        "--stl",
     ]);
     assert!(prone.status.success(), "{}", text(&prone));
+    // STL only when asked: it is larger than the PLY (twice, here).
+    let stl = dir
+        .join("prone/surface.stl")
+        .metadata()
+        .map(|m| m.len())
+        .unwrap_or(0);
+    let ply = dir.join("prone/surface.ply").metadata().unwrap().len();
+    assert!(stl > ply, "--stl wrote {stl} bytes beside a {ply}-byte PLY");
     let p: serde_json::Value = serde_json::from_slice(&prone.stdout).unwrap();
     assert_eq!(
         (p["position"].as_str(), p["position_source"].as_str()),
@@ -419,7 +428,6 @@ fn prep_writes_its_exports_and_reports_json() {
         "centerline.json",
         "centerline.mrk.json",
         "surface.ply",
-        "surface.stl",
         "cells.json",
     ] {
         assert!(
@@ -427,6 +435,10 @@ fn prep_writes_its_exports_and_reports_json() {
             "{f} not written"
         );
     }
+    assert!(
+        !out.join("surface.stl").exists(),
+        "surface.stl written unasked"
+    );
     assert!(
         !out.join("cleansed.nii.gz").exists() && j["cleanse"].is_null(),
         "no tagged fluid, nothing to cleanse"
@@ -472,7 +484,7 @@ fn prep_writes_its_exports_and_reports_json() {
     // All or nothing: a folder where an export goes fails the whole write, naming it, and the
     // files already there stay as they were.
     let blocked = dir.join("blocked");
-    std::fs::create_dir_all(blocked.join("surface.stl")).unwrap();
+    std::fs::create_dir_all(blocked.join("surface.ply")).unwrap();
     std::fs::write(blocked.join("lumen.nii.gz"), b"old").unwrap();
     let o = voyage(&[
         "prep",
@@ -483,7 +495,7 @@ fn prep_writes_its_exports_and_reports_json() {
     let err = String::from_utf8_lossy(&o.stderr);
     let errors: Vec<&str> = err.lines().filter(|l| !l.starts_with("warning:")).collect();
     assert!(
-        !o.status.success() && err.contains("surface.stl") && errors.len() == 1,
+        !o.status.success() && err.contains("surface.ply") && errors.len() == 1,
         "{err}"
     );
     assert_eq!(std::fs::read(blocked.join("lumen.nii.gz")).unwrap(), b"old");

@@ -9,19 +9,27 @@ use super::{MarkupsPoint, write_markups_curve, write_ply, write_stl};
 use crate::{atomic::write_atomic, nifti};
 use voyage_core::{Result, Study};
 
+/// Which optional exports [`write_study`] adds.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct StudyExports {
+    /// `surface.stl` beside the PLY: STL repeats each vertex per triangle, so it is about
+    /// twice the PLY's size (146 MB for a real exam), and only some tools need it.
+    pub stl: bool,
+}
+
 /// Writes every export of a study into `dir`; returns the paths written.
 ///
 /// All or nothing: the files are written into a staging folder inside `dir` and moved into
 /// place only when every one of them is complete, so a failure (a full disk, a folder in the
 /// way) leaves `dir` as it was, never a new lumen beside an old surface. A `dir` this call
 /// created is removed again.
-pub fn write_study(dir: &Path, study: &Study) -> Result<Vec<PathBuf>> {
+pub fn write_study(dir: &Path, study: &Study, extra: StudyExports) -> Result<Vec<PathBuf>> {
     let created = !dir.exists();
     std::fs::create_dir_all(dir).map_err(|e| voyage_core::Error::io(dir, e))?;
     let staging = dir.join(format!(".voyage-prep-{}", std::process::id()));
     let result = std::fs::create_dir(&staging)
         .map_err(|e| voyage_core::Error::io(&staging, e))
-        .and_then(|()| write_files(&staging, study))
+        .and_then(|()| write_files(&staging, study, extra))
         .and_then(|names| move_into(dir, &staging, &names));
     let _ = std::fs::remove_dir_all(&staging);
     if result.is_err() && created {
@@ -46,7 +54,7 @@ fn move_into(dir: &Path, staging: &Path, names: &[&str]) -> Result<Vec<PathBuf>>
 }
 
 /// Writes the exports into `dir`; returns their file names.
-fn write_files(dir: &Path, study: &Study) -> Result<Vec<&'static str>> {
+fn write_files(dir: &Path, study: &Study, extra: StudyExports) -> Result<Vec<&'static str>> {
     let g = study.ct.geometry();
     let mut out = Vec::new();
     let mut put = |name: &'static str| {
@@ -95,7 +103,9 @@ fn write_files(dir: &Path, study: &Study) -> Result<Vec<&'static str>> {
         .collect();
     write_markups_curve(&put("centerline.mrk.json"), "Centerline", &points)?;
     write_ply(&put("surface.ply"), &study.surface.mesh, g)?;
-    write_stl(&put("surface.stl"), &study.surface.mesh, g)?;
+    if extra.stl {
+        write_stl(&put("surface.stl"), &study.surface.mesh, g)?;
+    }
     let cells: Vec<_> = study
         .cells
         .cells

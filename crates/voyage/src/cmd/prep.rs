@@ -10,7 +10,10 @@ use serde_json::json;
 use voyage_core::{
     ComponentKind, Geometry, PatientPosition, PositionSource, PrepOptions, Stage, Study, prepare,
 };
-use voyage_io::{self as io, LoadOptions, export::study::write_study};
+use voyage_io::{
+    self as io, LoadOptions,
+    export::study::{StudyExports, write_study},
+};
 
 #[derive(Clone, Copy, Debug, Default, ValueEnum)]
 pub enum Frame {
@@ -107,6 +110,9 @@ pub struct PrepArgs {
     /// Print one JSON object with counts and timings.
     #[arg(long)]
     pub json: bool,
+    /// Also write surface.stl (about twice the PLY's size; 3D printing, older tools).
+    #[arg(long)]
+    pub stl: bool,
 }
 
 pub fn parse_point(s: &str) -> Result<DVec3, String> {
@@ -175,7 +181,7 @@ pub fn run(a: &PrepArgs) -> Result<()> {
         geometry: g,
         load_ms,
     } = load_and_prepare(&a.input, None)?;
-    let written = write_study(&a.out, &study)?;
+    let written = write_study(&a.out, &study, StudyExports { stl: a.stl })?;
     let summary = summary(&study, &g, load_ms);
     if a.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
