@@ -699,6 +699,17 @@ fn fly_reports_both_directions_and_writes_a_trajectory() {
         poses[0].len() as u64,
         j["directions"]["forward"]["frames"].as_u64().unwrap() + 1
     );
+    // A flight that falls short fails the command and says so on stderr; the JSON is still
+    // printed, with reached false.
+    let short = voyage(&["fly", ct.to_str().unwrap(), "--max-seconds", "2", "--json"]);
+    let err = String::from_utf8_lossy(&short.stderr);
+    assert!(!short.status.success(), "a flight that fell short exited 0");
+    assert!(
+        err.contains("forward flight stopped") && err.contains("short of its goal"),
+        "{err}"
+    );
+    let j: serde_json::Value = serde_json::from_slice(&short.stdout).unwrap();
+    assert_eq!(j["directions"]["forward"]["reached"], false);
     // Bad physics is refused on one line, before any work.
     let bad = voyage(&["fly", ct.to_str().unwrap(), "--cs=-1"]);
     assert!(!bad.status.success());

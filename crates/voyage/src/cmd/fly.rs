@@ -1,4 +1,5 @@
-//! `voyage fly INPUT`: automatic flights through the colon (paper §3), no user.
+//! `voyage fly INPUT`: automatic flights through the colon (paper §3), no user. A flight
+//! that does not reach its goal makes the command fail, after its output is written.
 
 use std::path::PathBuf;
 
@@ -163,6 +164,22 @@ pub fn run(a: &FlyArgs) -> Result<()> {
         if let Some(out) = &a.out {
             println!("  wrote {}", out.display());
         }
+    }
+    // A flight that fell short is a failure, said on stderr (the JSON says it too), after
+    // what it did was printed and written.
+    let short: Vec<String> = flights
+        .iter()
+        .filter(|f| !f.reached)
+        .map(|f| {
+            format!(
+                "the {} flight stopped {:.0} mm short of its goal",
+                f.direction.name(),
+                f.final_dt_mm
+            )
+        })
+        .collect();
+    if !short.is_empty() {
+        anyhow::bail!("{}: {}", a.input.input.display(), short.join("; "));
     }
     Ok(())
 }
