@@ -874,3 +874,32 @@ fn the_report_lists_the_polyps_with_sizes_segments_and_c_rads_and_their_views() 
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Issue 24, item 2: choosing cecum → rectum when the study opens (at the rectum) flies from
+/// the cecum, instead of saying "goal reached" and stopping.
+#[test]
+fn cecum_to_rectum_at_the_start_flies_from_the_cecum() {
+    let Some(display) = Display::start() else {
+        return;
+    };
+    let dir = scratch("backward");
+    let ct = dir.join("colon.nii.gz");
+    small_colon(&ct, &[]);
+    let steps = serde_json::json!([
+        {"record": "start"}, {"direction": "backward"}, {"play": true}, {"wait": 30},
+        {"record": "after"}, {"quit": true}
+    ]);
+    let r = view_script(&display, &ct, &["--paused"], steps, &dir, "script");
+    assert_eq!(
+        r["playing"], true,
+        "the backward flight stopped at once: {r}"
+    );
+    let (start, _) = pose(&r["recorded"]["start"]);
+    let (after, _) = pose(&r["recorded"]["after"]);
+    assert!(
+        start.distance(after) > 50.0,
+        "the camera stayed by the rectum: {:.0} mm from where it opened",
+        start.distance(after)
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

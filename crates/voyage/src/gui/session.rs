@@ -133,7 +133,9 @@ impl Session {
             .unwrap_or(f64::INFINITY)
     }
 
-    /// Turns the flight around (rectum → cecum or back) from where the submarine is.
+    /// Turns the flight around (rectum → cecum or back) from where the submarine is; when it
+    /// already stands at the new goal (cecum → rectum chosen at the rectum, where a study
+    /// opens), it goes to the new start instead, so that there is a flight to make.
     pub fn set_direction(&mut self, dir: Direction) {
         if dir == self.sub.direction {
             return;
@@ -152,6 +154,11 @@ impl Session {
         self.pilot.restart(self.sub.state.t, self.dt_to_goal(), x);
         if let Ok(p) = start_pose(&self.field, &self.study.centerline, dir, &self.opts) {
             self.start = p;
+        }
+        if self.dt_to_goal() <= self.pilot.reach_mm {
+            let playing = self.playing;
+            self.place(self.start);
+            self.playing = playing;
         }
     }
 
