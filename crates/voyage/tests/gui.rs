@@ -903,3 +903,43 @@ fn cecum_to_rectum_at_the_start_flies_from_the_cecum() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Issue 24, item 7: after Export the window says where the files went, in full, however
+/// the folder was given.
+#[test]
+fn export_says_where_the_files_went_in_full() {
+    let Some(display) = Display::start() else {
+        return;
+    };
+    let dir = scratch("export-path");
+    let script = dir.join("script.json");
+    std::fs::write(
+        &script,
+        r#"[{"export": "relative-findings"}, {"wait": 2}, {"quit": true}]"#,
+    )
+    .unwrap();
+    let report = dir.join("report.json");
+    let out = voyage(&display)
+        .current_dir(&dir)
+        .args(["demo", "--small", "--paused", "--script"])
+        .arg(&script)
+        .arg("--report")
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r = read_json(&report);
+    let status = r["status"].as_str().unwrap();
+    let full = dir.join("relative-findings");
+    assert!(full.join("report.html").is_file());
+    assert!(
+        status.contains(&full.display().to_string()),
+        "the status does not name {}: {status}",
+        full.display()
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -741,7 +741,10 @@ impl App {
         });
         match result {
             Ok(files) => {
-                self.status = format!("exported {} files to {}", files.len(), dir.display())
+                // Where the files went, in full: a relative folder is relative to where
+                // voyage was started, which the window does not show.
+                let at = std::path::absolute(&dir).unwrap_or(dir);
+                self.status = format!("exported {} files to {}", files.len(), at.display())
             }
             Err(e) => {
                 self.status = format!("export failed: {e}");
@@ -950,6 +953,7 @@ impl App {
             colon: s.map(|s| colon_report(s, self.source.as_ref())),
             coverage: s.map(|s| s.coverage.report()),
             correction_error: self.correction_error.clone(),
+            status: self.status.clone(),
         }
     }
 

@@ -36,6 +36,8 @@ pub struct Report {
     /// What the frames shown showed of the mucosa, and the two-way reading.
     pub coverage: Option<CoverageReport>,
     pub correction_error: Option<String>,
+    /// The status line at the top of the window, as last shown.
+    pub status: String,
 }
 
 #[derive(Serialize)]
