@@ -943,3 +943,46 @@ fn export_says_where_the_files_went_in_full() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Issue 24, item 3: the frame statistics count only frames drawn with a study (not the
+/// loading), and the read-out's two figures are one measure.
+#[test]
+fn frame_statistics_count_only_frames_with_a_study() {
+    let Some(display) = Display::start() else {
+        return;
+    };
+    let dir = scratch("frames");
+    let script = dir.join("script.json");
+    std::fs::write(&script, r#"[{"wait": 20}, {"quit": true}]"#).unwrap();
+    let report = dir.join("report.json");
+    let out = voyage(&display)
+        .args(["demo", "--small", "--paused", "--script"])
+        .arg(&script)
+        .arg("--report")
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r = read_json(&report);
+    let (counted, drawn) = (
+        r["frame_ms"]["frames"].as_u64().unwrap(),
+        r["frames"].as_u64().unwrap(),
+    );
+    assert!(
+        counted <= drawn,
+        "{counted} frames timed, {drawn} drawn with the study"
+    );
+    let (mean, fps) = (
+        r["frame_ms"]["mean"].as_f64().unwrap(),
+        r["frame_ms"]["fps"].as_f64().unwrap(),
+    );
+    assert!(
+        (mean * fps - 1000.0).abs() < 1e-6,
+        "mean {mean} ms and {fps} fps disagree"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

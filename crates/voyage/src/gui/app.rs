@@ -440,6 +440,8 @@ impl App {
                 self.correction_error = None;
                 self.generation += 1;
                 self.frames = 0;
+                // Frame statistics are of frames drawn with a study, not of the loading.
+                self.times = FrameTimes::default();
                 self.announced = false;
             }
             Err(e) => {
@@ -1506,11 +1508,14 @@ impl App {
         {
             painter.circle_filled(p, 4.0, measure_color);
         }
-        let fps = self.times.fps();
+        // One figure, one way: the mean frame time over the frames kept, and its inverse.
+        let frames = self.times.summary();
         let stats = &self.endoscope.stats;
         let readout = format!(
-            "{:.1} ms/frame ({fps:.0} fps) · view {:.1} ms · {} cells, {}k triangles · {}",
-            self.times.last_frame_ms(),
+            "frame {:.1} ms = {:.0} fps (mean of {}) · view {:.1} ms · {} cells, {}k triangles · {}",
+            frames.mean,
+            frames.fps,
+            frames.frames,
             stats.render_ms,
             stats.cells,
             stats.triangles / 1000,

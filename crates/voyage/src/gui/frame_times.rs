@@ -49,15 +49,6 @@ impl FrameTimes {
         push_limited(&mut self.render_ms, ms);
     }
 
-    /// Frames per second over the frames kept.
-    pub fn fps(&self) -> f64 {
-        if self.frame_ms.is_empty() {
-            0.0
-        } else {
-            1000.0 * self.frame_ms.len() as f64 / self.frame_ms.iter().sum::<f64>()
-        }
-    }
-
     pub fn last_frame_ms(&self) -> f64 {
         self.frame_ms.back().copied().unwrap_or(0.0)
     }
