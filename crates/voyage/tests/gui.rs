@@ -904,23 +904,14 @@ fn cecum_to_rectum_at_the_start_flies_from_the_cecum() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// Issue 24, item 7: after Export the window says where the files went, in full, however
-/// the folder was given.
-#[test]
-fn export_says_where_the_files_went_in_full() {
-    let Some(display) = Display::start() else {
-        return;
-    };
-    let dir = scratch("export-path");
+/// `voyage demo --small --paused --script` with `steps`, run in `dir` (written there as
+/// script.json), which must succeed; its `--report`.
+fn small_demo_script(display: &Display, steps: Value, dir: &Path) -> Value {
     let script = dir.join("script.json");
-    std::fs::write(
-        &script,
-        r#"[{"export": "relative-findings"}, {"wait": 2}, {"quit": true}]"#,
-    )
-    .unwrap();
+    std::fs::write(&script, steps.to_string()).unwrap();
     let report = dir.join("report.json");
-    let out = voyage(&display)
-        .current_dir(&dir)
+    let out = voyage(display)
+        .current_dir(dir)
         .args(["demo", "--small", "--paused", "--script"])
         .arg(&script)
         .arg("--report")
@@ -932,7 +923,19 @@ fn export_says_where_the_files_went_in_full() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let r = read_json(&report);
+    read_json(&report)
+}
+
+/// Issue 24, item 7: after Export the window says where the files went, in full, however
+/// the folder was given.
+#[test]
+fn export_says_where_the_files_went_in_full() {
+    let Some(display) = Display::start() else {
+        return;
+    };
+    let dir = scratch("export-path");
+    let steps = serde_json::json!([{"export": "relative-findings"}, {"wait": 2}, {"quit": true}]);
+    let r = small_demo_script(&display, steps, &dir);
     let status = r["status"].as_str().unwrap();
     let full = dir.join("relative-findings");
     assert!(full.join("report.html").is_file());
@@ -952,22 +955,11 @@ fn frame_statistics_count_only_frames_with_a_study() {
         return;
     };
     let dir = scratch("frames");
-    let script = dir.join("script.json");
-    std::fs::write(&script, r#"[{"wait": 20}, {"quit": true}]"#).unwrap();
-    let report = dir.join("report.json");
-    let out = voyage(&display)
-        .args(["demo", "--small", "--paused", "--script"])
-        .arg(&script)
-        .arg("--report")
-        .arg(&report)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let r = small_demo_script(
+        &display,
+        serde_json::json!([{"wait": 20}, {"quit": true}]),
+        &dir,
     );
-    let r = read_json(&report);
     let (counted, drawn) = (
         r["frame_ms"]["frames"].as_u64().unwrap(),
         r["frames"].as_u64().unwrap(),
