@@ -876,3 +876,70 @@ fn render_movie_and_bench_render_on_the_small_phantom() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Issue 24, item 8: a mask stored as 0/255 is taken as a mask; labels 0/1/2 without --mask
+/// are named as a label mask (not "is this a CT colonography?"); with --mask the labels
+/// merged are said.
+#[test]
+fn label_masks_are_told_from_cts() {
+    let dir = scratch("labels");
+    let ct = dir.join("colon.nii.gz");
+    let truth = dir.join("truth.json");
+    let made = voyage(&[
+        "phantom",
+        "colon",
+        "--small",
+        "--out",
+        ct.to_str().unwrap(),
+        "--truth",
+        truth.to_str().unwrap(),
+    ]);
+    assert!(made.status.success(), "{}", text(&made));
+    let lumen = voyage_io::load(&dir.join("truth.lumen.nii.gz"), &Default::default())
+        .unwrap()
+        .volume;
+    let remapped = |name: &str, f: &dyn Fn(usize, i16) -> i16| {
+        let mut v = lumen.clone();
+        for (i, x) in v.data_mut().iter_mut().enumerate() {
+            *x = f(i, *x);
+        }
+        let path = dir.join(name);
+        voyage_io::nifti::save(&path, &v).unwrap();
+        path
+    };
+    let out = dir.join("out");
+    let prep = |path: &std::path::Path, mask: bool| {
+        let mut args = vec![
+            "prep",
+            path.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        if mask {
+            args.push("--mask");
+        }
+        voyage(&args)
+    };
+    // 0/255: a mask, found as one.
+    let m255 = remapped("m255.nii.gz", &|_, x| x * 255);
+    let o = prep(&m255, false);
+    assert!(o.status.success(), "{}", text(&o));
+    // 0/1/2 (the lumen split in two labels by the voxel's parity): refused as a CT, with the
+    // way out named.
+    let labels = remapped("labels.nii.gz", &|i, x| {
+        if x > 0 { 1 + (i % 2) as i16 } else { 0 }
+    });
+    let o = prep(&labels, false);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("label mask") && err.contains("--mask") && err.contains("0, 1, 2"),
+        "{err}"
+    );
+    assert!(!err.contains("CT colonography"), "{err}");
+    let o = prep(&labels, true);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(err.contains("mask labels 1, 2 merged"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -247,10 +247,35 @@ impl Runs {
 /// (a coronal or sagittal stack, or a volume stored another way round), the scan is first
 /// stored with its axial planes as slices, and the result stored back.
 pub fn segment(vol: &Volume<i16>, opts: &SegmentOptions) -> Result<Segmentation> {
-    let from_mask = opts.mask.unwrap_or_else(|| is_mask(vol));
+    // A 0/1 mask is told at once; other label-like values (0/255, 0/1/2) are looked at only
+    // then, so neither a CT nor a 0/1 mask pays for the look.
+    let plain_mask = opts.mask != Some(false) && is_mask(vol);
+    let labels = (opts.mask != Some(false) && !plain_mask)
+        .then(|| label_values(vol))
+        .flatten()
+        .filter(|l| l.len() >= 2);
+    let from_mask = opts
+        .mask
+        .unwrap_or(plain_mask || labels.as_ref().is_some_and(|l| l.len() == 2));
+    if from_mask {
+        let mut seg = segment_mask(vol, opts)?;
+        if let Some(l) = labels.filter(|l| l.len() > 2) {
+            seg.warnings.push(format!(
+                "mask labels {} merged as the lumen (0 is outside)",
+                join(&l[1..])
+            ));
+        }
+        return Ok(seg);
+    }
+    if let Some(l) = labels {
+        return Err(Error::invalid(format!(
+            "this looks like a label mask, not a CT (its only values are {}): give --mask to take every non-zero label as the lumen",
+            join(&l)
+        )));
+    }
     let (axial, _) = PatientFrame::of(vol.geometry()).nearest_axis(DVec3::Z);
-    if from_mask || axial == 2 {
-        return segment_axial(vol, opts, from_mask);
+    if axial == 2 {
+        return segment_axial(vol, opts, false);
     }
     let mut perm = [0, 1, 2];
     perm.swap(axial, 2);
@@ -818,6 +843,45 @@ const EXCLUDED: &str = "excluded by the user";
 const LARGE_LEFT_ML: f64 = 20.0;
 /// Fluid filling a bridged stretch is taken this far (mm) from the bridge's path.
 const FILL_MM: f64 = 25.0;
+
+/// A mask is segmented as stored (it has no outside air to find in axial slices).
+fn segment_mask(vol: &Volume<i16>, opts: &SegmentOptions) -> Result<Segmentation> {
+    segment_axial(vol, opts, true)
+}
+
+/// The values of a volume that holds only a few in 0..=255 (a label or 0/255 mask), sorted;
+/// None for anything else (a CT: its first negative value ends the look).
+pub fn label_values(vol: &Volume<i16>) -> Option<Vec<i16>> {
+    let seen = vol
+        .data()
+        .par_chunks(1 << 14)
+        .map(|c| {
+            let mut bits = [0u64; 4];
+            for &v in c {
+                if !(0..=255).contains(&v) {
+                    return None;
+                }
+                bits[v as usize >> 6] |= 1 << (v as usize & 63);
+            }
+            Some(bits)
+        })
+        .try_reduce(|| [0u64; 4], |a, b| Some([0, 1, 2, 3].map(|i| a[i] | b[i])))?;
+    let values: Vec<i16> = (0..256i16)
+        .filter(|&v| seen[v as usize >> 6] >> (v as usize & 63) & 1 == 1)
+        .collect();
+    (values.len() <= MAX_LABELS).then_some(values)
+}
+
+/// More distinct values than this is no label mask.
+const MAX_LABELS: usize = 16;
+
+fn join(values: &[i16]) -> String {
+    values
+        .iter()
+        .map(|v| v.to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
 
 /// A volume holding only 0 and 1 is a mask, not a CT.
 pub fn is_mask(vol: &Volume<i16>) -> bool {

@@ -29,7 +29,8 @@ pub enum Frame {
 pub struct InputArgs {
     /// A CT (DICOM folder or file, NIfTI, MetaImage, NRRD) or a lumen mask (0/1 labels).
     pub input: PathBuf,
-    /// Treat the input as a lumen mask (default: detected, values only 0 and 1).
+    /// Treat the input as a lumen mask, every non-zero label lumen (default: detected when it
+    /// holds 0 and one other value, as 0/1 or 0/255; labels 0/1/2... need it).
     #[arg(long)]
     pub mask: bool,
     #[command(flatten)]
