@@ -42,13 +42,22 @@ impl Display {
             voyage_phantom::fixtures::skip("Xvfb not installed (bash scripts/deps.sh installs it)");
             return None;
         }
-        for _ in 0..20 {
+        // Displays whose socket exists (a server, or one killed before it could clean up)
+        // are passed over without counting as a try.
+        let mut tries = 0;
+        while tries < 20 {
             let n =
                 140 + (std::process::id() % 400) * 2 + NEXT_DISPLAY.fetch_add(1, Ordering::SeqCst);
+            if n > 60_000 {
+                break;
+            }
             let name = format!(":{n}");
-            if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() {
+            if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists()
+                || Path::new(&format!("/tmp/.X{n}-lock")).exists()
+            {
                 continue;
             }
+            tries += 1;
             let mut server = Command::new("Xvfb")
                 .args([
                     name.as_str(),
