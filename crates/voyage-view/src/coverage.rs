@@ -327,6 +327,17 @@ pub struct Lumen<'a> {
     pub up: DVec3,
 }
 
+impl<'a> Lumen<'a> {
+    /// The study's lumen, for a camera kept `min_wall_mm` from the wall, up against gravity.
+    pub fn of(study: &'a Study, min_wall_mm: f64) -> Self {
+        Lumen {
+            ds: &study.ds,
+            min_wall_mm,
+            up: -study.gravity_local(),
+        }
+    }
+}
+
 /// Tilts (degrees from the patch's normal) and azimuths tried for a viewpoint, in order.
 const TILTS_DEG: [f64; 4] = [0.0, 20.0, 40.0, 60.0];
 const AZIMUTHS: usize = 8;
@@ -538,11 +549,7 @@ pub fn read_both_ways(
     let (backward, back) = read_flight(Direction::Backward)?;
     let mut two_way = one_way.clone();
     two_way.union(&back);
-    let lumen = Lumen {
-        ds: &study.ds,
-        min_wall_mm,
-        up: -study.gravity_local(),
-    };
+    let lumen = Lumen::of(study, min_wall_mm);
     let mut after_review = two_way.clone();
     let first_round = two_way.patches(mesh).len();
     let visits = review(

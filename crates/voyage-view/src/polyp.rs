@@ -83,6 +83,8 @@ struct Neighbourhood<'a> {
     triangles: Vec<[u32; 3]>,
     /// Mesh vertex → triangles (indices into `triangles`) of the neighbourhood.
     of_vertex: HashMap<u32, Vec<u32>>,
+    /// Its vertices, sorted, so that every result is independent of hash order.
+    vertices: Vec<u32>,
 }
 
 impl<'a> Neighbourhood<'a> {
@@ -103,10 +105,13 @@ impl<'a> Neighbourhood<'a> {
                 of_vertex.entry(v).or_default().push(i as u32);
             }
         }
+        let mut vertices: Vec<u32> = of_vertex.keys().copied().collect();
+        vertices.sort_unstable();
         Neighbourhood {
             mesh,
             triangles,
             of_vertex,
+            vertices,
         }
     }
 
@@ -118,13 +123,6 @@ impl<'a> Neighbourhood<'a> {
         DVec3::from_array(self.mesh.normals[v as usize].map(f64::from))
     }
 
-    /// Vertices sorted, so that every result is independent of hash order.
-    fn vertices(&self) -> Vec<u32> {
-        let mut v: Vec<u32> = self.of_vertex.keys().copied().collect();
-        v.sort_unstable();
-        v
-    }
-
     /// The vertices connected to the vertex nearest `click` through vertices standing above
     /// `wall` by more than `cut`, within `ring` of the click across the normal.
     fn bump(&self, click: DVec3, wall: &Wall, ring: f64, cut: f64) -> Vec<u32> {
@@ -132,8 +130,9 @@ impl<'a> Neighbourhood<'a> {
         // Inside the ring only: the quadric means nothing beyond the points it was fitted to.
         let above = |v: u32| height(v) > cut && wall.across(self.position(v)).length() <= ring;
         let Some(start) = self
-            .vertices()
-            .into_iter()
+            .vertices
+            .iter()
+            .copied()
             .filter(|&v| above(v))
             .min_by(|&a, &b| {
                 self.position(a)
@@ -264,8 +263,9 @@ impl Wall {
         let mut points: Vec<DVec3> = Vec::new();
         for _ in 0..3 {
             let ring_vertices: Vec<u32> = near
-                .vertices()
-                .into_iter()
+                .vertices
+                .iter()
+                .copied()
                 .filter(|&v| {
                     let d = near.position(v) - click;
                     let across = (d - w * d.dot(w)).length();

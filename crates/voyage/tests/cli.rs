@@ -300,21 +300,30 @@ fn a_panicking_decoder_still_gives_one_line() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// `voyage phantom colon --small ARGS --out OUT`, which must succeed.
+fn small_colon(out: &Path, args: &[&str]) {
+    let made = voyage(
+        &[
+            &[
+                "phantom",
+                "colon",
+                "--small",
+                "--out",
+                out.to_str().unwrap(),
+            ],
+            args,
+        ]
+        .concat(),
+    );
+    assert!(made.status.success(), "{}", text(&made));
+}
+
 #[test]
 fn prep_writes_its_exports_and_reports_json() {
     let dir = scratch("prep");
     let ct = dir.join("colon.nii.gz");
     let truth = dir.join("colon.json");
-    let made = voyage(&[
-        "phantom",
-        "colon",
-        "--small",
-        "--out",
-        ct.to_str().unwrap(),
-        "--truth",
-        truth.to_str().unwrap(),
-    ]);
-    assert!(made.status.success(), "{}", text(&made));
+    small_colon(&ct, &["--truth", truth.to_str().unwrap()]);
     let out = dir.join("prep");
     let o = voyage(&[
         "prep",
@@ -514,15 +523,7 @@ fn prep_writes_its_exports_and_reports_json() {
 fn prep_cleanses_a_tagged_exam_unless_told_not_to() {
     let dir = scratch("cleanse");
     let ct = dir.join("tagged.nii.gz");
-    let made = voyage(&[
-        "phantom",
-        "colon",
-        "--small",
-        "--tagged-fluid",
-        "--out",
-        ct.to_str().unwrap(),
-    ]);
-    assert!(made.status.success(), "{}", text(&made));
+    small_colon(&ct, &["--tagged-fluid"]);
     let out = dir.join("on");
     let o = voyage(&[
         "prep",
@@ -661,8 +662,7 @@ fn prep_of_a_chest_ct_says_there_is_no_colon() {
 fn fly_reports_both_directions_and_writes_a_trajectory() {
     let dir = scratch("fly");
     let ct = dir.join("colon.nii.gz");
-    let made = voyage(&["phantom", "colon", "--small", "--out", ct.to_str().unwrap()]);
-    assert!(made.status.success(), "{}", text(&made));
+    small_colon(&ct, &[]);
     let traj = dir.join("trajectory.json");
     let o = voyage(&[
         "fly",
@@ -731,8 +731,7 @@ fn png(path: &Path) -> image::RgbaImage {
 fn render_movie_and_bench_render_on_the_small_phantom() {
     let dir = scratch("render");
     let ct = dir.join("colon.nii.gz");
-    let made = voyage(&["phantom", "colon", "--small", "--out", ct.to_str().unwrap()]);
-    assert!(made.status.success(), "{}", text(&made));
+    small_colon(&ct, &[]);
     let ct = ct.to_str().unwrap();
     // One frame of the flight on each renderer: same size, nearly the same picture.
     let cpu = dir.join("cpu.png");
@@ -885,16 +884,7 @@ fn label_masks_are_told_from_cts() {
     let dir = scratch("labels");
     let ct = dir.join("colon.nii.gz");
     let truth = dir.join("truth.json");
-    let made = voyage(&[
-        "phantom",
-        "colon",
-        "--small",
-        "--out",
-        ct.to_str().unwrap(),
-        "--truth",
-        truth.to_str().unwrap(),
-    ]);
-    assert!(made.status.success(), "{}", text(&made));
+    small_colon(&ct, &["--truth", truth.to_str().unwrap()]);
     let lumen = voyage_io::load(&dir.join("truth.lumen.nii.gz"), &Default::default())
         .unwrap()
         .volume;

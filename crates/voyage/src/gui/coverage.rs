@@ -82,8 +82,8 @@ pub struct TwoWay {
     pub one_way_pct: Option<f64>,
     pub two_way_pct: Option<f64>,
     pub after_review_pct: Option<f64>,
-    /// This round's patches, largest first, and the poses that show them.
-    queue: Vec<(Patch, Option<Pose>)>,
+    /// This round's patches, largest first.
+    queue: Vec<Patch>,
     /// Unseen patches when the review began, and the visits made.
     pub patches: usize,
     pub visits: usize,
@@ -243,7 +243,7 @@ impl WindowCoverage {
             }
             Stage::Backward if reached => {
                 r.two_way_pct = Some(r.seen.percent());
-                r.queue = review_queue(&r.seen, mesh, study, self.min_wall_mm);
+                r.queue = r.seen.patches(mesh);
                 r.patches = r.queue.len();
                 r.round_shown = 0.0;
                 r.stage = Stage::Review {
@@ -266,23 +266,26 @@ impl WindowCoverage {
                     };
                     return Move::Nothing;
                 }
-                // The next patch this round that has a pose.
-                let next = (index..r.queue.len()).find(|&i| r.queue[i].1.is_some());
-                if let Some(i) = next {
-                    let (patch, pose) = &r.queue[i];
-                    self.outline = outline(patch, mesh);
+                // The next patch this round that a pose shows, its pose found now (one at a
+                // time, as voyage_view::review does, not all at the round's start in one frame).
+                let lumen = Lumen::of(study, self.min_wall_mm);
+                let next = (index..r.queue.len()).find_map(|i| {
+                    viewing_pose(&r.queue[i], mesh, &lumen, r.seen.options()).map(|p| (i, p))
+                });
+                if let Some((i, pose)) = next {
+                    self.outline = outline(&r.queue[i], mesh);
                     r.visits += 1;
                     r.stage = Stage::Review {
                         round,
                         index: i + 1,
                         dwell: DWELL_FRAMES,
                     };
-                    return Move::Place(pose.expect("found with a pose"));
+                    return Move::Place(pose);
                 }
                 // The round is over: another, for what the poses left, while it shows more.
                 let again = round + 1 < REVIEW_ROUNDS && r.round_shown > 0.0;
                 r.queue = if again {
-                    review_queue(&r.seen, mesh, study, self.min_wall_mm)
+                    r.seen.patches(mesh)
                 } else {
                     Vec::new()
                 };
@@ -308,7 +311,7 @@ impl WindowCoverage {
     /// largest), with that pose; else the largest, with None. None when nothing is left. Its
     /// outline is kept for the view.
     pub fn next_patch(&mut self, mesh: &CellMesh, study: &Study) -> Option<(Patch, Option<Pose>)> {
-        let lumen = lumen(study, self.min_wall_mm);
+        let lumen = Lumen::of(study, self.min_wall_mm);
         let patches = self.session.patches(mesh);
         let shown = patches.iter().take(NEXT_TRIES).find_map(|p| {
             viewing_pose(p, mesh, &lumen, self.session.options())
@@ -370,31 +373,6 @@ fn unseen_by_cluster(
         .iter()
         .zip(&area)
         .map(|(&u, &a)| if a > 0.0 { u / a } else { 0.0 })
-        .collect()
-}
-
-fn lumen(study: &Study, min_wall_mm: f64) -> Lumen<'_> {
-    Lumen {
-        ds: &study.ds,
-        min_wall_mm,
-        up: -study.gravity_local(),
-    }
-}
-
-/// The unseen patches, largest first, each with a pose that shows it.
-fn review_queue(
-    seen: &Coverage,
-    mesh: &CellMesh,
-    study: &Study,
-    min_wall_mm: f64,
-) -> Vec<(Patch, Option<Pose>)> {
-    let lumen = lumen(study, min_wall_mm);
-    seen.patches(mesh)
-        .into_iter()
-        .map(|p| {
-            let pose = viewing_pose(&p, mesh, &lumen, seen.options());
-            (p, pose)
-        })
         .collect()
 }
 
