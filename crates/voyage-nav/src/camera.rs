@@ -84,6 +84,12 @@ impl Camera {
         }
     }
 
+    /// A lens alone: a camera of this field of view whose pose (at the origin) the user sets
+    /// per frame, as a reader of flights and reviews does.
+    pub fn lens(fov_y_deg: f64) -> Self {
+        Camera::new(Pose::looking(DVec3::ZERO, DVec3::Z, DVec3::Y)).with_fov(fov_y_deg)
+    }
+
     pub fn with_fov(mut self, fov_y_deg: f64) -> Self {
         self.fov_y_deg = fov_y_deg.clamp(1.0, Self::MAX_FOV_DEG);
         self

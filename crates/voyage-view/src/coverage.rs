@@ -2,7 +2,8 @@
 //! unseen patches left, a camera pose that shows each, and the review that visits them.
 //!
 //! A triangle counts as seen when it covers a pixel of a shown frame within the reading
-//! distance of the eye and faces the eye within the reading angle: the test runs on the id
+//! distance of the eye and faces the eye within the reading angle (its smoothed normal, as
+//! shaded, not the terraced facet's): the test runs on the id
 //! buffer the renderer wrote anyway, so marking costs one pass over the frame plus a facing
 //! test per newly met triangle. Coverage is area, in mm², of the triangles seen over all.
 //! Readers who fly one way see about 77 % of the mucosa and both ways about 94 %; stepping
@@ -30,7 +31,19 @@ pub struct CoverageOptions {
     pub max_angle_deg: f64,
     /// Unseen patches smaller than this (mm²) are not listed.
     pub min_patch_mm2: f64,
+    /// The review also visits unseen surface down to this area (mm²), after the listed
+    /// patches: bits too small to list can still hide a small polyp.
+    pub review_min_mm2: f64,
 }
+
+/// The footprint of a 3 mm polyp (mm²): the smallest the two-way reading and review must
+/// show, so the smallest unseen bit the review visits.
+pub const REVIEW_MIN_MM2: f64 = std::f64::consts::PI * 1.5 * 1.5;
+
+/// The reading lens of [`read_both_ways`] and `voyage coverage` (vertical and horizontal
+/// field of view of its square frames, degrees): the 120° of the primary-3D fly-through
+/// whose readers saw about 77 % one way and 94 % both ways (Pickhardt et al., 2006).
+pub const READING_FOV_DEG: f64 = 120.0;
 
 impl Default for CoverageOptions {
     fn default() -> Self {
@@ -38,6 +51,7 @@ impl Default for CoverageOptions {
             reading_distance_mm: 50.0,
             max_angle_deg: 75.0,
             min_patch_mm2: 30.0,
+            review_min_mm2: REVIEW_MIN_MM2,
         }
     }
 }
@@ -124,7 +138,7 @@ impl Coverage {
         let mut added = 0.0;
         for &t in &self.candidates {
             let [a, b, c] = triangle_points(mesh, t);
-            let normal = (b - a).cross(c - a);
+            let normal = smooth_normal(mesh, t);
             let to_eye = view.eye - (a + b + c) / 3.0;
             if normal.dot(to_eye) >= cos_max * normal.length() * to_eye.length() {
                 self.seen[t as usize] = true;
@@ -185,8 +199,20 @@ impl Coverage {
     }
 
     /// The connected unseen parts of the surface (triangles sharing a vertex), at least
-    /// `min_patch_mm2` each, largest first.
+    /// `min_patch_mm2` each, largest first: the patches listed.
     pub fn patches(&self, mesh: &CellMesh) -> Vec<Patch> {
+        self.patches_of(mesh, self.options.min_patch_mm2)
+    }
+
+    /// What a review visits: the unseen patches down to `review_min_mm2` (or `min_patch_mm2`
+    /// where that is smaller), largest first, so the listed patches come first.
+    pub fn review_targets(&self, mesh: &CellMesh) -> Vec<Patch> {
+        let min = self.options.review_min_mm2.min(self.options.min_patch_mm2);
+        self.patches_of(mesh, min)
+    }
+
+    /// The connected unseen parts of at least `min_mm2`, largest first.
+    fn patches_of(&self, mesh: &CellMesh, min_mm2: f64) -> Vec<Patch> {
         let mut parent: Vec<u32> = (0..mesh.positions.len() as u32).collect();
         let unseen = || (0..self.seen.len() as u32).filter(|&t| !self.seen[t as usize]);
         for t in unseen() {
@@ -208,7 +234,7 @@ impl Coverage {
             .into_iter()
             .filter_map(|tris| {
                 let area: f64 = tris.iter().map(|&t| self.area_mm2[t as usize] as f64).sum();
-                (area >= self.options.min_patch_mm2).then(|| Patch::new(mesh, tris, area))
+                (area >= min_mm2).then(|| Patch::new(mesh, tris, area))
             })
             .collect();
         patches.sort_by(|a, b| b.area_mm2.total_cmp(&a.area_mm2));
@@ -237,6 +263,17 @@ fn union(parent: &mut [u32], a: u32, b: u32) {
 #[inline]
 fn triangle_points(mesh: &CellMesh, t: u32) -> [DVec3; 3] {
     mesh.triangles[t as usize].map(|v| DVec3::from_array(mesh.positions[v as usize].map(f64::from)))
+}
+
+/// The mucosa's orientation at triangle `t`: the sum of its vertices' smoothed normals. A
+/// facet's own normal on a terraced marching-cubes surface (a 0/1 mask, a coarse scan) tilts
+/// up to 55° from the wall's, and would fail the reading angle on wall that faces the eye.
+#[inline]
+fn smooth_normal(mesh: &CellMesh, t: u32) -> DVec3 {
+    mesh.triangles[t as usize]
+        .iter()
+        .map(|&v| DVec3::from_array(mesh.normals[v as usize].map(f64::from)))
+        .sum()
 }
 
 /// A patch's normal is the mean over its surface within this distance of its centre (mm).
@@ -466,7 +503,8 @@ pub struct Visit {
     pub shown_mm2: f64,
 }
 
-/// Visits every unseen patch, largest first, and marks what each pose shows; patches a visit
+/// Visits every unseen patch, largest first, then the smaller bits down to
+/// `review_min_mm2`, and marks what each pose shows; patches a visit
 /// leaves (parts hidden from the first pose) are visited again, up to `rounds` times over.
 /// Returns the visits of all rounds in order.
 pub fn review(
@@ -479,7 +517,7 @@ pub fn review(
 ) -> Vec<Visit> {
     let mut visits = Vec::new();
     for _ in 0..rounds {
-        let patches = coverage.patches(mesh);
+        let patches = coverage.review_targets(mesh);
         if patches.is_empty() {
             break;
         }
@@ -515,8 +553,8 @@ pub struct Reading {
     pub two_way: Coverage,
     /// Both flights and the review.
     pub after_review: Coverage,
-    /// The unseen patches of the two-way reading, largest first, each with the pose the
-    /// review showed it from and what that showed.
+    /// The unseen patches of the two-way reading (at least `min_patch_mm2`), largest first,
+    /// each with the pose the review showed it from and what that showed.
     pub patches: Vec<Visit>,
     /// Every visit of the review (its later rounds revisit what a first pose left).
     pub visits: usize,
@@ -551,7 +589,7 @@ pub fn read_both_ways(
     two_way.union(&back);
     let lumen = Lumen::of(study, min_wall_mm);
     let mut after_review = two_way.clone();
-    let first_round = two_way.patches(mesh).len();
+    let listed = two_way.patches(mesh).len();
     let visits = review(
         &mut reader,
         mesh,
@@ -561,8 +599,8 @@ pub fn read_both_ways(
         REVIEW_ROUNDS,
     );
     let total_visits = visits.len();
-    // The review's first round visits exactly the two-way reading's patches, in order.
-    let patches = visits.into_iter().take(first_round).collect();
+    // The review's first round visits the two-way reading's listed patches first, in order.
+    let patches = visits.into_iter().take(listed).collect();
     Ok(Reading {
         flights: [forward, backward],
         one_way,

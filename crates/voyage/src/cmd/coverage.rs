@@ -3,10 +3,9 @@
 
 use anyhow::{Context, Result};
 use clap::Args;
-use glam::DVec3;
 use serde_json::{Value, json};
-use voyage_nav::{Camera, FlightOptions, Pose};
-use voyage_view::{CellMesh, CoverageOptions, Visit, read_both_ways};
+use voyage_nav::{Camera, FlightOptions};
+use voyage_view::{CellMesh, CoverageOptions, READING_FOV_DEG, Visit, read_both_ways};
 
 use super::prep::{InputArgs, Prepared, load_and_prepare};
 
@@ -20,14 +19,19 @@ pub struct CoverageArgs {
     /// A triangle seen more obliquely than this is not counted (degrees from its normal).
     #[arg(long, default_value_t = CoverageOptions::default().max_angle_deg)]
     pub max_angle: f64,
-    /// Unseen patches smaller than this are not listed or reviewed (mm²).
+    /// Unseen patches smaller than this are not listed (mm²).
     #[arg(long, default_value_t = CoverageOptions::default().min_patch_mm2)]
     pub min_patch: f64,
+    /// The review also visits unseen bits down to this area (mm²; default: a 3 mm polyp's
+    /// footprint).
+    #[arg(long, default_value_t = CoverageOptions::default().review_min_mm2)]
+    pub review_min: f64,
     /// Side of the square frames the coverage is measured on (pixels).
     #[arg(long, default_value_t = 256)]
     pub size: u32,
-    /// The camera's vertical field of view (degrees).
-    #[arg(long, default_value_t = 90.0)]
+    /// The reading lens's field of view (degrees; the frames are square), 120° as in the
+    /// reading studies the coverage is compared with.
+    #[arg(long, default_value_t = READING_FOV_DEG)]
     pub fov: f64,
     /// Print the result as JSON.
     #[arg(long)]
@@ -62,10 +66,16 @@ impl CoverageArgs {
             Camera::MAX_FOV_DEG,
             self.fov
         );
+        anyhow::ensure!(
+            self.review_min.is_finite() && self.review_min > 0.0,
+            "--review-min must be a positive number of mm², not {}",
+            self.review_min
+        );
         Ok(CoverageOptions {
             reading_distance_mm: self.reading_distance,
             max_angle_deg: self.max_angle,
             min_patch_mm2: self.min_patch,
+            review_min_mm2: self.review_min,
         })
     }
 }
@@ -79,7 +89,7 @@ pub fn run(a: &CoverageArgs) -> Result<()> {
     } = load_and_prepare(&a.input, Some(min_wall))?;
     let mut mesh = CellMesh::new(&study.surface, &study.cells);
     mesh.index_cells();
-    let camera = Camera::new(Pose::looking(DVec3::ZERO, DVec3::Z, DVec3::Y)).with_fov(a.fov);
+    let camera = Camera::lens(a.fov);
     let reading = read_both_ways(&study, &mesh, options, camera, a.size)
         .with_context(|| format!("{name}: the two-way reading"))?;
     for f in &reading.flights {

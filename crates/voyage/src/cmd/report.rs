@@ -7,11 +7,11 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::Args;
-use glam::DVec3;
 use voyage_io::export::{ReportCoverage, export_reading, read_findings};
-use voyage_nav::{Camera, FlightOptions, Pose};
+use voyage_nav::{Camera, FlightOptions};
 use voyage_view::{
-    CellMesh, CoverageOptions, Lighting, Strategy, View, Visibility, read_both_ways, render_rgba,
+    CellMesh, CoverageOptions, Lighting, READING_FOV_DEG, Strategy, View, Visibility,
+    read_both_ways, render_rgba,
 };
 
 use super::prep::{InputArgs, Prepared, load_and_prepare};
@@ -46,7 +46,8 @@ pub fn run(a: &ReportArgs) -> Result<()> {
     let coverage = if a.no_coverage {
         ReportCoverage::default()
     } else {
-        let lens = Camera::new(Pose::looking(DVec3::ZERO, DVec3::Z, DVec3::Y)).with_fov(a.fov);
+        // The same reading as `voyage coverage` with its defaults, not the snapshots' lens.
+        let lens = Camera::lens(READING_FOV_DEG);
         let r = read_both_ways(&study, &mesh, CoverageOptions::default(), lens, 256)
             .with_context(|| format!("{}: the two-way reading", a.input.input.display()))?;
         ReportCoverage {

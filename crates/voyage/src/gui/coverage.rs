@@ -14,7 +14,8 @@ use glam::DVec3;
 use voyage_core::{Cells, Study};
 use voyage_nav::{Camera, Pose};
 use voyage_view::{
-    CellMesh, Coverage, CoverageOptions, Lumen, Patch, REVIEW_ROUNDS, Reader, viewing_pose,
+    CellMesh, Coverage, CoverageOptions, Lumen, Patch, READING_FOV_DEG, REVIEW_ROUNDS, Reader,
+    viewing_pose,
 };
 
 use super::{
@@ -104,7 +105,8 @@ pub enum Move {
 impl WindowCoverage {
     pub fn new(mesh: &CellMesh, cells: &Cells, min_wall_mm: f64) -> Self {
         let options = CoverageOptions::default();
-        let lens = Camera::new(Pose::looking(DVec3::ZERO, DVec3::Z, DVec3::Y));
+        // Replaced by the view's own lens with each frame marked.
+        let lens = Camera::lens(READING_FOV_DEG);
         WindowCoverage {
             on: true,
             reader: Reader::new(cells, lens, MARK_HEIGHT, MARK_HEIGHT),
@@ -243,8 +245,8 @@ impl WindowCoverage {
             }
             Stage::Backward if reached => {
                 r.two_way_pct = Some(r.seen.percent());
-                r.queue = r.seen.patches(mesh);
-                r.patches = r.queue.len();
+                r.patches = r.seen.patches(mesh).len();
+                r.queue = r.seen.review_targets(mesh);
                 r.round_shown = 0.0;
                 r.stage = Stage::Review {
                     round: 0,
@@ -285,7 +287,7 @@ impl WindowCoverage {
                 // The round is over: another, for what the poses left, while it shows more.
                 let again = round + 1 < REVIEW_ROUNDS && r.round_shown > 0.0;
                 r.queue = if again {
-                    r.seen.patches(mesh)
+                    r.seen.review_targets(mesh)
                 } else {
                     Vec::new()
                 };
