@@ -106,9 +106,14 @@ pub fn load_dir(path: &Path, opts: &LoadOptions) -> Result<Loaded> {
     }
     let mut notes = skipped_notes(&skipped_non_dicom, &skipped_non_image);
     let (chosen, others, choice_note) = choose_series(path, images, opts)?;
+    let warning = choice_note
+        .as_ref()
+        .filter(|_| opts.series_uid.is_none())
+        .map(|n| format!("{n}; --series UID loads another (`voyage info` lists them)"));
     notes.extend(choice_note);
     let mut loaded = load_series(chosen)?;
     loaded.meta.other_series = others;
+    loaded.meta.warnings.extend(warning);
     notes.append(&mut loaded.meta.notes);
     loaded.meta.notes = notes;
     Ok(loaded)
@@ -670,14 +675,25 @@ fn choose_series(dir: &Path, images: Vec<Header>, opts: &LoadOptions) -> Result<
         .collect();
     let note = (!others.is_empty()).then(|| {
         let chosen = summaries.iter().find(|s| s.uid == chosen_uid);
-        let how = match chosen {
-            _ if opts.series_uid.is_some() => "as asked",
-            Some(s) if s.modality.as_deref() == Some("CT") => "the CT series with the most slices",
-            _ => "no CT series; the series with the most slices",
+        let rank = |s: &SeriesSummary| (s.modality.as_deref() == Some("CT"), s.slices);
+        let tied: Vec<String> = others
+            .iter()
+            .filter(|o| chosen.is_some_and(|c| rank(o) == rank(c)))
+            .map(describe_series)
+            .collect();
+        let mut how = match chosen {
+            _ if opts.series_uid.is_some() => "as asked".to_string(),
+            Some(s) if s.modality.as_deref() == Some("CT") => {
+                "the CT series with the most slices".to_string()
+            }
+            _ => "no CT series; the series with the most slices".to_string(),
         };
+        if opts.series_uid.is_none() && !tied.is_empty() {
+            how += &format!(", tied with {} and taken by UID order", tied.join(" and "));
+        }
         let chosen = chosen.map(describe_series).unwrap_or_default();
         format!(
-            "the folder holds {} series; loaded {chosen} ({how})",
+            "the folder holds {} series; loaded {chosen}: {how}",
             summaries.len()
         )
     });
@@ -1120,6 +1136,7 @@ fn load_series(headers: Vec<Header>) -> Result<Loaded> {
         transfer_syntaxes,
         files: headers.len(),
         other_series: Vec::new(),
+        warnings: Vec::new(),
         notes,
         position: known,
     };

@@ -57,6 +57,9 @@ pub struct Meta {
     pub other_series: Vec<SeriesSummary>,
     /// Things the loader did that the user should know (series chosen, tilt corrected...).
     pub notes: Vec<String>,
+    /// Doubtful choices the user must see wherever the study is opened (prep, the window):
+    /// a series taken among several without being asked for.
+    pub warnings: Vec<String>,
     /// DICOM PatientPosition (0018,5100), when the file says and the code is known.
     #[serde(skip)]
     pub position: Option<voyage_core::PatientPosition>,

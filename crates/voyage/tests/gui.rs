@@ -987,3 +987,66 @@ fn frame_statistics_count_only_frames_with_a_study() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Issue 24, item 8a: a folder holding two series of the same size loads one by UID order;
+/// `prep` and the window both say which, and that another exists.
+#[test]
+fn a_tie_between_two_series_is_named_in_prep_and_the_window() {
+    let dir = scratch("two-series");
+    let both = dir.join("both");
+    std::fs::create_dir_all(&both).unwrap();
+    for seed in ["3", "4"] {
+        let series = dir.join(format!("series-{seed}"));
+        small_colon(
+            &dir.join(format!("colon-{seed}.nii.gz")),
+            &["--seed", seed, "--dicom", series.to_str().unwrap()],
+        );
+        for e in std::fs::read_dir(&series).unwrap() {
+            let f = e.unwrap().path();
+            let name = format!("{seed}-{}", f.file_name().unwrap().to_string_lossy());
+            std::fs::rename(&f, both.join(name)).unwrap();
+        }
+    }
+    let said = |text: &str| text.contains("holds 2 series") && text.contains("tied with");
+    let prep = Command::new(env!("CARGO_BIN_EXE_voyage"))
+        .arg("prep")
+        .arg(&both)
+        .arg("--out")
+        .arg(dir.join("prep"))
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(
+        prep.status.success(),
+        "{}",
+        String::from_utf8_lossy(&prep.stderr)
+    );
+    let err = String::from_utf8_lossy(&prep.stderr);
+    assert!(said(&err), "prep did not name the tie: {err}");
+    let summary: Value = serde_json::from_slice(&prep.stdout).unwrap();
+    assert!(
+        summary["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|w| said(w.as_str().unwrap())),
+        "{summary}"
+    );
+    let Some(display) = Display::start() else {
+        return;
+    };
+    let r = view_script(
+        &display,
+        &both,
+        &["--paused"],
+        serde_json::json!([{"quit": true}]),
+        &dir,
+        "script",
+    );
+    let warnings = r["colon"]["warnings"].as_array().unwrap();
+    assert!(
+        warnings.iter().any(|w| said(w.as_str().unwrap())),
+        "the window did not name the tie: {warnings:?}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -153,7 +153,7 @@ pub fn load_and_prepare(a: &InputArgs, nav_min_wall_mm: Option<f64>) -> Result<P
     opts.nav_min_wall_mm = nav_min_wall_mm;
 
     let bar = progress_bar();
-    let study = prepare(loaded.volume, &opts, |stage| {
+    let mut study = prepare(loaded.volume, &opts, |stage| {
         if let Some(b) = &bar {
             b.set_message(stage.name());
             b.set_position(Stage::ALL.iter().position(|s| *s == stage).unwrap_or(0) as u64);
@@ -166,6 +166,10 @@ pub fn load_and_prepare(a: &InputArgs, nav_min_wall_mm: Option<f64>) -> Result<P
     if study.centerline.points_mm.len() < 2 {
         bail!("{}: the centerline is empty", a.input.display());
     }
+    study
+        .segmentation
+        .warnings
+        .splice(0..0, loaded.meta.warnings);
     for w in &study.segmentation.warnings {
         eprintln!("warning: {}: {w}", a.input.display());
     }

@@ -1859,6 +1859,7 @@ fn colon_report(s: &Session, source: Option<&Source>) -> serde_json::Value {
     json!({
         "segments": seg.segments.iter().map(|x| json!({"label": x.label, "order": x.order, "kept": x.kept, "gas_ml": x.gas_ml, "anchor_lps_mm": x.anchor_lps_mm, "reason": x.reason})).collect::<Vec<_>>(),
         "gaps": seg.gaps.len(),
+        "warnings": seg.warnings,
         "centerline_mm": cl.length_mm,
         "start_lps_mm": lps(0),
         "end_lps_mm": lps(cl.points_mm.len().saturating_sub(1)),

@@ -146,6 +146,7 @@ impl Job {
 
 fn open(source: &Source, progress: &dyn Fn(usize, &str)) -> anyhow::Result<Session> {
     let mut opts = PrepOptions::default();
+    let mut load_warnings = Vec::new();
     let ct = match source {
         Source::File {
             path,
@@ -162,6 +163,7 @@ fn open(source: &Source, progress: &dyn Fn(usize, &str)) -> anyhow::Result<Sessi
             )?;
             opts.segment.mask = mask.then_some(true);
             points.apply(loaded.volume.geometry(), &loaded.meta, &mut opts);
+            load_warnings = loaded.meta.warnings;
             loaded.volume
         }
         Source::Phantom { small, points } => {
@@ -175,11 +177,13 @@ fn open(source: &Source, progress: &dyn Fn(usize, &str)) -> anyhow::Result<Sessi
             ct
         }
     };
-    let study = prepare(ct, &opts, |stage| {
+    let mut study = prepare(ct, &opts, |stage| {
         let i = Stage::ALL.iter().position(|s| *s == stage).unwrap_or(0);
         progress(1 + i, stage.name());
     })
     .with_context(|| source.describe())?;
+    // The loader's doubts (a series taken among several) head the study's warnings.
+    study.segmentation.warnings.splice(0..0, load_warnings);
     progress(Stage::ALL.len() + 1, "setting up the flight");
     Session::new(source.title(), study).with_context(|| source.describe())
 }
