@@ -20,7 +20,8 @@ pub use potential::{
     Voxel, potential_field,
 };
 pub use submarine::{
-    Dynamics, Forces, Input, Modes, Safety, State, StepReport, Submarine, delta_q, euler_step,
+    Dynamics, EASE_FROM_MM, Forces, Input, Modes, STOP_SHORT_MM, Safety, State, StepReport,
+    Submarine, delta_q, euler_step,
 };
 /// The navigable core's Dt, made by `prepare` (`Study::nav`, `Study::navigable`).
 pub use voyage_core::Navigable;

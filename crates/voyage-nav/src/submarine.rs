@@ -20,6 +20,15 @@ use crate::{
 };
 use voyage_core::{Error, Result};
 
+/// A click's push toward the wall starts to fade this far from it (mm): about the stopping
+/// distance of the camera at the speed a held click gives it (|F_user| / kf / kf).
+pub const EASE_FROM_MM: f64 = 12.0;
+/// Nearer the wall than this (mm) a click no longer pushes toward it.
+pub const STOP_SHORT_MM: f64 = 4.0;
+/// The brake on a pushed camera's motion toward the wall at [`STOP_SHORT_MM`] (1/s, as kf):
+/// with the friction it stops the camera within about a millimetre.
+const BRAKE_PER_S: f64 = 30.0;
+
 /// Physical constants of the submarine (changeable at any moment).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Dynamics {
@@ -312,9 +321,21 @@ impl Submarine {
         s.lumen_corners == 8 && s.ds >= self.safety.min_wall_mm
     }
 
-    /// F_user of magnitude |F_user| toward the 3D point seen along `ray` (paper §3.3).
-    pub fn push_toward(&self, ray: DVec3) -> DVec3 {
-        ray.normalize_or_zero() * self.dynamics.user_force
+    /// F_user of magnitude |F_user| toward the 3D point seen along `ray` (paper §3.3), eased
+    /// off near the wall as an endoscopist stops short of the mucosa: from [`EASE_FROM_MM`]
+    /// to [`STOP_SHORT_MM`] its part toward the nearest wall fades to nothing and a brake
+    /// against the camera's motion toward the wall grows (the part along the wall stays, so a
+    /// push still carries the camera down the lumen). Without it a held click drives the
+    /// camera to the safe set's edge, where the view is a blur of mucosa.
+    pub fn push_toward<S: DistanceStore>(&self, field: &PotentialField<S>, ray: DVec3) -> DVec3 {
+        let force = ray.normalize_or_zero() * self.dynamics.user_force;
+        let x = self.state.x;
+        let inward = field.ds_gradient(x).normalize_or_zero();
+        let near =
+            1.0 - ((field.ds(x) - STOP_SHORT_MM) / (EASE_FROM_MM - STOP_SHORT_MM)).clamp(0.0, 1.0);
+        let toward_wall = (-force.dot(inward)).max(0.0);
+        let closing_speed = (-self.state.p.dot(inward)).max(0.0);
+        force + inward * near * (toward_wall + BRAKE_PER_S * closing_speed)
     }
 
     /// The forces at the current state.

@@ -11,8 +11,8 @@ use glam::{DMat3, DQuat, DVec3};
 use voyage_core::{PrepOptions, Study, prepare, rng::Rng};
 use voyage_nav::{
     BrickStore, Camera, DS_FLOOR_MM, Direction, DistanceStore, Dynamics, Flight, FlightOptions,
-    Forces, Input, Modes, Navigable, Pose, PotentialField, PotentialParams, Safety, SortedStore,
-    State, Submarine, euler_step, fly, start_pose,
+    Forces, Input, Modes, Navigable, Pose, PotentialField, PotentialParams, STOP_SHORT_MM, Safety,
+    SortedStore, State, Submarine, euler_step, fly, start_pose,
 };
 use voyage_phantom::{self as phantom, ColonOptions};
 
@@ -558,7 +558,7 @@ fn a_click_pushes_the_camera_toward_the_pixel() {
     let cam = Camera::new(sub.pose());
     // A pixel right of and above the centre of a 512² view.
     let ray = cam.pixel_ray(400.0, 150.0, 512, 512);
-    let force = sub.push_toward(ray);
+    let force = sub.push_toward(&f, ray);
     assert!((force.length() - sub.dynamics.user_force).abs() < 1e-9);
     let x0 = sub.state.x;
     sub.step(
@@ -591,6 +591,66 @@ fn a_click_pushes_the_camera_toward_the_pixel() {
         sub.pose().z_body().angle_between(ray) < before,
         "the view did not turn toward the click"
     );
+}
+
+/// Issue 24, item 1: a click held on the wall beside the camera drives it toward the wall,
+/// and stops it short, as an endoscopist stops short of the mucosa: without the easing the
+/// same push ends by the safe set's edge, under 3 mm off the wall.
+/// On colon-a, the real mask (on the phantom the navigable core ends 3 mm short already).
+#[test]
+fn a_held_click_stops_short_of_the_wall() {
+    let Some(study) = colon_a_study() else {
+        return;
+    };
+    let nav = study.navigable(1.0).unwrap();
+    let f = field(&study, &nav);
+    let cl = &study.centerline.points_mm;
+    // From centerline point `i`, looking along it, a click held for 3 s on the nearest wall a
+    // little ahead, then let go for 2 s: the nearest the camera came to the wall (mm, the
+    // wall's true distance) and how far it went.
+    let hold = |i: usize, eased: bool| -> (f64, f64) {
+        let at = DVec3::from_array(cl[i]);
+        let pose = Pose::looking(at, DVec3::from_array(cl[i + 10]) - at, DVec3::Y);
+        let mut sub = Submarine::new(&f, pose, Safety::default()).unwrap();
+        sub.potential = PotentialParams {
+            ct: 0.0,
+            cs: 0.0,
+            rho: 1.0,
+        };
+        let toward_wall = -f.ds_gradient(at).normalize();
+        let ray = toward_wall + 0.3 * pose.z_body();
+        let mut nearest = f64::MAX;
+        for frame in 0..150 {
+            let force = match (frame < 90, eased) {
+                (false, _) => DVec3::ZERO,
+                (true, true) => sub.push_toward(&f, ray),
+                (true, false) => ray.normalize() * sub.dynamics.user_force,
+            };
+            let input = Input {
+                force,
+                torque: DVec3::ZERO,
+            };
+            sub.step(&f, 1.0 / 30.0, &input);
+            nearest = nearest.min(study.ds.sample(sub.state.x) as f64);
+        }
+        (nearest, sub.state.x.distance(at))
+    };
+    for k in 1..8 {
+        let i = k * (cl.len() - 11) / 8;
+        let (raw, _) = hold(i, false);
+        let (eased, moved) = hold(i, true);
+        eprintln!(
+            "at {i}: unchecked {raw:.1} mm from the wall, eased {eased:.1} mm after {moved:.1} mm"
+        );
+        assert!(
+            eased >= STOP_SHORT_MM - 0.5 && eased > raw + 0.5,
+            "at {i}: a held click took the camera {eased:.1} mm from the wall ({raw:.1} mm unchecked)"
+        );
+        assert!(
+            moved > 3.0,
+            "at {i}: the eased push moved the camera {moved:.1} mm"
+        );
+    }
 }
 
 #[test]

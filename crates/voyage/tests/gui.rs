@@ -1050,3 +1050,76 @@ fn a_tie_between_two_series_is_named_in_prep_and_the_window() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Length of clear lumen along the view from `pose` (mm, up to 200): how far down the colon
+/// the camera looks.
+fn clear_view_mm(study: &voyage_core::Study, pose: &Value) -> f64 {
+    let (at, q) = self::pose(pose);
+    let dir = q * DVec3::Z;
+    let mut t = 0.0;
+    while t < 200.0 && study.ds.sample(at + dir * t) > 0.0 {
+        t += 0.5;
+    }
+    t
+}
+
+/// Issue 24, item 1: a jump and a click on a slice by the wall put the camera on a viewing
+/// spot, well off the wall and looking down the colon, not against or at the wall.
+#[test]
+fn jumps_and_slice_clicks_land_on_a_viewing_spot() {
+    let Some(display) = Display::start() else {
+        return;
+    };
+    let dir = scratch("spot");
+    let ct = dir.join("colon.nii.gz");
+    small_colon(&ct, &[]);
+    // The window's own preprocessing, here, to measure where the camera stands.
+    let loaded = voyage_io::load(&ct, &Default::default()).unwrap();
+    let g = loaded.volume.geometry().clone();
+    let study = voyage_core::prepare(loaded.volume, &Default::default(), |_| {}).unwrap();
+    let cl = &study.centerline.points_mm;
+    let c = DVec3::from_array(cl[cl.len() / 3]);
+    let radius = study.ds.sample(c) as f64;
+    // A point of the lumen 1.2 mm from the wall, toward the wall nearest the centerline.
+    let grad = |p: DVec3| {
+        let d = |q: DVec3| study.ds.sample(q) as f64;
+        DVec3::new(
+            d(p + DVec3::X * 0.5) - d(p - DVec3::X * 0.5),
+            d(p + DVec3::Y * 0.5) - d(p - DVec3::Y * 0.5),
+            d(p + DVec3::Z * 0.5) - d(p - DVec3::Z * 0.5),
+        )
+        .normalize()
+    };
+    let out = -grad(c);
+    let mut by_wall = c;
+    while study.ds.sample(by_wall + out * 0.2) as f64 > 1.2 {
+        by_wall += out * 0.2;
+    }
+    let lps = g.local_to_patient(by_wall).to_array();
+    let steps = serde_json::json!([
+        {"jump": 0.6}, {"record": "jump"}, {"move_to": lps}, {"record": "click"}, {"quit": true}
+    ]);
+    let r = view_script(&display, &ct, &["--paused"], steps, &dir, "script");
+    for name in ["jump", "click"] {
+        let pose = &r["recorded"][name];
+        let (at, _) = self::pose(pose);
+        let wall = study.ds.sample(at) as f64;
+        let clear = clear_view_mm(&study, pose);
+        eprintln!("{name}: {wall:.1} mm from the wall, {clear:.0} mm of lumen ahead");
+        assert!(
+            clear >= 2.5 * wall,
+            "after the {name} the camera looks at the wall: {clear:.0} mm ahead, {wall:.1} mm off it"
+        );
+        if name == "click" {
+            assert!(
+                wall >= 0.5 * radius,
+                "the click by the wall put the camera {wall:.1} mm from it (lumen radius {radius:.1} mm)"
+            );
+            assert!(
+                at.distance(by_wall) < radius,
+                "the camera went far from the click"
+            );
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

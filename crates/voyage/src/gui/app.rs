@@ -829,6 +829,21 @@ impl App {
                     self.slices.follow();
                 }
             }
+            Step::MoveTo(lps) => {
+                if let Some(s) = &mut self.session {
+                    let x = s
+                        .study
+                        .ct
+                        .geometry()
+                        .patient_to_local(DVec3::from_array(lps));
+                    s.set_playing(false);
+                    match s.move_to_spot(x) {
+                        Ok(()) => self.status = "moved to the point clicked".into(),
+                        Err(e) => self.status = e,
+                    }
+                    self.slices.follow();
+                }
+            }
             Step::GoTo(label) => self.go_to_marker(&label),
             Step::Pose(a) => {
                 if let (Some(s), Some(p)) = (&mut self.session, voyage_nav::Pose::from_array(a)) {
@@ -1235,16 +1250,13 @@ impl App {
                     at,
                     self.job.is_some(),
                 ) {
-                    Some(SliceAction::MoveTo(p)) => {
-                        let forward = s.pose().z_body();
-                        match s.jump_to(p, forward) {
-                            Ok(()) => {
-                                self.slices.follow();
-                                self.status = "moved to the point clicked".into();
-                            }
-                            Err(e) => self.status = e,
+                    Some(SliceAction::MoveTo(p)) => match s.move_to_spot(p) {
+                        Ok(()) => {
+                            self.slices.follow();
+                            self.status = "moved to the point clicked".into();
                         }
-                    }
+                        Err(e) => self.status = e,
+                    },
                     Some(SliceAction::Correct(c)) => self.correct(c, ui.ctx()),
                     None => {}
                 }
@@ -1267,7 +1279,7 @@ impl App {
                 let cam = s.camera();
                 let mut input = Input::default();
                 if let Some(ray) = steering.push {
-                    input.force = s.sub.push_toward(ray);
+                    input.force = s.sub.push_toward(&s.field, ray);
                 }
                 if steering.look != Vec2::ZERO {
                     // τ_option from the drag: the turn rate that keeps the view under the pointer

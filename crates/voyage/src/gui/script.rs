@@ -64,6 +64,9 @@ pub enum Step {
     },
     /// Jump to a point of the centerline: a fraction of its length from the rectum.
     Jump(f64),
+    /// What a left click on a slice at this point (LPS mm) does: move to a viewing spot near
+    /// it, looking down the colon.
+    MoveTo([f64; 3]),
     /// Put the camera at a pose [x, y, z, qw, qx, qy, qz] (volume-local mm, z_body = view,
     /// y_body = up: the poses of `voyage fly --out`), if it lies inside the colon.
     Pose([f64; 7]),

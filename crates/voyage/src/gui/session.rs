@@ -21,6 +21,16 @@ use super::{
 /// submarine (the physics sub-steps anyway; this keeps the flight's pace steady).
 const MAX_FRAME_S: f64 = 1.0 / 15.0;
 
+/// How far down the colon a jump or a slice click looks (mm along the centerline).
+const LOOK_AHEAD_MM: f64 = 20.0;
+/// A slice click's viewing spot stands at least this fraction of the local radius (the
+/// centerline's distance to the wall) from the wall.
+const SPOT_RADIUS_FRACTION: f64 = 0.6;
+/// The nearest centerline points tried for one in sight of a slice click, and the step of
+/// the line of sight to it (mm).
+const SPOT_CANDIDATES: usize = 64;
+const SPOT_STEP_MM: f64 = 0.5;
+
 pub struct Session {
     /// The file name shown in the title (never a patient name).
     pub name: String,
@@ -243,7 +253,7 @@ impl Session {
         self.pilot.restart(t, self.dt_to_goal(), pose.position);
     }
 
-    /// Jumps to centerline point `i`, looking toward the current goal.
+    /// Jumps to centerline point `i`, looking down the colon toward the current goal.
     pub fn jump_to_centerline(&mut self, i: usize) -> Result<(), String> {
         let pts = &self.study.centerline.points_mm;
         if pts.is_empty() {
@@ -251,15 +261,78 @@ impl Session {
         }
         let i = i.min(pts.len() - 1);
         let p = DVec3::from_array(pts[i]);
-        let (a, b) = (i.saturating_sub(3), (i + 3).min(pts.len() - 1));
-        let mut forward = DVec3::from_array(pts[b]) - DVec3::from_array(pts[a]);
-        if self.sub.direction == Direction::Backward {
-            forward = -forward;
-        }
         // The centerline can run closer to the wall than the safety margin where the lumen
         // is narrow; then the nearest safe point along the local cross-section would do, but
         // the plain answer is to refuse.
-        self.jump_to(p, forward)
+        self.jump_to(p, self.down_the_colon(i))
+    }
+
+    /// The view down the colon from centerline point `i` in the current direction: toward
+    /// the centerline [`LOOK_AHEAD_MM`] on (a tangent over a few points follows the
+    /// centerline's wiggles and can face the wall).
+    fn down_the_colon(&self, i: usize) -> DVec3 {
+        let cl = &self.study.centerline;
+        let p = DVec3::from_array(cl.points_mm[i]);
+        let ahead = |forward: bool| {
+            let arc = cl.arc_mm[i]
+                + if forward {
+                    LOOK_AHEAD_MM
+                } else {
+                    -LOOK_AHEAD_MM
+                };
+            let j = cl
+                .arc_mm
+                .partition_point(|&a| a < arc)
+                .min(cl.points_mm.len() - 1);
+            DVec3::from_array(cl.points_mm[j]) - p
+        };
+        let forward = self.sub.direction == Direction::Forward;
+        // At the goal's end, the view along the way back, turned round.
+        let d = ahead(forward);
+        if d.length() > 1.0 {
+            d
+        } else {
+            -ahead(!forward)
+        }
+    }
+
+    /// Moves to a viewing spot for the lumen point `x` (a slice click): on the line from `x`
+    /// toward the nearest centerline point it sees, the first point at least
+    /// [`SPOT_RADIUS_FRACTION`] of the local radius from the wall, looking down the colon in
+    /// the current direction. A click by the wall does not put the camera against it.
+    pub fn move_to_spot(&mut self, x: DVec3) -> Result<(), String> {
+        let ds = |p: DVec3| self.study.ds.sample(p) as f64;
+        if ds(x) <= 0.0 {
+            return Err(format!(
+                "({:.0}, {:.0}, {:.0}) mm is not inside the colon",
+                x.x, x.y, x.z
+            ));
+        }
+        let cl = &self.study.centerline.points_mm;
+        let mut near: Vec<(f64, usize)> = (0..cl.len())
+            .map(|i| (DVec3::from_array(cl[i]).distance_squared(x), i))
+            .collect();
+        near.sort_by(|a, b| a.0.total_cmp(&b.0));
+        // The nearest centerline point in the same stretch of lumen: the line to it stays in
+        // air (a loop beyond the wall can be nearer).
+        let seen = near.iter().take(SPOT_CANDIDATES).find_map(|&(_, i)| {
+            let c = DVec3::from_array(cl[i]);
+            let steps = (c.distance(x) / SPOT_STEP_MM).ceil().max(1.0) as usize;
+            let line: Vec<DVec3> = (0..=steps)
+                .map(|k| x.lerp(c, k as f64 / steps as f64))
+                .collect();
+            line.iter().all(|&q| ds(q) > 0.0).then_some((i, line))
+        });
+        let Some((i, line)) = seen else {
+            return Err("no centerline in sight of that point".into());
+        };
+        let want = SPOT_RADIUS_FRACTION * ds(DVec3::from_array(cl[i]));
+        let spot = line
+            .iter()
+            .copied()
+            .find(|&q| ds(q) >= want && self.sub.is_safe(&self.field, q))
+            .unwrap_or(DVec3::from_array(cl[i]));
+        self.jump_to(spot, self.down_the_colon(i))
     }
 
     /// Back to the start of the current direction's flight.
