@@ -183,6 +183,21 @@ fn view_script(
     read_json(&report)
 }
 
+/// `voyage prep INPUT --out OUT --json`, which must succeed: its summary and its stderr.
+fn prep_json(input: &Path, out: &Path) -> (Value, String) {
+    let prep = Command::new(env!("CARGO_BIN_EXE_voyage"))
+        .arg("prep")
+        .arg(input)
+        .arg("--out")
+        .arg(out)
+        .arg("--json")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&prep.stderr).into_owned();
+    assert!(prep.status.success(), "{err}");
+    (serde_json::from_slice(&prep.stdout).unwrap(), err)
+}
+
 /// The endoscopic view's rectangle in the window (x0, y0, x1, y1), from a `--report`.
 fn view_rect(report: &Value) -> [f32; 4] {
     let v: Vec<f32> = report["view_rect"]
@@ -443,20 +458,7 @@ fn corrections_rerun_the_preprocessing_and_the_colon_follows() {
     let ct = dir.join("collapsed.nii.gz");
     small_colon(&ct, &["--collapsed", "descending"]);
     // The automatic colon: two segments, rectum first; each with a point in its gas.
-    let prep = voyage(&display)
-        .arg("prep")
-        .arg(&ct)
-        .arg("--out")
-        .arg(dir.join("prep"))
-        .arg("--json")
-        .output()
-        .unwrap();
-    assert!(
-        prep.status.success(),
-        "{}",
-        String::from_utf8_lossy(&prep.stderr)
-    );
-    let auto: Value = serde_json::from_slice(&prep.stdout).unwrap();
+    let (auto, _) = prep_json(&ct, &dir.join("prep"));
     let segs = auto["segments"].as_array().unwrap();
     assert_eq!(
         segs.iter().filter(|s| s["kept"] == true).count(),
@@ -1008,22 +1010,8 @@ fn a_tie_between_two_series_is_named_in_prep_and_the_window() {
         }
     }
     let said = |text: &str| text.contains("holds 2 series") && text.contains("tied with");
-    let prep = Command::new(env!("CARGO_BIN_EXE_voyage"))
-        .arg("prep")
-        .arg(&both)
-        .arg("--out")
-        .arg(dir.join("prep"))
-        .arg("--json")
-        .output()
-        .unwrap();
-    assert!(
-        prep.status.success(),
-        "{}",
-        String::from_utf8_lossy(&prep.stderr)
-    );
-    let err = String::from_utf8_lossy(&prep.stderr);
+    let (summary, err) = prep_json(&both, &dir.join("prep"));
     assert!(said(&err), "prep did not name the tie: {err}");
-    let summary: Value = serde_json::from_slice(&prep.stdout).unwrap();
     assert!(
         summary["warnings"]
             .as_array()
