@@ -1111,3 +1111,40 @@ fn jumps_and_slice_clicks_land_on_a_viewing_spot() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Issue 24, item 4: every slice panel shows the patient's side at all four edges, always,
+/// and a prone exam is shown in the standard display (anterior up) with its position named.
+#[test]
+fn every_slice_shows_its_orientation_letters_and_a_prone_exam_is_named() {
+    let Some(display) = Display::start() else {
+        return;
+    };
+    let dir = scratch("letters");
+    let ct = dir.join("prone.nii.gz");
+    small_colon(&ct, &["--prone"]);
+    let shot = dir.join("window.png");
+    let steps = serde_json::json!([{"wait": 3}, {"screenshot": shot}, {"quit": true}]);
+    let r = view_script(
+        &display,
+        &ct,
+        &["--paused", "--position", "HFP"],
+        steps,
+        &dir,
+        "script",
+    );
+    assert_eq!(r["colon"]["position"], "HFP", "{}", r["colon"]);
+    let letters: Vec<Vec<String>> = serde_json::from_value(r["slice_letters"].clone()).unwrap();
+    assert_eq!(
+        letters,
+        [
+            ["R", "L", "A", "P"],
+            ["R", "L", "S", "I"],
+            ["A", "P", "S", "I"]
+        ]
+        .map(|p| p.map(String::from).to_vec())
+        .to_vec(),
+        "letters drawn (left, right, top, bottom) on axial, coronal, sagittal"
+    );
+    assert!(shot.is_file());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

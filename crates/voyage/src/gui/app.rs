@@ -968,6 +968,7 @@ impl App {
             cells: self.endoscope.stats.cells,
             triangles: self.endoscope.stats.triangles,
             colon: s.map(|s| colon_report(s, self.source.as_ref())),
+            slice_letters: self.slices.letters_drawn.clone(),
             coverage: s.map(|s| s.coverage.report()),
             correction_error: self.correction_error.clone(),
             status: self.status.clone(),
@@ -1241,11 +1242,14 @@ impl App {
             .show(ui, |ui| {
                 let Some(s) = &mut self.session else { return };
                 let at = s.pose().position;
+                let p = s.study.segmentation.orientation.position;
+                let position = format!("{} ({})", p.describe(), p.code());
                 match self.slices.show(
                     ui,
                     SliceSource {
                         ct: &s.study.ct,
                         cleansing: &s.study.cleansing,
+                        position: &position,
                     },
                     at,
                     self.job.is_some(),
@@ -1872,6 +1876,7 @@ fn colon_report(s: &Session, source: Option<&Source>) -> serde_json::Value {
         "segments": seg.segments.iter().map(|x| json!({"label": x.label, "order": x.order, "kept": x.kept, "gas_ml": x.gas_ml, "anchor_lps_mm": x.anchor_lps_mm, "reason": x.reason})).collect::<Vec<_>>(),
         "gaps": seg.gaps.len(),
         "warnings": seg.warnings,
+        "position": seg.orientation.position.code(),
         "centerline_mm": cl.length_mm,
         "start_lps_mm": lps(0),
         "end_lps_mm": lps(cl.points_mm.len().saturating_sub(1)),

@@ -33,6 +33,9 @@ pub struct Report {
     pub triangles: usize,
     /// The colon's segments, gaps and corrections.
     pub colon: Option<serde_json::Value>,
+    /// The patient's sides drawn at the edges of the axial, coronal and sagittal slices in
+    /// the last frame (left, right, top, bottom).
+    pub slice_letters: [Vec<&'static str>; 3],
     /// What the frames shown showed of the mucosa, and the two-way reading.
     pub coverage: Option<CoverageReport>,
     pub correction_error: Option<String>,

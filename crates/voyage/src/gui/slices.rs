@@ -52,6 +52,17 @@ impl Plane {
             Plane::Sagittal => "sagittal",
         }
     }
+
+    /// The patient's side at the image's left, right, top and bottom edges, as [`layout`]
+    /// puts it in the standard display whatever way the patient lay or the data is stored:
+    /// right on the left, anterior up on axial slices, head up on the others.
+    pub fn edge_letters(self) -> [&'static str; 4] {
+        match self {
+            Plane::Axial => ["R", "L", "A", "P"],
+            Plane::Coronal => ["R", "L", "S", "I"],
+            Plane::Sagittal => ["A", "P", "S", "I"],
+        }
+    }
 }
 
 /// How a plane's image maps to voxel indices: which index axis runs along the screen's x
@@ -114,6 +125,9 @@ struct SliceView {
 
 pub struct SlicePanel {
     views: [SliceView; 3],
+    /// The edge letters drawn on each slice in the last frame (axial, coronal, sagittal; empty
+    /// until drawn), for the window's report.
+    pub letters_drawn: [Vec<&'static str>; 3],
     pub window: f64,
     pub level: f64,
     /// Show the cleansed CT (where cleansing changed anything), and outline what it changed.
@@ -121,11 +135,13 @@ pub struct SlicePanel {
     pub outline: bool,
 }
 
-/// The CT the slices read, and what cleansing changed in it.
+/// The CT the slices read, what cleansing changed in it, and how the patient lay (named
+/// above the slices, e.g. "prone (HFP)").
 #[derive(Clone, Copy)]
 pub struct SliceSource<'a> {
     pub ct: &'a Volume<i16>,
     pub cleansing: &'a Cleansing,
+    pub position: &'a str,
 }
 
 impl SlicePanel {
@@ -142,6 +158,7 @@ impl SlicePanel {
         });
         SlicePanel {
             views,
+            letters_drawn: Default::default(),
             window: PRESETS[0].1,
             level: PRESETS[0].2,
             cleansed: false,
@@ -179,10 +196,14 @@ impl SlicePanel {
                 ui.checkbox(&mut self.outline, "Outline").on_hover_text("outline the voxels cleansing changed");
             }
             ui.label(format!("W {:.0} L {:.0}", self.window, self.level)).on_hover_text("drag on a slice: ←→ window, ↑↓ level; scroll: slices; click in the colon: go there; right click: start / end here, gas is colon or not");
+            ui.separator();
+            ui.label(format!("patient {}: shown anterior up, patient's right on the left", src.position));
         });
         let mut clicked = None;
         let width = ui.available_width() / 3.0 - 6.0;
-        let height = ui.available_height();
+        // No taller than what the panel shows: the bottom rows and letters were cut off.
+        let visible = ui.clip_rect().bottom() - ui.cursor().top() - 8.0;
+        let height = ui.available_height().min(visible).max(32.0);
         ui.horizontal(|ui| {
             for i in 0..3 {
                 let (rect, response) =
@@ -318,24 +339,7 @@ impl SlicePanel {
             egui::FontId::proportional(11.0),
             Color32::from_gray(200),
         );
-        let (lx, rx) = match plane {
-            Plane::Sagittal => ("A", "P"),
-            _ => ("R", "L"),
-        };
-        painter.text(
-            Pos2::new(image_rect.left() + 3.0, image_rect.center().y),
-            egui::Align2::LEFT_CENTER,
-            lx,
-            egui::FontId::proportional(11.0),
-            Color32::from_gray(160),
-        );
-        painter.text(
-            Pos2::new(image_rect.right() - 3.0, image_rect.center().y),
-            egui::Align2::RIGHT_CENTER,
-            rx,
-            egui::FontId::proportional(11.0),
-            Color32::from_gray(160),
-        );
+        self.letters_drawn[i] = edge_letters(&painter, image_rect, plane);
 
         // Screen → the voxel centre under it (the nearest, so a point given back to
         // segmentation lies in the voxel the user saw).
@@ -397,6 +401,46 @@ impl SlicePanel {
         });
         chosen
     }
+}
+
+/// Draws the patient's side at each edge of a slice image, white on a dark plate so that it
+/// reads over bright tissue as over air; returns the letters drawn (left, right, top,
+/// bottom).
+fn edge_letters(painter: &egui::Painter, image: Rect, plane: Plane) -> Vec<&'static str> {
+    let [left, right, top, bottom] = plane.edge_letters();
+    let inset = 3.0;
+    let places = [
+        (
+            left,
+            Pos2::new(image.left() + inset, image.center().y),
+            egui::Align2::LEFT_CENTER,
+        ),
+        (
+            right,
+            Pos2::new(image.right() - inset, image.center().y),
+            egui::Align2::RIGHT_CENTER,
+        ),
+        (
+            top,
+            Pos2::new(image.center().x, image.top() + inset),
+            egui::Align2::CENTER_TOP,
+        ),
+        (
+            bottom,
+            Pos2::new(image.center().x, image.bottom() - inset),
+            egui::Align2::CENTER_BOTTOM,
+        ),
+    ];
+    let font = egui::FontId::proportional(12.0);
+    let mut drawn = Vec::with_capacity(4);
+    for (letter, at, align) in places {
+        let galley = painter.layout_no_wrap(letter.to_string(), font.clone(), Color32::WHITE);
+        let text = align.anchor_size(at, galley.size());
+        painter.rect_filled(text.expand(2.0), 2.0, Color32::from_black_alpha(170));
+        painter.galley(text.min, galley, Color32::WHITE);
+        drawn.push(letter);
+    }
+    drawn
 }
 
 /// How a slice is shown: window / level (HU), size in pixels, and cleansing's changes in its
