@@ -326,58 +326,108 @@ fn scripted_session_steers_marks_measures_exports_and_shows_three_panels() {
     );
 }
 
-#[test]
-fn mouse_and_keys_drive_the_window() {
-    let Some(display) = Display::start() else {
-        return;
-    };
-    if !have("xdotool") {
-        voyage_phantom::fixtures::skip("xdotool not installed (bash scripts/deps.sh installs it)");
-        return;
-    }
-    let dir = scratch("xdotool");
-    let script = dir.join("script.json");
-    std::fs::write(&script, r#"[{"record": "start"}]"#).unwrap();
-    let report = dir.join("report.json");
-    let mut child = voyage(&display)
-        .args(["demo", "--small", "--paused"])
-        .arg("--script")
-        .arg(&script)
-        .arg("--report")
-        .arg(&report)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
-    let ready: Value = loop {
-        let line = lines
-            .next()
-            .expect("the window closed before it was ready")
-            .unwrap();
-        if let Ok(v) = serde_json::from_str::<Value>(&line)
-            && v["ready"] == true
-        {
-            break v;
+/// The small demo, paused, driven by real X events: started with a script of `steps` and
+/// a report, up to its "ready" line on stdout (which it returns).
+struct Driven<'a> {
+    display: &'a Display,
+    child: Child,
+    ready: Value,
+    report: PathBuf,
+}
+
+impl<'a> Driven<'a> {
+    /// None (skipped, said) when xdotool is missing.
+    fn start(display: &'a Display, dir: &Path, steps: &str) -> Option<Self> {
+        if !have("xdotool") {
+            voyage_phantom::fixtures::skip(
+                "xdotool not installed (bash scripts/deps.sh installs it)",
+            );
+            return None;
         }
-    };
-    let v: Vec<f64> = ready["view_px"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect();
-    let xdo = |args: &[&str]| {
+        let script = dir.join("script.json");
+        std::fs::write(&script, steps).unwrap();
+        let report = dir.join("report.json");
+        let mut child = voyage(display)
+            .args(["demo", "--small", "--paused"])
+            .arg("--script")
+            .arg(&script)
+            .arg("--report")
+            .arg(&report)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+        let ready: Value = loop {
+            let line = lines
+                .next()
+                .expect("the window closed before it was ready")
+                .unwrap();
+            if let Ok(v) = serde_json::from_str::<Value>(&line)
+                && v["ready"] == true
+            {
+                break v;
+            }
+        };
+        let driven = Driven {
+            display,
+            child,
+            ready,
+            report,
+        };
+        // No window manager runs on the virtual display: give the window the keyboard focus.
+        driven.xdo(&["search", "--name", "^voyage", "windowfocus"]);
+        Some(driven)
+    }
+
+    fn xdo(&self, args: &[&str]) {
         let ok = Command::new("xdotool")
-            .env("DISPLAY", &display.name)
+            .env("DISPLAY", &self.display.name)
             .args(args)
             .status()
             .unwrap()
             .success();
         assert!(ok, "xdotool {args:?}");
+    }
+
+    fn move_to(&self, x: f64, y: f64) {
+        self.xdo(&["mousemove", &format!("{x:.0}"), &format!("{y:.0}")]);
+    }
+
+    /// Closes the window with Ctrl+Q; its report.
+    fn quit(mut self) -> Value {
+        self.xdo(&["key", "ctrl+q"]);
+        let t = Instant::now();
+        let status = loop {
+            if let Some(s) = self.child.try_wait().unwrap() {
+                break s;
+            }
+            if t.elapsed() > Duration::from_secs(60) {
+                let _ = self.child.kill();
+                panic!("the window did not close on Ctrl+Q");
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        };
+        assert!(status.success());
+        read_json(&self.report)
+    }
+}
+
+#[test]
+fn mouse_and_keys_drive_the_window() {
+    let Some(display) = Display::start() else {
+        return;
     };
-    // No window manager runs on the virtual display: give the window the keyboard focus.
-    xdo(&["search", "--name", "^voyage", "windowfocus"]);
+    let dir = scratch("xdotool");
+    let Some(w) = Driven::start(&display, &dir, r#"[{"record": "start"}]"#) else {
+        return;
+    };
+    let v: Vec<f64> = w.ready["view_px"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
     let (cx, cy) = ((v[0] + v[2]) / 2.0, (v[1] + v[3]) / 2.0);
     let right_x = v[0] + 0.75 * (v[2] - v[0]);
     // Hold the left button right of centre for 0.3 s: F_user pulls right and
@@ -386,29 +436,16 @@ fn mouse_and_keys_drive_the_window() {
     // 0.6 s turned it ~112°, so a late mouseup on a busy machine could carry it past 180°,
     // where the angle reads as a turn to the left. The script is done by then, so the
     // physics follows the clock, not the frame count.)
-    xdo(&["mousemove", &format!("{right_x:.0}"), &format!("{cy:.0}")]);
-    xdo(&["mousedown", "1"]);
+    w.move_to(right_x, cy);
+    w.xdo(&["mousedown", "1"]);
     std::thread::sleep(Duration::from_millis(300));
-    xdo(&["mouseup", "1"]);
+    w.xdo(&["mouseup", "1"]);
     // A marker on the surface under the cursor, then quit with Ctrl+Q.
-    xdo(&["mousemove", &format!("{cx:.0}"), &format!("{cy:.0}")]);
+    w.move_to(cx, cy);
     std::thread::sleep(Duration::from_millis(300));
-    xdo(&["key", "m"]);
+    w.xdo(&["key", "m"]);
     std::thread::sleep(Duration::from_millis(500));
-    xdo(&["key", "ctrl+q"]);
-    let t = Instant::now();
-    let status = loop {
-        if let Some(s) = child.try_wait().unwrap() {
-            break s;
-        }
-        if t.elapsed() > Duration::from_secs(60) {
-            let _ = child.kill();
-            panic!("the window did not close on Ctrl+Q");
-        }
-        std::thread::sleep(Duration::from_millis(100));
-    };
-    assert!(status.success());
-    let r = read_json(&report);
+    let r = w.quit();
     let turn = turned_right_deg(&r["recorded"]["start"], &r["pose"]);
     eprintln!(
         "after holding the button right of centre: turned {turn:.1}°; markers {}",
@@ -419,6 +456,54 @@ fn mouse_and_keys_drive_the_window() {
         "the camera turned {turn:.2}° (want right, > 2°)"
     );
     assert_eq!(r["markers"].as_array().unwrap().len(), 1, "{r}");
+}
+
+/// Issue 24, item 5: a click near the scout's centerline (12 px off it, where the old 8 px
+/// tolerance missed) jumps there; the line under the pointer lights up; a click that misses
+/// says so.
+#[test]
+fn the_scout_picks_generously_lights_the_line_and_says_when_a_click_misses() {
+    let Some(display) = Display::start() else {
+        return;
+    };
+    let dir = scratch("scout-pick");
+    let Some(w) = Driven::start(&display, &dir, r#"[{"record": "start"}]"#) else {
+        return;
+    };
+    let probe: Vec<[f64; 2]> = serde_json::from_value(w.ready["scout_centerline_px"].clone())
+        .expect("the ready line gives the scout's centerline");
+    let ([ax, ay], [bx, by]) = (probe[0], probe[1]);
+    let len = (bx - ax).hypot(by - ay).max(1e-9);
+    let (nx, ny) = (-(by - ay) / len, (bx - ax) / len);
+    let (px, py) = (ax + 12.0 * nx, ay + 12.0 * ny);
+    w.move_to(px, py);
+    std::thread::sleep(Duration::from_millis(300));
+    w.xdo(&["click", "1"]);
+    std::thread::sleep(Duration::from_millis(500));
+    // A click on empty scout (its top right corner): a miss, said.
+    w.move_to(1270.0, 60.0);
+    std::thread::sleep(Duration::from_millis(300));
+    w.xdo(&["click", "1"]);
+    std::thread::sleep(Duration::from_millis(500));
+    // Back over the line: it lights up.
+    w.move_to(px, py);
+    std::thread::sleep(Duration::from_millis(500));
+    let r = w.quit();
+    let (start, _) = pose(&r["recorded"]["start"]);
+    let (now, _) = pose(&r["pose"]);
+    assert!(
+        start.distance(now) > 20.0,
+        "the click near the scout's centerline did not jump: {:.1} mm moved",
+        start.distance(now)
+    );
+    let status = r["status"].as_str().unwrap();
+    assert!(status.contains("missed the centerline"), "{status}");
+    assert!(
+        r["scout_hovered"].is_u64(),
+        "the centerline under the pointer is not lit: {}",
+        r["scout_hovered"]
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]

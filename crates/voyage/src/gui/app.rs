@@ -29,7 +29,7 @@ use super::{
     loader::{Job, Source},
     pixels::WindowGpu,
     report::{MarkerReport, Report},
-    scout::{ScoutMarks, ScoutView},
+    scout::{ScoutClick, ScoutMarks, ScoutView},
     script::{Script, Step},
     session::Session,
     slices::{SliceAction, SlicePanel, SliceSource},
@@ -969,6 +969,7 @@ impl App {
             triangles: self.endoscope.stats.triangles,
             colon: s.map(|s| colon_report(s, self.source.as_ref())),
             slice_letters: self.slices.letters_drawn.clone(),
+            scout_hovered: self.scout.as_ref().and_then(|v| v.hovered),
             coverage: s.map(|s| s.coverage.report()),
             correction_error: self.correction_error.clone(),
             status: self.status.clone(),
@@ -1210,6 +1211,7 @@ impl App {
                     .then(|| s.coverage.scout_tint(&s.mesh, &s.scout));
                 let marks = ScoutMarks {
                     centerline: &s.study.centerline.points_mm,
+                    arc_mm: &s.study.centerline.arc_mm,
                     markers: self
                         .findings
                         .markers
@@ -1220,8 +1222,13 @@ impl App {
                     view_dir: pose.z_body(),
                     unseen,
                 };
-                if let Some(i) = view.show(ui, &s.scout, &marks) {
-                    match s.jump_to_centerline(i) {
+                match view.show(ui, &s.scout, &marks) {
+                    Some(ScoutClick::Missed(d)) => {
+                        self.status = format!(
+                            "the click on the scout missed the centerline ({d:.0} px away): click on the green line (it lights up under the pointer); drag orbits"
+                        );
+                    }
+                    Some(ScoutClick::Centerline(i)) => match s.jump_to_centerline(i) {
                         Ok(()) => {
                             self.slices.follow();
                             self.status = format!(
@@ -1230,7 +1237,8 @@ impl App {
                             );
                         }
                         Err(e) => self.status = e,
-                    }
+                    },
+                    None => {}
                 }
             });
     }
@@ -1657,9 +1665,15 @@ impl App {
         }
         let Some(r) = self.view_rect else { return };
         let ppp = ctx.pixels_per_point();
+        // The scout's centerline middle, for a tool that clicks it.
+        let probe = self
+            .scout
+            .as_ref()
+            .and_then(|v| v.probe)
+            .map(|ps| ps.map(|p| [p.x * ppp, p.y * ppp]));
         println!(
             "{}",
-            json!({"ready": true, "view_px": [r.left() * ppp, r.top() * ppp, r.right() * ppp, r.bottom() * ppp]})
+            json!({"ready": true, "view_px": [r.left() * ppp, r.top() * ppp, r.right() * ppp, r.bottom() * ppp], "scout_centerline_px": probe})
         );
         use std::io::Write;
         let _ = std::io::stdout().flush();

@@ -36,6 +36,8 @@ pub struct Report {
     /// The patient's sides drawn at the edges of the axial, coronal and sagittal slices in
     /// the last frame (left, right, top, bottom).
     pub slice_letters: [Vec<&'static str>; 3],
+    /// The centerline point under the pointer on the scout (lit up there), if any.
+    pub scout_hovered: Option<usize>,
     /// What the frames shown showed of the mucosa, and the two-way reading.
     pub coverage: Option<CoverageReport>,
     pub correction_error: Option<String>,

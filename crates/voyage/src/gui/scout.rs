@@ -89,6 +89,8 @@ impl ScoutMesh {
 /// What the scout shows besides the colon.
 pub struct ScoutMarks<'a> {
     pub centerline: &'a [[f64; 3]],
+    /// The centerline points' distance from the rectum end (mm).
+    pub arc_mm: &'a [f64],
     /// (label, position).
     pub markers: Vec<(String, DVec3)>,
     pub submarine: DVec3,
@@ -98,8 +100,26 @@ pub struct ScoutMarks<'a> {
     pub unseen: Option<(&'a [f32], u64)>,
 }
 
+/// How near the pointer must come to the centerline on the scout to pick it (points): a
+/// generous target, as the line is thin and the colon small on a full-size scout.
+pub const PICK_POINTS: f32 = 16.0;
+
+/// What a click on the scout did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ScoutClick {
+    /// Picked centerline point i.
+    Centerline(usize),
+    /// Missed: the centerline was this far from the click (points).
+    Missed(f32),
+}
+
 /// The scout's orbit camera and its cached mesh.
 pub struct ScoutView {
+    /// Where the centerline's middle point and the point 5 on were drawn in the last frame
+    /// (points), for tools that click the line from outside (tests with xdotool).
+    pub probe: Option<[Pos2; 2]>,
+    /// The centerline point under the pointer in the last frame, if any.
+    pub hovered: Option<usize>,
     yaw: f64,
     pitch: f64,
     zoom: f64,
@@ -149,6 +169,8 @@ impl ScoutView {
         // local = Dᵀ (patient − origin): a patient axis e is Dᵀ e in the local frame.
         let d = geometry.direction_mat().transpose();
         ScoutView {
+            probe: None,
+            hovered: None,
             yaw: 0.0,
             pitch: 0.0,
             zoom: 1.0,
@@ -183,14 +205,15 @@ impl ScoutView {
         }
     }
 
-    /// Draws the scout into `ui`'s remaining space; returns the centerline point clicked,
-    /// if a click landed within a few pixels of the centerline.
+    /// Draws the scout into `ui`'s remaining space, the centerline under the pointer
+    /// highlighted; returns what a click did: the centerline point picked (within
+    /// [`PICK_POINTS`] of the line), or a miss.
     pub fn show(
         &mut self,
         ui: &mut egui::Ui,
         mesh: &ScoutMesh,
         marks: &ScoutMarks,
-    ) -> Option<usize> {
+    ) -> Option<ScoutClick> {
         let (rect, response) = ui.allocate_exact_size(ui.available_size(), Sense::click_and_drag());
         if response.dragged_by(egui::PointerButton::Primary)
             || response.dragged_by(egui::PointerButton::Secondary)
@@ -244,16 +267,26 @@ impl ScoutView {
             Color32::from_gray(150),
         );
 
+        let mid = line.len() / 2;
+        self.probe = line.get(mid + 5).map(|&on| [line[mid], on]);
+        let near = |p: Pos2| nearest_on_line(&line, p);
+        self.hovered = response
+            .hover_pos()
+            .and_then(near)
+            .filter(|&(_, d)| d <= PICK_POINTS)
+            .map(|(i, _)| i);
+        if let Some(i) = self.hovered {
+            highlight(&painter, &line, i, marks.arc_mm);
+        }
         if response.clicked() {
             let at = response.interact_pointer_pos()?;
-            let (mut best, mut bi) = (f32::INFINITY, None);
-            for (i, s) in line.iter().enumerate() {
-                let d = s.distance(at);
-                if d < best {
-                    (best, bi) = (d, Some(i));
+            return near(at).map(|(i, d)| {
+                if d <= PICK_POINTS {
+                    ScoutClick::Centerline(i)
+                } else {
+                    ScoutClick::Missed(d)
                 }
-            }
-            return bi.filter(|_| best <= 8.0);
+            });
         }
         None
     }
@@ -299,6 +332,49 @@ impl ScoutView {
         self.image.set(image);
         self.cached = Some((key, offset));
         offset
+    }
+}
+
+/// The centerline point nearest `p` on the screen polyline `line`, and the distance from `p`
+/// to the line (points): segments, not only points, so a click between two far-apart
+/// points of a zoomed scout still picks.
+fn nearest_on_line(line: &[Pos2], p: Pos2) -> Option<(usize, f32)> {
+    if line.len() == 1 {
+        return Some((0, line[0].distance(p)));
+    }
+    line.windows(2)
+        .enumerate()
+        .map(|(i, w)| {
+            let (a, b) = (w[0], w[1]);
+            let ab = b - a;
+            let t = ((p - a).dot(ab) / ab.length_sq().max(f32::MIN_POSITIVE)).clamp(0.0, 1.0);
+            let d = (a + ab * t).distance(p);
+            (if t < 0.5 { i } else { i + 1 }, d)
+        })
+        .min_by(|x, y| x.1.total_cmp(&y.1))
+}
+
+/// The centerline's stretch around point `i` drawn bright, with a ring at `i` and its
+/// distance from the rectum: what a click there will do.
+fn highlight(painter: &egui::Painter, line: &[Pos2], i: usize, arc_mm: &[f64]) {
+    let hot = Color32::from_rgb(255, 230, 60);
+    let span = &line[i.saturating_sub(15)..(i + 16).min(line.len())];
+    painter.add(Shape::line(span.to_vec(), Stroke::new(3.0, hot)));
+    painter.circle_stroke(line[i], 6.0, Stroke::new(2.0, hot));
+    if let Some(arc) = arc_mm.get(i) {
+        // On the side of the panel with room for it.
+        let (offset, align) = if line[i].x > painter.clip_rect().center().x {
+            (Vec2::new(-9.0, -9.0), egui::Align2::RIGHT_BOTTOM)
+        } else {
+            (Vec2::new(9.0, -9.0), egui::Align2::LEFT_BOTTOM)
+        };
+        painter.text(
+            line[i] + offset,
+            align,
+            format!("go to {arc:.0} mm"),
+            egui::FontId::proportional(12.0),
+            hot,
+        );
     }
 }
 
