@@ -1170,7 +1170,7 @@ fn jumps_and_slice_clicks_land_on_a_viewing_spot() {
     }
     let lps = g.local_to_patient(by_wall).to_array();
     let steps = serde_json::json!([
-        {"jump": 0.6}, {"record": "jump"}, {"move_to": lps}, {"record": "click"}, {"quit": true}
+        {"jump": 0.6}, {"wait": 60}, {"record": "jump"}, {"move_to": lps}, {"wait": 60}, {"record": "click"}, {"quit": true}
     ]);
     let r = view_script(&display, &ct, &["--paused"], steps, &dir, "script");
     for name in ["jump", "click"] {
