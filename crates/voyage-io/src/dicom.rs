@@ -658,13 +658,9 @@ fn choose_series(dir: &Path, images: Vec<Header>, opts: &LoadOptions) -> Result<
             want.clone()
         }
         None => {
-            let best = summaries.iter().max_by_key(|s| {
-                (
-                    s.modality.as_deref() == Some("CT"),
-                    s.slices,
-                    std::cmp::Reverse(s.uid.clone()),
-                )
-            });
+            let best = summaries
+                .iter()
+                .max_by_key(|s| (rank(s), std::cmp::Reverse(s.uid.clone())));
             best.map(|s| s.uid.clone()).unwrap_or_default()
         }
     };
@@ -675,7 +671,6 @@ fn choose_series(dir: &Path, images: Vec<Header>, opts: &LoadOptions) -> Result<
         .collect();
     let note = (!others.is_empty()).then(|| {
         let chosen = summaries.iter().find(|s| s.uid == chosen_uid);
-        let rank = |s: &SeriesSummary| (s.modality.as_deref() == Some("CT"), s.slices);
         let tied: Vec<String> = others
             .iter()
             .filter(|o| chosen.is_some_and(|c| rank(o) == rank(c)))
@@ -699,6 +694,12 @@ fn choose_series(dir: &Path, images: Vec<Header>, opts: &LoadOptions) -> Result<
     });
     let chosen = groups.remove(&chosen_uid).unwrap_or_default();
     Ok((chosen, others, note))
+}
+
+/// How a series ranks when none is asked for: CT first, then the most slices (a tie is
+/// broken by UID, and named).
+fn rank(s: &SeriesSummary) -> (bool, usize) {
+    (s.modality.as_deref() == Some("CT"), s.slices)
 }
 
 fn summary(uid: &str, headers: &[Header]) -> SeriesSummary {

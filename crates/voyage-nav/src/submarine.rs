@@ -347,10 +347,11 @@ impl Submarine {
             torque += -r.z_axis.cross(grad_v);
         }
         if self.modes.leveling {
-            // The paper's τ_leveling (§3.3) turns y_body toward −G, which also pitches the view toward the
-            // horizon; during a flight the compass holds the view down the lumen against it.
-            // With no compass to hold it (paused, where V is off, or compass off) only its
-            // roll about the view axis acts: a camera put looking down the colon stays so.
+            // The paper's τ_leveling (§3.3) turns y_body toward −G, which also pitches the
+            // view toward the horizon; during a flight the compass holds the view down the
+            // lumen against it. With no compass to hold it (paused, where V is off, or
+            // compass off) only its roll about the view axis acts: a camera put looking down
+            // the colon stays so.
             let level = -r.y_axis.cross(self.dynamics.gravity);
             let compass_holds = self.modes.compass && grad_v != DVec3::ZERO;
             torque += if compass_holds {

@@ -837,11 +837,7 @@ impl App {
                         .geometry()
                         .patient_to_local(DVec3::from_array(lps));
                     s.set_playing(false);
-                    match s.move_to_spot(x) {
-                        Ok(()) => self.status = "moved to the point clicked".into(),
-                        Err(e) => self.status = e,
-                    }
-                    self.slices.follow();
+                    self.move_to_point(x);
                 }
             }
             Step::GoTo(label) => self.go_to_marker(&label),
@@ -1243,6 +1239,19 @@ impl App {
             });
     }
 
+    /// A click on a slice at `x` (volume-local mm): to a viewing spot near it, the slices
+    /// following; or why not, in the status line.
+    fn move_to_point(&mut self, x: DVec3) {
+        let Some(s) = &mut self.session else { return };
+        match s.move_to_spot(x) {
+            Ok(()) => {
+                self.slices.follow();
+                self.status = "moved to the point clicked".into();
+            }
+            Err(e) => self.status = e,
+        }
+    }
+
     fn slice_panel(&mut self, ui: &mut egui::Ui) {
         egui::Panel::bottom("slices")
             .resizable(false)
@@ -1262,13 +1271,7 @@ impl App {
                     at,
                     self.job.is_some(),
                 ) {
-                    Some(SliceAction::MoveTo(p)) => match s.move_to_spot(p) {
-                        Ok(()) => {
-                            self.slices.follow();
-                            self.status = "moved to the point clicked".into();
-                        }
-                        Err(e) => self.status = e,
-                    },
+                    Some(SliceAction::MoveTo(p)) => self.move_to_point(p),
                     Some(SliceAction::Correct(c)) => self.correct(c, ui.ctx()),
                     None => {}
                 }

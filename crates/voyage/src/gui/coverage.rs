@@ -245,8 +245,14 @@ impl WindowCoverage {
             }
             Stage::Backward if reached => {
                 r.two_way_pct = Some(r.seen.percent());
-                r.patches = r.seen.patches(mesh).len();
+                // The listed patches lead the targets (largest first): counted, not found again.
                 r.queue = r.seen.review_targets(mesh);
+                let min_patch = r.seen.options().min_patch_mm2;
+                r.patches = r
+                    .queue
+                    .iter()
+                    .take_while(|p| p.area_mm2 >= min_patch)
+                    .count();
                 r.round_shown = 0.0;
                 r.stage = Stage::Review {
                     round: 0,
