@@ -9,7 +9,7 @@
 //! Readers who fly one way see about 77 % of the mucosa and both ways about 94 %; stepping
 //! through the unseen patches raises that to about 98 % (Pickhardt et al., 2006).
 
-use glam::DVec3;
+use glam::{DQuat, DVec3};
 use serde::Serialize;
 
 use crate::{
@@ -34,6 +34,9 @@ pub struct CoverageOptions {
     /// The review also visits unseen surface down to this area (mm²), after the listed
     /// patches: bits too small to list can still hide a small polyp.
     pub review_min_mm2: f64,
+    /// Reading flights look around as they go ([`Glances`]); off, they look only where the
+    /// flight looks, as the paper's camera does.
+    pub look_around: bool,
 }
 
 /// The footprint of a 3 mm polyp (mm²): the smallest the two-way reading and review must
@@ -52,6 +55,7 @@ impl Default for CoverageOptions {
             max_angle_deg: 75.0,
             min_patch_mm2: 30.0,
             review_min_mm2: REVIEW_MIN_MM2,
+            look_around: true,
         }
     }
 }
@@ -132,6 +136,16 @@ impl Coverage {
     /// Marks what `frame`, drawn from `view`, shows of `mesh`; returns the area newly seen
     /// (mm²).
     pub fn mark(&mut self, frame: &Frame, view: &View, mesh: &CellMesh) -> f64 {
+        self.tally(frame, view, mesh, true)
+    }
+
+    /// The area `frame`, drawn from `view`, would newly show (mm²), left unmarked.
+    pub fn gain(&mut self, frame: &Frame, view: &View, mesh: &CellMesh) -> f64 {
+        self.tally(frame, view, mesh, false)
+    }
+
+    /// The unseen area `frame` shows, marked seen when `commit`.
+    fn tally(&mut self, frame: &Frame, view: &View, mesh: &CellMesh, commit: bool) -> f64 {
         self.next_frame();
         self.collect_candidates(frame, view);
         let cos_max = self.options.max_angle_deg.to_radians().cos();
@@ -141,11 +155,13 @@ impl Coverage {
             let normal = smooth_normal(mesh, t);
             let to_eye = view.eye - (a + b + c) / 3.0;
             if normal.dot(to_eye) >= cos_max * normal.length() * to_eye.length() {
-                self.seen[t as usize] = true;
+                self.seen[t as usize] |= commit;
                 added += self.area_mm2[t as usize] as f64;
             }
         }
-        self.seen_mm2 += added;
+        if commit {
+            self.seen_mm2 += added;
+        }
         added
     }
 
@@ -476,6 +492,24 @@ impl Reader {
         pose: Pose,
         coverage: &mut Coverage,
     ) -> f64 {
+        let view = self.draw(mesh, cells, pose);
+        coverage.mark(&self.frame, &view, mesh)
+    }
+
+    /// Draws `mesh` from `pose` and returns the area the frame would newly show (mm²),
+    /// left unmarked.
+    pub fn probe(
+        &mut self,
+        mesh: &CellMesh,
+        cells: &Cells,
+        pose: Pose,
+        coverage: &mut Coverage,
+    ) -> f64 {
+        let view = self.draw(mesh, cells, pose);
+        coverage.gain(&self.frame, &view, mesh)
+    }
+
+    fn draw(&mut self, mesh: &CellMesh, cells: &Cells, pose: Pose) -> View {
         let camera = Camera {
             pose,
             ..self.camera
@@ -484,12 +518,88 @@ impl Reader {
         let raster = Rasterizer::new(mesh, view, &self.shading);
         self.frame.clear();
         self.visibility.draw(&mut self.frame, &raster, cells);
-        coverage.mark(&self.frame, &view, mesh)
+        view
     }
 
     /// The frame last drawn.
     pub fn frame(&self) -> &Frame {
         &self.frame
+    }
+}
+
+/// Travel (mm) between two looks around during a reading flight.
+pub const GLANCE_EVERY_MM: f64 = 10.0;
+/// How far (degrees) a glance turns from the flight's view: up, down, left or right.
+pub const GLANCE_TURN_DEG: f64 = 65.0;
+/// A glance is taken where it would show at least this much unseen mucosa (mm²).
+pub const GLANCE_MIN_MM2: f64 = 100.0;
+/// Ways a glance can turn, evenly around the view.
+pub const GLANCE_WAYS: usize = 8;
+/// Side of the small frames that try the glances (pixels).
+const PROBE_PX: u32 = 64;
+
+/// The body-frame turns of the glances: [`GLANCE_TURN_DEG`] away from the view, toward
+/// each of [`GLANCE_WAYS`] directions around it (up, up-left, left, ...).
+pub fn glance_turns() -> impl Iterator<Item = DQuat> {
+    let turn = GLANCE_TURN_DEG.to_radians();
+    (0..GLANCE_WAYS).map(move |k| {
+        let around = k as f64 * std::f64::consts::TAU / GLANCE_WAYS as f64;
+        DQuat::from_axis_angle(DVec3::new(around.cos(), around.sin(), 0.0), turn)
+    })
+}
+
+/// A reader's looking around during a flight: every [`GLANCE_EVERY_MM`] of travel it tries
+/// turning the view [`GLANCE_TURN_DEG`] each of [`GLANCE_WAYS`] ways on a small frame, and
+/// glances the way that would show most unseen mucosa, where that is at least
+/// [`GLANCE_MIN_MM2`]: the wall of a wide chamber the straight view passes at a slant.
+pub struct Glances {
+    probe: Reader,
+    travelled_mm: f64,
+    last: Option<DVec3>,
+    /// Glances taken.
+    pub taken: usize,
+}
+
+impl Glances {
+    pub fn new(cells: &Cells, camera: Camera) -> Self {
+        Glances {
+            probe: Reader::new(cells, camera, PROBE_PX, PROBE_PX),
+            travelled_mm: 0.0,
+            last: None,
+            taken: 0,
+        }
+    }
+
+    /// After the flight's frame at `pose` was shown: where the flight has come
+    /// [`GLANCE_EVERY_MM`] since the last look around, the glance worth taking, if any (it
+    /// is not marked here: the caller shows it).
+    pub fn next(
+        &mut self,
+        mesh: &CellMesh,
+        cells: &Cells,
+        pose: Pose,
+        coverage: &mut Coverage,
+    ) -> Option<Pose> {
+        let here = pose.position;
+        self.travelled_mm += self.last.map_or(0.0, |p| p.distance(here));
+        self.last = Some(here);
+        if self.travelled_mm < GLANCE_EVERY_MM {
+            return None;
+        }
+        self.travelled_mm = 0.0;
+        let (gain, glance) = glance_turns()
+            .map(|q| {
+                let glance = Pose {
+                    position: here,
+                    orientation: pose.orientation * q,
+                };
+                (self.probe.probe(mesh, cells, glance, coverage), glance)
+            })
+            .max_by(|a, b| a.0.total_cmp(&b.0))?;
+        (gain >= GLANCE_MIN_MM2).then(|| {
+            self.taken += 1;
+            glance
+        })
     }
 }
 
@@ -547,6 +657,8 @@ pub const REVIEW_ROUNDS: usize = 10;
 pub struct Reading {
     /// The automatic flights, rectum → cecum then cecum → rectum.
     pub flights: [Flight; 2],
+    /// The glances each flight took ([`Glances`]).
+    pub glances: [usize; 2],
     /// What the first flight showed.
     pub one_way: Coverage,
     /// What both flights showed.
@@ -575,16 +687,23 @@ pub fn read_both_ways(
     let field = potential_field(study, min_wall_mm)?;
     let cells = &study.cells;
     let mut reader = Reader::new(cells, camera, size, size);
-    let mut read_flight = |dir: Direction| -> Result<(Flight, Coverage)> {
+    let mut read_flight = |dir: Direction| -> Result<(Flight, Coverage, usize)> {
         let flight = fly(&field, &study.centerline, dir, &flight_opts)?;
         let mut seen = Coverage::new(mesh, options);
+        let mut glances = Glances::new(cells, camera);
         for &pose in &flight.poses {
             reader.show(mesh, cells, pose, &mut seen);
+            if !options.look_around {
+                continue;
+            }
+            if let Some(glance) = glances.next(mesh, cells, pose, &mut seen) {
+                reader.show(mesh, cells, glance, &mut seen);
+            }
         }
-        Ok((flight, seen))
+        Ok((flight, seen, glances.taken))
     };
-    let (forward, one_way) = read_flight(Direction::Forward)?;
-    let (backward, back) = read_flight(Direction::Backward)?;
+    let (forward, one_way, glances_forward) = read_flight(Direction::Forward)?;
+    let (backward, back, glances_backward) = read_flight(Direction::Backward)?;
     let mut two_way = one_way.clone();
     two_way.union(&back);
     let lumen = Lumen::of(study, min_wall_mm);
@@ -603,6 +722,7 @@ pub fn read_both_ways(
     let patches = visits.into_iter().take(listed).collect();
     Ok(Reading {
         flights: [forward, backward],
+        glances: [glances_forward, glances_backward],
         one_way,
         two_way,
         after_review,

@@ -1,12 +1,13 @@
 //! Coverage of the mucosa (issue 23): the two-way reading and the review on the colon
 //! phantom, against its truth polyps; and the bookkeeping's invariants.
 
-use glam::DVec3;
+use glam::{DQuat, DVec3};
 use voyage_core::{PrepOptions, Study, prepare};
 use voyage_nav::{Camera, Pose};
 use voyage_phantom::{self as phantom, ColonOptions};
 use voyage_view::{
-    CellMesh, Coverage, CoverageOptions, READING_FOV_DEG, Reader, Reading, read_both_ways,
+    CellMesh, Coverage, CoverageOptions, GLANCE_EVERY_MM, GLANCE_MIN_MM2, GLANCE_TURN_DEG, Glances,
+    READING_FOV_DEG, Reader, Reading, glance_turns, read_both_ways,
 };
 
 fn camera() -> Camera {
@@ -209,8 +210,13 @@ fn coverage_bookkeeping() {
         assert_eq!(p.triangles, q.triangles);
     }
     assert_eq!(listed.len(), fresh.review_targets(&mesh).len());
-    // Union: what two readings saw together, counted once.
+    // A probe says what a frame would show and marks nothing: showing it then shows that.
     let back = Pose::looking(at, -ahead, ahead.any_orthonormal_vector());
+    let mut probed = seen.clone();
+    let would = reader.probe(&mesh, cells, back, &mut probed);
+    assert!(would > 0.0 && probed.seen_mm2() == seen.seen_mm2());
+    assert!((reader.show(&mesh, cells, back, &mut probed) - would).abs() < 1e-6);
+    // Union: what two readings saw together, counted once.
     let mut other = fresh.clone();
     reader.show(&mesh, cells, back, &mut other);
     let mut both = seen.clone();
@@ -222,10 +228,10 @@ fn coverage_bookkeeping() {
     assert_eq!(both.seen_mm2(), again);
 }
 
-/// The real colon mask, read at the reading lens: the review leaves at most 0.5 % of the
-/// mucosa unseen and every listed patch has a pose. Two ways the reading shows 89 % of it,
-/// short of the 94 % of readers in the literature: its cecum is 85 mm wide, so its far wall
-/// lies beyond the 50 mm reading distance of a camera on the centerline (the review shows it).
+/// The real colon mask, read at the reading lens: two ways the reading shows at least the
+/// 94 % of readers in the literature, the review leaves at most 0.5 % of the mucosa unseen,
+/// and every listed patch has a pose. Looking straight along the flights (no glances) it
+/// showed 89 %: a chamber 85 mm wide passes the lens at a slant.
 #[test]
 fn the_real_colon_is_read_to_the_end() {
     let Some(path) = voyage_phantom::fixtures::colon_a_path() else {
@@ -238,14 +244,77 @@ fn the_real_colon_is_read_to_the_end() {
     let r = read_both_ways(&study, &mesh, CoverageOptions::default(), lens, 256).unwrap();
     let [one, two, after] = [&r.one_way, &r.two_way, &r.after_review].map(|c| c.percent());
     eprintln!(
-        "colon-a: one way {one:.2} %, two ways {two:.2} %, after review {after:.2} % ({} patches, {} visits)",
+        "colon-a: one way {one:.2} %, two ways {two:.2} %, after review {after:.2} % ({} patches, {} visits, {:?} glances)",
         r.patches.len(),
-        r.visits
+        r.visits,
+        r.glances
     );
     assert!(r.flights.iter().all(|f| f.reached));
     assert!(one < two, "one way {one:.2} % ≥ two ways {two:.2} %");
-    assert!(two >= 88.0, "two ways {two:.2} % (was 89.1 %)");
+    assert!(two >= 94.0, "two ways {two:.2} % < 94 %");
+    assert!(
+        r.glances.iter().all(|&n| n > 0),
+        "no glances: {:?}",
+        r.glances
+    );
     assert!(after >= 99.5, "after review {after:.2} % < 99.5 %");
     let without = r.patches.iter().filter(|v| v.pose.is_none()).count();
     assert_eq!(without, 0, "{without} listed patches without a pose");
+}
+
+/// A reading flight looks around once per [`GLANCE_EVERY_MM`] of travel, turned
+/// [`GLANCE_TURN_DEG`] from its view where that shows enough unseen mucosa; where everything
+/// in reach has been seen it does not.
+#[test]
+fn glances_look_around_where_mucosa_is_unseen() {
+    let study = small_study();
+    let mesh = indexed_mesh(&study);
+    let cells = &study.cells;
+    let cl = &study.centerline;
+    let i = cl.points_mm.len() / 2;
+    // The next point at least `GLANCE_EVERY_MM` on, as the crow flies.
+    let on_from = |i: usize| {
+        let from = DVec3::from_array(cl.points_mm[i]);
+        (i..cl.points_mm.len())
+            .find(|&j| DVec3::from_array(cl.points_mm[j]).distance(from) >= GLANCE_EVERY_MM)
+            .unwrap()
+    };
+    let j = on_from(i);
+    let pose_at = |k: usize| {
+        let at = DVec3::from_array(cl.points_mm[k]);
+        let ahead = DVec3::from_array(cl.points_mm[k + 3]) - at;
+        Pose::looking(at, ahead, ahead.any_orthonormal_vector())
+    };
+    let (first, later) = (pose_at(i), pose_at(j));
+    let mut seen = Coverage::new(&mesh, CoverageOptions::default());
+    let mut glances = Glances::new(cells, camera());
+    let mut reader = Reader::new(cells, camera(), 128, 128);
+    // Not yet far enough; then, with nothing seen, a glance.
+    assert!(glances.next(&mesh, cells, first, &mut seen).is_none());
+    let glance = glances
+        .next(&mesh, cells, later, &mut seen)
+        .expect("no glance with all the walls unseen");
+    assert_eq!(glance.position, later.position);
+    let turned = glance.z_body().angle_between(later.z_body()).to_degrees();
+    assert!(
+        (turned - GLANCE_TURN_DEG).abs() < 1e-6,
+        "turned {turned:.2}°"
+    );
+    let before = seen.seen_mm2();
+    let shown = reader.show(&mesh, cells, glance, &mut seen);
+    assert!(
+        shown >= 0.5 * GLANCE_MIN_MM2,
+        "the glance showed {shown:.0} mm²"
+    );
+    assert!(seen.seen_mm2() > before && glances.taken == 1);
+    // Where every way a glance could turn has been shown, there is nothing to glance at.
+    let last = pose_at(on_from(j));
+    for q in glance_turns().chain([DQuat::IDENTITY]) {
+        let turned = Pose {
+            orientation: last.orientation * q,
+            ..last
+        };
+        reader.show(&mesh, cells, turned, &mut seen);
+    }
+    assert!(glances.next(&mesh, cells, last, &mut seen).is_none());
 }

@@ -816,8 +816,13 @@ fn two_way_reading_runs_to_the_end_and_coverage_rises() {
         pct("after_review_pct"),
     );
     eprintln!(
-        "window: one way {one:.1} %, two ways {two:.1} %, after review {after:.1} %, {} patches, {} visits; marked {} of {} frames at {:.2} ms",
-        reading["patches"], reading["visits"], c["frames_marked"], c["frames_asked"], c["mark_ms"]
+        "window: one way {one:.1} %, two ways {two:.1} %, after review {after:.1} %, {} patches, {} visits, {} glances; marked {} of {} frames at {:.2} ms",
+        reading["patches"],
+        reading["visits"],
+        reading["glances"],
+        c["frames_marked"],
+        c["frames_asked"],
+        c["mark_ms"]
     );
     assert_eq!(reading["stage"], "done", "{c}");
     assert!(one < two && two < after, "{c}");
@@ -830,6 +835,8 @@ fn two_way_reading_runs_to_the_end_and_coverage_rises() {
         "{c}"
     );
     assert!(c["session_pct"].as_f64().unwrap() >= after - 1e-9);
+    // The flights look around as `voyage coverage`'s do.
+    assert!(reading["glances"].as_u64().unwrap() >= 1, "{c}");
     // The scout shows the unseen mucosa in blue: much of it after 150 frames, little after.
     let view = view_rect(&r);
     let scout = [view[2] + 4.0, view[1] + 20.0, 1280.0, view[3]];

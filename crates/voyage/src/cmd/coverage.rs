@@ -33,6 +33,11 @@ pub struct CoverageArgs {
     /// reading studies the coverage is compared with.
     #[arg(long, default_value_t = READING_FOV_DEG)]
     pub fov: f64,
+    /// Read as the paper's camera looks, straight along the flight: no glances around
+    /// (every 10 mm the reading otherwise turns 65° up, down, left or right where that shows
+    /// unseen mucosa).
+    #[arg(long)]
+    pub no_glances: bool,
     /// Print the result as JSON.
     #[arg(long)]
     pub json: bool,
@@ -76,6 +81,7 @@ impl CoverageArgs {
             max_angle_deg: self.max_angle,
             min_patch_mm2: self.min_patch,
             review_min_mm2: self.review_min,
+            look_around: !self.no_glances,
         })
     }
 }
@@ -137,6 +143,7 @@ pub fn run(a: &CoverageArgs) -> Result<()> {
             "frame_px": a.size,
             "fov_deg": a.fov,
             "unseen_patches": reading.patches.iter().map(patch_json).collect::<Vec<Value>>(),
+            "glances": reading.glances,
             "review_visits": reading.visits,
             "patches_left_after_review": left,
         });
@@ -157,6 +164,10 @@ pub fn run(a: &CoverageArgs) -> Result<()> {
             reading.visits,
             left
         );
+        if options.look_around {
+            let [forward, backward] = reading.glances;
+            println!("  glances around             {forward} forward, {backward} backward");
+        }
     }
     Ok(())
 }

@@ -1323,7 +1323,7 @@ impl App {
                 self.last_cells = self.endoscope.last_cells.clone();
                 self.times.record_render(self.endoscope.stats.render_ms);
                 s.mark_shown(&s.camera(), size, self.times.last_frame_ms());
-                s.step_reading();
+                s.step_reading(size);
                 self.closeup_overlay(ui, rect);
                 self.translucency_overlay(ui, rect);
                 self.overlays(ui, rect);
@@ -1560,7 +1560,13 @@ impl App {
         );
         let mode = format!(
             "{} · {} · wall {:.1} mm{}{}{}",
-            if s.playing { "flying" } else { "paused" },
+            if s.playing {
+                "flying"
+            } else if s.coverage.glancing() {
+                "glancing around"
+            } else {
+                "paused"
+            },
             if s.direction() == Direction::Forward {
                 "rectum to cecum"
             } else {
@@ -1766,8 +1772,8 @@ fn coverage_section(ui: &mut egui::Ui, c: &WindowCoverage, actions: &mut Vec<Act
     if let Some(r) = &c.reading {
         let pct = |v: Option<f64>| v.map_or("…".to_string(), |x| format!("{x:.1} %"));
         let stage = match &r.stage {
-            Stage::Forward => "rectum to cecum".to_string(),
-            Stage::Backward => "cecum to rectum".to_string(),
+            Stage::Forward => format!("rectum to cecum, {} glances", r.glances_taken),
+            Stage::Backward => format!("cecum to rectum, {} glances", r.glances_taken),
             Stage::Review { .. } => format!("review: patch {} of {}", r.visits, r.patches),
             Stage::Done => "done".to_string(),
         };

@@ -14,8 +14,8 @@ use glam::DVec3;
 use voyage_core::{Cells, Study};
 use voyage_nav::{Camera, Pose};
 use voyage_view::{
-    CellMesh, Coverage, CoverageOptions, Lumen, Patch, READING_FOV_DEG, REVIEW_ROUNDS, Reader,
-    viewing_pose,
+    CellMesh, Coverage, CoverageOptions, Glances, Lumen, Patch, READING_FOV_DEG, REVIEW_ROUNDS,
+    Reader, viewing_pose,
 };
 
 use super::{
@@ -34,6 +34,9 @@ const NEXT_TRIES: usize = 10;
 
 /// Frames the review stays at each patch (it marks every one of them).
 pub const DWELL_FRAMES: u32 = 20;
+
+/// Frames a glance of the reading's flights is held (it is marked when taken).
+pub const GLANCE_FRAMES: u32 = 8;
 
 pub struct WindowCoverage {
     /// Marking is on (a switch, so its cost can be measured against none).
@@ -90,6 +93,12 @@ pub struct TwoWay {
     pub visits: usize,
     /// Area the current round's visits newly showed (mm²).
     round_shown: f64,
+    /// The current flight's looking around ([`Glances`]), and the glance held now: frames
+    /// left.
+    glances: Option<Glances>,
+    glancing: Option<u32>,
+    /// Glances taken by both flights.
+    pub glances_taken: usize,
 }
 
 /// What the window must do for the reading this frame.
@@ -100,6 +109,10 @@ pub enum Move {
     FlyBackward,
     /// Stand still at this pose.
     Place(Pose),
+    /// Pause the flight and look from this pose (a glance around).
+    Glance(Pose),
+    /// The glance is over: the flight goes on from where it paused.
+    Resume,
 }
 
 impl WindowCoverage {
@@ -153,6 +166,14 @@ impl WindowCoverage {
         self.last = Some(key);
         self.frames_marked += 1;
         let clock = Instant::now();
+        self.mark_now(mesh, cells, camera, size);
+        let ms = clock.elapsed().as_secs_f64() * 1e3;
+        self.budget_ms -= ms;
+        self.mark_ms.push(ms);
+    }
+
+    /// Marks what `camera` shows in a view of `size` pixels, whatever the budget.
+    fn mark_now(&mut self, mesh: &CellMesh, cells: &Cells, camera: &Camera, size: [u32; 2]) {
         let width = ((MARK_HEIGHT as f64 * size[0] as f64 / size[1].max(1) as f64).round() as u32)
             .clamp(16, 4 * MARK_HEIGHT);
         self.reader.set_lens(*camera, width, MARK_HEIGHT);
@@ -166,9 +187,6 @@ impl WindowCoverage {
             let shown = r.seen.mark(frame, &view, mesh);
             r.round_shown += shown;
         }
-        let ms = clock.elapsed().as_secs_f64() * 1e3;
-        self.budget_ms -= ms;
-        self.mark_ms.push(ms);
     }
 
     /// A two-way reading is under way.
@@ -176,6 +194,11 @@ impl WindowCoverage {
         self.reading
             .as_ref()
             .is_some_and(|r| r.stage != Stage::Done)
+    }
+
+    /// The reading's flight has paused for a glance around.
+    pub fn glancing(&self) -> bool {
+        self.reading.as_ref().is_some_and(|r| r.glancing.is_some())
     }
 
     /// Mean time to mark a frame (ms), over the frames marked.
@@ -209,6 +232,7 @@ impl WindowCoverage {
                 after_review_pct: r.after_review_pct,
                 patches: r.patches,
                 visits: r.visits,
+                glances: r.glances_taken,
             }),
         }
     }
@@ -225,25 +249,46 @@ impl WindowCoverage {
             patches: 0,
             visits: 0,
             round_shown: 0.0,
+            glances: None,
+            glancing: None,
+            glances_taken: 0,
         });
         self.flight.clear();
         Move::FlyForward
     }
 
     /// One frame of the reading: `reached` says the flight of the current direction has
-    /// reached its goal.
-    pub fn step_reading(&mut self, reached: bool, mesh: &CellMesh, study: &Study) -> Move {
+    /// reached its goal; `camera` is the view's now, in a view of `size` pixels.
+    pub fn step_reading(
+        &mut self,
+        reached: bool,
+        camera: &Camera,
+        size: [u32; 2],
+        mesh: &CellMesh,
+        study: &Study,
+    ) -> Move {
         let Some(r) = &mut self.reading else {
             return Move::Nothing;
         };
         match r.stage.clone() {
-            Stage::Forward if reached => {
+            Stage::Forward | Stage::Backward if r.glancing.is_some() => {
+                let left = r.glancing.unwrap_or(0);
+                r.glancing = left.checked_sub(1);
+                if r.glancing.is_some() {
+                    Move::Nothing
+                } else {
+                    Move::Resume
+                }
+            }
+            Stage::Forward | Stage::Backward if !reached => self.glance(camera, size, mesh, study),
+            Stage::Forward => {
                 r.one_way_pct = Some(r.seen.percent());
                 r.stage = Stage::Backward;
+                r.glances = None;
                 self.flight.clear();
                 Move::FlyBackward
             }
-            Stage::Backward if reached => {
+            Stage::Backward => {
                 r.two_way_pct = Some(r.seen.percent());
                 // The listed patches lead the targets (largest first): counted, not found again.
                 r.queue = r.seen.review_targets(mesh);
@@ -311,8 +356,31 @@ impl WindowCoverage {
                 }
                 Move::Nothing
             }
-            _ => Move::Nothing,
+            Stage::Done => Move::Nothing,
         }
+    }
+
+    /// The reading's flights look around as `voyage coverage`'s do ([`Glances`], through
+    /// the view's lens): a glance worth taking is marked now, whatever the marking budget,
+    /// and held on screen for [`GLANCE_FRAMES`].
+    fn glance(&mut self, camera: &Camera, size: [u32; 2], mesh: &CellMesh, study: &Study) -> Move {
+        let Some(r) = &mut self.reading else {
+            return Move::Nothing;
+        };
+        if !r.seen.options().look_around {
+            return Move::Nothing;
+        }
+        let cells = &study.cells;
+        let glances = r
+            .glances
+            .get_or_insert_with(|| Glances::new(cells, *camera));
+        let Some(pose) = glances.next(mesh, cells, camera.pose, &mut r.seen) else {
+            return Move::Nothing;
+        };
+        r.glancing = Some(GLANCE_FRAMES);
+        r.glances_taken += 1;
+        self.mark_now(mesh, cells, &Camera { pose, ..*camera }, size);
+        Move::Glance(pose)
     }
 
     /// The largest unseen patch of the session that a pose shows (of the [`NEXT_TRIES`]

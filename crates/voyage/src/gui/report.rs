@@ -69,6 +69,8 @@ pub struct ReadingReport {
     /// Unseen patches when the review began, and the visits it made.
     pub patches: usize,
     pub visits: usize,
+    /// Glances around the flights took.
+    pub glances: usize,
 }
 
 #[derive(Serialize)]

@@ -54,6 +54,8 @@ pub struct Session {
     pub coverage: WindowCoverage,
     /// The cleansed CT, made the first time the translucency view asks for it.
     cleansed: OnceLock<Volume<i16>>,
+    /// Where the reading's flight was when it paused for a glance around.
+    glanced_from: Option<voyage_nav::State>,
 }
 
 impl Session {
@@ -120,6 +122,7 @@ impl Session {
             start,
             coverage,
             cleansed: OnceLock::new(),
+            glanced_from: None,
         })
     }
 
@@ -349,11 +352,12 @@ impl Session {
             .mark(&self.mesh, &self.study.cells, camera, size, frame_ms);
     }
 
-    /// Carries out what the two-way reading asks this frame.
-    pub fn step_reading(&mut self) {
-        let wanted = self
-            .coverage
-            .step_reading(self.reached, &self.mesh, &self.study);
+    /// Carries out what the two-way reading asks this frame, in a view of `size` pixels.
+    pub fn step_reading(&mut self, size: [u32; 2]) {
+        let camera = self.camera();
+        let wanted =
+            self.coverage
+                .step_reading(self.reached, &camera, size, &self.mesh, &self.study);
         self.follow(wanted);
     }
 
@@ -381,6 +385,20 @@ impl Session {
             }
             Move::Place(pose) => {
                 self.show_from(pose);
+            }
+            Move::Glance(pose) => {
+                self.glanced_from = Some(self.sub.state);
+                self.set_playing(false);
+                self.place(pose);
+            }
+            Move::Resume => {
+                if let Some(state) = self.glanced_from.take() {
+                    // On as it was, moving: a glance turns the head, it does not stop the flight.
+                    let t = self.sub.state.t;
+                    self.sub.state = voyage_nav::State { t, ..state };
+                    self.vis.reset();
+                }
+                self.set_playing(true);
             }
         }
     }
