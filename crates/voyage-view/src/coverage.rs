@@ -528,7 +528,7 @@ impl Reader {
 }
 
 /// Travel (mm) between two looks around during a reading flight.
-pub const GLANCE_EVERY_MM: f64 = 10.0;
+pub const GLANCE_EVERY_MM: f64 = 7.0;
 /// How far (degrees) a glance turns from the flight's view: up, down, left or right.
 pub const GLANCE_TURN_DEG: f64 = 65.0;
 /// A glance is taken where it would show at least this much unseen mucosa (mm²).
@@ -541,11 +541,13 @@ const PROBE_PX: u32 = 64;
 /// The body-frame turns of the glances: [`GLANCE_TURN_DEG`] away from the view, toward
 /// each of [`GLANCE_WAYS`] directions around it (up, up-left, left, ...).
 pub fn glance_turns() -> impl Iterator<Item = DQuat> {
-    let turn = GLANCE_TURN_DEG.to_radians();
-    (0..GLANCE_WAYS).map(move |k| {
-        let around = k as f64 * std::f64::consts::TAU / GLANCE_WAYS as f64;
-        DQuat::from_axis_angle(DVec3::new(around.cos(), around.sin(), 0.0), turn)
-    })
+    (0..GLANCE_WAYS).map(glance_turn)
+}
+
+fn glance_turn(way: usize) -> DQuat {
+    let around = way as f64 * std::f64::consts::TAU / GLANCE_WAYS as f64;
+    let axis = DVec3::new(around.cos(), around.sin(), 0.0);
+    DQuat::from_axis_angle(axis, GLANCE_TURN_DEG.to_radians())
 }
 
 /// A reader's looking around during a flight: every [`GLANCE_EVERY_MM`] of travel it tries
@@ -556,7 +558,11 @@ pub struct Glances {
     probe: Reader,
     travelled_mm: f64,
     last: Option<DVec3>,
-    /// Glances taken.
+    /// While trying the ways at a stop: the next way's index, and the best so far (its
+    /// gain in mm², its turn).
+    trying: Option<(usize, f64, DQuat)>,
+    /// Ways tried, and glances taken.
+    pub tries: usize,
     pub taken: usize,
 }
 
@@ -566,13 +572,16 @@ impl Glances {
             probe: Reader::new(cells, camera, PROBE_PX, PROBE_PX),
             travelled_mm: 0.0,
             last: None,
+            trying: None,
+            tries: 0,
             taken: 0,
         }
     }
 
-    /// After the flight's frame at `pose` was shown: where the flight has come
-    /// [`GLANCE_EVERY_MM`] since the last look around, the glance worth taking, if any (it
-    /// is not marked here: the caller shows it).
+    /// After each of the flight's frames (at `pose`, already shown): once the flight has come
+    /// [`GLANCE_EVERY_MM`] since the last stop, tries one way per frame, so that no frame
+    /// pays for all of them; after the last way, the glance worth taking, if any, turned
+    /// from the view of that frame. The glance is not marked here: the caller shows it.
     pub fn next(
         &mut self,
         mesh: &CellMesh,
@@ -583,22 +592,34 @@ impl Glances {
         let here = pose.position;
         self.travelled_mm += self.last.map_or(0.0, |p| p.distance(here));
         self.last = Some(here);
-        if self.travelled_mm < GLANCE_EVERY_MM {
+        if self.trying.is_none() {
+            if self.travelled_mm < GLANCE_EVERY_MM {
+                return None;
+            }
+            self.travelled_mm = 0.0;
+            self.trying = Some((0, f64::NEG_INFINITY, DQuat::IDENTITY));
+        }
+        let (way, best, best_turn) = self.trying?;
+        let turn = glance_turn(way);
+        let turned = |q: DQuat| Pose {
+            position: here,
+            orientation: pose.orientation * q,
+        };
+        let gain = self.probe.probe(mesh, cells, turned(turn), coverage);
+        self.tries += 1;
+        let (best, best_turn) = if gain > best {
+            (gain, turn)
+        } else {
+            (best, best_turn)
+        };
+        if way + 1 < GLANCE_WAYS {
+            self.trying = Some((way + 1, best, best_turn));
             return None;
         }
-        self.travelled_mm = 0.0;
-        let (gain, glance) = glance_turns()
-            .map(|q| {
-                let glance = Pose {
-                    position: here,
-                    orientation: pose.orientation * q,
-                };
-                (self.probe.probe(mesh, cells, glance, coverage), glance)
-            })
-            .max_by(|a, b| a.0.total_cmp(&b.0))?;
-        (gain >= GLANCE_MIN_MM2).then(|| {
+        self.trying = None;
+        (best >= GLANCE_MIN_MM2).then(|| {
             self.taken += 1;
-            glance
+            turned(best_turn)
         })
     }
 }

@@ -6,8 +6,8 @@ use voyage_core::{PrepOptions, Study, prepare};
 use voyage_nav::{Camera, Pose};
 use voyage_phantom::{self as phantom, ColonOptions};
 use voyage_view::{
-    CellMesh, Coverage, CoverageOptions, GLANCE_EVERY_MM, GLANCE_MIN_MM2, GLANCE_TURN_DEG, Glances,
-    READING_FOV_DEG, Reader, Reading, glance_turns, read_both_ways,
+    CellMesh, Coverage, CoverageOptions, GLANCE_EVERY_MM, GLANCE_MIN_MM2, GLANCE_TURN_DEG,
+    GLANCE_WAYS, Glances, READING_FOV_DEG, Reader, Reading, glance_turns, read_both_ways,
 };
 
 fn camera() -> Camera {
@@ -263,8 +263,8 @@ fn the_real_colon_is_read_to_the_end() {
 }
 
 /// A reading flight looks around once per [`GLANCE_EVERY_MM`] of travel, turned
-/// [`GLANCE_TURN_DEG`] from its view where that shows enough unseen mucosa; where everything
-/// in reach has been seen it does not.
+/// [`GLANCE_TURN_DEG`] from its view where that shows enough unseen mucosa, after trying the
+/// [`GLANCE_WAYS`] ways one per frame; where everything in reach has been seen it does not.
 #[test]
 fn glances_look_around_where_mucosa_is_unseen() {
     let study = small_study();
@@ -289,10 +289,14 @@ fn glances_look_around_where_mucosa_is_unseen() {
     let mut seen = Coverage::new(&mesh, CoverageOptions::default());
     let mut glances = Glances::new(cells, camera());
     let mut reader = Reader::new(cells, camera(), 128, 128);
-    // Not yet far enough; then, with nothing seen, a glance.
+    // Not yet far enough; then, with nothing seen, a glance once every way has been tried,
+    // one per frame.
     assert!(glances.next(&mesh, cells, first, &mut seen).is_none());
-    let glance = glances
-        .next(&mesh, cells, later, &mut seen)
+    let mut tries = (0..GLANCE_WAYS).map(|_| glances.next(&mesh, cells, later, &mut seen));
+    assert!(tries.by_ref().take(GLANCE_WAYS - 1).all(|g| g.is_none()));
+    let glance = tries
+        .next()
+        .flatten()
         .expect("no glance with all the walls unseen");
     assert_eq!(glance.position, later.position);
     let turned = glance.z_body().angle_between(later.z_body()).to_degrees();
@@ -316,5 +320,5 @@ fn glances_look_around_where_mucosa_is_unseen() {
         };
         reader.show(&mesh, cells, turned, &mut seen);
     }
-    assert!(glances.next(&mesh, cells, last, &mut seen).is_none());
+    assert!((0..2 * GLANCE_WAYS).all(|_| glances.next(&mesh, cells, last, &mut seen).is_none()));
 }

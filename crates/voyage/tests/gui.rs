@@ -816,10 +816,11 @@ fn two_way_reading_runs_to_the_end_and_coverage_rises() {
         pct("after_review_pct"),
     );
     eprintln!(
-        "window: one way {one:.1} %, two ways {two:.1} %, after review {after:.1} %, {} patches, {} visits, {} glances; marked {} of {} frames at {:.2} ms",
+        "window: one way {one:.1} %, two ways {two:.1} %, after review {after:.1} %, {} patches, {} visits, {} glances (a try {:.2} ms); marked {} of {} frames at {:.2} ms",
         reading["patches"],
         reading["visits"],
         reading["glances"],
+        c["probe_ms"],
         c["frames_marked"],
         c["frames_asked"],
         c["mark_ms"]

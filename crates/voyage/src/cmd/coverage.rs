@@ -34,8 +34,8 @@ pub struct CoverageArgs {
     #[arg(long, default_value_t = READING_FOV_DEG)]
     pub fov: f64,
     /// Read as the paper's camera looks, straight along the flight: no glances around
-    /// (every 10 mm the reading otherwise turns 65° up, down, left or right where that shows
-    /// unseen mucosa).
+    /// (every 7 mm the reading otherwise tries turning 65° eight ways around its view, one
+    /// way a frame, and glances the way that shows most unseen mucosa, ≥ 100 mm²).
     #[arg(long)]
     pub no_glances: bool,
     /// Print the result as JSON.

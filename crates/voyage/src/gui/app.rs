@@ -1585,7 +1585,7 @@ impl App {
             },
             if s.sub.modes.still { " · still" } else { "" }
         );
-        label(
+        let mode_rect = label(
             &painter,
             rect.left_bottom() + Vec2::new(8.0, -26.0),
             &mode,
@@ -1610,12 +1610,10 @@ impl App {
             (Tool::Measure, true) => "click: second point",
             (Tool::Polyp, _) => "click a polyp: its size",
         };
-        label(
-            &painter,
-            rect.right_bottom() + Vec2::new(-300.0, -26.0),
-            tool,
-            Color32::from_gray(200),
-        );
+        // Beside the mode where there is room, else a line above it.
+        let beside = mode_rect.right() + 8.0 <= rect.right() - 300.0;
+        let tool_at = rect.right_bottom() + Vec2::new(-300.0, if beside { -26.0 } else { -48.0 });
+        label(&painter, tool_at, tool, Color32::from_gray(200));
         // A small crosshair at the view's centre: where the close-up looks by default.
         let c = rect.center();
         painter.line_segment(

@@ -52,8 +52,11 @@ pub struct WindowCoverage {
     pub outline: Vec<[DVec3; 2]>,
     last: Option<(Pose, f64, [u32; 2])>,
     mark_ms: Vec<f64>,
-    /// Marking time the frames so far have allowed and not used (ms).
+    /// Marking time the frames so far have allowed and not used (ms); the reading's glances
+    /// try their ways out of it too.
     budget_ms: f64,
+    /// Running mean time of one try of a glance's way (ms).
+    probe_ms: f64,
     /// Frames that asked to be marked, and those that were.
     pub frames_asked: u64,
     pub frames_marked: u64,
@@ -130,6 +133,7 @@ impl WindowCoverage {
             last: None,
             mark_ms: Vec::new(),
             budget_ms: 0.0,
+            probe_ms: 0.0,
             frames_asked: 0,
             frames_marked: 0,
             scout_tint: (Vec::new(), 0, f64::NAN),
@@ -159,7 +163,8 @@ impl WindowCoverage {
         self.frames_asked += 1;
         let cost = self.mean_mark_ms();
         // A long stall (loading, a dialog) must not save up a burst of marking.
-        self.budget_ms = (self.budget_ms + BUDGET_SHARE * frame_ms).min(2.0 * cost + 1.0);
+        let most = 2.0 * cost.max(self.probe_ms) + 1.0;
+        self.budget_ms = (self.budget_ms + BUDGET_SHARE * frame_ms).min(most);
         if self.budget_ms < cost {
             return;
         }
@@ -217,6 +222,7 @@ impl WindowCoverage {
             session_pct: self.session.percent(),
             flight_pct: self.flight.percent(),
             mark_ms: self.mean_mark_ms(),
+            probe_ms: self.probe_ms,
             frames_asked: self.frames_asked,
             frames_marked: self.frames_marked,
             reading: self.reading.as_ref().map(|r| ReadingReport {
@@ -361,20 +367,32 @@ impl WindowCoverage {
     }
 
     /// The reading's flights look around as `voyage coverage`'s do ([`Glances`], through
-    /// the view's lens): a glance worth taking is marked now, whatever the marking budget,
-    /// and held on screen for [`GLANCE_FRAMES`].
+    /// the view's lens). Its tries come out of the marking budget (a frame without budget
+    /// skips its try); a glance worth taking is marked now, whatever the budget, and held on
+    /// screen for [`GLANCE_FRAMES`].
     fn glance(&mut self, camera: &Camera, size: [u32; 2], mesh: &CellMesh, study: &Study) -> Move {
         let Some(r) = &mut self.reading else {
             return Move::Nothing;
         };
-        if !r.seen.options().look_around {
+        if !r.seen.options().look_around || self.budget_ms < self.probe_ms {
             return Move::Nothing;
         }
         let cells = &study.cells;
         let glances = r
             .glances
             .get_or_insert_with(|| Glances::new(cells, *camera));
-        let Some(pose) = glances.next(mesh, cells, camera.pose, &mut r.seen) else {
+        let (clock, tries) = (Instant::now(), glances.tries);
+        let next = glances.next(mesh, cells, camera.pose, &mut r.seen);
+        let ms = clock.elapsed().as_secs_f64() * 1e3;
+        self.budget_ms -= ms;
+        if glances.tries > tries {
+            self.probe_ms = if self.probe_ms == 0.0 {
+                ms
+            } else {
+                0.9 * self.probe_ms + 0.1 * ms
+            };
+        }
+        let Some(pose) = next else {
             return Move::Nothing;
         };
         r.glancing = Some(GLANCE_FRAMES);

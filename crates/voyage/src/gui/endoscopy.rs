@@ -304,9 +304,10 @@ pub fn surface_point_on_screen(
 }
 
 /// A readable label on the view: light text on a dark backing.
-pub fn label(painter: &egui::Painter, at: Pos2, text: &str, color: Color32) {
+pub fn label(painter: &egui::Painter, at: Pos2, text: &str, color: Color32) -> Rect {
     let galley = painter.layout_no_wrap(text.to_string(), egui::FontId::proportional(13.0), color);
     let r = Rect::from_min_size(at, galley.size()).expand(2.0);
     painter.rect_filled(r, 3.0, Color32::from_black_alpha(160));
     painter.galley(at, galley, color);
+    r
 }
