@@ -7,7 +7,9 @@
 //! buffer the renderer wrote anyway, so marking costs one pass over the frame plus a facing
 //! test per newly met triangle. Coverage is area, in mm², of the triangles seen over all.
 //! Readers who fly one way see about 77 % of the mucosa and both ways about 94 %; stepping
-//! through the unseen patches raises that to about 98 % (Pickhardt et al., 2006).
+//! through the unseen patches raises that to about 98 % (Pickhardt et al., 2006). The
+//! paper's camera looks only where the flight goes, which leaves the wall of a wide stretch
+//! unseen; a reading flight here also glances around ([`Glances`]), as readers do.
 
 use glam::{DQuat, DVec3};
 use serde::Serialize;

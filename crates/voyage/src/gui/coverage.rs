@@ -6,7 +6,8 @@
 //! stands still is marked once. The session's coverage counts every frame since the study
 //! opened; the flight's, the frames since the direction was last set.
 //! The two-way reading (rectum → cecum, cecum → rectum, then a review of every unseen
-//! patch) is a small state machine the window steps once per frame.
+//! patch) is a small state machine the window steps once per frame; its flights glance
+//! around as `voyage coverage`'s do, pausing on each glance for [`GLANCE_FRAMES`].
 
 use std::time::Instant;
 
