@@ -21,7 +21,7 @@ use crate::{
     shading::Lighting,
     visibility::{Strategy, Visibility},
 };
-use voyage_core::{Bricked, Cells, Centerline, Result, Study};
+use voyage_core::{Bricked, Cells, Result, Study};
 use voyage_nav::{Camera, Direction, Flight, FlightOptions, Pose, fly, potential_field};
 
 /// What counts as seen, and which unseen patches are listed.
@@ -357,18 +357,11 @@ impl Patch {
         }
     }
 
-    /// Arc length (mm from the centerline's source) of the centerline point nearest the
-    /// patch's centre.
-    pub fn arc_mm(&self, centerline: &Centerline) -> Option<f64> {
-        centerline
-            .points_mm
-            .iter()
-            .zip(&centerline.arc_mm)
-            .min_by(|(p, _), (q, _)| {
-                let d = |x: &[f64; 3]| DVec3::from_array(*x).distance_squared(self.center_mm);
-                d(p).total_cmp(&d(q))
-            })
-            .map(|(_, &arc)| arc)
+    /// Arc length (mm from the centerline's rectum end) of the centerline point nearest the
+    /// patch's centre, read just off the wall in the lumen as the findings' distances are
+    /// ([`Study::arc_at`]: a loop beyond the wall is not taken for the patch's own).
+    pub fn arc_mm(&self, study: &Study) -> Option<f64> {
+        study.arc_at(self.center_mm + self.normal * 1.5)
     }
 }
 

@@ -122,7 +122,7 @@ pub fn run(a: &CoverageArgs) -> Result<()> {
                 "area_mm2": v.patch.area_mm2,
                 "across_mm": v.patch.across_mm,
                 "center_lps_mm": geometry.local_to_patient(v.patch.center_mm).to_array(),
-                "arc_mm": v.patch.arc_mm(&study.centerline),
+                "arc_mm": v.patch.arc_mm(&study),
                 "pose": v.pose.map(|p| {
                     let mut a = p.to_array();
                     a[..3].copy_from_slice(&geometry.local_to_patient(p.position).to_array());

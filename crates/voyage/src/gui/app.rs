@@ -602,7 +602,7 @@ impl App {
             );
             return;
         };
-        let arc = patch.arc_mm(&s.study.centerline).unwrap_or(0.0);
+        let arc = patch.arc_mm(&s.study).unwrap_or(0.0);
         self.status = match pose {
             Some(p) if s.show_from(p) => {
                 self.slices.follow();
