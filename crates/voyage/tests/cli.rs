@@ -933,3 +933,54 @@ fn label_masks_are_told_from_cts() {
     assert!(err.contains("mask labels 1, 2 merged"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn coverage_reports_json_and_reads_with_glances_unless_told_not_to() {
+    let dir = scratch("coverage");
+    let ct = dir.join("colon.nii.gz");
+    small_colon(&ct, &[]);
+    let read = |extra: &[&str]| {
+        let mut args = vec!["coverage", ct.to_str().unwrap(), "--json"];
+        args.extend_from_slice(extra);
+        let o = voyage(&args);
+        assert!(o.status.success(), "{}", text(&o));
+        serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()
+    };
+    let (with, without) = (read(&[]), read(&["--no-glances"]));
+    let pct = |j: &serde_json::Value, k: &str| j[k].as_f64().unwrap();
+    for j in [&with, &without] {
+        let [one, two, after] =
+            ["one_way_pct", "two_way_pct", "after_review_pct"].map(|k| pct(j, k));
+        assert!(one < two && two <= after && after <= 100.0, "{j}");
+        assert_eq!(j["flights_reached"]["forward"], true);
+        for p in j["unseen_patches"].as_array().unwrap() {
+            assert!(p["area_mm2"].as_f64().unwrap() >= 30.0, "{p}");
+            assert_eq!(p["center_lps_mm"].as_array().unwrap().len(), 3);
+            assert!(p["arc_mm"].as_f64().is_some_and(|a| a >= 0.0), "{p}");
+            assert_eq!(p["pose"].as_array().map(|a| a.len()), Some(7), "{p}");
+        }
+    }
+    // The glances are frames shown beside the same flight's: they only add to what it saw.
+    let glances = |j: &serde_json::Value| -> Vec<u64> {
+        j["glances"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|g| g.as_u64().unwrap())
+            .collect()
+    };
+    assert!(glances(&with).iter().all(|&g| g > 0), "{with}");
+    assert_eq!(glances(&without), [0, 0]);
+    assert_eq!(with["options"]["look_around"], true);
+    assert_eq!(without["options"]["look_around"], false);
+    assert!(pct(&with, "one_way_pct") > pct(&without, "one_way_pct"));
+    assert!(pct(&with, "two_way_pct") >= pct(&without, "two_way_pct"));
+    // A lens wider than the renderer's is refused on one line, before any work.
+    let bad = voyage(&["coverage", ct.to_str().unwrap(), "--fov", "170"]);
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        !bad.status.success() && err.contains("--fov") && err.trim().lines().count() == 1,
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
