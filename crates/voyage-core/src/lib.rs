@@ -33,7 +33,9 @@ pub use distance::{Geodesic, distance_to_wall, geodesic_distance};
 pub use error::{Error, Result};
 pub use grid::{BoxGrid, BoxIndex, BrickIndex, Bricked, Field, bounding_box};
 pub use navigable::{DEFAULT_MIN_WALL_MM, Navigable};
-pub use prep::{COLON_SEGMENTS, PrepOptions, RECTUM_MM, Stage, Study, Timings, prepare};
+pub use prep::{
+    COLON_SEGMENTS, OFF_WALL_MM, PrepOptions, RECTUM_MM, Stage, Study, Timings, prepare,
+};
 pub use segment::{ComponentKind, SegmentOptions, Segmentation, segment};
 pub use surface::{Mesh, Surface, roughness};
 pub use volume::{Geometry, IDENTITY, Volume, check_dims};

@@ -203,6 +203,10 @@ pub struct Study {
 /// 12–15 cm long).
 pub const RECTUM_MM: f64 = 150.0;
 
+/// How far along its normal into the lumen a point on the wall is moved before
+/// [`Study::arc_at`] and [`Study::segment_at`] read it (mm).
+pub const OFF_WALL_MM: f64 = 1.5;
+
 /// Dt from the source is shorter than the arc along the centerline by up to this fraction
 /// (the geodesic cuts the bends).
 const ARC_SLACK: f64 = 0.25;
@@ -309,7 +313,7 @@ impl Study {
 
     /// Arc length (mm from the centerline's rectum end, about the anal verge) of the
     /// centerline point nearest `p` (volume-local mm, in the lumen: a point on the wall
-    /// moved a little along its normal).
+    /// moved [`OFF_WALL_MM`] along its normal).
     pub fn arc_at(&self, p: DVec3) -> Option<f64> {
         self.nearest_centerline_point(p)
             .map(|i| self.centerline.arc_mm[i])

@@ -21,7 +21,7 @@ use crate::{
     shading::Lighting,
     visibility::{Strategy, Visibility},
 };
-use voyage_core::{Bricked, Cells, Result, Study};
+use voyage_core::{Bricked, Cells, OFF_WALL_MM, Result, Study};
 use voyage_nav::{Camera, Direction, Flight, FlightOptions, Pose, fly, potential_field};
 
 /// What counts as seen, and which unseen patches are listed.
@@ -361,7 +361,7 @@ impl Patch {
     /// patch's centre, read just off the wall in the lumen as the findings' distances are
     /// ([`Study::arc_at`]: a loop beyond the wall is not taken for the patch's own).
     pub fn arc_mm(&self, study: &Study) -> Option<f64> {
-        study.arc_at(self.center_mm + self.normal * 1.5)
+        study.arc_at(self.center_mm + self.normal * OFF_WALL_MM)
     }
 }
 

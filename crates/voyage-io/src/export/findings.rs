@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 use serde_json::json;
-use voyage_core::{Error, Geometry, Result, Study};
+use voyage_core::{Error, Geometry, OFF_WALL_MM, Result, Study};
 use voyage_view::{Findings, Marker, c_rads};
 
 use super::{
@@ -87,9 +87,6 @@ fn placed(m: &Marker, study: &Study) -> (&'static str, Option<f64>) {
     let p = m.position + m.normal.normalize_or_zero() * OFF_WALL_MM;
     (study.segment_at(p), study.arc_at(p))
 }
-
-/// How far into the lumen a marker's place is read (mm).
-const OFF_WALL_MM: f64 = 1.5;
 
 /// The snapshots, `findings.json` (with segments and distances where `study` is given) and
 /// `findings.mrk.json`; the paths written and each snapshot's PNG bytes.
