@@ -409,13 +409,19 @@ pub fn prepare(
     } else {
         Some(distance_to_wall_in(&seg.lumen, grid.clone()))
     };
+    // Where the segmentation placed the cecum by anatomy, the centerline ends there unless
+    // the user gave the end.
+    let mut cl_opts = opts.centerline.clone();
+    if cl_opts.target_mm.is_none() {
+        cl_opts.target_mm = seg.cecum_voxel.map(|v| centerline::mm_of(&seg.lumen, v));
+    }
     let sk = trace_skeleton(
         &seg.lumen,
         &grid,
         seg.lumen_voxels,
         seg.seed_voxel,
         early_ds.as_ref(),
-        &opts.centerline,
+        &cl_opts,
     )?;
     laps.start(Stage::Contacts);
 
@@ -445,7 +451,7 @@ pub fn prepare(
         _ => distance_to_wall_in(&seg.lumen, grid.clone()),
     };
     laps.start(Stage::Centerline);
-    let mut ends = centre_skeleton(&seg.lumen, &ds_box, &sk, &opts.centerline)?;
+    let mut ends = centre_skeleton(&seg.lumen, &ds_box, &sk, &cl_opts)?;
     // Ds moves into bricks, and the Dt searches work in its box array.
     let mut ds = Bricked::from_field(&ds_box, 0.0);
     let mut memory = SearchMemory::from(ds_box.data);
@@ -462,7 +468,7 @@ pub fn prepare(
         }
         contact_voxels = 0;
         let ds_box = distance_to_wall_in(&seg.lumen, grid.clone());
-        ends = centre_skeleton(&seg.lumen, &ds_box, &sk, &opts.centerline)?;
+        ends = centre_skeleton(&seg.lumen, &ds_box, &sk, &cl_opts)?;
         ds = Bricked::from_field(&ds_box, 0.0);
         memory = SearchMemory::from(ds_box.data);
         dt_source = geodesic_distance_like(&seg.lumen, &ds, ends.source, &mut memory)?;

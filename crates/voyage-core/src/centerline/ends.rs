@@ -164,6 +164,10 @@ pub fn find_endpoints(
     centre_skeleton(lumen, ds, &sk, opts)
 }
 
+/// The start is the nearest voxel to the seed at least this far from the wall (mm), or
+/// `min_width` of the widest, whichever is less.
+const START_WIDE_MM: f32 = 5.0;
+
 /// The raw colon path (voxels of `lumen`, source → target) from the skeleton graph.
 ///
 /// Given endpoints are placed on the whole colon's path (automatic rectum to cecum) and the
@@ -184,7 +188,9 @@ fn skeleton_path(
     let ds_pad = pad.pad(&ds.data, 0.0);
     let weight = cost_weight(&ds_pad, opts);
     let dmax = ds.data.iter().cloned().fold(0.0f32, f32::max);
-    let floor = (opts.min_width as f32 * dmax).min(dmax);
+    // The rectum needs room for the camera, not a share of the widest chamber: with the
+    // whole colon in, a wide cecum would push the start tens of mm up the rectum.
+    let floor = (opts.min_width as f32 * dmax).min(dmax).min(START_WIDE_MM);
     let start = TreeStart::new(&pad, &weight);
     // The search stops at the first wide voxel it settles: the nearest.
     let wide = |v: usize| ds_pad[v] > 0.0 && ds_pad[v] >= floor;

@@ -14,6 +14,7 @@ use glam::DVec3;
 
 use super::{
     bridge::Path,
+    course::Course,
     work::{Bbox, Key},
 };
 
@@ -96,9 +97,15 @@ impl Coarse {
         }
     }
 
-    /// Geodesic distances (mm, 26-neighbours) from block `from` over the blocks of
-    /// compartment `c`; returns the farthest block and its distance.
+    /// The farthest block of compartment `c` from block `from` (geodesic, over its blocks)
+    /// and its distance.
     pub fn farthest(&self, c: u32, from: usize) -> (usize, f64) {
+        self.distances(c, from).1
+    }
+
+    /// Geodesic distances (mm, 26-neighbours) from block `from` over the blocks of
+    /// compartment `c` (infinite elsewhere), and the farthest block with its distance.
+    fn distances(&self, c: u32, from: usize) -> (Vec<f64>, (usize, f64)) {
         let mut dist = vec![f64::INFINITY; self.label.len()];
         let mut heap = BinaryHeap::new();
         dist[from] = 0.0;
@@ -141,7 +148,27 @@ impl Coarse {
                 }
             }
         }
-        best
+        (dist, best)
+    }
+
+    /// The blocks of each of `n` compartments, in block order.
+    fn blocks_by_comp(&self, n: usize) -> Vec<Vec<usize>> {
+        let mut out = vec![Vec::new(); n];
+        for (b, &c) in self.label.iter().enumerate() {
+            if (c as usize) < n {
+                out[c as usize].push(b);
+            }
+        }
+        out
+    }
+
+    /// The block of `blocks` nearest a point (volume-local mm).
+    fn nearest(&self, blocks: &[usize], to: DVec3) -> Option<usize> {
+        blocks.iter().copied().min_by(|&x, &y| {
+            self.centre_mm(x)
+                .distance_squared(to)
+                .total_cmp(&self.centre_mm(y).distance_squared(to))
+        })
     }
 
     /// Centre of block `b`, volume-local mm.
@@ -204,49 +231,273 @@ pub struct Chain {
     pub left: Vec<(u32, Left)>,
 }
 
-/// Orders the colon's compartments from `rectum` on. `candidate(c)`: big enough to be a
-/// segment; `bridge(from_block, to_block, a, b)`: the cheapest path between two blocks of
+/// What a compartment may be in the chain.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Role {
+    /// Large gas that is neither lung nor stomach: colon, wherever it lies.
+    Major,
+    /// Big enough for a segment; colon where it lies on the colon's way.
+    Minor,
+    /// Too small, or excluded.
+    Out,
+}
+
+/// Orders the colon's compartments from `rectum` to the cecum.
+///
+/// 1. The spine: the rectum, then every major compartment in the order of the colon's
+///    course ([`Course::along`] of its centroid), each joined to the one before where they
+///    face each other ([`facing_ends`]), however far apart: the stretch between them is
+///    collapsed or filled with fluid.
+/// 2. Minor compartments on the way: one that lies between two spine neighbours, and costs
+///    little more to pass through than the bridge that skips it, is taken in.
+/// 3. The tail: from the last compartment, the nearest free end further along the course,
+///    while one lies within `max_gap_mm` and its bridge is cheap (what the chain did before
+///    there were majors, and still does when there are none).
+///
+/// `bridge(from_block, to_block, a, b)` is the cheapest path between two blocks of
 /// compartments a and b.
 pub fn chain(
     coarse: &Coarse,
     comps: &[Compartment],
     rectum: u32,
-    candidate: impl Fn(u32) -> bool,
+    roles: &[Role],
+    course: &Course,
     opts: &ChainOptions,
     mut bridge: impl FnMut(usize, usize, u32, u32) -> Option<Path>,
 ) -> Chain {
+    let blocks = coarse.blocks_by_comp(comps.len());
+    let along = |c: u32| course.along(comps[c as usize].centroid_mm());
     let entry = coarse.block_of(comps[rectum as usize].lowest);
-    let mut links = vec![Link {
-        comp: rectum,
-        entry,
-        exit: coarse.farthest(rectum, entry).0,
-    }];
-    let mut gaps = Vec::new();
-    let mut left: Vec<(u32, Left)> = Vec::new();
-    // Both ends of every candidate: a double sweep from its lowest voxel.
-    let ends: Vec<Option<[usize; 2]>> = (0..comps.len() as u32)
+    let mut ch = Chain {
+        links: vec![Link {
+            comp: rectum,
+            entry,
+            exit: entry,
+        }],
+        gaps: Vec::new(),
+        left: Vec::new(),
+    };
+    let mut majors: Vec<u32> = (0..comps.len() as u32)
+        .filter(|&c| c != rectum && roles[c as usize] == Role::Major)
+        .collect();
+    majors.sort_by(|&a, &b| along(a).total_cmp(&along(b)));
+    for &b in &majors {
+        let a = ch.links[ch.links.len() - 1].clone();
+        let Some((exit, entry)) = facing_ends(coarse, &blocks, &a, b) else {
+            continue;
+        };
+        match bridge(exit, entry, a.comp, b) {
+            Some(p) => {
+                ch.links.last_mut().expect("the rectum").exit = exit;
+                ch.gaps.push(p);
+                ch.links.push(Link {
+                    comp: b,
+                    entry,
+                    exit: entry,
+                });
+            }
+            None => ch.left.push((b, Left::TooFar(f64::INFINITY))),
+        }
+    }
+    let last = ch.links.len() - 1;
+    ch.links[last].exit = coarse.farthest(ch.links[last].comp, ch.links[last].entry).0;
+    let mut free: Vec<u32> = (0..comps.len() as u32)
+        .filter(|&c| c != rectum && roles[c as usize] == Role::Minor)
+        .collect();
+    if !majors.is_empty() {
+        take_in_on_the_way(coarse, &blocks, &mut ch, &mut free, &mut bridge);
+    }
+    extend_tail(
+        coarse,
+        comps,
+        &blocks,
+        &mut ch,
+        &mut free,
+        (!majors.is_empty()).then_some(course),
+        opts,
+        &mut bridge,
+    );
+    // Whatever stayed free: too far from the chain's end (or its bridge too dear).
+    let end = coarse.centre_mm(ch.links[ch.links.len() - 1].exit);
+    for &c in &free {
+        if !ch.left.iter().any(|(x, _)| *x == c) {
+            let d = blocks[c as usize]
+                .iter()
+                .map(|&b| coarse.centre_mm(b).distance(end))
+                .fold(f64::INFINITY, f64::min);
+            ch.left.push((c, Left::TooFar(d)));
+        }
+    }
+    let links = ch.links.clone();
+    ch.left.retain(|(c, _)| !links.iter().any(|l| l.comp == *c));
+    for c in 0..comps.len() as u32 {
+        if c != rectum && roles[c as usize] == Role::Out {
+            ch.left.push((c, Left::TooSmall));
+        }
+    }
+    ch
+}
+
+/// The cecum's blocks in compartment `c`: its blocks furthest along the course (within
+/// [`CECUM_BAND`]), lowest first in the patient frame: the cecal pole comes first.
+pub fn cecum_blocks(coarse: &Coarse, c: u32, course: &Course, inferior: DVec3) -> Vec<usize> {
+    let blocks = coarse.blocks_by_comp(c as usize + 1).swap_remove(c as usize);
+    let along: Vec<f64> = blocks
+        .iter()
+        .map(|&b| course.along(coarse.centre_mm(b)))
+        .collect();
+    let last = along.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+    let mut band: Vec<usize> = blocks
+        .iter()
+        .zip(&along)
+        .filter(|&(_, &t)| t >= last - CECUM_BAND)
+        .map(|(&b, _)| b)
+        .collect();
+    band.sort_by(|&x, &y| {
+        height(inferior, coarse.centre_mm(y)).total_cmp(&height(inferior, coarse.centre_mm(x)))
+    });
+    band
+}
+
+/// How far short of the course's end (fraction) a block may be and still be the cecum's.
+const CECUM_BAND: f64 = 0.03;
+
+/// Where compartment `a` (entered at `a.entry`) and compartment `b` face each other: a block
+/// in the far half of `a` from its entry and a block of `b`, each the nearest to the other
+/// (two rounds from `b`'s centroid).
+fn facing_ends(
+    coarse: &Coarse,
+    blocks: &[Vec<usize>],
+    a: &Link,
+    b: u32,
+) -> Option<(usize, usize)> {
+    let (dist, (_, far)) = coarse.distances(a.comp, a.entry);
+    let far_half: Vec<usize> = blocks[a.comp as usize]
+        .iter()
+        .copied()
+        .filter(|&x| dist[x] >= 0.5 * far)
+        .collect();
+    let of_b = &blocks[b as usize];
+    let centroid = of_b
+        .iter()
+        .map(|&x| coarse.centre_mm(x))
+        .sum::<DVec3>()
+        / of_b.len().max(1) as f64;
+    let mut exit = coarse.nearest(&far_half, centroid)?;
+    let mut entry = coarse.nearest(of_b, coarse.centre_mm(exit))?;
+    for _ in 0..2 {
+        exit = coarse.nearest(&far_half, coarse.centre_mm(entry))?;
+        entry = coarse.nearest(of_b, coarse.centre_mm(exit))?;
+    }
+    Some((exit, entry))
+}
+
+/// A minor compartment is on the way between two neighbours when passing by it is at most
+/// this much longer than the straight way (fraction, and at least [`DETOUR_MIN_MM`]).
+const DETOUR: f64 = 0.25;
+const DETOUR_MIN_MM: f64 = 20.0;
+/// ... and when its two bridges cost at most this much more than the one that skips it.
+const DETOUR_COST: f64 = 1.25;
+
+/// Step 2 of [`chain`]: minor compartments between spine neighbours join the chain there.
+fn take_in_on_the_way(
+    coarse: &Coarse,
+    blocks: &[Vec<usize>],
+    ch: &mut Chain,
+    free: &mut Vec<u32>,
+    bridge: &mut impl FnMut(usize, usize, u32, u32) -> Option<Path>,
+) {
+    let mut g = 0;
+    while g < ch.gaps.len() {
+        let (a, b) = (ch.links[g].clone(), ch.links[g + 1].clone());
+        let (p, q) = (coarse.centre_mm(a.exit), coarse.centre_mm(b.entry));
+        let straight = p.distance(q);
+        let detour = |x: usize| {
+            let c = coarse.centre_mm(x);
+            c.distance(p) + c.distance(q)
+        };
+        // The minor compartments on the way, least detour first.
+        let mut near: Vec<(f64, u32)> = free
+            .iter()
+            .map(|&c| {
+                let d = blocks[c as usize]
+                    .iter()
+                    .map(|&x| detour(x))
+                    .fold(f64::INFINITY, f64::min);
+                (d, c)
+            })
+            .filter(|&(d, _)| d <= straight + (DETOUR * straight).max(DETOUR_MIN_MM))
+            .collect();
+        near.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+        let direct = ch.gaps[g].length_mm * ch.gaps[g].mean_cost;
+        let mut taken = false;
+        for &(_, m) in near.iter().take(CANDIDATES) {
+            let of_m = &blocks[m as usize];
+            let (Some(m_in), Some(m_out)) = (coarse.nearest(of_m, p), coarse.nearest(of_m, q))
+            else {
+                continue;
+            };
+            let (Some(p1), Some(p2)) = (bridge(a.exit, m_in, a.comp, m), bridge(m_out, b.entry, m, b.comp))
+            else {
+                continue;
+            };
+            let via = p1.length_mm * p1.mean_cost + p2.length_mm * p2.mean_cost;
+            if via <= DETOUR_COST * direct {
+                ch.gaps.splice(g..=g, [p1, p2]);
+                ch.links.insert(
+                    g + 1,
+                    Link {
+                        comp: m,
+                        entry: m_in,
+                        exit: m_out,
+                    },
+                );
+                free.retain(|&x| x != m);
+                taken = true;
+                break;
+            }
+        }
+        // After a minor is taken in, the gap before it is looked at again.
+        if !taken {
+            g += 1;
+        }
+    }
+}
+
+/// Step 3 of [`chain`]: from the chain's end, on to the nearest free end (further along the
+/// course, when `course` is given) while one is within reach and its bridge is cheap.
+fn extend_tail(
+    coarse: &Coarse,
+    comps: &[Compartment],
+    blocks: &[Vec<usize>],
+    ch: &mut Chain,
+    free: &mut Vec<u32>,
+    course: Option<&Course>,
+    opts: &ChainOptions,
+    bridge: &mut impl FnMut(usize, usize, u32, u32) -> Option<Path>,
+) {
+    // Both ends of every free compartment: a double sweep from its lowest voxel.
+    let ends: Vec<Option<[usize; 2]>> = (0..blocks.len())
         .map(|c| {
-            (c != rectum && candidate(c)).then(|| {
+            free.contains(&(c as u32)).then(|| {
                 let a = coarse
-                    .farthest(c, coarse.block_of(comps[c as usize].lowest))
+                    .farthest(c as u32, coarse.block_of(comps[c].lowest))
                     .0;
-                [a, coarse.farthest(c, a).0]
+                [a, coarse.farthest(c as u32, a).0]
             })
         })
         .collect();
-    let mut free: Vec<u32> = (0..comps.len() as u32)
-        .filter(|&c| ends[c as usize].is_some())
-        .collect();
     loop {
-        let here = links
-            .last()
-            .map(|l| (l.comp, coarse.centre_mm(l.exit), l.exit));
-        let Some((at_comp, at, exit)) = here else {
-            break;
+        let here = &ch.links[ch.links.len() - 1];
+        let (at_comp, exit) = (here.comp, here.exit);
+        let at = coarse.centre_mm(exit);
+        let onward = |e: usize| {
+            course.is_none_or(|k| k.along(coarse.centre_mm(e)) >= k.along(at) - ONWARD_SLACK)
         };
         let mut options: Vec<(f64, u32, usize)> = free
             .iter()
             .flat_map(|&c| ends[c as usize].into_iter().flatten().map(move |e| (c, e)))
+            .filter(|&(_, e)| onward(e))
             .map(|(c, e)| (coarse.centre_mm(e).distance(at), c, e))
             .collect();
         options.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
@@ -270,8 +521,8 @@ pub fn chain(
                     }
                 }
                 Some(p) => {
-                    left.retain(|(x, _)| *x != c);
-                    left.push((
+                    ch.left.retain(|(x, _)| *x != c);
+                    ch.left.push((
                         c,
                         Left::BridgeTooDear {
                             gap_mm: p.length_mm,
@@ -283,37 +534,20 @@ pub fn chain(
             }
         }
         let Some((_, c, e, p)) = best else { break };
-        links.push(Link {
+        ch.links.push(Link {
             comp: c,
             entry: e,
             exit: coarse.farthest(c, e).0,
         });
-        gaps.push(p);
+        ch.gaps.push(p);
         free.retain(|&x| x != c);
-        left.retain(|(x, _)| *x != c);
+        ch.left.retain(|(x, _)| *x != c);
     }
-    // Whatever stayed free: too far from the chain's end (or its bridge too dear).
-    for &c in &free {
-        if !left.iter().any(|(x, _)| *x == c) {
-            let at = links
-                .last()
-                .map_or(DVec3::ZERO, |l| coarse.centre_mm(l.exit));
-            let d = ends[c as usize].map_or(f64::INFINITY, |e| {
-                e.iter()
-                    .map(|&b| coarse.centre_mm(b).distance(at))
-                    .fold(f64::INFINITY, f64::min)
-            });
-            left.push((c, Left::TooFar(d)));
-        }
-    }
-    left.retain(|(c, _)| !links.iter().any(|l| l.comp == *c));
-    for c in 0..comps.len() as u32 {
-        if c != rectum && !candidate(c) {
-            left.push((c, Left::TooSmall));
-        }
-    }
-    Chain { links, gaps, left }
 }
+
+/// How far back along the course (fraction) the tail may step: a loop of the colon turns
+/// back a little.
+const ONWARD_SLACK: f64 = 0.05;
 
 /// Height toward the feet (mm) of a volume-local point: larger is lower in the patient.
 pub fn height(inferior: DVec3, p: DVec3) -> f64 {

@@ -265,6 +265,77 @@ pub fn pools(
     per.into_iter().flat_map(|(_, m)| m).collect()
 }
 
+/// Pools reach past the columns under the air: a haustral pocket is wider than the air
+/// above it, and fluid lies under the folds' overhang. From the pool's voxels, bright voxels
+/// sideways (across gravity) and below join it, up to `SPREAD_MM` from where it started,
+/// never upward (nothing of a pool lies above its level) and never through a voxel that is
+/// not bright: a small-bowel loop beside the pool is behind two walls of soft tissue.
+/// `work` holds the labels (0: nothing yet); what joins is labelled POOL. Returns the voxels
+/// added (volume indices, in the order found).
+pub fn spread(
+    work: &mut [u8],
+    geom: &Geometry,
+    bx: &Bbox,
+    gravity_lps: DVec3,
+    pool: &[usize],
+    bright: impl Fn(usize) -> bool,
+) -> Vec<usize> {
+    let (axis, sign) = PatientFrame::of(geom).nearest_axis(gravity_lps);
+    let [nx, ny, _] = geom.dims;
+    let stride = [1usize, nx, nx * ny];
+    // Steps: both ways along the two axes across gravity, and one way along it (down).
+    let steps: Vec<(usize, bool)> = (0..3)
+        .flat_map(|a| {
+            let ways: &[bool] = if a == axis {
+                if sign > 0 { &[true] } else { &[false] }
+            } else {
+                &[true, false]
+            };
+            ways.iter().map(move |&up| (a, up))
+        })
+        .collect();
+    let reach: Vec<u16> = (0..3)
+        .map(|a| (SPREAD_MM / geom.spacing[a]).round().max(1.0) as u16)
+        .collect();
+    let mut front: Vec<usize> = pool.to_vec();
+    let mut added = Vec::new();
+    let mut depth = 0u16;
+    while !front.is_empty() && depth < *reach.iter().max().unwrap_or(&1) {
+        depth += 1;
+        let mut next = Vec::new();
+        for &v in &front {
+            let ijk = [v % nx, (v / nx) % ny, v / (nx * ny)];
+            for &(a, up) in &steps {
+                if depth > reach[a] {
+                    continue;
+                }
+                let q = if up {
+                    if ijk[a] >= bx.hi[a] {
+                        continue;
+                    }
+                    v + stride[a]
+                } else {
+                    if ijk[a] <= bx.lo[a] {
+                        continue;
+                    }
+                    v - stride[a]
+                };
+                if work[q] != 0 || !bright(q) {
+                    continue;
+                }
+                work[q] = POOL;
+                next.push(q);
+                added.push(q);
+            }
+        }
+        front = next;
+    }
+    added
+}
+
+/// How far (mm, steps along the voxel axes) a pool spreads past the columns under its air.
+pub const SPREAD_MM: f64 = 20.0;
+
 /// How many bright voxels follow `v` along `axis` in direction `sign` (±1), counting up to
 /// `limit` at most and stopping at the volume's edge.
 fn bright_run(

@@ -32,6 +32,7 @@
 
 mod bridge;
 mod chain;
+mod course;
 mod fluid;
 mod tube;
 mod work;
@@ -45,7 +46,8 @@ use crate::{
     anatomy::{Orientation, PatientFrame, PatientPosition, PositionSource},
     simd::{self, Test},
 };
-use chain::{Chain, ChainOptions, Coarse, Compartment, Left};
+use chain::{Chain, ChainOptions, Coarse, Compartment, Left, Role};
+use course::Course;
 use work::{BRIDGE, Bbox, GAS, LAYER, POOL};
 
 #[derive(Clone, Debug)]
@@ -184,6 +186,10 @@ pub struct Segmentation {
     pub warnings: Vec<String>,
     /// Radius (mm) of the tube laid along each bridge.
     pub bridge_radius_mm: f64,
+    /// The cecal pole, where the colon's course ends (a voxel of the last segment), when the
+    /// colon was ordered by its large compartments' anatomy; None: the centerline's longest
+    /// path decides.
+    pub cecum_voxel: Option<[usize; 3]>,
 }
 
 /// One stretch of lumen candidates along x: voxels x0..x1 of row (j, k).
@@ -298,6 +304,7 @@ impl Segmentation {
         *lumen.geometry_mut() = geom.clone();
         self.lumen = lumen;
         self.seed_voxel = p(self.seed_voxel);
+        self.cecum_voxel = self.cecum_voxel.map(p);
         self.extent = [p(self.extent[0]), p(self.extent[1])];
         for c in &mut self.components {
             c.centroid_mm = [
@@ -444,8 +451,24 @@ fn segment_axial(
         pooled = marks.len();
         pool_rows = vec![false; vol.dims()[1] * vol.dims()[2]];
         let nx = vol.dims()[0];
+        let mut pool = Vec::new();
         for (idx, label) in marks {
             work.data_mut()[idx] = label;
+            pool_rows[idx / nx] = true;
+            if label == POOL {
+                pool.push(idx);
+            }
+        }
+        let spread = fluid::spread(
+            work.data_mut(),
+            vol.geometry(),
+            &cbox,
+            orientation.gravity(),
+            &pool,
+            |v| (threshold..BONE_HU).contains(&vol.data()[v]),
+        );
+        pooled += spread.len();
+        for idx in spread {
             pool_rows[idx / nx] = true;
         }
     }
@@ -558,6 +581,27 @@ fn segment_axial(
         }
         best.map(|b| b.1)
     };
+    // The voxel of compartment c's gas nearest block b's middle.
+    let gas_voxel_in = |block: usize, c: u32| {
+        let bx = coarse.voxels_of(block, dims);
+        let mid = [0, 1, 2].map(|a| (bx.lo[a] + bx.hi[a]) / 2);
+        let mut best: Option<(usize, [usize; 3])> = None;
+        for k in bx.lo[2]..=bx.hi[2] {
+            for j in bx.lo[1]..=bx.hi[1] {
+                for i in bx.lo[0]..=bx.hi[0] {
+                    if work.get(i, j, k) == GAS && comp_at([i, j, k]) == Some(c) {
+                        let d = (0..3)
+                            .map(|a| mid[a].abs_diff([i, j, k][a]).pow(2))
+                            .sum::<usize>();
+                        if best.is_none_or(|b| d < b.0) {
+                            best = Some((d, [i, j, k]));
+                        }
+                    }
+                }
+            }
+        }
+        best.map(|b| b.1)
+    };
     let bridge = |from: usize, to: usize, a: u32, b: u32| {
         let (va, vb) = (voxel_in(from, a)?, voxel_in(to, b)?);
         let own = |v: [usize; 3]| comp_at(v).is_some_and(|c| c == a || c == b);
@@ -565,14 +609,35 @@ fn segment_axial(
             |v: [usize; 3]| matches!(work.get(v[0], v[1], v[2]), GAS | POOL | LAYER) && !own(v);
         bridge::cheapest_path(ct, dims, vol.spacing(), va, vb, own, other)
     };
+    let roles = roles(&compartments, rectum, candidate, vol.geometry(), voxel_ml);
+    let course = Course::new(
+        vol.geometry(),
+        colon_box(&compartments, rectum, |c| roles[c as usize] == Role::Major, vol.geometry()),
+    );
     let mut ch: Chain = chain::chain(
         &coarse,
         &compartments,
         rectum,
-        candidate,
+        &roles,
+        &course,
         &opts.chain,
         &bridge,
     );
+    let cecum_voxel = roles
+        .iter()
+        .any(|&r| r == Role::Major)
+        .then(|| {
+            // The pole of its gas: fluid may spread lower, and is cleansed or cut away.
+            let last = ch.links.last()?.comp;
+            let (b, v) = chain::cecum_blocks(&coarse, last, &course, frame.inferior())
+                .into_iter()
+                .find_map(|b| Some((b, gas_voxel_in(b, last)?)))?;
+            if let Some(l) = ch.links.last_mut() {
+                l.exit = b;
+            }
+            Some(v)
+        })
+        .flatten();
     // A seed's gas is colon, wherever the chain went: joined at the chain's end.
     for &s in &seeded {
         if ch.links.iter().any(|l| l.comp == s) {
@@ -702,6 +767,8 @@ fn segment_axial(
         };
     }
     let mut segments: Vec<SegmentReport> = Vec::new();
+    // Named by where they lie along the whole colon's course.
+    let named = Course::new(&geom, colon_lps);
     for (i, l) in ch.links.iter().enumerate() {
         let comp = &compartments[l.comp as usize];
         let names: Vec<&str> = [
@@ -710,7 +777,7 @@ fn segment_axial(
             coarse.centre_mm(l.exit),
         ]
         .iter()
-        .map(|&p| region_of(&geom, p, &colon_lps))
+        .map(|&p| named.name(p))
         .fold(Vec::new(), |mut v, n| {
             if v.last() != Some(&n) {
                 v.push(n);
@@ -834,8 +901,67 @@ fn segment_axial(
         gaps,
         warnings,
         bridge_radius_mm,
+        cecum_voxel,
     })
 }
+
+/// Gas from this size on (ml) that is neither lung nor stomach is colon, wherever it lies: in
+/// an insufflated exam the colon's compartments are the largest gas below the diaphragm.
+const MAJOR_ML: f64 = 200.0;
+
+/// Each compartment's role in the chain: major (colon, [`MAJOR_ML`] of gas or more, unless
+/// it lies where the stomach does), minor (a candidate segment) or out.
+fn roles(
+    comps: &[Compartment],
+    rectum: u32,
+    candidate: impl Fn(u32) -> bool,
+    geom: &crate::Geometry,
+    voxel_ml: f64,
+) -> Vec<Role> {
+    let big = |c: u32| {
+        c != rectum && candidate(c) && comps[c as usize].gas_voxels as f64 * voxel_ml >= MAJOR_ML
+    };
+    let all = colon_box(comps, rectum, big, geom);
+    (0..comps.len() as u32)
+        .map(|c| {
+            if !candidate(c) && c != rectum {
+                Role::Out
+            } else if big(c) && !stomach_like(&comps[c as usize], geom, &all) {
+                Role::Major
+            } else {
+                Role::Minor
+            }
+        })
+        .collect()
+}
+
+/// All of its gas in the top 40 % of the large gas's box, its middle on the patient's left:
+/// where the stomach lies under the left diaphragm (a splenic flexure alone in its own
+/// compartment would look the same, and is then given back by a seed).
+fn stomach_like(comp: &Compartment, geom: &crate::Geometry, all: &[DVec3; 2]) -> bool {
+    let b = lps_box(geom, &comp.bbox);
+    let c = geom.local_to_patient(comp.centroid_mm());
+    let span = all[1] - all[0];
+    b[0].z > all[0].z + 0.6 * span.z && c.x > all[0].x + 0.5 * span.x
+}
+
+/// The LPS box of the rectum's compartment and those where `with(c)`.
+fn colon_box(
+    comps: &[Compartment],
+    rectum: u32,
+    with: impl Fn(u32) -> bool,
+    geom: &crate::Geometry,
+) -> [DVec3; 2] {
+    let b = (0..comps.len() as u32)
+        .filter(|&c| with(c))
+        .fold(comps[rectum as usize].bbox, |a, c| {
+            a.union(&comps[c as usize].bbox)
+        });
+    lps_box(geom, &b)
+}
+
+/// Cortical bone from here on (HU): tagged fluid is darker.
+const BONE_HU: i16 = 1300;
 
 /// Why a segment the user excluded is not in the colon.
 const EXCLUDED: &str = "excluded by the user";

@@ -1,0 +1,125 @@
+//! The colon's course in the patient frame: where a place lies along the colon, rectum → cecum.
+//!
+//! The colon frames the abdomen: from the rectum, low and in the middle of the pelvis, the
+//! sigmoid rises to the descending colon on the patient's left, which climbs to the splenic
+//! flexure; the transverse colon crosses high to the hepatic flexure on the right; the
+//! ascending colon runs down to the cecum, low on the right. A place is put on that course by
+//! where it lies in the colon's box in the patient frame (left–right and head–feet, both
+//! taken from the direction matrix and the position, never from array order): its *course* is
+//! the fraction along the template of the nearest point, 0 at the rectum and 1 at the cecum.
+//! Gas compartments are ordered by it, and named by its nearest landmark.
+
+use glam::{DVec2, DVec3};
+
+use crate::Geometry;
+
+/// The template: landmarks in the colon's box, u from the patient's right (0) to left (1),
+/// v from inferior (0) to superior (1), in their order along the colon.
+const LANDMARKS: [(&str, f64, f64); 8] = [
+    ("rectum", 0.5, 0.0),
+    ("sigmoid", 0.62, 0.22),
+    ("descending", 0.9, 0.5),
+    ("splenic flexure", 0.88, 0.95),
+    ("transverse", 0.5, 0.85),
+    ("hepatic flexure", 0.12, 0.92),
+    ("ascending", 0.1, 0.55),
+    ("cecum", 0.12, 0.28),
+];
+
+/// The colon's course within a box in the patient frame (LPS mm).
+#[derive(Clone, Debug)]
+pub struct Course {
+    geom: Geometry,
+    lo: DVec3,
+    span: DVec3,
+    /// Arc length of the template up to each landmark, as a fraction of the whole.
+    at: [f64; 8],
+}
+
+impl Course {
+    /// The course over `colon` (LPS box: the colon's gas, as far as it is known).
+    pub fn new(geom: &Geometry, colon: [DVec3; 2]) -> Course {
+        let mut at = [0.0; 8];
+        for i in 1..8 {
+            at[i] = at[i - 1] + landmark(i).distance(landmark(i - 1));
+        }
+        let total = at[7];
+        at.iter_mut().for_each(|a| *a /= total);
+        Course {
+            geom: geom.clone(),
+            lo: colon[0],
+            span: (colon[1] - colon[0]).max(DVec3::splat(1.0)),
+            at,
+        }
+    }
+
+    /// (u, v) of a volume-local point: right 0 → left 1, inferior 0 → superior 1.
+    fn place(&self, local: DVec3) -> DVec2 {
+        let q = self.geom.local_to_patient(local);
+        DVec2::new(
+            (q.x - self.lo.x) / self.span.x,
+            (q.z - self.lo.z) / self.span.z,
+        )
+    }
+
+    /// Where a volume-local point lies along the colon: 0 at the rectum, 1 at the cecum.
+    pub fn along(&self, local: DVec3) -> f64 {
+        let p = self.place(local);
+        let mut best = (f64::INFINITY, 0.0);
+        for i in 1..8 {
+            let (a, b) = (landmark(i - 1), landmark(i));
+            let s = ((p - a).dot(b - a) / (b - a).length_squared()).clamp(0.0, 1.0);
+            let d = p.distance(a + s * (b - a));
+            if d < best.0 {
+                best = (d, self.at[i - 1] + s * (self.at[i] - self.at[i - 1]));
+            }
+        }
+        best.1
+    }
+
+    /// The landmark nearest a volume-local point, as a segment's name.
+    pub fn name(&self, local: DVec3) -> &'static str {
+        let p = self.place(local);
+        (0..8)
+            .min_by(|&a, &b| {
+                p.distance(landmark(a))
+                    .total_cmp(&p.distance(landmark(b)))
+            })
+            .map_or("colon", |i| LANDMARKS[i].0)
+    }
+}
+
+fn landmark(i: usize) -> DVec2 {
+    DVec2::new(LANDMARKS[i].1, LANDMARKS[i].2)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The landmarks come in order along the course, and the course does not depend on how
+    /// the volume is stored: a point named by its place in the patient frame gets the same
+    /// course in an LPS volume and in one stored with x flipped and axes swapped.
+    #[test]
+    fn course_runs_rectum_to_cecum_in_the_patient_frame() {
+        let box_lps = [DVec3::new(0.0, 0.0, -300.0), DVec3::new(300.0, 200.0, 0.0)];
+        let lps_at = |u: f64, v: f64| DVec3::new(300.0 * u, 100.0, -300.0 + 300.0 * v);
+        let plain = Geometry::new([300, 200, 300], [1.0; 3], [0.0; 3]).unwrap();
+        let mut flipped = Geometry::new([300, 300, 200], [1.0; 3], [300.0, 0.0, -300.0]).unwrap();
+        // Stored with i running to the patient's right, j superior and k posterior.
+        flipped.direction = [[-1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]];
+        for g in [&plain, &flipped] {
+            let c = Course::new(g, box_lps);
+            let mut last = -1.0;
+            for &(name, u, v) in &LANDMARKS {
+                let local = g.patient_to_local(lps_at(u, v));
+                let t = c.along(local);
+                assert!(t > last, "{name} at {t} after {last}");
+                assert_eq!(c.name(local), name);
+                last = t;
+            }
+            assert!(c.along(g.patient_to_local(lps_at(0.5, 0.0))) < 0.01);
+            assert!(c.along(g.patient_to_local(lps_at(0.12, 0.28))) > 0.99);
+        }
+    }
+}
