@@ -228,6 +228,8 @@ pub struct Chain {
     pub links: Vec<Link>,
     /// `gaps[i]` joins `links[i]` and `links[i + 1]`.
     pub gaps: Vec<Path>,
+    /// The compartment that ends the course at the cecum, when large compartments set it.
+    pub cecum: Option<u32>,
     pub left: Vec<(u32, Left)>,
 }
 
@@ -275,6 +277,7 @@ pub fn chain(
             exit: entry,
         }],
         gaps: Vec::new(),
+        cecum: None,
         left: Vec::new(),
     };
     let mut majors: Vec<u32> = (0..comps.len() as u32)
@@ -301,22 +304,34 @@ pub fn chain(
     }
     let last = ch.links.len() - 1;
     ch.links[last].exit = coarse.farthest(ch.links[last].comp, ch.links[last].entry).0;
+    if !majors.is_empty() {
+        let c = ch.links[last].comp;
+        if let Some(&b) = cecum_blocks(coarse, c, course).first() {
+            ch.links[last].exit = b;
+        }
+        // The course ended at the cecum: the gas beyond it is the ileum's, not colon.
+        if course.along(coarse.centre_mm(ch.links[last].exit)) >= COURSE_END {
+            ch.cecum = Some(c);
+        }
+    }
     let mut free: Vec<u32> = (0..comps.len() as u32)
         .filter(|&c| c != rectum && roles[c as usize] == Role::Minor)
         .collect();
     if !majors.is_empty() {
         take_in_on_the_way(coarse, &blocks, &mut ch, &mut free, &mut bridge);
     }
-    extend_tail(
-        coarse,
-        comps,
-        &blocks,
-        &mut ch,
-        &mut free,
-        (!majors.is_empty()).then_some(course),
-        opts,
-        &mut bridge,
-    );
+    if ch.cecum.is_none() {
+        extend_tail(
+            coarse,
+            comps,
+            &blocks,
+            &mut ch,
+            &mut free,
+            (!majors.is_empty()).then_some(course),
+            opts,
+            &mut bridge,
+        );
+    }
     // Whatever stayed free: too far from the chain's end (or its bridge too dear).
     let end = coarse.centre_mm(ch.links[ch.links.len() - 1].exit);
     for &c in &free {
@@ -340,8 +355,10 @@ pub fn chain(
 
 /// The cecum's blocks in compartment `c`: its blocks furthest along the course (within
 /// [`CECUM_BAND`]), lowest first in the patient frame: the cecal pole comes first.
-pub fn cecum_blocks(coarse: &Coarse, c: u32, course: &Course, inferior: DVec3) -> Vec<usize> {
-    let blocks = coarse.blocks_by_comp(c as usize + 1).swap_remove(c as usize);
+pub fn cecum_blocks(coarse: &Coarse, c: u32, course: &Course) -> Vec<usize> {
+    let blocks = coarse
+        .blocks_by_comp(c as usize + 1)
+        .swap_remove(c as usize);
     let along: Vec<f64> = blocks
         .iter()
         .map(|&b| course.along(coarse.centre_mm(b)))
@@ -354,10 +371,16 @@ pub fn cecum_blocks(coarse: &Coarse, c: u32, course: &Course, inferior: DVec3) -
         .map(|(&b, _)| b)
         .collect();
     band.sort_by(|&x, &y| {
-        height(inferior, coarse.centre_mm(y)).total_cmp(&height(inferior, coarse.centre_mm(x)))
+        course
+            .height(coarse.centre_mm(x))
+            .total_cmp(&course.height(coarse.centre_mm(y)))
     });
     band
 }
+
+/// A chain whose large compartments reach this far along the course (fraction) has reached
+/// the cecum.
+const COURSE_END: f64 = 0.9;
 
 /// How far short of the course's end (fraction) a block may be and still be the cecum's.
 const CECUM_BAND: f64 = 0.03;
@@ -365,12 +388,7 @@ const CECUM_BAND: f64 = 0.03;
 /// Where compartment `a` (entered at `a.entry`) and compartment `b` face each other: a block
 /// in the far half of `a` from its entry and a block of `b`, each the nearest to the other
 /// (two rounds from `b`'s centroid).
-fn facing_ends(
-    coarse: &Coarse,
-    blocks: &[Vec<usize>],
-    a: &Link,
-    b: u32,
-) -> Option<(usize, usize)> {
+fn facing_ends(coarse: &Coarse, blocks: &[Vec<usize>], a: &Link, b: u32) -> Option<(usize, usize)> {
     let (dist, (_, far)) = coarse.distances(a.comp, a.entry);
     let far_half: Vec<usize> = blocks[a.comp as usize]
         .iter()
@@ -378,11 +396,8 @@ fn facing_ends(
         .filter(|&x| dist[x] >= 0.5 * far)
         .collect();
     let of_b = &blocks[b as usize];
-    let centroid = of_b
-        .iter()
-        .map(|&x| coarse.centre_mm(x))
-        .sum::<DVec3>()
-        / of_b.len().max(1) as f64;
+    let centroid =
+        of_b.iter().map(|&x| coarse.centre_mm(x)).sum::<DVec3>() / of_b.len().max(1) as f64;
     let mut exit = coarse.nearest(&far_half, centroid)?;
     let mut entry = coarse.nearest(of_b, coarse.centre_mm(exit))?;
     for _ in 0..2 {
@@ -437,8 +452,10 @@ fn take_in_on_the_way(
             else {
                 continue;
             };
-            let (Some(p1), Some(p2)) = (bridge(a.exit, m_in, a.comp, m), bridge(m_out, b.entry, m, b.comp))
-            else {
+            let (Some(p1), Some(p2)) = (
+                bridge(a.exit, m_in, a.comp, m),
+                bridge(m_out, b.entry, m, b.comp),
+            ) else {
                 continue;
             };
             let via = p1.length_mm * p1.mean_cost + p2.length_mm * p2.mean_cost;
@@ -583,6 +600,12 @@ pub fn region(u: f64, v: f64) -> &'static str {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::Geometry;
+
+    fn plain_course() -> Course {
+        let g = Geometry::new([200, 20, 20], [1.0; 3], [0.0; 3]).unwrap();
+        Course::new(&g, [DVec3::ZERO, DVec3::new(200.0, 20.0, 20.0)])
+    }
 
     /// Three gas tubes along x in a row with gaps of 10 and 30 blocks' worth; the chain goes
     /// from the first (the "rectum") to the nearest next, then the last, entering each at its
@@ -618,7 +641,8 @@ mod tests {
             &coarse,
             &comps,
             0,
-            |_| true,
+            &[Role::Minor; 3],
+            &plain_course(),
             &ChainOptions::default(),
             |from, to, a, b| {
                 asked.push((a, b));
@@ -652,7 +676,8 @@ mod tests {
             &coarse,
             &comps,
             0,
-            |_| true,
+            &[Role::Minor; 3],
+            &plain_course(),
             &lax,
             |from, to, _, b| {
                 let (p, q) = (coarse.centre_mm(from), coarse.centre_mm(to));
@@ -672,7 +697,8 @@ mod tests {
             &coarse,
             &comps,
             0,
-            |_| true,
+            &[Role::Minor; 3],
+            &plain_course(),
             &ChainOptions::default(),
             |_, _, _, _| {
                 Some(Path {
@@ -693,7 +719,15 @@ mod tests {
             max_gap_mm: 10.0,
             ..Default::default()
         };
-        let ch = chain(&coarse, &comps, 0, |_| true, &far, |_, _, _, _| None);
+        let ch = chain(
+            &coarse,
+            &comps,
+            0,
+            &[Role::Minor; 3],
+            &plain_course(),
+            &far,
+            |_, _, _, _| None,
+        );
         assert_eq!(ch.links.len(), 1);
         assert!(ch.left.iter().all(|(_, l)| matches!(l, Left::TooFar(_))));
     }

@@ -77,14 +77,16 @@ impl Course {
         best.1
     }
 
+    /// Height of a volume-local point in the patient (LPS z, mm): superior is larger.
+    pub fn height(&self, local: DVec3) -> f64 {
+        self.geom.local_to_patient(local).z
+    }
+
     /// The landmark nearest a volume-local point, as a segment's name.
     pub fn name(&self, local: DVec3) -> &'static str {
         let p = self.place(local);
         (0..8)
-            .min_by(|&a, &b| {
-                p.distance(landmark(a))
-                    .total_cmp(&p.distance(landmark(b)))
-            })
+            .min_by(|&a, &b| p.distance(landmark(a)).total_cmp(&p.distance(landmark(b))))
             .map_or("colon", |i| LANDMARKS[i].0)
     }
 }

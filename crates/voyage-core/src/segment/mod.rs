@@ -451,24 +451,8 @@ fn segment_axial(
         pooled = marks.len();
         pool_rows = vec![false; vol.dims()[1] * vol.dims()[2]];
         let nx = vol.dims()[0];
-        let mut pool = Vec::new();
         for (idx, label) in marks {
             work.data_mut()[idx] = label;
-            pool_rows[idx / nx] = true;
-            if label == POOL {
-                pool.push(idx);
-            }
-        }
-        let spread = fluid::spread(
-            work.data_mut(),
-            vol.geometry(),
-            &cbox,
-            orientation.gravity(),
-            &pool,
-            |v| (threshold..BONE_HU).contains(&vol.data()[v]),
-        );
-        pooled += spread.len();
-        for idx in spread {
             pool_rows[idx / nx] = true;
         }
     }
@@ -612,7 +596,12 @@ fn segment_axial(
     let roles = roles(&compartments, rectum, candidate, vol.geometry(), voxel_ml);
     let course = Course::new(
         vol.geometry(),
-        colon_box(&compartments, rectum, |c| roles[c as usize] == Role::Major, vol.geometry()),
+        colon_box(
+            &compartments,
+            rectum,
+            |c| roles[c as usize] == Role::Major,
+            vol.geometry(),
+        ),
     );
     let mut ch: Chain = chain::chain(
         &coarse,
@@ -623,21 +612,12 @@ fn segment_axial(
         &opts.chain,
         &bridge,
     );
-    let cecum_voxel = roles
-        .iter()
-        .any(|&r| r == Role::Major)
-        .then(|| {
-            // The pole of its gas: fluid may spread lower, and is cleansed or cut away.
-            let last = ch.links.last()?.comp;
-            let (b, v) = chain::cecum_blocks(&coarse, last, &course, frame.inferior())
-                .into_iter()
-                .find_map(|b| Some((b, gas_voxel_in(b, last)?)))?;
-            if let Some(l) = ch.links.last_mut() {
-                l.exit = b;
-            }
-            Some(v)
-        })
-        .flatten();
+    // The pole of the cecum's gas: fluid may lie lower, and is cleansed or cut away.
+    let cecum_voxel = ch.cecum.and_then(|c| {
+        chain::cecum_blocks(&coarse, c, &course)
+            .into_iter()
+            .find_map(|b| gas_voxel_in(b, c))
+    });
     // A seed's gas is colon, wherever the chain went: joined at the chain's end.
     for &s in &seeded {
         if ch.links.iter().any(|l| l.comp == s) {
@@ -959,9 +939,6 @@ fn colon_box(
         });
     lps_box(geom, &b)
 }
-
-/// Cortical bone from here on (HU): tagged fluid is darker.
-const BONE_HU: i16 = 1300;
 
 /// Why a segment the user excluded is not in the colon.
 const EXCLUDED: &str = "excluded by the user";
