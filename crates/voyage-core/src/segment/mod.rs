@@ -906,7 +906,10 @@ fn roles(
         .map(|c| {
             if !candidate(c) && c != rectum {
                 Role::Out
-            } else if big(c) && !stomach_like(&comps[c as usize], geom, &all) {
+            } else if big(c)
+                && !stomach_like(&comps[c as usize], geom, &all)
+                && !flat(&comps[c as usize], geom)
+            {
                 Role::Major
             } else {
                 Role::Minor
@@ -924,6 +927,16 @@ fn stomach_like(comp: &Compartment, geom: &crate::Geometry, all: &[DVec3; 2]) ->
     let span = all[1] - all[0];
     b[0].z > all[0].z + 0.6 * span.z && c.x > all[0].x + 0.5 * span.x
 }
+
+/// Thinner than [`MIN_BOX_MM`] along some axis of the patient frame: a sheet of gas (air over
+/// the water of a phantom's tank, under a prone patient's skin folds), not a bowel.
+fn flat(comp: &Compartment, geom: &crate::Geometry) -> bool {
+    let b = lps_box(geom, &comp.bbox);
+    (b[1] - b[0]).min_element() < MIN_BOX_MM
+}
+
+/// A colon compartment's box is at least this wide along every axis (mm).
+const MIN_BOX_MM: f64 = 15.0;
 
 /// The LPS box of the rectum's compartment and those where `with(c)`.
 fn colon_box(
