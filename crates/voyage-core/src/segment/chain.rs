@@ -324,7 +324,6 @@ pub fn chain(
         extend_tail(
             coarse,
             comps,
-            &blocks,
             &mut ch,
             &mut free,
             (!majors.is_empty()).then_some(course),
@@ -486,7 +485,6 @@ fn take_in_on_the_way(
 fn extend_tail(
     coarse: &Coarse,
     comps: &[Compartment],
-    blocks: &[Vec<usize>],
     ch: &mut Chain,
     free: &mut Vec<u32>,
     course: Option<&Course>,
@@ -494,7 +492,7 @@ fn extend_tail(
     bridge: &mut impl FnMut(usize, usize, u32, u32) -> Option<Path>,
 ) {
     // Both ends of every free compartment: a double sweep from its lowest voxel.
-    let ends: Vec<Option<[usize; 2]>> = (0..blocks.len())
+    let ends: Vec<Option<[usize; 2]>> = (0..comps.len())
         .map(|c| {
             free.contains(&(c as u32)).then(|| {
                 let a = coarse
