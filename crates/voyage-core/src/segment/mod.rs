@@ -545,14 +545,15 @@ fn segment_axial(
     }
     let dims = vol.dims();
     let ct = (!from_mask).then_some(vol);
-    let voxel_in = |block: usize, c: u32| {
+    // The voxel of compartment c nearest block b's middle (of its gas only, with `gas`).
+    let voxel_of_comp = |block: usize, c: u32, gas: bool| {
         let bx = coarse.voxels_of(block, dims);
         let mid = [0, 1, 2].map(|a| (bx.lo[a] + bx.hi[a]) / 2);
         let mut best: Option<(usize, [usize; 3])> = None;
         for k in bx.lo[2]..=bx.hi[2] {
             for j in bx.lo[1]..=bx.hi[1] {
                 for i in bx.lo[0]..=bx.hi[0] {
-                    if comp_at([i, j, k]) == Some(c) {
+                    if (!gas || work.get(i, j, k) == GAS) && comp_at([i, j, k]) == Some(c) {
                         let d = (0..3)
                             .map(|a| mid[a].abs_diff([i, j, k][a]).pow(2))
                             .sum::<usize>();
@@ -565,27 +566,7 @@ fn segment_axial(
         }
         best.map(|b| b.1)
     };
-    // The voxel of compartment c's gas nearest block b's middle.
-    let gas_voxel_in = |block: usize, c: u32| {
-        let bx = coarse.voxels_of(block, dims);
-        let mid = [0, 1, 2].map(|a| (bx.lo[a] + bx.hi[a]) / 2);
-        let mut best: Option<(usize, [usize; 3])> = None;
-        for k in bx.lo[2]..=bx.hi[2] {
-            for j in bx.lo[1]..=bx.hi[1] {
-                for i in bx.lo[0]..=bx.hi[0] {
-                    if work.get(i, j, k) == GAS && comp_at([i, j, k]) == Some(c) {
-                        let d = (0..3)
-                            .map(|a| mid[a].abs_diff([i, j, k][a]).pow(2))
-                            .sum::<usize>();
-                        if best.is_none_or(|b| d < b.0) {
-                            best = Some((d, [i, j, k]));
-                        }
-                    }
-                }
-            }
-        }
-        best.map(|b| b.1)
-    };
+    let voxel_in = |block: usize, c: u32| voxel_of_comp(block, c, false);
     let bridge = |from: usize, to: usize, a: u32, b: u32| {
         let (va, vb) = (voxel_in(from, a)?, voxel_in(to, b)?);
         let own = |v: [usize; 3]| comp_at(v).is_some_and(|c| c == a || c == b);
@@ -616,7 +597,7 @@ fn segment_axial(
     let cecum_voxel = ch.cecum.and_then(|c| {
         chain::cecum_blocks(&coarse, c, &course)
             .into_iter()
-            .find_map(|b| gas_voxel_in(b, c))
+            .find_map(|b| voxel_of_comp(b, c, true))
     });
     // A seed's gas is colon, wherever the chain went: joined at the chain's end.
     for &s in &seeded {
