@@ -228,9 +228,16 @@ pub struct Chain {
     pub links: Vec<Link>,
     /// `gaps[i]` joins `links[i]` and `links[i + 1]`.
     pub gaps: Vec<Path>,
-    /// The compartment that ends the course at the cecum, when large compartments set it.
-    pub cecum: Option<u32>,
+    /// Where the course ends at the cecum, when large compartments reach it.
+    pub cecum: Option<Cecum>,
     pub left: Vec<(u32, Left)>,
+}
+
+/// The compartment that ends the course, and its blocks at the cecum, the pole first (see
+/// [`cecum_blocks`]).
+pub struct Cecum {
+    pub comp: u32,
+    pub blocks: Vec<usize>,
 }
 
 /// What a compartment may be in the chain.
@@ -302,17 +309,25 @@ pub fn chain(
             None => ch.left.push((b, Left::TooFar(f64::INFINITY))),
         }
     }
+    // The last compartment is left at the cecum's pole, where the course knows it; else at
+    // its end farthest from where it was entered.
     let last = ch.links.len() - 1;
-    ch.links[last].exit = coarse.farthest(ch.links[last].comp, ch.links[last].entry).0;
-    if !majors.is_empty() {
-        let c = ch.links[last].comp;
-        if let Some(&b) = cecum_blocks(coarse, c, course).first() {
-            ch.links[last].exit = b;
-        }
-        // The course ended at the cecum: the gas beyond it is the ileum's, not colon.
-        if course.along(coarse.centre_mm(ch.links[last].exit)) >= COURSE_END {
-            ch.cecum = Some(c);
-        }
+    let c = ch.links[last].comp;
+    let at_cecum = if majors.is_empty() {
+        Vec::new()
+    } else {
+        cecum_blocks(coarse, &blocks[c as usize], course)
+    };
+    ch.links[last].exit = match at_cecum.first() {
+        Some(&b) => b,
+        None => coarse.farthest(c, ch.links[last].entry).0,
+    };
+    // The course ended at the cecum: the gas beyond it is the ileum's, not colon.
+    if !at_cecum.is_empty() && course.along(coarse.centre_mm(ch.links[last].exit)) >= COURSE_END {
+        ch.cecum = Some(Cecum {
+            comp: c,
+            blocks: at_cecum,
+        });
     }
     let mut free: Vec<u32> = (0..comps.len() as u32)
         .filter(|&c| c != rectum && roles[c as usize] == Role::Minor)
@@ -352,12 +367,9 @@ pub fn chain(
     ch
 }
 
-/// The cecum's blocks in compartment `c`: its blocks furthest along the course (within
-/// [`CECUM_BAND`]), lowest first in the patient frame: the cecal pole comes first.
-pub fn cecum_blocks(coarse: &Coarse, c: u32, course: &Course) -> Vec<usize> {
-    let blocks = coarse
-        .blocks_by_comp(c as usize + 1)
-        .swap_remove(c as usize);
+/// The cecum's blocks among a compartment's `blocks`: those furthest along the course
+/// (within [`CECUM_BAND`]), lowest first in the patient frame: the cecal pole comes first.
+fn cecum_blocks(coarse: &Coarse, blocks: &[usize], course: &Course) -> Vec<usize> {
     let along: Vec<f64> = blocks
         .iter()
         .map(|&b| course.along(coarse.centre_mm(b)))

@@ -594,10 +594,10 @@ fn segment_axial(
         &bridge,
     );
     // The pole of the cecum's gas: fluid may lie lower, and is cleansed or cut away.
-    let cecum_voxel = ch.cecum.and_then(|c| {
-        chain::cecum_blocks(&coarse, c, &course)
-            .into_iter()
-            .find_map(|b| voxel_of_comp(b, c, true))
+    let cecum_voxel = ch.cecum.as_ref().and_then(|c| {
+        c.blocks
+            .iter()
+            .find_map(|&b| voxel_of_comp(b, c.comp, true))
     });
     // A seed's gas is colon, wherever the chain went: joined at the chain's end.
     for &s in &seeded {
@@ -711,14 +711,8 @@ fn segment_axial(
     );
 
     // Reports.
-    let colon_lps = lps_box(
-        &geom,
-        &ch.links
-            .iter()
-            .map(|l| compartments[l.comp as usize].bbox)
-            .fold(compartments[rectum as usize].bbox, |a, b| a.union(&b)),
-    );
     let order_of = |c: u32| ch.links.iter().position(|l| l.comp == c);
+    let colon_lps = colon_box(&compartments, rectum, |c| order_of(c).is_some(), &geom);
     let mut classes = vec![ComponentKind::Other; compartments.len()];
     for (c, comp) in compartments.iter().enumerate() {
         classes[c] = if order_of(c as u32).is_some() {
