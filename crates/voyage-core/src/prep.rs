@@ -192,8 +192,12 @@ pub struct Study {
     pub contact_voxels: usize,
     pub centerline: Centerline,
     /// Stretches of the centerline (arc mm from the source, start and end) that cross a
-    /// bridged gap: collapsed or fluid-filled bowel, no air.
+    /// bridged gap: collapsed or fluid-filled bowel, no air. Sorted.
     pub collapsed_spans: Vec<[f64; 2]>,
+    /// Each bridged gap's stretch of the centerline, in the order of `segmentation.gaps`;
+    /// None where the centerline does not pass through the gap (the colon is joined by
+    /// lumen elsewhere too).
+    pub gap_spans: Vec<Option<[f64; 2]>>,
     pub surface: Surface,
     pub cells: Cells,
     pub timings: Timings,
@@ -269,12 +273,13 @@ impl Study {
             .local(self.segmentation.orientation.gravity())
     }
 
-    /// The collapsed span holding arc length `arc` (mm from the source), if any.
-    pub fn collapsed_at(&self, arc: f64) -> Option<[f64; 2]> {
-        self.collapsed_spans
+    /// The bridged gap whose stretch of the centerline holds arc length `arc` (mm from the
+    /// source), if any.
+    pub fn gap_at(&self, arc: f64) -> Option<&crate::Gap> {
+        self.gap_spans
             .iter()
-            .copied()
-            .find(|s| s[0] <= arc && arc <= s[1])
+            .position(|s| s.is_some_and(|s| s[0] <= arc && arc <= s[1]))
+            .map(|i| &self.segmentation.gaps[i])
     }
 
     pub fn source_mm(&self) -> DVec3 {
@@ -502,7 +507,9 @@ pub fn prepare(
     let cells = build_cells(&seg.lumen, &dt_source.dist, &cl, &surface, &opts.cells)?;
     laps.stop();
 
-    let collapsed_spans = collapsed_spans(&cl, &seg);
+    let gap_spans = gap_spans(&cl, &seg);
+    let mut collapsed_spans: Vec<[f64; 2]> = gap_spans.iter().flatten().copied().collect();
+    collapsed_spans.sort_by(|a, b| a[0].total_cmp(&b[0]));
     if opts.centerline.source_mm.is_none() || opts.centerline.target_mm.is_none() {
         let w = anatomical_checks(
             &seg,
@@ -527,38 +534,34 @@ pub fn prepare(
         contact_voxels,
         centerline: cl,
         collapsed_spans,
+        gap_spans,
         surface,
         cells,
         timings,
     })
 }
 
-/// The centerline's stretches through bridged gaps: points whose voxel the bridge added (its
-/// tube, or the fluid filling the stretch).
-fn collapsed_spans(cl: &Centerline, seg: &Segmentation) -> Vec<[f64; 2]> {
+/// Each bridged gap's stretch of the centerline (in the order of the gaps): the points whose
+/// voxel the bridge added (its tube, or the fluid filling the stretch).
+fn gap_spans(cl: &Centerline, seg: &Segmentation) -> Vec<Option<[f64; 2]>> {
     let g = seg.lumen.geometry();
-    let mut spans: Vec<[f64; 2]> = Vec::new();
-    for gap in &seg.gaps {
-        let mut span: Option<[f64; 2]> = None;
-        for (p, &arc) in cl.points_mm.iter().zip(&cl.arc_mm) {
-            let v = g.local_to_index(DVec3::from_array(*p)).round();
-            if !g.contains_index(v) {
-                continue;
-            }
-            if gap
-                .voxels
-                .binary_search(&g.index(v.x as usize, v.y as usize, v.z as usize))
-                .is_ok()
-            {
-                span = Some(span.map_or([arc, arc], |s| [s[0].min(arc), s[1].max(arc)]));
-            }
-        }
-        if let Some(s) = span {
-            spans.push(s);
-        }
-    }
-    spans.sort_by(|a, b| a[0].total_cmp(&b[0]));
-    spans
+    let voxel_of = |p: &[f64; 3]| {
+        let v = g.local_to_index(DVec3::from_array(*p)).round();
+        g.contains_index(v)
+            .then(|| g.index(v.x as usize, v.y as usize, v.z as usize))
+    };
+    let voxels: Vec<Option<usize>> = cl.points_mm.iter().map(voxel_of).collect();
+    seg.gaps
+        .iter()
+        .map(|gap| {
+            voxels
+                .iter()
+                .zip(&cl.arc_mm)
+                .filter(|(v, _)| v.is_some_and(|v| gap.voxels.binary_search(&v).is_ok()))
+                .map(|(_, &arc)| [arc, arc])
+                .reduce(|a, b| [a[0].min(b[0]), a[1].max(b[1])])
+        })
+        .collect()
 }
 
 /// Where the automatic ends lie in the colon's box in the patient frame: the rectum low and

@@ -107,11 +107,26 @@ pub struct Flight {
     pub clipped_substeps: usize,
     /// Dt left to the goal at the end (mm).
     pub final_dt_mm: f64,
+    /// Where the autopilot could not progress for [`STUCK_S`] s and glided on along the
+    /// centerline.
+    pub rescues: Vec<Rescue>,
     /// Mean angle between z_body and the direction of travel (the path's tangent over ±¼ s),
     /// degrees, over frames that moved.
     pub mean_heading_error_deg: f64,
     #[serde(skip)]
     pub poses: Vec<Pose>,
+}
+
+/// A place where the flight made no progress for [`STUCK_S`] seconds and the autopilot
+/// glided on along the centerline.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct Rescue {
+    /// Simulated time (s).
+    pub t: f64,
+    /// Arc length from the flight's start (mm) where the glide began.
+    pub arc_mm: f64,
+    /// Where the submarine was (volume-local mm).
+    pub position: [f64; 3],
 }
 
 /// The centerline as the flight sees it: points from the flight's start to its goal.
@@ -152,6 +167,23 @@ impl Guide {
             1.0
         };
         (self.points[i - 1].lerp(self.points[i], t), i)
+    }
+    /// Arc spans where the lumen's radius is under `roomy_mm`, the goal's end left out
+    /// (the flight stops before it).
+    fn narrows(&self, roomy_mm: f64) -> Vec<[f64; 2]> {
+        let mut spans: Vec<[f64; 2]> = Vec::new();
+        let n = self.points.len();
+        for i in 0..n.saturating_sub(1) {
+            if self.radius[i] >= roomy_mm {
+                continue;
+            }
+            let a = self.arc[i];
+            match spans.last_mut() {
+                Some(s) if i > 0 && self.radius[i - 1] < roomy_mm => s[1] = a,
+                _ => spans.push([a, a]),
+            }
+        }
+        spans
     }
     fn nearest(&self, x: DVec3) -> usize {
         let mut best = (f64::INFINITY, 0);
@@ -213,7 +245,23 @@ pub struct Autopilot {
     /// The glide that last reached its end: not glided again from inside it.
     glided: Option<usize>,
     up: DVec3,
+    /// A glide ends only where the centerline's radius is at least this (mm): the camera is
+    /// in the safe set there.
+    roomy_mm: f64,
+    /// The last progress: (time, Dt then); no progress for [`STUCK_S`] s is a rescue.
+    progress: (f64, f64),
+    /// Where the autopilot glided on after [`STUCK_S`] s without progress.
+    pub rescues: Vec<Rescue>,
 }
+
+/// Without [`STUCK_S`] seconds of progress the autopilot glides this far (mm, at least twice
+/// the local radius) along the centerline.
+const RESCUE_MM: f64 = 20.0;
+/// Seconds without progress (Dt falling by `stall_progress_mm`) before a rescue glide.
+pub const STUCK_S: f64 = 5.0;
+/// Centerline stretches whose radius is under the camera's distance from the wall plus this
+/// (mm) are glided through: the safe set is too thin there for the field to carry the camera.
+pub const NARROW_MARGIN_MM: f64 = 1.0;
 
 /// A glide starts this far (mm) before a bridged gap: the lumen narrows toward it and the
 /// wall term would stop the submarine there.
@@ -234,16 +282,26 @@ impl Autopilot {
         let near = guide.nearest(x);
         let goal_radius = *guide.radius.last().unwrap_or(&0.0);
         let reach_mm = opts.reach_mm.unwrap_or(goal_radius.max(10.0));
-        let glides = opts
+        let roomy_mm = opts.safety.min_wall_mm + NARROW_MARGIN_MM;
+        let mut spans: Vec<[f64; 2]> = opts
             .collapsed_spans
             .iter()
             .map(|s| match dir {
                 Direction::Forward => [s[0], s[1]],
                 Direction::Backward => [cl.length_mm - s[1], cl.length_mm - s[0]],
             })
-            .map(|s| [s[0] - GLIDE_BEFORE_MM, s[1] + GLIDE_AFTER_MM])
             .collect();
+        spans.extend(guide.narrows(roomy_mm));
+        let glides = merged(
+            spans
+                .into_iter()
+                .map(|s| [s[0] - GLIDE_BEFORE_MM, s[1] + GLIDE_AFTER_MM])
+                .collect(),
+        );
         Autopilot {
+            roomy_mm,
+            progress: (0.0, dt_now),
+            rescues: Vec::new(),
             glides,
             glide_mm_s: opts.glide_mm_s,
             glide_arc: None,
@@ -266,6 +324,7 @@ impl Autopilot {
     /// The autopilot's force for the frame starting at time `t` with the submarine at `x`
     /// and Dt = `dt_now`: zero, or an escape push scaled by Ct.
     pub fn input(&mut self, t: f64, dt_now: f64, x: DVec3, ct: f64) -> Input {
+        self.note_progress(t, dt_now);
         // Stall: too little progress over the window (not while escaping). Each stall in a
         // row pushes harder.
         if t >= self.escape_until && t - self.window_start.0 >= self.stall_window_s {
@@ -298,6 +357,7 @@ impl Autopilot {
 
     /// Starts the stall watch afresh (a glide is progress, not a stall).
     pub fn watch_from(&mut self, t: f64, dt_now: f64) {
+        self.progress = (t, dt_now);
         self.window_start = (t, dt_now);
         self.escape_until = f64::NEG_INFINITY;
         self.in_a_row = 0;
@@ -310,11 +370,33 @@ impl Autopilot {
         self.near
     }
 
-    /// In a bridged gap (or the narrowing before it): the pose `dt` seconds further along the
-    /// centerline at the glide speed, looking ahead; None elsewhere. There is no air in the
-    /// gap for the field to act in: the flight keeps to the path, slowly.
-    pub fn glide(&mut self, x: DVec3, dt: f64) -> Option<Pose> {
+    fn note_progress(&mut self, t: f64, dt_now: f64) {
+        if self.progress.1 - dt_now >= self.stall_progress_mm {
+            self.progress = (t, dt_now);
+        }
+    }
+
+    /// Whether the flight has made no progress for [`STUCK_S`] seconds at time `t`.
+    pub fn stuck(&self, t: f64) -> bool {
+        t - self.progress.0 >= STUCK_S
+    }
+
+    /// The last rescue, if one happened in the `within_s` seconds before `t`.
+    pub fn recent_rescue(&self, t: f64, within_s: f64) -> Option<&Rescue> {
+        self.rescues.last().filter(|r| t - r.t <= within_s)
+    }
+
+    /// In a bridged gap, a narrow (or the stretch before either), or stuck for [`STUCK_S`]
+    /// seconds at time `t` (Dt = `dt_now`): the pose `dt` seconds further along the
+    /// centerline at the glide speed, looking ahead; None elsewhere. There is no room there
+    /// for the field to act in: the flight keeps to the path, slowly.
+    pub fn glide(&mut self, x: DVec3, t: f64, dt_now: f64, dt: f64) -> Option<Pose> {
         let i = self.moved_to(x);
+        self.note_progress(t, dt_now);
+        if self.glide_arc.is_none() && self.stuck(t) {
+            self.rescue(t, x, i);
+        }
+        // While gliding, the glide's own arc (the nearest point may round past the end).
         let here = self
             .glide_arc
             .unwrap_or(self.guide.arc[i])
@@ -326,7 +408,7 @@ impl Autopilot {
         if self.glided == Some(k) && self.glide_arc.is_none() {
             return None;
         }
-        let end = self.glides[k][1].min(*self.guide.arc.last()?);
+        let end = self.roomy_after(self.glides[k][1]);
         let next = (here + self.glide_mm_s * dt).min(end);
         self.glide_arc = (next < end).then_some(next);
         self.glided = Some(k);
@@ -338,10 +420,53 @@ impl Autopilot {
         ))
     }
 
+    /// Starts a rescue glide from guide point `i`: [`RESCUE_MM`] (at least twice the local
+    /// radius) along the centerline.
+    fn rescue(&mut self, t: f64, x: DVec3, i: usize) {
+        let from = self.guide.arc[i];
+        let span = [from, from + RESCUE_MM.max(2.0 * self.guide.radius[i])];
+        self.rescues.push(Rescue {
+            t,
+            arc_mm: from,
+            position: x.to_array(),
+        });
+        let mut glides = std::mem::take(&mut self.glides);
+        glides.push(span);
+        self.glides = merged(glides);
+        self.glided = None;
+        self.glide_arc = Some(from);
+        self.progress.0 = t;
+    }
+
+    /// The first arc at or after `arc` where the centerline is roomy enough for the camera
+    /// (the goal's arc when none is).
+    fn roomy_after(&self, arc: f64) -> f64 {
+        let g = &self.guide;
+        let last = *g.arc.last().unwrap_or(&0.0);
+        let from = g.arc.partition_point(|&a| a < arc);
+        (from..g.arc.len())
+            .find(|&j| g.radius[j] >= self.roomy_mm)
+            .map_or(last, |j| g.arc[j])
+            .min(last)
+    }
+
     /// Lumen radius at the guide's point `i` (mm).
     pub fn radius(&self, i: usize) -> f64 {
         self.guide.radius[i]
     }
+}
+
+/// Spans sorted and overlapping ones joined.
+fn merged(mut spans: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
+    spans.sort_by(|a, b| a[0].total_cmp(&b[0]));
+    let mut out: Vec<[f64; 2]> = Vec::new();
+    for s in spans {
+        match out.last_mut() {
+            Some(o) if s[0] <= o[1] => o[1] = o[1].max(s[1]),
+            _ => out.push(s),
+        }
+    }
+    out
 }
 
 /// Where a flight starts: the first centerline point from the start end that lies in the
@@ -401,6 +526,7 @@ pub fn fly<S: DistanceStore>(
         substeps: 0,
         clipped_substeps: 0,
         final_dt_mm: f64::INFINITY,
+        rescues: Vec::new(),
         mean_heading_error_deg: 0.0,
         poses: Vec::new(),
     };
@@ -426,7 +552,7 @@ pub fn fly<S: DistanceStore>(
         }
         let before = sub.state.x;
         let clock = Instant::now();
-        match pilot.glide(sub.state.x, frame_dt) {
+        match pilot.glide(sub.state.x, t, dt_now, frame_dt) {
             Some(pose) if sub.glide_to(field, pose, frame_dt) => {
                 pilot.watch_from(sub.state.t, dt_at(sub.state.x));
             }
@@ -453,6 +579,7 @@ pub fn fly<S: DistanceStore>(
     }
     f.sim_seconds = sub.state.t;
     f.stalls = pilot.stalls;
+    f.rescues = std::mem::take(&mut pilot.rescues);
     if f.frames > 0 {
         f.mean_wall_distance_mm = wall_sum / f.frames as f64;
         f.mean_local_radius_mm = radius_sum / f.frames as f64;
@@ -498,5 +625,81 @@ fn nearest_from(guide: &Guide, x: DVec3, last: usize) -> usize {
         guide.nearest(x)
     } else {
         bi
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A straight centerline along x, 1 mm apart, `n` points long, with radius `r(i)`.
+    fn line(n: usize, r: impl Fn(usize) -> f64) -> Centerline {
+        Centerline {
+            points_mm: (0..n).map(|i| [i as f64, 0.0, 0.0]).collect(),
+            arc_mm: (0..n).map(|i| i as f64).collect(),
+            radius_mm: (0..n).map(r).collect(),
+            length_mm: (n - 1) as f64,
+        }
+    }
+
+    #[test]
+    fn narrows_are_glided_through_both_ways() {
+        // 200 mm, 8 mm wide but 0.9 mm at 100..=104 (the camera keeps 1 mm from the wall).
+        let cl = line(201, |i| if (100..=104).contains(&i) { 0.9 } else { 8.0 });
+        let opts = FlightOptions::default();
+        let ahead = Autopilot::new(&cl, Direction::Forward, &opts, DVec3::ZERO, 200.0);
+        assert_eq!(
+            ahead.glides,
+            vec![[100.0 - GLIDE_BEFORE_MM, 104.0 + GLIDE_AFTER_MM]]
+        );
+        let back = Autopilot::new(&cl, Direction::Backward, &opts, DVec3::X * 200.0, 200.0);
+        assert_eq!(
+            back.glides,
+            vec![[96.0 - GLIDE_BEFORE_MM, 100.0 + GLIDE_AFTER_MM]]
+        );
+    }
+
+    #[test]
+    fn spans_merge_when_they_overlap() {
+        assert_eq!(
+            merged(vec![[30.0, 40.0], [0.0, 10.0], [5.0, 20.0]]),
+            vec![[0.0, 20.0], [30.0, 40.0]]
+        );
+    }
+
+    #[test]
+    fn five_seconds_without_progress_glide_on_and_are_recorded() {
+        let cl = line(201, |_| 8.0);
+        let opts = FlightOptions::default();
+        let x = DVec3::new(50.0, 3.0, 0.0);
+        let mut pilot = Autopilot::new(&cl, Direction::Forward, &opts, x, 150.0);
+        let frame = 1.0 / 30.0;
+        let mut t = 0.0;
+        // Stuck: Dt stays at 150 mm.
+        while t < STUCK_S - 0.1 {
+            assert!(pilot.glide(x, t, 150.0, frame).is_none(), "glided at {t} s");
+            pilot.input(t, 150.0, x, 1.0);
+            t += frame;
+        }
+        t = STUCK_S + 0.01;
+        let pose = pilot.glide(x, t, 150.0, frame).expect("a rescue glide");
+        assert_eq!(pilot.rescues.len(), 1);
+        assert_eq!(pilot.rescues[0].arc_mm, 50.0);
+        assert!(pose.position.x > 50.0 && pose.position.y == 0.0);
+        // It glides on, along the centerline, at least RESCUE_MM.
+        let mut last = pose.position;
+        while let Some(p) = pilot.glide(last, t, 150.0, frame) {
+            assert!(p.position.x >= last.x);
+            last = p.position;
+            t += frame;
+        }
+        // (to within a guide point: the glide ends where the nearest point reaches its end)
+        assert!(
+            last.x >= 50.0 + RESCUE_MM - 1.0,
+            "glided only to {}",
+            last.x
+        );
+        assert!(pilot.recent_rescue(t, 10.0).is_some());
+        assert_eq!(pilot.rescues.len(), 1);
     }
 }

@@ -12,7 +12,7 @@ mod potential;
 mod submarine;
 
 pub use camera::{Camera, Pose};
-pub use flight::{Autopilot, Flight, FlightOptions, fly, start_pose};
+pub use flight::{Autopilot, Flight, FlightOptions, Rescue, STUCK_S, fly, start_pose};
 #[cfg(feature = "layouts")]
 pub use layouts::{BoxStore, SortedStore};
 pub use potential::{

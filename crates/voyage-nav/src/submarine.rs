@@ -296,16 +296,18 @@ impl Submarine {
         self.state.pose()
     }
 
-    /// Puts the submarine at `pose`, at rest, `dt` seconds later, if `pose` is in the safe
-    /// set (else leaves it where it was and returns false): the autopilot's glide through a
-    /// bridged gap, where the colon holds no air for the field to act in.
+    /// Puts the submarine at `pose`, at rest, `dt` seconds later, if `pose` is inside the
+    /// navigable core (else leaves it where it was and returns false): the autopilot's glide
+    /// along the centerline through a bridged gap or a narrow, where the field cannot carry
+    /// the camera. In a narrow the centerline may run closer to the wall than the safe set
+    /// allows; it is still the farthest the camera can keep from it.
     pub fn glide_to<S: DistanceStore>(
         &mut self,
         field: &PotentialField<S>,
         pose: Pose,
         dt: f64,
     ) -> bool {
-        if !self.is_safe(field, pose.position) {
+        if !field.in_lumen_cube(pose.position) {
             return false;
         }
         let t = self.state.t + dt;
@@ -413,7 +415,16 @@ impl Submarine {
                 next.x = self.state.x;
                 next.p = DVec3::ZERO;
             }
-            if !self.modes.still && !self.is_safe(field, next.x) {
+            if !self.modes.still
+                && !self.is_safe(field, next.x)
+                && !self.is_safe(field, self.state.x)
+            {
+                // Left in a narrow by a glide: move only away from the wall, within the core.
+                if !(field.in_lumen_cube(next.x) && field.ds(next.x) >= ds) {
+                    next.x = self.state.x;
+                    next.p = DVec3::ZERO;
+                }
+            } else if !self.modes.still && !self.is_safe(field, next.x) {
                 next.x = self.last_safe_point(field, self.state.x, next.x);
                 let n = field.ds_gradient(next.x).normalize_or_zero();
                 let into = next.p.dot(n);
@@ -426,7 +437,10 @@ impl Submarine {
                 };
                 report.clipped += 1;
             }
-            debug_assert!(self.is_safe(field, next.x), "the camera left the safe set");
+            debug_assert!(
+                self.is_safe(field, next.x) || next.x == self.state.x || field.ds(next.x) >= ds,
+                "the camera left the safe set"
+            );
             self.state = next;
             remaining -= h;
             report.sim_s += h;

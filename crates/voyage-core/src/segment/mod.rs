@@ -297,6 +297,15 @@ pub fn segment(vol: &Volume<i16>, opts: &SegmentOptions) -> Result<Segmentation>
 }
 
 impl Segmentation {
+    /// The largest gas region left out of the colon automatically (ml of gas), if any holds
+    /// at least `min_ml`: the flight's end is then doubtful (not the user's choice).
+    pub fn largest_left_out(&self, min_ml: f64) -> Option<&SegmentReport> {
+        self.segments
+            .iter()
+            .filter(|s| !s.kept && s.gas_ml >= min_ml && s.reason.as_deref() != Some(EXCLUDED))
+            .max_by(|a, b| a.gas_ml.total_cmp(&b.gas_ml))
+    }
+
     /// The segmentation of a scan stored with axes `perm` (a swap), in the original storage.
     fn stored_back(mut self, perm: [usize; 3], geom: &crate::Geometry) -> Result<Segmentation> {
         let p = |v: [usize; 3]| [v[perm[0]], v[perm[1]], v[perm[2]]];

@@ -5,9 +5,11 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
+use glam::DVec3;
 use serde_json::json;
+use voyage_core::Geometry;
 use voyage_io::export::trajectory::write_trajectory;
-use voyage_nav::{Direction, Flight, FlightOptions, fly, potential_field};
+use voyage_nav::{Direction, Flight, FlightOptions, Rescue, STUCK_S, fly, potential_field};
 
 use super::prep::{InputArgs, Prepared, load_and_prepare};
 
@@ -127,13 +129,22 @@ pub fn run(a: &FlyArgs) -> Result<()> {
             .with_context(|| format!("{}: {} flight", a.input.input.display(), dir.name()))?;
         flights.push(f);
     }
+    for f in &flights {
+        for r in &f.rescues {
+            eprintln!(
+                "warning: {}: {}",
+                a.input.input.display(),
+                rescue_text(f, r, &geometry)
+            );
+        }
+    }
     if let Some(out) = &a.out {
         write_trajectory(out, &flights, &geometry, opts.fps)?;
     }
     if a.json {
         let per: serde_json::Map<String, serde_json::Value> = flights
             .iter()
-            .map(|f| (f.direction.name().to_string(), summary(f)))
+            .map(|f| (f.direction.name().to_string(), summary(f, &geometry)))
             .collect();
         println!(
             "{}",
@@ -144,7 +155,7 @@ pub fn run(a: &FlyArgs) -> Result<()> {
     } else {
         for f in &flights {
             println!(
-                "{:<8} {} in {} frames ({:.1} s simulated), path {:.0} mm, wall distance min {:.1} / mean {:.1} mm (mean radius {:.1}), {} stalls, physics {:.2} µs/frame",
+                "{:<8} {} in {} frames ({:.1} s simulated), path {:.0} mm, wall distance min {:.1} / mean {:.1} mm (mean radius {:.1}), {} stalls, {} rescues, physics {:.2} µs/frame",
                 f.direction.name(),
                 if f.reached {
                     "reached"
@@ -158,6 +169,7 @@ pub fn run(a: &FlyArgs) -> Result<()> {
                 f.mean_wall_distance_mm,
                 f.mean_local_radius_mm,
                 f.stalls,
+                f.rescues.len(),
                 f.step_ns / 1e3
             );
         }
@@ -184,8 +196,34 @@ pub fn run(a: &FlyArgs) -> Result<()> {
     Ok(())
 }
 
-fn summary(f: &Flight) -> serde_json::Value {
+/// What a rescue (no progress for STUCK_S s, then a glide on) says to the user.
+fn rescue_text(f: &Flight, r: &Rescue, g: &Geometry) -> String {
+    let p = g.local_to_patient(DVec3::from_array(r.position));
+    format!(
+        "the {} flight made no progress for {:.0} s at LPS ({:.0}, {:.0}, {:.0}), {:.0} mm along its way: the autopilot glided on along the centerline",
+        f.direction.name(),
+        STUCK_S,
+        p.x,
+        p.y,
+        p.z,
+        r.arc_mm
+    )
+}
+
+fn summary(f: &Flight, g: &Geometry) -> serde_json::Value {
+    let rescues: Vec<serde_json::Value> = f
+        .rescues
+        .iter()
+        .map(|r| {
+            json!({
+                "t_s": r.t,
+                "arc_mm": r.arc_mm,
+                "lps_mm": g.local_to_patient(DVec3::from_array(r.position)).to_array(),
+            })
+        })
+        .collect();
     json!({
+        "rescues": rescues,
         "reached": f.reached,
         "frames": f.frames,
         "sim_seconds": f.sim_seconds,

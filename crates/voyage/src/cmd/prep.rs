@@ -269,7 +269,7 @@ fn gaps(s: &Study) -> Vec<serde_json::Value> {
         .iter()
         .enumerate()
         .map(|(i, g)| {
-            let span = s.collapsed_spans.get(i);
+            let span = s.gap_spans[i];
             json!({
                 "between": g.between,
                 "length_mm": g.length_mm,
@@ -324,12 +324,7 @@ fn print_text(s: &Study, g: &Geometry, load_ms: f64) {
             sg.fluid_ml
         );
     }
-    for (gap, span) in seg.gaps.iter().zip(
-        s.collapsed_spans
-            .iter()
-            .map(Some)
-            .chain(std::iter::repeat(None)),
-    ) {
+    for (gap, span) in seg.gaps.iter().zip(&s.gap_spans) {
         let at = span.map_or(String::new(), |a| {
             format!(", centerline {:.0}–{:.0} mm", a[0], a[1])
         });

@@ -79,6 +79,10 @@ const PANEL_BACKGROUND: Color32 = Color32::from_gray(27);
 /// The panels' images among the window's [`voyage_render::PixelImages`].
 const SLICE_IMAGES: [u64; 3] = [0, 1, 2];
 const SCOUT_IMAGE: u64 = 3;
+/// How long (simulated s) the window shows that the autopilot glided on after being stuck.
+const RESCUE_NOTICE_S: f64 = 8.0;
+/// Gas left out of the colon from this size on (ml) makes a reached goal doubtful.
+const LEFT_OUT_DOUBT_ML: f64 = 100.0;
 
 /// What the user asks of the window, from a key, a control or a script: [`App::apply`]
 /// carries it out, so the three cannot disagree.
@@ -1045,9 +1049,28 @@ impl App {
         ui.radio_value(&mut dir, Direction::Backward, "cecum to rectum");
         s.set_direction(dir);
         if s.reached {
-            ui.label(RichText::new("goal reached").color(Color32::LIGHT_GREEN));
+            match s.study.segmentation.largest_left_out(LEFT_OUT_DOUBT_ML) {
+                Some(big) => ui.label(
+                    RichText::new(format!(
+                        "end of this colon reached, but {:.0} ml of gas ({}) was left out: is it colon? (see Colon)",
+                        big.gas_ml, big.label
+                    ))
+                    .color(Color32::from_rgb(255, 190, 90)),
+                ),
+                None => ui.label(RichText::new("goal reached").color(Color32::LIGHT_GREEN)),
+            };
         }
         ui.label(format!("to the goal: {:.0} mm", s.dt_to_goal()));
+        if let Some(r) = s.pilot.recent_rescue(s.sub.state.t, RESCUE_NOTICE_S) {
+            ui.label(
+                RichText::new(format!(
+                    "no progress for {:.0} s at {:.0} mm along the colon: gliding on along the centerline",
+                    voyage_nav::STUCK_S,
+                    r.arc_mm
+                ))
+                .color(Color32::from_rgb(255, 190, 90)),
+            );
+        }
         ui.separator();
         coverage_section(ui, &s.coverage, &mut actions);
         ui.separator();
@@ -1591,10 +1614,10 @@ impl App {
             &mode,
             Color32::from_gray(220),
         );
-        if let Some(span) = s.collapsed_here() {
+        if let Some(gap) = s.collapsed_here() {
             let text = format!(
                 "collapsed segment, {:.0} mm: no air here, the flight keeps to the path",
-                span[1] - span[0]
+                gap.length_mm
             );
             label(
                 &painter,
@@ -1830,7 +1853,11 @@ fn colon_summary(ui: &mut egui::Ui, study: &voyage_core::Study, busy: bool) -> O
             ui.add_enabled_ui(!busy, |ui| {
                 for s in &seg.segments {
                     let mut on = s.kept;
-                    let text = format!("{}, {:.0} ml", s.label, s.gas_ml + s.fluid_ml);
+                    let text = if s.fluid_ml >= 0.5 {
+                        format!("{}, {:.0} ml gas + {:.0} ml fluid", s.label, s.gas_ml, s.fluid_ml)
+                    } else {
+                        format!("{}, {:.0} ml gas", s.label, s.gas_ml)
+                    };
                     let why = s.reason.as_deref().unwrap_or("in the colon");
                     let a = s.anchor_lps_mm;
                     let hover = format!("{why}\nuntick to leave it out, tick to take it in\nLPS ({:.0}, {:.0}, {:.0}) mm", a[0], a[1], a[2]);
@@ -1840,13 +1867,7 @@ fn colon_summary(ui: &mut egui::Ui, study: &voyage_core::Study, busy: bool) -> O
                 }
             });
         });
-    for (gap, span) in seg.gaps.iter().zip(
-        study
-            .collapsed_spans
-            .iter()
-            .map(Some)
-            .chain(std::iter::repeat(None)),
-    ) {
+    for (gap, span) in seg.gaps.iter().zip(&study.gap_spans) {
         let names = |i: usize| {
             seg.segments
                 .iter()

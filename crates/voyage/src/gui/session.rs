@@ -67,8 +67,8 @@ impl Session {
         self.cleansed.get_or_init(|| self.study.cleansed_ct())
     }
 
-    /// The bridged gap (arc span along the centerline) the submarine is in, if any.
-    pub fn collapsed_here(&self) -> Option<[f64; 2]> {
+    /// The bridged gap the submarine is in, if any.
+    pub fn collapsed_here(&self) -> Option<&voyage_core::Gap> {
         let x = self.sub.state.x;
         let cl = &self.study.centerline;
         let (i, _) = cl
@@ -77,7 +77,7 @@ impl Session {
             .enumerate()
             .map(|(i, p)| (i, glam::DVec3::from_array(*p).distance_squared(x)))
             .min_by(|a, b| a.1.total_cmp(&b.1))?;
-        self.study.collapsed_at(cl.arc_mm[i])
+        self.study.gap_at(cl.arc_mm[i])
     }
 
     /// Everything the window needs for a preprocessed study; the submarine waits at the
@@ -200,7 +200,9 @@ impl Session {
             } else if steering {
                 self.pilot
                     .restart(self.sub.state.t, dt_now, self.sub.state.x);
-            } else if let Some(pose) = self.pilot.glide(self.sub.state.x, dt)
+            } else if let Some(pose) =
+                self.pilot
+                    .glide(self.sub.state.x, self.sub.state.t, dt_now, dt)
                 && self.sub.glide_to(&self.field, pose, dt)
             {
                 // A bridged gap holds no air for the field: the flight keeps to the path.

@@ -1,0 +1,59 @@
+//! Flights through the real prone, tagged CT colonography exam of the shared data
+//! (`ctc/prone-tagged`), colon found automatically: both ways to the goal, the camera inside
+//! the lumen at every frame, through its narrow sigmoid and its bridged fluid-filled
+//! descending stretch. Needs `../shared/data`; skips with a message without it. Run in
+//! release mode (`cargo test --release -p voyage-nav --test ctc_exam`).
+
+use voyage_core::{PrepOptions, prepare};
+use voyage_nav::{Direction, FlightOptions, STUCK_S, fly, potential_field};
+
+#[test]
+fn the_real_exam_is_flown_both_ways_inside_the_lumen() {
+    let Some(data) = voyage_phantom::fixtures::shared_data() else {
+        return;
+    };
+    let path = data.join("ctc").join("prone-tagged.nii.gz");
+    if !path.exists() {
+        voyage_phantom::fixtures::skip(&format!("{} not found", path.display()));
+        return;
+    }
+    let ct = voyage_io::load(&path, &Default::default()).unwrap().volume;
+    let study = prepare(ct, &PrepOptions::default(), |_| {}).unwrap();
+    let opts = FlightOptions::for_study(&study);
+    let field = potential_field(&study, opts.safety.min_wall_mm).unwrap();
+    for dir in [Direction::Forward, Direction::Backward] {
+        let f = fly(&field, &study.centerline, dir, &opts).unwrap();
+        eprintln!(
+            "ctc/prone-tagged {}: reached {} in {:.0} s, {} stalls, {} rescues (no progress for {STUCK_S} s)",
+            dir.name(),
+            f.reached,
+            f.sim_seconds,
+            f.stalls,
+            f.rescues.len()
+        );
+        assert!(
+            f.reached,
+            "the {} flight stopped {:.0} mm short",
+            dir.name(),
+            f.final_dt_mm
+        );
+        // The field keeps the camera in the safe set; a glide through a narrow keeps it on
+        // the centerline, inside the navigable core.
+        for (i, p) in f.poses.iter().enumerate() {
+            assert!(
+                field.in_lumen_cube(p.position),
+                "{} frame {i} at {:?} is not inside the lumen",
+                dir.name(),
+                p.position
+            );
+        }
+        // Without the glides and rescues the flights sat for minutes: they take no longer
+        // than the colon's length at 10 mm/s, twice over.
+        assert!(
+            f.sim_seconds <= 2.0 * study.centerline.length_mm / 10.0,
+            "the {} flight took {:.0} s",
+            dir.name(),
+            f.sim_seconds
+        );
+    }
+}
