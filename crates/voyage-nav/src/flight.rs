@@ -44,6 +44,12 @@ pub struct FlightOptions {
     /// flight glides along at `glide_mm_s` (see [`Autopilot::glide`]).
     pub collapsed_spans: Vec<[f64; 2]>,
     pub glide_mm_s: f64,
+    /// ρ of Eq. 2 is at most this many times the lumen's radius at the nearest centerline
+    /// point (None: the potential's ρ everywhere). With ρ above the radius the wall's push
+    /// acts on the centerline too and rises where the lumen narrows: a barrier along the
+    /// way that Ct cannot climb (on ctc/prone-tagged, with Dt's ways kept off the wall:
+    /// ρ = 25 mm everywhere, 6 and 5 stalls at tapers; at most 1.5 radii, none).
+    pub rho_per_radius: Option<f64>,
 }
 
 impl Default for FlightOptions {
@@ -68,6 +74,7 @@ impl Default for FlightOptions {
             keep_poses: true,
             collapsed_spans: Vec::new(),
             glide_mm_s: 10.0,
+            rho_per_radius: Some(1.5),
         }
     }
 }
@@ -252,6 +259,7 @@ pub struct Autopilot {
     progress: (f64, f64),
     /// Where the autopilot glided on after [`STUCK_S`] s without progress.
     pub rescues: Vec<Rescue>,
+    rho_per_radius: Option<f64>,
 }
 
 /// Without [`STUCK_S`] seconds of progress the autopilot glides this far (mm, at least twice
@@ -302,6 +310,7 @@ impl Autopilot {
             roomy_mm,
             progress: (0.0, dt_now),
             rescues: Vec::new(),
+            rho_per_radius: opts.rho_per_radius,
             glides,
             glide_mm_s: opts.glide_mm_s,
             glide_arc: None,
@@ -401,10 +410,12 @@ impl Autopilot {
             .glide_arc
             .unwrap_or(self.guide.arc[i])
             .max(self.guide.arc[i]);
-        let k = self
-            .glides
-            .iter()
-            .position(|g| g[0] <= here && here < g[1])?;
+        let Some(k) = self.glides.iter().position(|g| g[0] <= here && here < g[1]) else {
+            // Past the glide (the field carried the submarine on when a glide pose was
+            // refused): it is over.
+            self.glide_arc = None;
+            return None;
+        };
         if self.glided == Some(k) && self.glide_arc.is_none() {
             return None;
         }
@@ -448,6 +459,15 @@ impl Autopilot {
             .find(|&j| g.radius[j] >= self.roomy_mm)
             .map_or(last, |j| g.arc[j])
             .min(last)
+    }
+
+    /// ρ of Eq. 2 for the submarine where it is: the options' ρ, at most `rho_per_radius`
+    /// times the lumen's radius at the nearest centerline point.
+    pub fn rho(&self, p: &PotentialParams) -> f64 {
+        match self.rho_per_radius {
+            Some(k) => p.rho.min(k * self.guide.radius[self.near]),
+            None => p.rho,
+        }
     }
 
     /// Lumen radius at the guide's point `i` (mm).
@@ -558,6 +578,7 @@ pub fn fly<S: DistanceStore>(
             }
             _ => {
                 let input = pilot.input(t, dt_now, sub.state.x, sub.potential.ct);
+                sub.potential.rho = pilot.rho(&opts.potential);
                 let r = sub.step(field, frame_dt, &input);
                 f.substeps += r.substeps;
                 f.clipped_substeps += r.clipped;

@@ -187,6 +187,20 @@ fn collapsed_and_fluid_filled_stretches_are_bridged() {
     );
 }
 
+/// ctc/prone-tagged's sigmoid narrows to a 0.9 mm gas thread: under the camera's 1 mm from
+/// the wall. Both flights sat in front of it for minutes (and the navigable core, thinned to
+/// let Dt through, led the flight into crevices everywhere).
+#[test]
+fn a_neck_narrower_than_the_camera_is_passed_both_ways() {
+    check(
+        "sigmoid neck",
+        ColonOptions {
+            narrowed: s(&["sigmoid"]),
+            ..Default::default()
+        },
+    );
+}
+
 #[test]
 fn the_rectal_tube_leads_to_the_rectum() {
     check(

@@ -81,6 +81,11 @@ pub struct ColonOptions {
     /// once) with a 40–60 mm stretch (full size) filled to the brim with tagged fluid: lumen,
     /// but no gas, so the gas is split there while the lumen goes on.
     pub fluid_filled: Vec<String>,
+    /// Segments (sigmoid, descending, transverse; each at most once) with a neck 30 % of
+    /// the way along: over 10 mm (full size) the gas narrows to a thread [`NECK_RADIUS_MM`]
+    /// in radius, joined but narrower than the camera's distance from the wall allows (a
+    /// real sigmoid's spasm).
+    pub narrowed: Vec<String>,
     /// Loops of small bowel filled with oral contrast (+300..+600 HU, no gas) in the right
     /// and central lower abdomen and pelvis, some touching the colon near the descending
     /// colon, the terminal ileum opening into the caecum under the level of a caecal pool
@@ -113,6 +118,7 @@ impl Default for ColonOptions {
             prone: false,
             collapsed: Vec::new(),
             fluid_filled: Vec::new(),
+            narrowed: Vec::new(),
             opacified_small_bowel: false,
             rectal_tube: false,
             tagged_stool: false,
@@ -300,6 +306,8 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
     let mut tube = Tube::new(axis, frame.thin(WALL, 1.0), Ends::Round);
     let collapses = make_collapses(&frame, &segments, &opts.collapsed)?;
     tube.collapse = collapses.iter().map(|(c, _)| c.clone()).collect();
+    tube.collapse
+        .extend(make_necks(&frame, &segments, &opts.narrowed)?);
     let folds = make_folds(&frame, &tube, &segments, opts.seed);
     tube.set_folds(folds);
     let (mut blobs, polyps) = make_polyps(&frame, &mut tube, &segments, opts.seed)?;
@@ -525,6 +533,7 @@ fn check_options(opts: &ColonOptions) -> Result<()> {
         Ok(())
     };
     names("collapsed", &opts.collapsed, COLLAPSIBLE)?;
+    names("narrowed", &opts.narrowed, COLLAPSIBLE)?;
     names("fluid-filled", &opts.fluid_filled, FILLABLE)
 }
 
@@ -710,6 +719,7 @@ fn make_collapses(
             end: mid + half,
             taper,
             cord_radius: 2.0 * frame.thin(WALL, 1.0),
+            neck_radius: 0.0,
         };
         let t = CollapsedTruth {
             segment: name.clone(),
@@ -721,6 +731,29 @@ fn make_collapses(
     }
     out.sort_by(|x, y| x.0.start.total_cmp(&y.0.start));
     Ok(out)
+}
+
+/// The gas thread's radius in a neck (mm, any size): under the camera's 1 mm from the wall.
+pub const NECK_RADIUS_MM: f64 = 0.9;
+
+/// A neck 30 % of the way along each named segment: 10 mm (full size) where the lumen is
+/// a thread [`NECK_RADIUS_MM`] in radius, tapering over 8 mm on each side.
+fn make_necks(frame: &Frame, segments: &[SegmentTruth], names: &[String]) -> Result<Vec<Collapse>> {
+    let s = frame.scale;
+    names
+        .iter()
+        .map(|name| {
+            let g = segment(segments, name)?;
+            let mid = g.start_arc_mm + 0.3 * (g.end_arc_mm - g.start_arc_mm);
+            Ok(Collapse {
+                start: mid - 5.0 * s,
+                end: mid + 5.0 * s,
+                taper: 8.0 * s,
+                cord_radius: 0.0,
+                neck_radius: NECK_RADIUS_MM,
+            })
+        })
+        .collect()
 }
 
 /// Whether arc `s` lies within `margin` of a collapsed stretch (tapers included).

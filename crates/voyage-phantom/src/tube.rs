@@ -96,6 +96,9 @@ pub struct Collapse {
     pub taper: f64,
     /// Radius of the solid tissue cord left where the lumen is gone (two walls apposed).
     pub cord_radius: f64,
+    /// A neck, not a collapse: the lumen keeps this radius (mm) through the stretch
+    /// (0: no lumen at all).
+    pub neck_radius: f64,
 }
 
 impl Collapse {
@@ -345,9 +348,14 @@ impl Tube {
             },
         );
         if let Some((f, c)) = narrowest {
-            // A small negative margin makes the core solid even on the axis itself.
-            r_lumen = r * f - (1.0 - f) * 2.0 * self.wall_mm;
-            r_outer = (r * f + self.wall_mm).max(c.cord_radius);
+            if c.neck_radius > 0.0 {
+                r_lumen = (r * f).max(c.neck_radius);
+                r_outer = r_lumen + self.wall_mm;
+            } else {
+                // A small negative margin makes the core solid even on the axis itself.
+                r_lumen = r * f - (1.0 - f) * 2.0 * self.wall_mm;
+                r_outer = (r * f + self.wall_mm).max(c.cord_radius);
+            }
         }
         let mut lumen = d - r_lumen;
         let fi = self.fold_at[i];

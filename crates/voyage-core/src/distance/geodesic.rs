@@ -104,29 +104,59 @@ pub fn geodesic_distance_like<U>(
     Ok(found)
 }
 
-/// Dt to both ends over the lumen's **core**, the voxels of `mask` whose Ds (`ds`, over the
-/// lumen's box, in bricks holding every lumen voxel) is at least `min_ds_mm`: `[to target,
-/// to source]` in `ds`'s bricks, +∞ outside the core. The ends are the first and the last of
+/// Where Dt is searched and what a step costs (see `navigable.rs`).
+#[derive(Clone, Copy, Debug)]
+pub struct CoreSpec<'a> {
+    /// Lumen voxels with Ds at least this (mm) are searched.
+    pub min_ds_mm: f64,
+    /// A step costs `1 + (wall_weight − 1)·(1 − Ds/ramp_mm)` per mm where Ds < `ramp_mm`,
+    /// 1 beyond: Dt's ways keep off the wall where the lumen lets them.
+    pub ramp_mm: f64,
+    pub wall_weight: f32,
+    /// Points where the lumen is narrow (volume-local mm): the lumen within `open_mm` of
+    /// each is searched too, so that a neck joins the core without thinning it everywhere.
+    pub narrows_mm: &'a [[f64; 3]],
+    pub open_mm: f64,
+}
+
+/// Dt to both ends over the lumen's **core** (`spec`: the voxels of `mask` whose Ds — `ds`,
+/// over the lumen's box, in bricks holding every lumen voxel — is at least `min_ds_mm`, and
+/// the lumen around the narrows): the length (mm) of the cheapest way, a step near the wall
+/// costing more (so the ways keep off it), `[to target, to source]` in `ds`'s bricks, +∞
+/// outside the core. The ends are the first and the last of
 /// `path_mm` (volume-local mm, source first) that lie in the core. None when no path point
 /// lies in the core or the ends are not joined in it. The searches work in `memory`, one
 /// after the other.
 pub fn core_distances(
     mask: &Volume<u8>,
     ds: &Bricked<f32>,
-    min_ds_mm: f64,
+    spec: &CoreSpec,
     path_mm: &[[f64; 3]],
     memory: &mut SearchMemory,
 ) -> Option<[Bricked<f32>; 2]> {
     let shape = Padded::shape(&ds.grid);
-    let outside_core = |d: f32| (d as f64) < min_ds_mm;
+    let outside_core = |d: f32| (d as f64) < spec.min_ds_mm;
     let sp = mask.spacing();
+    let open = opened_near(mask, &ds.grid, spec.narrows_mm, spec.open_mm);
     let in_core = |p: &[f64; 3]| {
         let v = [0, 1, 2].map(|a| (p[a] / sp[a]).round().max(0.0) as usize);
         let i = shape.index_of_global(v)?;
-        (mask.get(v[0], v[1], v[2]) != 0 && !outside_core(ds.get(v))).then_some(i)
+        (mask.get(v[0], v[1], v[2]) != 0 && (!outside_core(ds.get(v)) || open.contains(&v)))
+            .then_some(i)
     };
     let s = path_mm.iter().find_map(in_core)?;
     let t = path_mm.iter().rev().find_map(in_core)?;
+    let padded = |l: [usize; 3]| shape.row_start(l[1], l[2]) + l[0];
+    let local = |v: &[usize; 3]| [0, 1, 2].map(|a| v[a] - ds.grid.lo[a]);
+    let mut weight = vec![1.0f32; shape.search_len()];
+    for (at, &d) in ds.values().iter().enumerate() {
+        let l = ds.box_voxel(BrickIndex(at));
+        if (d as f64) < spec.ramp_mm && (0..3).all(|a| l[a] < ds.grid.dims[a]) {
+            let t = (1.0 - d as f64 / spec.ramp_mm) as f32;
+            weight[padded(l)] = 1.0 + (spec.wall_weight - 1.0) * t;
+        }
+    }
+    let range = (1.0, spec.wall_weight.max(1.0));
     // The start from the mask with the lumen outside the core made wall (every lumen voxel
     // lies in Ds's bricks).
     let search = |from: PadIndex, memory: &mut SearchMemory| {
@@ -135,11 +165,22 @@ pub fn core_distances(
             if outside_core(d) {
                 let l = ds.box_voxel(BrickIndex(at));
                 if (0..3).all(|a| l[a] < ds.grid.dims[a]) {
-                    start[shape.row_start(l[1], l[2]) + l[0]] = 0.0;
+                    start[padded(l)] = 0.0;
                 }
             }
         }
-        shape.search(sp).start(start).unfinished().from(&[from])
+        for v in &open {
+            start[padded(local(v))] = f32::INFINITY;
+        }
+        let mut r = shape
+            .search(sp)
+            .start(start)
+            .weighted_in(&weight, range)
+            .tree_in(vec![NO_PARENT; shape.search_len()])
+            .unfinished()
+            .from(&[from]);
+        lengths_along_tree(&mut r);
+        r
     };
     let bricked = |r: Search, memory: &mut SearchMemory| {
         let dist =
@@ -155,6 +196,57 @@ pub fn core_distances(
     let to_target = bricked(to_t, memory);
     let to_s = search(s, memory);
     Some([to_target, bricked(to_s, memory)])
+}
+
+/// Replaces a weighted tree search's costs by the lengths (mm) of its ways: each voxel's
+/// way is its parent's and one step, in settling order (parents first), stored settled
+/// (negated) as the search leaves its distances.
+fn lengths_along_tree(r: &mut Search) {
+    for i in 0..r.order.len() {
+        let v = r.order[i] as usize;
+        r.dist[v] = match r.parent[v] {
+            NO_PARENT => -0.0,
+            p => {
+                let (off, len) = r.nbrs[p as usize];
+                r.dist[(v as isize + off) as usize] - len
+            }
+        };
+    }
+}
+
+/// The lumen voxels (global) of `mask` in `grid`'s box within `reach_mm` of each point
+/// (volume-local mm), sorted.
+fn opened_near(
+    mask: &Volume<u8>,
+    grid: &BoxGrid,
+    points_mm: &[[f64; 3]],
+    reach_mm: f64,
+) -> std::collections::BTreeSet<[usize; 3]> {
+    let sp = mask.spacing();
+    let r = reach_mm;
+    let mut open = std::collections::BTreeSet::new();
+    for p in points_mm {
+        let lo =
+            [0, 1, 2].map(|a| (((p[a] - r) / sp[a]).floor().max(0.0) as usize).max(grid.lo[a]));
+        let hi = [0, 1, 2].map(|a| {
+            (((p[a] + r) / sp[a]).ceil().max(0.0) as usize).min(grid.lo[a] + grid.dims[a] - 1)
+        });
+        for k in lo[2]..=hi[2] {
+            for j in lo[1]..=hi[1] {
+                for i in lo[0]..=hi[0] {
+                    let d2: f64 = [i, j, k]
+                        .iter()
+                        .enumerate()
+                        .map(|(a, &x)| (x as f64 * sp[a] - p[a]).powi(2))
+                        .sum();
+                    if d2 <= r * r && mask.get(i, j, k) != 0 {
+                        open.insert([i, j, k]);
+                    }
+                }
+            }
+        }
+    }
+    open
 }
 
 /// The plain search from `source` over `grid`, its distances left unfinished ([`finish`]);

@@ -60,6 +60,10 @@ pub struct PhantomArgs {
     /// but lumen). Repeatable.
     #[arg(long, value_name = "SEGMENT", value_parser = ["rectum", "sigmoid", "descending", "transverse", "ascending", "cecum"])]
     pub fluid_filled: Vec<String>,
+    /// Colon only: a neck in SEGMENT (sigmoid, descending or transverse), 30 % along: the gas
+    /// narrows to a thread 0.9 mm in radius over 10 mm. Repeatable.
+    #[arg(long, value_name = "SEGMENT", value_parser = ["sigmoid", "descending", "transverse"])]
+    pub narrowed: Vec<String>,
     /// Colon only: small-bowel loops full of oral contrast (no gas), the terminal ileum opening
     /// into a caecal pool of tagged fluid: one bright region with it.
     #[arg(long)]
@@ -111,6 +115,7 @@ fn make(a: &PhantomArgs) -> Result<Phantom> {
             prone: a.prone,
             collapsed: a.collapsed.clone(),
             fluid_filled: a.fluid_filled.clone(),
+            narrowed: a.narrowed.clone(),
             opacified_small_bowel: a.opacified_small_bowel,
             rectal_tube: a.rectal_tube,
             tagged_stool: a.tagged_stool,

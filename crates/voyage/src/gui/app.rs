@@ -1113,7 +1113,10 @@ impl App {
         ui.separator();
         ui.add(egui::Slider::new(&mut s.sub.potential.ct, 0.0..=1000.0).text("Ct (pull)"));
         ui.add(egui::Slider::new(&mut s.sub.potential.cs, 0.0..=1000.0).text("Cs (wall)"));
-        ui.add(egui::Slider::new(&mut s.sub.potential.rho, 2.0..=60.0).text("ρ mm"));
+        ui.add(egui::Slider::new(&mut s.sub.potential.rho, 2.0..=60.0).text("ρ mm"))
+            .on_hover_text(
+                "the reach of the wall's push; the flight keeps it within 1.5 lumen radii",
+            );
         ui.add(egui::Slider::new(&mut s.sub.dynamics.user_force, 0.0..=2000.0).text("|F_user|"));
         ui.add(egui::Slider::new(&mut s.fov, 30.0..=Camera::MAX_FOV_DEG).text("FOV °"));
         for (switch, text, hover) in [

@@ -222,9 +222,12 @@ impl Session {
         }
         // Paused, the field is switched off (Ct = Cs = 0): the camera stays where it is
         // unless the user pushes it, and a push glides to rest under friction. The safe set
-        // still keeps it off the wall (Submarine::step clips every sub-step).
+        // still keeps it off the wall (Submarine::step clips every sub-step). Playing, ρ is
+        // held within the lumen's radius (`FlightOptions::rho_per_radius`).
         let field = self.sub.potential;
-        if !self.playing {
+        if self.playing {
+            self.sub.potential.rho = self.pilot.rho(&field);
+        } else {
             self.sub.potential.ct = 0.0;
             self.sub.potential.cs = 0.0;
         }
