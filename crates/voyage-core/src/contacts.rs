@@ -267,6 +267,152 @@ fn neighbour_voxels(u: [usize; 3], dims: [usize; 3]) -> impl Iterator<Item = [us
     })
 }
 
+/// A centerline stretch narrower than this (radius, mm) may be a short cut through a
+/// contact: a hole between touching loops.
+const SHORTCUT_NARROW_MM: f64 = 2.0;
+/// The way round must be this wide (Ds, mm) all along: colon, not a crevice or a bridge's
+/// tube.
+const BYPASS_WIDE_MM: f64 = 4.0;
+/// The ends of the way round are the widest centerline points this far (mm of arc) on
+/// either side of the stretch, at least twice [`BYPASS_WIDE_MM`] in radius.
+const BYPASS_REACH_MM: f64 = 60.0;
+/// Stretches this near (mm of arc) the centerline's ends are its ends narrowing, not holes.
+const ENDS_MM: f64 = 20.0;
+/// The plug that closes a hole: the lumen within this many mm of its narrowest point (at
+/// least twice its radius).
+const PLUG_MM: f64 = 4.0;
+
+/// Holes between touching loops that the centerline went through: where it narrows under
+/// [`SHORTCUT_NARROW_MM`] while the lumen on either side is also joined by a way at least
+/// [`BYPASS_WIDE_MM`] wide all along, the narrow stretch is a short cut (the colon is one
+/// tube: it cannot go both ways). Returns the lumen voxels (volume indices) of a plug at each
+/// such hole, for the caller to take out and trace the centerline again. `lumen` is without
+/// contacts cut (a cut across the way round would hide it); Ds over `grid` is computed only
+/// when a stretch needs it. Points, radii and arcs are the centerline's.
+pub fn shortcut_plugs(
+    lumen: &Volume<u8>,
+    grid: &BoxGrid,
+    points_mm: &[[f64; 3]],
+    radius_mm: &[f64],
+    arc_mm: &[f64],
+) -> Vec<usize> {
+    let length = arc_mm.last().copied().unwrap_or(0.0);
+    let mut ds = None;
+    let mut plugs = Vec::new();
+    let mut i = 0;
+    while i < points_mm.len() {
+        if radius_mm[i] >= SHORTCUT_NARROW_MM {
+            i += 1;
+            continue;
+        }
+        let start = i;
+        while i < points_mm.len() && radius_mm[i] < SHORTCUT_NARROW_MM {
+            i += 1;
+        }
+        let (a, b) = (arc_mm[start], arc_mm[i - 1]);
+        if a < ENDS_MM || b > length - ENDS_MM {
+            continue;
+        }
+        // The widest places on either side within reach: well inside the lumen.
+        let widest = |js: &mut dyn Iterator<Item = usize>| {
+            js.max_by(|&x, &y| radius_mm[x].total_cmp(&radius_mm[y]))
+                .filter(|&j| radius_mm[j] >= 2.0 * BYPASS_WIDE_MM)
+        };
+        let before = widest(&mut (0..start).filter(|&j| arc_mm[j] >= a - BYPASS_REACH_MM));
+        let after = widest(&mut (i..points_mm.len()).filter(|&j| arc_mm[j] <= b + BYPASS_REACH_MM));
+        let (Some(p), Some(q)) = (before, after) else {
+            continue;
+        };
+        let ds =
+            ds.get_or_insert_with(|| crate::distance::distance_to_wall_in(lumen, grid.clone()));
+        if wide_way(lumen, ds, points_mm[p], points_mm[q]) {
+            let n = (start..i)
+                .min_by(|&x, &y| radius_mm[x].total_cmp(&radius_mm[y]))
+                .unwrap_or(start);
+            let r = PLUG_MM.max(2.0 * radius_mm[n]);
+            plugs.extend(lumen_within(lumen, points_mm[n], r));
+        }
+    }
+    plugs.sort_unstable();
+    plugs.dedup();
+    plugs
+}
+
+/// Whether `from` and `to` (volume-local mm) are joined through lumen voxels with Ds at least
+/// [`BYPASS_WIDE_MM`] (6-connected, within Ds's box).
+fn wide_way(
+    lumen: &Volume<u8>,
+    ds: &crate::grid::Field<f32>,
+    from: [f64; 3],
+    to: [f64; 3],
+) -> bool {
+    let grid = &ds.grid;
+    let sp = lumen.spacing();
+    let local = |p: [f64; 3]| -> Option<[usize; 3]> {
+        let g = [0, 1, 2].map(|a| (p[a] / sp[a]).round().max(0.0) as usize);
+        grid.index_of_global(g)
+            .map(|_| [0, 1, 2].map(|a| g[a] - grid.lo[a]))
+    };
+    let (Some(s), Some(t)) = (local(from), local(to)) else {
+        return false;
+    };
+    let d = grid.dims;
+    let at = |l: [usize; 3]| grid.index(l[0], l[1], l[2]).0;
+    let open = |l: [usize; 3]| {
+        let g = [0, 1, 2].map(|a| l[a] + grid.lo[a]);
+        lumen.get(g[0], g[1], g[2]) != 0 && ds.data[at(l)] as f64 >= BYPASS_WIDE_MM
+    };
+    if !open(s) || !open(t) {
+        return false;
+    }
+    let mut seen = vec![false; d[0] * d[1] * d[2]];
+    let mut queue = std::collections::VecDeque::from([s]);
+    seen[at(s)] = true;
+    while let Some(l) = queue.pop_front() {
+        if l == t {
+            return true;
+        }
+        for a in 0..3 {
+            for up in [false, true] {
+                if (!up && l[a] == 0) || (up && l[a] + 1 >= d[a]) {
+                    continue;
+                }
+                let mut n = l;
+                n[a] = if up { l[a] + 1 } else { l[a] - 1 };
+                if !seen[at(n)] && open(n) {
+                    seen[at(n)] = true;
+                    queue.push_back(n);
+                }
+            }
+        }
+    }
+    false
+}
+
+/// Lumen voxels (volume indices) within `r` mm of `p` (volume-local mm).
+fn lumen_within(lumen: &Volume<u8>, p: [f64; 3], r: f64) -> Vec<usize> {
+    let sp = lumen.spacing();
+    let dims = lumen.dims();
+    let lo = [0, 1, 2].map(|a| ((p[a] - r) / sp[a]).floor().max(0.0) as usize);
+    let hi = [0, 1, 2].map(|a| (((p[a] + r) / sp[a]).ceil() as usize).min(dims[a] - 1));
+    let mut out = Vec::new();
+    for k in lo[2]..=hi[2] {
+        for j in lo[1]..=hi[1] {
+            for i in lo[0]..=hi[0] {
+                let d2: f64 = [i, j, k]
+                    .iter()
+                    .enumerate()
+                    .map(|(a, &x)| (x as f64 * sp[a] - p[a]).powi(2))
+                    .sum();
+                if d2 <= r * r && lumen.get(i, j, k) != 0 {
+                    out.push(lumen.geometry().index(i, j, k));
+                }
+            }
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -299,6 +445,83 @@ mod tests {
                     assert_eq!(partial_around(&partial, u, &rows), want, "block {u}");
                 }
             }
+        }
+    }
+
+    /// Two tubes 10 mm in radius side by side (along x at y = 15 and y = 50 mm), a hole 1.5 mm
+    /// in radius between them at x = 30 mm, and, with `joined`, a bend joining them at
+    /// x = 100 mm: the colon's way round.
+    fn loops(joined: bool) -> Volume<u8> {
+        let g = crate::Geometry::new([120, 70, 30], [1.0; 3], [0.0; 3]).unwrap();
+        let mut m = Volume::filled(g, 0u8).unwrap();
+        for k in 0..30 {
+            for j in 0..70 {
+                for i in 0..120 {
+                    let (x, y, z) = (i as f64, j as f64, k as f64);
+                    let tube = |yc: f64| (y - yc).hypot(z - 15.0) <= 10.0 && x <= 100.0;
+                    let bend =
+                        joined && (x - 100.0).hypot(z - 15.0) <= 10.0 && (15.0..=50.0).contains(&y);
+                    let hole = (x - 30.0).hypot(z - 15.0) <= 1.5 && (15.0..=50.0).contains(&y);
+                    if tube(15.0) || tube(50.0) || bend || hole {
+                        m.data_mut()[i + 120 * (j + 70 * k)] = 1;
+                    }
+                }
+            }
+        }
+        m
+    }
+
+    /// A path along the first tube, through the hole and back along the second.
+    fn through_the_hole() -> (Vec<[f64; 3]>, Vec<f64>, Vec<f64>) {
+        let mut points = Vec::new();
+        points.extend((12..=30).map(|x| [x as f64, 15.0, 15.0]));
+        points.extend((16..50).map(|y| [30.0, y as f64, 15.0]));
+        points.extend((12..=30).rev().map(|x| [x as f64, 50.0, 15.0]));
+        // Ds: in a tube, its radius less the distance from its axis; in the hole, 1.5 mm.
+        let radius: Vec<f64> = points
+            .iter()
+            .map(|p| {
+                (10.0 - (p[1] - 15.0).abs())
+                    .max(10.0 - (p[1] - 50.0).abs())
+                    .max(1.5)
+            })
+            .collect();
+        let mut arc = vec![0.0];
+        for w in points.windows(2) {
+            let d: f64 = (0..3)
+                .map(|a| (w[1][a] - w[0][a]).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            arc.push(arc.last().unwrap() + d);
+        }
+        (points, radius, arc)
+    }
+
+    #[test]
+    fn a_hole_between_loops_is_plugged_and_a_neck_is_not() {
+        let (points, radius, arc) = through_the_hole();
+        for joined in [true, false] {
+            let m = loops(joined);
+            let grid = BoxGrid::around([[0; 3], [119, 69, 29]], 0, m.dims());
+            let plugs = shortcut_plugs(&m, &grid, &points, &radius, &arc);
+            if !joined {
+                assert!(plugs.is_empty(), "the only way was plugged");
+                continue;
+            }
+            assert!(!plugs.is_empty(), "the hole was not plugged");
+            // The plug lies within PLUG_MM of the hole's narrow part (y 24..41 on its axis).
+            let g = m.geometry();
+            for &v in &plugs {
+                let p = g.index_to_local(glam::DVec3::from_array(
+                    crate::volume::grid_ijk(m.dims(), v).map(|x| x as f64),
+                ));
+                let on_axis = glam::DVec3::new(30.0, p.y.clamp(24.0, 41.0), 15.0);
+                assert!((p - on_axis).length() <= PLUG_MM + 1e-9, "plugged at {p:?}");
+            }
+            let mut plugged = m.clone();
+            plugs.iter().for_each(|&v| plugged.data_mut()[v] = 0);
+            let crossing = (15..=50).all(|j| plugged.get(30, j, 15) != 0);
+            assert!(!crossing, "the hole is still open");
         }
     }
 }

@@ -14,12 +14,12 @@ use crate::{
         self, Centerline, CenterlineOptions, centre_skeleton, trace_skeleton, uses_blocks,
     },
     cleanse::{CleanseOptions, Cleansing, Scene, cleanse},
-    contacts::{ContactOptions, cut_contacts},
+    contacts::{ContactOptions, cut_contacts, shortcut_plugs},
     distance::{
         distance_to_wall_in,
         geodesic::{SearchMemory, geodesic_distance_like},
     },
-    grid::{BoxGrid, Bricked},
+    grid::{BoxGrid, Bricked, Field},
     navigable::{DEFAULT_MIN_WALL_MM, Navigable},
     segment::{SegmentOptions, Segmentation, segment},
     surface::{Surface, extract_surface},
@@ -403,60 +403,48 @@ pub fn prepare(
     };
     seg.lumen_voxels = seg.lumen_voxels + cleansing.joined_lumen - cleansing.left_lumen;
 
-    // The skeleton search runs on blocks with their own Ds when the lumen is large, so the
-    // voxels' Ds waits until the contacts are cut; on a small lumen it needs Ds first.
-    laps.start(Stage::Skeleton);
     // Every Ds below is over this box: cutting contacts only takes lumen away, and a box
     // larger than the lumen's own changes no distance.
     let grid = BoxGrid::around(seg.extent, 1, seg.lumen.dims());
-    let early_ds = if uses_blocks(&seg.lumen, seg.lumen_voxels, &opts.centerline) {
-        None
-    } else {
-        Some(distance_to_wall_in(&seg.lumen, grid.clone()))
-    };
     // Where the segmentation placed the cecum by anatomy, the centerline ends there unless
     // the user gave the end.
     let mut cl_opts = opts.centerline.clone();
     if cl_opts.target_mm.is_none() {
         cl_opts.target_mm = seg.cecum_voxel.map(|v| centerline::mm_of(&seg.lumen, v));
     }
-    let sk = trace_skeleton(
-        &seg.lumen,
-        &grid,
-        seg.lumen_voxels,
-        seg.seed_voxel,
-        early_ds.as_ref(),
-        &cl_opts,
-    )?;
-    laps.start(Stage::Contacts);
-
-    // No wall at the ends: source and target stay lumen.
-    let keep = [
-        sk.given_source
-            .map(|v| centerline::mm_of(&seg.lumen, v))
-            .unwrap_or(sk.path_mm[0]),
-        sk.given_target
-            .map(|v| centerline::mm_of(&seg.lumen, v))
-            .unwrap_or(sk.path_mm[sk.path_mm.len() - 1]),
-    ];
-    let keep_mm = 2.0 * seg.lumen.spacing().iter().cloned().fold(0.0, f64::max);
-    let taken = cut_contacts(
-        &mut seg.lumen,
-        &grid,
-        &sk.path_mm,
-        sk.blocks.as_ref(),
-        &keep,
-        keep_mm,
-        &opts.contacts,
-    )?;
-
-    laps.start(Stage::Ds);
-    let ds_box = match early_ds {
-        Some(d) if taken.is_empty() => d,
-        _ => distance_to_wall_in(&seg.lumen, grid.clone()),
-    };
-    laps.start(Stage::Centerline);
-    let mut ends = centre_skeleton(&seg.lumen, &ds_box, &sk, &cl_opts)?;
+    let mut traced = trace(&mut seg, &grid, &cl_opts, opts, &mut laps)?;
+    // Holes between touching loops that the centerline went through: plugged, traced again
+    // (a hole plugged can show the next).
+    let mut plugged = 0;
+    for _ in 0..MAX_PLUG_ROUNDS {
+        set_voxels(&mut seg.lumen, &traced.taken, 1);
+        let c = &traced.ends.centerline;
+        let plugs = shortcut_plugs(&seg.lumen, &grid, &c.points_mm, &c.radius_mm, &c.arc_mm);
+        match (!plugs.is_empty())
+            .then(|| retrace_plugged(&mut seg, &grid, &cl_opts, opts, &mut laps, &plugs))
+            .flatten()
+        {
+            Some(t) => {
+                plugged += plugs.len();
+                traced = t;
+            }
+            None => {
+                set_voxels(&mut seg.lumen, &traced.taken, 0);
+                break;
+            }
+        }
+    }
+    if plugged > 0 {
+        seg.warnings.push(format!(
+            "the centerline went through holes between touching loops of the colon ({plugged} voxels plugged): it now goes round"
+        ));
+    }
+    let Traced {
+        sk,
+        mut ends,
+        taken,
+        ds_box,
+    } = traced;
     // Ds moves into bricks, and the Dt searches work in its box array.
     let mut ds = Bricked::from_field(&ds_box, 0.0);
     let mut memory = SearchMemory::from(ds_box.data);
@@ -538,6 +526,104 @@ pub fn prepare(
         surface,
         cells,
         timings,
+    })
+}
+
+/// The centerline traced through the lumen: its ends and centred path, the contact voxels
+/// cut from the lumen (sorted), and Ds over the lumen's box.
+struct Traced {
+    sk: centerline::Skeleton,
+    ends: centerline::Endpoints,
+    taken: Vec<usize>,
+    ds_box: Field<f32>,
+}
+
+/// Rounds of plugging holes between loops (each traces the centerline again).
+const MAX_PLUG_ROUNDS: usize = 3;
+
+/// The centerline traced again with `plugs` taken out of the lumen (which holds no contacts
+/// cut: they are cut along the new path); None, and the lumen as it was, when the plugs cut
+/// the colon itself.
+fn retrace_plugged(
+    seg: &mut Segmentation,
+    grid: &BoxGrid,
+    cl_opts: &CenterlineOptions,
+    opts: &PrepOptions,
+    laps: &mut Laps<impl FnMut(Stage)>,
+    plugs: &[usize],
+) -> Option<Traced> {
+    set_voxels(&mut seg.lumen, plugs, 0);
+    seg.lumen_voxels -= plugs.len();
+    let traced = trace(seg, grid, cl_opts, opts, laps).ok();
+    if traced.is_none() {
+        set_voxels(&mut seg.lumen, plugs, 1);
+        seg.lumen_voxels += plugs.len();
+    }
+    traced
+}
+
+fn set_voxels(mask: &mut Volume<u8>, voxels: &[usize], v: u8) {
+    voxels.iter().for_each(|&i| mask.data_mut()[i] = v);
+}
+
+/// Stages skeleton, contacts, Ds and centerline: the skeleton's path, the contacts it shows
+/// cut from `seg`'s lumen, Ds, and the path centred. The skeleton search runs on blocks with
+/// their own Ds when the lumen is large, so the voxels' Ds waits until the contacts are cut;
+/// on a small lumen it needs Ds first.
+fn trace(
+    seg: &mut Segmentation,
+    grid: &BoxGrid,
+    cl_opts: &CenterlineOptions,
+    opts: &PrepOptions,
+    laps: &mut Laps<impl FnMut(Stage)>,
+) -> Result<Traced> {
+    laps.start(Stage::Skeleton);
+    let early_ds = if uses_blocks(&seg.lumen, seg.lumen_voxels, cl_opts) {
+        None
+    } else {
+        Some(distance_to_wall_in(&seg.lumen, grid.clone()))
+    };
+    let sk = trace_skeleton(
+        &seg.lumen,
+        grid,
+        seg.lumen_voxels,
+        seg.seed_voxel,
+        early_ds.as_ref(),
+        cl_opts,
+    )?;
+    laps.start(Stage::Contacts);
+    // No wall at the ends: source and target stay lumen.
+    let keep = [
+        sk.given_source
+            .map(|v| centerline::mm_of(&seg.lumen, v))
+            .unwrap_or(sk.path_mm[0]),
+        sk.given_target
+            .map(|v| centerline::mm_of(&seg.lumen, v))
+            .unwrap_or(sk.path_mm[sk.path_mm.len() - 1]),
+    ];
+    let keep_mm = 2.0 * seg.lumen.spacing().iter().cloned().fold(0.0, f64::max);
+    let mut taken = cut_contacts(
+        &mut seg.lumen,
+        grid,
+        &sk.path_mm,
+        sk.blocks.as_ref(),
+        &keep,
+        keep_mm,
+        &opts.contacts,
+    )?;
+    taken.sort_unstable();
+    laps.start(Stage::Ds);
+    let ds_box = match early_ds {
+        Some(d) if taken.is_empty() => d,
+        _ => distance_to_wall_in(&seg.lumen, grid.clone()),
+    };
+    laps.start(Stage::Centerline);
+    let ends = centre_skeleton(&seg.lumen, &ds_box, &sk, cl_opts)?;
+    Ok(Traced {
+        sk,
+        ends,
+        taken,
+        ds_box,
     })
 }
 

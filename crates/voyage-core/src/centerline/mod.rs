@@ -18,7 +18,7 @@ use glam::DVec3;
 
 #[cfg(test)]
 pub(crate) use ends::find_endpoints;
-pub use ends::{centre_skeleton, mm_of, trace_skeleton, uses_blocks};
+pub use ends::{Endpoints, Skeleton, centre_skeleton, mm_of, trace_skeleton, uses_blocks};
 pub use graph::SkeletonOptions;
 pub use refine::Centerline;
 pub(crate) use refine::arc_lengths;

@@ -279,21 +279,111 @@ pub fn segment(vol: &Volume<i16>, opts: &SegmentOptions) -> Result<Segmentation>
             join(&l)
         )));
     }
-    let (axial, _) = PatientFrame::of(vol.geometry()).nearest_axis(DVec3::Z);
-    if axial == 2 {
+    let (perm, flip) = canonical_storage(vol.geometry());
+    if perm == [0, 1, 2] && flip == [false; 3] {
         return segment_axial(vol, opts, false);
     }
-    let mut perm = [0, 1, 2];
-    perm.swap(axial, 2);
-    let stored = vol.reoriented(perm, [false; 3])?;
-    let swap = |p: DVec3| DVec3::new(p[perm[0]], p[perm[1]], p[perm[2]]);
+    let stored = vol.reoriented(perm, flip)?;
+    let canon = Canonical {
+        perm,
+        flip,
+        dims: stored.dims(),
+        spacing: stored.spacing(),
+    };
     let o = SegmentOptions {
-        seeds_mm: opts.seeds_mm.iter().map(|&p| swap(p)).collect(),
-        exclude_mm: opts.exclude_mm.iter().map(|&p| swap(p)).collect(),
+        seeds_mm: opts.seeds_mm.iter().map(|&p| canon.mm_in(p)).collect(),
+        exclude_mm: opts.exclude_mm.iter().map(|&p| canon.mm_in(p)).collect(),
         ..opts.clone()
     };
     let s = segment_axial(&stored, &o, false)?;
-    s.stored_back(perm, vol.geometry())
+    s.stored_back(&canon, vol.geometry())
+}
+
+/// The storage every scan is segmented in: its axes permuted and flipped to run along the
+/// patient's x (left), y (posterior) and z (superior), so that no result depends on how the
+/// scan was stored (coarse blocks, ties between equal distances). Where the axes do not
+/// match the patient's one to one (very oblique), only the axial axis is put last.
+fn canonical_storage(g: &crate::Geometry) -> ([usize; 3], [bool; 3]) {
+    let frame = PatientFrame::of(g);
+    let mut perm = [0; 3];
+    let mut flip = [false; 3];
+    for (b, dir) in [DVec3::X, DVec3::Y, DVec3::Z].into_iter().enumerate() {
+        let (a, sign) = frame.nearest_axis(dir);
+        perm[b] = a;
+        flip[b] = sign < 0;
+    }
+    let mut sorted = perm;
+    sorted.sort_unstable();
+    if sorted == [0, 1, 2] {
+        return (perm, flip);
+    }
+    let (axial, _) = frame.nearest_axis(DVec3::Z);
+    let mut perm = [0, 1, 2];
+    perm.swap(axial, 2);
+    (perm, [false; 3])
+}
+
+/// A scan's canonical storage ([`canonical_storage`]): `reoriented(perm, flip)` of the
+/// original, of `dims` and `spacing`.
+struct Canonical {
+    perm: [usize; 3],
+    flip: [bool; 3],
+    dims: [usize; 3],
+    spacing: [f64; 3],
+}
+
+impl Canonical {
+    /// Original volume-local mm to canonical.
+    fn mm_in(&self, p: DVec3) -> DVec3 {
+        DVec3::from_array([0, 1, 2].map(|a| {
+            let x = p[self.perm[a]];
+            if self.flip[a] {
+                (self.dims[a] - 1) as f64 * self.spacing[a] - x
+            } else {
+                x
+            }
+        }))
+    }
+    /// Canonical volume-local mm to original.
+    fn mm_back(&self, p: [f64; 3]) -> [f64; 3] {
+        let mut o = [0.0; 3];
+        for a in 0..3 {
+            o[self.perm[a]] = if self.flip[a] {
+                (self.dims[a] - 1) as f64 * self.spacing[a] - p[a]
+            } else {
+                p[a]
+            };
+        }
+        o
+    }
+    /// Canonical voxel to original.
+    fn voxel_back(&self, v: [usize; 3]) -> [usize; 3] {
+        let mut o = [0; 3];
+        for a in 0..3 {
+            o[self.perm[a]] = if self.flip[a] {
+                self.dims[a] - 1 - v[a]
+            } else {
+                v[a]
+            };
+        }
+        o
+    }
+    /// A canonical box (both corners inside) in the original storage.
+    fn box_back(&self, lo: [usize; 3], hi: [usize; 3]) -> ([usize; 3], [usize; 3]) {
+        let (a, b) = (self.voxel_back(lo), self.voxel_back(hi));
+        (
+            [0, 1, 2].map(|i| a[i].min(b[i])),
+            [0, 1, 2].map(|i| a[i].max(b[i])),
+        )
+    }
+    /// The (perm, flip) of `reoriented` that undoes this one.
+    fn inverse(&self) -> ([usize; 3], [bool; 3]) {
+        let mut inv = [0; 3];
+        for a in 0..3 {
+            inv[self.perm[a]] = a;
+        }
+        (inv, [0, 1, 2].map(|b| self.flip[inv[b]]))
+    }
 }
 
 impl Segmentation {
@@ -306,32 +396,28 @@ impl Segmentation {
             .max_by(|a, b| a.gas_ml.total_cmp(&b.gas_ml))
     }
 
-    /// The segmentation of a scan stored with axes `perm` (a swap), in the original storage.
-    fn stored_back(mut self, perm: [usize; 3], geom: &crate::Geometry) -> Result<Segmentation> {
-        let p = |v: [usize; 3]| [v[perm[0]], v[perm[1]], v[perm[2]]];
-        let mut lumen = self.lumen.reoriented(perm, [false; 3])?;
+    /// The segmentation of a scan in its canonical storage `canon`, in the original storage
+    /// (of geometry `geom`).
+    fn stored_back(mut self, canon: &Canonical, geom: &crate::Geometry) -> Result<Segmentation> {
+        let (inv, iflip) = canon.inverse();
+        let mut lumen = self.lumen.reoriented(inv, iflip)?;
         *lumen.geometry_mut() = geom.clone();
         self.lumen = lumen;
-        self.seed_voxel = p(self.seed_voxel);
-        self.cecum_voxel = self.cecum_voxel.map(p);
-        self.extent = [p(self.extent[0]), p(self.extent[1])];
+        self.seed_voxel = canon.voxel_back(self.seed_voxel);
+        self.cecum_voxel = self.cecum_voxel.map(|v| canon.voxel_back(v));
+        let (lo, hi) = canon.box_back(self.extent[0], self.extent[1]);
+        self.extent = [lo, hi];
         for c in &mut self.components {
-            c.centroid_mm = [
-                c.centroid_mm[perm[0]],
-                c.centroid_mm[perm[1]],
-                c.centroid_mm[perm[2]],
-            ];
-            (c.bbox_lo, c.bbox_hi) = (p(c.bbox_lo), p(c.bbox_hi));
+            c.centroid_mm = canon.mm_back(c.centroid_mm);
+            (c.bbox_lo, c.bbox_hi) = canon.box_back(c.bbox_lo, c.bbox_hi);
         }
         for g in &mut self.gaps {
-            // Indices of the stored volume (dims permuted) into this one's.
-            let sd = [0, 1, 2].map(|a| geom.dims[perm[a]]);
             g.voxels = g
                 .voxels
                 .iter()
                 .map(|&i| {
-                    let v = crate::volume::grid_ijk(sd, i);
-                    geom.index(v[perm[0]], v[perm[1]], v[perm[2]])
+                    let v = canon.voxel_back(crate::volume::grid_ijk(canon.dims, i));
+                    geom.index(v[0], v[1], v[2])
                 })
                 .collect();
             g.voxels.sort_unstable();
@@ -364,14 +450,24 @@ fn segment_axial(
     let tubes = if from_mask {
         Vec::new()
     } else {
-        tube::find(
+        let voxel_ml = vol.spacing().iter().product::<f64>() / 1000.0;
+        let mut tubes = tube::find(
             &runs,
             &inside,
             &run_comp,
             |c| c != u32::MAX && comps[c as usize].kind != ComponentKind::Lung,
             vol.dims(),
             vol.spacing(),
-        )
+            inferior_slice(vol),
+        );
+        // A tube opens into the rectum: a colon segment's gas beyond its tip.
+        tubes.retain(|t| {
+            let beyond = comps[t.comp as usize]
+                .voxels
+                .saturating_sub(run_voxels(&runs, &t.runs));
+            beyond as f64 * voxel_ml >= opts.chain.min_segment_ml
+        });
+        tubes
     };
     for t in &tubes {
         // Its air is the outside's, carried in.
@@ -1825,6 +1921,27 @@ fn segment_report(
     }
 }
 
+/// The scan's inferior axial slice (k is axial): 0 or the last, whichever lies lower in the
+/// patient; None when the slices do not run along the body.
+fn inferior_slice(vol: &Volume<i16>) -> Option<usize> {
+    let g = vol.geometry();
+    let nz = vol.dims()[2];
+    let first = g.index_to_patient(DVec3::ZERO);
+    let last = g.index_to_patient(DVec3::new(0.0, 0.0, nz.saturating_sub(1) as f64));
+    let along = last - first;
+    if along.length() < 1e-9 || along.z.abs() < 0.7 * along.length() {
+        return None;
+    }
+    Some(if along.z < 0.0 { nz - 1 } else { 0 })
+}
+
+/// Voxels in some runs.
+fn run_voxels(runs: &Runs, rs: &[usize]) -> usize {
+    rs.iter()
+        .map(|&r| (runs.runs[r].x1 - runs.runs[r].x0) as usize)
+        .sum()
+}
+
 /// A rectal tube as a gas region left out of the colon.
 fn tube_report(
     t: &tube::Tube,
@@ -1833,11 +1950,10 @@ fn tube_report(
     voxel_ml: f64,
 ) -> SegmentReport {
     let mut bbox: Option<Bbox> = None;
-    let mut voxels = 0usize;
+    let voxels = run_voxels(runs, &t.runs);
     for &r in &t.runs {
         let (j, k) = row_of(runs, r);
         let run = runs.runs[r];
-        voxels += (run.x1 - run.x0) as usize;
         let b = Bbox {
             lo: [run.x0 as usize, j, k],
             hi: [run.x1 as usize - 1, j, k],
@@ -1857,8 +1973,16 @@ fn tube_report(
         anchor_lps_mm: lps(t.entry),
         kept: false,
         reason: Some(format!(
-            "a rectal tube, {:.0} mm from the skin to its tip at LPS ({:.0}, {:.0}, {:.0}): its air is not colon; the rectum starts at its tip",
-            t.length_mm, tip[0], tip[1], tip[2]
+            "a rectal tube, {:.0} mm from {} to its tip at LPS ({:.0}, {:.0}, {:.0}): its air is not colon; the rectum starts at its tip",
+            t.length_mm,
+            if t.from_edge {
+                "the scan's edge"
+            } else {
+                "the skin"
+            },
+            tip[0],
+            tip[1],
+            tip[2]
         )),
     }
 }

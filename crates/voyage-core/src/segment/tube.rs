@@ -4,10 +4,16 @@
 //! the tube's outer end the colon's lowest point, so the flight would start in the tube.
 //!
 //! A gas component touches outside air in 3D only there: one of its runs overlaps an
-//! outside run in the next axial slice. From that slice, going away from the outside air,
-//! the tube's cross-section (its gas joined within the slice) is followed while it stays as
-//! narrow as a tube; where it widens is the tube's tip, in the rectum. The tube's air is
-//! then outside air, and the rectum begins at the tip.
+//! outside run in the next axial slice. A scan that ends at the perineum cuts the tube
+//! instead: its air reaches the scan's inferior slice. From that slice, going away from the
+//! outside air or the scan's edge, the tube's cross-section (its gas joined within the
+//! slice) is followed while it stays as narrow as a tube; where it widens is the tube's tip,
+//! in the rectum. The tube's air is then outside air, and the rectum begins at the tip.
+//!
+//! A narrow stretch of gas that just ends is no tube: a skin fold, or the air between a
+//! prone patient and the table, pinched off in one slice from the outside air of the next.
+//! A tube opens into the rectum, and the gas beyond its tip is a colon segment's at least
+//! (checked by the caller).
 
 use super::{Runs, row_of};
 
@@ -24,15 +30,19 @@ pub struct Tube {
     pub comp: u32,
     /// Its runs (now outside air).
     pub runs: Vec<usize>,
-    /// Where it enters the body and where it ends, volume indices (slice centroids).
+    /// Where it enters the body (or the scan) and where it ends, volume indices (slice
+    /// centroids).
     pub entry: [f64; 3],
     pub tip: [f64; 3],
     pub length_mm: f64,
+    /// It enters at the scan's inferior edge, not through the skin.
+    pub from_edge: bool,
 }
 
 /// Rectal tubes: for each component `c` (its runs `run_comp[r] == c`; u32::MAX for none)
-/// that touches outside air (`inside[r] == false`) across an axial slice, the narrow
-/// stretch from there on, if it is long enough to be a tube.
+/// that touches outside air (`inside[r] == false`) across an axial slice, or has gas in the
+/// scan's inferior slice (`inferior_slice`, when the axial slices run along the body), the
+/// narrow stretch from there on, if it is long enough to be a tube and opens out.
 pub fn find(
     runs: &Runs,
     inside: &[bool],
@@ -40,17 +50,41 @@ pub fn find(
     is_gas: impl Fn(u32) -> bool,
     dims: [usize; 3],
     spacing: [f64; 3],
+    inferior_slice: Option<usize>,
 ) -> Vec<Tube> {
     let mut tubes: Vec<Tube> = Vec::new();
-    for contact in contacts(runs, inside, run_comp, &is_gas, dims) {
+    let at_skin = contacts(runs, inside, run_comp, &is_gas, dims)
+        .into_iter()
+        .map(|c| (c, false));
+    let at_edge = inferior_slice
+        .into_iter()
+        .flat_map(|k| edge_contacts(runs, run_comp, &is_gas, dims, k))
+        .map(|c| (c, true));
+    for (contact, from_edge) in at_skin.chain(at_edge) {
         if tubes.iter().any(|t| t.comp == run_comp[contact.2]) {
             continue;
         }
-        if let Some(t) = follow(runs, run_comp, contact, dims[2], spacing) {
+        if let Some(t) = follow(runs, run_comp, contact, dims[2], spacing, from_edge) {
             tubes.push(t);
         }
     }
     tubes
+}
+
+/// Internal gas runs in the scan's edge slice `k`: (k, the step into the scan, the run).
+fn edge_contacts(
+    runs: &Runs,
+    run_comp: &[u32],
+    is_gas: &impl Fn(u32) -> bool,
+    dims: [usize; 3],
+    k: usize,
+) -> Vec<(usize, i64, usize)> {
+    let away = if k == 0 { 1 } else { -1 };
+    (0..dims[1])
+        .flat_map(|j| runs.row(j, k))
+        .filter(|&r| is_gas(run_comp[r]))
+        .map(|r| (k, away, r))
+        .collect()
 }
 
 /// Internal gas runs that overlap outside air in the next slice: (their slice, the step in k
@@ -96,11 +130,14 @@ fn follow(
     (k0, away, start): (usize, i64, usize),
     nz: usize,
     spacing: [f64; 3],
+    from_edge: bool,
 ) -> Option<Tube> {
     let c = run_comp[start];
     let max_voxels = (MAX_AREA_MM2 / (spacing[0] * spacing[1])).ceil() as usize;
     let nz = nz as i64;
-    let mut blob = in_slice(runs, run_comp, c, vec![start], max_voxels)?;
+    let Section::Narrow(mut blob) = in_slice(runs, run_comp, c, vec![start], max_voxels) else {
+        return None;
+    };
     let entry = centroid(runs, &blob);
     let mut tip;
     let mut taken = Vec::new();
@@ -126,8 +163,10 @@ fn follow(
             })
             .collect();
         match in_slice(runs, run_comp, c, over, max_voxels) {
-            Some(b) => blob = b,
-            None => break,
+            Section::Narrow(b) => blob = b,
+            Section::Wide => break,
+            // The gas ends: a pocket pinched off the outside air, not a tube.
+            Section::Gone => return None,
         }
     }
     let d = [0, 1, 2].map(|a| (tip[a] - entry[a]) * spacing[a]);
@@ -140,19 +179,30 @@ fn follow(
         entry,
         tip,
         length_mm,
+        from_edge,
     })
 }
 
+/// A component's gas in one slice around some runs.
+enum Section {
+    /// As narrow as a tube: its runs.
+    Narrow(Vec<usize>),
+    /// Wider than a tube.
+    Wide,
+    /// No gas.
+    Gone,
+}
+
 /// The runs of component `c` joined to `seeds` within their slice (rows next to each other,
-/// overlapping); None when there are none or they hold more than `max_voxels` (wider than a
-/// tube: the rectum, or the gas the tube opens into).
+/// overlapping); wide when they hold more than `max_voxels` (the rectum, or the gas the
+/// tube opens into).
 fn in_slice(
     runs: &Runs,
     run_comp: &[u32],
     c: u32,
     mut stack: Vec<usize>,
     max_voxels: usize,
-) -> Option<Vec<usize>> {
+) -> Section {
     stack.sort_unstable();
     stack.dedup();
     let mut seen = stack.clone();
@@ -162,7 +212,7 @@ fn in_slice(
         let run = runs.runs[r];
         voxels += (run.x1 - run.x0) as usize;
         if voxels > max_voxels {
-            return None;
+            return Section::Wide;
         }
         out.push(r);
         let (j, k) = row_of(runs, r);
@@ -182,7 +232,11 @@ fn in_slice(
             }
         }
     }
-    (!out.is_empty()).then_some(out)
+    if out.is_empty() {
+        Section::Gone
+    } else {
+        Section::Narrow(out)
+    }
 }
 
 /// Mean voxel position (volume indices) of some runs.
