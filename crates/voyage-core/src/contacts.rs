@@ -288,13 +288,16 @@ const PLUG_MM: f64 = 4.0;
 /// tube: it cannot go both ways). Returns the lumen voxels (volume indices) of a plug at each
 /// such hole, for the caller to take out and trace the centerline again. `lumen` is without
 /// contacts cut (a cut across the way round would hide it); Ds over `grid` is computed only
-/// when a stretch needs it. Points, radii and arcs are the centerline's.
+/// when a stretch needs it. Points, radii and arcs are the centerline's. `necks` are the
+/// narrowest points of stretches found to be the only way (real necks) in earlier calls:
+/// they are not looked at again, and the new ones are added.
 pub fn shortcut_plugs(
     lumen: &Volume<u8>,
     grid: &BoxGrid,
     points_mm: &[[f64; 3]],
     radius_mm: &[f64],
     arc_mm: &[f64],
+    necks: &mut Vec<[f64; 3]>,
 ) -> Vec<usize> {
     let length = arc_mm.last().copied().unwrap_or(0.0);
     let mut ds = None;
@@ -323,14 +326,23 @@ pub fn shortcut_plugs(
         let (Some(p), Some(q)) = (before, after) else {
             continue;
         };
+        let n = (start..i)
+            .min_by(|&x, &y| radius_mm[x].total_cmp(&radius_mm[y]))
+            .unwrap_or(start);
+        let at = glam::DVec3::from_array(points_mm[n]);
+        if necks
+            .iter()
+            .any(|&k| glam::DVec3::from_array(k).distance(at) <= PLUG_MM)
+        {
+            continue;
+        }
         let ds =
             ds.get_or_insert_with(|| crate::distance::distance_to_wall_in(lumen, grid.clone()));
         if wide_way(lumen, ds, points_mm[p], points_mm[q]) {
-            let n = (start..i)
-                .min_by(|&x, &y| radius_mm[x].total_cmp(&radius_mm[y]))
-                .unwrap_or(start);
             let r = PLUG_MM.max(2.0 * radius_mm[n]);
             plugs.extend(lumen_within(lumen, points_mm[n], r));
+        } else {
+            necks.push(points_mm[n]);
         }
     }
     plugs.sort_unstable();
@@ -503,9 +515,11 @@ mod tests {
         for joined in [true, false] {
             let m = loops(joined);
             let grid = BoxGrid::around([[0; 3], [119, 69, 29]], 0, m.dims());
-            let plugs = shortcut_plugs(&m, &grid, &points, &radius, &arc);
+            let mut necks = Vec::new();
+            let plugs = shortcut_plugs(&m, &grid, &points, &radius, &arc, &mut necks);
             if !joined {
                 assert!(plugs.is_empty(), "the only way was plugged");
+                assert_eq!(necks.len(), 1, "the neck is remembered");
                 continue;
             }
             assert!(!plugs.is_empty(), "the hole was not plugged");

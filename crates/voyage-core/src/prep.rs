@@ -416,10 +416,18 @@ pub fn prepare(
     // Holes between touching loops that the centerline went through: plugged, traced again
     // (a hole plugged can show the next).
     let mut plugged = 0;
+    let mut necks = Vec::new();
     for _ in 0..MAX_PLUG_ROUNDS {
         set_voxels(&mut seg.lumen, &traced.taken, 1);
         let c = &traced.ends.centerline;
-        let plugs = shortcut_plugs(&seg.lumen, &grid, &c.points_mm, &c.radius_mm, &c.arc_mm);
+        let plugs = shortcut_plugs(
+            &seg.lumen,
+            &grid,
+            &c.points_mm,
+            &c.radius_mm,
+            &c.arc_mm,
+            &mut necks,
+        );
         match (!plugs.is_empty())
             .then(|| retrace_plugged(&mut seg, &grid, &cl_opts, opts, &mut laps, &plugs))
             .flatten()

@@ -340,11 +340,29 @@ impl<T: Copy + Send + Sync> Volume<T> {
             }
         }
         let mut data = Vec::with_capacity(old.len());
-        data.par_extend((0..dims[1] * dims[2]).into_par_iter().flat_map_iter(|row| {
+        let row_start = |row: usize| {
             let (j, k) = (row % dims[1], row / dims[1]);
-            let start = base + step[1] * j as isize + step[2] * k as isize;
-            (0..dims[0]).map(move |i| self.data[(start + step[0] * i as isize) as usize])
-        }));
+            base + step[1] * j as isize + step[2] * k as isize
+        };
+        if step[0].abs() == 1 {
+            // Rows stay rows (only their order or direction changes): copied whole, at the
+            // speed of memory (a scan stored feet first is flipped so before segmentation).
+            let n = dims[0];
+            for row in 0..dims[1] * dims[2] {
+                let start = row_start(row);
+                if step[0] > 0 {
+                    data.extend_from_slice(&self.data[start as usize..start as usize + n]);
+                } else {
+                    let first = (start + 1 - n as isize) as usize;
+                    data.extend(self.data[first..=start as usize].iter().rev());
+                }
+            }
+        } else {
+            data.par_extend((0..dims[1] * dims[2]).into_par_iter().flat_map_iter(|row| {
+                let start = row_start(row);
+                (0..dims[0]).map(move |i| self.data[(start + step[0] * i as isize) as usize])
+            }));
+        }
         let mut corner = [0.0; 3];
         for a in 0..3 {
             corner[perm[a]] = if flip[a] { (dims[a] - 1) as f64 } else { 0.0 };
