@@ -403,26 +403,10 @@ fn wide_way(
 
 /// Lumen voxels (volume indices) within `r` mm of `p` (volume-local mm).
 fn lumen_within(lumen: &Volume<u8>, p: [f64; 3], r: f64) -> Vec<usize> {
-    let sp = lumen.spacing();
-    let dims = lumen.dims();
-    let lo = [0, 1, 2].map(|a| ((p[a] - r) / sp[a]).floor().max(0.0) as usize);
-    let hi = [0, 1, 2].map(|a| (((p[a] + r) / sp[a]).ceil() as usize).min(dims[a] - 1));
-    let mut out = Vec::new();
-    for k in lo[2]..=hi[2] {
-        for j in lo[1]..=hi[1] {
-            for i in lo[0]..=hi[0] {
-                let d2: f64 = [i, j, k]
-                    .iter()
-                    .enumerate()
-                    .map(|(a, &x)| (x as f64 * sp[a] - p[a]).powi(2))
-                    .sum();
-                if d2 <= r * r && lumen.get(i, j, k) != 0 {
-                    out.push(lumen.geometry().index(i, j, k));
-                }
-            }
-        }
-    }
-    out
+    crate::volume::set_voxels_in_ball(lumen, p, r)
+        .into_iter()
+        .map(|v| lumen.geometry().index(v[0], v[1], v[2]))
+        .collect()
 }
 
 #[cfg(test)]

@@ -441,6 +441,30 @@ pub(crate) fn runs_where<T: Copy>(
     })
 }
 
+/// The voxels of `mask` that are not 0 within `r` mm of `p` (volume-local mm).
+pub(crate) fn set_voxels_in_ball(mask: &Volume<u8>, p: [f64; 3], r: f64) -> Vec<[usize; 3]> {
+    let sp = mask.spacing();
+    let dims = mask.dims();
+    let lo = [0, 1, 2].map(|a| ((p[a] - r) / sp[a]).floor().max(0.0) as usize);
+    let hi = [0, 1, 2].map(|a| (((p[a] + r) / sp[a]).ceil().max(0.0) as usize).min(dims[a] - 1));
+    let mut out = Vec::new();
+    for k in lo[2]..=hi[2] {
+        for j in lo[1]..=hi[1] {
+            for i in lo[0]..=hi[0] {
+                let d2: f64 = [i, j, k]
+                    .iter()
+                    .enumerate()
+                    .map(|(a, &x)| (x as f64 * sp[a] - p[a]).powi(2))
+                    .sum();
+                if d2 <= r * r && mask.get(i, j, k) != 0 {
+                    out.push([i, j, k]);
+                }
+            }
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -137,7 +137,7 @@ pub fn core_distances(
     let shape = Padded::shape(&ds.grid);
     let outside_core = |d: f32| (d as f64) < spec.min_ds_mm;
     let sp = mask.spacing();
-    let open = opened_near(mask, &ds.grid, spec.narrows_mm, spec.open_mm);
+    let open = opened_near(mask, spec.narrows_mm, spec.open_mm);
     let in_core = |p: &[f64; 3]| {
         let v = [0, 1, 2].map(|a| (p[a] / sp[a]).round().max(0.0) as usize);
         let i = shape.index_of_global(v)?;
@@ -214,39 +214,17 @@ fn lengths_along_tree(r: &mut Search) {
     }
 }
 
-/// The lumen voxels (global) of `mask` in `grid`'s box within `reach_mm` of each point
-/// (volume-local mm), sorted.
+/// The lumen voxels (global) of `mask` within `reach_mm` of each point (volume-local mm),
+/// sorted (all in Ds's box, which holds every lumen voxel).
 fn opened_near(
     mask: &Volume<u8>,
-    grid: &BoxGrid,
     points_mm: &[[f64; 3]],
     reach_mm: f64,
 ) -> std::collections::BTreeSet<[usize; 3]> {
-    let sp = mask.spacing();
-    let r = reach_mm;
-    let mut open = std::collections::BTreeSet::new();
-    for p in points_mm {
-        let lo =
-            [0, 1, 2].map(|a| (((p[a] - r) / sp[a]).floor().max(0.0) as usize).max(grid.lo[a]));
-        let hi = [0, 1, 2].map(|a| {
-            (((p[a] + r) / sp[a]).ceil().max(0.0) as usize).min(grid.lo[a] + grid.dims[a] - 1)
-        });
-        for k in lo[2]..=hi[2] {
-            for j in lo[1]..=hi[1] {
-                for i in lo[0]..=hi[0] {
-                    let d2: f64 = [i, j, k]
-                        .iter()
-                        .enumerate()
-                        .map(|(a, &x)| (x as f64 * sp[a] - p[a]).powi(2))
-                        .sum();
-                    if d2 <= r * r && mask.get(i, j, k) != 0 {
-                        open.insert([i, j, k]);
-                    }
-                }
-            }
-        }
-    }
-    open
+    points_mm
+        .iter()
+        .flat_map(|&p| crate::volume::set_voxels_in_ball(mask, p, reach_mm))
+        .collect()
 }
 
 /// The plain search from `source` over `grid`, its distances left unfinished ([`finish`]);
