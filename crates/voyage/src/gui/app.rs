@@ -1113,10 +1113,14 @@ impl App {
         ui.separator();
         ui.add(egui::Slider::new(&mut s.sub.potential.ct, 0.0..=1000.0).text("Ct (pull)"));
         ui.add(egui::Slider::new(&mut s.sub.potential.cs, 0.0..=1000.0).text("Cs (wall)"));
+        let rho_hover = match s.opts.rho_per_radius {
+            Some(k) => {
+                format!("the reach of the wall's push; the flight keeps it within {k} lumen radii")
+            }
+            None => "the reach of the wall's push".to_string(),
+        };
         ui.add(egui::Slider::new(&mut s.sub.potential.rho, 2.0..=60.0).text("ρ mm"))
-            .on_hover_text(
-                "the reach of the wall's push; the flight keeps it within 1.5 lumen radii",
-            );
+            .on_hover_text(rho_hover);
         ui.add(egui::Slider::new(&mut s.sub.dynamics.user_force, 0.0..=2000.0).text("|F_user|"));
         ui.add(egui::Slider::new(&mut s.fov, 30.0..=Camera::MAX_FOV_DEG).text("FOV °"));
         for (switch, text, hover) in [
