@@ -191,9 +191,6 @@ pub struct Study {
     /// Lumen voxels left out of Dt where loops of the colon touch (`contacts.rs`).
     pub contact_voxels: usize,
     pub centerline: Centerline,
-    /// Stretches of the centerline (arc mm from the source, start and end) that cross a
-    /// bridged gap: collapsed or fluid-filled bowel, no air. Sorted.
-    pub collapsed_spans: Vec<[f64; 2]>,
     /// Each bridged gap's stretch of the centerline, in the order of `segmentation.gaps`;
     /// None where the centerline does not pass through the gap (the colon is joined by
     /// lumen elsewhere too).
@@ -271,6 +268,14 @@ impl Study {
     pub fn gravity_local(&self) -> DVec3 {
         crate::anatomy::PatientFrame::of(self.ct.geometry())
             .local(self.segmentation.orientation.gravity())
+    }
+
+    /// Stretches of the centerline (arc mm from the source, start and end) that cross a
+    /// bridged gap: collapsed or fluid-filled bowel, no air. Sorted.
+    pub fn collapsed_spans(&self) -> Vec<[f64; 2]> {
+        let mut spans: Vec<[f64; 2]> = self.gap_spans.iter().flatten().copied().collect();
+        spans.sort_by(|a, b| a[0].total_cmp(&b[0]));
+        spans
     }
 
     /// The bridged gap whose stretch of the centerline holds arc length `arc` (mm from the
@@ -504,8 +509,6 @@ pub fn prepare(
     laps.stop();
 
     let gap_spans = gap_spans(&cl, &seg);
-    let mut collapsed_spans: Vec<[f64; 2]> = gap_spans.iter().flatten().copied().collect();
-    collapsed_spans.sort_by(|a, b| a[0].total_cmp(&b[0]));
     if opts.centerline.source_mm.is_none() || opts.centerline.target_mm.is_none() {
         let w = anatomical_checks(
             &seg,
@@ -529,7 +532,6 @@ pub fn prepare(
         target,
         contact_voxels,
         centerline: cl,
-        collapsed_spans,
         gap_spans,
         surface,
         cells,

@@ -89,7 +89,7 @@ impl FlightOptions {
     pub fn fitted_to(self, study: &voyage_core::Study) -> FlightOptions {
         FlightOptions {
             dynamics: self.dynamics.with_gravity_along(study.gravity_local()),
-            collapsed_spans: study.collapsed_spans.clone(),
+            collapsed_spans: study.collapsed_spans(),
             ..self
         }
     }
@@ -386,7 +386,7 @@ impl Autopilot {
     }
 
     /// Whether the flight has made no progress for [`STUCK_S`] seconds at time `t`.
-    pub fn stuck(&self, t: f64) -> bool {
+    fn stuck(&self, t: f64) -> bool {
         t - self.progress.0 >= STUCK_S
     }
 
@@ -405,7 +405,7 @@ impl Autopilot {
         if self.glide_arc.is_none() && self.stuck(t) {
             self.rescue(t, x, i);
         }
-        // While gliding, the glide's own arc (the nearest point may round past the end).
+        // While gliding, the glide's own arc or the nearest point's, whichever is farther on.
         let here = self
             .glide_arc
             .unwrap_or(self.guide.arc[i])

@@ -415,16 +415,14 @@ impl Submarine {
                 next.x = self.state.x;
                 next.p = DVec3::ZERO;
             }
-            if !self.modes.still
-                && !self.is_safe(field, next.x)
-                && !self.is_safe(field, self.state.x)
-            {
+            let leaves = !self.modes.still && !self.is_safe(field, next.x);
+            if leaves && !self.is_safe(field, self.state.x) {
                 // Left in a narrow by a glide: move only away from the wall, within the core.
                 if !(field.in_lumen_cube(next.x) && field.ds(next.x) >= ds) {
                     next.x = self.state.x;
                     next.p = DVec3::ZERO;
                 }
-            } else if !self.modes.still && !self.is_safe(field, next.x) {
+            } else if leaves {
                 next.x = self.last_safe_point(field, self.state.x, next.x);
                 let n = field.ds_gradient(next.x).normalize_or_zero();
                 let into = next.p.dot(n);

@@ -115,7 +115,7 @@ fn check(name: &str, opts: ColonOptions) {
         t.gas_gaps
     );
     assert_eq!(
-        study.collapsed_spans.len(),
+        study.collapsed_spans().len(),
         t.gas_gaps.len(),
         "{name}: collapsed spans on the centerline"
     );

@@ -447,10 +447,10 @@ fn segment_axial(
     connect_3d(&runs, &inside, vol.dims(), &mut labels);
     let (mut comps, mut run_comp) = component_stats(&runs, &inside, vol, &mut labels, from_mask);
     classify_lungs(&mut comps, from_mask);
+    let voxel_ml = vol.spacing().iter().product::<f64>() / 1000.0;
     let tubes = if from_mask {
         Vec::new()
     } else {
-        let voxel_ml = vol.spacing().iter().product::<f64>() / 1000.0;
         let mut tubes = tube::find(
             &runs,
             &inside,
@@ -589,7 +589,6 @@ fn segment_axial(
         vol.geometry(),
         frame.inferior(),
     );
-    let voxel_ml = vol.spacing().iter().product::<f64>() / 1000.0;
     let comp_at = |v: [usize; 3]| cruns.at(v).map(|r| crun_comp[r]).filter(|&c| c != u32::MAX);
     // Every gas component's compartment.
     let mut gas_compartment: Vec<Option<u32>> = vec![None; comps.len()];

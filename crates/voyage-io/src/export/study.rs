@@ -87,7 +87,7 @@ fn write_files(dir: &Path, study: &Study, extra: StudyExports) -> Result<Vec<&'s
         "radius_mm": cl.radius_mm,
         // Stretches (arc mm from the source, start and end) through bridged gaps: collapsed
         // or fluid-filled bowel, no air.
-        "collapsed_arc_mm": study.collapsed_spans,
+        "collapsed_arc_mm": study.collapsed_spans(),
     });
     write_json(&put("centerline.json"), &cl_json)?;
     let points: Vec<MarkupsPoint> = lps

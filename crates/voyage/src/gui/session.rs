@@ -205,7 +205,7 @@ impl Session {
                     .glide(self.sub.state.x, self.sub.state.t, dt_now, dt)
                 && self.sub.glide_to(&self.field, pose, dt)
             {
-                // A bridged gap holds no air for the field: the flight keeps to the path.
+                // A bridged gap, a neck or a place stuck for 5 s: the flight keeps to the path.
                 self.pilot.watch_from(self.sub.state.t, self.dt_to_goal());
                 return;
             } else {
