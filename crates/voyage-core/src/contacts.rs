@@ -270,11 +270,15 @@ fn neighbour_voxels(u: [usize; 3], dims: [usize; 3]) -> impl Iterator<Item = [us
 /// A centerline stretch narrower than this (radius, mm) may be a short cut through a
 /// contact: a hole between touching loops.
 const SHORTCUT_NARROW_MM: f64 = 2.0;
-/// The way round must be this wide (Ds, mm) all along: colon, not a crevice or a bridge's
-/// tube.
-const BYPASS_WIDE_MM: f64 = 4.0;
+/// The way round must be at least this wide (Ds, mm) all along, and [`BYPASS_PER_NECK`] times
+/// the stretch's narrowest radius: colon, not a crevice or another hole. Relative to the
+/// neck, because the colon's own way round a hole may narrow too (a fold, a fluid-filled
+/// flexure): on `ctc/prone-tagged` a 0.1 mm hole between the transverse and ascending
+/// colon was taken, 300 mm of colon skipped, while the way round narrowed to 3 mm somewhere.
+const BYPASS_WIDE_MM: f64 = 2.0;
+const BYPASS_PER_NECK: f64 = 3.0;
 /// The ends of the way round are the widest centerline points this far (mm of arc) on
-/// either side of the stretch, at least twice [`BYPASS_WIDE_MM`] in radius.
+/// either side of the stretch, at least twice as wide as the way round must be.
 const BYPASS_REACH_MM: f64 = 60.0;
 /// Stretches this near (mm of arc) the centerline's ends are its ends narrowing, not holes.
 const ENDS_MM: f64 = 20.0;
@@ -283,8 +287,8 @@ const ENDS_MM: f64 = 20.0;
 const PLUG_MM: f64 = 4.0;
 
 /// Holes between touching loops that the centerline went through: where it narrows under
-/// [`SHORTCUT_NARROW_MM`] while the lumen on either side is also joined by a way at least
-/// [`BYPASS_WIDE_MM`] wide all along, the narrow stretch is a short cut (the colon is one
+/// [`SHORTCUT_NARROW_MM`] while the lumen on either side is also joined by a way much wider
+/// all along ([`BYPASS_WIDE_MM`], [`BYPASS_PER_NECK`]), the narrow stretch is a short cut (the colon is one
 /// tube: it cannot go both ways). Returns the lumen voxels (volume indices) of a plug at each
 /// such hole, for the caller to take out and trace the centerline again. `lumen` is without
 /// contacts cut (a cut across the way round would hide it); Ds over `grid` is computed only
@@ -299,9 +303,51 @@ pub fn shortcut_plugs(
     arc_mm: &[f64],
     necks: &mut Vec<[f64; 3]>,
 ) -> Vec<usize> {
-    let length = arc_mm.last().copied().unwrap_or(0.0);
+    let mut stretches = narrow_stretches(points_mm, radius_mm, arc_mm, necks);
+    // Narrowest first: each way round is looked for with the holes plugged so far closed,
+    // so that two stretches are never both taken for holes each by way of the other.
+    stretches.sort_by(|x, y| radius_mm[x.neck].total_cmp(&radius_mm[y.neck]));
     let mut ds = None;
-    let mut plugs = Vec::new();
+    let mut plugs: std::collections::HashSet<usize> = std::collections::HashSet::new();
+    for s in stretches {
+        let n = s.neck;
+        let ds =
+            ds.get_or_insert_with(|| crate::distance::distance_to_wall_in(lumen, grid.clone()));
+        let way = Way {
+            lumen,
+            ds,
+            closed: &plugs,
+            wide: s.wide,
+        };
+        if way.joins(points_mm[s.ends.0], points_mm[s.ends.1]) {
+            plugs.extend(plug(lumen, ds, points_mm[n], radius_mm[n]));
+        } else {
+            necks.push(points_mm[n]);
+        }
+    }
+    let mut plugs: Vec<usize> = plugs.into_iter().collect();
+    plugs.sort_unstable();
+    plugs
+}
+
+/// A narrow stretch of the centerline that may be a hole: its narrowest point, the widest
+/// points on either side that a way round would join, and how wide that way must be.
+struct Stretch {
+    neck: usize,
+    ends: (usize, usize),
+    wide: f64,
+}
+
+/// The centerline's stretches narrower than [`SHORTCUT_NARROW_MM`], away from its ends and
+/// from the `necks` already known, with wide enough places on either side.
+fn narrow_stretches(
+    points_mm: &[[f64; 3]],
+    radius_mm: &[f64],
+    arc_mm: &[f64],
+    necks: &[[f64; 3]],
+) -> Vec<Stretch> {
+    let length = arc_mm.last().copied().unwrap_or(0.0);
+    let mut out = Vec::new();
     let mut i = 0;
     while i < points_mm.len() {
         if radius_mm[i] >= SHORTCUT_NARROW_MM {
@@ -316,16 +362,6 @@ pub fn shortcut_plugs(
         if a < ENDS_MM || b > length - ENDS_MM {
             continue;
         }
-        // The widest places on either side within reach: well inside the lumen.
-        let widest = |js: &mut dyn Iterator<Item = usize>| {
-            js.max_by(|&x, &y| radius_mm[x].total_cmp(&radius_mm[y]))
-                .filter(|&j| radius_mm[j] >= 2.0 * BYPASS_WIDE_MM)
-        };
-        let before = widest(&mut (0..start).filter(|&j| arc_mm[j] >= a - BYPASS_REACH_MM));
-        let after = widest(&mut (i..points_mm.len()).filter(|&j| arc_mm[j] <= b + BYPASS_REACH_MM));
-        let (Some(p), Some(q)) = (before, after) else {
-            continue;
-        };
         let n = (start..i)
             .min_by(|&x, &y| radius_mm[x].total_cmp(&radius_mm[y]))
             .unwrap_or(start);
@@ -336,69 +372,103 @@ pub fn shortcut_plugs(
         {
             continue;
         }
-        let ds =
-            ds.get_or_insert_with(|| crate::distance::distance_to_wall_in(lumen, grid.clone()));
-        if wide_way(lumen, ds, points_mm[p], points_mm[q]) {
-            let r = PLUG_MM.max(2.0 * radius_mm[n]);
-            plugs.extend(lumen_within(lumen, points_mm[n], r));
-        } else {
-            necks.push(points_mm[n]);
+        let wide = BYPASS_WIDE_MM.max(BYPASS_PER_NECK * radius_mm[n]);
+        // The widest places on either side within reach: well inside the lumen.
+        let widest = |js: &mut dyn Iterator<Item = usize>| {
+            js.max_by(|&x, &y| radius_mm[x].total_cmp(&radius_mm[y]))
+                .filter(|&j| radius_mm[j] >= 2.0 * wide)
+        };
+        let before = widest(&mut (0..start).filter(|&j| arc_mm[j] >= a - BYPASS_REACH_MM));
+        let after = widest(&mut (i..points_mm.len()).filter(|&j| arc_mm[j] <= b + BYPASS_REACH_MM));
+        if let (Some(p), Some(q)) = (before, after) {
+            out.push(Stretch {
+                neck: n,
+                ends: (p, q),
+                wide,
+            });
         }
     }
-    plugs.sort_unstable();
-    plugs.dedup();
-    plugs
+    out
 }
 
-/// Whether `from` and `to` (volume-local mm) are joined through lumen voxels with Ds at least
-/// [`BYPASS_WIDE_MM`] (6-connected, within Ds's box).
-fn wide_way(
-    lumen: &Volume<u8>,
-    ds: &crate::grid::Field<f32>,
-    from: [f64; 3],
-    to: [f64; 3],
-) -> bool {
-    let grid = &ds.grid;
-    let sp = lumen.spacing();
-    let local = |p: [f64; 3]| -> Option<[usize; 3]> {
-        let g = [0, 1, 2].map(|a| (p[a] / sp[a]).round().max(0.0) as usize);
-        grid.index_of_global(g)
-            .map(|_| [0, 1, 2].map(|a| g[a] - grid.lo[a]))
-    };
-    let (Some(s), Some(t)) = (local(from), local(to)) else {
-        return false;
-    };
-    let d = grid.dims;
-    let at = |l: [usize; 3]| grid.index(l[0], l[1], l[2]).0;
-    let open = |l: [usize; 3]| {
-        let g = [0, 1, 2].map(|a| l[a] + grid.lo[a]);
-        lumen.get(g[0], g[1], g[2]) != 0 && ds.data[at(l)] as f64 >= BYPASS_WIDE_MM
-    };
-    if !open(s) || !open(t) {
-        return false;
-    }
-    let mut seen = vec![false; d[0] * d[1] * d[2]];
-    let mut queue = std::collections::VecDeque::from([s]);
-    seen[at(s)] = true;
-    while let Some(l) = queue.pop_front() {
-        if l == t {
-            return true;
+/// The plug that closes a hole at `at` (volume-local mm) of radius `r` mm: the lumen within
+/// [`PLUG_MM`] (at least 2r) that is no wider than the hole (Ds at most r and a voxel), so
+/// that the loops on either side keep their lumen.
+fn plug(lumen: &Volume<u8>, ds: &crate::grid::Field<f32>, at: [f64; 3], r: f64) -> Vec<usize> {
+    let thin = r + lumen.spacing().iter().cloned().fold(0.0, f64::max);
+    lumen_within(lumen, at, PLUG_MM.max(2.0 * r))
+        .into_iter()
+        .filter(|&v| {
+            ds.grid
+                .index_of_global(lumen.geometry().ijk(v))
+                .is_some_and(|b| (ds.data[b.0] as f64) <= thin)
+        })
+        .collect()
+}
+
+/// A search for a way through the lumen at least `wide` mm wide (Ds), not through the
+/// voxels `closed`.
+struct Way<'a> {
+    lumen: &'a Volume<u8>,
+    ds: &'a crate::grid::Field<f32>,
+    closed: &'a std::collections::HashSet<usize>,
+    wide: f64,
+}
+
+impl Way<'_> {
+    /// Whether `from` and `to` (volume-local mm) are joined through lumen voxels with Ds at least
+    /// `wide` mm, none closed (6-connected, within Ds's box).
+    fn joins(&self, from: [f64; 3], to: [f64; 3]) -> bool {
+        let Way {
+            lumen,
+            ds,
+            closed,
+            wide,
+        } = *self;
+        let grid = &ds.grid;
+        let sp = lumen.spacing();
+        let local = |p: [f64; 3]| -> Option<[usize; 3]> {
+            let g = [0, 1, 2].map(|a| (p[a] / sp[a]).round().max(0.0) as usize);
+            grid.index_of_global(g)
+                .map(|_| [0, 1, 2].map(|a| g[a] - grid.lo[a]))
+        };
+        let (Some(s), Some(t)) = (local(from), local(to)) else {
+            return false;
+        };
+        let d = grid.dims;
+        let at = |l: [usize; 3]| grid.index(l[0], l[1], l[2]).0;
+        let open = |l: [usize; 3]| {
+            let g = [0, 1, 2].map(|a| l[a] + grid.lo[a]);
+            lumen.get(g[0], g[1], g[2]) != 0
+                && ds.data[at(l)] as f64 >= wide
+                && !closed.contains(&lumen.geometry().index(g[0], g[1], g[2]))
+        };
+        if !open(s) || !open(t) {
+            return false;
         }
-        for a in 0..3 {
-            for up in [false, true] {
-                if (!up && l[a] == 0) || (up && l[a] + 1 >= d[a]) {
-                    continue;
-                }
-                let mut n = l;
-                n[a] = if up { l[a] + 1 } else { l[a] - 1 };
-                if !seen[at(n)] && open(n) {
-                    seen[at(n)] = true;
-                    queue.push_back(n);
+        let mut seen = vec![false; d[0] * d[1] * d[2]];
+        let mut queue = std::collections::VecDeque::from([s]);
+        seen[at(s)] = true;
+        while let Some(l) = queue.pop_front() {
+            if l == t {
+                return true;
+            }
+            for a in 0..3 {
+                for up in [false, true] {
+                    if (!up && l[a] == 0) || (up && l[a] + 1 >= d[a]) {
+                        continue;
+                    }
+                    let mut n = l;
+                    n[a] = if up { l[a] + 1 } else { l[a] - 1 };
+                    if !seen[at(n)] && open(n) {
+                        seen[at(n)] = true;
+                        queue.push_back(n);
+                    }
                 }
             }
         }
+        false
     }
-    false
 }
 
 /// Lumen voxels (volume indices) within `r` mm of `p` (volume-local mm).

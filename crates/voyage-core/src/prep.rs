@@ -407,6 +407,18 @@ pub fn prepare(
         _ => Cleansing::default(),
     };
     seg.lumen_voxels = seg.lumen_voxels + cleansing.joined_lumen - cleansing.left_lumen;
+    // The centerline is traced without the fluid taken in beside the pools' columns: where two
+    // loops' pools lie against one thin wall, the lumen there is one voxel from a hole, and
+    // on `ctc/prone-tagged` the centerline's course through the large compartment moved by
+    // up to 300 mm with them. They are lumen again for Ds, Dt and the surface.
+    let beside: Vec<usize> = seg
+        .pools_grown
+        .iter()
+        .copied()
+        .filter(|&v| seg.lumen.data()[v] != 0)
+        .collect();
+    set_voxels(&mut seg.lumen, &beside, 0);
+    seg.lumen_voxels -= beside.len();
 
     // Every Ds below is over this box: cutting contacts only takes lumen away, and a box
     // larger than the lumen's own changes no distance.
@@ -456,8 +468,14 @@ pub fn prepare(
         sk,
         mut ends,
         taken,
-        ds_box,
+        mut ds_box,
     } = traced;
+    if !beside.is_empty() {
+        set_voxels(&mut seg.lumen, &beside, 1);
+        seg.lumen_voxels += beside.len();
+        laps.start(Stage::Ds);
+        ds_box = distance_to_wall_in(&seg.lumen, grid.clone());
+    }
     // Ds moves into bricks, and the Dt searches work in its box array.
     let mut ds = Bricked::from_field(&ds_box, 0.0);
     let mut memory = SearchMemory::from(ds_box.data);

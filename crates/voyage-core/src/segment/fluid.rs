@@ -23,8 +23,10 @@ use rayon::prelude::*;
 use super::work::{Bbox, GAS, LAYER, POOL};
 use crate::{Geometry, anatomy::PatientFrame};
 
-/// A pool deeper than this below its gas is not one colon segment's fluid.
-pub const MAX_DEPTH_MM: f64 = 60.0;
+/// A pool deeper than this below its gas is not one colon segment's fluid. (The prone
+/// `ctc/prone-tagged`'s descending pool is about 70 mm deep: at 60 mm its floor was cut off
+/// in a straight plane.)
+pub const MAX_DEPTH_MM: f64 = 100.0;
 
 /// Between air and fluid the partial-volume layer is at most this thick (mm; at least one
 /// voxel).
@@ -228,13 +230,7 @@ pub fn pools(
         depth_max: (MAX_DEPTH_MM / step).round() as i64,
         narrow_below: (NARROW_BELOW_MM / step).round() as i64,
     };
-    let tube_steps = (TUBE_MM / step).ceil() as usize;
-    let wide = |v: usize| {
-        bright_run(geom, v, axis, sign, tube_steps, &bright) < tube_steps
-            || (0..3)
-                .filter(|&a| a != axis)
-                .any(|a| chord_at_least(geom, v, a, WIDE_MM, &bright))
-    };
+    let wide = |v: usize| wide(geom, v, (axis, sign), &bright);
     let w = bx.widths();
     let lines = if axis == 2 {
         w[0] * w[1]
@@ -263,6 +259,34 @@ pub fn pools(
         },
     );
     per.into_iter().flat_map(|(_, m)| m).collect()
+}
+
+/// Whether bright voxel `v` lies where fluid is wide or ends soon below it (gravity along
+/// voxel axis `down.0`, direction `down.1`): see [`WIDE_MM`]. A pool spreads under its level,
+/// a loop leaving it is a tube.
+pub fn wide(
+    geom: &Geometry,
+    v: usize,
+    down: (usize, i32),
+    bright: &impl Fn(usize) -> bool,
+) -> bool {
+    let (axis, sign) = down;
+    let tube_steps = (TUBE_MM / geom.spacing[axis]).ceil() as usize;
+    bright_run(geom, v, axis, sign, tube_steps, bright) < tube_steps
+        || wide_across(geom, v, axis, bright)
+}
+
+/// Whether a horizontal chord through bright voxel `v` (gravity along voxel axis `down`),
+/// all bright, is at least [`WIDE_MM`] long: fluid spread under a level, not a tube's.
+pub fn wide_across(
+    geom: &Geometry,
+    v: usize,
+    down: usize,
+    bright: &impl Fn(usize) -> bool,
+) -> bool {
+    (0..3)
+        .filter(|&a| a != down)
+        .any(|a| chord_at_least(geom, v, a, WIDE_MM, bright))
 }
 
 /// How many bright voxels follow `v` along `axis` in direction `sign` (±1), counting up to
@@ -362,6 +386,125 @@ pub fn gravity_from_levels(rows: &LabelRows, geom: &Geometry, bx: &Bbox) -> Opti
     let mut e = [0.0; 3];
     e[axis] = sign as f64;
     Some(PatientFrame::of(geom).lps(DVec3::from_array(e)).normalize())
+}
+
+/// Real pools are wider than the air above them: they fill haustral pockets and run under
+/// folds beyond the column under the air, and a fluid-filled stretch holds only a bubble.
+/// So the colon's fluid is also every bright voxel reached from its bright voxels within this
+/// far (mm, along 6-neighbour steps through bright voxels where the fluid is
+/// [`wide_across`]: a small-bowel loop leaving the pool, as the ileum through the ileocecal
+/// valve, is not, even along its floor). On `ctc/prone-tagged` this
+/// reach takes in 97 % of the tagged fluid of the given colon, while contrast in small-bowel
+/// loops and bone, behind wall and fat, is not reached or only where a loop touches the
+/// colon (0.7 ml); at 30 mm 7 ml of it came in, at 40 mm 36 ml.
+pub const POOL_REACH_MM: f64 = 20.0;
+
+/// A step down (along gravity) costs this many times its length in [`grow_bright`]: a pool
+/// spreads sideways under its level, into the pockets beside the air; a loop leaving its
+/// floor downward, as the ileum through the ileocecal valve, is followed a few mm at most.
+pub const DOWN_COST: u32 = 8;
+
+/// Distances in [`grow_bright`], in units of this (mm): integer sums, so that which voxels
+/// lie within the reach does not depend on the order they were visited in.
+const DIST_UNIT_MM: f64 = 0.01;
+
+/// Grows `work` from `seeds` (voxel indices) through the voxels where `pass(i)`, each
+/// reached within `reach_mm` (along 6-neighbour steps, each as long as the spacing along its
+/// axis, and [`DOWN_COST`] times that along gravity, `down`: voxel axis and direction) set to
+/// `label` and pushed to `added`; a voxel where only `take(i)` is taken when
+/// reached, and not passed through (a pool's partial-volume skin, not the wall between it and
+/// a loop beside it). Only voxels still 0 in `work` are taken.
+pub fn grow_bright(
+    work: &mut crate::Volume<u8>,
+    seeds: impl IntoIterator<Item = usize>,
+    (reach_mm, down): (f64, Option<(usize, i32)>),
+    take: impl Fn(usize) -> bool,
+    pass: impl Fn(usize) -> bool,
+    label: u8,
+    added: &mut Vec<usize>,
+) {
+    use std::cmp::Reverse;
+    use std::collections::{BinaryHeap, HashMap};
+    let g = work.geometry().clone();
+    let [nx, ny, nz] = g.dims;
+    // Per axis, the cost of a step towards − and towards +.
+    let unit: [[u32; 2]; 3] = [0, 1, 2].map(|a| {
+        let u = (g.spacing[a] / DIST_UNIT_MM).round().max(1.0) as u32;
+        match down {
+            Some((axis, sign)) if axis == a => {
+                if sign > 0 {
+                    [u, DOWN_COST * u]
+                } else {
+                    [DOWN_COST * u, u]
+                }
+            }
+            _ => [u, u],
+        }
+    });
+    let reach = (reach_mm / DIST_UNIT_MM).round() as u32;
+    let mut dist: HashMap<usize, u32> = HashMap::new();
+    let mut heap = BinaryHeap::new();
+    for i in seeds {
+        if dist.insert(i, 0).is_none() {
+            heap.push(Reverse((0u32, i)));
+        }
+    }
+    while let Some(Reverse((d, i))) = heap.pop() {
+        if dist.get(&i).is_some_and(|&x| x < d) {
+            continue;
+        }
+        if work.data()[i] == 0 && pass(i) {
+            work.data_mut()[i] = label;
+            added.push(i);
+        }
+        let [x, y, z] = g.ijk(i);
+        let steps = [
+            (x > 0).then(|| (i - 1, unit[0][0])),
+            (x + 1 < nx).then(|| (i + 1, unit[0][1])),
+            (y > 0).then(|| (i - nx, unit[1][0])),
+            (y + 1 < ny).then(|| (i + nx, unit[1][1])),
+            (z > 0).then(|| (i - nx * ny, unit[2][0])),
+            (z + 1 < nz).then(|| (i + nx * ny, unit[2][1])),
+        ];
+        for (q, u) in steps.into_iter().flatten() {
+            let dq = d + u;
+            if dq > reach || work.data()[q] != 0 || !take(q) {
+                continue;
+            }
+            if !pass(q) {
+                work.data_mut()[q] = label;
+                added.push(q);
+            } else if dist.get(&q).is_none_or(|&x| dq < x) {
+                dist.insert(q, dq);
+                heap.push(Reverse((dq, q)));
+            }
+        }
+    }
+}
+
+/// Whether tagged voxel `v` is at least halfway between soft tissue (`tissue_hu`) and the
+/// brightest of its six neighbours: fluid, not the partial-volume wall between two pools (a
+/// bowel wall of 2 mm between two pools, blurred, stays above the fluid threshold).
+pub fn above_half(hu: &[i16], v: usize, dims: [usize; 3], tissue_hu: i16) -> bool {
+    let [nx, ny, nz] = dims;
+    let (i, rest) = (v % nx, v / nx);
+    let (j, k) = (rest % ny, rest / ny);
+    let n = [
+        (i > 0).then(|| v - 1),
+        (i + 1 < nx).then(|| v + 1),
+        (j > 0).then(|| v - nx),
+        (j + 1 < ny).then(|| v + nx),
+        (k > 0).then(|| v - nx * ny),
+        (k + 1 < nz).then(|| v + nx * ny),
+    ];
+    let max = n
+        .into_iter()
+        .flatten()
+        .map(|w| hu[w])
+        .max()
+        .unwrap_or(hu[v])
+        .max(hu[v]);
+    2 * hu[v] as i32 >= max as i32 + tissue_hu as i32
 }
 
 #[cfg(test)]

@@ -22,7 +22,9 @@
 //!    supine, assumed and said ([`crate::anatomy`]).
 //! 6. Tagged fluid: bright voxels in the column under a gas region's air, across the level
 //!    ([`fluid`]); gas regions and their pools form *compartments* (air split by a level
-//!    stays one compartment).
+//!    stays one compartment). Once the colon is chosen, its pools are made whole: the
+//!    tagged fluid beside the columns (haustral pockets, pools wider than their air, the
+//!    floor of a deep pool) reached through fluid within [`fluid::POOL_REACH_MM`].
 //! 7. The colon: a chain of compartments from the rectum (the lowest gas in the patient
 //!    frame) to the cecum, end to end, each gap bridged by the cheapest path through the CT
 //!    ([`chain`], [`bridge`]). What is left out is listed with the reason.
@@ -190,6 +192,9 @@ pub struct Segmentation {
     /// colon was ordered by its large compartments' anatomy; None: the centerline's longest
     /// path decides.
     pub cecum_voxel: Option<[usize; 3]>,
+    /// The voxels of tagged fluid the lumen took in beyond its pools' columns ([`fluid`]'s
+    /// whole pools; volume indices, ascending).
+    pub pools_grown: Vec<usize>,
 }
 
 /// One stretch of lumen candidates along x: voxels x0..x1 of row (j, k).
@@ -411,17 +416,21 @@ impl Segmentation {
             c.centroid_mm = canon.mm_back(c.centroid_mm);
             (c.bbox_lo, c.bbox_hi) = canon.box_back(c.bbox_lo, c.bbox_hi);
         }
-        for g in &mut self.gaps {
-            g.voxels = g
-                .voxels
+        let back = |voxels: &[usize]| {
+            let mut out: Vec<usize> = voxels
                 .iter()
                 .map(|&i| {
                     let v = canon.voxel_back(crate::volume::grid_ijk(canon.dims, i));
                     geom.index(v[0], v[1], v[2])
                 })
                 .collect();
-            g.voxels.sort_unstable();
+            out.sort_unstable();
+            out
+        };
+        for g in &mut self.gaps {
+            g.voxels = back(&g.voxels);
         }
+        self.pools_grown = back(&self.pools_grown);
         Ok(self)
     }
 }
@@ -801,6 +810,22 @@ fn segment_axial(
     for &v in &added {
         work.data_mut()[v] = 1;
     }
+    // Whole pools: the colon's fluid beyond the columns under its air.
+    let grown = match (ct, fluid_hu) {
+        (Some(ct), Some(t)) => whole_pools(
+            &mut work,
+            ct,
+            lumen_box,
+            (opts.air_hu, t),
+            orientation.gravity(),
+        ),
+        _ => Vec::new(),
+    };
+    for &v in &grown {
+        let ijk = geom.ijk(v);
+        lumen_box = lumen_box.map(|x| x.union(&Bbox { lo: ijk, hi: ijk }));
+    }
+    fluid_voxels += grown.len();
     let lumen = work;
     let lumen_box = lumen_box.ok_or_else(|| Error::invalid("the colon holds no voxels"))?;
 
@@ -944,7 +969,9 @@ fn segment_axial(
         }
         comp.kind = gas_compartment[c].map_or(ComponentKind::Other, |x| classes[x as usize]);
     }
-    let lumen_voxels = colon_voxels + bridge_voxels;
+    let lumen_voxels = colon_voxels + bridge_voxels + grown.len();
+    let mut pools_grown = grown;
+    pools_grown.sort_unstable();
     let (components, small) = report(comps, opts.min_report_ml);
     Ok(Segmentation {
         lumen,
@@ -961,6 +988,7 @@ fn segment_axial(
         warnings,
         bridge_radius_mm,
         cecum_voxel,
+        pools_grown,
     })
 }
 
@@ -1036,6 +1064,8 @@ fn colon_box(
 const EXCLUDED: &str = "excluded by the user";
 /// Gas left out of the colon from this size on (ml) gets a warning.
 const LARGE_LEFT_ML: f64 = 20.0;
+/// Soft tissue's HU: the bowel wall between two pools.
+const TISSUE_HU: i16 = 40;
 /// Fluid filling a bridged stretch is taken this far (mm) from the bridge's path.
 const FILL_MM: f64 = 25.0;
 
@@ -1816,43 +1846,96 @@ fn fill_fluid(
     added: &mut Vec<usize>,
 ) {
     let g = work.geometry().clone();
-    let step = g.spacing.iter().cloned().fold(f64::INFINITY, f64::min);
-    let layers = (reach_mm / step).ceil() as usize;
-    let mut front: Vec<usize> = path
+    let seeds: Vec<usize> = path
         .iter()
         .map(|v| g.index(v[0], v[1], v[2]))
         .filter(|&i| work.data()[i] == 0 && bright(i))
         .collect();
-    for &i in &front {
-        work.data_mut()[i] = BRIDGE;
-        added.push(i);
-    }
-    let [nx, ny, nz] = g.dims;
-    for _ in 0..layers {
-        let mut next = Vec::new();
-        for &i in &front {
-            let [x, y, z] = g.ijk(i);
-            let n = [
-                (x > 0).then(|| i - 1),
-                (x + 1 < nx).then(|| i + 1),
-                (y > 0).then(|| i - nx),
-                (y + 1 < ny).then(|| i + nx),
-                (z > 0).then(|| i - nx * ny),
-                (z + 1 < nz).then(|| i + nx * ny),
-            ];
-            for q in n.into_iter().flatten() {
-                if work.data()[q] == 0 && bright(q) {
-                    work.data_mut()[q] = BRIDGE;
-                    added.push(q);
-                    next.push(q);
-                }
-            }
-        }
-        if next.is_empty() {
-            break;
-        }
-        front = next;
-    }
+    fluid::grow_bright(
+        work,
+        seeds,
+        (reach_mm, None),
+        &bright,
+        &bright,
+        BRIDGE,
+        added,
+    );
+}
+
+/// The colon's tagged fluid beyond its pools' columns: bright voxels within
+/// [`fluid::POOL_REACH_MM`] of the lumen's bright voxels (`lumen` is 0/1, in `lumen_box`),
+/// added to the lumen. Returns them.
+fn whole_pools(
+    lumen: &mut Volume<u8>,
+    ct: &Volume<i16>,
+    lumen_box: Option<Bbox>,
+    (air_hu, fluid_hu): (i16, i16),
+    gravity_lps: DVec3,
+) -> Vec<usize> {
+    let Some(b) = lumen_box else {
+        return Vec::new();
+    };
+    let g = lumen.geometry().clone();
+    let bright = |i: usize| ct.data()[i] >= fluid_hu;
+    // Only the lumen's bright voxels with a bright neighbour outside it start the growth.
+    let [nx, ny, _] = g.dims;
+    let seeds: Vec<usize> = (b.lo[2]..=b.hi[2])
+        .into_par_iter()
+        .flat_map_iter(|k| {
+            let (lumen, g) = (&*lumen, &g);
+            (b.lo[1]..=b.hi[1]).flat_map(move |j| {
+                let row = g.index(b.lo[0], j, k);
+                (row..=row + b.hi[0] - b.lo[0]).filter(move |&i| {
+                    let [x, y, z] = [b.lo[0] + i - row, j, k];
+                    let out = |q: usize| lumen.data()[q] == 0 && bright(q);
+                    lumen.data()[i] == 1
+                        && bright(i)
+                        && ((x > 0 && out(i - 1))
+                            || (x + 1 < nx && out(i + 1))
+                            || (y > 0 && out(i - nx))
+                            || (y + 1 < ny && out(i + nx))
+                            || (z > 0 && out(i - nx * ny))
+                            || (z + 1 < g.dims[2] && out(i + nx * ny)))
+                })
+            })
+        })
+        .collect();
+    let down = PatientFrame::of(&g).nearest_axis(gravity_lps);
+    // Fluid is not passed through where gas lies beside it: past the level (in the lumen
+    // already) or in tagged stool mottled with gas, which cleansing's model of lumps takes.
+    let by_air = |i: usize| {
+        let [x, y, z] = g.ijk(i);
+        [
+            (x > 0).then(|| i - 1),
+            (x + 1 < nx).then(|| i + 1),
+            (y > 0).then(|| i - nx),
+            (y + 1 < ny).then(|| i + nx),
+            (z > 0).then(|| i - nx * ny),
+            (z + 1 < g.dims[2]).then(|| i + nx * ny),
+        ]
+        .into_iter()
+        .flatten()
+        .any(|q| ct.data()[q] < air_hu)
+    };
+    // Fluid is passed through where it is wide, at least halfway to the brightest beside it
+    // (not the blurred wall between two pools), with no gas beside it. Reached from there,
+    // the pool's partial-volume skin (bright, under halfway) is taken too, and so is wide
+    // fluid beside gas; not a tube's fluid.
+    let half = |i: usize| fluid::above_half(ct.data(), i, g.dims, TISSUE_HU);
+    let wide = |i: usize| fluid::wide_across(&g, i, down.0, &bright);
+    let take = |i: usize| bright(i) && (!half(i) || wide(i));
+    let pass = |i: usize| bright(i) && wide(i) && half(i) && !by_air(i);
+    let mut grown = Vec::new();
+    fluid::grow_bright(
+        lumen,
+        seeds,
+        (fluid::POOL_REACH_MM, Some(down)),
+        take,
+        pass,
+        1,
+        &mut grown,
+    );
+    grown
 }
 
 /// The LPS box of a voxel box (all eight corners: the direction may turn the axes).
