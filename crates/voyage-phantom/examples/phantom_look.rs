@@ -5,9 +5,9 @@
 //! `cargo run --release -p voyage-phantom --example phantom_look [pipe|colon|small|all]`;
 //! `... phantom_look time` times the generators; `... phantom_look anatomy` prints the
 //! colon's course (lengths, tightest bend, closest loops) for tuning it; `... variant NAME
-//! small prone opacified tube fluid collapsed=SEG filled=SEG quantize=HU seed=N` draws
-//! slices through what the newer options add (the ileocaecal valve, the rectal catheter,
-//! each gap in the gas) and lists the truth; `... free Z0 Z1` maps the room around the colon
+//! small prone opacified tube table folds fluid collapsed=SEG filled=SEG quantize=HU seed=N`
+//! draws slices through what the newer options add (the ileocaecal valve, the rectal
+//! catheter, each gap in the gas, each skin fold) and lists the truth; `... free Z0 Z1` maps the room around the colon
 //! and `... room` (knots on stdin) checks a small-bowel course, for placing the loops;
 //! `... save OUT.nii [small] [fluid] [collapsed] [seed=N]` writes the CT as the CLI does.
 
@@ -89,8 +89,8 @@ fn main() -> Res<()> {
         return Ok(());
     }
     if which == "variant" {
-        // `variant NAME [small] [fluid] [prone] [opacified] [tube] [collapsed=SEG]...
-        // [filled=SEG]... [quantize=HU] [seed=N]`: pictures of one variant.
+        // `variant NAME [small] [fluid] [prone] [opacified] [tube] [table] [folds]
+        // [collapsed=SEG]... [filled=SEG]... [quantize=HU] [seed=N]`: pictures of one variant.
         let args: Vec<String> = std::env::args().skip(2).collect();
         let opts = variant_options(&args[1..]);
         let t = Instant::now();
@@ -139,8 +139,8 @@ fn main() -> Res<()> {
     Ok(())
 }
 
-/// Options from words: small, fluid, prone, opacified, tube, collapsed=SEG, filled=SEG,
-/// quantize=HU, seed=N, noise=HU.
+/// Options from words: small, fluid, prone, opacified, tube, table, folds, collapsed=SEG,
+/// filled=SEG, quantize=HU, seed=N, noise=HU.
 fn variant_options(args: &[String]) -> ColonOptions {
     let mut o = ColonOptions::default();
     for a in args {
@@ -156,6 +156,8 @@ fn variant_options(args: &[String]) -> ColonOptions {
                 "prone" => o.prone = true,
                 "opacified" => o.opacified_small_bowel = true,
                 "tube" => o.rectal_tube = true,
+                "table" => o.table = true,
+                "folds" => o.skin_folds = true,
                 _ => eprintln!("ignored: {a}"),
             },
         }
@@ -165,7 +167,8 @@ fn variant_options(args: &[String]) -> ColonOptions {
 
 /// Slices through what the newer options add: the ileocaecal valve (axial, coronal,
 /// sagittal), the rectal catheter (sagittal, coronal), each gap in the gas (coronal through
-/// its middle), and counts of the labels.
+/// its middle), each skin fold (axial where skin closes over it, or through its middle), and
+/// counts of the labels.
 fn look_variant(p: &Phantom, dir: &Path, name: &str) -> Res<()> {
     let t = &p.truth;
     let s = p.ct.spacing();
@@ -263,6 +266,27 @@ fn look_variant(p: &Phantom, dir: &Path, name: &str) -> Res<()> {
                 &dir.join(format!("{name}-tube-axial-{k:03}.png")),
             )?;
         }
+    }
+    if let Some(tb) = &t.table {
+        eprintln!(
+            "  table {} y {:.1}..{:.1}, skin flat on it over x {:.1}..{:.1}",
+            tb.side, tb.top_y_mm, tb.bottom_y_mm, tb.contact_x_mm[0], tb.contact_x_mm[1]
+        );
+    }
+    for (n, f) in t.skin_folds.iter().enumerate() {
+        let l = f
+            .closed_mm
+            .map_or(0.5 * (f.span_mm[0] + f.span_mm[1]), |[a, b]| 0.5 * (a + b));
+        let at = [0, 1, 2].map(|a| f.mouth_mm[a] + f.inward[a] * 0.5 * f.depth_mm + f.along[a] * l);
+        let [_, _, k] = vox(at);
+        eprintln!(
+            "  {} fold at {:.1?}: {:.0} mm deep, {:.1} mm wide, along {:.1?} over {:.0?}, closed over {:.0?}",
+            f.region, f.mouth_mm, f.depth_mm, f.width_mm, f.along, f.span_mm, f.closed_mm
+        );
+        save(
+            &axial(&p.ct, k),
+            &dir.join(format!("{name}-fold{n}-{}-axial-{k:03}.png", f.region)),
+        )?;
     }
     for (n, g) in t.gas_gaps.iter().enumerate() {
         let mid = 0.5 * (g.start_arc_mm + g.end_arc_mm);

@@ -36,6 +36,11 @@
 //! - rectal tube: a catheter from 35 mm up the rectum out through a perineum, which the body
 //!   gets only then (4 mm above the first slice, full size): the rectum's end stays ≥ 5 mm
 //!   from its skin, its muscle wraps the rectum's end as the pelvic floor does.
+//! - table: a CT table (carbon-fibre shell, foam core) under the patient on the dependent
+//!   side, the skin pressed flat on it over a contact strip (see [`super::skin`]).
+//! - skin folds: 4–8 thin crevices of outside air cut into the skin, on the dependent side
+//!   and low in the scan (perineal beside the catheter, or gluteal), some closed over by skin
+//!   in part of their length (see [`super::skin`]).
 //! - quantise: the CT rounded to multiples of a step after the noise.
 
 use glam::{DVec2, DVec3};
@@ -48,6 +53,7 @@ use super::{
     polyp::{PolypSpec, place},
     raster::{Materials, Scene},
     rng::{Rng, stream_key},
+    skin::{self, Obstacles},
     small_bowel::{self, Valve},
     truth::{
         COORDINATES_NOTE, CollapsedTruth, DistractorTruth, FilledTruth, FoldTruth, GapTruth,
@@ -98,6 +104,18 @@ pub struct ColonOptions {
     /// of the rectum, sigmoid, descending, transverse and ascending colon, one of each two
     /// mottled with air: colon content, labelled 11, in the truth's `stool`.
     pub tagged_stool: bool,
+    /// A CT table under the patient on the dependent side (posterior supine, anterior prone):
+    /// a 2.5 mm shell (+350 HU) round a foam core (−935 HU), 45 mm thick at full size, in
+    /// every slice, running out of the field of view on both sides as on a real exam; the
+    /// skin lies flat on it over a contact strip, with a wedge of outside air beside it. Not
+    /// the patient: label 0, the air round it 1.
+    pub table: bool,
+    /// 4–8 skin folds: crevices of outside air (label 1) 1–2 mm wide, 15–40 mm deep and
+    /// 30–80 mm long at full size, 3–6 on the dependent side beside the table's contact and
+    /// 1–2 low in the scan (rising from the perineum beside the rectal catheter's exit, or
+    /// without one in the gluteal cleft off the scan's inferior edge); most closed over by skin
+    /// in part of their length, where axial slices hold their air enclosed in the body.
+    pub skin_folds: bool,
     /// A few separate small-bowel gas pockets (not colon).
     pub small_bowel_gas: bool,
     /// The bases of both lungs in the top slices (not colon).
@@ -122,6 +140,8 @@ impl Default for ColonOptions {
             opacified_small_bowel: false,
             rectal_tube: false,
             tagged_stool: false,
+            table: false,
+            skin_folds: false,
             small_bowel_gas: true,
             lung_bases: true,
             noise_hu: 20.0,
@@ -173,6 +193,7 @@ const STREAM_FILLED: u64 = 0xC010_0006;
 pub(super) const STREAM_BOWEL: u64 = 0xC010_0007;
 const STREAM_VALVE_POOL: u64 = 0xC010_0008;
 const STREAM_STOOL: u64 = 0xC010_0009;
+pub(super) const STREAM_SKIN_FOLDS: u64 = 0xC010_000A;
 
 /// Full-size height (z, mm) of the perineum's skin when the body has one (rectal tube): the
 /// rectum's wall ends ≈ 10.5 mm above the first slice, so this keeps ≥ 5 mm of tissue.
@@ -298,11 +319,14 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
     check_options(opts)?;
     let frame = Frame::new(opts.small)?;
     let floor = opts.rectal_tube.then(|| frame.pos([0.0, 0.0, FLOOR_Z]).z);
-    let body = make_body(&frame, opts.lung_bases, floor);
+    let gravity = if opts.prone { DVec3::NEG_Y } else { DVec3::Y };
+    let mut body = make_body(&frame, opts.lung_bases, floor);
+    if opts.table {
+        body.table = Some(skin::make_table(&frame, &body, gravity));
+    }
     let axis = make_axis(&frame)?;
     let segments = segments(&axis);
     check_anatomy(&frame, &axis, &body)?;
-    let gravity = if opts.prone { DVec3::NEG_Y } else { DVec3::Y };
     let mut tube = Tube::new(axis, frame.thin(WALL, 1.0), Ends::Round);
     let collapses = make_collapses(&frame, &segments, &opts.collapsed)?;
     tube.collapse = collapses.iter().map(|(c, _)| c.clone()).collect();
@@ -390,6 +414,17 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
         }));
         blobs.extend(b.blobs.iter().cloned());
     }
+    let skin_folds = if opts.skin_folds {
+        let near = Obstacles {
+            tube: &tube,
+            blobs: &blobs,
+            catheter: catheter.as_ref(),
+        };
+        skin::make_folds(&frame, &body, gravity, &near, opts.seed)
+    } else {
+        Vec::new()
+    };
+    body.folds = skin_folds.iter().map(|(f, _)| f.clone()).collect();
     distractors.extend(body.lungs.iter().map(|l| DistractorTruth {
         kind: "lung".into(),
         center_mm: [
@@ -491,6 +526,8 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
             wall_hu: c.hu,
         }),
         body_floor_z_mm: floor,
+        table: body.table.as_ref().map(|t| skin::table_truth(t, &body)),
+        skin_folds: skin_folds.into_iter().map(|(_, t)| t).collect(),
         noise_roi,
         materials_hu: materials(opts),
         labels: label::legend(),
@@ -555,6 +592,10 @@ fn materials(opts: &ColonOptions) -> Vec<(String, f64)> {
     if opts.rectal_tube {
         m.push(("catheter_plastic".into(), CATHETER_HU));
     }
+    if opts.table {
+        m.push(("table_shell".into(), body::TABLE_SHELL));
+        m.push(("table_foam".into(), body::TABLE_FOAM));
+    }
     m
 }
 
@@ -592,6 +633,8 @@ fn make_body(frame: &Frame, lungs: bool, floor: Option<f64>) -> Body {
             Vec::new()
         },
         floor,
+        table: None,
+        folds: Vec::new(),
         inv_w: 3.0 / frame.geom.spacing.iter().sum::<f64>(),
     }
 }
@@ -1308,8 +1351,8 @@ fn make_catheter(frame: &Frame, tube: &Tube, polyps: &[Blob], floor: f64) -> Res
     ))
 }
 
-/// A 12-voxel box of pure fat (far from colon, pockets, loops, catheter, spine, lungs and
-/// the rim) for
+/// A 12-voxel box of pure fat (far from colon, pockets, loops, catheter, spine, lungs, skin
+/// folds and the rim) for
 /// measuring the noise, found by a fixed scan.
 fn fat_roi(
     frame: &Frame,
@@ -1339,7 +1382,11 @@ fn fat_roi(
                     && blobs
                         .iter()
                         .all(|b| b.center.distance(c) - b.reach() >= margin)
-                    && catheter.is_none_or(|t| t.distance(c) - t.outer_radius() >= margin);
+                    && catheter.is_none_or(|t| t.distance(c) - t.outer_radius() >= margin)
+                    && body
+                        .folds
+                        .iter()
+                        .all(|f| f.plane_distance(c) - f.half_width - f.lining >= margin);
                 if ok {
                     return Some(RoiTruth {
                         min_ijk: [i - half_vox, j - half_vox, k - half_vox],
@@ -1511,4 +1558,83 @@ pub fn loop_room_report(knots: &[[f64; 3]], r: f64) -> Result<String> {
         );
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::raster::Background;
+
+    /// The body with a table and skin folds as [`colon`] makes it (folds clear of the colon
+    /// and, with `catheter`, of a rectal catheter leaving through a perineum).
+    fn body_on_table(small: bool, prone: bool, catheter: bool) -> Body {
+        let frame = Frame::new(small).expect("frame");
+        let gravity = if prone { DVec3::NEG_Y } else { DVec3::Y };
+        let floor = catheter.then(|| frame.pos([0.0, 0.0, FLOOR_Z]).z);
+        let mut body = make_body(&frame, true, floor);
+        body.table = Some(skin::make_table(&frame, &body, gravity));
+        let tube = Tube::new(
+            make_axis(&frame).expect("axis"),
+            frame.thin(WALL, 1.0),
+            Ends::Round,
+        );
+        let cath = floor.map(|f| make_catheter(&frame, &tube, &[], f).expect("catheter"));
+        let near = Obstacles {
+            tube: &tube,
+            blobs: &[],
+            catheter: cath.as_ref(),
+        };
+        body.folds = skin::make_folds(&frame, &body, gravity, &near, 1)
+            .into_iter()
+            .map(|(f, _)| f)
+            .collect();
+        body
+    }
+
+    /// The rows' shortcuts (plain air, table, fat) give exactly what [`Background::sample`]
+    /// gives, next to the table, the contact strip, the wedge and every skin fold.
+    #[test]
+    fn rows_with_the_table_and_folds_are_what_sample_gives() {
+        for (small, prone, catheter) in [
+            (true, true, true),
+            (true, false, false),
+            (false, true, true),
+            (false, false, false),
+        ] {
+            let frame = Frame::new(small).expect("frame");
+            let body = body_on_table(small, prone, catheter);
+            assert!(body.folds.len() >= 4, "{} folds", body.folds.len());
+            let g = &frame.geom;
+            let [nx, ny, nz] = g.dims;
+            let [sx, sy, sz] = g.spacing;
+            // Every slice of the small phantom; at full size the first ones (perineum, the
+            // gluteal folds) and those through each fold's middle.
+            let slices: Vec<usize> = if small {
+                (0..nz).collect()
+            } else {
+                (0..8)
+                    .chain(body.folds.iter().map(|f| {
+                        let mid = f.mouth + f.along * 0.5 * (f.span.0 + f.span.1);
+                        ((mid.z / sz).round().max(0.0) as usize).min(nz - 1)
+                    }))
+                    .collect()
+            };
+            let (mut hu, mut lab) = (vec![0.0; nx], vec![0u8; nx]);
+            for k in slices {
+                let z = k as f64 * sz;
+                for j in 0..ny {
+                    let y = j as f64 * sy;
+                    body.fill_row(y, z, sx, &mut hu, &mut lab);
+                    for i in 0..nx {
+                        let want = body.sample(DVec3::new(i as f64 * sx, y, z));
+                        assert!(
+                            (hu[i], lab[i]) == want,
+                            "small {small} prone {prone}: voxel ({i}, {j}, {k}) row {:?}, sample {want:?}",
+                            (hu[i], lab[i])
+                        );
+                    }
+                }
+            }
+        }
+    }
 }

@@ -14,10 +14,11 @@
 //! stretches filled with fluid (no gas, but lumen); opacified small-bowel loops (oral
 //! contrast, no gas) whose terminal ileum opens into a caecal pool, so that they and the
 //! pool are one bright region; a rectal catheter that joins the colon's gas to the air
-//! outside the body; grey levels quantised as an 8-bit export leaves them. The true
-//! centerline runs on through every gap in the gas. Without the options the phantoms are
-//! bit for bit what they were before the options existed (the new choices draw from their
-//! own random streams).
+//! outside the body; a CT table under the patient and skin folds, whose air an axial
+//! outside-air flood finds enclosed in the body; grey levels quantised as an 8-bit export
+//! leaves them. The true centerline runs on through every gap in the gas. Without the
+//! options the phantoms are bit for bit what they were before the options existed (the new
+//! choices draw from their own random streams).
 //!
 //! Everything is deterministic from the seed, whatever the number of threads.
 //!
@@ -32,6 +33,7 @@ pub mod pipe;
 pub mod polyp;
 pub mod raster;
 pub use voyage_core::rng;
+pub mod skin;
 pub mod small_bowel;
 pub mod truth;
 pub mod tube;
@@ -40,16 +42,17 @@ pub use colon::{ColonOptions, colon};
 pub use pipe::pipe;
 pub use truth::{
     CollapsedTruth, DistractorTruth, FilledTruth, FoldTruth, GapTruth, LoopTruth, PolypTruth,
-    PoolTruth, RectalTubeTruth, RoiTruth, SegmentTruth, StoolTruth, Truth,
+    PoolTruth, RectalTubeTruth, RoiTruth, SegmentTruth, SkinFoldTruth, StoolTruth, TableTruth,
+    Truth,
 };
 
 use voyage_core::Volume;
 
 /// Values of [`Phantom::labels`]: what each voxel is (by the material at its centre).
 pub mod label {
-    /// Body tissue, fat, water, tank: anything not listed below.
+    /// Body tissue, fat, water, tank, the CT table: anything not listed below.
     pub const OTHER: u8 = 0;
-    /// Air outside the body (or above and around the water tank).
+    /// Air outside the body (or above and around the water tank), skin folds' air included.
     pub const OUTSIDE_AIR: u8 = 1;
     /// Colon (or pipe) gas: lumen.
     pub const LUMEN_AIR: u8 = 2;

@@ -197,6 +197,8 @@ pub fn pipe(seed: u64) -> Result<Phantom> {
         stool: Vec::new(),
         rectal_tube: None,
         body_floor_z_mm: None,
+        table: None,
+        skin_folds: Vec::new(),
         noise_roi: Some(water_roi(&geom, center)),
         materials_hu: [
             ("air", AIR),

@@ -94,6 +94,12 @@ pub struct Truth {
     /// the body has one (with a rectal catheter); otherwise the body fills every slice.
     #[serde(default)]
     pub body_floor_z_mm: Option<f64>,
+    /// The CT table under the patient, if any (its voxels are label 0, the air around it 1).
+    #[serde(default)]
+    pub table: Option<TableTruth>,
+    /// Skin folds: crevices of outside air (label 1) cut into the body.
+    #[serde(default)]
+    pub skin_folds: Vec<SkinFoldTruth>,
     /// A box of homogeneous tissue (inclusive voxel ranges) for measuring noise.
     pub noise_roi: Option<RoiTruth>,
     /// Noise-free HU of the materials.
@@ -216,6 +222,46 @@ pub struct RectalTubeTruth {
     pub outer_radius_mm: f64,
     /// HU of its plastic wall.
     pub wall_hu: f64,
+}
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct TableTruth {
+    /// The body's dependent side, where the table lies: "posterior" (supine) or "anterior"
+    /// (prone).
+    pub side: String,
+    /// The plane y = top_y_mm is the table's top, on which the body rests; its far face is
+    /// at y = bottom_y_mm. It spans every slice.
+    pub top_y_mm: f64,
+    pub bottom_y_mm: f64,
+    pub x_range_mm: [f64; 2],
+    /// A shell this thick around the foam.
+    pub shell_mm: f64,
+    pub shell_hu: f64,
+    pub foam_hu: f64,
+    /// Where the skin lies flat on the table; beside it a wedge of outside air narrows to
+    /// nothing between skin and table.
+    pub contact_x_mm: [f64; 2],
+}
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct SkinFoldTruth {
+    /// "dependent" (beside the table's contact), "perineal" (rising from the perineum beside
+    /// the rectal catheter's exit) or "gluteal" (beside the posterior midline, from below the
+    /// scan's first slice).
+    pub region: String,
+    /// Where its mid-plane meets the skin, and the unit vectors into the body and along it:
+    /// its air is the slab within width_mm / 2 of the rectangle mouth + u·inward + l·along,
+    /// 0 ≤ u ≤ depth_mm, span_mm[0] ≤ l ≤ span_mm[1].
+    pub mouth_mm: [f64; 3],
+    pub inward: [f64; 3],
+    pub along: [f64; 3],
+    pub depth_mm: f64,
+    pub width_mm: f64,
+    pub span_mm: [f64; 2],
+    /// Over this stretch of l a bridge of skin bridge_mm thick closes its mouth: there its
+    /// air is enclosed in the body in the slices across it; None: open all along.
+    pub closed_mm: Option<[f64; 2]>,
+    pub bridge_mm: f64,
 }
 
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]

@@ -1,14 +1,16 @@
 //! The colon phantom's options that reproduce real CT colonography exams: a prone patient,
 //! several collapsed stretches, stretches filled with fluid, opacified small bowel joined to a
-//! caecal pool, a rectal catheter, quantised grey levels. Each test fails without its
-//! feature; one checks that the phantom without them is bit for bit what it was.
+//! caecal pool, a rectal catheter, a CT table and skin folds, quantised grey levels. Each
+//! test fails without its feature; one checks that the phantom without them is bit for bit
+//! what it was.
 //!
 //! Run with `cargo test --release -p voyage-phantom --test phantom_variants`.
 
 use std::{collections::VecDeque, path::PathBuf};
 
+use glam::DVec3;
 use voyage_core::Volume;
-use voyage_phantom::{self as phantom, ColonOptions, Phantom, Truth, label};
+use voyage_phantom::{self as phantom, ColonOptions, Phantom, SkinFoldTruth, Truth, label};
 
 fn small(opts: ColonOptions) -> Phantom {
     phantom::colon(&ColonOptions {
@@ -710,6 +712,193 @@ fn rectal_tube_joins_colon_gas_to_the_air_outside() {
 }
 
 // ---------------------------------------------------------------------------------------
+// Table and skin folds.
+
+fn v3(a: [f64; 3]) -> DVec3 {
+    DVec3::from_array(a)
+}
+
+/// A point of fold `f` at depth `u`, `l` along it (its mid-plane).
+fn fold_point(f: &SkinFoldTruth, u: f64, l: f64) -> [f64; 3] {
+    (v3(f.mouth_mm) + v3(f.inward) * u + v3(f.along) * l).to_array()
+}
+
+/// Whether voxel `idx` lies in a fold's air by the truth's geometry.
+fn in_fold(f: &SkinFoldTruth, v: &Volume<u8>, idx: usize) -> bool {
+    let d = v3(local(v, idx)) - v3(f.mouth_mm);
+    let (inward, along) = (v3(f.inward), v3(f.along));
+    let (u, l, w) = (d.dot(inward), d.dot(along), d.dot(inward.cross(along)));
+    w.abs() <= 0.5 * f.width_mm
+        && (0.0..=f.depth_mm).contains(&u)
+        && (f.span_mm[0]..=f.span_mm[1]).contains(&l)
+}
+
+/// On the table with skin folds, prone with a catheter and supine without: the table under
+/// the body on the dependent side in every slice (a bright shell round dark foam, not the
+/// patient), the skin flat on it over the contact strip with a wedge of outside air beside
+/// it; 4–8 folds of outside air, 3–6 beside the table and 1–2 low in the scan, some enclosed
+/// in axial slices, all joined to the outside air in 3D; the truth lumen as without them.
+#[test]
+fn table_and_skin_folds_lie_at_the_skin() {
+    for prone in [true, false] {
+        let opts = ColonOptions {
+            prone,
+            rectal_tube: prone,
+            tagged_fluid: true,
+            ..ColonOptions::default()
+        };
+        let p = small(ColonOptions {
+            table: true,
+            skin_folds: true,
+            ..opts.clone()
+        });
+        let plain = small(opts);
+        check_basics(&p);
+        assert!(
+            p.lumen.data() == plain.lumen.data(),
+            "prone {prone}: the truth lumen changed"
+        );
+        check_table(&p, prone);
+        check_folds_air(&p, prone);
+    }
+}
+
+fn check_table(p: &Phantom, prone: bool) {
+    let t = &p.truth;
+    let table = t.table.as_ref().expect("a table in the truth");
+    assert_eq!(table.side, if prone { "anterior" } else { "posterior" });
+    let [nx, ny, nz] = p.ct.dims();
+    let s = p.ct.spacing();
+    let (ct, lab) = (p.ct.data(), p.labels.data());
+    let down = (table.bottom_y_mm - table.top_y_mm).signum();
+    let row = |y: f64| ((y / s[1]).round() as usize).min(ny - 1);
+    let col = |x: f64| ((x / s[0]).round().max(0.0) as usize).min(nx - 1);
+    let at = |i: usize, j: usize, k: usize| i + nx * (j + ny * k);
+    // Wider than the field of view, as on a real exam.
+    assert!(table.x_range_mm[0] < 0.0 && table.x_range_mm[1] > (nx - 1) as f64 * s[0]);
+    let mid_x = 0.5 * (table.contact_x_mm[0] + table.contact_x_mm[1]);
+    let foam_row = row(0.5 * (table.top_y_mm + table.bottom_y_mm));
+    // Beside the contact strip, where the skin has left the table by ≥ 2 voxels.
+    let beside = col(table.contact_x_mm[1] + 25.0 * t.scale);
+    let mut foam = Vec::new();
+    for k in 0..nz {
+        for i in 0..nx {
+            foam.push(ct[at(i, foam_row, k)]);
+            assert_eq!(
+                lab[at(i, foam_row, k)],
+                label::OTHER,
+                "the table is not other"
+            );
+        }
+        // Through the shell: a bright voxel between foam and the top.
+        let shell = (0..=4)
+            .map(|d| row(table.top_y_mm + down * d as f64 * s[1]))
+            .map(|j| ct[at(col(mid_x), j, k)])
+            .max()
+            .unwrap_or(i16::MIN);
+        assert!(
+            shell > 100,
+            "slice {k}: no shell under the body ({shell} HU)"
+        );
+        if t.body_floor_z_mm
+            .is_some_and(|f| (k as f64 * s[2]) < f + 2.0 * s[2])
+        {
+            continue;
+        }
+        // The body rests on the table over the contact strip...
+        let skin = row(table.top_y_mm - down * s[1]);
+        assert_ne!(
+            lab[at(col(mid_x), skin, k)],
+            label::OUTSIDE_AIR,
+            "slice {k}: the body does not rest on the table"
+        );
+        // ...and beside it outside air lies between skin and table.
+        assert_eq!(
+            lab[at(beside, skin, k)],
+            label::OUTSIDE_AIR,
+            "slice {k}: no air between skin and table beside the contact"
+        );
+    }
+    foam.sort_unstable();
+    let median = foam[foam.len() / 2] as f64;
+    assert!(
+        (median - table.foam_hu).abs() < 10.0,
+        "foam median {median} HU, made of {} HU",
+        table.foam_hu
+    );
+}
+
+fn check_folds_air(p: &Phantom, prone: bool) {
+    let t = &p.truth;
+    let folds = &t.skin_folds;
+    let count = |r: &str| folds.iter().filter(|f| f.region == r).count();
+    let low = if prone { "perineal" } else { "gluteal" };
+    assert!(
+        (4..=8).contains(&folds.len())
+            && (3..=6).contains(&count("dependent"))
+            && (1..=2).contains(&count(low)),
+        "prone {prone}: folds {:?}",
+        folds.iter().map(|f| &f.region).collect::<Vec<_>>()
+    );
+    assert!(folds.iter().any(|f| f.closed_mm.is_some()));
+    let dims = p.ct.dims();
+    let (ct, lab) = (p.ct.data(), p.labels.data());
+    // Deep in each fold, where it is not closed over: outside air.
+    for f in folds {
+        let l = match f.closed_mm {
+            Some([a, _]) if a > f.span_mm[0] => 0.5 * (f.span_mm[0] + a),
+            Some([_, b]) => 0.5 * (b + f.span_mm[1]),
+            None => 0.5 * (f.span_mm[0] + f.span_mm[1]),
+        };
+        let deep = voxel(&p.labels, fold_point(f, 0.6 * f.depth_mm, l));
+        assert_eq!(
+            lab[deep],
+            label::OUTSIDE_AIR,
+            "prone {prone}: a {} fold's air is not outside air",
+            f.region
+        );
+    }
+    let air: Vec<usize> = (0..lab.len())
+        .filter(|&i| ct[i] < -500 && folds.iter().any(|f| in_fold(f, &p.labels, i)))
+        .collect();
+    assert!(
+        air.iter()
+            .all(|&i| lab[i] == label::OUTSIDE_AIR && p.lumen.data()[i] == 0)
+    );
+    // In some axial slices a fold's air is enclosed in the body...
+    let [nx, ny, nz] = dims;
+    let mut enclosed = 0;
+    for k in 0..nz {
+        let from_edge = flood6([nx, ny, 1], rim2d(nx, ny), |i| ct[i + k * nx * ny] < -500);
+        enclosed += air
+            .iter()
+            .filter(|&&i| i / (nx * ny) == k && !from_edge[i % (nx * ny)])
+            .count();
+    }
+    assert!(
+        enclosed > 0,
+        "prone {prone}: no fold air enclosed in a slice"
+    );
+    // ...yet every fold is outside air in 3D. An oblique slit one or two voxels wide breaks
+    // up under the threshold into pieces that touch only at edges, so not every voxel is
+    // 6-connected to the rest.
+    let outside = flood6(dims, border(dims), |i| ct[i] < -500);
+    for f in folds {
+        assert!(
+            air.iter().any(|&i| outside[i] && in_fold(f, &p.labels, i)),
+            "prone {prone}: a {} fold's air is not joined to the outside",
+            f.region
+        );
+    }
+    let joined = air.iter().filter(|&&i| outside[i]).count();
+    assert!(
+        joined * 100 >= air.len() * 80,
+        "prone {prone}: {joined} of {} fold air voxels joined to the outside",
+        air.len()
+    );
+}
+
+// ---------------------------------------------------------------------------------------
 // Quantisation.
 
 /// Tagged stool: two lumps in each segment from the rectum to the ascending colon, bright,
@@ -819,6 +1008,8 @@ fn every_option(seed: u64) -> ColonOptions {
         collapsed: names(&["sigmoid", "descending"]),
         fluid_filled: names(&["transverse"]),
         rectal_tube: true,
+        table: true,
+        skin_folds: true,
         quantize_hu: Some(8.0),
         ..ColonOptions::default()
     }
@@ -849,6 +1040,8 @@ fn every_option_is_deterministic_whatever_the_threads() {
         collapsed: names(&["transverse"]),
         fluid_filled: names(&["descending"]),
         rectal_tube: true,
+        table: true,
+        skin_folds: true,
         quantize_hu: Some(4.0),
         ..ColonOptions::default()
     };
@@ -891,6 +1084,8 @@ fn older_truth_files_still_read() {
         "ileocecal_valve_mm",
         "rectal_tube",
         "body_floor_z_mm",
+        "table",
+        "skin_folds",
     ] {
         obj.remove(key);
     }

@@ -72,6 +72,16 @@ pub struct PhantomArgs {
     /// (the body then ends in a perineum just above the first slice).
     #[arg(long)]
     pub rectal_tube: bool,
+    /// Colon only: a CT table under the patient on the dependent side (posterior, or anterior
+    /// with --prone): a carbon-fibre shell round a foam core, the skin flat on it over a
+    /// contact strip with a wedge of outside air beside it.
+    #[arg(long)]
+    pub table: bool,
+    /// Colon only: 4–8 skin folds, thin crevices of outside air on the dependent side and low
+    /// in the scan (beside the rectal catheter's exit with --rectal-tube), most closed over by
+    /// skin in part of their length: air enclosed in the body in some axial slices.
+    #[arg(long)]
+    pub skin_folds: bool,
     /// Colon only: round the CT's values to multiples of HU (after the noise), as a windowed
     /// 8-bit export leaves them.
     #[arg(long, value_name = "HU")]
@@ -119,6 +129,8 @@ fn make(a: &PhantomArgs) -> Result<Phantom> {
             opacified_small_bowel: a.opacified_small_bowel,
             rectal_tube: a.rectal_tube,
             tagged_stool: a.tagged_stool,
+            table: a.table,
+            skin_folds: a.skin_folds,
             small_bowel_gas: !a.no_small_bowel_gas,
             lung_bases: !a.no_lungs,
             noise_hu: a.noise,
