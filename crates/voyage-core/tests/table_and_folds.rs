@@ -6,8 +6,7 @@
 //! tube. Each check first makes sure the phantom holds the trap: fold air enclosed in some
 //! axial slices.
 //!
-//! Run with `cargo test --release -p voyage-core --test table_and_folds` (`-- --ignored` for
-//! the full-size cases the segmentation still gets wrong).
+//! Run with `cargo test --release -p voyage-core --test table_and_folds`.
 
 use glam::DVec3;
 use voyage_core::{ComponentKind, SegmentOptions, Segmentation, segment};
@@ -229,13 +228,11 @@ fn supine_on_the_table_without_a_catheter_has_no_tube() {
 }
 
 #[test]
-#[ignore = "segmentation fooled: a perineal skin fold beside the catheter's exit (5.1 ml of air, open to the air under the perineum, enclosed in every axial slice) is taken as the colon's first segment ('sigmoid', order 0) and bridged 42 mm to the colon: 9030 fold-air voxels in the lumen"]
 fn prone_full_size_on_the_table_the_catheter_is_the_only_tube() {
     check("prone, full size", prone(false, 1));
 }
 
 #[test]
-#[ignore = "segmentation fooled: a gluteal skin fold closed over its whole length and cut by the scan's inferior edge (5.1 ml of air, enclosed in every axial slice) is taken as the colon's first segment ('rectum–sigmoid', order 0) and bridged 138 mm to the colon: 9039 fold-air voxels in the lumen"]
 fn supine_full_size_on_the_table_without_a_catheter_has_no_tube() {
     check("supine, full size, seed 3", supine(false, 3));
 }

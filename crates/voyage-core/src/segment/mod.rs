@@ -621,10 +621,24 @@ fn segment_axial(
             vol.geometry().describe_point(opts.seeds_mm[i])
         )));
     }
-    // A segment: big enough, or seeded; never excluded.
+    // Crevices: gas thin all over, a skin fold's (closed over at the skin in every axial
+    // slice, it is not found as outside air), not bowel.
+    let crevice: Vec<bool> = compartments
+        .iter()
+        .enumerate()
+        .map(|(c, comp)| {
+            let ml = comp.gas_voxels as f64 * voxel_ml;
+            (opts.chain.min_segment_ml..=CREVICE_MAX_ML).contains(&ml)
+                && inscribed_radius_mm(&cruns, &crun_comp, c as u32, &comp.bbox, vol.spacing())
+                    < CREVICE_MM
+        })
+        .collect();
+    // A segment: big enough and no crevice, or seeded; never excluded.
     let candidate = |c: u32| {
         !excluded.contains(&c)
-            && (compartments[c as usize].gas_voxels as f64 * voxel_ml >= opts.chain.min_segment_ml
+            && ((compartments[c as usize].gas_voxels as f64 * voxel_ml
+                >= opts.chain.min_segment_ml
+                && !crevice[c as usize])
                 || seeded.contains(&c))
     };
     // The rectum: the candidate holding the lowest voxel in the patient frame (a seed makes
@@ -892,6 +906,11 @@ fn segment_axial(
         }
         let kind = classes[c as usize];
         let reason = match why {
+            Left::TooSmall if crevice[c as usize] => format!(
+                "{:.1} ml of gas in a crevice less than {:.0} mm across (a skin fold), not bowel",
+                comp.gas_voxels as f64 * voxel_ml,
+                2.0 * CREVICE_MM
+            ),
             Left::TooSmall => format!(
                 "{:.1} ml of gas, less than a colon segment's {} ml",
                 comp.gas_voxels as f64 * voxel_ml,
@@ -1058,6 +1077,46 @@ fn colon_box(
             a.union(&comps[c as usize].bbox)
         });
     lps_box(geom, &b)
+}
+
+/// Gas of a compartment (up to [`CREVICE_MAX_ML`]) whose widest inscribed ball is narrower
+/// than this radius (mm) lies in a crevice: a skin fold (1–2 mm), not a bowel, whose gas
+/// even collapsed holds bubbles wider than 5 mm.
+const CREVICE_MM: f64 = 2.5;
+const CREVICE_MAX_ML: f64 = 50.0;
+
+/// The radius (mm) of the widest ball inside compartment `c` (its runs in `runs`, within
+/// `bbox`).
+fn inscribed_radius_mm(
+    runs: &Runs,
+    run_comp: &[u32],
+    c: u32,
+    bbox: &Bbox,
+    spacing: [f64; 3],
+) -> f64 {
+    // One voxel of margin: the wall all round.
+    let dims = bbox.widths().map(|w| w + 2);
+    let Ok(g) = crate::Geometry::new(dims, spacing, [0.0; 3]) else {
+        return f64::INFINITY;
+    };
+    let Ok(mut mask) = Volume::filled(g, 0u8) else {
+        return f64::INFINITY;
+    };
+    for k in bbox.lo[2]..=bbox.hi[2] {
+        for j in bbox.lo[1]..=bbox.hi[1] {
+            for r in runs.row(j, k).filter(|&r| run_comp[r] == c) {
+                let Run { x0, x1 } = runs.runs[r];
+                let row = mask
+                    .geometry()
+                    .index(0, j - bbox.lo[1] + 1, k - bbox.lo[2] + 1);
+                let from = row + x0 as usize - bbox.lo[0] + 1;
+                mask.data_mut()[from..from + (x1 - x0) as usize].fill(1);
+            }
+        }
+    }
+    let grid = crate::grid::BoxGrid::around([[0; 3], dims.map(|d| d - 1)], 0, dims);
+    let ds = crate::distance::distance_to_wall_in(&mask, grid);
+    ds.data.iter().cloned().fold(0.0f32, f32::max) as f64
 }
 
 /// Why a segment the user excluded is not in the colon.
