@@ -411,7 +411,7 @@ pub fn prepare(
     // loops' pools lie against one thin wall, the lumen there is one voxel from a hole, and
     // on `ctc/prone-tagged` the centerline's course through the large compartment moved by
     // up to 300 mm with them. They are lumen again for Ds, Dt and the surface.
-    let beside: Vec<usize> = seg
+    let mut beside: Vec<usize> = seg
         .pools_grown
         .iter()
         .copied()
@@ -429,7 +429,18 @@ pub fn prepare(
     if cl_opts.target_mm.is_none() {
         cl_opts.target_mm = seg.cecum_voxel.map(|v| centerline::mm_of(&seg.lumen, v));
     }
-    let mut traced = trace(&mut seg, &grid, &cl_opts, opts, &mut laps)?;
+    let mut traced = match trace(&mut seg, &grid, &cl_opts, opts, &mut laps) {
+        Ok(t) => t,
+        // Without them the colon came apart (cleansing took wall voxels out beside them):
+        // traced with them.
+        Err(_) if !beside.is_empty() => {
+            set_voxels(&mut seg.lumen, &beside, 1);
+            seg.lumen_voxels += beside.len();
+            beside.clear();
+            trace(&mut seg, &grid, &cl_opts, opts, &mut laps)?
+        }
+        Err(e) => return Err(e),
+    };
     // Holes between touching loops that the centerline went through: plugged, traced again
     // (a hole plugged can show the next).
     let mut plugged = 0;
