@@ -10,7 +10,11 @@ use std::{cmp::Reverse, collections::BinaryHeap};
 
 use glam::DVec3;
 
-use super::work::{Bbox, Key};
+use super::{
+    chain::Coarse,
+    compartments::Compartments,
+    work::{BRIDGE, Bbox, GAS, Key, LAYER, POOL},
+};
 use crate::Volume;
 
 /// A search box with more voxels than this is searched on coarser blocks.
@@ -216,6 +220,100 @@ fn line_voxels(pts: &[[usize; 3]]) -> Vec<[usize; 3]> {
         }
     }
     out
+}
+
+/// Bridges between compartments on the chain's coarse grid: from a block of one to a block
+/// of another, through `ct` (None: a mask's background), around the other gas of `work`.
+pub(super) struct Bridges<'a> {
+    pub(super) coarse: &'a Coarse,
+    pub(super) work: &'a Volume<u8>,
+    pub(super) parts: &'a Compartments,
+    pub(super) ct: Option<&'a Volume<i16>>,
+}
+
+impl Bridges<'_> {
+    /// The voxel of compartment c nearest block b's middle (of its gas only, with `gas`).
+    pub(super) fn voxel_of_comp(&self, block: usize, c: u32, gas: bool) -> Option<[usize; 3]> {
+        let bx = self.coarse.voxels_of(block, self.work.dims());
+        let mid = [0, 1, 2].map(|a| (bx.lo[a] + bx.hi[a]) / 2);
+        let mut best: Option<(usize, [usize; 3])> = None;
+        for k in bx.lo[2]..=bx.hi[2] {
+            for j in bx.lo[1]..=bx.hi[1] {
+                for i in bx.lo[0]..=bx.hi[0] {
+                    if (!gas || self.work.get(i, j, k) == GAS)
+                        && self.parts.at([i, j, k]) == Some(c)
+                    {
+                        let d = (0..3)
+                            .map(|a| mid[a].abs_diff([i, j, k][a]).pow(2))
+                            .sum::<usize>();
+                        if best.is_none_or(|b| d < b.0) {
+                            best = Some((d, [i, j, k]));
+                        }
+                    }
+                }
+            }
+        }
+        best.map(|b| b.1)
+    }
+
+    /// The cheapest path from block `from` of compartment `a` to block `to` of `b`.
+    pub(super) fn bridge(&self, from: usize, to: usize, a: u32, b: u32) -> Option<Path> {
+        let (va, vb) = (
+            self.voxel_of_comp(from, a, false)?,
+            self.voxel_of_comp(to, b, false)?,
+        );
+        let own = |v: [usize; 3]| self.parts.at(v).is_some_and(|c| c == a || c == b);
+        let other = |v: [usize; 3]| {
+            matches!(self.work.get(v[0], v[1], v[2]), GAS | POOL | LAYER) && !own(v)
+        };
+        cheapest_path(
+            self.ct,
+            self.work.dims(),
+            self.work.spacing(),
+            va,
+            vb,
+            own,
+            other,
+        )
+    }
+}
+
+/// A tube of `radius_mm` around a bridge's path: BRIDGE where there is neither gas nor a pool.
+pub(super) fn lay_bridge(
+    work: &mut Volume<u8>,
+    path: &[[usize; 3]],
+    radius_mm: f64,
+    added: &mut Vec<usize>,
+) {
+    let g = work.geometry().clone();
+    let r = g.spacing.map(|s| (radius_mm / s).floor() as i64);
+    let mut ball = Vec::new();
+    for dz in -r[2]..=r[2] {
+        for dy in -r[1]..=r[1] {
+            for dx in -r[0]..=r[0] {
+                let d2 = (dx as f64 * g.spacing[0]).powi(2)
+                    + (dy as f64 * g.spacing[1]).powi(2)
+                    + (dz as f64 * g.spacing[2]).powi(2);
+                if d2 <= radius_mm * radius_mm {
+                    ball.push([dx, dy, dz]);
+                }
+            }
+        }
+    }
+    for v in path {
+        for o in &ball {
+            let q = [v[0] as i64 + o[0], v[1] as i64 + o[1], v[2] as i64 + o[2]];
+            if (0..3).any(|a| q[a] < 0 || q[a] >= g.dims[a] as i64) {
+                continue;
+            }
+            let i = g.index(q[0] as usize, q[1] as usize, q[2] as usize);
+            let x = &mut work.data_mut()[i];
+            if *x == 0 {
+                *x = BRIDGE;
+                added.push(i);
+            }
+        }
+    }
 }
 
 #[cfg(test)]

@@ -13,10 +13,13 @@ use std::{cmp::Reverse, collections::BinaryHeap};
 use glam::DVec3;
 
 use super::{
-    bridge::Path,
+    bridge::{Bridges, Path},
+    compartments::{Candidates, Compartments, colon_box},
     course::Course,
+    fluid::Pooled,
     work::{Bbox, Key},
 };
+use crate::Volume;
 
 /// How many of the nearest free compartments are bridged to at each step.
 const CANDIDATES: usize = 3;
@@ -249,6 +252,153 @@ pub enum Role {
     Minor,
     /// Too small, or excluded.
     Out,
+}
+
+/// Step 7's outcome: the chain of compartments, on its coarse grid, and where it ends.
+pub(super) struct Chained {
+    pub(super) coarse: Coarse,
+    pub(super) chain: Chain,
+    /// The pole of the cecum's gas, when the course ended there.
+    pub(super) cecum_voxel: Option<[usize; 3]>,
+    /// What the user must hear of (a seed's gas joined, or not).
+    pub(super) warnings: Vec<String>,
+}
+
+/// Step 7: the chain of `cand`'s compartments from the rectum, bridged through the CT (`ct`;
+/// None: a mask's background) between the labels of `pooled`, the seeds' gas joined at its
+/// end, the excluded said so.
+pub(super) fn colon(
+    parts: &Compartments,
+    cand: &Candidates,
+    pooled: &Pooled,
+    ct: Option<&Volume<i16>>,
+    opts: &ChainOptions,
+) -> Chained {
+    let geom = pooled.work.geometry();
+    let coarse = coarse_grid(parts, cand, &pooled.cbox, geom.dims, geom.spacing);
+    let ways = Bridges {
+        coarse: &coarse,
+        work: &pooled.work,
+        parts,
+        ct,
+    };
+    let course = Course::new(
+        geom,
+        colon_box(
+            &parts.list,
+            cand.rectum,
+            |c| cand.roles[c as usize] == Role::Major,
+            geom,
+        ),
+    );
+    let mut ch = chain(
+        &coarse,
+        &parts.list,
+        cand.rectum,
+        &cand.roles,
+        &course,
+        opts,
+        |from, to, a, b| ways.bridge(from, to, a, b),
+    );
+    // The pole of the cecum's gas: fluid may lie lower, and is cleansed or cut away.
+    let cecum_voxel = ch.cecum.as_ref().and_then(|c| {
+        c.blocks
+            .iter()
+            .find_map(|&b| ways.voxel_of_comp(b, c.comp, true))
+    });
+    let warnings = join_seeds(&mut ch, &coarse, parts, cand, |from, to, a, b| {
+        ways.bridge(from, to, a, b)
+    });
+    for (c, why) in &mut ch.left {
+        if cand.excluded.contains(c) {
+            *why = Left::Excluded;
+        }
+    }
+    Chained {
+        coarse,
+        chain: ch,
+        cecum_voxel,
+        warnings,
+    }
+}
+
+impl Chained {
+    /// The gas of the chained compartments (ml).
+    pub(super) fn gas_ml(&self, parts: &Compartments) -> f64 {
+        self.chain.links.iter().map(|l| parts.gas_ml(l.comp)).sum()
+    }
+}
+
+/// The coarse grid of the candidates (and the rectum) within `cbox`.
+fn coarse_grid(
+    parts: &Compartments,
+    cand: &Candidates,
+    cbox: &Bbox,
+    dims: [usize; 3],
+    spacing: [f64; 3],
+) -> Coarse {
+    let mut coarse = Coarse::new(dims, spacing);
+    for k in cbox.lo[2]..=cbox.hi[2] {
+        for j in cbox.lo[1]..=cbox.hi[1] {
+            for r in parts.runs.row(j, k) {
+                let c = parts.run_comp[r];
+                if c == cand.rectum || cand.candidate[c as usize] {
+                    coarse.mark_run(
+                        parts.runs.runs[r].x0 as usize,
+                        parts.runs.runs[r].x1 as usize,
+                        j,
+                        k,
+                        c,
+                    );
+                }
+            }
+        }
+    }
+    coarse
+}
+
+/// A seed's gas is colon, wherever the chain went: joined at the chain's end (`bridge` as in
+/// [`chain`]). Returns what the user must hear of it.
+fn join_seeds(
+    ch: &mut Chain,
+    coarse: &Coarse,
+    parts: &Compartments,
+    cand: &Candidates,
+    bridge: impl Fn(usize, usize, u32, u32) -> Option<Path>,
+) -> Vec<String> {
+    let mut warnings = Vec::new();
+    for &s in &cand.seeded {
+        if ch.links.iter().any(|l| l.comp == s) {
+            continue;
+        }
+        let last = ch.links.last().map_or(0, |l| l.exit);
+        let at = coarse.centre_mm(last);
+        let lowest = coarse.block_of(parts.list[s as usize].lowest);
+        let entry = [lowest]
+            .into_iter()
+            .chain([coarse.farthest(s, lowest).0])
+            .min_by(|&x, &y| {
+                coarse
+                    .centre_mm(x)
+                    .distance(at)
+                    .total_cmp(&coarse.centre_mm(y).distance(at))
+            })
+            .unwrap_or(0);
+        let from = ch.links.last().map(|l| l.comp).unwrap_or(cand.rectum);
+        if let Some(p) = bridge(last, entry, from, s) {
+            warnings.push(format!("the seed's gas was not joined to the colon by itself: joined to its end through {:.0} mm of tissue", p.length_mm));
+            ch.links.push(Link {
+                comp: s,
+                entry,
+                exit: coarse.farthest(s, entry).0,
+            });
+            ch.gaps.push(p);
+            ch.left.retain(|(c, _)| *c != s);
+        } else {
+            warnings.push(format!("the seed's gas ({:.0} ml) could not be joined to the colon: no way to it through the CT", parts.gas_ml(s)));
+        }
+    }
+    warnings
 }
 
 /// Orders the colon's compartments from `rectum` to the cecum.

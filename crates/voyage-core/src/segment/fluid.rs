@@ -16,12 +16,24 @@
 //! The lines are walked through their labelled voxels only (gas and bright runs, row by
 //! row), never through the empty voxels between: a scan's bone is bright too, and the box
 //! around the gas is most of the volume.
+//!
+//! The step is [`pool`]: the gas and its pools as working labels, and gravity. Once the colon
+//! is chained, [`whole_pools`] takes in its fluid beyond the columns, and [`fill_fluid`] the
+//! fluid a bridge crosses.
 
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::work::{Bbox, GAS, LAYER, POOL};
-use crate::{Geometry, anatomy::PatientFrame};
+use super::{
+    SegmentOptions,
+    components::Found,
+    runs::{Runs, label_rows, paint, row_of, runs_box, runs_near},
+    work::{BRIDGE, Bbox, GAS, LAYER, POOL},
+};
+use crate::{
+    Geometry, Result, Volume,
+    anatomy::{Orientation, PatientFrame, PatientPosition, PositionSource},
+};
 
 /// A pool deeper than this below its gas is not one colon segment's fluid. (The prone
 /// `ctc/prone-tagged`'s descending pool is about 70 mm deep: at 60 mm its floor was cut off
@@ -505,6 +517,229 @@ pub fn above_half(hu: &[i16], v: usize, dims: [usize; 3], tissue_hu: i16) -> boo
         .unwrap_or(hu[v])
         .max(hu[v]);
     2 * hu[v] as i32 >= max as i32 + tissue_hu as i32
+}
+
+/// Steps 5 and 6 on the gas: the working labels (gas, and the pools under it with their
+/// layers) and the patient's orientation.
+pub(super) struct Pooled {
+    /// Working labels in the volume that becomes the lumen.
+    pub(super) work: Volume<u8>,
+    pub(super) orientation: Orientation,
+    /// Fluid lies below the gas, at most a pool's depth away: everything from here on happens
+    /// in this box.
+    pub(super) cbox: Bbox,
+    /// Voxels labelled pool or layer.
+    pub(super) pooled: usize,
+    /// Per row (j + ny·k): whether it holds any of them (empty without bright runs).
+    pub(super) pool_rows: Vec<bool>,
+}
+
+/// Labels the gas of `found`, finds gravity (given, else from the air–fluid levels, else
+/// supine assumed) and labels the pools under the gas: the fluid at or above `fluid_hu`.
+pub(super) fn pool(
+    vol: &Volume<i16>,
+    opts: &SegmentOptions,
+    found: &Found,
+    fluid_hu: Option<i16>,
+    from_mask: bool,
+) -> Result<Pooled> {
+    let gas = |r: usize| found.gas_run(r);
+    let mut work = Volume::filled(vol.geometry().clone(), 0u8)?;
+    paint(&mut work, &found.runs, |r| gas(r).then_some(GAS));
+    let Some(gas_box) = runs_box(&found.runs, vol.dims(), gas) else {
+        return Err(found.no_colon(opts, from_mask));
+    };
+    let mut orientation = given_or_assumed(opts.position);
+    let Some(bright) = &found.bright else {
+        return Ok(Pooled {
+            work,
+            orientation,
+            cbox: gas_box,
+            pooled: 0,
+            pool_rows: Vec::new(),
+        });
+    };
+    let nx = vol.dims()[0];
+    let cbox = gas_box.grown(
+        vol.spacing()
+            .map(|s| (MAX_DEPTH_MM / s).ceil() as usize + 2),
+        vol.dims(),
+    );
+    let rows = label_rows(&found.runs, gas, bright, &cbox, nx, |_, _, _| true);
+    if opts.position.is_none()
+        && let Some(g) =
+            gravity_from_levels(&level_rows(found, bright, &cbox, nx), vol.geometry(), &cbox)
+    {
+        orientation = Orientation::new(
+            PatientPosition::from_gravity(g),
+            PositionSource::AirFluidLevels,
+        );
+    }
+    let threshold = fluid_hu.unwrap_or(i16::MAX);
+    let marks = pools(&rows, vol.geometry(), &cbox, orientation.gravity(), |v| {
+        vol.data()[v] >= threshold
+    });
+    let pooled = marks.len();
+    let pool_rows = mark(&mut work, marks);
+    Ok(Pooled {
+        work,
+        orientation,
+        cbox,
+        pooled,
+        pool_rows,
+    })
+}
+
+/// The position given, else supine assumed.
+fn given_or_assumed(position: Option<(PatientPosition, PositionSource)>) -> Orientation {
+    match position {
+        Some((p, src)) => Orientation::new(p, src),
+        None => Orientation::new(PatientPosition::Hfs, PositionSource::Assumed),
+    }
+}
+
+/// Writes the pools' labels into `work`; returns per row (j + ny·k) whether it holds any.
+fn mark(work: &mut Volume<u8>, marks: Vec<Mark>) -> Vec<bool> {
+    let [nx, ny, nz] = work.dims();
+    let mut rows = vec![false; ny * nz];
+    for (idx, label) in marks {
+        work.data_mut()[idx] = label;
+        rows[idx / nx] = true;
+    }
+    rows
+}
+
+/// The gas runs and bright runs where air–fluid levels may lie: a level lies within a layer's
+/// thickness of gas, so only gas near bright runs and bright runs near gas (not bone, most of
+/// them) are looked at for it.
+fn level_rows(found: &Found, bright: &Runs, cbox: &Bbox, nx: usize) -> LabelRows {
+    let runs = &found.runs;
+    let all = |_: usize| true;
+    let near_gas =
+        |x: (u32, u32), j: usize, k: usize| runs_near(runs, &|r| found.gas_run(r), x, j, k, 3);
+    let gas_near_bright = |r: usize| {
+        found.gas_run(r) && {
+            let (j, k) = row_of(runs, r);
+            runs_near(bright, &all, (runs.runs[r].x0, runs.runs[r].x1), j, k, 3)
+        }
+    };
+    label_rows(runs, gas_near_bright, bright, cbox, nx, near_gas)
+}
+
+impl Pooled {
+    /// The warning when the patient's position was assumed.
+    pub(super) fn position_warning(&self, from_mask: bool) -> Option<String> {
+        (self.orientation.source == PositionSource::Assumed).then(|| if from_mask {
+            "patient position unknown (a mask has no fluid levels): supine assumed; give --position if not".to_string()
+        } else {
+            "patient position unknown (no PatientPosition, no air–fluid level seen): supine assumed; give --position if not".to_string()
+        })
+    }
+}
+
+/// Soft tissue's HU: the bowel wall between two pools.
+const TISSUE_HU: i16 = 40;
+
+/// Fluid filling a bridged stretch: the bright voxels reached from the path's bright voxels
+/// within `reach_mm`, through bright voxels.
+pub(super) fn fill_fluid(
+    work: &mut Volume<u8>,
+    path: &[[usize; 3]],
+    reach_mm: f64,
+    bright: impl Fn(usize) -> bool,
+    added: &mut Vec<usize>,
+) {
+    let g = work.geometry().clone();
+    let seeds: Vec<usize> = path
+        .iter()
+        .map(|v| g.index(v[0], v[1], v[2]))
+        .filter(|&i| work.data()[i] == 0 && bright(i))
+        .collect();
+    grow_bright(
+        work,
+        seeds,
+        (reach_mm, None),
+        &bright,
+        &bright,
+        BRIDGE,
+        added,
+    );
+}
+
+/// The colon's tagged fluid beyond its pools' columns: bright voxels within
+/// [`POOL_REACH_MM`] of the lumen's bright voxels (`lumen` is 0/1, in `lumen_box`),
+/// added to the lumen. Returns them.
+pub(super) fn whole_pools(
+    lumen: &mut Volume<u8>,
+    ct: &Volume<i16>,
+    lumen_box: Option<Bbox>,
+    (air_hu, fluid_hu): (i16, i16),
+    gravity_lps: DVec3,
+) -> Vec<usize> {
+    let Some(b) = lumen_box else {
+        return Vec::new();
+    };
+    let g = lumen.geometry().clone();
+    let bright = |i: usize| ct.data()[i] >= fluid_hu;
+    // Only the lumen's bright voxels with a bright neighbour outside it start the growth.
+    let [nx, ny, _] = g.dims;
+    let seeds: Vec<usize> = (b.lo[2]..=b.hi[2])
+        .into_par_iter()
+        .flat_map_iter(|k| {
+            let (lumen, g) = (&*lumen, &g);
+            (b.lo[1]..=b.hi[1]).flat_map(move |j| {
+                let row = g.index(b.lo[0], j, k);
+                (row..=row + b.hi[0] - b.lo[0]).filter(move |&i| {
+                    let [x, y, z] = [b.lo[0] + i - row, j, k];
+                    let out = |q: usize| lumen.data()[q] == 0 && bright(q);
+                    lumen.data()[i] == 1
+                        && bright(i)
+                        && ((x > 0 && out(i - 1))
+                            || (x + 1 < nx && out(i + 1))
+                            || (y > 0 && out(i - nx))
+                            || (y + 1 < ny && out(i + nx))
+                            || (z > 0 && out(i - nx * ny))
+                            || (z + 1 < g.dims[2] && out(i + nx * ny)))
+                })
+            })
+        })
+        .collect();
+    let down = PatientFrame::of(&g).nearest_axis(gravity_lps);
+    // Fluid is not passed through where gas lies beside it: past the level (in the lumen
+    // already) or in tagged stool mottled with gas, which cleansing's model of lumps takes.
+    let by_air = |i: usize| {
+        let [x, y, z] = g.ijk(i);
+        [
+            (x > 0).then(|| i - 1),
+            (x + 1 < nx).then(|| i + 1),
+            (y > 0).then(|| i - nx),
+            (y + 1 < ny).then(|| i + nx),
+            (z > 0).then(|| i - nx * ny),
+            (z + 1 < g.dims[2]).then(|| i + nx * ny),
+        ]
+        .into_iter()
+        .flatten()
+        .any(|q| ct.data()[q] < air_hu)
+    };
+    // Fluid is passed through where it is wide, at least halfway to the brightest beside it
+    // (not the blurred wall between two pools), with no gas beside it. Reached from there,
+    // the pool's partial-volume skin (bright, under halfway) is taken too, and so is wide
+    // fluid beside gas; not a tube's fluid.
+    let half = |i: usize| above_half(ct.data(), i, g.dims, TISSUE_HU);
+    let wide = |i: usize| wide_across(&g, i, down.0, &bright);
+    let take = |i: usize| bright(i) && (!half(i) || wide(i));
+    let pass = |i: usize| bright(i) && wide(i) && half(i) && !by_air(i);
+    let mut grown = Vec::new();
+    grow_bright(
+        lumen,
+        seeds,
+        (POOL_REACH_MM, Some(down)),
+        take,
+        pass,
+        1,
+        &mut grown,
+    );
+    grown
 }
 
 #[cfg(test)]

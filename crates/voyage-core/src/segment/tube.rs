@@ -15,7 +15,10 @@
 //! A tube opens into the rectum, and the gas beyond its tip is a colon segment's at least
 //! (checked by the caller).
 
-use super::{Runs, row_of};
+use glam::DVec3;
+
+use super::runs::{Runs, row_of};
+use crate::Volume;
 
 /// A tube's cross-section in an axial slice is at most this (mm²): an inner radius of 6 mm
 /// at 45° to the slice (real tubes are 3–8 mm wide inside).
@@ -252,4 +255,18 @@ fn centroid(runs: &Runs, rs: &[usize]) -> [f64; 3] {
         sum[2] += m * k as f64;
     }
     sum.map(|v| v / n.max(1.0))
+}
+
+/// The scan's inferior axial slice (k is axial): 0 or the last, whichever lies lower in the
+/// patient; None when the slices do not run along the body.
+pub(super) fn inferior_slice(vol: &Volume<i16>) -> Option<usize> {
+    let g = vol.geometry();
+    let nz = vol.dims()[2];
+    let first = g.index_to_patient(DVec3::ZERO);
+    let last = g.index_to_patient(DVec3::new(0.0, 0.0, nz.saturating_sub(1) as f64));
+    let along = last - first;
+    if along.length() < 1e-9 || along.z.abs() < 0.7 * along.length() {
+        return None;
+    }
+    Some(if along.z < 0.0 { nz - 1 } else { 0 })
 }

@@ -1,0 +1,415 @@
+//! Steps 2–4: the gas components inside the body. Outside air is found per axial slice
+//! ([`inside_body`]), the rest joined in 3D ([`connect_3d`]), lungs told from bowel gas
+//! ([`classify_lungs`]) and rectal tubes taken out ([`tube`]); the user's points are looked up
+//! in them, and they are listed in the end ([`report`]).
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use super::{
+    Component, ComponentKind, SegmentOptions,
+    runs::{Runs, extract_runs, for_overlaps, run_voxels},
+    tube::{self, Tube},
+};
+use crate::{Error, Result, Volume, simd::Test};
+
+/// What steps 1–4 found: the air's runs (and the bright runs of tagged fluid), the gas
+/// components inside the body and the rectal tubes.
+pub(super) struct Found {
+    pub(super) runs: Runs,
+    /// The runs at or above the fluid's HU (None: no fluid is looked for).
+    pub(super) bright: Option<Runs>,
+    pub(super) comps: Vec<Component>,
+    /// Per run: its component (u32::MAX: outside air, a rectal tube's air).
+    pub(super) run_comp: Vec<u32>,
+    pub(super) tubes: Vec<Tube>,
+}
+
+/// The gas components of the user's points: the seeds' and those of the points to exclude.
+pub(super) struct Points {
+    pub(super) seeds: Vec<usize>,
+    pub(super) exclude: Vec<usize>,
+}
+
+/// Steps 1–4 on a scan (or a mask, `from_mask`: all of it is inside, no lungs, no tube).
+pub(super) fn find(
+    vol: &Volume<i16>,
+    opts: &SegmentOptions,
+    fluid_hu: Option<i16>,
+    from_mask: bool,
+) -> Found {
+    // Air, its statistics and the bright runs of tagged fluid, all in one pass over the values.
+    let (runs, bright) = if from_mask {
+        extract_runs(vol, Test::NonZero, None)
+    } else {
+        extract_runs(vol, Test::Below(opts.air_hu), fluid_hu)
+    };
+    let inside = if from_mask {
+        vec![true; runs.runs.len()]
+    } else {
+        inside_body(&runs, vol.dims())
+    };
+    let mut labels = UnionFind::new(runs.runs.len());
+    connect_3d(&runs, &inside, vol.dims(), &mut labels);
+    let (mut comps, mut run_comp) = component_stats(&runs, &inside, vol, &mut labels, from_mask);
+    classify_lungs(&mut comps, from_mask);
+    let tubes = if from_mask {
+        Vec::new()
+    } else {
+        rectal_tubes(
+            &runs,
+            &inside,
+            &run_comp,
+            &comps,
+            vol,
+            opts.chain.min_segment_ml,
+        )
+    };
+    for t in &tubes {
+        // Its air is the outside's, carried in.
+        t.runs.iter().for_each(|&r| run_comp[r] = u32::MAX);
+    }
+    Found {
+        runs,
+        bright,
+        comps,
+        run_comp,
+        tubes,
+    }
+}
+
+impl Found {
+    /// Whether component `c` (u32::MAX: none) is gas: inside the body, not lung.
+    pub(super) fn is_gas(&self, c: u32) -> bool {
+        is_gas(&self.comps, c)
+    }
+
+    /// Whether run `r` is gas.
+    pub(super) fn gas_run(&self, r: usize) -> bool {
+        self.is_gas(self.run_comp[r])
+    }
+
+    /// The gas components of the user's seeds and points to exclude, or an error that says
+    /// why a point is in none.
+    pub(super) fn user_points(&self, vol: &Volume<i16>, opts: &SegmentOptions) -> Result<Points> {
+        let gas_at = |what: &str, mm: &DVec3| {
+            gas_component(
+                &self.comps,
+                &self.runs,
+                &self.run_comp,
+                vol,
+                *mm,
+                what,
+                opts,
+            )
+        };
+        let seeds = opts
+            .seeds_mm
+            .iter()
+            .map(|mm| gas_at("the seed", mm))
+            .collect::<Result<Vec<_>>>()?;
+        let exclude = opts
+            .exclude_mm
+            .iter()
+            .map(|mm| gas_at("the point to exclude", mm))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Points { seeds, exclude })
+    }
+
+    /// The error when no gas is big enough to be a colon ([`no_colon`]).
+    pub(super) fn no_colon(&self, opts: &SegmentOptions, from_mask: bool) -> Error {
+        no_colon(&self.comps, opts, from_mask)
+    }
+}
+
+fn is_gas(comps: &[Component], c: u32) -> bool {
+    c != u32::MAX && comps[c as usize].kind != ComponentKind::Lung
+}
+
+/// The rectal tubes in the gas components ([`tube::find`]) that open into the rectum: a
+/// colon segment's gas (`min_segment_ml`) beyond the tip.
+fn rectal_tubes(
+    runs: &Runs,
+    inside: &[bool],
+    run_comp: &[u32],
+    comps: &[Component],
+    vol: &Volume<i16>,
+    min_segment_ml: f64,
+) -> Vec<Tube> {
+    let voxel_ml = super::voxel_ml(vol);
+    let mut tubes = tube::find(
+        runs,
+        inside,
+        run_comp,
+        |c| is_gas(comps, c),
+        vol.dims(),
+        vol.spacing(),
+        tube::inferior_slice(vol),
+    );
+    // A tube opens into the rectum: a colon segment's gas beyond its tip.
+    tubes.retain(|t| {
+        let beyond = comps[t.comp as usize]
+            .voxels
+            .saturating_sub(run_voxels(runs, &t.runs));
+        beyond as f64 * voxel_ml >= min_segment_ml
+    });
+    tubes
+}
+
+/// Step 2: per slice, runs 4-connected to the slice's border are outside air.
+fn inside_body(runs: &Runs, dims: [usize; 3]) -> Vec<bool> {
+    let [nx, ny, nz] = dims;
+    let per_slice: Vec<Vec<bool>> = (0..nz)
+        .into_par_iter()
+        .map(|k| {
+            let first = runs.row(0, k).start;
+            let last = runs.row(ny - 1, k).end;
+            let mut uf = UnionFind::new(last - first);
+            for j in 1..ny {
+                for_overlaps(runs, runs.row(j - 1, k), runs.row(j, k), |a, b| {
+                    uf.union(a - first, b - first)
+                });
+            }
+            let mut outside = vec![false; last - first];
+            for j in 0..ny {
+                for r in runs.row(j, k) {
+                    let run = runs.runs[r];
+                    if j == 0 || j == ny - 1 || run.x0 == 0 || run.x1 as usize == nx {
+                        let root = uf.find(r - first);
+                        outside[root] = true;
+                    }
+                }
+            }
+            (0..last - first).map(|r| !outside[uf.find(r)]).collect()
+        })
+        .collect();
+    per_slice.into_iter().flatten().collect()
+}
+
+/// Step 3: 6-connected components of the inside runs.
+pub(super) fn connect_3d(runs: &Runs, inside: &[bool], dims: [usize; 3], uf: &mut UnionFind) {
+    let [_, ny, nz] = dims;
+    for k in 0..nz {
+        for j in 0..ny {
+            let here = runs.row(j, k);
+            if here.is_empty() {
+                continue;
+            }
+            if j > 0 {
+                for_overlaps(runs, runs.row(j - 1, k), here.clone(), |a, b| {
+                    if inside[a] && inside[b] {
+                        uf.union(a, b)
+                    }
+                });
+            }
+            if k > 0 {
+                for_overlaps(runs, runs.row(j, k - 1), here.clone(), |a, b| {
+                    if inside[a] && inside[b] {
+                        uf.union(a, b)
+                    }
+                });
+            }
+        }
+    }
+}
+
+/// Per component statistics; returns the components and, per run, its component (or MAX).
+fn component_stats(
+    runs: &Runs,
+    inside: &[bool],
+    vol: &Volume<i16>,
+    uf: &mut UnionFind,
+    from_mask: bool,
+) -> (Vec<Component>, Vec<u32>) {
+    let [_, ny, nz] = vol.dims();
+    let sp = vol.spacing();
+    let mut comp_of_root = vec![u32::MAX; runs.runs.len()];
+    let mut run_comp = vec![u32::MAX; runs.runs.len()];
+    #[derive(Default, Clone)]
+    struct Acc {
+        n: usize,
+        sum: [f64; 3],
+        lo: [usize; 3],
+        hi: [usize; 3],
+        hu: i64,
+        dark: u64,
+    }
+    let mut acc: Vec<Acc> = Vec::new();
+    for k in 0..nz {
+        for j in 0..ny {
+            for r in runs.row(j, k) {
+                if !inside[r] {
+                    continue;
+                }
+                let root = uf.find(r);
+                if comp_of_root[root] == u32::MAX {
+                    comp_of_root[root] = acc.len() as u32;
+                    acc.push(Acc {
+                        lo: [usize::MAX; 3],
+                        ..Default::default()
+                    });
+                }
+                let c = comp_of_root[root];
+                run_comp[r] = c;
+                let a = &mut acc[c as usize];
+                let run = runs.runs[r];
+                let len = (run.x1 - run.x0) as usize;
+                a.n += len;
+                a.sum[0] += (run.x0 as f64 + run.x1 as f64 - 1.0) * 0.5 * len as f64;
+                a.sum[1] += (j * len) as f64;
+                a.sum[2] += (k * len) as f64;
+                a.lo = [a.lo[0].min(run.x0 as usize), a.lo[1].min(j), a.lo[2].min(k)];
+                a.hi = [
+                    a.hi[0].max(run.x1 as usize - 1),
+                    a.hi[1].max(j),
+                    a.hi[2].max(k),
+                ];
+                a.hu += runs.hu_sum[r];
+                a.dark += runs.dark[r] as u64;
+            }
+        }
+    }
+    let voxel_ml = sp[0] * sp[1] * sp[2] / 1000.0;
+    let comps = acc
+        .into_iter()
+        .map(|a| {
+            let n = a.n as f64;
+            Component {
+                voxels: a.n,
+                volume_ml: n * voxel_ml,
+                centroid_mm: [
+                    a.sum[0] / n * sp[0],
+                    a.sum[1] / n * sp[1],
+                    a.sum[2] / n * sp[2],
+                ],
+                bbox_lo: a.lo,
+                bbox_hi: a.hi,
+                mean_hu: (!from_mask).then(|| a.hu as f64 / n),
+                dark_fraction: (!from_mask).then(|| a.dark as f64 / n),
+                kind: ComponentKind::Other,
+            }
+        })
+        .collect();
+    (comps, run_comp)
+}
+
+/// Step 4: lung parenchyma is air mixed with tissue; bowel gas is nearly pure air.
+fn classify_lungs(comps: &mut [Component], from_mask: bool) {
+    if from_mask {
+        return;
+    }
+    for c in comps.iter_mut() {
+        if c.volume_ml > 1.0 && c.dark_fraction.unwrap_or(1.0) < 0.3 {
+            c.kind = ComponentKind::Lung;
+        }
+    }
+}
+
+/// The gas component holding a point the user gave (`what`: "the seed", ...), or an error
+/// that says why there is none.
+fn gas_component(
+    comps: &[Component],
+    runs: &Runs,
+    run_comp: &[u32],
+    vol: &Volume<i16>,
+    mm: DVec3,
+    what: &str,
+    opts: &SegmentOptions,
+) -> Result<usize> {
+    let at = vol.geometry().describe_point(mm);
+    let [i, j, k] = voxel_of(vol, mm)
+        .ok_or_else(|| Error::invalid(format!("{what} {at} lies outside the volume")))?;
+    match runs.at([i, j, k]).map(|r| run_comp[r]) {
+        Some(c) if c != u32::MAX && comps[c as usize].kind != ComponentKind::Lung => Ok(c as usize),
+        Some(c) if c != u32::MAX => Err(Error::invalid(format!(
+            "{what} {at} lies in a lung, not in the bowel"
+        ))),
+        Some(_) => Err(Error::invalid(format!(
+            "{what} {at} lies in air outside the body"
+        ))),
+        None => Err(Error::invalid(format!(
+            "{what} {at} is not in gas (HU {} ≥ {})",
+            vol.get(i, j, k),
+            opts.air_hu
+        ))),
+    }
+}
+
+/// The error when no gas is big enough to be a colon.
+fn no_colon(comps: &[Component], opts: &SegmentOptions, from_mask: bool) -> Error {
+    let biggest = comps
+        .iter()
+        .filter(|c| c.kind != ComponentKind::Lung)
+        .map(|c| c.volume_ml)
+        .fold(0.0, f64::max);
+    if from_mask {
+        return Error::invalid(if comps.is_empty() {
+            "the mask holds no lumen: every voxel is 0".to_string()
+        } else {
+            format!(
+                "the mask's largest lumen region is {biggest:.1} ml, too small for a colon (at least {} ml expected)",
+                opts.min_colon_ml
+            )
+        });
+    }
+    Error::invalid(format!(
+        "no colon lumen found: the largest gas inside the body, lungs left out, is {biggest:.1} ml (at least {} ml expected; is this a CT colonography? a --seed picks any gas)",
+        opts.min_colon_ml
+    ))
+}
+
+fn voxel_of(vol: &Volume<i16>, mm: DVec3) -> Option<[usize; 3]> {
+    let ijk = vol.geometry().local_to_index(mm).round();
+    vol.geometry()
+        .contains_index(ijk)
+        .then_some([ijk.x as usize, ijk.y as usize, ijk.z as usize])
+}
+
+/// Largest first; tiny components are only counted.
+pub(super) fn report(comps: Vec<Component>, min_ml: f64) -> (Vec<Component>, usize) {
+    let mut listed: Vec<Component> = Vec::new();
+    let mut small = 0;
+    for c in comps {
+        if c.kind == ComponentKind::Colon || c.volume_ml >= min_ml {
+            listed.push(c);
+        } else {
+            small += 1;
+        }
+    }
+    listed.sort_by_key(|c| std::cmp::Reverse(c.voxels));
+    (listed, small)
+}
+
+/// Union-find over run indices, with path halving and union by size.
+pub(super) struct UnionFind {
+    parent: Vec<u32>,
+    size: Vec<u32>,
+}
+
+impl UnionFind {
+    pub(super) fn new(n: usize) -> Self {
+        UnionFind {
+            parent: (0..n as u32).collect(),
+            size: vec![1; n],
+        }
+    }
+    pub(super) fn find(&mut self, mut x: usize) -> usize {
+        while self.parent[x] as usize != x {
+            let p = self.parent[x] as usize;
+            self.parent[x] = self.parent[p];
+            x = p;
+        }
+        x
+    }
+    fn union(&mut self, a: usize, b: usize) {
+        let (mut ra, mut rb) = (self.find(a), self.find(b));
+        if ra == rb {
+            return;
+        }
+        if self.size[ra] < self.size[rb] {
+            std::mem::swap(&mut ra, &mut rb);
+        }
+        self.parent[rb] = ra as u32;
+        self.size[ra] += self.size[rb];
+    }
+}

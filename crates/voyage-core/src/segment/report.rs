@@ -1,0 +1,379 @@
+//! The report: every gas region, kept in the colon (named by where it lies along the colon's
+//! course) or left out (classed, with the reason), the rectal tubes, the bridged gaps, what
+//! the user must hear of, and the gas components labelled by their compartments.
+
+use glam::DVec3;
+
+use super::{
+    Component, ComponentKind, EXCLUDED, Gap, SegmentOptions, SegmentReport,
+    bridge::Path,
+    chain::{self, Chained, Compartment, Left},
+    compartments::{CREVICE_MM, Candidates, Compartments, colon_box},
+    components::{Found, report as list_components},
+    course::Course,
+    runs::{Runs, row_of, run_voxels},
+    tube,
+    work::Bbox,
+};
+
+/// Gas left out of the colon from this size on (ml) gets a warning.
+const LARGE_LEFT_ML: f64 = 20.0;
+
+/// The segmentation's reports.
+pub(super) struct Report {
+    /// Gas regions (with their fluid): the colon's in order, then the rest.
+    pub(super) segments: Vec<SegmentReport>,
+    pub(super) gaps: Vec<Gap>,
+    pub(super) warnings: Vec<String>,
+    /// Gas components, largest first (those above `min_report_ml`), and how many smaller.
+    pub(super) components: Vec<Component>,
+    pub(super) small_components: usize,
+}
+
+/// The reports of the colon chained in `chained` from `parts` and of everything else `found`
+/// holds; `gap_voxels`: per gap, the lumen voxels its bridge added.
+pub(super) fn report(
+    found: Found,
+    parts: &Compartments,
+    cand: &Candidates,
+    chained: &Chained,
+    gap_voxels: Vec<Vec<usize>>,
+    geom: &crate::Geometry,
+    opts: &SegmentOptions,
+) -> Report {
+    let in_colon = |c: u32| chained.chain.links.iter().any(|l| l.comp == c);
+    let colon_lps = colon_box(&parts.list, cand.rectum, in_colon, geom);
+    let classes = classes(parts, in_colon, geom, &colon_lps);
+    let mut segments = colon_segments(parts, chained, geom, colon_lps);
+    segments.extend(left_out(
+        parts,
+        &cand.crevice,
+        &chained.chain.left,
+        &classes,
+        geom,
+        opts,
+    ));
+    for t in &found.tubes {
+        segments.push(tube_report(t, &found.runs, geom, parts.voxel_ml));
+    }
+    let (gaps, mut warnings) = gaps(&chained.chain.gaps, gap_voxels, &segments, geom);
+    warnings.extend(left_out_warnings(&segments));
+    let comps = labelled(found.comps, &parts.of_gas, &classes);
+    let (components, small_components) = list_components(comps, opts.min_report_ml);
+    Report {
+        segments,
+        gaps,
+        warnings,
+        components,
+        small_components,
+    }
+}
+
+/// Each compartment's class: colon where `in_colon`, else [`classify`]'s within the colon's
+/// LPS box `colon_lps`.
+fn classes(
+    parts: &Compartments,
+    in_colon: impl Fn(u32) -> bool,
+    geom: &crate::Geometry,
+    colon_lps: &[DVec3; 2],
+) -> Vec<ComponentKind> {
+    (0..parts.list.len() as u32)
+        .map(|c| {
+            if in_colon(c) {
+                ComponentKind::Colon
+            } else {
+                classify(&parts.list[c as usize], geom, colon_lps, parts.voxel_ml)
+            }
+        })
+        .collect()
+}
+
+/// The colon's segments in order, each named by where its entry, middle and exit lie along
+/// the whole colon's course (`colon_lps`: its box).
+fn colon_segments(
+    parts: &Compartments,
+    chained: &Chained,
+    geom: &crate::Geometry,
+    colon_lps: [DVec3; 2],
+) -> Vec<SegmentReport> {
+    let named = Course::new(geom, colon_lps);
+    let coarse = &chained.coarse;
+    let mut segments = Vec::new();
+    for (i, l) in chained.chain.links.iter().enumerate() {
+        let comp = &parts.list[l.comp as usize];
+        let names: Vec<&str> = [
+            coarse.centre_mm(l.entry),
+            comp.centroid_mm(),
+            coarse.centre_mm(l.exit),
+        ]
+        .iter()
+        .map(|&p| named.name(p))
+        .fold(Vec::new(), |mut v, n| {
+            if v.last() != Some(&n) {
+                v.push(n);
+            }
+            v
+        });
+        segments.push(segment_report(
+            comp,
+            geom,
+            names.join("–"),
+            ComponentKind::Colon,
+            Some(i),
+            None,
+            parts.voxel_ml,
+        ));
+    }
+    segments
+}
+
+/// The gas left out of the colon (`left`), most gas first, from `min_report_ml` on: each
+/// with its class and why it was left out.
+fn left_out(
+    parts: &Compartments,
+    crevice: &[bool],
+    left: &[(u32, Left)],
+    classes: &[ComponentKind],
+    geom: &crate::Geometry,
+    opts: &SegmentOptions,
+) -> Vec<SegmentReport> {
+    let voxel_ml = parts.voxel_ml;
+    let mut others: Vec<(u32, Left)> = left.to_vec();
+    others.sort_by(|a, b| {
+        parts.list[b.0 as usize]
+            .gas_voxels
+            .cmp(&parts.list[a.0 as usize].gas_voxels)
+            .then(a.0.cmp(&b.0))
+    });
+    let mut segments = Vec::new();
+    for (c, why) in others {
+        let comp = &parts.list[c as usize];
+        if (comp.gas_voxels as f64 * voxel_ml) < opts.min_report_ml {
+            continue;
+        }
+        let kind = classes[c as usize];
+        let reason = reason(
+            why,
+            crevice[c as usize],
+            comp.gas_voxels as f64 * voxel_ml,
+            opts,
+        );
+        let label = match kind {
+            ComponentKind::SmallBowel => "small bowel",
+            ComponentKind::Stomach => "stomach",
+            _ => "other",
+        };
+        segments.push(segment_report(
+            comp,
+            geom,
+            label.to_string(),
+            kind,
+            None,
+            Some(reason),
+            voxel_ml,
+        ));
+    }
+    segments
+}
+
+/// Why a compartment of `gas_ml` is not in the colon, in words.
+fn reason(why: Left, crevice: bool, gas_ml: f64, opts: &SegmentOptions) -> String {
+    match why {
+        Left::TooSmall if crevice => format!(
+            "{:.1} ml of gas in a crevice less than {:.0} mm across (a skin fold), not bowel",
+            gas_ml,
+            2.0 * CREVICE_MM
+        ),
+        Left::TooSmall => format!(
+            "{:.1} ml of gas, less than a colon segment's {} ml",
+            gas_ml, opts.chain.min_segment_ml
+        ),
+        Left::TooFar(d) if d.is_finite() => format!(
+            "its nearest end is {d:.0} mm from the colon's end (more than {:.0} mm)",
+            opts.chain.max_gap_mm
+        ),
+        Left::TooFar(_) => "not reached from the colon's end".to_string(),
+        Left::BridgeTooDear { gap_mm, cost } => format!(
+            "the way to it ({gap_mm:.0} mm) crosses fat or bone, not collapsed bowel (cost {cost:.1} per mm)"
+        ),
+        Left::Excluded => EXCLUDED.to_string(),
+    }
+}
+
+/// The gaps bridged between consecutive colon segments (`paths`, with the voxels each added,
+/// `gap_voxels`), and a warning for each.
+fn gaps(
+    paths: &[Path],
+    gap_voxels: Vec<Vec<usize>>,
+    segments: &[SegmentReport],
+    geom: &crate::Geometry,
+) -> (Vec<Gap>, Vec<String>) {
+    let lps = |v: [usize; 3]| {
+        geom.index_to_patient(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64))
+            .to_array()
+    };
+    let mut gaps = Vec::new();
+    let mut warnings = Vec::new();
+    for (i, (p, voxels)) in paths.iter().zip(gap_voxels).enumerate() {
+        let ends = (p.voxels[0], p.voxels[p.voxels.len() - 1]);
+        gaps.push(Gap {
+            between: [i, i + 1],
+            length_mm: p.length_mm,
+            from_lps_mm: lps(ends.0),
+            to_lps_mm: lps(ends.1),
+            mean_cost: p.mean_cost,
+            voxels,
+        });
+        warnings.push(format!(
+            "collapsed or fluid-filled stretch bridged: {:.0} mm between the {} and the {} segment, from LPS ({:.0}, {:.0}, {:.0})",
+            p.length_mm,
+            segments[i].label,
+            segments[i + 1].label,
+            lps(ends.0)[0],
+            lps(ends.0)[1],
+            lps(ends.0)[2]
+        ));
+    }
+    (gaps, warnings)
+}
+
+/// A warning for each large gas region left out of the colon automatically (not by the user).
+fn left_out_warnings(segments: &[SegmentReport]) -> Vec<String> {
+    segments
+        .iter()
+        .filter(|s| !s.kept && s.gas_ml >= LARGE_LEFT_ML && s.reason.as_deref() != Some(EXCLUDED))
+        .map(|s| {
+            format!(
+                "{:.0} ml of gas ({}) left out of the colon: {}",
+                s.gas_ml,
+                s.label,
+                s.reason.as_deref().unwrap_or("")
+            )
+        })
+        .collect()
+}
+
+/// Gas components, labelled by their compartment's class (`of_gas`, `classes`); lungs stay.
+fn labelled(
+    mut comps: Vec<Component>,
+    of_gas: &[Option<u32>],
+    classes: &[ComponentKind],
+) -> Vec<Component> {
+    for (c, comp) in comps.iter_mut().enumerate() {
+        if comp.kind == ComponentKind::Lung {
+            continue;
+        }
+        comp.kind = of_gas[c].map_or(ComponentKind::Other, |x| classes[x as usize]);
+    }
+    comps
+}
+
+/// The LPS box of a voxel box (all eight corners: the direction may turn the axes).
+pub(super) fn lps_box(geom: &crate::Geometry, b: &Bbox) -> [DVec3; 2] {
+    geom.patient_box(b.lo, b.hi)
+}
+
+/// The anatomical region of a volume-local point within the colon's LPS box.
+pub(crate) fn region_of(geom: &crate::Geometry, p: DVec3, colon: &[DVec3; 2]) -> &'static str {
+    let q = geom.local_to_patient(p);
+    let span = (colon[1] - colon[0]).max(DVec3::splat(1.0));
+    let u = (q.x - colon[0].x) / span.x;
+    let v = (q.z - colon[0].z) / span.z;
+    chain::region(u, v)
+}
+
+/// Gas left out of the colon: stomach (high on the left), small bowel (small or narrow), or
+/// other.
+fn classify(
+    comp: &Compartment,
+    geom: &crate::Geometry,
+    colon: &[DVec3; 2],
+    voxel_ml: f64,
+) -> ComponentKind {
+    let ml = comp.gas_voxels as f64 * voxel_ml;
+    let c = geom.local_to_patient(comp.centroid_mm());
+    let span = colon[1] - colon[0];
+    let high_left = c.z > colon[0].z + 0.7 * span.z && c.x > colon[0].x + 0.5 * span.x;
+    if high_left && ml >= LARGE_LEFT_ML {
+        return ComponentKind::Stomach;
+    }
+    // Its length from its box's diagonal; narrow when the mean cross-section is under 25 mm.
+    let b = lps_box(geom, &comp.bbox);
+    let length = (b[1] - b[0]).length().max(1.0);
+    let width = 2.0 * (ml * 1000.0 / (std::f64::consts::PI * length)).sqrt();
+    if ml < LARGE_LEFT_ML || width <= 25.0 {
+        ComponentKind::SmallBowel
+    } else {
+        ComponentKind::Other
+    }
+}
+
+fn segment_report(
+    comp: &Compartment,
+    geom: &crate::Geometry,
+    label: String,
+    kind: ComponentKind,
+    order: Option<usize>,
+    reason: Option<String>,
+    voxel_ml: f64,
+) -> SegmentReport {
+    let b = lps_box(geom, &comp.bbox);
+    SegmentReport {
+        label,
+        kind,
+        order,
+        gas_ml: comp.gas_voxels as f64 * voxel_ml,
+        fluid_ml: (comp.voxels - comp.gas_voxels) as f64 * voxel_ml,
+        extent_lps_mm: [b[0].to_array(), b[1].to_array()],
+        anchor_lps_mm: geom
+            .index_to_patient(DVec3::from_array(comp.lowest.map(|x| x as f64)))
+            .to_array(),
+        kept: order.is_some(),
+        reason,
+    }
+}
+
+/// A rectal tube as a gas region left out of the colon.
+fn tube_report(
+    t: &tube::Tube,
+    runs: &Runs,
+    geom: &crate::Geometry,
+    voxel_ml: f64,
+) -> SegmentReport {
+    let mut bbox: Option<Bbox> = None;
+    let voxels = run_voxels(runs, &t.runs);
+    for &r in &t.runs {
+        let (j, k) = row_of(runs, r);
+        let run = runs.runs[r];
+        let b = Bbox {
+            lo: [run.x0 as usize, j, k],
+            hi: [run.x1 as usize - 1, j, k],
+        };
+        bbox = Some(bbox.map_or(b, |x| x.union(&b)));
+    }
+    let b = bbox.map_or([DVec3::ZERO; 2], |b| lps_box(geom, &b));
+    let lps = |v: [f64; 3]| geom.index_to_patient(DVec3::from_array(v)).to_array();
+    let tip = lps(t.tip);
+    SegmentReport {
+        label: "rectal tube".into(),
+        kind: ComponentKind::RectalTube,
+        order: None,
+        gas_ml: voxels as f64 * voxel_ml,
+        fluid_ml: 0.0,
+        extent_lps_mm: [b[0].to_array(), b[1].to_array()],
+        anchor_lps_mm: lps(t.entry),
+        kept: false,
+        reason: Some(format!(
+            "a rectal tube, {:.0} mm from {} to its tip at LPS ({:.0}, {:.0}, {:.0}): its air is not colon; the rectum starts at its tip",
+            t.length_mm,
+            if t.from_edge {
+                "the scan's edge"
+            } else {
+                "the skin"
+            },
+            tip[0],
+            tip[1],
+            tip[2]
+        )),
+    }
+}
