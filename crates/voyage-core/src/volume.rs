@@ -216,6 +216,21 @@ pub fn grid_ijk(dims: [usize; 3], index: usize) -> [usize; 3] {
     ]
 }
 
+/// The six face neighbours of voxel `index` (−x, +x, −y, +y, −z, +z), None past the edge.
+#[inline]
+pub fn face_neighbours(dims: [usize; 3], index: usize) -> [Option<usize>; 6] {
+    let [x, y, z] = grid_ijk(dims, index);
+    let (sy, sz) = (dims[0], dims[0] * dims[1]);
+    [
+        (x > 0).then(|| index - 1),
+        (x + 1 < dims[0]).then(|| index + 1),
+        (y > 0).then(|| index - sy),
+        (y + 1 < dims[1]).then(|| index + sy),
+        (z > 0).then(|| index - sz),
+        (z + 1 < dims[2]).then(|| index + sz),
+    ]
+}
+
 pub const IDENTITY: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 
 /// Validates header dimensions before anything is allocated.

@@ -33,6 +33,7 @@ use super::{
 use crate::{
     Geometry, Result, Volume,
     anatomy::{Orientation, PatientFrame, PatientPosition, PositionSource},
+    volume::face_neighbours,
 };
 
 /// A pool deeper than this below its gas is not one colon segment's fluid. (The prone
@@ -438,7 +439,6 @@ pub fn grow_bright(
     use std::cmp::Reverse;
     use std::collections::{BinaryHeap, HashMap};
     let g = work.geometry().clone();
-    let [nx, ny, nz] = g.dims;
     // Per axis, the cost of a step towards − and towards +.
     let unit: [[u32; 2]; 3] = [0, 1, 2].map(|a| {
         let u = (g.spacing[a] / DIST_UNIT_MM).round().max(1.0) as u32;
@@ -469,16 +469,11 @@ pub fn grow_bright(
             work.data_mut()[i] = label;
             added.push(i);
         }
-        let [x, y, z] = g.ijk(i);
-        let steps = [
-            (x > 0).then(|| (i - 1, unit[0][0])),
-            (x + 1 < nx).then(|| (i + 1, unit[0][1])),
-            (y > 0).then(|| (i - nx, unit[1][0])),
-            (y + 1 < ny).then(|| (i + nx, unit[1][1])),
-            (z > 0).then(|| (i - nx * ny, unit[2][0])),
-            (z + 1 < nz).then(|| (i + nx * ny, unit[2][1])),
-        ];
-        for (q, u) in steps.into_iter().flatten() {
+        let steps = face_neighbours(g.dims, i)
+            .into_iter()
+            .zip(unit.into_iter().flatten())
+            .filter_map(|(q, u)| Some((q?, u)));
+        for (q, u) in steps {
             let dq = d + u;
             if dq > reach || work.data()[q] != 0 || !take(q) {
                 continue;
@@ -498,18 +493,7 @@ pub fn grow_bright(
 /// brightest of its six neighbours: fluid, not the partial-volume wall between two pools (a
 /// bowel wall of 2 mm between two pools, blurred, stays above the fluid threshold).
 pub fn above_half(hu: &[i16], v: usize, dims: [usize; 3], tissue_hu: i16) -> bool {
-    let [nx, ny, nz] = dims;
-    let (i, rest) = (v % nx, v / nx);
-    let (j, k) = (rest % ny, rest / ny);
-    let n = [
-        (i > 0).then(|| v - 1),
-        (i + 1 < nx).then(|| v + 1),
-        (j > 0).then(|| v - nx),
-        (j + 1 < ny).then(|| v + nx),
-        (k > 0).then(|| v - nx * ny),
-        (k + 1 < nz).then(|| v + nx * ny),
-    ];
-    let max = n
+    let max = face_neighbours(dims, v)
         .into_iter()
         .flatten()
         .map(|w| hu[w])
@@ -682,7 +666,6 @@ pub(super) fn whole_pools(
     let g = lumen.geometry().clone();
     let bright = |i: usize| ct.data()[i] >= fluid_hu;
     // Only the lumen's bright voxels with a bright neighbour outside it start the growth.
-    let [nx, ny, _] = g.dims;
     let seeds: Vec<usize> = (b.lo[2]..=b.hi[2])
         .into_par_iter()
         .flat_map_iter(|k| {
@@ -690,16 +673,12 @@ pub(super) fn whole_pools(
             (b.lo[1]..=b.hi[1]).flat_map(move |j| {
                 let row = g.index(b.lo[0], j, k);
                 (row..=row + b.hi[0] - b.lo[0]).filter(move |&i| {
-                    let [x, y, z] = [b.lo[0] + i - row, j, k];
-                    let out = |q: usize| lumen.data()[q] == 0 && bright(q);
                     lumen.data()[i] == 1
                         && bright(i)
-                        && ((x > 0 && out(i - 1))
-                            || (x + 1 < nx && out(i + 1))
-                            || (y > 0 && out(i - nx))
-                            || (y + 1 < ny && out(i + nx))
-                            || (z > 0 && out(i - nx * ny))
-                            || (z + 1 < g.dims[2] && out(i + nx * ny)))
+                        && face_neighbours(g.dims, i)
+                            .into_iter()
+                            .flatten()
+                            .any(|q| lumen.data()[q] == 0 && bright(q))
                 })
             })
         })
@@ -708,18 +687,10 @@ pub(super) fn whole_pools(
     // Fluid is not passed through where gas lies beside it: past the level (in the lumen
     // already) or in tagged stool mottled with gas, which cleansing's model of lumps takes.
     let by_air = |i: usize| {
-        let [x, y, z] = g.ijk(i);
-        [
-            (x > 0).then(|| i - 1),
-            (x + 1 < nx).then(|| i + 1),
-            (y > 0).then(|| i - nx),
-            (y + 1 < ny).then(|| i + nx),
-            (z > 0).then(|| i - nx * ny),
-            (z + 1 < g.dims[2]).then(|| i + nx * ny),
-        ]
-        .into_iter()
-        .flatten()
-        .any(|q| ct.data()[q] < air_hu)
+        face_neighbours(g.dims, i)
+            .into_iter()
+            .flatten()
+            .any(|q| ct.data()[q] < air_hu)
     };
     // Fluid is passed through where it is wide, at least halfway to the brightest beside it
     // (not the blurred wall between two pools), with no gas beside it. Reached from there,
