@@ -465,7 +465,8 @@ pub fn grow_bright(
         if dist.get(&i).is_some_and(|&x| x < d) {
             continue;
         }
-        if work.data()[i] == 0 && pass(i) {
+        // Every voxel queued past the seeds passed when it was queued.
+        if work.data()[i] == 0 && (d > 0 || pass(i)) {
             work.data_mut()[i] = label;
             added.push(i);
         }
@@ -475,15 +476,26 @@ pub fn grow_bright(
             .filter_map(|(q, u)| Some((q?, u)));
         for (q, u) in steps {
             let dq = d + u;
-            if dq > reach || work.data()[q] != 0 || !take(q) {
+            if dq > reach || work.data()[q] != 0 {
                 continue;
             }
-            if !pass(q) {
-                work.data_mut()[q] = label;
-                added.push(q);
-            } else if dist.get(&q).is_none_or(|&x| dq < x) {
+            // Queued already: it passed; only a nearer way counts.
+            if let Some(&x) = dist.get(&q) {
+                if dq < x {
+                    dist.insert(q, dq);
+                    heap.push(Reverse((dq, q)));
+                }
+                continue;
+            }
+            if !take(q) {
+                continue;
+            }
+            if pass(q) {
                 dist.insert(q, dq);
                 heap.push(Reverse((dq, q)));
+            } else {
+                work.data_mut()[q] = label;
+                added.push(q);
             }
         }
     }

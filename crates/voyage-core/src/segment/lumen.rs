@@ -63,12 +63,8 @@ pub(super) fn lumen(
     let colon = || links.iter().map(|l| &parts.list[l.comp as usize]);
     let mut fluid_voxels: usize = colon().map(|c| c.voxels - c.gas_voxels).sum();
     let colon_voxels: usize = colon().map(|c| c.voxels).sum();
-    let mut lumen_box: Option<Bbox> = colon().map(|c| c.bbox).reduce(|a, b| a.union(&b));
-    for &v in &added {
-        let ijk = geom.ijk(v);
-        let b = Bbox { lo: ijk, hi: ijk };
-        lumen_box = Some(lumen_box.map_or(b, |x| x.union(&b)));
-    }
+    let colon_box: Option<Bbox> = colon().map(|c| c.bbox).reduce(|a, b| a.union(&b));
+    let lumen_box = grown_by(colon_box, &geom, &added);
     let bridge_voxels = added.len();
     if let Some(ct) = ct {
         fluid_voxels += added
@@ -87,12 +83,9 @@ pub(super) fn lumen(
         (Some(ct), Some(t)) => whole_pools(&mut work, ct, lumen_box, (air_hu, t), gravity_lps),
         _ => Vec::new(),
     };
-    for &v in &grown {
-        let ijk = geom.ijk(v);
-        lumen_box = lumen_box.map(|x| x.union(&Bbox { lo: ijk, hi: ijk }));
-    }
     fluid_voxels += grown.len();
-    let extent = lumen_box.ok_or_else(|| Error::invalid("the colon holds no voxels"))?;
+    let extent = grown_by(lumen_box, &geom, &grown)
+        .ok_or_else(|| Error::invalid("the colon holds no voxels"))?;
     let voxels = colon_voxels + bridge_voxels + grown.len();
     let mut pools_grown = grown;
     pools_grown.sort_unstable();
@@ -104,6 +97,15 @@ pub(super) fn lumen(
         gap_voxels,
         pools_grown,
         bridge_radius_mm,
+    })
+}
+
+/// `bx` grown to hold `voxels` (volume indices).
+fn grown_by(bx: Option<Bbox>, geom: &crate::Geometry, voxels: &[usize]) -> Option<Bbox> {
+    voxels.iter().fold(bx, |b, &v| {
+        let ijk = geom.ijk(v);
+        let at = Bbox { lo: ijk, hi: ijk };
+        Some(b.map_or(at, |x| x.union(&at)))
     })
 }
 
