@@ -283,8 +283,10 @@ const BYPASS_REACH_MM: f64 = 60.0;
 /// Stretches this near (mm of arc) the centerline's ends are its ends narrowing, not holes.
 const ENDS_MM: f64 = 20.0;
 /// The plug that closes a hole: the lumen within this many mm of its narrowest point (at
-/// least twice its radius).
-const PLUG_MM: f64 = 4.0;
+/// least twice its radius). A hole between loops is a slit: on `ctc/prone-tagged` one runs
+/// 7 mm from its narrowest point, and a 4 mm plug left the flight's Dt a way through it,
+/// where the camera stalled.
+const PLUG_MM: f64 = 8.0;
 
 /// Holes between touching loops that the centerline went through: where it narrows under
 /// [`SHORTCUT_NARROW_MM`] while the lumen on either side is also joined by a way much wider

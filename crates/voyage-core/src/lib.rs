@@ -21,6 +21,7 @@ mod prep;
 pub mod rng;
 mod segment;
 mod simd;
+mod storage;
 mod surface;
 mod volume;
 
@@ -37,5 +38,6 @@ pub use prep::{
     COLON_SEGMENTS, OFF_WALL_MM, PrepOptions, RECTUM_MM, Stage, Study, Timings, prepare,
 };
 pub use segment::{ComponentKind, Gap, SegmentOptions, Segmentation, segment};
+pub use storage::Storage;
 pub use surface::{Mesh, Surface, roughness};
 pub use volume::{Geometry, IDENTITY, Volume, check_dims};

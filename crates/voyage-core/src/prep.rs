@@ -8,7 +8,7 @@ use glam::DVec3;
 use serde::Serialize;
 
 use crate::{
-    Result, Volume,
+    Result, Storage, Volume,
     cells::{CellOptions, Cells, build_cells},
     centerline::{
         self, Centerline, CenterlineOptions, centre_skeleton, trace_skeleton, uses_blocks,
@@ -172,8 +172,12 @@ impl<F: FnMut(Stage)> Laps<F> {
 /// Everything preprocessing produces. Geometry in volume-local mm.
 #[derive(Clone, Debug)]
 pub struct Study {
-    /// The input: HU, or a mask's labels.
+    /// The input: HU, or a mask's labels, in the study storage (its axes along the
+    /// patient's L, P, S).
     pub ct: Volume<i16>,
+    /// The input's storage: [`Storage::to_input`] writes a volume of the study on the input's
+    /// grid.
+    pub storage: Storage,
     pub segmentation: Segmentation,
     /// What electronic cleansing changed in `ct` (empty without tagged fluid, or when it is
     /// off): [`Study::cleansed_ct`] is the CT the surface was cut from.
@@ -379,12 +383,40 @@ impl Study {
 }
 
 /// Runs every stage. `progress` hears of each stage as it starts.
-pub fn prepare(
+///
+/// The study is made in the study storage ([`Storage`]): `ct` is turned to run along the
+/// patient's axes first (the points in `opts` with it), so that no result depends on how the
+/// scan was stored. Everything in the [`Study`] is in that storage; `Study::storage` goes
+/// back to the input's.
+pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, progress: impl FnMut(Stage)) -> Result<Study> {
+    let start = Instant::now();
+    let storage = Storage::of(ct.geometry());
+    if storage.is_identity() {
+        return prepare_stored(ct, opts, storage, start, progress);
+    }
+    let ct = storage.to_study(&ct)?;
+    let mut o = opts.clone();
+    let points = [&mut o.segment.seeds_mm, &mut o.segment.exclude_mm];
+    for p in points.into_iter().flatten() {
+        *p = storage.mm_in(*p);
+    }
+    for p in [&mut o.centerline.source_mm, &mut o.centerline.target_mm]
+        .into_iter()
+        .flatten()
+    {
+        *p = storage.mm_in(*p);
+    }
+    prepare_stored(ct, &o, storage, start, progress)
+}
+
+/// [`prepare`] on a scan in the study storage.
+fn prepare_stored(
     mut ct: Volume<i16>,
     opts: &PrepOptions,
+    storage: Storage,
+    start: Instant,
     progress: impl FnMut(Stage),
 ) -> Result<Study> {
-    let start = Instant::now();
     let mut laps = Laps::new(progress);
 
     laps.start(Stage::Segment);
@@ -443,7 +475,7 @@ pub fn prepare(
     };
     // Holes between touching loops that the centerline went through: plugged, traced again
     // (a hole plugged can show the next).
-    let mut plugged = 0;
+    let mut plugged: Vec<usize> = Vec::new();
     let mut necks = Vec::new();
     for _ in 0..MAX_PLUG_ROUNDS {
         set_voxels(&mut seg.lumen, &traced.taken, 1);
@@ -461,7 +493,7 @@ pub fn prepare(
             .flatten()
         {
             Some(t) => {
-                plugged += plugs.len();
+                plugged.extend(&plugs);
                 traced = t;
             }
             None => {
@@ -470,9 +502,10 @@ pub fn prepare(
             }
         }
     }
-    if plugged > 0 {
+    if !plugged.is_empty() {
         seg.warnings.push(format!(
-            "the centerline went through holes between touching loops of the colon ({plugged} voxels plugged): it now goes round"
+            "the centerline went through holes between touching loops of the colon ({} voxels plugged): it now goes round",
+            plugged.len()
         ));
     }
     let Traced {
@@ -481,6 +514,10 @@ pub fn prepare(
         taken,
         mut ds_box,
     } = traced;
+    // The fluid beside the columns is lumen again, but for the holes plugged and the
+    // contacts cut in it.
+    plugged.sort_unstable();
+    beside.retain(|v| plugged.binary_search(v).is_err() && taken.binary_search(v).is_err());
     if !beside.is_empty() {
         set_voxels(&mut seg.lumen, &beside, 1);
         seg.lumen_voxels += beside.len();
@@ -552,6 +589,7 @@ pub fn prepare(
     timings.total_after_load = start.elapsed().as_secs_f64() * 1e3;
     Ok(Study {
         ct,
+        storage,
         segmentation: seg,
         cleansing,
         ds,

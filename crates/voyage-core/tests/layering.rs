@@ -6,7 +6,7 @@
 use std::{collections::BTreeSet, path::Path};
 
 /// voyage-core's top-level modules, each after everything it may use.
-const ORDER: [&str; 16] = [
+const ORDER: [&str; 17] = [
     "error",
     "rng",
     "volume",
@@ -14,6 +14,7 @@ const ORDER: [&str; 16] = [
     "mem",
     "grid",
     "anatomy",
+    "storage",
     "distance",
     "segment",
     "cleanse",

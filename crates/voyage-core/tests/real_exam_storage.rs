@@ -1,10 +1,9 @@
 //! The real exam (`ctc/prone-tagged`) stored other ways gives the same colon: NIfTI in other
 //! axis orders and flips, and DICOM series of axial, coronal and sagittal slices. The
-//! segmentation's lumen agrees to 0.1% of its voxels and the bridged gaps to two voxels.
-//! Cleansing (issue 35) and the centerline with the contacts cut along it are printed for
-//! each, not yet held to it: they still depend on the storage (0.2% and 0.8% of the lumen
-//! on a flipped copy). Needs `../shared/data`; skips with a message without it. Run in
-//! release mode
+//! segmentation's lumen agrees to 0.1% of its voxels and the bridged gaps to two voxels;
+//! the prepared study (made in the study storage, `voyage_core::Storage`) is the same: the
+//! same cleansed CT, the same lumen with its contacts cut, the same centerline. Needs
+//! `../shared/data`; skips with a message without it. Run in release mode
 //! (`cargo test --release -p voyage-core --test real_exam_storage`).
 
 use std::path::PathBuf;
@@ -82,7 +81,6 @@ fn every_storage_of_the_real_exam_gives_the_same_segmentation() {
     let reference = prepare(ct.clone(), &PrepOptions::default(), |_| {}).unwrap();
     let ref_cleansed = cleansed_mask(&reference);
     let lumen_voxels = ref_lumen.data().iter().filter(|&&v| v != 0).count();
-    let cleansed_voxels = reference.cleansing.len();
 
     let dir = std::env::temp_dir().join(format!("voyage-exam-storage-{}", std::process::id()));
     let mut variants: Vec<(String, Volume<i16>)> = Vec::new();
@@ -115,19 +113,34 @@ fn every_storage_of_the_real_exam_gives_the_same_segmentation() {
         let seg = segment(&stored, &SegmentOptions::default()).unwrap();
         let d = differ(&restored(&seg.lumen, &geom), ref_lumen);
         let s = prepare(stored, &PrepOptions::default(), |_| {}).unwrap();
-        let cleansed = restored(&cleansed_mask(&s), &geom);
-        let dc = differ(&cleansed, &ref_cleansed);
-        let df = differ(
-            &restored(&s.segmentation.lumen, &geom),
-            &reference.segmentation.lumen,
-        );
+        // Both studies are in the study storage: compared voxel for voxel.
+        assert_eq!(s.ct.dims(), reference.ct.dims(), "{what}");
+        let dc = differ(&cleansed_mask(&s), &ref_cleansed);
+        let dv = s
+            .cleansed_ct()
+            .data()
+            .iter()
+            .zip(reference.cleansed_ct().data())
+            .filter(|(a, b)| a != b)
+            .count();
+        let df = differ(&s.segmentation.lumen, &reference.segmentation.lumen);
+        let dl = (s.centerline.length_mm - reference.centerline.length_mm).abs();
         eprintln!(
-            "{what}: segmentation's lumen differs in {d} voxels ({:.3}%), cleansing in {dc} ({:.3}%); after the centerline's contacts {df} ({:.3}%), centerline {:.0} mm against {:.0}",
+            "{what}: segmentation's lumen differs in {d} voxels ({:.3}%), cleansing in {dc}, the cleansed CT in {dv}; after the centerline's contacts {df}; centerline {:.1} mm against {:.1}",
             100.0 * d as f64 / lumen_voxels as f64,
-            100.0 * dc as f64 / cleansed_voxels.max(1) as f64,
-            100.0 * df as f64 / lumen_voxels as f64,
             s.centerline.length_mm,
             reference.centerline.length_mm
+        );
+        assert_eq!(dv, 0, "{what}: the cleansed CT differs in {dv} voxels");
+        assert_eq!(df, 0, "{what}: the study's lumen differs in {df} voxels");
+        assert!(
+            dl < 1.0,
+            "{what}: the centerline's length differs by {dl:.1} mm"
+        );
+        assert_eq!(
+            (s.source, s.target),
+            (reference.source, reference.target),
+            "{what}"
         );
         assert!(
             d as f64 <= 0.001 * lumen_voxels as f64,

@@ -37,6 +37,9 @@ fn the_real_exam_is_flown_both_ways_inside_the_lumen() {
             dir.name(),
             f.final_dt_mm
         );
+        // Issue 34: no stall either way (with a hole between two loops plugged only 4 mm
+        // round its narrowest point, the flight's Dt still went through it: two stalls).
+        assert_eq!(f.stalls, 0, "the {} flight stalled", dir.name());
         // The field keeps the camera in the safe set; a glide through a narrow keeps it on
         // the centerline, inside the navigable core.
         for (i, p) in f.poses.iter().enumerate() {

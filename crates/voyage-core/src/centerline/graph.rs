@@ -23,12 +23,15 @@
 //!    the lumen, or across a contact. Each such meeting place (one per cluster) becomes an edge
 //!    joining the two skeleton points, so the graph has the lumen's cycles.
 //! 4. The branches are cut at junctions and meeting places into a small graph with edge
-//!    lengths in mm, and a depth-first search finds the longest simple path from the source
-//!    (to the given target, when there is one). Its voxels are the raw centerline.
+//!    lengths in mm, and the longest simple path from the source (to the given target, when
+//!    there is one) is searched ([`super::longest`]). Its voxels are the raw centerline.
 
 use std::collections::HashMap;
 
-use super::CenterlineOptions;
+use super::{
+    CenterlineOptions,
+    longest::{self, longest_path},
+};
 use crate::{
     Error, Result,
     distance::geodesic::Search,
@@ -45,7 +48,8 @@ pub struct SkeletonOptions {
     /// `meet_scale`·(Ds_a + Ds_b) + `meet_mm` apart along the skeleton.
     pub meet_scale: f64,
     pub meet_mm: f64,
-    /// Most edges the longest-path search may try before it keeps the best found.
+    /// Most steps the longest-path search may take (in each block of the graph) before it
+    /// keeps the best found.
     pub search_budget: usize,
 }
 
@@ -122,8 +126,10 @@ pub(crate) fn colon_path(
     let goal = target_owner.map(|o| graph.node_of[&o]);
     let lengths: Vec<f32> = graph.edges.iter().map(|e| e.length).collect();
     let (best, _) = longest_path(
-        &graph.adj,
-        &lengths,
+        &longest::Graph {
+            adj: &graph.adj,
+            len: &lengths,
+        },
         graph.start,
         goal,
         opts.skeleton.search_budget,
@@ -607,59 +613,6 @@ fn stamp(flags: &mut [u8], dims: [usize; 3], c: usize, r: f32, sp: [f32; 3]) {
             }
         }
     }
-}
-
-/// The longest simple path from `start` (ending at `goal` when given), by depth-first search
-/// with a budget of edge steps; returns its edges and the steps spent.
-fn longest_path(
-    adj: &[Vec<(usize, usize)>],
-    len: &[f32],
-    start: usize,
-    goal: Option<usize>,
-    budget: usize,
-) -> (Option<Vec<usize>>, usize) {
-    struct S<'a> {
-        adj: &'a [Vec<(usize, usize)>],
-        len: &'a [f32],
-        goal: Option<usize>,
-        seen: Vec<bool>,
-        path: Vec<usize>,
-        best: Option<(f32, Vec<usize>)>,
-        steps: usize,
-        budget: usize,
-    }
-    fn go(s: &mut S, at: usize, acc: f32) {
-        if s.goal.is_none_or(|g| g == at) && s.best.as_ref().is_none_or(|b| acc > b.0) {
-            s.best = Some((acc, s.path.clone()));
-        }
-        if s.goal == Some(at) {
-            return;
-        }
-        for &(to, e) in &s.adj[at] {
-            if s.seen[to] || s.steps >= s.budget {
-                continue;
-            }
-            s.steps += 1;
-            s.seen[to] = true;
-            s.path.push(e);
-            go(s, to, acc + s.len[e]);
-            s.path.pop();
-            s.seen[to] = false;
-        }
-    }
-    let mut s = S {
-        adj,
-        len,
-        goal,
-        seen: vec![false; adj.len()],
-        path: Vec::new(),
-        best: None,
-        steps: 0,
-        budget,
-    };
-    s.seen[start] = true;
-    go(&mut s, start, 0.0);
-    (s.best.map(|b| b.1), s.steps)
 }
 
 #[cfg(test)]

@@ -12,6 +12,7 @@
 
 mod ends;
 mod graph;
+mod longest;
 mod refine;
 
 use glam::DVec3;

@@ -59,8 +59,8 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::{
-    Error, Result, Volume,
-    anatomy::{Orientation, PatientFrame, PatientPosition, PositionSource},
+    Error, Result, Storage, Volume,
+    anatomy::{Orientation, PatientPosition, PositionSource},
 };
 use chain::ChainOptions;
 use compartments::{Candidates, Compartments};
@@ -243,111 +243,18 @@ pub fn segment(vol: &Volume<i16>, opts: &SegmentOptions) -> Result<Segmentation>
             join(&l)
         )));
     }
-    let (perm, flip) = canonical_storage(vol.geometry());
-    if perm == [0, 1, 2] && flip == [false; 3] {
+    let storage = Storage::of(vol.geometry());
+    if storage.is_identity() {
         return segment_axial(vol, opts, false);
     }
-    let stored = vol.reoriented(perm, flip)?;
-    let canon = Canonical {
-        perm,
-        flip,
-        dims: stored.dims(),
-        spacing: stored.spacing(),
-    };
+    let stored = storage.to_study(vol)?;
     let o = SegmentOptions {
-        seeds_mm: opts.seeds_mm.iter().map(|&p| canon.mm_in(p)).collect(),
-        exclude_mm: opts.exclude_mm.iter().map(|&p| canon.mm_in(p)).collect(),
+        seeds_mm: opts.seeds_mm.iter().map(|&p| storage.mm_in(p)).collect(),
+        exclude_mm: opts.exclude_mm.iter().map(|&p| storage.mm_in(p)).collect(),
         ..opts.clone()
     };
     let s = segment_axial(&stored, &o, false)?;
-    s.stored_back(&canon, vol.geometry())
-}
-
-/// The storage every scan is segmented in: its axes permuted and flipped to run along the
-/// patient's x (left), y (posterior) and z (superior), so that no result depends on how the
-/// scan was stored (coarse blocks, ties between equal distances). Where the axes do not
-/// match the patient's one to one (very oblique), only the axial axis is put last.
-fn canonical_storage(g: &crate::Geometry) -> ([usize; 3], [bool; 3]) {
-    let frame = PatientFrame::of(g);
-    let mut perm = [0; 3];
-    let mut flip = [false; 3];
-    for (b, dir) in [DVec3::X, DVec3::Y, DVec3::Z].into_iter().enumerate() {
-        let (a, sign) = frame.nearest_axis(dir);
-        perm[b] = a;
-        flip[b] = sign < 0;
-    }
-    let mut sorted = perm;
-    sorted.sort_unstable();
-    if sorted == [0, 1, 2] {
-        return (perm, flip);
-    }
-    let (axial, _) = frame.nearest_axis(DVec3::Z);
-    let mut perm = [0, 1, 2];
-    perm.swap(axial, 2);
-    (perm, [false; 3])
-}
-
-/// A scan's canonical storage ([`canonical_storage`]): `reoriented(perm, flip)` of the
-/// original, of `dims` and `spacing`.
-struct Canonical {
-    perm: [usize; 3],
-    flip: [bool; 3],
-    dims: [usize; 3],
-    spacing: [f64; 3],
-}
-
-impl Canonical {
-    /// Original volume-local mm to canonical.
-    fn mm_in(&self, p: DVec3) -> DVec3 {
-        DVec3::from_array([0, 1, 2].map(|a| {
-            let x = p[self.perm[a]];
-            if self.flip[a] {
-                (self.dims[a] - 1) as f64 * self.spacing[a] - x
-            } else {
-                x
-            }
-        }))
-    }
-    /// Canonical volume-local mm to original.
-    fn mm_back(&self, p: [f64; 3]) -> [f64; 3] {
-        let mut o = [0.0; 3];
-        for a in 0..3 {
-            o[self.perm[a]] = if self.flip[a] {
-                (self.dims[a] - 1) as f64 * self.spacing[a] - p[a]
-            } else {
-                p[a]
-            };
-        }
-        o
-    }
-    /// Canonical voxel to original.
-    fn voxel_back(&self, v: [usize; 3]) -> [usize; 3] {
-        let mut o = [0; 3];
-        for a in 0..3 {
-            o[self.perm[a]] = if self.flip[a] {
-                self.dims[a] - 1 - v[a]
-            } else {
-                v[a]
-            };
-        }
-        o
-    }
-    /// A canonical box (both corners inside) in the original storage.
-    fn box_back(&self, lo: [usize; 3], hi: [usize; 3]) -> ([usize; 3], [usize; 3]) {
-        let (a, b) = (self.voxel_back(lo), self.voxel_back(hi));
-        (
-            [0, 1, 2].map(|i| a[i].min(b[i])),
-            [0, 1, 2].map(|i| a[i].max(b[i])),
-        )
-    }
-    /// The (perm, flip) of `reoriented` that undoes this one.
-    fn inverse(&self) -> ([usize; 3], [bool; 3]) {
-        let mut inv = [0; 3];
-        for a in 0..3 {
-            inv[self.perm[a]] = a;
-        }
-        (inv, [0, 1, 2].map(|b| self.flip[inv[b]]))
-    }
+    s.stored_back(&storage)
 }
 
 impl Segmentation {
@@ -360,36 +267,21 @@ impl Segmentation {
             .max_by(|a, b| a.gas_ml.total_cmp(&b.gas_ml))
     }
 
-    /// The segmentation of a scan in its canonical storage `canon`, in the original storage
-    /// (of geometry `geom`).
-    fn stored_back(mut self, canon: &Canonical, geom: &crate::Geometry) -> Result<Segmentation> {
-        let (inv, iflip) = canon.inverse();
-        let mut lumen = self.lumen.reoriented(inv, iflip)?;
-        *lumen.geometry_mut() = geom.clone();
-        self.lumen = lumen;
-        self.seed_voxel = canon.voxel_back(self.seed_voxel);
-        self.cecum_voxel = self.cecum_voxel.map(|v| canon.voxel_back(v));
-        let (lo, hi) = canon.box_back(self.extent[0], self.extent[1]);
+    /// The segmentation of a scan in its study storage, in the input storage.
+    fn stored_back(mut self, storage: &Storage) -> Result<Segmentation> {
+        self.lumen = storage.to_input(&self.lumen)?;
+        self.seed_voxel = storage.voxel_back(self.seed_voxel);
+        self.cecum_voxel = self.cecum_voxel.map(|v| storage.voxel_back(v));
+        let (lo, hi) = storage.box_back(self.extent[0], self.extent[1]);
         self.extent = [lo, hi];
         for c in &mut self.components {
-            c.centroid_mm = canon.mm_back(c.centroid_mm);
-            (c.bbox_lo, c.bbox_hi) = canon.box_back(c.bbox_lo, c.bbox_hi);
+            c.centroid_mm = storage.mm_back(c.centroid_mm);
+            (c.bbox_lo, c.bbox_hi) = storage.box_back(c.bbox_lo, c.bbox_hi);
         }
-        let back = |voxels: &[usize]| {
-            let mut out: Vec<usize> = voxels
-                .iter()
-                .map(|&i| {
-                    let v = canon.voxel_back(crate::volume::grid_ijk(canon.dims, i));
-                    geom.index(v[0], v[1], v[2])
-                })
-                .collect();
-            out.sort_unstable();
-            out
-        };
         for g in &mut self.gaps {
-            g.voxels = back(&g.voxels);
+            g.voxels = storage.indices_back(&g.voxels);
         }
-        self.pools_grown = back(&self.pools_grown);
+        self.pools_grown = storage.indices_back(&self.pools_grown);
         Ok(self)
     }
 }

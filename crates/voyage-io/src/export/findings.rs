@@ -207,7 +207,7 @@ fn findings_json(
         })
         .collect();
     json!({
-        "frame": "*_lps_mm, normal_lps: DICOM patient LPS; position_mm: volume-local mm (x = i·sx, y = j·sy, z = k·sz); view_pose_mm: camera [x, y, z, qw, qx, qy, qz] in volume-local mm, z_body forward",
+        "frame": "*_lps_mm, normal_lps: DICOM patient LPS; position_mm: study-local mm (x = i·sx, y = j·sy, z = k·sz with the scan turned so that i, j, k run to the patient's left, back and head); view_pose_mm: camera [x, y, z, qw, qx, qy, qz] in study-local mm, z_body forward",
         "markers": markers,
         "measurements": measurements,
     })

@@ -53,6 +53,40 @@ fn move_into(dir: &Path, staging: &Path, names: &[&str]) -> Result<Vec<PathBuf>>
     Ok(paths)
 }
 
+/// The lumen, Ds and the cleansed CT, on the input's grid (the study is made in its own
+/// storage: [`voyage_core::Storage`]).
+fn write_volumes(study: &Study, put: &mut impl FnMut(&'static str) -> PathBuf) -> Result<()> {
+    let st = &study.storage;
+    let g = st.input_geometry();
+    if st.is_identity() {
+        nifti::save(&put("lumen.nii.gz"), &study.segmentation.lumen)?;
+        nifti::save_slices(&put("ds.nii.gz"), g, |k, out: &mut [f32]| {
+            study.ds.fill_slice(k, out)
+        })?;
+        if !study.cleansing.is_empty() {
+            nifti::save_slices(&put("cleansed.nii.gz"), g, |k, out: &mut [i16]| {
+                study.cleansing.fill_slice(&study.ct, k, out)
+            })?;
+        }
+        return Ok(());
+    }
+    nifti::save(
+        &put("lumen.nii.gz"),
+        &st.to_input(&study.segmentation.lumen)?,
+    )?;
+    nifti::save_slices(&put("ds.nii.gz"), g, |k, out: &mut [f32]| {
+        st.fill_input_slice(k, out, |v| study.ds.get(v))
+    })?;
+    if !study.cleansing.is_empty() {
+        let c = study.cleansed_ct();
+        let cg = c.geometry();
+        nifti::save_slices(&put("cleansed.nii.gz"), g, |k, out: &mut [i16]| {
+            st.fill_input_slice(k, out, |v| c.data()[cg.index(v[0], v[1], v[2])])
+        })?;
+    }
+    Ok(())
+}
+
 /// Writes the exports into `dir`; returns their file names.
 fn write_files(dir: &Path, study: &Study, extra: StudyExports) -> Result<Vec<&'static str>> {
     let g = study.ct.geometry();
@@ -61,15 +95,7 @@ fn write_files(dir: &Path, study: &Study, extra: StudyExports) -> Result<Vec<&'s
         out.push(name);
         dir.join(name)
     };
-    nifti::save(&put("lumen.nii.gz"), &study.segmentation.lumen)?;
-    nifti::save_slices(&put("ds.nii.gz"), g, |k, out: &mut [f32]| {
-        study.ds.fill_slice(k, out)
-    })?;
-    if !study.cleansing.is_empty() {
-        nifti::save_slices(&put("cleansed.nii.gz"), g, |k, out: &mut [i16]| {
-            study.cleansing.fill_slice(&study.ct, k, out)
-        })?;
-    }
+    write_volumes(study, &mut put)?;
     let cl = &study.centerline;
     let lps: Vec<[f64; 3]> = cl
         .points_mm
@@ -77,7 +103,7 @@ fn write_files(dir: &Path, study: &Study, extra: StudyExports) -> Result<Vec<&'s
         .map(|p| g.local_to_patient(DVec3::from_array(*p)).to_array())
         .collect();
     let cl_json = json!({
-        "frame": "points_mm: volume-local mm (x = i·sx, y = j·sy, z = k·sz); points_lps_mm: DICOM patient LPS",
+        "frame": "points_mm: study-local mm (x = i·sx, y = j·sy, z = k·sz with the scan turned so that i, j, k run to the patient's left, back and head); points_lps_mm: DICOM patient LPS",
         "length_mm": cl.length_mm,
         "source_mm": study.source_mm().to_array(),
         "target_mm": study.target_mm().to_array(),
@@ -138,7 +164,7 @@ fn write_files(dir: &Path, study: &Study, extra: StudyExports) -> Result<Vec<&'s
         .collect();
     write_json(
         &put("cells.json"),
-        &json!({ "frame": "volume-local mm, with LPS copies", "cells": cells }),
+        &json!({ "frame": "study-local mm (as in centerline.json), with LPS copies", "cells": cells }),
     )?;
     Ok(out)
 }

@@ -28,7 +28,7 @@ pub fn write_trajectory(
         })
         .collect();
     let doc = json!({
-        "frame": "poses: volume-local mm (x = i·sx, y = j·sy, z = k·sz) and a unit quaternion [qw, qx, qy, qz] from the camera's body frame (z_body = view direction, y_body = up, x_body = y_body × z_body, the viewer's left) to the volume's axes; positions_lps_mm: DICOM patient LPS",
+        "frame": "poses: study-local mm (x = i·sx, y = j·sy, z = k·sz with the scan turned so that i, j, k run to the patient's left, back and head) and a unit quaternion [qw, qx, qy, qz] from the camera's body frame (z_body = view direction, y_body = up, x_body = y_body × z_body, the viewer's left) to the volume's axes; positions_lps_mm: DICOM patient LPS",
         "fps": fps,
         "volume": {
             "dims": geometry.dims,

@@ -173,9 +173,11 @@ pub fn load_and_prepare(a: &InputArgs, nav_min_wall_mm: Option<f64>) -> Result<P
     for w in &study.segmentation.warnings {
         eprintln!("warning: {}: {w}", a.input.display());
     }
+    // The study is in its own storage (axes along the patient's): its local mm are read
+    // with its geometry.
     Ok(Prepared {
+        geometry: study.ct.geometry().clone(),
         study,
-        geometry: g,
         load_ms,
     })
 }

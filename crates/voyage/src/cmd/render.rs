@@ -92,8 +92,9 @@ pub struct RenderArgs {
     /// Which flight --frame counts along.
     #[arg(long, value_enum, default_value_t = OneDirection::Forward)]
     pub direction: OneDirection,
-    /// A camera pose x,y,z,qw,qx,qy,qz: position in volume-local mm and orientation (z_body
-    /// = view, y_body = up), as in the "poses" of `voyage fly --out`.
+    /// A camera pose x,y,z,qw,qx,qy,qz: position in the study's local mm (the scan turned so
+    /// that its axes run to the patient's left, back and head) and orientation (z_body =
+    /// view, y_body = up), as in the "poses" of `voyage fly --out`.
     #[arg(long)]
     pub pose: Option<String>,
     /// The PNG to write.

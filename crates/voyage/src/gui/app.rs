@@ -395,7 +395,7 @@ impl App {
             self.status = "a correction is still being preprocessed".into();
             return;
         }
-        let points = c.applied_to(source.points(), s.study.ct.geometry());
+        let points = c.applied_to(source.points(), s.study.storage.input_geometry());
         self.status = format!("preprocessing again: {}", c.describe());
         self.correction_error = None;
         self.correcting = Some(c);
