@@ -1,5 +1,6 @@
 //! Phantom → file → load gives back the phantom: geometry and every HU, through NIfTI and
-//! through a full-size DICOM series.
+//! through a full-size DICOM series; and `voyage prep`'s volumes of a scan stored otherwise
+//! come back on that scan's grid.
 
 use voyage_core::Volume;
 use voyage_io::{self as io, LoadOptions, dicom_write, nifti};
