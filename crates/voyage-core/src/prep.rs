@@ -511,7 +511,7 @@ fn prepare_stored(
     let Traced {
         sk,
         mut ends,
-        taken,
+        mut taken,
         mut ds_box,
     } = traced;
     // The fluid beside the columns is lumen again, but for the holes plugged and the
@@ -521,6 +521,22 @@ fn prepare_stored(
     if !beside.is_empty() {
         set_voxels(&mut seg.lumen, &beside, 1);
         seg.lumen_voxels += beside.len();
+        // The contacts cut again on the lumen with it: where the fluid beside the columns
+        // lies across a contact, it would join the loops round the wall cut before.
+        laps.start(Stage::Contacts);
+        let blocks = sk
+            .blocks
+            .as_ref()
+            .map(|_| crate::grid::Blocks::new(&seg.lumen, &grid, 2))
+            .transpose()?;
+        taken.extend(cut_along(
+            &mut seg.lumen,
+            &grid,
+            &sk,
+            blocks.as_ref(),
+            opts,
+        )?);
+        taken.sort_unstable();
         laps.start(Stage::Ds);
         ds_box = distance_to_wall_in(&seg.lumen, grid.clone());
     }
@@ -669,25 +685,7 @@ fn trace(
         cl_opts,
     )?;
     laps.start(Stage::Contacts);
-    // No wall at the ends: source and target stay lumen.
-    let keep = [
-        sk.given_source
-            .map(|v| centerline::mm_of(&seg.lumen, v))
-            .unwrap_or(sk.path_mm[0]),
-        sk.given_target
-            .map(|v| centerline::mm_of(&seg.lumen, v))
-            .unwrap_or(sk.path_mm[sk.path_mm.len() - 1]),
-    ];
-    let keep_mm = 2.0 * seg.lumen.spacing().iter().cloned().fold(0.0, f64::max);
-    let mut taken = cut_contacts(
-        &mut seg.lumen,
-        grid,
-        &sk.path_mm,
-        sk.blocks.as_ref(),
-        &keep,
-        keep_mm,
-        &opts.contacts,
-    )?;
+    let mut taken = cut_along(&mut seg.lumen, grid, &sk, sk.blocks.as_ref(), opts)?;
     taken.sort_unstable();
     laps.start(Stage::Ds);
     let ds_box = match early_ds {
@@ -702,6 +700,36 @@ fn trace(
         taken,
         ds_box,
     })
+}
+
+/// Cuts the contacts between loops along the skeleton's path `sk` from `lumen` (searching on
+/// `blocks` when given); returns the voxels taken. No wall at the ends: source and target
+/// stay lumen.
+fn cut_along(
+    lumen: &mut Volume<u8>,
+    grid: &BoxGrid,
+    sk: &centerline::Skeleton,
+    blocks: Option<&crate::grid::Blocks>,
+    opts: &PrepOptions,
+) -> Result<Vec<usize>> {
+    let keep = [
+        sk.given_source
+            .map(|v| centerline::mm_of(lumen, v))
+            .unwrap_or(sk.path_mm[0]),
+        sk.given_target
+            .map(|v| centerline::mm_of(lumen, v))
+            .unwrap_or(sk.path_mm[sk.path_mm.len() - 1]),
+    ];
+    let keep_mm = 2.0 * lumen.spacing().iter().cloned().fold(0.0, f64::max);
+    cut_contacts(
+        lumen,
+        grid,
+        &sk.path_mm,
+        blocks,
+        &keep,
+        keep_mm,
+        &opts.contacts,
+    )
 }
 
 /// Each bridged gap's stretch of the centerline (in the order of the gaps): the points whose
