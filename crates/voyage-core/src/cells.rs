@@ -631,13 +631,8 @@ mod tests {
 
     #[test]
     fn leaving_out_interior_points_keeps_the_hull() {
-        let mut x = 88172645463325252u64;
-        let mut rnd = || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            (x % 10_000) as f64 / 100.0
-        };
+        let mut rng = crate::rng::Rng::new(88172645463325252, 0);
+        let mut rnd = || (rng.next_u64() % 10_000) as f64 / 100.0;
         for shape in 0..4 {
             // A disc, a square and a thin slanted strip of random points, and a voxel grid
             // (many collinear and tied points).

@@ -450,14 +450,9 @@ mod tests {
 
     fn random_mask(dims: [usize; 3], spacing: [f64; 3], seed: u64, fill: f64) -> Volume<u8> {
         let g = Geometry::new(dims, spacing, [0.0; 3]).unwrap();
-        let mut x = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        let mut rng = crate::rng::Rng::new(seed, 0);
         let data = (0..g.len())
-            .map(|_| {
-                x ^= x << 13;
-                x ^= x >> 7;
-                x ^= x << 17;
-                ((x % 1000) as f64 / 1000.0 < fill) as u8
-            })
+            .map(|_| ((rng.next_u64() % 1000) as f64 / 1000.0 < fill) as u8)
             .collect();
         Volume::from_vec(g, data).unwrap()
     }
@@ -500,13 +495,8 @@ mod tests {
     /// length up to past [`DIRECT_MAX`], with squared distances as the passes leave them.
     #[test]
     fn direct_minimum_equals_the_envelope() {
-        let mut x = 0x9E37_79B9_7F4A_7C15u64;
-        let mut next = || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            (x >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rng = crate::rng::Rng::new(0x9E37_79B9_7F4A_7C15, 0);
+        let mut next = || (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32;
         let mut s = Scratch::new(DIRECT_MAX + 64);
         for n in 1..DIRECT_MAX + 40 {
             let h = 0.5 + next();

@@ -851,14 +851,9 @@ mod tests {
 
     fn maze(dims: [usize; 3], spacing: [f64; 3], seed: u64) -> Volume<u8> {
         let g = Geometry::new(dims, spacing, [0.0; 3]).unwrap();
-        let mut x = seed | 1;
+        let mut rng = crate::rng::Rng::new(seed, 0);
         let data = (0..g.len())
-            .map(|_| {
-                x ^= x << 13;
-                x ^= x >> 7;
-                x ^= x << 17;
-                (x % 100 < 70) as u8
-            })
+            .map(|_| (rng.next_u64() % 100 < 70) as u8)
             .collect();
         Volume::from_vec(g, data).unwrap()
     }

@@ -429,13 +429,8 @@ mod tests {
     /// ends and across word boundaries, values at and beside the thresholds.
     #[test]
     fn row_bits_give_the_runs_of_each_test() {
-        let mut x = 0x2545_F491_4F6C_DD1Du64;
-        let mut next = || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x
-        };
+        let mut rng = crate::rng::Rng::new(0x2545_F491_4F6C_DD1D, 0);
+        let mut next = || rng.next_u64();
         let values = [
             -1000i16,
             -501,
