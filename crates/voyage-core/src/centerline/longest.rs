@@ -150,9 +150,10 @@ impl<'a> Search<'a> {
     }
 }
 
-/// The graph's biconnected blocks: each block's edges, and the blocks of each node.
+/// The graph's biconnected blocks: each block's edges and nodes, and the blocks of each node.
 struct Blocks {
     edges: Vec<Vec<usize>>,
+    nodes: Vec<Vec<usize>>,
     of_node: Vec<Vec<usize>>,
 }
 
@@ -165,8 +166,16 @@ impl Blocks {
         let mut edge_stack: Vec<usize> = Vec::new();
         let mut blocks = Blocks {
             edges: Vec::new(),
+            nodes: Vec::new(),
             of_node: vec![Vec::new(); n],
         };
+        // Each edge's two nodes.
+        let mut ends = vec![(0, 0); g.len.len()];
+        for (v, list) in g.adj.iter().enumerate() {
+            for &(w, e) in list {
+                ends[e] = (v, w);
+            }
+        }
         let mut counter = 0;
         let mut edge_seen = vec![false; g.len.len()];
         for root in 0..n {
@@ -205,24 +214,22 @@ impl Blocks {
                     // u cuts v's block off: its edges are those pushed since `via`.
                     let at = edge_stack.iter().rposition(|&x| x == via).unwrap_or(0);
                     let block: Vec<usize> = edge_stack.drain(at..).collect();
-                    blocks.push(g, block);
+                    blocks.push(&ends, block);
                 }
             }
         }
         blocks
     }
 
-    fn push(&mut self, g: &Graph, edges: Vec<usize>) {
+    fn push(&mut self, ends: &[(usize, usize)], edges: Vec<usize>) {
         let b = self.edges.len();
-        let mut nodes: Vec<usize> = Vec::new();
-        for (v, list) in g.adj.iter().enumerate() {
-            if list.iter().any(|&(_, e)| edges.contains(&e)) {
-                nodes.push(v);
-            }
-        }
-        for v in nodes {
+        let mut nodes: Vec<usize> = edges.iter().flat_map(|&e| [ends[e].0, ends[e].1]).collect();
+        nodes.sort_unstable();
+        nodes.dedup();
+        for &v in &nodes {
             self.of_node[v].push(b);
         }
+        self.nodes.push(nodes);
         self.edges.push(edges);
     }
 
@@ -240,7 +247,7 @@ impl Blocks {
                 break;
             }
             let next: Vec<usize> = if x < nb {
-                self.nodes_of(x).into_iter().map(|v| nb + v).collect()
+                self.nodes[x].iter().map(|&v| nb + v).collect()
             } else {
                 self.of_node[x - nb].clone()
             };
@@ -267,12 +274,6 @@ impl Blocks {
                 .map(|w| (w[1], w[0] - nb, w[2] - nb))
                 .collect(),
         )
-    }
-
-    fn nodes_of(&self, block: usize) -> Vec<usize> {
-        (0..self.of_node.len())
-            .filter(|&v| self.of_node[v].contains(&block))
-            .collect()
     }
 }
 
