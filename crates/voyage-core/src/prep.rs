@@ -169,7 +169,7 @@ impl<F: FnMut(Stage)> Laps<F> {
     }
 }
 
-/// Everything preprocessing produces. Geometry in volume-local mm.
+/// Everything preprocessing produces. Geometry in the study storage's local mm.
 #[derive(Clone, Debug)]
 pub struct Study {
     /// The input: HU, or a mask's labels, in the study storage (its axes along the
@@ -396,16 +396,9 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, progress: impl FnMut(Stage))
     }
     let ct = storage.to_study(&ct)?;
     let mut o = opts.clone();
-    let points = [&mut o.segment.seeds_mm, &mut o.segment.exclude_mm];
-    for p in points.into_iter().flatten() {
-        *p = storage.mm_in(*p);
-    }
-    for p in [&mut o.centerline.source_mm, &mut o.centerline.target_mm]
-        .into_iter()
-        .flatten()
-    {
-        *p = storage.mm_in(*p);
-    }
+    o.segment = opts.segment.in_storage(&storage);
+    o.centerline.source_mm = opts.centerline.source_mm.map(|p| storage.mm_in(p));
+    o.centerline.target_mm = opts.centerline.target_mm.map(|p| storage.mm_in(p));
     prepare_stored(ct, &o, storage, start, progress)
 }
 

@@ -248,13 +248,19 @@ pub fn segment(vol: &Volume<i16>, opts: &SegmentOptions) -> Result<Segmentation>
         return segment_axial(vol, opts, false);
     }
     let stored = storage.to_study(vol)?;
-    let o = SegmentOptions {
-        seeds_mm: opts.seeds_mm.iter().map(|&p| storage.mm_in(p)).collect(),
-        exclude_mm: opts.exclude_mm.iter().map(|&p| storage.mm_in(p)).collect(),
-        ..opts.clone()
-    };
-    let s = segment_axial(&stored, &o, false)?;
+    let s = segment_axial(&stored, &opts.in_storage(&storage), false)?;
     s.stored_back(&storage)
+}
+
+impl SegmentOptions {
+    /// These options with their points (input volume-local mm) in the study storage.
+    pub(crate) fn in_storage(&self, storage: &Storage) -> SegmentOptions {
+        SegmentOptions {
+            seeds_mm: self.seeds_mm.iter().map(|&p| storage.mm_in(p)).collect(),
+            exclude_mm: self.exclude_mm.iter().map(|&p| storage.mm_in(p)).collect(),
+            ..self.clone()
+        }
+    }
 }
 
 impl Segmentation {

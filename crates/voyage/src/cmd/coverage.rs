@@ -90,9 +90,8 @@ pub fn run(a: &CoverageArgs) -> Result<()> {
     let options = a.options()?;
     let name = a.input.input.display().to_string();
     let min_wall = FlightOptions::default().safety.min_wall_mm;
-    let Prepared {
-        study, geometry, ..
-    } = load_and_prepare(&a.input, Some(min_wall))?;
+    let Prepared { study, .. } = load_and_prepare(&a.input, Some(min_wall))?;
+    let geometry = study.ct.geometry();
     let mut mesh = CellMesh::new(&study.surface, &study.cells);
     mesh.index_cells();
     let camera = Camera::lens(a.fov);

@@ -117,9 +117,8 @@ pub struct FlyArgs {
 
 pub fn run(a: &FlyArgs) -> Result<()> {
     let opts = a.physics.options()?;
-    let Prepared {
-        study, geometry, ..
-    } = load_and_prepare(&a.input, Some(opts.safety.min_wall_mm))?;
+    let Prepared { study, .. } = load_and_prepare(&a.input, Some(opts.safety.min_wall_mm))?;
+    let geometry = study.ct.geometry();
     let opts = opts.fitted_to(&study);
     let field = potential_field(&study, opts.safety.min_wall_mm)
         .with_context(|| format!("{}", a.input.input.display()))?;

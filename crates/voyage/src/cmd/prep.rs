@@ -130,8 +130,8 @@ pub fn parse_point(s: &str) -> Result<DVec3, String> {
 
 /// A study ready for navigation, and what it cost to load.
 pub struct Prepared {
+    /// In the study storage: its local mm are read with `study.ct.geometry()`.
     pub study: Study,
-    pub geometry: Geometry,
     pub load_ms: f64,
 }
 
@@ -173,27 +173,18 @@ pub fn load_and_prepare(a: &InputArgs, nav_min_wall_mm: Option<f64>) -> Result<P
     for w in &study.segmentation.warnings {
         eprintln!("warning: {}: {w}", a.input.display());
     }
-    // The study is in its own storage (axes along the patient's): its local mm are read
-    // with its geometry.
-    Ok(Prepared {
-        geometry: study.ct.geometry().clone(),
-        study,
-        load_ms,
-    })
+    Ok(Prepared { study, load_ms })
 }
 
 pub fn run(a: &PrepArgs) -> Result<()> {
-    let Prepared {
-        study,
-        geometry: g,
-        load_ms,
-    } = load_and_prepare(&a.input, None)?;
+    let Prepared { study, load_ms } = load_and_prepare(&a.input, None)?;
+    let g = study.ct.geometry();
     let written = write_study(&a.out, &study, StudyExports { stl: a.stl })?;
-    let summary = summary(&study, &g, load_ms);
+    let summary = summary(&study, g, load_ms);
     if a.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
-        print_text(&study, &g, load_ms);
+        print_text(&study, g, load_ms);
         for p in written {
             println!("  wrote {}", p.display());
         }
