@@ -133,17 +133,17 @@ pub fn run(a: &FlyArgs) -> Result<()> {
             eprintln!(
                 "warning: {}: {}",
                 a.input.input.display(),
-                rescue_text(f, r, &geometry)
+                rescue_text(f, r, geometry)
             );
         }
     }
     if let Some(out) = &a.out {
-        write_trajectory(out, &flights, &geometry, opts.fps)?;
+        write_trajectory(out, &flights, geometry, opts.fps)?;
     }
     if a.json {
         let per: serde_json::Map<String, serde_json::Value> = flights
             .iter()
-            .map(|f| (f.direction.name().to_string(), summary(f, &geometry)))
+            .map(|f| (f.direction.name().to_string(), summary(f, geometry)))
             .collect();
         println!(
             "{}",
