@@ -13,6 +13,7 @@ use glam::DVec3;
 use super::{
     chain::Coarse,
     compartments::Compartments,
+    fluid::MAX_DEPTH_MM,
     work::{BRIDGE, Bbox, GAS, Key, LAYER, POOL},
 };
 use crate::Volume;
@@ -31,7 +32,7 @@ pub fn hu_cost(hu: Option<i16>) -> f32 {
         Some(h) if h < -150 => 10.0,
         Some(h) if h < -30 => 6.0,  // fat
         Some(h) if h < 200 => 1.0,  // collapsed bowel wall (and organs)
-        Some(h) if h < 1200 => 0.7, // tagged fluid filling the bowel (and cancellous bone)
+        Some(h) if h < 1200 => 0.2, // tagged fluid filling the bowel (and cancellous bone)
         Some(_) => 40.0,            // cortical bone
     }
 }
@@ -49,29 +50,60 @@ pub struct Path {
     pub mean_cost: f64,
 }
 
+/// Where the cheapest path is looked for: around both ends, and a pool's depth further
+/// along gravity.
+///
+/// A stretch filled with tagged fluid between two gas segments lies below their gas: their
+/// facing ends are gas, and the fluid joining them may run a pool's depth under both (on
+/// `ctc/prone-tagged` the descending colon's fluid-filled stretch runs 70–100 mm anterior
+/// to the two segments' gas, and a box around the ends alone held only the tissue behind
+/// it, so the bridge went through 75 mm of it).
+#[derive(Clone, Copy)]
+pub struct SearchBox {
+    pub dims: [usize; 3],
+    pub spacing: [f64; 3],
+    /// Gravity's voxel axis and direction, when known.
+    pub down: Option<(usize, i32)>,
+}
+
+impl SearchBox {
+    fn around(&self, a: [usize; 3], b: [usize; 3]) -> Bbox {
+        let dist_mm = (0..3)
+            .map(|x| ((a[x] as f64 - b[x] as f64) * self.spacing[x]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let pad_mm = 15.0 + 0.3 * dist_mm;
+        let pad = self.spacing.map(|s| (pad_mm / s).ceil() as usize);
+        let mut bx = Bbox {
+            lo: [0, 1, 2].map(|x| a[x].min(b[x])),
+            hi: [0, 1, 2].map(|x| a[x].max(b[x])),
+        }
+        .grown(pad, self.dims);
+        if let Some((axis, sign)) = self.down {
+            let depth = (MAX_DEPTH_MM / self.spacing[axis]).ceil() as usize;
+            if sign > 0 {
+                bx.hi[axis] = (bx.hi[axis] + depth).min(self.dims[axis] - 1);
+            } else {
+                bx.lo[axis] = bx.lo[axis].saturating_sub(depth);
+            }
+        }
+        bx
+    }
+}
+
 /// The cheapest path from `a` to `b` through `ct` (or a mask's background when None), where
 /// `own(v)` says that voxel `v` lies in one of the two segments being joined and
 /// `other_gas(v)` that it is another gas region.
 pub fn cheapest_path(
     ct: Option<&Volume<i16>>,
-    dims: [usize; 3],
-    spacing: [f64; 3],
+    within: SearchBox,
     a: [usize; 3],
     b: [usize; 3],
     own: impl Fn([usize; 3]) -> bool,
     other_gas: impl Fn([usize; 3]) -> bool,
 ) -> Option<Path> {
-    let dist_mm = (0..3)
-        .map(|x| ((a[x] as f64 - b[x] as f64) * spacing[x]).powi(2))
-        .sum::<f64>()
-        .sqrt();
-    let pad_mm = 15.0 + 0.3 * dist_mm;
-    let pad = spacing.map(|s| (pad_mm / s).ceil() as usize);
-    let bx = Bbox {
-        lo: [0, 1, 2].map(|x| a[x].min(b[x])),
-        hi: [0, 1, 2].map(|x| a[x].max(b[x])),
-    }
-    .grown(pad, dims);
+    let spacing = within.spacing;
+    let bx = within.around(a, b);
     let w = bx.widths();
     let n: usize = w.iter().product();
     // Blocks of f³ voxels when the box is large.
@@ -167,7 +199,7 @@ pub fn cheapest_path(
     pts[0] = a;
     let last = pts.len() - 1;
     pts[last] = b;
-    let voxels = line_voxels(&pts);
+    let voxels = outside_stretch(line_voxels(&pts), &own);
     let mut length_mm = 0.0;
     let mut outside = (0.0, 0.0);
     for p in voxels.windows(2) {
@@ -196,6 +228,19 @@ pub fn cheapest_path(
         length_mm,
         mean_cost,
     })
+}
+
+/// The stretch of a path (`voxels`) outside the two segments: from the last voxel of the
+/// one it leaves to the first of the one it enters; the whole path when it never leaves them.
+/// A path from gas down through its pool to a fluid-filled stretch bridges only the stretch.
+fn outside_stretch(voxels: Vec<[usize; 3]>, own: impl Fn([usize; 3]) -> bool) -> Vec<[usize; 3]> {
+    let out = |v: &[usize; 3]| !own(*v);
+    match (voxels.iter().position(out), voxels.iter().rposition(out)) {
+        (Some(first), Some(last)) => {
+            voxels[first.saturating_sub(1)..=(last + 1).min(voxels.len() - 1)].to_vec()
+        }
+        _ => voxels,
+    }
 }
 
 /// The voxels on straight lines through `pts` (26-connected, no repeats).
@@ -229,6 +274,8 @@ pub(super) struct Bridges<'a> {
     pub(super) work: &'a Volume<u8>,
     pub(super) parts: &'a Compartments,
     pub(super) ct: Option<&'a Volume<i16>>,
+    /// Gravity's voxel axis and direction, when known.
+    pub(super) down: Option<(usize, i32)>,
 }
 
 impl Bridges<'_> {
@@ -266,10 +313,14 @@ impl Bridges<'_> {
         let other = |v: [usize; 3]| {
             matches!(self.work.get(v[0], v[1], v[2]), GAS | POOL | LAYER) && !own(v)
         };
+        let within = SearchBox {
+            dims: self.work.dims(),
+            spacing: self.work.spacing(),
+            down: self.down,
+        };
         cheapest_path(
             self.ct,
-            self.work.dims(),
-            self.work.spacing(),
+            within,
             va,
             vb,
             own,
@@ -344,10 +395,14 @@ mod tests {
                 ct.set(t, 15, k, 40);
             }
         }
+        let within = SearchBox {
+            dims: ct.dims(),
+            spacing: ct.spacing(),
+            down: None,
+        };
         let p = cheapest_path(
             Some(&ct),
-            ct.dims(),
-            ct.spacing(),
+            within,
             [5, 5, 5],
             [35, 5, 5],
             |_| false,
@@ -384,5 +439,52 @@ mod tests {
                 .windows(2)
                 .all(|w| (0..3).all(|x| w[0][x].abs_diff(w[1][x]) <= 1))
         );
+    }
+
+    /// Two gas segments whose ends face each other across 34 mm of fat, joined by a
+    /// U of tagged fluid hanging below them (gravity +y), each arm the segment's own pool
+    /// for 20 mm and then fluid: as on `ctc/prone-tagged`, where the descending colon's
+    /// fluid-filled stretch runs 70–100 mm anterior to the two segments' gas. The bridge goes
+    /// through the fluid, and only the stretch outside the segments is bridged.
+    #[test]
+    fn the_bridge_goes_down_through_fluid_below_the_gas() {
+        let g = Geometry::new([30, 90, 100], [1.0; 3], [0.0; 3]).unwrap();
+        // Fat around the bowel.
+        let mut ct = Volume::filled(g.clone(), -100i16).unwrap();
+        let tube = |j: usize, k: usize| {
+            let arm = |z: f64| (k as f64 - z).abs() <= 8.0 && (5..=78).contains(&j);
+            let bottom = (j as f64 - 74.0).abs() <= 6.0 && (17..=83).contains(&k);
+            arm(25.0) || arm(75.0) || bottom
+        };
+        for k in 0..100 {
+            for j in 0..90 {
+                for i in 3..27 {
+                    if tube(j, k) {
+                        ct.set(i, j, k, if j < 10 { -1000 } else { 600 });
+                    }
+                }
+            }
+        }
+        let own = |v: [usize; 3]| tube(v[1], v[2]) && v[1] < 30 && (3..27).contains(&v[0]);
+        let (a, b) = ([15, 6, 25], [15, 6, 75]);
+        let path = |down| {
+            let within = SearchBox {
+                dims: g.dims,
+                spacing: g.spacing,
+                down,
+            };
+            cheapest_path(Some(&ct), within, a, b, own, |_| false).unwrap()
+        };
+        // Around the ends alone: through the tissue.
+        assert!(path(None).mean_cost >= 1.0);
+        let p = path(Some((1, 1)));
+        let bright = p.voxels.iter().filter(|v| ct.get(v[0], v[1], v[2]) >= 200).count();
+        assert!(
+            bright as f64 >= 0.9 * p.voxels.len() as f64,
+            "{bright} of {} voxels in fluid",
+            p.voxels.len()
+        );
+        assert!(p.voxels.iter().all(|v| v[1] >= 25), "the bridge starts in the pool");
+        assert!(p.mean_cost < 0.5, "mean cost {}", p.mean_cost);
     }
 }

@@ -19,7 +19,7 @@ use super::{
     fluid::Pooled,
     work::{Bbox, Key},
 };
-use crate::Volume;
+use crate::{Volume, anatomy::PatientFrame};
 
 /// How many of the nearest free compartments are bridged to at each step.
 const CANDIDATES: usize = 3;
@@ -281,6 +281,7 @@ pub(super) fn colon(
         work: &pooled.work,
         parts,
         ct,
+        down: ct.map(|_| PatientFrame::of(geom).nearest_axis(pooled.orientation.gravity())),
     };
     let course = Course::new(
         geom,

@@ -426,13 +426,16 @@ const DIST_UNIT_MM: f64 = 0.01;
 /// axis, and [`DOWN_COST`] times that along gravity, `down`: voxel axis and direction) set to
 /// `label` and pushed to `added`; a voxel where only `take(i)` is taken when
 /// reached, and not passed through (a pool's partial-volume skin, not the wall between it and
-/// a loop beside it). Only voxels still 0 in `work` are taken.
+/// a loop beside it). A step into a voxel where `free(i)` costs nothing (the core of a fluid
+/// body wider than any small-bowel loop: [`Cores`]). Only voxels still 0 in `work` are taken.
+#[allow(clippy::too_many_arguments)]
 pub fn grow_bright(
     work: &mut crate::Volume<u8>,
     seeds: impl IntoIterator<Item = usize>,
     (reach_mm, down): (f64, Option<(usize, i32)>),
     take: impl Fn(usize) -> bool,
     pass: impl Fn(usize) -> bool,
+    free: impl Fn(usize) -> bool,
     label: u8,
     added: &mut Vec<usize>,
 ) {
@@ -475,7 +478,7 @@ pub fn grow_bright(
             .zip(unit.into_iter().flatten())
             .filter_map(|(q, u)| Some((q?, u)));
         for (q, u) in steps {
-            let dq = d + u;
+            let dq = if free(q) { d } else { d + u };
             if dq > reach || work.data()[q] != 0 {
                 continue;
             }
@@ -657,6 +660,7 @@ pub(super) fn fill_fluid(
         (reach_mm, None),
         &bright,
         &bright,
+        |_| false,
         BRIDGE,
         added,
     );
@@ -712,6 +716,11 @@ pub(super) fn whole_pools(
     let wide = |i: usize| wide_across(&g, i, down.0, &bright);
     let take = |i: usize| bright(i) && (!half(i) || wide(i));
     let pass = |i: usize| bright(i) && wide(i) && half(i) && !by_air(i);
+    // The growth passes only bright voxels: the box around those joined to the seeds holds it.
+    let cores = match reach_of(&g, &seeds, bright) {
+        Some(b) => Cores::find(ct, b, fluid_hu),
+        None => Cores::none(),
+    };
     let mut grown = Vec::new();
     grow_bright(
         lumen,
@@ -719,10 +728,201 @@ pub(super) fn whole_pools(
         (POOL_REACH_MM, Some(down)),
         take,
         pass,
+        |i| cores.holds(g.ijk(i)),
         1,
         &mut grown,
     );
     grown
+}
+
+/// Fluid this far (mm) or further from anything but fluid is a wide body's core: a ball of
+/// fluid 28 mm across fits there. A lumen filled with tagged fluid from wall to wall holds
+/// one (the prone `ctc/prone-tagged`'s descending colon: 45 mm across for 12 cm); a small-
+/// bowel loop, at most 25 mm across, does not.
+pub const CORE_MM: f64 = 14.0;
+
+/// Cores are looked for on cells about this big (mm): a core's extent is a matter of
+/// millimetres, and the box around the lumen is most of the abdomen.
+const CELL_MM: f64 = 1.5;
+
+/// The wide fluid bodies around the lumen: every voxel within [`CORE_MM`] of a core (the
+/// union of the 28 mm balls of fluid that fit, an opening of the fluid). [`whole_pools`]
+/// crosses them at no cost, so its reach counts only from their edge: a fluid-filled
+/// stretch is taken whole, not cut [`POOL_REACH_MM`] from the air in a straight face, and a
+/// small-bowel loop touching it is still followed that far at most.
+pub struct Cores {
+    /// Per cell: within [`CORE_MM`] of a core.
+    body: Vec<bool>,
+    lo: [usize; 3],
+    cell: [usize; 3],
+    cells: [usize; 3],
+}
+
+impl Cores {
+    /// The bodies within the box `b` (around all the growth can pass: [`reach_of`]),
+    /// in `hu`: a cell is fluid where all its voxels are at or above `fluid_hu` and at least
+    /// halfway from soft tissue to the brightest of them (not the blurred wall between two
+    /// pools).
+    pub fn find(hu: &Volume<i16>, b: Bbox, fluid_hu: i16) -> Cores {
+        let geom = hu.geometry();
+        let cell = geom.spacing.map(|s| ((CELL_MM / s).round() as usize).max(1));
+        let w = b.widths();
+        let cells = [0, 1, 2].map(|a| w[a].div_ceil(cell[a]));
+        let mut cores = Cores {
+            body: Vec::new(),
+            lo: b.lo,
+            cell,
+            cells,
+        };
+        let fluid = cores.fluid_cells(hu, fluid_hu);
+        let cell_mm = [0, 1, 2].map(|a| cell[a] as f64 * geom.spacing[a]);
+        let Ok(cell_geom) = Geometry::new(cells, cell_mm, [0.0; 3]) else {
+            return cores;
+        };
+        let Some(distance) = Volume::from_vec(cell_geom, fluid)
+            .ok()
+            .and_then(|v| crate::distance::distance_to_wall(&v).ok())
+        else {
+            return cores;
+        };
+        let core: Vec<bool> = (0..cells.iter().product())
+            .map(|c| {
+                let [x, y, z] = [c % cells[0], (c / cells[0]) % cells[1], c / (cells[0] * cells[1])];
+                distance.get_global([x, y, z], 0.0) >= CORE_MM as f32
+            })
+            .collect();
+        cores.body = dilate(&core, cells, cell_mm, CORE_MM);
+        cores
+    }
+
+    /// No bodies.
+    pub fn none() -> Cores {
+        Cores {
+            body: Vec::new(),
+            lo: [0; 3],
+            cell: [1; 3],
+            cells: [0; 3],
+        }
+    }
+
+    /// Per cell, whether all its voxels are fluid.
+    fn fluid_cells(&self, hu: &Volume<i16>, fluid_hu: i16) -> Vec<u8> {
+        let [cx, cy, cz] = self.cells;
+        let dims = hu.dims();
+        let mut out = vec![0u8; cx * cy * cz];
+        out.par_chunks_mut(cx * cy).enumerate().for_each(|(z, slab)| {
+            for (y, row) in slab.chunks_mut(cx).enumerate() {
+                for (x, c) in row.iter_mut().enumerate() {
+                    let at = [x, y, z];
+                    let start = [0, 1, 2].map(|a| self.lo[a] + at[a] * self.cell[a]);
+                    let end = [0, 1, 2].map(|a| (start[a] + self.cell[a]).min(dims[a]));
+                    let (mut min, mut max) = (i16::MAX, i16::MIN);
+                    for k in start[2]..end[2] {
+                        for j in start[1]..end[1] {
+                            let i0 = hu.geometry().index(start[0], j, k);
+                            for &v in &hu.data()[i0..i0 + end[0] - start[0]] {
+                                min = min.min(v);
+                                max = max.max(v);
+                            }
+                        }
+                    }
+                    *c = (min >= fluid_hu && 2 * min as i32 >= max as i32 + TISSUE_HU as i32)
+                        as u8;
+                }
+            }
+        });
+        out
+    }
+
+    /// Whether voxel `g` (of the volume) lies in a body.
+    pub fn holds(&self, g: [usize; 3]) -> bool {
+        if self.body.is_empty() {
+            return false;
+        }
+        let mut c = [0usize; 3];
+        for a in 0..3 {
+            let Some(l) = g[a].checked_sub(self.lo[a]) else {
+                return false;
+            };
+            c[a] = l / self.cell[a];
+            if c[a] >= self.cells[a] {
+                return false;
+            }
+        }
+        self.body[c[0] + self.cells[0] * (c[1] + self.cells[1] * c[2])]
+    }
+}
+
+/// The box around every voxel reached from `seeds` through voxels where `pass(i)` (6-neighbour
+/// steps, with no limit), grown by a voxel: where [`whole_pools`] may go. None without seeds.
+pub fn reach_of(geom: &Geometry, seeds: &[usize], pass: impl Fn(usize) -> bool) -> Option<Bbox> {
+    let mut seen = vec![0u64; geom.len().div_ceil(64)];
+    let mut visit = |i: usize| {
+        let (w, bit) = (i / 64, 1u64 << (i % 64));
+        let new = seen[w] & bit == 0;
+        seen[w] |= bit;
+        new
+    };
+    let mut stack: Vec<usize> = seeds.iter().copied().filter(|&i| visit(i)).collect();
+    let mut b: Option<Bbox> = None;
+    while let Some(i) = stack.pop() {
+        let at = geom.ijk(i);
+        let here = Bbox { lo: at, hi: at };
+        b = Some(b.map_or(here, |x| x.union(&here)));
+        for q in face_neighbours(geom.dims, i).into_iter().flatten() {
+            if pass(q) && visit(q) {
+                stack.push(q);
+            }
+        }
+    }
+    b.map(|x| x.grown([1; 3], geom.dims))
+}
+
+/// The cells within `r_mm` of a set one (cells of `cell_mm`), by a ball stamped on each set
+/// cell at the set's edge (the inside is covered by them and by itself).
+fn dilate(set: &[bool], cells: [usize; 3], cell_mm: [f64; 3], r_mm: f64) -> Vec<bool> {
+    let r = cell_mm.map(|s| (r_mm / s).floor() as i64);
+    let mut ball = Vec::new();
+    for dz in -r[2]..=r[2] {
+        for dy in -r[1]..=r[1] {
+            for dx in -r[0]..=r[0] {
+                let d2 = (dx as f64 * cell_mm[0]).powi(2)
+                    + (dy as f64 * cell_mm[1]).powi(2)
+                    + (dz as f64 * cell_mm[2]).powi(2);
+                if d2 <= r_mm * r_mm {
+                    ball.push([dx, dy, dz]);
+                }
+            }
+        }
+    }
+    let at = |p: [i64; 3]| -> Option<usize> {
+        (0..3)
+            .all(|a| p[a] >= 0 && p[a] < cells[a] as i64)
+            .then(|| p[0] as usize + cells[0] * (p[1] as usize + cells[1] * p[2] as usize))
+    };
+    let mut out = set.to_vec();
+    for (c, _) in set.iter().enumerate().filter(|(_, s)| **s) {
+        let p = [
+            (c % cells[0]) as i64,
+            ((c / cells[0]) % cells[1]) as i64,
+            (c / (cells[0] * cells[1])) as i64,
+        ];
+        let edge = [[1, 0, 0], [0, 1, 0], [0, 0, 1]].iter().any(|d| {
+            [1i64, -1].iter().any(|&sgn| {
+                at([p[0] + sgn * d[0], p[1] + sgn * d[1], p[2] + sgn * d[2]])
+                    .is_some_and(|q| !set[q])
+            })
+        });
+        if !edge {
+            continue;
+        }
+        for o in &ball {
+            if let Some(q) = at([p[0] + o[0], p[1] + o[1], p[2] + o[2]]) {
+                out[q] = true;
+            }
+        }
+    }
+    out
 }
 
 #[cfg(test)]
@@ -875,5 +1075,54 @@ mod tests {
             // And the same pool, whichever way the lines run in memory.
             assert_eq!(supine_pools(&r).len(), 20 * 6 * 40, "{perm:?} {flip:?}");
         }
+    }
+
+    /// A gas pocket over its pool (the lumen so far, at x < 50), the pool going on as a
+    /// stretch filled wall to wall (a 44 mm tube, 120 mm long along x, as `ctc/prone-tagged`'s
+    /// descending colon), and past its end a small-bowel loop full of contrast (20 mm, along
+    /// x, touching it with no wall between). The stretch is taken whole, far beyond the
+    /// reach from the air; the loop only near the stretch's end.
+    #[test]
+    fn a_stretch_filled_wall_to_wall_is_taken_whole_and_a_loop_past_it_is_not() {
+        let g = Geometry::new([240, 70, 100], [1.0; 3], [0.0; 3]).unwrap();
+        let mut ct = Volume::filled(g.clone(), 40i16).unwrap();
+        let mut lumen = Volume::filled(g.clone(), 0u8).unwrap();
+        let r2 = |j: usize, k: usize, r: f64| {
+            (j as f64 - 35.0).powi(2) + (k as f64 - 50.0).powi(2) <= r * r
+        };
+        let (mut stretch, mut loop_far) = (Vec::new(), Vec::new());
+        for k in 0..100 {
+            for j in 0..70 {
+                for i in 10..240 {
+                    let v = g.index(i, j, k);
+                    if i < 170 && r2(j, k, 22.0) {
+                        // Gravity +y: gas over the pool at x < 50, fluid everywhere after.
+                        let gas = i < 50 && j < 28;
+                        ct.data_mut()[v] = if gas { -1000 } else { 600 };
+                        if i < 50 {
+                            lumen.data_mut()[v] = 1;
+                        } else {
+                            stretch.push(v);
+                        }
+                    } else if i >= 170 && r2(j, k, 10.0) {
+                        ct.data_mut()[v] = 600;
+                        if i >= 170 + POOL_REACH_MM as usize + 6 {
+                            loop_far.push(v);
+                        }
+                    }
+                }
+            }
+        }
+        let b = Bbox {
+            lo: [10, 13, 28],
+            hi: [49, 57, 72],
+        };
+        let grown = whole_pools(&mut lumen, &ct, Some(b), (-600, 200), DVec3::Y);
+        let taken = |v: &usize| lumen.data()[*v] == 1;
+        let share = stretch.iter().filter(|v| taken(v)).count() as f64 / stretch.len() as f64;
+        assert!(share > 0.99, "{share:.3} of the filled stretch taken");
+        assert_eq!(grown.len(), grown.iter().filter(|v| taken(v)).count());
+        let far = loop_far.iter().filter(|v| taken(v)).count();
+        assert_eq!(far, 0, "{far} voxels of the loop taken beyond its first {} mm", POOL_REACH_MM + 6.0);
     }
 }
