@@ -657,13 +657,9 @@ impl Ring {
 
     /// Whether values on both sides of `surface_hu` lie in the 3³ around `v`.
     fn surface_near(&self, v: [usize; 3], surface_hu: i16) -> bool {
-        let (mut below, mut above) = (false, false);
-        for &d in &CUBE {
-            let x = self.after[self.index(v, d)];
-            below |= x < surface_hu;
-            above |= x >= surface_hu;
-        }
-        below && above
+        let below = self.after[self.index(v, [0; 3])] < surface_hu;
+        CUBE.iter()
+            .any(|&d| (self.after[self.index(v, d)] < surface_hu) != below)
     }
 }
 
