@@ -741,8 +741,8 @@ pub(super) fn whole_pools(
 /// bowel loop, at most 25 mm across, does not.
 pub const CORE_MM: f64 = 14.0;
 
-/// Cores are looked for on cells about this big (mm): a core's extent is a matter of
-/// millimetres, and the box around the lumen is most of the abdomen.
+/// Cores are found on cells about this big (mm), not on voxels: a 14 mm distance needs no
+/// finer step, and the box searched is most of the abdomen (8× fewer cells at 0.75 mm).
 const CELL_MM: f64 = 1.5;
 
 /// The wide fluid bodies around the lumen: every voxel within [`CORE_MM`] of a core (the
