@@ -483,7 +483,10 @@ fn smooth_the_model(
     let [nx, ny, nz] = g.dims;
     let plane = nx * ny;
     let (k0, k1) = (first as usize / plane, last as usize / plane);
-    let (klo, khi) = (k0.saturating_sub(1).max(2), (k1 + 1).min(nz.saturating_sub(3)));
+    let (klo, khi) = (
+        k0.saturating_sub(1).max(2),
+        (k1 + 1).min(nz.saturating_sub(3)),
+    );
     if klo > khi {
         return;
     }
@@ -668,7 +671,11 @@ const CUBE: [[isize; 3]; 27] = {
     let mut out = [[0isize; 3]; 27];
     let mut n = 0;
     while n < 27 {
-        out[n] = [(n % 3) as isize - 1, ((n / 3) % 3) as isize - 1, (n / 9) as isize - 1];
+        out[n] = [
+            (n % 3) as isize - 1,
+            ((n / 3) % 3) as isize - 1,
+            (n / 9) as isize - 1,
+        ];
         n += 1;
     }
     out

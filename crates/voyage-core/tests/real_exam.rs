@@ -133,7 +133,10 @@ fn the_real_exam_gives_the_whole_colon_rectum_to_cecum() {
     let (air, fluid) = voyage_core::roughness(&s.surface.mesh, &s.ct, 200, 2.0);
     let (air, fluid) = (air.unwrap(), fluid.unwrap());
     eprintln!("roughness {fluid:.2}° where fluid lay, {air:.2}° in air");
-    assert!(fluid <= 1.4 * air, "{fluid:.2}° where fluid lay, {air:.2}° in air");
+    assert!(
+        fluid <= 1.4 * air,
+        "{fluid:.2}° where fluid lay, {air:.2}° in air"
+    );
     // No large gas left out.
     for x in seg.segments.iter().filter(|x| !x.kept) {
         assert!(

@@ -318,14 +318,7 @@ impl Bridges<'_> {
             spacing: self.work.spacing(),
             down: self.down,
         };
-        cheapest_path(
-            self.ct,
-            within,
-            va,
-            vb,
-            own,
-            other,
-        )
+        cheapest_path(self.ct, within, va, vb, own, other)
     }
 }
 
@@ -478,13 +471,20 @@ mod tests {
         // Around the ends alone: through the tissue.
         assert!(path(None).mean_cost >= 1.0);
         let p = path(Some((1, 1)));
-        let bright = p.voxels.iter().filter(|v| ct.get(v[0], v[1], v[2]) >= 200).count();
+        let bright = p
+            .voxels
+            .iter()
+            .filter(|v| ct.get(v[0], v[1], v[2]) >= 200)
+            .count();
         assert!(
             bright as f64 >= 0.9 * p.voxels.len() as f64,
             "{bright} of {} voxels in fluid",
             p.voxels.len()
         );
-        assert!(p.voxels.iter().all(|v| v[1] >= 25), "the bridge starts in the pool");
+        assert!(
+            p.voxels.iter().all(|v| v[1] >= 25),
+            "the bridge starts in the pool"
+        );
         assert!(p.mean_cost < 0.5, "mean cost {}", p.mean_cost);
     }
 }

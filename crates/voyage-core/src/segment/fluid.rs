@@ -765,7 +765,9 @@ impl Cores {
     /// pools).
     pub fn find(hu: &Volume<i16>, b: Bbox, fluid_hu: i16) -> Cores {
         let geom = hu.geometry();
-        let cell = geom.spacing.map(|s| ((CELL_MM / s).round() as usize).max(1));
+        let cell = geom
+            .spacing
+            .map(|s| ((CELL_MM / s).round() as usize).max(1));
         let w = b.widths();
         let cells = [0, 1, 2].map(|a| w[a].div_ceil(cell[a]));
         let mut cores = Cores {
@@ -787,7 +789,11 @@ impl Cores {
         };
         let core: Vec<bool> = (0..cells.iter().product())
             .map(|c| {
-                let [x, y, z] = [c % cells[0], (c / cells[0]) % cells[1], c / (cells[0] * cells[1])];
+                let [x, y, z] = [
+                    c % cells[0],
+                    (c / cells[0]) % cells[1],
+                    c / (cells[0] * cells[1]),
+                ];
                 distance.get_global([x, y, z], 0.0) >= CORE_MM as f32
             })
             .collect();
@@ -810,27 +816,29 @@ impl Cores {
         let [cx, cy, cz] = self.cells;
         let dims = hu.dims();
         let mut out = vec![0u8; cx * cy * cz];
-        out.par_chunks_mut(cx * cy).enumerate().for_each(|(z, slab)| {
-            for (y, row) in slab.chunks_mut(cx).enumerate() {
-                for (x, c) in row.iter_mut().enumerate() {
-                    let at = [x, y, z];
-                    let start = [0, 1, 2].map(|a| self.lo[a] + at[a] * self.cell[a]);
-                    let end = [0, 1, 2].map(|a| (start[a] + self.cell[a]).min(dims[a]));
-                    let (mut min, mut max) = (i16::MAX, i16::MIN);
-                    for k in start[2]..end[2] {
-                        for j in start[1]..end[1] {
-                            let i0 = hu.geometry().index(start[0], j, k);
-                            for &v in &hu.data()[i0..i0 + end[0] - start[0]] {
-                                min = min.min(v);
-                                max = max.max(v);
+        out.par_chunks_mut(cx * cy)
+            .enumerate()
+            .for_each(|(z, slab)| {
+                for (y, row) in slab.chunks_mut(cx).enumerate() {
+                    for (x, c) in row.iter_mut().enumerate() {
+                        let at = [x, y, z];
+                        let start = [0, 1, 2].map(|a| self.lo[a] + at[a] * self.cell[a]);
+                        let end = [0, 1, 2].map(|a| (start[a] + self.cell[a]).min(dims[a]));
+                        let (mut min, mut max) = (i16::MAX, i16::MIN);
+                        for k in start[2]..end[2] {
+                            for j in start[1]..end[1] {
+                                let i0 = hu.geometry().index(start[0], j, k);
+                                for &v in &hu.data()[i0..i0 + end[0] - start[0]] {
+                                    min = min.min(v);
+                                    max = max.max(v);
+                                }
                             }
                         }
+                        *c = (min >= fluid_hu && 2 * min as i32 >= max as i32 + TISSUE_HU as i32)
+                            as u8;
                     }
-                    *c = (min >= fluid_hu && 2 * min as i32 >= max as i32 + TISSUE_HU as i32)
-                        as u8;
                 }
-            }
-        });
+            });
         out
     }
 
@@ -1123,6 +1131,11 @@ mod tests {
         assert!(share > 0.99, "{share:.3} of the filled stretch taken");
         assert_eq!(grown.len(), grown.iter().filter(|v| taken(v)).count());
         let far = loop_far.iter().filter(|v| taken(v)).count();
-        assert_eq!(far, 0, "{far} voxels of the loop taken beyond its first {} mm", POOL_REACH_MM + 6.0);
+        assert_eq!(
+            far,
+            0,
+            "{far} voxels of the loop taken beyond its first {} mm",
+            POOL_REACH_MM + 6.0
+        );
     }
 }
