@@ -456,6 +456,25 @@ pub(crate) fn runs_where<T: Copy>(
     })
 }
 
+/// The voxel offsets within `r_mm` of a voxel's centre, for voxels (or cells) of `spacing`.
+pub(crate) fn ball_offsets(spacing: [f64; 3], r_mm: f64) -> Vec<[i64; 3]> {
+    let r = spacing.map(|s| (r_mm / s).floor() as i64);
+    let mut ball = Vec::new();
+    for dz in -r[2]..=r[2] {
+        for dy in -r[1]..=r[1] {
+            for dx in -r[0]..=r[0] {
+                let d2 = (dx as f64 * spacing[0]).powi(2)
+                    + (dy as f64 * spacing[1]).powi(2)
+                    + (dz as f64 * spacing[2]).powi(2);
+                if d2 <= r_mm * r_mm {
+                    ball.push([dx, dy, dz]);
+                }
+            }
+        }
+    }
+    ball
+}
+
 /// The voxels of `mask` that are not 0 within `r` mm of `p` (volume-local mm).
 pub(crate) fn set_voxels_in_ball(mask: &Volume<u8>, p: [f64; 3], r: f64) -> Vec<[usize; 3]> {
     let sp = mask.spacing();

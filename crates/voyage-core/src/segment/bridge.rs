@@ -16,7 +16,7 @@ use super::{
     fluid::MAX_DEPTH_MM,
     work::{BRIDGE, Bbox, GAS, Key, LAYER, POOL},
 };
-use crate::Volume;
+use crate::{Volume, volume::ball_offsets};
 
 /// A search box with more voxels than this is searched on coarser blocks.
 const MAX_BOX_VOXELS: usize = 1 << 18;
@@ -330,20 +330,7 @@ pub(super) fn lay_bridge(
     added: &mut Vec<usize>,
 ) {
     let g = work.geometry().clone();
-    let r = g.spacing.map(|s| (radius_mm / s).floor() as i64);
-    let mut ball = Vec::new();
-    for dz in -r[2]..=r[2] {
-        for dy in -r[1]..=r[1] {
-            for dx in -r[0]..=r[0] {
-                let d2 = (dx as f64 * g.spacing[0]).powi(2)
-                    + (dy as f64 * g.spacing[1]).powi(2)
-                    + (dz as f64 * g.spacing[2]).powi(2);
-                if d2 <= radius_mm * radius_mm {
-                    ball.push([dx, dy, dz]);
-                }
-            }
-        }
-    }
+    let ball = ball_offsets(g.spacing, radius_mm);
     for v in path {
         for o in &ball {
             let q = [v[0] as i64 + o[0], v[1] as i64 + o[1], v[2] as i64 + o[2]];

@@ -33,7 +33,7 @@ use super::{
 use crate::{
     Geometry, Result, Volume,
     anatomy::{Orientation, PatientFrame, PatientPosition, PositionSource},
-    volume::face_neighbours,
+    volume::{ball_offsets, face_neighbours},
 };
 
 /// A pool deeper than this below its gas is not one colon segment's fluid. (The prone
@@ -889,20 +889,7 @@ pub fn reach_of(geom: &Geometry, seeds: &[usize], pass: impl Fn(usize) -> bool) 
 /// The cells within `r_mm` of a set one (cells of `cell_mm`), by a ball stamped on each set
 /// cell at the set's edge (the inside is covered by them and by itself).
 fn dilate(set: &[bool], cells: [usize; 3], cell_mm: [f64; 3], r_mm: f64) -> Vec<bool> {
-    let r = cell_mm.map(|s| (r_mm / s).floor() as i64);
-    let mut ball = Vec::new();
-    for dz in -r[2]..=r[2] {
-        for dy in -r[1]..=r[1] {
-            for dx in -r[0]..=r[0] {
-                let d2 = (dx as f64 * cell_mm[0]).powi(2)
-                    + (dy as f64 * cell_mm[1]).powi(2)
-                    + (dz as f64 * cell_mm[2]).powi(2);
-                if d2 <= r_mm * r_mm {
-                    ball.push([dx, dy, dz]);
-                }
-            }
-        }
-    }
+    let ball = ball_offsets(cell_mm, r_mm);
     let at = |p: [i64; 3]| -> Option<usize> {
         (0..3)
             .all(|a| p[a] >= 0 && p[a] < cells[a] as i64)
