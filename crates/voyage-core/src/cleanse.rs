@@ -403,7 +403,6 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
     // beyond does not hold: islands of partial-volume skin in the new lumen. They are air.
     let mut join = stool.join;
     let islands = Islands {
-        m: lumen.data(),
         hu,
         g: &g,
         voxels: &voxels,
@@ -412,7 +411,7 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
         join: &join,
         air_hu,
     }
-    .find(lo, hi);
+    .find(lumen.data_mut(), lo, hi);
     if !islands.is_empty() {
         let to_air: Vec<(u32, i16)> = islands.iter().map(|&v| (v as u32, AIR_HU)).collect();
         overwrite(&mut voxels, &mut cleansed, hu, &to_air);
@@ -500,7 +499,10 @@ fn smooth_the_model(
         g,
         voxels,
         values,
-        kernel: gaussian_offsets(g.spacing, SMOOTH_MM),
+        kernel: gaussian_offsets(g.spacing, SMOOTH_MM)
+            .into_iter()
+            .map(|(d, w)| (Ring::step(g.dims[0], d), w))
+            .collect(),
         surface_hu,
         fluid_hu,
     };
@@ -521,7 +523,7 @@ struct Smoothing<'a> {
     g: &'a Geometry,
     voxels: &'a [u32],
     values: &'a [i16],
-    kernel: Vec<([isize; 3], f64)>,
+    kernel: Vec<(RingStep, f64)>,
     surface_hu: i16,
     fluid_hu: i16,
 }
@@ -543,13 +545,13 @@ impl Smoothing<'_> {
             // Slice kc = k − 2 has its two neighbours on each side loaded.
             let kc = k - 2;
             for c in self.beside_changes(kc, &mut seen) {
-                let at = [c % nx, c / nx, kc];
+                let around = ring.around(kc);
                 let v = c + plane * kc;
-                let now = ring.after[ring.index(at, [0; 3])];
+                let now = ring.at(&around, c, (2, 0));
                 // Tagged voxels cleansing left (contrast in a small-bowel loop behind the
                 // wall) keep their value.
                 if (self.hu[v] >= self.fluid_hu && now == self.hu[v])
-                    || !ring.surface_near(at, self.surface_hu)
+                    || !ring.surface_near(&around, c, self.surface_hu)
                     || !fluid_near(v, self.g, self.hu, self.fluid_hu)
                 {
                     continue;
@@ -557,7 +559,7 @@ impl Smoothing<'_> {
                 let mean: f64 = self
                     .kernel
                     .iter()
-                    .map(|&(d, w)| w * ring.after[ring.index(at, d)] as f64)
+                    .map(|&(d, w)| w * ring.at(&around, c, d) as f64)
                     .sum();
                 out.push((v as u32, mean.round() as i16));
             }
@@ -574,9 +576,19 @@ impl Smoothing<'_> {
         let (lo, hi) = ((plane * (kc - 1)) as u32, (plane * (kc + 2)) as u32);
         let from = self.voxels.partition_point(|&v| v < lo);
         let to = self.voxels.partition_point(|&v| v < hi);
-        let mut near = Vec::new();
+        // The changed voxels' places in plane (several slices change at one place, as
+        // under a pool's level), then the places beside them.
+        let mut changed = Vec::new();
         for &v in &self.voxels[from..to] {
             let r = v as usize % plane;
+            if !seen[r] {
+                seen[r] = true;
+                changed.push(r);
+            }
+        }
+        changed.iter().for_each(|&c| seen[c] = false);
+        let mut near = Vec::new();
+        for r in changed {
             let (i, j) = (r % nx, r / nx);
             for y in j.saturating_sub(1).max(2)..=(j + 1).min(ny - 3) {
                 for x in i.saturating_sub(1).max(2)..=(i + 1).min(nx - 3) {
@@ -631,16 +643,20 @@ fn gaussian_offsets(spacing: [f64; 3], sigma_mm: f64) -> Vec<([isize; 3], f64)> 
 /// Five slices of the cleansed CT, slice k at k mod 5.
 struct Ring {
     after: Vec<i16>,
-    nx: usize,
     plane: usize,
+    /// [`CUBE`] as ring steps.
+    cube: [RingStep; 27],
 }
+
+/// A step from a voxel of the ring's middle slice k: to slice k − 2 + .0, and by .1 in plane.
+type RingStep = (usize, isize);
 
 impl Ring {
     fn new(nx: usize, ny: usize) -> Ring {
         Ring {
             after: vec![0; 5 * nx * ny],
-            nx,
             plane: nx * ny,
+            cube: CUBE.map(|d| Ring::step(nx, d)),
         }
     }
 
@@ -651,17 +667,28 @@ impl Ring {
         slice_with(hu, (voxels, values), k, out);
     }
 
-    /// Where voxel (i, j, k) + `d` lies in the ring (slices k − 2..=k + 2 loaded).
-    fn index(&self, [i, j, k]: [usize; 3], d: [isize; 3]) -> usize {
-        let at = |x: usize, dx: isize| (x as isize + dx) as usize;
-        (at(k, d[2]) % 5) * self.plane + at(j, d[1]) * self.nx + at(i, d[0])
+    /// The step by `d` (voxels; in slices at most two) in a volume `nx` voxels wide.
+    fn step(nx: usize, d: [isize; 3]) -> RingStep {
+        ((d[2] + 2) as usize, d[0] + d[1] * nx as isize)
     }
 
-    /// Whether values on both sides of `surface_hu` lie in the 3³ around `v`.
-    fn surface_near(&self, v: [usize; 3], surface_hu: i16) -> bool {
-        let below = self.after[self.index(v, [0; 3])] < surface_hu;
-        CUBE.iter()
-            .any(|&d| (self.after[self.index(v, d)] < surface_hu) != below)
+    /// Where slices k − 2..=k + 2 start in the ring (all loaded).
+    fn around(&self, k: usize) -> [usize; 5] {
+        std::array::from_fn(|n| ((k + n + 3) % 5) * self.plane)
+    }
+
+    /// The value a step from in-plane voxel `c` of the middle slice of `around`.
+    fn at(&self, around: &[usize; 5], c: usize, (s, d): RingStep) -> i16 {
+        self.after[(around[s] + c).wrapping_add_signed(d)]
+    }
+
+    /// Whether values on both sides of `surface_hu` lie in the 3³ around in-plane voxel `c`
+    /// of the middle slice of `around`.
+    fn surface_near(&self, around: &[usize; 5], c: usize, surface_hu: i16) -> bool {
+        let below = self.at(around, c, (2, 0)) < surface_hu;
+        self.cube
+            .iter()
+            .any(|&d| (self.at(around, c, d) < surface_hu) != below)
     }
 }
 
@@ -696,29 +723,32 @@ fn peel_spurs(
     six: &[isize; 6],
     air_hu: i16,
 ) {
-    let mut candidates: Vec<usize> = voxels
+    let spur = |m: &[u8], v: usize| {
+        m[v] == 0
+            && six
+                .iter()
+                .filter(|&&d| m[(v as isize + d) as usize] & 1 != 0)
+                .count()
+                >= 5
+            && (air_hu..0).contains(&value_after(voxels, values, hu, v))
+    };
+    let changed = |v: usize| voxels.binary_search(&(v as u32)).is_ok();
+    // The first pass looks at every changed voxel and its face neighbours; a later one only
+    // at the face neighbours of the voxels just peeled (nothing else changed around the
+    // others), that are changed or beside a changed voxel.
+    let mut spurs: Vec<usize> = voxels
         .iter()
         .flat_map(|&v| {
             six.iter()
                 .map(move |&d| (v as isize + d) as usize)
                 .chain([v as usize])
         })
+        .filter(|&v| spur(m, v))
         .collect();
-    candidates.sort_unstable();
-    candidates.dedup();
     let mut peeled: Vec<(u32, i16)> = Vec::new();
     for _ in 0..SPUR_PASSES {
-        let spurs: Vec<usize> = candidates
-            .iter()
-            .copied()
-            .filter(|&v| m[v] == 0 && (air_hu..0).contains(&value_after(voxels, values, hu, v)))
-            .filter(|&v| {
-                six.iter()
-                    .filter(|&&d| m[(v as isize + d) as usize] & 1 != 0)
-                    .count()
-                    >= 5
-            })
-            .collect();
+        spurs.sort_unstable();
+        spurs.dedup();
         if spurs.is_empty() {
             break;
         }
@@ -727,6 +757,12 @@ fn peel_spurs(
             join.push(v);
             peeled.push((v as u32, AIR_HU));
         }
+        spurs = spurs
+            .iter()
+            .flat_map(|&v| six.iter().map(move |&d| (v as isize + d) as usize))
+            .filter(|&w| changed(w) || six.iter().any(|&d| changed((w as isize + d) as usize)))
+            .filter(|&w| spur(m, w))
+            .collect();
     }
     peeled.sort_unstable();
     overwrite(voxels, values, hu, &peeled);
@@ -921,8 +957,6 @@ fn find_lumps(
 
 /// The changes so far, to find what they left floating.
 struct Islands<'a> {
-    /// The lumen before cleansing, with the marks.
-    m: &'a [u8],
     hu: &'a [i16],
     g: &'a Geometry,
     /// Changed voxels (ascending) and their new values.
@@ -934,14 +968,21 @@ struct Islands<'a> {
     air_hu: i16,
 }
 
+/// The marks of a pool's surroundings or a lump, that [`Islands::find`] looks at.
+const MARKED: u8 = NEAR | SOLID | LUMP;
+/// Spare bits [`Islands::find`] marks (and clears): a marked voxel solid once cleansed, and
+/// one held by the wall beyond (or, among the loose ones, already put in an island).
+const STAYS: u8 = 64;
+const HELD: u8 = 128;
+
 impl Islands<'_> {
     fn value(&self, v: usize) -> i16 {
         value_after(self.voxels, self.values, self.hu, v)
     }
 
-    /// Outside the lumen once cleansed, at or above the air level.
-    fn solid(&self, v: usize) -> bool {
-        let lumen = if self.m[v] & 1 != 0 {
+    /// Outside the lumen `m` once cleansed, at or above the air level.
+    fn solid(&self, m: &[u8], v: usize) -> bool {
+        let lumen = if m[v] & 1 != 0 {
             self.leave.binary_search(&v).is_err()
         } else {
             self.join.binary_search(&v).is_ok()
@@ -952,8 +993,9 @@ impl Islands<'_> {
     /// Voxels marked near a pool or in a lump (within lo..=hi grown by one; the marks reach
     /// two past it, and lo..=hi lies two inside the volume) that are solid once cleansed but
     /// joined to nothing solid outside the marks, through face neighbours solid and marked:
-    /// ascending.
-    fn find(&self, lo: [usize; 3], hi: [usize; 3]) -> Vec<usize> {
+    /// ascending. `m` is the lumen before cleansing, with the marks; the two spare bits it
+    /// lends are clear again on return.
+    fn find(&self, m: &mut [u8], lo: [usize; 3], hi: [usize; 3]) -> Vec<usize> {
         let [nx, ny, _] = self.g.dims;
         let six = [
             1isize,
@@ -964,85 +1006,129 @@ impl Islands<'_> {
             -((nx * ny) as isize),
         ];
         let (blo, bhi) = (lo.map(|x| x - 1), hi.map(|x| x + 1));
-        let in_box = |v: usize| {
-            let ijk = self.g.ijk(v);
-            (0..3).all(|a| ijk[a] >= blo[a] && ijk[a] <= bhi[a])
-        };
-        let marked = |v: usize| self.m[v] & (NEAR | SOLID | LUMP) != 0 && in_box(v);
-        // The marked voxels solid once cleansed (ascending, by the scan), and whether each is
-        // held: from outside (a neighbour outside the lumen, unmarked or past the box, where
-        // nothing changed), then through the others.
+        // The marked voxels solid once cleansed (by the scan, ascending, so the change lists
+        // are read in order), and whether each is held: from outside (a face neighbour
+        // outside the lumen, unmarked or past the box, where nothing changed), then through
+        // the others.
+        let (mut leave, mut join, mut changed) = (
+            Ascending::new(self.leave),
+            Ascending::new(self.join),
+            Ascending::new(self.voxels),
+        );
         let mut solid = Vec::new();
+        let mut queue = Vec::new();
         for k in blo[2]..=bhi[2] {
             for j in blo[1]..=bhi[1] {
                 let row = nx * (j + ny * k);
-                for v in row + blo[0]..=row + bhi[0] {
-                    // (In the box by the loop's bounds.)
-                    if self.m[v] & (NEAR | SOLID | LUMP) != 0 && self.solid(v) {
-                        solid.push(v);
+                for i in blo[0]..=bhi[0] {
+                    let v = row + i;
+                    if m[v] & MARKED == 0 {
+                        continue;
+                    }
+                    let lumen = if m[v] & 1 != 0 {
+                        !leave.has(v)
+                    } else {
+                        join.has(v)
+                    };
+                    let value = changed
+                        .find(v as u32)
+                        .map_or(self.hu[v], |n| self.values[n]);
+                    if lumen || value < self.air_hu {
+                        continue;
+                    }
+                    m[v] |= STAYS;
+                    solid.push(v);
+                    let at = [i, j, k];
+                    let past_box = |d: usize| {
+                        let a = d / 2;
+                        if d % 2 == 0 {
+                            at[a] == bhi[a]
+                        } else {
+                            at[a] == blo[a]
+                        }
+                    };
+                    let held = (0..6).any(|d| {
+                        let w = (v as isize + six[d]) as usize;
+                        m[w] & 1 == 0 && (m[w] & MARKED == 0 || past_box(d))
+                    });
+                    if held {
+                        m[v] |= HELD;
+                        queue.push(v);
                     }
                 }
             }
         }
-        let mut held: Vec<bool> = solid
-            .iter()
-            .map(|&v| {
-                six.iter().any(|&d| {
-                    let w = (v as isize + d) as usize;
-                    !marked(w) && self.m[w] & 1 == 0
-                })
-            })
-            .collect();
-        let mut queue: Vec<usize> = (0..solid.len()).filter(|&n| held[n]).collect();
-        while let Some(n) = queue.pop() {
+        let joined = |m: &[u8], w: usize| m[w] & (STAYS | HELD) == STAYS;
+        while let Some(v) = queue.pop() {
             for &d in &six {
-                let w = (solid[n] as isize + d) as usize;
-                if let Ok(x) = solid.binary_search(&w)
-                    && !held[x]
-                {
-                    held[x] = true;
-                    queue.push(x);
+                let w = (v as isize + d) as usize;
+                if joined(m, w) {
+                    m[w] |= HELD;
+                    queue.push(w);
                 }
             }
         }
         // An island with tissue inside it (a voxel of at least 0 HU all of whose neighbours
         // are solid) is a polyp's head on a stalk too thin to show, not skin: it stays.
-        let loose: Vec<usize> = solid
-            .into_iter()
-            .zip(held)
-            .filter(|&(_, h)| !h)
-            .map(|(v, _)| v)
-            .collect();
-        let inner = |v: usize| {
-            self.value(v) >= 0 && six.iter().all(|&d| self.solid((v as isize + d) as usize))
+        let inner = |m: &[u8], v: usize| {
+            self.value(v) >= 0
+                && six.iter().all(|&d| {
+                    let w = (v as isize + d) as usize;
+                    m[w] & STAYS != 0 || self.solid(m, w)
+                })
         };
-        let mut seen = vec![false; loose.len()];
         let mut out = Vec::new();
-        for start in 0..loose.len() {
-            if seen[start] {
+        for &start in &solid {
+            if !joined(m, start) {
                 continue;
             }
-            seen[start] = true;
+            m[start] |= HELD;
             let mut island = vec![start];
             let mut next = 0;
             while next < island.len() {
-                let v = loose[island[next]];
+                let v = island[next];
                 next += 1;
                 for &d in &six {
-                    if let Ok(x) = loose.binary_search(&((v as isize + d) as usize))
-                        && !seen[x]
-                    {
-                        seen[x] = true;
-                        island.push(x);
+                    let w = (v as isize + d) as usize;
+                    if joined(m, w) {
+                        m[w] |= HELD;
+                        island.push(w);
                     }
                 }
             }
-            if !island.iter().any(|&n| inner(loose[n])) {
-                out.extend(island.iter().map(|&n| loose[n]));
+            if !island.iter().any(|&v| inner(m, v)) {
+                out.extend(island);
             }
+        }
+        for &v in &solid {
+            m[v] &= !(STAYS | HELD);
         }
         out.sort_unstable();
         out
+    }
+}
+
+/// Look-ups in an ascending list, in ascending order: each costs the steps past the last.
+struct Ascending<'a, T> {
+    list: &'a [T],
+    at: usize,
+}
+
+impl<'a, T: Ord + Copy> Ascending<'a, T> {
+    fn new(list: &'a [T]) -> Self {
+        Ascending { list, at: 0 }
+    }
+
+    /// Where `v` is in the list; `v` is at least the last one asked for.
+    fn find(&mut self, v: T) -> Option<usize> {
+        while self.at < self.list.len() && self.list[self.at] < v {
+            self.at += 1;
+        }
+        (self.list.get(self.at) == Some(&v)).then_some(self.at)
+    }
+
+    fn has(&mut self, v: T) -> bool {
+        self.find(v).is_some()
     }
 }
 
