@@ -1039,13 +1039,11 @@ impl Islands<'_> {
                     m[v] |= STAYS;
                     solid.push(v);
                     let at = [i, j, k];
+                    // Step d of `six` leaves the box: +axis d / 2 at its top, −axis at
+                    // its bottom.
                     let past_box = |d: usize| {
                         let a = d / 2;
-                        if d % 2 == 0 {
-                            at[a] == bhi[a]
-                        } else {
-                            at[a] == blo[a]
-                        }
+                        at[a] == if d.is_multiple_of(2) { bhi[a] } else { blo[a] }
                     };
                     let held = (0..6).any(|d| {
                         let w = (v as isize + six[d]) as usize;
