@@ -439,13 +439,19 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
     }
     smooth_the_model(hu, &g, (&mut voxels, &mut cleansed), (air_hu, fluid_hu));
     // Whatever cleansing made air is lumen (the wall's first voxel beside a pool, mostly
-    // fluid; a lump's voxel segmentation had taken in and then let go): the surface is cut
-    // between lumen and wall, and air on the wall's side would stand as a shard.
+    // fluid; a lump's voxel segmentation had taken in and then let go), and whatever it left
+    // at or above the air level is not (the smoothing moved some voxels across the level the
+    // model had placed them by): the surface is cut between lumen and wall, and air on the
+    // wall's side would stand as a shard, wall on the lumen's side as a pit.
     for (&v, &value) in voxels.iter().zip(&cleansed) {
         let v = v as usize;
-        if value < air_hu && m[v] == 0 {
+        let air = value < air_hu;
+        if air && m[v] == 0 {
             m[v] = 1;
             join.push(v);
+        } else if !air && m[v] != 0 {
+            m[v] = 0;
+            leave.push(v);
         }
     }
     peel_spurs(m, hu, &mut voxels, &mut cleansed, &mut join, &six, air_hu);
@@ -1320,10 +1326,19 @@ mod tests {
         // calls it mostly wall).
         assert!((ct.get(9, 10, 9) + 480).abs() <= 5, "{}", ct.get(9, 10, 9));
         assert_eq!(lumen.get(9, 10, 9), 0);
-        // The wall's 100 half-fluid voxels but the four in the corner of three walls: the
-        // model made those mostly air, and the smoothing, after they were counted, takes them
-        // just above the air level (−408 to −476 HU) without their leaving the lumen.
-        assert_eq!(c.left_lumen, 96);
+        // Lumen and cleansed values agree on every changed voxel: lumen below the air level,
+        // wall at or above it. So the wall's 100 half-fluid voxels leave the lumen, and with
+        // them five at the pool's edges that the model made air and the smoothing, blending
+        // them with the walls round the corner, took just above the air level (−495 HU).
+        let (_, before) = scene();
+        for v in c.voxels.iter().map(|&v| v as usize) {
+            let h = ct.data()[v];
+            assert_eq!(lumen.data()[v] != 0, h < -500, "voxel {v}: {h} HU");
+        }
+        let left = (0..before.data().len())
+            .filter(|&v| before.data()[v] != 0 && lumen.data()[v] == 0)
+            .count();
+        assert_eq!((c.left_lumen, left), (105, 105));
         // The polyp is still tissue (the surface goes round it); the wall beyond the smoothing's
         // reach, and the small bowel behind it, keep their values.
         assert!(ct.get(5, 8, 5) > -500, "{}", ct.get(5, 8, 5));

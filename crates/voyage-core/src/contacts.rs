@@ -270,6 +270,10 @@ fn neighbour_voxels(u: [usize; 3], dims: [usize; 3]) -> impl Iterator<Item = [us
 /// A centerline stretch narrower than this (radius, mm) may be a short cut through a
 /// contact: a hole between touching loops.
 const SHORTCUT_NARROW_MM: f64 = 2.0;
+/// In a wide colon a hole may be wider: a stretch under this fraction of the lumen's radius
+/// on both sides may be one too (on `ctc/prone-tagged`, 2.3 mm between the transverse colon
+/// and the cecum, 20 mm wide on either side, skipped the ascending colon).
+const NECK_PER_SIDE: f64 = 0.2;
 /// The way round must be at least this wide (Ds, mm) all along, and [`BYPASS_PER_NECK`] times
 /// the stretch's narrowest radius: colon, not a crevice or another hole. Relative to the
 /// neck, because the colon's own way round a hole may narrow too (a fold, a fluid-filled
@@ -349,15 +353,16 @@ fn narrow_stretches(
     necks: &[[f64; 3]],
 ) -> Vec<Stretch> {
     let length = arc_mm.last().copied().unwrap_or(0.0);
+    let narrow = narrow_points(radius_mm, arc_mm);
     let mut out = Vec::new();
     let mut i = 0;
     while i < points_mm.len() {
-        if radius_mm[i] >= SHORTCUT_NARROW_MM {
+        if !narrow[i] {
             i += 1;
             continue;
         }
         let start = i;
-        while i < points_mm.len() && radius_mm[i] < SHORTCUT_NARROW_MM {
+        while i < points_mm.len() && narrow[i] {
             i += 1;
         }
         let (a, b) = (arc_mm[start], arc_mm[i - 1]);
@@ -391,6 +396,27 @@ fn narrow_stretches(
         }
     }
     out
+}
+
+/// Whether each centerline point is narrow enough to be a hole: under
+/// [`SHORTCUT_NARROW_MM`], or under [`NECK_PER_SIDE`] times the widest radius on each side
+/// within [`BYPASS_REACH_MM`] of arc.
+fn narrow_points(radius_mm: &[f64], arc_mm: &[f64]) -> Vec<bool> {
+    let n = radius_mm.len();
+    let widest = |js: std::ops::Range<usize>| js.map(|j| radius_mm[j]).fold(0.0, f64::max);
+    let (mut lo, mut hi) = (0, 0);
+    (0..n)
+        .map(|i| {
+            while arc_mm[lo] < arc_mm[i] - BYPASS_REACH_MM {
+                lo += 1;
+            }
+            while hi + 1 < n && arc_mm[hi + 1] <= arc_mm[i] + BYPASS_REACH_MM {
+                hi += 1;
+            }
+            let sides = widest(lo..i).min(widest(i + 1..hi + 1));
+            radius_mm[i] < SHORTCUT_NARROW_MM.max(NECK_PER_SIDE * sides)
+        })
+        .collect()
 }
 
 /// The plug that closes a hole at `at` (volume-local mm) of radius `r` mm: the lumen within

@@ -42,7 +42,7 @@ pub fn refine_points(raw: Vec<DVec3>, ds: &Field<f32>, opts: &CenterlineOptions)
     let mut pts = resample(&raw, opts.step_mm);
     for _ in 0..opts.centre_iterations {
         pts = centre(&pts, ds);
-        pts = smooth(&pts, (opts.smooth_mm / opts.step_mm).round() as usize, ds);
+        pts = smooth(&pts, opts.smooth_mm, opts.step_mm, ds);
         pts = resample(&pts, opts.step_mm);
     }
     finish(pts, ds)
@@ -144,16 +144,24 @@ fn centre(pts: &[DVec3], ds: &Field<f32>) -> Vec<DVec3> {
     out
 }
 
-/// Moving average over ±`half` points, ends fixed; a point whose average would leave the
-/// lumen (Ds below half its own) keeps its place.
-fn smooth(pts: &[DVec3], half: usize, ds: &Field<f32>) -> Vec<DVec3> {
+/// In a wide lumen the smoothing reaches this fraction of the lumen's radius: Ds's ridge
+/// runs from haustrum to haustrum there, and a window of a few millimetres kept its zigzag
+/// (on `ctc/prone-tagged`, where the right colon is 100 mm across, 5% of the length).
+const SMOOTH_PER_RADIUS: f64 = 0.5;
+
+/// Moving average over ±`smooth_mm` (or [`SMOOTH_PER_RADIUS`] of the lumen's radius, if more)
+/// of points `step_mm` apart, ends fixed; a point whose average would leave the lumen (Ds
+/// below half its own) keeps its place.
+fn smooth(pts: &[DVec3], smooth_mm: f64, step_mm: f64, ds: &Field<f32>) -> Vec<DVec3> {
     let n = pts.len();
     let mut out = pts.to_vec();
     for i in 1..n.saturating_sub(1) {
+        let here = ds.sample(pts[i], 0.0);
+        let half = (smooth_mm.max(SMOOTH_PER_RADIUS * here as f64) / step_mm).round() as usize;
         let w = half.min(i).min(n - 1 - i);
         let sum: DVec3 = pts[i - w..=i + w].iter().copied().sum();
         let q = sum / (2 * w + 1) as f64;
-        if ds.sample(q, 0.0) >= 0.5 * ds.sample(pts[i], 0.0) {
+        if ds.sample(q, 0.0) >= 0.5 * here {
             out[i] = q;
         }
     }
