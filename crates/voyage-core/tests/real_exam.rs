@@ -65,6 +65,25 @@ fn grown(mask: &[bool], dims: [usize; 3], n: usize) -> Vec<bool> {
     m
 }
 
+/// The share of `mask`'s voxels (every 64th) farther than `mm` from every point of `path`
+/// (volume-local mm).
+fn far_from(mask: &Volume<i16>, path: &[[f64; 3]], mm: f64) -> f64 {
+    let g = mask.geometry();
+    let voxels: Vec<usize> = (0..mask.data().len())
+        .filter(|&v| mask.data()[v] != 0)
+        .step_by(64)
+        .collect();
+    let far = voxels
+        .iter()
+        .filter(|&&v| {
+            let p = DVec3::from_array(g.ijk(v).map(|x| x as f64)) * DVec3::from_array(g.spacing);
+            path.iter()
+                .all(|&q| p.distance_squared(DVec3::from_array(q)) > mm * mm)
+        })
+        .count();
+    far as f64 / voxels.len().max(1) as f64
+}
+
 fn lps(study: &Study, v: [usize; 3]) -> DVec3 {
     study
         .ct
@@ -118,6 +137,15 @@ fn the_real_exam_gives_the_whole_colon_rectum_to_cecum() {
         "length {:.0} mm",
         s.centerline.length_mm
     );
+    // The centerline runs through all of the colon: the right colon here is 100 mm across,
+    // and a centerline that went from the transverse colon into the cecum through a hole left
+    // 22% of the colon more than 55 mm from it (the hepatic flexure and the ascending colon).
+    let far = far_from(&colon, &s.centerline.points_mm, 55.0);
+    assert!(
+        far <= 0.01,
+        "{:.1}% of the colon > 55 mm from the centerline",
+        far * 100.0
+    );
     // Named in the colon's order: the rectum first, the cecum last.
     assert!(
         labels.first().is_some_and(|l| l.starts_with("rectum")),
@@ -128,13 +156,14 @@ fn the_real_exam_gives_the_whole_colon_rectum_to_cecum() {
         "{labels:?}"
     );
     // Cleansing: the mucosa where fluid lay is nearly as smooth as in air (mean angle between
-    // neighbouring faces; 2.3× before the model's values were smoothed). The study's CT is the
+    // neighbouring faces; 2.3× before the model's values were smoothed, 1.35× before the
+    // lumen followed them). The study's CT is the
     // original: it tells where fluid lay.
     let (air, fluid) = voyage_core::roughness(&s.surface.mesh, &s.ct, 200, 2.0);
     let (air, fluid) = (air.unwrap(), fluid.unwrap());
     eprintln!("roughness {fluid:.2}° where fluid lay, {air:.2}° in air");
     assert!(
-        fluid <= 1.4 * air,
+        fluid <= 1.3 * air,
         "{fluid:.2}° where fluid lay, {air:.2}° in air"
     );
     // No large gas left out.
