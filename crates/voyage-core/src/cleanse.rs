@@ -470,8 +470,8 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
 /// carry the fluid's noise, amplified: the fluid fraction divides by `c − t` (500–900 HU on
 /// `ctc/prone-tagged`, and `c` varies along the pool) where air's divides by 1040 HU. On
 /// that exam the faces over former fluid were 2.3× as rough as those in air (mean angle
-/// between neighbouring faces' normals); 0.75 mm brings it to 1.35× (0.9 mm: 1.3×; what
-/// remains lies where tagged fluid was left), well below the phantom's 3 mm polyps.
+/// between neighbouring faces' normals); 0.75 mm brings it to 1.35× (0.9 mm: 1.3×), and
+/// the lumen following the smoothed values to 1.12×, well below the phantom's 3 mm polyps.
 const SMOOTH_MM: f64 = 0.75;
 
 /// Smooths the cleansed CT where the surface under former fluid passes: every voxel beside
