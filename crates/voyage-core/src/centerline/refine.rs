@@ -144,20 +144,23 @@ fn centre(pts: &[DVec3], ds: &Field<f32>) -> Vec<DVec3> {
     out
 }
 
-/// In a wide lumen the smoothing reaches this fraction of the lumen's radius: Ds's ridge
-/// runs from haustrum to haustrum there, and a window of a few millimetres kept its zigzag
-/// (on `ctc/prone-tagged`, where the right colon is 100 mm across, 5% of the length).
+/// In a wide lumen the smoothing window grows by this fraction of the radius beyond
+/// [`SMOOTH_FROM_MM`]: Ds's ridge runs from haustrum to haustrum there, and a window of a few
+/// millimetres kept its zigzag (on `ctc/prone-tagged`, whose right colon is 100 mm across,
+/// 5% of the length). A colon of ordinary width keeps the plain window.
 const SMOOTH_PER_RADIUS: f64 = 0.5;
+const SMOOTH_FROM_MM: f64 = 12.0;
 
-/// Moving average over ±`smooth_mm` (or [`SMOOTH_PER_RADIUS`] of the lumen's radius, if more)
-/// of points `step_mm` apart, ends fixed; a point whose average would leave the lumen (Ds
-/// below half its own) keeps its place.
+/// Moving average over ±`smooth_mm` (more in a wide lumen: [`SMOOTH_PER_RADIUS`]) of points
+/// `step_mm` apart, ends fixed; a point whose average would leave the lumen (Ds below half
+/// its own) keeps its place.
 fn smooth(pts: &[DVec3], smooth_mm: f64, step_mm: f64, ds: &Field<f32>) -> Vec<DVec3> {
     let n = pts.len();
     let mut out = pts.to_vec();
     for i in 1..n.saturating_sub(1) {
         let here = ds.sample(pts[i], 0.0);
-        let half = (smooth_mm.max(SMOOTH_PER_RADIUS * here as f64) / step_mm).round() as usize;
+        let wide = SMOOTH_PER_RADIUS * (here as f64 - SMOOTH_FROM_MM).max(0.0);
+        let half = ((smooth_mm + wide) / step_mm).round() as usize;
         let w = half.min(i).min(n - 1 - i);
         let sum: DVec3 = pts[i - w..=i + w].iter().copied().sum();
         let q = sum / (2 * w + 1) as f64;
