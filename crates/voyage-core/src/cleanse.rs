@@ -471,7 +471,7 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
 /// `ctc/prone-tagged`, and `c` varies along the pool) where air's divides by 1040 HU. On
 /// that exam the faces over former fluid were 2.3× as rough as those in air (mean angle
 /// between neighbouring faces' normals); 0.75 mm brings it to 1.35× (0.9 mm: 1.3×), and
-/// the lumen following the smoothed values to 1.12×, well below the phantom's 3 mm polyps.
+/// the lumen following the smoothed values to 1.21×, well below the phantom's 3 mm polyps.
 const SMOOTH_MM: f64 = 0.75;
 
 /// Smooths the cleansed CT where the surface under former fluid passes: every voxel beside
