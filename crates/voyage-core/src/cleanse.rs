@@ -550,8 +550,8 @@ impl Smoothing<'_> {
             }
             // Slice kc = k − 2 has its two neighbours on each side loaded.
             let kc = k - 2;
+            let around = ring.around(kc);
             for c in self.beside_changes(kc, &mut seen) {
-                let around = ring.around(kc);
                 let v = c + plane * kc;
                 let now = ring.at(&around, c, (2, 0));
                 // Tagged voxels cleansing left (contrast in a small-bowel loop behind the
@@ -988,12 +988,19 @@ impl Islands<'_> {
 
     /// Outside the lumen `m` once cleansed, at or above the air level.
     fn solid(&self, m: &[u8], v: usize) -> bool {
-        let lumen = if m[v] & 1 != 0 {
-            self.leave.binary_search(&v).is_err()
-        } else {
-            self.join.binary_search(&v).is_ok()
-        };
-        !lumen && self.value(v) >= self.air_hu
+        self.stays_solid(
+            m[v],
+            self.leave.binary_search(&v).is_ok(),
+            self.join.binary_search(&v).is_ok(),
+            self.value(v),
+        )
+    }
+
+    /// [`Islands::solid`] for a voxel marked `m` before, that `leaves` or `joins` the lumen
+    /// and is `value` once cleansed.
+    fn stays_solid(&self, m: u8, leaves: bool, joins: bool, value: i16) -> bool {
+        let lumen = if m & 1 != 0 { !leaves } else { joins };
+        !lumen && value >= self.air_hu
     }
 
     /// Voxels marked near a pool or in a lump (within lo..=hi grown by one; the marks reach
@@ -1031,15 +1038,10 @@ impl Islands<'_> {
                     if m[v] & MARKED == 0 {
                         continue;
                     }
-                    let lumen = if m[v] & 1 != 0 {
-                        !leave.has(v)
-                    } else {
-                        join.has(v)
-                    };
                     let value = changed
                         .find(v as u32)
                         .map_or(self.hu[v], |n| self.values[n]);
-                    if lumen || value < self.air_hu {
+                    if !self.stays_solid(m[v], leave.has(v), join.has(v), value) {
                         continue;
                     }
                     m[v] |= STAYS;

@@ -293,7 +293,8 @@ const ENDS_MM: f64 = 20.0;
 const PLUG_MM: f64 = 8.0;
 
 /// Holes between touching loops that the centerline went through: where it narrows under
-/// [`SHORTCUT_NARROW_MM`] while the lumen on either side is also joined by a way much wider
+/// [`SHORTCUT_NARROW_MM`] (or under [`NECK_PER_SIDE`] of its width on both sides) while the
+/// lumen on either side is also joined by a way much wider
 /// all along ([`BYPASS_WIDE_MM`], [`BYPASS_PER_NECK`]), the narrow stretch is a short cut (the colon is one
 /// tube: it cannot go both ways). Returns the lumen voxels (volume indices) of a plug at each
 /// such hole, for the caller to take out and trace the centerline again. `lumen` is without
@@ -344,8 +345,8 @@ struct Stretch {
     wide: f64,
 }
 
-/// The centerline's stretches narrower than [`SHORTCUT_NARROW_MM`], away from its ends and
-/// from the `necks` already known, with wide enough places on either side.
+/// The centerline's narrow stretches ([`narrow_points`]), away from its ends and from the
+/// `necks` already known, with wide enough places on either side.
 fn narrow_stretches(
     points_mm: &[[f64; 3]],
     radius_mm: &[f64],
