@@ -274,6 +274,12 @@ impl Study {
             .local(self.segmentation.orientation.gravity())
     }
 
+    /// The patient's anterior as a volume-local unit vector: up in the endoscopic view, in
+    /// any position (prone, the anterior is down).
+    pub fn anterior_local(&self) -> DVec3 {
+        crate::anatomy::PatientFrame::of(self.ct.geometry()).local(DVec3::new(0.0, -1.0, 0.0))
+    }
+
     /// Stretches of the centerline (arc mm from the source, start and end) that cross a
     /// bridged gap: collapsed or fluid-filled bowel, no air. Sorted.
     pub fn collapsed_spans(&self) -> Vec<[f64; 2]> {

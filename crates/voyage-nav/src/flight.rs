@@ -17,7 +17,7 @@ use serde::Serialize;
 use crate::{
     camera::Pose,
     potential::{Direction, DistanceStore, PotentialField, PotentialParams},
-    submarine::{Dynamics, Input, Modes, Safety, Submarine},
+    submarine::{Dynamics, Input, Look, Modes, Safety, Submarine},
 };
 use voyage_core::{Centerline, Error, Result};
 
@@ -85,10 +85,11 @@ impl FlightOptions {
         FlightOptions::default().fitted_to(study)
     }
 
-    /// These options with gravity from the study's patient position and its bridged gaps.
+    /// These options with leveling's G toward the patient's posterior (the anterior up in
+    /// the view, supine or prone, as a reader expects) and the study's bridged gaps.
     pub fn fitted_to(self, study: &voyage_core::Study) -> FlightOptions {
         FlightOptions {
-            dynamics: self.dynamics.with_gravity_along(study.gravity_local()),
+            dynamics: self.dynamics.with_gravity_along(-study.anterior_local()),
             collapsed_spans: study.collapsed_spans(),
             ..self
         }
@@ -137,7 +138,7 @@ pub struct Rescue {
 }
 
 /// The centerline as the flight sees it: points from the flight's start to its goal.
-struct Guide {
+pub(crate) struct Guide {
     points: Vec<DVec3>,
     radius: Vec<f64>,
     /// Arc length from the flight's start (mm).
@@ -145,7 +146,7 @@ struct Guide {
 }
 
 impl Guide {
-    fn new(cl: &Centerline, dir: Direction) -> Self {
+    pub(crate) fn new(cl: &Centerline, dir: Direction) -> Self {
         let mut points: Vec<DVec3> = cl.points_mm.iter().map(|p| DVec3::from_array(*p)).collect();
         let mut radius = cl.radius_mm.clone();
         let mut arc: Vec<f64> = cl.arc_mm.clone();
@@ -192,7 +193,7 @@ impl Guide {
         }
         spans
     }
-    fn nearest(&self, x: DVec3) -> usize {
+    pub(crate) fn nearest(&self, x: DVec3) -> usize {
         let mut best = (f64::INFINITY, 0);
         for (i, p) in self.points.iter().enumerate() {
             let d = p.distance_squared(x);
@@ -201,6 +202,33 @@ impl Guide {
             }
         }
         best.1
+    }
+    /// Unit direction of the centerline over the next `mm` of arc from point i toward the
+    /// goal (over the last `mm` near the goal).
+    pub(crate) fn way_on(&self, i: usize, mm: f64) -> DVec3 {
+        let last = *self.arc.last().unwrap_or(&0.0);
+        let from = self.arc[i].min(last - mm).max(0.0);
+        let (a, _) = self.at_arc(from);
+        let (b, _) = self.at_arc(from + mm);
+        (b - a).try_normalize().unwrap_or_else(|| self.ahead(i))
+    }
+    /// Where the view turns at guide point i: the centerline [`LOOK_AHEAD_MM`] on (at least
+    /// [`LOOK_PER_RADIUS`] times the lumen's radius there), seen from `x`; near the goal, along
+    /// the centerline's last stretch.
+    fn look_target(&self, i: usize, x: DVec3) -> DVec3 {
+        let reach = LOOK_AHEAD_MM.max(LOOK_PER_RADIUS * self.radius[i]);
+        // The mean of the centerline from half to one and a half times the reach: a
+        // single point follows the centerline's wiggles between folds, and the view with it.
+        let p = LOOK_SPREAD
+            .iter()
+            .map(|f| self.at_arc(self.arc[i] + f * reach).0)
+            .sum::<DVec3>()
+            / LOOK_SPREAD.len() as f64;
+        if p.distance(x) >= 0.5 * LOOK_AHEAD_MM {
+            p
+        } else {
+            x + self.way_on(i, LOOK_AHEAD_MM) * LOOK_AHEAD_MM
+        }
     }
     /// Unit direction of the centerline toward the goal at point i.
     fn ahead(&self, i: usize) -> DVec3 {
@@ -260,6 +288,8 @@ pub struct Autopilot {
     /// Where the autopilot glided on after [`STUCK_S`] s without progress.
     pub rescues: Vec<Rescue>,
     rho_per_radius: Option<f64>,
+    /// The direction of the last look (for its spin); None after a glide or a restart.
+    look_dir: Option<DVec3>,
 }
 
 /// Without [`STUCK_S`] seconds of progress the autopilot glides this far (mm, at least twice
@@ -270,6 +300,16 @@ pub const STUCK_S: f64 = 5.0;
 /// Centerline stretches whose radius is under the camera's distance from the wall plus this
 /// (mm) are glided through: the safe set is too thin there for the field to carry the camera.
 pub const NARROW_MARGIN_MM: f64 = 1.0;
+
+/// During the flight the view turns toward the centerline this far (mm of arc) beyond the
+/// camera's nearest point ([`Autopilot::look_point`]) ...
+pub const LOOK_AHEAD_MM: f64 = 30.0;
+/// ... or this many times the lumen's radius there, whichever is farther: in a chamber wide
+/// enough for the camera to stray from the centerline, a nearer point would swing the view
+/// across the lumen as the camera passes it.
+const LOOK_PER_RADIUS: f64 = 1.5;
+/// The look-ahead point is the mean of the centerline at these multiples of the reach.
+const LOOK_SPREAD: [f64; 5] = [0.5, 0.75, 1.0, 1.25, 1.5];
 
 /// A glide starts this far (mm) before a bridged gap: the lumen narrows toward it and the
 /// wall term would stop the submarine there.
@@ -327,6 +367,7 @@ impl Autopilot {
             in_a_row: 0,
             near,
             stalls: 0,
+            look_dir: None,
         }
     }
 
@@ -359,9 +400,15 @@ impl Autopilot {
     /// next is not the field's doing.
     pub fn restart(&mut self, t: f64, dt_now: f64, x: DVec3) {
         self.watch_from(t, dt_now);
+        self.look_dir = None;
         self.near = self.guide.nearest(x);
         self.glide_arc = None;
         self.glided = None;
+    }
+
+    /// The view was set from outside (a glide's pose): the next look has no spin to feed.
+    pub fn forget_look(&mut self) {
+        self.look_dir = None;
     }
 
     /// Starts the stall watch afresh (a glide is progress, not a stall).
@@ -377,6 +424,24 @@ impl Autopilot {
     pub fn moved_to(&mut self, x: DVec3) -> usize {
         self.near = nearest_from(&self.guide, x, self.near);
         self.near
+    }
+
+    /// Where the view should turn with the submarine at `x` (after [`Autopilot::moved_to`]),
+    /// `dt` seconds after the last look: the centerline [`LOOK_AHEAD_MM`] on, so that the
+    /// lumen ahead stays near the middle of the view, and how fast the direction to it
+    /// turned since. The submarine turns toward it with the compass's torque
+    /// ([`crate::Submarine::look_at`]).
+    pub fn look(&mut self, x: DVec3, dt: f64) -> Look {
+        let point = x + (self.guide.look_target(self.near, x) - self.guide.points[self.near]);
+        let dir = (point - x).normalize_or_zero();
+        let spin = match self.look_dir {
+            Some(prev) if dt > 0.0 => {
+                prev.cross(dir).normalize_or_zero() * prev.angle_between(dir) / dt
+            }
+            _ => DVec3::ZERO,
+        };
+        self.look_dir = Some(dir);
+        Look { point, spin }
     }
 
     fn note_progress(&mut self, t: f64, dt_now: f64) {
@@ -424,11 +489,8 @@ impl Autopilot {
         self.glide_arc = (next < end).then_some(next);
         self.glided = Some(k);
         let (p, j) = self.guide.at_arc(next);
-        Some(Pose::looking(
-            p,
-            self.guide.ahead(j.saturating_sub(1)),
-            self.up,
-        ))
+        let look = self.guide.look_target(j.saturating_sub(1), p);
+        Some(Pose::looking(p, look - p, self.up))
     }
 
     /// Starts a rescue glide from guide point `i`: [`RESCUE_MM`] (at least twice the local
@@ -490,7 +552,7 @@ fn merged(mut spans: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
 }
 
 /// Where a flight starts: the first centerline point from the start end that lies in the
-/// safe set, looking along the centerline, up against gravity.
+/// safe set, looking along the centerline, leveling's up (the patient's anterior) up.
 pub fn start_pose<S: DistanceStore>(
     field: &PotentialField<S>,
     cl: &Centerline,
@@ -575,10 +637,12 @@ pub fn fly<S: DistanceStore>(
         match pilot.glide(sub.state.x, t, dt_now, frame_dt) {
             Some(pose) if sub.glide_to(field, pose, frame_dt) => {
                 pilot.watch_from(sub.state.t, dt_at(sub.state.x));
+                pilot.forget_look();
             }
             _ => {
                 let input = pilot.input(t, dt_now, sub.state.x, sub.potential.ct);
                 sub.potential.rho = pilot.rho(&opts.potential);
+                sub.look_at = Some(pilot.look(sub.state.x, frame_dt));
                 let r = sub.step(field, frame_dt, &input);
                 f.substeps += r.substeps;
                 f.clipped_substeps += r.clipped;
@@ -630,7 +694,7 @@ fn mean_heading_error(track: &[(DVec3, DVec3)], fps: f64) -> f64 {
 
 /// The nearest centerline point, searched near the last one first (a flight moves a little
 /// per frame), falling back to all points when the local best is far.
-fn nearest_from(guide: &Guide, x: DVec3, last: usize) -> usize {
+pub(crate) fn nearest_from(guide: &Guide, x: DVec3, last: usize) -> usize {
     let n = guide.points.len();
     let lo = last.saturating_sub(40);
     let hi = (last + 40).min(n);

@@ -8,19 +8,23 @@ mod camera;
 mod flight;
 #[cfg(feature = "layouts")]
 mod layouts;
+mod looking;
 mod potential;
 mod submarine;
 
 pub use camera::{Camera, Pose};
-pub use flight::{Autopilot, Flight, FlightOptions, Rescue, STUCK_S, fly, start_pose};
+pub use flight::{
+    Autopilot, Flight, FlightOptions, LOOK_AHEAD_MM, Rescue, STUCK_S, fly, start_pose,
+};
 #[cfg(feature = "layouts")]
 pub use layouts::{BoxStore, SortedStore};
+pub use looking::{ALL_WALL_SHARE, AngleStats, Looking, RAYS, TANGENT_MM, WALL_NEAR_MM, looking};
 pub use potential::{
     BrickStore, DS_FLOOR_MM, Direction, DistanceStore, PotentialField, PotentialParams, Sample,
     Voxel, potential_field,
 };
 pub use submarine::{
-    Dynamics, EASE_FROM_MM, Forces, Input, Modes, STOP_SHORT_MM, Safety, State, StepReport,
+    Dynamics, EASE_FROM_MM, Forces, Input, Look, Modes, STOP_SHORT_MM, Safety, State, StepReport,
     Submarine, delta_q, euler_step,
 };
 /// The navigable core's Dt, made by `prepare` (`Study::nav`, `Study::navigable`).

@@ -28,6 +28,9 @@ pub const STOP_SHORT_MM: f64 = 4.0;
 /// The brake on a pushed camera's motion toward the wall at [`STOP_SHORT_MM`] (1/s, as kf):
 /// with the friction it stops the camera within about a millimetre.
 const BRAKE_PER_S: f64 = 30.0;
+/// The view settles onto the autopilot's look-ahead point in about this time (s): the
+/// time constant of a critically damped turn.
+const LOOK_TIME_S: f64 = 0.1;
 
 /// Physical constants of the submarine (changeable at any moment).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -41,7 +44,9 @@ pub struct Dynamics {
     pub length_mm: f64,
     /// |F_user|: the push of a click.
     pub user_force: f64,
-    /// G for leveling mode (volume-local; magnitude = strength).
+    /// G for leveling mode (volume-local; magnitude = strength): y_body turns against it.
+    /// A study's flight sets it toward the patient's posterior, whatever the patient's
+    /// position ([`crate::FlightOptions::fitted_to`]).
     pub gravity: DVec3,
     /// Caps that keep explicit Euler stable whatever the user does (mm/s, rad/s).
     pub max_speed: f64,
@@ -49,8 +54,8 @@ pub struct Dynamics {
 }
 
 impl Dynamics {
-    /// The same dynamics with gravity pulling along `dir` (volume-local; its strength kept):
-    /// leveling keeps the view's up against the patient's real gravity (prone, decubitus).
+    /// The same dynamics with leveling's G along `dir` (volume-local; its strength kept):
+    /// leveling keeps the view's up against it.
     pub fn with_gravity_along(self, dir: DVec3) -> Dynamics {
         Dynamics {
             gravity: dir.normalize_or(self.gravity.normalize_or_zero()) * self.gravity.length(),
@@ -83,12 +88,21 @@ impl Dynamics {
     }
 }
 
+/// Where the view should look: a point, and how fast the direction to it turns (rad/s,
+/// world axis), so that the view keeps up with it rather than trailing it.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Look {
+    pub point: DVec3,
+    pub spin: DVec3,
+}
+
 /// The optional controls of §3.3.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Modes {
-    /// τ = −z_body × ∇V: turn the view down the field.
+    /// τ = −z_body × ∇V: turn the view down the field; toward [`Submarine::look_at`] when
+    /// the autopilot gives a point to look at.
     pub compass: bool,
-    /// τ = −y_body × G: keep the up vector against gravity.
+    /// τ = −y_body × G: keep the up vector against G (the patient's anterior up).
     pub leveling: bool,
     /// Skip Eqs. 5–6: X stays put, the view still turns.
     pub still: bool,
@@ -252,6 +266,11 @@ pub struct Submarine {
     pub dynamics: Dynamics,
     pub modes: Modes,
     pub direction: Direction,
+    /// Where the compass turns the view, when set (the autopilot's look-ahead point on the
+    /// centerline, [`crate::Autopilot::look`]); None: down the field, as the paper's
+    /// compass. Near a wall or in a wide chamber ∇V is mostly the wall's push, and a view
+    /// turned down it faces the wall.
+    pub look_at: Option<Look>,
     safety: Safety,
 }
 
@@ -277,6 +296,7 @@ impl Submarine {
             dynamics: Dynamics::default(),
             modes: Modes::default(),
             direction: Direction::Forward,
+            look_at: None,
             safety,
         };
         if !sub.is_safe(field, pose.position) {
@@ -345,17 +365,24 @@ impl Submarine {
         let grad_v = field.gradient(self.state.x, &self.potential, self.direction);
         let mut torque = input.torque;
         let r = DMat3::from_quat(self.state.q);
-        if self.modes.compass {
-            torque += -r.z_axis.cross(grad_v);
+        // The user's push or drag wins while it lasts (its own turn is Eq. 4's z × F_user).
+        let user_steers = input.force != DVec3::ZERO || input.torque != DVec3::ZERO;
+        if self.modes.compass && !user_steers {
+            torque += match self.look_at {
+                Some(look) => self.look_torque(r.z_axis, &look),
+                None => -r.z_axis.cross(grad_v),
+            };
         }
         if self.modes.leveling {
             // The paper's τ_leveling (§3.3) turns y_body toward −G, which also pitches the
-            // view toward the horizon; during a flight the compass holds the view down the
-            // lumen against it. With no compass to hold it (paused, where V is off, or
-            // compass off) only its roll about the view axis acts: a camera put looking down
-            // the colon stays so.
+            // view toward the horizon; during a flight down the field the compass holds the
+            // view down the lumen against it. With no compass to hold it (paused, where V is
+            // off, or compass off), or looking at a point (which pitching would pull the view
+            // off), only its roll about the view axis acts: a camera put looking down the
+            // colon stays so.
             let level = -r.y_axis.cross(self.dynamics.gravity);
-            let compass_holds = self.modes.compass && grad_v != DVec3::ZERO;
+            let compass_holds =
+                self.modes.compass && grad_v != DVec3::ZERO && self.look_at.is_none();
             torque += if compass_holds {
                 level
             } else {
@@ -367,6 +394,22 @@ impl Submarine {
             user: input.force,
             option_torque: torque,
         }
+    }
+
+    /// The compass's torque toward `look`: a spring that turns z_body toward the point,
+    /// damped critically over [`LOOK_TIME_S`] (the rotation's friction ka, and as much more
+    /// as that takes), and the look's own spin fed forward, so that a view following a bend
+    /// keeps pace with it instead of trailing by the spin times the damping's time.
+    fn look_torque(&self, z_body: DVec3, look: &Look) -> DVec3 {
+        let Some(to) = (look.point - self.state.x).try_normalize() else {
+            return DVec3::ZERO;
+        };
+        let i = self.dynamics.inertia().x;
+        let stiffness = i / (LOOK_TIME_S * LOOK_TIME_S);
+        let damping = 2.0 * i / LOOK_TIME_S;
+        let across = |w: DVec3| w - z_body * w.dot(z_body);
+        stiffness * z_body.cross(to) + damping * across(look.spin)
+            - (damping - self.dynamics.ka).max(0.0) * across(self.state.omega)
     }
 
     /// Longest sub-step the friction terms allow for a stable explicit Euler step.

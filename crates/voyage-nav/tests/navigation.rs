@@ -12,7 +12,7 @@ use voyage_core::{PrepOptions, Study, prepare, rng::Rng};
 use voyage_nav::{
     BrickStore, Camera, DS_FLOOR_MM, Direction, DistanceStore, Dynamics, Flight, FlightOptions,
     Forces, Input, Modes, Navigable, Pose, PotentialField, PotentialParams, STOP_SHORT_MM, Safety,
-    SortedStore, State, Submarine, euler_step, fly, start_pose,
+    SortedStore, State, Submarine, euler_step, fly, looking, start_pose,
 };
 use voyage_phantom::{self as phantom, ColonOptions};
 
@@ -419,7 +419,38 @@ fn flights(study: &Study, opts: &FlightOptions, what: &str) -> Vec<Flight> {
         .collect()
 }
 
-/// Compass alone: the view follows the way the camera goes.
+/// Issue 36: the view looks down the lumen. The angle between z_body and the centerline's
+/// direction over the next 20 mm: median ≤ 15°, 95th percentile ≤ 45°; at most 2% of the
+/// frames see nothing but wall nearer than 15 mm. (Down −∇V, the paper's compass, the
+/// colon phantom's median was 16° and colon-a's 28°, p95 59–67°.)
+fn check_looking(study: &Study, f: &Flight, what: &str) {
+    let l = looking(study, f.direction, &f.poses);
+    let a = l.view_angle_deg;
+    eprintln!(
+        "{what} {:?}: view angle median {:.1}°, p95 {:.1}°, {:.1}% over 45°; all wall {:.1}%",
+        f.direction,
+        a.median,
+        a.p95,
+        100.0 * a.over_45_share,
+        100.0 * l.all_wall_share
+    );
+    assert_eq!(l.frames, f.poses.len());
+    assert!(
+        a.median <= 15.0 && a.p95 <= 45.0,
+        "{what} {:?}: the view is {:.1}° off the way on (median), p95 {:.1}°",
+        f.direction,
+        a.median,
+        a.p95
+    );
+    assert!(
+        l.all_wall_share <= 0.02,
+        "{what} {:?}: {:.1}% of the frames see only wall",
+        f.direction,
+        100.0 * l.all_wall_share
+    );
+}
+
+/// Compass alone (no leveling): the view turns toward the centerline ahead.
 fn compass_only() -> FlightOptions {
     FlightOptions {
         modes: Modes {
@@ -443,11 +474,10 @@ fn automatic_flights_reach_both_ends_of_the_phantoms() {
         );
     }
     for seed in [1, 2, 3] {
-        for f in flights(
-            &full_colon(seed),
-            &compass_only(),
-            &format!("colon phantom seed {seed}"),
-        ) {
+        let study = full_colon(seed);
+        let what = format!("colon phantom seed {seed}");
+        for f in flights(&study, &compass_only(), &what) {
+            check_looking(&study, &f, &what);
             assert!(
                 f.mean_heading_error_deg <= 20.0,
                 "colon seed {seed}: heading error {:.1}°",
@@ -463,9 +493,11 @@ fn automatic_flights_reach_both_ends_of_colon_a() {
         return;
     };
     for f in flights(&study, &compass_only(), "colon-a") {
-        // Measured 20–21° (haustral folds make the path weave); the phantoms hold 20°.
+        check_looking(&study, &f, "colon-a");
+        // The view follows the centerline, the camera's path weaves between haustral
+        // folds: 25–26° between them (20–21° when the view followed the path down −∇V).
         assert!(
-            f.mean_heading_error_deg <= 25.0,
+            f.mean_heading_error_deg <= 30.0,
             "colon-a: heading error {:.1}°",
             f.mean_heading_error_deg
         );

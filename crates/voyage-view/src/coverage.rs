@@ -371,17 +371,18 @@ pub struct Lumen<'a> {
     pub ds: &'a Bricked<f32>,
     /// The camera keeps at least this far from the wall (the navigable core's distance).
     pub min_wall_mm: f64,
-    /// Up, for the poses made here (against gravity).
+    /// Up, for the poses made here (the patient's anterior).
     pub up: DVec3,
 }
 
 impl<'a> Lumen<'a> {
-    /// The study's lumen, for a camera kept `min_wall_mm` from the wall, up against gravity.
+    /// The study's lumen, for a camera kept `min_wall_mm` from the wall, the patient's
+    /// anterior up.
     pub fn of(study: &'a Study, min_wall_mm: f64) -> Self {
         Lumen {
             ds: &study.ds,
             min_wall_mm,
-            up: -study.gravity_local(),
+            up: study.anterior_local(),
         }
     }
 }

@@ -830,9 +830,11 @@ fn two_way_reading_runs_to_the_end_and_coverage_rises() {
     // The small phantom (half scale, 1.5 mm voxels) reads 97 % on the CLI; the window marks
     // within a time budget, so a little less.
     assert!(after >= 94.0, "after review {after:.1} %");
+    // The review visits what the flights left (one patch here, since the flights look down
+    // the lumen: 92.7 % one way; three when they looked down −∇V).
     let patches = reading["patches"].as_u64().unwrap();
     assert!(
-        patches >= 3 && reading["visits"].as_u64().unwrap() >= patches,
+        patches >= 1 && reading["visits"].as_u64().unwrap() >= patches,
         "{c}"
     );
     assert!(c["session_pct"].as_f64().unwrap() >= after - 1e-9);

@@ -11,7 +11,7 @@ use voyage_core::{PrepOptions, Study, Volume, prepare};
 use voyage_io::{self as io, LoadOptions};
 use voyage_nav::{
     BoxStore, BrickStore, Direction, DistanceStore, FlightOptions, PotentialField, PotentialParams,
-    SortedStore, fly,
+    SortedStore, fly, looking,
 };
 use voyage_phantom::{self as phantom, ColonOptions};
 
@@ -86,18 +86,12 @@ fn measure(name: &str, study: &Study, samples: usize) -> Result<Value> {
     let field = PotentialField::new(BrickStore::new(study, &nav)?, g);
     let mut flights = Vec::new();
     for dir in [Direction::Forward, Direction::Backward] {
-        let f = fly(
-            &field,
-            &study.centerline,
-            dir,
-            &FlightOptions {
-                keep_poses: false,
-                ..opts.clone()
-            },
-        )?;
+        let f = fly(&field, &study.centerline, dir, &opts)?;
+        let l = looking(study, dir, &f.poses);
         flights.push(json!({
             "direction": dir.name(), "reached": f.reached, "frames": f.frames, "stalls": f.stalls,
             "step_ns": f.step_ns, "substeps_per_frame": f.substeps as f64 / f.frames.max(1) as f64,
+            "view_angle_deg": l.view_angle_deg, "all_wall_share": l.all_wall_share,
         }));
     }
     Ok(json!({
@@ -177,6 +171,15 @@ fn print_case(c: &Value) {
             fl["stalls"],
             fl["substeps_per_frame"].as_f64().unwrap_or(0.0),
             fl["step_ns"].as_f64().unwrap_or(0.0) / 1e3
+        );
+        let a = &fl["view_angle_deg"];
+        let f = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
+        println!(
+            "         view {:.0}° off the way on (median; p95 {:.0}°, {:.1}% of frames over 45°), {:.1}% of frames all wall (targets ≤ 15°, ≤ 45°, ≤ 2%)",
+            f(&a["median"]),
+            f(&a["p95"]),
+            100.0 * f(&a["over_45_share"]),
+            100.0 * f(&fl["all_wall_share"])
         );
     }
 }

@@ -9,7 +9,9 @@ use glam::DVec3;
 use serde_json::json;
 use voyage_core::Geometry;
 use voyage_io::export::trajectory::write_trajectory;
-use voyage_nav::{Direction, Flight, FlightOptions, Rescue, STUCK_S, fly, potential_field};
+use voyage_nav::{
+    Direction, Flight, FlightOptions, Looking, Rescue, STUCK_S, fly, looking, potential_field,
+};
 
 use super::prep::{InputArgs, Prepared, load_and_prepare};
 
@@ -60,7 +62,7 @@ pub struct PhysicsArgs {
     /// Turn off compass mode (z_body follows −∇V).
     #[arg(long)]
     pub no_compass: bool,
-    /// Turn off leveling mode (y_body against gravity).
+    /// Turn off leveling mode (y_body toward the patient's anterior).
     #[arg(long)]
     pub no_leveling: bool,
     /// Give up after this many simulated seconds (default: length / 5 mm/s + 60 s).
@@ -140,10 +142,15 @@ pub fn run(a: &FlyArgs) -> Result<()> {
     if let Some(out) = &a.out {
         write_trajectory(out, &flights, geometry, opts.fps)?;
     }
+    let looks: Vec<Looking> = flights
+        .iter()
+        .map(|f| looking(&study, f.direction, &f.poses))
+        .collect();
     if a.json {
         let per: serde_json::Map<String, serde_json::Value> = flights
             .iter()
-            .map(|f| (f.direction.name().to_string(), summary(f, geometry)))
+            .zip(&looks)
+            .map(|(f, l)| (f.direction.name().to_string(), summary(f, l, geometry)))
             .collect();
         println!(
             "{}",
@@ -152,7 +159,7 @@ pub fn run(a: &FlyArgs) -> Result<()> {
             )?
         );
     } else {
-        for f in &flights {
+        for (f, l) in flights.iter().zip(&looks) {
             println!(
                 "{:<8} {} in {} frames ({:.1} s simulated), path {:.0} mm, wall distance min {:.1} / mean {:.1} mm (mean radius {:.1}), {} stalls, {} rescues, physics {:.2} µs/frame",
                 f.direction.name(),
@@ -171,6 +178,7 @@ pub fn run(a: &FlyArgs) -> Result<()> {
                 f.rescues.len(),
                 f.step_ns / 1e3
             );
+            println!("         {}", describe_looking(l));
         }
         if let Some(out) = &a.out {
             println!("  wrote {}", out.display());
@@ -209,7 +217,19 @@ fn rescue_text(f: &Flight, r: &Rescue, g: &Geometry) -> String {
     )
 }
 
-fn summary(f: &Flight, g: &Geometry) -> serde_json::Value {
+/// How a flight looked, in a line: the view's angle to the way on and the all-wall frames.
+pub fn describe_looking(l: &Looking) -> String {
+    let a = &l.view_angle_deg;
+    format!(
+        "view {:.0}° off the way on (median; p95 {:.0}°, {:.1}% of frames over 45°), {:.1}% of frames all wall",
+        a.median,
+        a.p95,
+        100.0 * a.over_45_share,
+        100.0 * l.all_wall_share
+    )
+}
+
+fn summary(f: &Flight, l: &Looking, g: &Geometry) -> serde_json::Value {
     let rescues: Vec<serde_json::Value> = f
         .rescues
         .iter()
@@ -236,5 +256,7 @@ fn summary(f: &Flight, g: &Geometry) -> serde_json::Value {
         "clipped_substeps": f.clipped_substeps,
         "final_dt_mm": f.final_dt_mm,
         "mean_heading_error_deg": f.mean_heading_error_deg,
+        "view_angle_deg": l.view_angle_deg,
+        "all_wall_share": l.all_wall_share,
     })
 }

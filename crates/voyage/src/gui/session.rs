@@ -207,6 +207,7 @@ impl Session {
             {
                 // A bridged gap, a neck or a place stuck for 5 s: the flight keeps to the path.
                 self.pilot.watch_from(self.sub.state.t, self.dt_to_goal());
+                self.pilot.forget_look();
                 return;
             } else {
                 input.force += self
@@ -224,7 +225,16 @@ impl Session {
         // unless the user pushes it, and a push glides to rest under friction. The safe set
         // still keeps it off the wall (Submarine::step clips every sub-step). Playing, ρ is
         // held within the lumen's radius (`FlightOptions::rho_per_radius`).
+        // Playing, the view turns toward the centerline ahead; the user's click or drag
+        // turns it while it lasts (the compass then follows the field, as the paper's), and
+        // the view eases back after.
         let field = self.sub.potential;
+        self.sub.look_at = if self.playing && !steering {
+            Some(self.pilot.look(self.sub.state.x, dt))
+        } else {
+            self.pilot.forget_look();
+            None
+        };
         if self.playing {
             self.sub.potential.rho = self.pilot.rho(&field);
         } else {
@@ -474,6 +484,58 @@ mod tests {
                 && ijk.z < dims[2] as f64
                 && lumen.get(ijk.x as usize, ijk.y as usize, ijk.z as usize) != 0
         })
+    }
+
+    /// The view's angle to the centerline's way on (degrees).
+    fn off_the_way(s: &Session) -> f64 {
+        voyage_nav::looking(&s.study, s.direction(), &[s.pose()])
+            .view_angle_deg
+            .median
+    }
+
+    #[test]
+    fn a_drag_turns_the_flying_view_away_while_it_lasts_and_the_view_eases_back() {
+        let p = voyage_phantom::pipe(1).unwrap();
+        let study = prepare(p.ct, &PrepOptions::default(), |_| {}).unwrap();
+        let mut s = Session::new("pipe".into(), study).unwrap();
+        let frame = 1.0 / 30.0;
+        s.set_playing(true);
+        for _ in 0..45 {
+            s.step(frame, &Input::default());
+        }
+        let flying = off_the_way(&s);
+        assert!(
+            flying <= 15.0,
+            "flying, the view is {flying:.0}° off the way"
+        );
+        // A right-drag sideways at 1 rad/s for half a second (as the window makes it).
+        for _ in 0..15 {
+            let torque = -s.pose().y_body() * s.sub.dynamics.ka;
+            s.step(
+                frame,
+                &Input {
+                    force: DVec3::ZERO,
+                    torque,
+                },
+            );
+        }
+        let dragged = off_the_way(&s);
+        assert!(
+            dragged >= flying + 15.0,
+            "the drag turned the view only to {dragged:.0}° (from {flying:.0}°)"
+        );
+        assert!(s.playing, "a drag does not stop the flight");
+        // Released: back down the lumen within a second, without swinging past.
+        let mut after = Vec::new();
+        for _ in 0..30 {
+            s.step(frame, &Input::default());
+            after.push(off_the_way(&s));
+        }
+        assert!(
+            after[after.len() - 1] <= 15.0,
+            "a second after the drag the view is still {:.0}° off the way",
+            after[after.len() - 1]
+        );
     }
 
     #[test]
