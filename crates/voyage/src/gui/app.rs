@@ -961,6 +961,7 @@ impl App {
                 .map(|m| m.length_mm())
                 .collect(),
             frame_ms: self.times.summary(),
+            flying_frame_ms: self.times.flying(),
             render_ms: self.times.mean_render_ms(),
             view_rect: self
                 .view_rect
@@ -1734,7 +1735,8 @@ impl eframe::App for App {
         // is done, follows the clock (a mouse held for 0.6 s turns the view as far at 30 as at
         // 100 frames/s).
         let scripted = self.script.as_ref().is_some_and(|s| !s.finished());
-        let since = self.times.tick(now);
+        let flying = self.session.as_ref().is_some_and(|s| s.playing);
+        let since = self.times.tick(now, flying);
         let dt = match (since, scripted || self.args.screenshot.is_some()) {
             (Some(s), false) => s,
             _ => 1.0 / 30.0,

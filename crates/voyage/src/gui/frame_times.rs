@@ -1,6 +1,7 @@
 //! The window's frame times: wall time per frame, the view's render time, and the
 //! process's CPU time per frame (on a CPU Vulkan driver the work per frame, steadier than the
-//! wall time on a busy machine). The last 240 frames count.
+//! wall time on a busy machine). The last 240 frames count; beside them, every frame drawn
+//! while the automatic flight played (the figure along a whole flight).
 
 use std::collections::VecDeque;
 use std::time::Instant;
@@ -16,6 +17,9 @@ pub struct FrameTimes {
     /// The process's CPU time (all threads) at each frame in `frame_ms`, ms.
     cpu_at_frame_ms: VecDeque<f64>,
     last_frame: Option<Instant>,
+    /// Every frame that began with the automatic flight playing, ms.
+    flying_ms: Vec<f64>,
+    last_flying: bool,
 }
 
 /// What the report says of the frames.
@@ -31,17 +35,21 @@ pub struct FrameSummary {
 }
 
 impl FrameTimes {
-    /// A frame starts at `now`: the time since the last one (None for the first) is recorded
-    /// and returned, in seconds.
-    pub fn tick(&mut self, now: Instant) -> Option<f64> {
+    /// A frame starts at `now`, `flying` or not: the time since the last one (None for the
+    /// first) is recorded and returned, in seconds.
+    pub fn tick(&mut self, now: Instant, flying: bool) -> Option<f64> {
         let since = self.last_frame.map(|t| now.duration_since(t).as_secs_f64());
         if let Some(s) = since {
             push_limited(&mut self.frame_ms, s * 1e3);
+            if self.last_flying {
+                self.flying_ms.push(s * 1e3);
+            }
             if let Some(cpu) = process_cpu_ms() {
                 push_limited(&mut self.cpu_at_frame_ms, cpu);
             }
         }
         self.last_frame = Some(now);
+        self.last_flying = flying;
         since
     }
 
@@ -58,23 +66,38 @@ impl FrameTimes {
     }
 
     pub fn summary(&self) -> FrameSummary {
-        let mut sorted: Vec<f64> = self.frame_ms.iter().copied().collect();
-        sorted.sort_by(f64::total_cmp);
-        let pct = |q: f64| {
-            sorted
-                .get(((sorted.len() as f64 - 1.0) * q).round() as usize)
-                .copied()
-                .unwrap_or(0.0)
-        };
-        let m = mean(&self.frame_ms);
-        FrameSummary {
-            mean: m,
-            median: pct(0.5),
-            p95: pct(0.95),
-            frames: self.frame_ms.len(),
-            fps: if m > 0.0 { 1000.0 / m } else { 0.0 },
-            cpu_ms: cpu_per_frame(&self.cpu_at_frame_ms),
-        }
+        let mut s = summarize(self.frame_ms.iter().copied().collect());
+        s.cpu_ms = cpu_per_frame(&self.cpu_at_frame_ms);
+        s
+    }
+
+    /// The frames drawn while the automatic flight played (no CPU figure).
+    pub fn flying(&self) -> FrameSummary {
+        summarize(self.flying_ms.clone())
+    }
+}
+
+/// Mean, median and 95th percentile of frame times (ms).
+fn summarize(mut sorted: Vec<f64>) -> FrameSummary {
+    sorted.sort_by(f64::total_cmp);
+    let pct = |q: f64| {
+        sorted
+            .get(((sorted.len() as f64 - 1.0) * q).round() as usize)
+            .copied()
+            .unwrap_or(0.0)
+    };
+    let m = if sorted.is_empty() {
+        0.0
+    } else {
+        sorted.iter().sum::<f64>() / sorted.len() as f64
+    };
+    FrameSummary {
+        mean: m,
+        median: pct(0.5),
+        p95: pct(0.95),
+        frames: sorted.len(),
+        fps: if m > 0.0 { 1000.0 / m } else { 0.0 },
+        cpu_ms: None,
     }
 }
 

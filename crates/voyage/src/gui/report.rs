@@ -23,7 +23,10 @@ pub struct Report {
     pub recorded: BTreeMap<String, [f64; 7]>,
     pub markers: Vec<MarkerReport>,
     pub measurements_mm: Vec<f64>,
+    /// The last 240 frames.
     pub frame_ms: FrameSummary,
+    /// Every frame drawn while the automatic flight played.
+    pub flying_frame_ms: FrameSummary,
     /// Mean time to draw the view, ms.
     pub render_ms: f64,
     /// The view's rectangle in window points [left, top, right, bottom].
