@@ -3,8 +3,8 @@
 //! `draw_indexed` per run of consecutive pieces), and a new visibility result costs no
 //! upload.
 //!
-//! Each cell is laid out as chunks of at most [`CHUNK_TRIANGLES`] triangles (in the
-//! surface's order, so spatially compact), each with its own vertices and bounding box. A
+//! Each cell is laid out as the [`CellMesh`]'s chunks ([`voyage_view::chunk_runs`]: compact
+//! pieces of the wall), each with its own vertices and bounding box. A
 //! cell the portals let through is drawn without the chunks that lie wholly outside the
 //! view frustum: they would give no fragment, so the image is the same (exact), and a CPU
 //! Vulkan driver is spared shading and binning them.
@@ -14,7 +14,7 @@ use std::ops::Range;
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 use voyage_nav::Camera;
-use voyage_view::CellMesh;
+use voyage_view::{CellMesh, ScreenRect, View, chunk_runs};
 use wgpu::util::DeviceExt;
 
 use crate::error::RenderError;
@@ -39,11 +39,6 @@ impl Vertex {
         }
     }
 }
-
-/// Triangles per chunk: small enough that the part of a cell behind or beside the camera
-/// falls away, large enough that the per-frame test and the draw calls stay few (colon-a:
-/// ~1 500 chunks in 140 cells).
-pub(crate) const CHUNK_TRIANGLES: usize = 1024;
 
 /// A run of a cell's triangles with its own vertices: its range in the index buffer and
 /// the bounding box of its vertices (mm).
@@ -152,6 +147,53 @@ impl GpuMesh {
     }
 }
 
+impl GpuMesh {
+    /// [`Self::draw_ranges_in`], also without the chunks that cannot cover a pixel centre
+    /// within their cell's rectangle (`rects[i]` for `cells[i]`, from the portals), widened
+    /// by [`RECT_MARGIN_PX`] for the GPU's rounding.
+    pub fn draw_ranges_within(
+        &self,
+        cells: &[u32],
+        rects: &[ScreenRect],
+        frustum: &Frustum,
+        view: &View,
+    ) -> Result<Vec<Range<u32>>, RenderError> {
+        let mut out: Vec<Range<u32>> = Vec::with_capacity(cells.len());
+        for (&c, rect) in cells.iter().zip(rects) {
+            let chunks = self
+                .cell_chunks
+                .get(c as usize)
+                .ok_or(RenderError::UnknownCell {
+                    cell: c,
+                    cells: self.cell_chunks.len(),
+                })?;
+            let rect = ScreenRect {
+                x0: rect.x0 - RECT_MARGIN_PX,
+                x1: rect.x1 + RECT_MARGIN_PX,
+                y0: rect.y0 - RECT_MARGIN_PX,
+                y1: rect.y1 + RECT_MARGIN_PX,
+            };
+            for chunk in &self.chunks[chunks.clone()] {
+                if chunk.indices.is_empty()
+                    || frustum.excludes(chunk.lo, chunk.hi)
+                    || !view.box_may_show(chunk.lo, chunk.hi, &rect)
+                {
+                    continue;
+                }
+                match out.last_mut() {
+                    Some(last) if last.end == chunk.indices.start => last.end = chunk.indices.end,
+                    _ => out.push(chunk.indices.clone()),
+                }
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// Pixels added on every side of a cell's rectangle before its chunks are tested: the GPU
+/// snaps vertices to a sub-pixel grid and transforms them in f32.
+const RECT_MARGIN_PX: i64 = 1;
+
 /// The camera's view volume, for excluding boxes that lie wholly outside it.
 pub(crate) struct Frustum {
     eye: DVec3,
@@ -241,12 +283,11 @@ fn chunked(mesh: &CellMesh) -> Layout {
     let mut slot = vec![(u32::MAX, 0u32); mesh.positions.len()];
     for range in &mesh.cell_ranges {
         let first = out.chunks.len();
-        let (start, end) = (range.start as usize, range.end as usize);
-        for lo in (start..end).step_by(CHUNK_TRIANGLES) {
+        for run in chunk_runs(range.clone()) {
             let id = out.chunks.len() as u32;
             let begin = out.triangles.len() as u32 * 3;
             let (mut bl, mut bh) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-            for t in &mesh.triangles[lo..(lo + CHUNK_TRIANGLES).min(end)] {
+            for t in &mesh.triangles[run.start as usize..run.end as usize] {
                 out.triangles.push(t.map(|v| {
                     let s = &mut slot[v as usize];
                     if s.0 != id {
@@ -387,7 +428,7 @@ mod tests {
 
     #[test]
     fn chunks_tile_each_cell_with_their_own_vertices() {
-        // Three cells: 2, 2 500 and 0 triangles of a strip, so the middle cell has 3 chunks.
+        // Three cells: 2, 2 500 and 0 triangles of a strip, so the middle cell has 5 chunks.
         let n = 2502usize;
         let positions: Vec<[f32; 3]> = (0..n + 2)
             .map(|i| [i as f32, (i % 2) as f32, 0.0])
@@ -399,18 +440,16 @@ mod tests {
             surface_triangle: (0..n as u32).collect(),
             triangles,
             cell_ranges: vec![0..2, 2..2502, 2502..2502],
-            cell_vertices: Vec::new(),
-            cell_vertex_ranges: Vec::new(),
-            local_triangles: Vec::new(),
+            ..CellMesh::default()
         };
         let l = chunked(&mesh);
-        assert_eq!(l.cell_chunks, vec![0..1, 1..4, 4..4]);
+        assert_eq!(l.cell_chunks, vec![0..1, 1..6, 6..6]);
         assert_eq!(
             l.chunks
                 .iter()
                 .map(|c| c.indices.len() / 3)
                 .collect::<Vec<_>>(),
-            vec![2, 1024, 1024, 452]
+            vec![2, 512, 512, 512, 512, 452]
         );
         // The same triangles, in the same order, each chunk indexing only its own vertices.
         let mut seen = 0;

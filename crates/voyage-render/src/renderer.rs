@@ -7,7 +7,7 @@
 use std::time::Instant;
 
 use voyage_nav::Camera;
-use voyage_view::{CellMesh, Lighting};
+use voyage_view::{CellMesh, Drawn, Lighting, View};
 
 use crate::{
     device,
@@ -124,6 +124,30 @@ impl GpuRenderer {
         })
     }
 
+    /// [`Self::draw_list`] of what a visibility pass chose (`drawn.cells`), each cell also
+    /// without its chunks that lie wholly outside the window its portals leave open
+    /// (`drawn.rects`): exact for the same reason as the cells themselves.
+    pub fn draw_list_within(
+        &self,
+        drawn: &Drawn,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+    ) -> Result<DrawList, RenderError> {
+        if !self.chunk_culling || drawn.rects.len() != drawn.cells.len() {
+            return self.draw_list(&drawn.cells, camera, width, height);
+        }
+        let mesh = self.mesh.as_ref().ok_or(RenderError::NoMesh)?;
+        Ok(DrawList {
+            ranges: mesh.draw_ranges_within(
+                &drawn.cells,
+                &drawn.rects,
+                &Frustum::new(camera, width, height),
+                &View::new(camera, width, height),
+            )?,
+        })
+    }
+
     /// Draws `list` into a render pass someone else began (viewport and scissor set by
     /// them), with the uniforms of the last [`Self::prepare`].
     pub fn draw_in_pass(
@@ -203,6 +227,25 @@ impl GpuRenderer {
         let mesh = self.mesh.as_ref().ok_or(RenderError::NoMesh)?;
         self.check_size(width, height)?;
         let ranges = self.ranges(mesh, cells, camera, width, height)?;
+        self.draw_ranges(
+            encoder, color, depth, camera, ranges, width, height, lighting,
+        )
+    }
+
+    /// [`Self::draw`] of index ranges already chosen.
+    #[allow(clippy::too_many_arguments)]
+    fn draw_ranges(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        camera: &Camera,
+        ranges: Vec<std::ops::Range<u32>>,
+        width: u32,
+        height: u32,
+        lighting: &Lighting,
+    ) -> Result<(), RenderError> {
+        let mesh = self.mesh.as_ref().ok_or(RenderError::NoMesh)?;
         let uniforms = Uniforms::new(camera, width, height, lighting);
         self.queue
             .write_buffer(&self.pipeline.uniforms, 0, bytemuck::bytes_of(&uniforms));
@@ -243,12 +286,27 @@ impl GpuRenderer {
         height: u32,
         lighting: &Lighting,
     ) -> Result<Vec<u8>, RenderError> {
+        let list = self.draw_list(cells, camera, width, height)?;
+        self.render_list(camera, &list, width, height, lighting)
+    }
+
+    /// [`Self::render`] of a draw list made before ([`Self::draw_list`],
+    /// [`Self::draw_list_within`]).
+    pub fn render_list(
+        &mut self,
+        camera: &Camera,
+        list: &DrawList,
+        width: u32,
+        height: u32,
+        lighting: &Lighting,
+    ) -> Result<Vec<u8>, RenderError> {
         self.check_size(width, height)?;
         self.ensure_target(width, height);
         let this = &*self;
         this.scoped(|| {
             let target = this.target.as_ref().expect("target was just made");
-            let mut encoder = this.encode_frame(camera, cells, width, height, lighting)?;
+            let mut encoder =
+                this.encode_frame(camera, list.ranges.clone(), width, height, lighting)?;
             target.encode_readback(&mut encoder);
             this.queue.submit([encoder.finish()]);
             target.read(&this.device).map_err(RenderError::Gpu)
@@ -259,19 +317,19 @@ impl GpuRenderer {
     fn encode_frame(
         &self,
         camera: &Camera,
-        cells: &[u32],
+        ranges: Vec<std::ops::Range<u32>>,
         width: u32,
         height: u32,
         lighting: &Lighting,
     ) -> Result<wgpu::CommandEncoder, RenderError> {
         let target = self.target.as_ref().expect("target was just made");
         let mut encoder = self.device.create_command_encoder(&Default::default());
-        self.draw(
+        self.draw_ranges(
             &mut encoder,
             &target.color_view,
             &target.depth_view,
             camera,
-            cells,
+            ranges,
             width,
             height,
             lighting,
@@ -305,7 +363,8 @@ impl GpuRenderer {
         this.scoped(|| {
             let frame = |camera: &Camera, cells: &[u32]| -> Result<f64, RenderError> {
                 let t0 = Instant::now();
-                let encoder = this.encode_frame(camera, cells, width, height, lighting)?;
+                let list = this.draw_list(cells, camera, width, height)?;
+                let encoder = this.encode_frame(camera, list.ranges, width, height, lighting)?;
                 let index = this.queue.submit([encoder.finish()]);
                 this.device
                     .poll(wgpu::PollType::Wait {

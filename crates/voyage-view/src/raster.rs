@@ -152,6 +152,93 @@ impl View {
     }
 }
 
+/// Pixel centres a cell may show at: columns `x0..=x1` of rows `y0..=y1` (empty when either
+/// range is).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct ScreenRect {
+    pub x0: i64,
+    pub x1: i64,
+    pub y0: i64,
+    pub y1: i64,
+}
+
+impl ScreenRect {
+    pub fn full(view: &View) -> Self {
+        ScreenRect {
+            x0: 0,
+            x1: view.width as i64 - 1,
+            y0: 0,
+            y1: view.height as i64 - 1,
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.x0 > self.x1 || self.y0 > self.y1
+    }
+}
+
+/// Slack (pixels) added around projected outlines: rounding must never drop a pixel centre
+/// that lies on an outline.
+pub(crate) const SLACK_PX: f64 = 1e-3;
+/// ... and around projected boxes, wider: the rasterizer transforms vertices in f32, the
+/// box test in f64.
+const BOX_SLACK_PX: f64 = 1e-2;
+
+/// Pixel indices whose centres (i + 0.5) lie in [a, b], clamped to the screen.
+pub(crate) fn centres(a: f64, b: f64, size: u32) -> (i64, i64) {
+    let lo = (a - 0.5 - SLACK_PX).ceil().max(0.0);
+    let hi = (b - 0.5 + SLACK_PX).floor().min(size as f64 - 1.0);
+    if lo > hi || hi < 0.0 {
+        (1, 0)
+    } else {
+        (lo as i64, hi as i64)
+    }
+}
+
+impl View {
+    /// Whether a box (volume-local mm, `lo`–`hi`) may hold a triangle that covers a pixel
+    /// centre of `rect`: false only when the box lies wholly behind the near plane (no
+    /// triangle of it is drawn), or wholly in front of it with its projection's bounding
+    /// rectangle holding no centre of `rect` (a projected triangle lies within its box's
+    /// projected corners).
+    pub fn box_may_show(&self, lo: [f32; 3], hi: [f32; 3], rect: &ScreenRect) -> bool {
+        if rect.is_empty() {
+            return false;
+        }
+        let (mut behind, mut x0, mut x1, mut y0, mut y1) = (
+            0,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        );
+        for k in 0..8 {
+            let c = DVec3::new(
+                if k & 1 == 0 { lo[0] } else { hi[0] } as f64,
+                if k & 2 == 0 { lo[1] } else { hi[1] } as f64,
+                if k & 4 == 0 { lo[2] } else { hi[2] } as f64,
+            );
+            let e = self.to_eye(c);
+            if e.z < self.near {
+                behind += 1;
+                continue;
+            }
+            let (x, y) = self.project(e);
+            (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
+        }
+        match behind {
+            8 => false,
+            0 => {
+                let (c0, c1) = centres(x0 - BOX_SLACK_PX, x1 + BOX_SLACK_PX, self.width);
+                let (r0, r1) = centres(y0 - BOX_SLACK_PX, y1 + BOX_SLACK_PX, self.height);
+                c0.max(rect.x0) <= c1.min(rect.x1) && r0.max(rect.y0) <= r1.min(rect.y1)
+            }
+            // Across the near plane: its projection is unbounded.
+            _ => true,
+        }
+    }
+}
+
 /// The eye transform in f32, relative to the eye, for the per-triangle work.
 struct EyeXf {
     eye: Vec3,
@@ -199,7 +286,7 @@ pub struct Rasterizer<'a> {
     view: View,
     xf: EyeXf,
     shading: &'a Shading,
-    /// The current cell's transformed vertices.
+    /// The current chunk's transformed vertices.
     scratch: RefCell<Vec<Vertex>>,
 }
 
@@ -222,8 +309,8 @@ impl<'a> Rasterizer<'a> {
     /// Draws every triangle of a cell; returns how many triangles that was.
     pub fn draw_cell(&self, frame: &mut Frame, cell: u32) -> usize {
         let mesh = self.mesh;
-        let range = mesh.cell_ranges[cell as usize].clone();
         if !mesh.is_indexed() {
+            let range = mesh.cell_ranges[cell as usize].clone();
             for id in range.clone() {
                 let t = mesh.triangles[id as usize];
                 let [a, b, c] = t.map(|v| self.vertex(v));
@@ -231,15 +318,41 @@ impl<'a> Rasterizer<'a> {
             }
             return range.len();
         }
-        // Each vertex once per cell (a vertex is shared by about six triangles).
+        let chunks = mesh.cell_chunks[cell as usize].clone();
+        chunks.map(|k| self.draw_chunk(frame, k as usize)).sum()
+    }
+
+    /// Draws the chunks of a cell that may cover a pixel centre in `rect` (see
+    /// [`View::box_may_show`]): the image is the same as [`Self::draw_cell`]'s wherever the
+    /// cell can only show within `rect`. Returns the triangles drawn.
+    pub fn draw_cell_within(&self, frame: &mut Frame, cell: u32, rect: &ScreenRect) -> usize {
+        let mesh = self.mesh;
+        if !mesh.is_indexed() {
+            return self.draw_cell(frame, cell);
+        }
+        let chunks = mesh.cell_chunks[cell as usize].clone();
+        chunks
+            .filter(|&k| {
+                let c = &mesh.chunks[k as usize];
+                self.view.box_may_show(c.lo, c.hi, rect)
+            })
+            .map(|k| self.draw_chunk(frame, k as usize))
+            .sum()
+    }
+
+    /// Draws chunk `k`, each vertex transformed once (a vertex is shared by about six
+    /// triangles).
+    fn draw_chunk(&self, frame: &mut Frame, k: usize) -> usize {
+        let mesh = self.mesh;
         let mut buf = self.scratch.borrow_mut();
         buf.clear();
-        let vr = mesh.cell_vertex_ranges[cell as usize].clone();
+        let vr = mesh.chunk_vertex_ranges[k].clone();
         buf.extend(
-            mesh.cell_vertices[vr.start as usize..vr.end as usize]
+            mesh.chunk_vertices[vr.start as usize..vr.end as usize]
                 .iter()
                 .map(|&v| self.vertex(v)),
         );
+        let range = mesh.chunks[k].triangles.clone();
         let local = &mesh.local_triangles[range.start as usize..range.end as usize];
         for (id, t) in (range.start..).zip(local) {
             self.draw_triangle(

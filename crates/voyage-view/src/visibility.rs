@@ -27,7 +27,7 @@ use std::{fmt, str::FromStr};
 use glam::DVec3;
 use serde::Serialize;
 
-use super::raster::{Frame, Rasterizer, View};
+use super::raster::{Frame, Rasterizer, SLACK_PX, ScreenRect, View, centres};
 use voyage_core::{Cells, convex_hull};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
@@ -73,6 +73,10 @@ impl FromStr for Strategy {
 pub struct Drawn {
     /// Cells in the order drawn.
     pub cells: Vec<u32>,
+    /// Per cell in `cells`, the pixel centres it can show at (the window its portals leave
+    /// open; the whole view for the camera's cell): a renderer may leave out what lies
+    /// wholly outside ([`crate::View::box_may_show`]).
+    pub rects: Vec<ScreenRect>,
     pub triangles: usize,
     /// The camera's cell (None: the camera is outside the lumen and everything was drawn).
     pub camera_cell: Option<u32>,
@@ -143,22 +147,32 @@ impl Visibility {
             camera_cell,
             ..Drawn::default()
         };
+        let whole = ScreenRect::full(&view);
         let Some(home) = camera_cell.filter(|_| self.strategy != Strategy::All) else {
             let all: Vec<u32> = (0..ncells).collect();
             drawn.triangles = raster.draw_cells(frame, &all);
+            drawn.rects = vec![whole; all.len()];
             drawn.cells = all;
             self.last = None;
             return drawn;
         };
         let mut done = vec![false; ncells as usize];
-        let mut draw = |c: u32, drawn: &mut Drawn, frame: &mut Frame| {
+        // Ours leaves out the chunks of a cell that lie wholly outside the window its
+        // portals leave open (the whole view for the camera's cell): they cannot show there.
+        let chunks = self.strategy == Strategy::Ours;
+        let mut draw = |c: u32, rect: &ScreenRect, drawn: &mut Drawn, frame: &mut Frame| {
             if !done[c as usize] {
                 done[c as usize] = true;
-                drawn.triangles += raster.draw_cell(frame, c);
+                drawn.triangles += if chunks {
+                    raster.draw_cell_within(frame, c, rect)
+                } else {
+                    raster.draw_cell(frame, c)
+                };
                 drawn.cells.push(c);
+                drawn.rects.push(*rect);
             }
         };
-        draw(home, &mut drawn, frame);
+        draw(home, &whole, &mut drawn, frame);
         if self.coherence
             && let Some((last_home, seqs)) = &self.last
             && *last_home == home
@@ -166,7 +180,7 @@ impl Visibility {
             for seq in seqs {
                 let keep = (seq.len() * 4).div_ceil(5);
                 for &c in &seq[..keep] {
-                    draw(c, &mut drawn, frame);
+                    draw(c, &whole, &mut drawn, frame);
                 }
             }
         }
@@ -185,7 +199,7 @@ impl Visibility {
                 ) {
                     break;
                 }
-                draw(next, &mut drawn, frame);
+                draw(next, &region.bounds(), &mut drawn, frame);
                 seq.push(next);
                 cell = next;
             }
@@ -206,11 +220,14 @@ impl Visibility {
             camera_cell,
             ..Drawn::default()
         };
+        let whole = ScreenRect::full(view);
         let Some(home) = camera_cell.filter(|_| self.strategy != Strategy::All) else {
             drawn.cells = (0..ncells).collect();
+            drawn.rects = vec![whole; ncells as usize];
             return drawn;
         };
         drawn.cells.push(home);
+        drawn.rects.push(whole);
         for dir in [TOWARD_TARGET, TOWARD_SOURCE] {
             let mut region = Region::full(view);
             let mut cell = home;
@@ -227,6 +244,7 @@ impl Visibility {
                     break;
                 }
                 drawn.cells.push(next);
+                drawn.rects.push(region.bounds());
                 cell = next;
             }
         }
@@ -315,10 +333,6 @@ struct Region {
     rows: Vec<(i64, i64)>,
 }
 
-/// Slack (pixels) added around projected outlines: rounding must never drop a pixel centre
-/// that lies on an outline.
-const SLACK_PX: f64 = 1e-3;
-
 impl Region {
     fn full(view: &View) -> Self {
         Region {
@@ -330,6 +344,20 @@ impl Region {
 
     fn is_empty(&self) -> bool {
         self.y0 > self.y1
+    }
+
+    /// The rectangle around the region's rows.
+    fn bounds(&self) -> ScreenRect {
+        let rows = (self.y0.max(0)..=self.y1)
+            .map(|y| self.rows[y as usize])
+            .filter(|r| r.0 <= r.1);
+        let (x0, x1) = rows.fold((i64::MAX, i64::MIN), |(a, b), r| (a.min(r.0), b.max(r.1)));
+        ScreenRect {
+            x0,
+            x1,
+            y0: self.y0,
+            y1: self.y1,
+        }
     }
 
     /// Drops empty rows at the top and bottom.
@@ -484,17 +512,6 @@ impl SlabBound {
         let depth = (c - self.eye_side) / nd;
         // A hair nearer, for rounding.
         1.0 / (depth * (1.0 - 1e-6)).max(1e-12)
-    }
-}
-
-/// Pixel indices whose centres (i + 0.5) lie in [a, b], clamped to the screen.
-fn centres(a: f64, b: f64, size: u32) -> (i64, i64) {
-    let lo = (a - 0.5 - SLACK_PX).ceil().max(0.0);
-    let hi = (b - 0.5 + SLACK_PX).floor().min(size as f64 - 1.0);
-    if lo > hi || hi < 0.0 {
-        (1, 0)
-    } else {
-        (lo as i64, hi as i64)
     }
 }
 

@@ -144,7 +144,8 @@ impl Endoscope {
                     .vis
                     .select(&session.study.cells, &View::new(&camera, size[0], size[1]));
                 self.stats.cells = drawn.cells.len();
-                // What the GPU is given: the cells' triangles less their chunks outside the view.
+                // What the GPU is given: the cells' triangles less their chunks outside the
+                // view or outside the window the portals leave open.
                 let list = rs
                     .renderer
                     .read()
@@ -152,7 +153,7 @@ impl Endoscope {
                     .get::<WindowGpu>()
                     .map(|g| {
                         g.renderer
-                            .draw_list(&drawn.cells, &camera, size[0], size[1])
+                            .draw_list_within(&drawn, &camera, size[0], size[1])
                     })
                     .transpose()?
                     .unwrap_or_default();
