@@ -124,30 +124,9 @@ impl GpuMesh {
         cells: &[u32],
         view: &Frustum,
     ) -> Result<Vec<Range<u32>>, RenderError> {
-        let mut out: Vec<Range<u32>> = Vec::with_capacity(cells.len());
-        for &c in cells {
-            let chunks = self
-                .cell_chunks
-                .get(c as usize)
-                .ok_or(RenderError::UnknownCell {
-                    cell: c,
-                    cells: self.cell_chunks.len(),
-                })?;
-            for chunk in &self.chunks[chunks.clone()] {
-                if chunk.indices.is_empty() || view.excludes(chunk.lo, chunk.hi) {
-                    continue;
-                }
-                match out.last_mut() {
-                    Some(last) if last.end == chunk.indices.start => last.end = chunk.indices.end,
-                    _ => out.push(chunk.indices.clone()),
-                }
-            }
-        }
-        Ok(out)
+        self.kept_ranges(cells, |_, chunk| !view.excludes(chunk.lo, chunk.hi))
     }
-}
 
-impl GpuMesh {
     /// [`Self::draw_ranges_in`], also without the chunks that cannot cover a pixel centre
     /// within their cell's rectangle (`rects[i]` for `cells[i]`, from the portals), widened
     /// by [`RECT_MARGIN_PX`] for the GPU's rounding.
@@ -158,8 +137,32 @@ impl GpuMesh {
         frustum: &Frustum,
         view: &View,
     ) -> Result<Vec<Range<u32>>, RenderError> {
+        let grown: Vec<ScreenRect> = rects
+            .iter()
+            .map(|r| ScreenRect {
+                x0: r.x0 - RECT_MARGIN_PX,
+                x1: r.x1 + RECT_MARGIN_PX,
+                y0: r.y0 - RECT_MARGIN_PX,
+                y1: r.y1 + RECT_MARGIN_PX,
+            })
+            .collect();
+        self.kept_ranges(cells, |i, chunk| {
+            !frustum.excludes(chunk.lo, chunk.hi)
+                && grown
+                    .get(i)
+                    .is_none_or(|r| view.box_may_show(chunk.lo, chunk.hi, r))
+        })
+    }
+
+    /// The index ranges of the chunks of `cells` (in order) that `keep(i, chunk)` keeps for
+    /// `cells[i]`, runs of consecutive chunks merged.
+    fn kept_ranges(
+        &self,
+        cells: &[u32],
+        keep: impl Fn(usize, &Chunk) -> bool,
+    ) -> Result<Vec<Range<u32>>, RenderError> {
         let mut out: Vec<Range<u32>> = Vec::with_capacity(cells.len());
-        for (&c, rect) in cells.iter().zip(rects) {
+        for (i, &c) in cells.iter().enumerate() {
             let chunks = self
                 .cell_chunks
                 .get(c as usize)
@@ -167,17 +170,8 @@ impl GpuMesh {
                     cell: c,
                     cells: self.cell_chunks.len(),
                 })?;
-            let rect = ScreenRect {
-                x0: rect.x0 - RECT_MARGIN_PX,
-                x1: rect.x1 + RECT_MARGIN_PX,
-                y0: rect.y0 - RECT_MARGIN_PX,
-                y1: rect.y1 + RECT_MARGIN_PX,
-            };
             for chunk in &self.chunks[chunks.clone()] {
-                if chunk.indices.is_empty()
-                    || frustum.excludes(chunk.lo, chunk.hi)
-                    || !view.box_may_show(chunk.lo, chunk.hi, &rect)
-                {
+                if chunk.indices.is_empty() || !keep(i, chunk) {
                     continue;
                 }
                 match out.last_mut() {

@@ -221,7 +221,7 @@ fn chunks_outside_the_view_change_nothing() {
 
 /// The cells the portals let through, each without its chunks outside the window the portals
 /// leave open, give the same image as the cells whole (the GPU against itself, bit for bit),
-/// and leave chunks out: views along the pipe at several places, and the colon phantom's.
+/// and leave chunks out: views along the pipe at 19 places.
 #[test]
 fn chunks_outside_the_portals_window_change_nothing() {
     let (study, mesh) = pipe();
