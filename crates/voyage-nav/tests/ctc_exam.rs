@@ -77,6 +77,34 @@ fn the_real_exam_is_flown_both_ways_inside_the_lumen() {
             dir.name(),
             100.0 * l.all_wall_share
         );
+        // Leveling keeps the patient's anterior up, prone as this patient lies (before, up
+        // was against gravity: the back). Where the view is more than 60° from the anterior
+        // axis (about half the frames), the view's up within 30° of the anterior across it
+        // in nine frames of ten (measured 93–95%).
+        let anterior = study.anterior_local();
+        let ups: Vec<f64> = f
+            .poses
+            .iter()
+            .filter(|p| p.z_body().dot(anterior).abs() < 0.5)
+            .map(|p| {
+                let z = p.z_body();
+                let want = (anterior - z * anterior.dot(z)).normalize();
+                p.y_body().angle_between(want).to_degrees()
+            })
+            .collect();
+        let level = ups.iter().filter(|&&a| a <= 30.0).count() as f64 / ups.len() as f64;
+        eprintln!(
+            "  anterior up within 30° in {:.1}% of {} frames not along it (of {})",
+            100.0 * level,
+            ups.len(),
+            f.poses.len()
+        );
+        assert!(
+            ups.len() > f.poses.len() / 3 && level >= 0.9,
+            "the {} flight: anterior up within 30° in only {:.1}% of frames",
+            dir.name(),
+            100.0 * level
+        );
         // Without the glides and rescues the flights sat for minutes: they take no longer
         // than the colon's length at 10 mm/s, twice over.
         assert!(
