@@ -118,6 +118,9 @@ pub struct Flight {
     /// Where the autopilot could not progress for [`STUCK_S`] s and glided on along the
     /// centerline.
     pub rescues: Vec<Rescue>,
+    /// Dt (mm) from the goal to the last centerline point the camera fits at, where the
+    /// goal's end is narrower than that (0 when it is not): the flight ends there.
+    pub short_end_mm: f64,
     /// Mean angle between z_body and the direction of travel (the path's tangent over ±¼ s),
     /// degrees, over frames that moved.
     pub mean_heading_error_deg: f64,
@@ -311,6 +314,10 @@ const LOOK_PER_RADIUS: f64 = 1.5;
 /// The look-ahead point is the mean of the centerline at these multiples of the reach.
 const LOOK_SPREAD: [f64; 5] = [0.5, 0.75, 1.0, 1.25, 1.5];
 
+/// Where the goal's end is too narrow for the camera, the flight ends within this much Dt
+/// (mm) of the last centerline point it fits at ([`Autopilot::fit_reach`]).
+pub const GOAL_SLACK_MM: f64 = 5.0;
+
 /// A glide starts this far (mm) before a bridged gap: the lumen narrows toward it and the
 /// wall term would stop the submarine there.
 const GLIDE_BEFORE_MM: f64 = 25.0;
@@ -394,6 +401,30 @@ impl Autopilot {
                 self.guide.toward_ahead(self.near, x) * self.escape_factor * boost * ct.max(1.0);
         }
         input
+    }
+
+    /// Where the centerline's last stretch toward the goal is too narrow for the camera (no
+    /// point of it in `field`'s safe set for a camera kept `min_wall_mm` from the wall), the
+    /// goal counts as reached once Dt is within [`GOAL_SLACK_MM`] of Dt at the last point
+    /// that is: the camera cannot go farther, and would otherwise stall there for good.
+    /// Returns how far short of the goal that is (mm of Dt; 0 when the end is roomy).
+    pub fn fit_reach<S: DistanceStore>(
+        &mut self,
+        field: &PotentialField<S>,
+        dir: Direction,
+        min_wall_mm: f64,
+    ) -> f64 {
+        let last_safe = self.guide.points.iter().rev().find_map(|&p| {
+            let s = field.sample(p, dir);
+            (s.lumen_corners == 8 && s.ds >= min_wall_mm).then_some(s.dt)
+        });
+        match last_safe.flatten() {
+            Some(dt) if dt + GOAL_SLACK_MM > self.reach_mm => {
+                self.reach_mm = dt + GOAL_SLACK_MM;
+                dt
+            }
+            _ => 0.0,
+        }
     }
 
     /// Restarts the stall watch (the user steered, or the submarine was moved): what happens
@@ -609,6 +640,7 @@ pub fn fly<S: DistanceStore>(
         clipped_substeps: 0,
         final_dt_mm: f64::INFINITY,
         rescues: Vec::new(),
+        short_end_mm: 0.0,
         mean_heading_error_deg: 0.0,
         poses: Vec::new(),
     };
@@ -616,6 +648,7 @@ pub fn fly<S: DistanceStore>(
     let (mut wall_sum, mut radius_sum) = (0.0, 0.0);
     let mut physics_ns = 0u128;
     let mut pilot = Autopilot::new(cl, dir, opts, sub.state.x, dt_at(sub.state.x));
+    f.short_end_mm = pilot.fit_reach(field, dir, opts.safety.min_wall_mm);
     let reach = pilot.reach_mm;
     let mut track: Vec<(DVec3, DVec3)> = Vec::new();
     if opts.keep_poses {

@@ -115,3 +115,35 @@ fn the_real_exam_is_flown_both_ways_inside_the_lumen() {
         );
     }
 }
+
+/// `ct/abdomen-3mm` (a colon 3–4 mm in radius, 3 mm slices): the rectum end of its centerline
+/// is narrower than the camera fits 1 mm from the wall. The backward flight used to stall
+/// there 23 mm short for good (16 rescue glides refused); it now ends at the last place the
+/// camera fits and says how far short that is, and the forward flight is unchanged.
+#[test]
+fn a_goal_too_narrow_for_the_camera_ends_the_flight_where_it_fits() {
+    let Some(data) = voyage_phantom::fixtures::shared_data() else {
+        return;
+    };
+    let path = data.join("ct").join("abdomen-3mm.nii.gz");
+    if !path.exists() {
+        voyage_phantom::fixtures::skip(&format!("{} not found", path.display()));
+        return;
+    }
+    let ct = voyage_io::load(&path, &Default::default()).unwrap().volume;
+    let study = prepare(ct, &PrepOptions::default(), |_| {}).unwrap();
+    let opts = FlightOptions::for_study(&study);
+    let field = potential_field(&study, opts.safety.min_wall_mm).unwrap();
+    let back = fly(&field, &study.centerline, Direction::Backward, &opts).unwrap();
+    eprintln!(
+        "abdomen-3mm backward: reached {} with {:.0} mm of Dt left, the last {:.0} mm too narrow, {} rescues",
+        back.reached,
+        back.final_dt_mm,
+        back.short_end_mm,
+        back.rescues.len()
+    );
+    assert!(back.reached, "stopped {:.0} mm short", back.final_dt_mm);
+    assert!(back.short_end_mm > 10.0 && back.final_dt_mm <= back.short_end_mm + 5.0);
+    let forward = fly(&field, &study.centerline, Direction::Forward, &opts).unwrap();
+    assert!(forward.reached && forward.short_end_mm == 0.0);
+}

@@ -830,13 +830,14 @@ fn two_way_reading_runs_to_the_end_and_coverage_rises() {
     // The small phantom (half scale, 1.5 mm voxels) reads 97 % on the CLI; the window marks
     // within a time budget, so a little less.
     assert!(after >= 94.0, "after review {after:.1} %");
-    // The review visits what the flights left (one patch here, since the flights look down
-    // the lumen: 92.7 % one way; three when they looked down −∇V).
-    let patches = reading["patches"].as_u64().unwrap();
-    assert!(
-        patches >= 1 && reading["visits"].as_u64().unwrap() >= patches,
-        "{c}"
+    // The review visits what the flights left: since the flights look down the lumen (93 %
+    // one way) that is none or one patch of 30 mm² or more (three when they looked down
+    // −∇V), and smaller bits; the window marks within a time budget, so which varies.
+    let (patches, visits) = (
+        reading["patches"].as_u64().unwrap(),
+        reading["visits"].as_u64().unwrap(),
     );
+    assert!(visits >= 1 && visits >= patches, "{c}");
     assert!(c["session_pct"].as_f64().unwrap() >= after - 1e-9);
     // The flights look around as `voyage coverage`'s do.
     assert!(reading["glances"].as_u64().unwrap() >= 1, "{c}");

@@ -131,6 +131,15 @@ pub fn run(a: &FlyArgs) -> Result<()> {
         flights.push(f);
     }
     for f in &flights {
+        if f.short_end_mm > 0.0 {
+            eprintln!(
+                "warning: {}: the last {:.0} mm to the {} flight's goal are narrower than the camera fits ({} mm from the wall): the flight ends there",
+                a.input.input.display(),
+                f.short_end_mm,
+                f.direction.name(),
+                opts.safety.min_wall_mm
+            );
+        }
         for r in &f.rescues {
             eprintln!(
                 "warning: {}: {}",
@@ -255,6 +264,7 @@ fn summary(f: &Flight, l: &Looking, g: &Geometry) -> serde_json::Value {
         "substeps": f.substeps,
         "clipped_substeps": f.clipped_substeps,
         "final_dt_mm": f.final_dt_mm,
+        "short_end_mm": f.short_end_mm,
         "mean_heading_error_deg": f.mean_heading_error_deg,
         "view_angle_deg": l.view_angle_deg,
         "all_wall_share": l.all_wall_share,

@@ -105,7 +105,8 @@ impl Session {
             .sample(start.position, dir)
             .dt
             .unwrap_or(f64::INFINITY);
-        let pilot = Autopilot::new(&study.centerline, dir, &opts, start.position, dt0);
+        let mut pilot = Autopilot::new(&study.centerline, dir, &opts, start.position, dt0);
+        pilot.fit_reach(&field, dir, opts.safety.min_wall_mm);
         Ok(Session {
             name,
             study,
@@ -164,6 +165,8 @@ impl Session {
             x,
             self.dt_to_goal(),
         );
+        self.pilot
+            .fit_reach(&self.field, dir, self.opts.safety.min_wall_mm);
         self.pilot.restart(self.sub.state.t, self.dt_to_goal(), x);
         if let Ok(p) = start_pose(&self.field, &self.study.centerline, dir, &self.opts) {
             self.start = p;
