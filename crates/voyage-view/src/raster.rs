@@ -791,6 +791,35 @@ mod tests {
     }
 
     #[test]
+    fn a_box_may_show_only_where_its_projection_meets_the_rect() {
+        // Looking along +z from the origin, 90° field of view, 100×100 pixels.
+        let view = View::new(&camera(), 100, 100);
+        let all = ScreenRect::full(&view);
+        let left = ScreenRect {
+            x0: 0,
+            x1: 20,
+            y0: 0,
+            y1: 99,
+        };
+        // In front, in the middle of the view.
+        let mid = ([-1.0, -1.0, 10.0], [1.0, 1.0, 11.0]);
+        assert!(view.box_may_show(mid.0, mid.1, &all));
+        assert!(!view.box_may_show(mid.0, mid.1, &left));
+        // Behind the eye, and beside the view.
+        assert!(!view.box_may_show([-1.0, -1.0, -5.0], [1.0, 1.0, -4.0], &all));
+        assert!(!view.box_may_show([30.0, -1.0, 10.0], [31.0, 1.0, 11.0], &all));
+        // Across the near plane: kept, its projection is unbounded.
+        assert!(view.box_may_show([5.0, 5.0, -1.0], [6.0, 6.0, 1.0], &left));
+        // An empty rect shows nothing.
+        let empty = ScreenRect {
+            x0: 1,
+            x1: 0,
+            ..all
+        };
+        assert!(!view.box_may_show(mid.0, mid.1, &empty));
+    }
+
+    #[test]
     fn floor_and_ceil_match_the_library() {
         for &x in &[
             -3.5, -1.0, -0.5, -0.0, 0.0, 0.25, 0.5, 1.0, 2.999, 3.0, 3.5, 9.0, 1e12, -1e12,
