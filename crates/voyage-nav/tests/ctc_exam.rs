@@ -4,21 +4,26 @@
 //! descending stretch. Needs `../shared/data`; skips with a message without it. Run in
 //! release mode (`cargo test --release -p voyage-nav --test ctc_exam`).
 
-use voyage_core::{PrepOptions, prepare};
+use voyage_core::{PrepOptions, Study, prepare};
 use voyage_nav::{Direction, FlightOptions, STUCK_S, fly, looking, potential_field};
+
+/// The shared data's file at `rel` (below `data/`) preprocessed with the default options, or
+/// None (skipped visibly).
+fn prepared(rel: &str) -> Option<Study> {
+    let path = voyage_phantom::fixtures::shared_data()?.join(rel);
+    if !path.exists() {
+        voyage_phantom::fixtures::skip(&format!("{} not found", path.display()));
+        return None;
+    }
+    let ct = voyage_io::load(&path, &Default::default()).unwrap().volume;
+    Some(prepare(ct, &PrepOptions::default(), |_| {}).unwrap())
+}
 
 #[test]
 fn the_real_exam_is_flown_both_ways_inside_the_lumen() {
-    let Some(data) = voyage_phantom::fixtures::shared_data() else {
+    let Some(study) = prepared("ctc/prone-tagged.nii.gz") else {
         return;
     };
-    let path = data.join("ctc").join("prone-tagged.nii.gz");
-    if !path.exists() {
-        voyage_phantom::fixtures::skip(&format!("{} not found", path.display()));
-        return;
-    }
-    let ct = voyage_io::load(&path, &Default::default()).unwrap().volume;
-    let study = prepare(ct, &PrepOptions::default(), |_| {}).unwrap();
     let opts = FlightOptions::for_study(&study);
     let field = potential_field(&study, opts.safety.min_wall_mm).unwrap();
     for dir in [Direction::Forward, Direction::Backward] {
@@ -122,16 +127,9 @@ fn the_real_exam_is_flown_both_ways_inside_the_lumen() {
 /// camera fits and says how far short that is, and the forward flight is unchanged.
 #[test]
 fn a_goal_too_narrow_for_the_camera_ends_the_flight_where_it_fits() {
-    let Some(data) = voyage_phantom::fixtures::shared_data() else {
+    let Some(study) = prepared("ct/abdomen-3mm.nii.gz") else {
         return;
     };
-    let path = data.join("ct").join("abdomen-3mm.nii.gz");
-    if !path.exists() {
-        voyage_phantom::fixtures::skip(&format!("{} not found", path.display()));
-        return;
-    }
-    let ct = voyage_io::load(&path, &Default::default()).unwrap().volume;
-    let study = prepare(ct, &PrepOptions::default(), |_| {}).unwrap();
     let opts = FlightOptions::for_study(&study);
     let field = potential_field(&study, opts.safety.min_wall_mm).unwrap();
     let back = fly(&field, &study.centerline, Direction::Backward, &opts).unwrap();
