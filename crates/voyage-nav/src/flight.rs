@@ -215,10 +215,10 @@ impl Guide {
         let (b, _) = self.at_arc(from + mm);
         (b - a).try_normalize().unwrap_or_else(|| self.ahead(i))
     }
-    /// Where the view turns at guide point i: the centerline [`LOOK_AHEAD_MM`] on (at least
-    /// [`LOOK_PER_RADIUS`] times the lumen's radius there), seen from `x`; near the goal, along
-    /// the centerline's last stretch.
-    fn look_target(&self, i: usize, x: DVec3) -> DVec3 {
+    /// Which way the view turns at guide point i: toward the centerline [`LOOK_AHEAD_MM`]
+    /// on (or [`LOOK_PER_RADIUS`] times the lumen's radius there), as a vector from point i;
+    /// near the goal, along the centerline's last stretch.
+    fn look_ahead(&self, i: usize) -> DVec3 {
         let reach = LOOK_AHEAD_MM.max(LOOK_PER_RADIUS * self.radius[i]);
         // The mean of the centerline from half to one and a half times the reach: a
         // single point follows the centerline's wiggles between folds, and the view with it.
@@ -227,10 +227,11 @@ impl Guide {
             .map(|f| self.at_arc(self.arc[i] + f * reach).0)
             .sum::<DVec3>()
             / LOOK_SPREAD.len() as f64;
-        if p.distance(x) >= 0.5 * LOOK_AHEAD_MM {
-            p
+        let v = p - self.points[i];
+        if v.length() >= 0.5 * LOOK_AHEAD_MM {
+            v
         } else {
-            x + self.way_on(i, LOOK_AHEAD_MM) * LOOK_AHEAD_MM
+            self.way_on(i, LOOK_AHEAD_MM) * LOOK_AHEAD_MM
         }
     }
     /// Unit direction of the centerline toward the goal at point i.
@@ -305,7 +306,7 @@ pub const STUCK_S: f64 = 5.0;
 pub const NARROW_MARGIN_MM: f64 = 1.0;
 
 /// During the flight the view turns toward the centerline this far (mm of arc) beyond the
-/// camera's nearest point ([`Autopilot::look_point`]) ...
+/// camera's nearest point ([`Autopilot::look`]) ...
 pub const LOOK_AHEAD_MM: f64 = 30.0;
 /// ... or this many times the lumen's radius there, whichever is farther: in a chamber wide
 /// enough for the camera to stray from the centerline, a nearer point would swing the view
@@ -458,12 +459,12 @@ impl Autopilot {
     }
 
     /// Where the view should turn with the submarine at `x` (after [`Autopilot::moved_to`]),
-    /// `dt` seconds after the last look: the centerline [`LOOK_AHEAD_MM`] on, so that the
-    /// lumen ahead stays near the middle of the view, and how fast the direction to it
-    /// turned since. The submarine turns toward it with the compass's torque
-    /// ([`crate::Submarine::look_at`]).
+    /// `dt` seconds after the last look: along the centerline's way on from the nearest
+    /// point toward [`LOOK_AHEAD_MM`] ahead, so that the lumen ahead stays near the middle of
+    /// the view, and how fast that direction turned since. The submarine turns toward it
+    /// with the compass's torque ([`crate::Submarine::look_at`]).
     pub fn look(&mut self, x: DVec3, dt: f64) -> Look {
-        let point = x + (self.guide.look_target(self.near, x) - self.guide.points[self.near]);
+        let point = x + self.guide.look_ahead(self.near);
         let dir = (point - x).normalize_or_zero();
         let spin = match self.look_dir {
             Some(prev) if dt > 0.0 => {
@@ -520,8 +521,8 @@ impl Autopilot {
         self.glide_arc = (next < end).then_some(next);
         self.glided = Some(k);
         let (p, j) = self.guide.at_arc(next);
-        let look = self.guide.look_target(j.saturating_sub(1), p);
-        Some(Pose::looking(p, look - p, self.up))
+        let look = self.guide.look_ahead(j.saturating_sub(1));
+        Some(Pose::looking(p, look, self.up))
     }
 
     /// Starts a rescue glide from guide point `i`: [`RESCUE_MM`] (at least twice the local
