@@ -3,8 +3,8 @@
 //! `draw_indexed` per run of consecutive pieces), and a new visibility result costs no
 //! upload.
 //!
-//! Each cell is laid out as the [`CellMesh`]'s chunks ([`voyage_view::chunk_runs`]: compact
-//! pieces of the wall), each with its own vertices and bounding box. A
+//! Each cell is laid out as the [`CellMesh`]'s chunks (compact pieces of the wall), each
+//! with its own vertices and bounding box. A
 //! cell the portals let through is drawn without the chunks that lie wholly outside the
 //! view frustum: they would give no fragment, so the image is the same (exact), and a CPU
 //! Vulkan driver is spared shading and binning them.
@@ -14,7 +14,7 @@ use std::ops::Range;
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 use voyage_nav::Camera;
-use voyage_view::{CellMesh, ScreenRect, View, chunk_runs};
+use voyage_view::{CellMesh, ScreenRect, View};
 use wgpu::util::DeviceExt;
 
 use crate::error::RenderError;
@@ -260,54 +260,58 @@ struct Layout {
     cell_chunks: Vec<Range<usize>>,
 }
 
-/// Lays the mesh out cell by cell and, within a cell, chunk by chunk: each chunk's vertices
-/// contiguous (a vertex shared by two chunks appears in both) and its triangles indexing
-/// only them. A draw of a run of chunks then touches one short stretch of the vertex buffer;
-/// with the surface's own vertex order a cell's indices span most of the buffer, and a
-/// driver that shades the whole index range of a draw (Mesa's CPU driver does) would shade
-/// every vertex of the colon for every run.
+/// Lays the mesh out cell by cell and, within a cell, chunk by chunk: the [`CellMesh`]'s own
+/// chunks ([`CellMesh::index_cells`]), each chunk's vertices contiguous (a vertex shared by
+/// two chunks appears in both) and its triangles indexing only them. A draw of a run of
+/// chunks then touches one short stretch of the vertex buffer; with the surface's own vertex
+/// order a cell's indices span most of the buffer, and a driver that shades the whole index
+/// range of a draw (Mesa's CPU driver does) would shade every vertex of the colon for every
+/// run.
 fn chunked(mesh: &CellMesh) -> Layout {
-    let mut out = Layout {
-        vertices: Vec::with_capacity(mesh.positions.len() * 5 / 4),
-        triangles: Vec::with_capacity(mesh.triangles.len()),
-        chunks: Vec::new(),
-        cell_chunks: Vec::with_capacity(mesh.cell_ranges.len()),
+    let indexed;
+    let mesh = if mesh.is_indexed() {
+        mesh
+    } else {
+        let mut m = mesh.clone();
+        m.index_cells();
+        indexed = m;
+        &indexed
     };
-    // Surface vertex → its index in the chunk being laid out (stamped with the chunk).
-    let mut slot = vec![(u32::MAX, 0u32); mesh.positions.len()];
-    for range in &mesh.cell_ranges {
-        let first = out.chunks.len();
-        for run in chunk_runs(range.clone()) {
-            let id = out.chunks.len() as u32;
-            let begin = out.triangles.len() as u32 * 3;
-            let (mut bl, mut bh) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-            for t in &mesh.triangles[run.start as usize..run.end as usize] {
-                out.triangles.push(t.map(|v| {
-                    let s = &mut slot[v as usize];
-                    if s.0 != id {
-                        let p = mesh.positions[v as usize];
-                        for a in 0..3 {
-                            bl[a] = bl[a].min(p[a]);
-                            bh[a] = bh[a].max(p[a]);
-                        }
-                        *s = (id, out.vertices.len() as u32);
-                        out.vertices.push(Vertex {
-                            position: p,
-                            normal: mesh.normals[v as usize],
-                        });
-                    }
-                    s.1
-                }));
+    let vertices = mesh
+        .chunk_vertices
+        .iter()
+        .map(|&v| Vertex {
+            position: mesh.positions[v as usize],
+            normal: mesh.normals[v as usize],
+        })
+        .collect();
+    let mut triangles: Vec<[u32; 3]> = Vec::with_capacity(mesh.triangles.len());
+    let chunks = mesh
+        .chunks
+        .iter()
+        .zip(&mesh.chunk_vertex_ranges)
+        .map(|(c, vr)| {
+            let begin = triangles.len() as u32 * 3;
+            let local = &mesh.local_triangles[c.triangles.start as usize..c.triangles.end as usize];
+            triangles.extend(local.iter().map(|t| t.map(|l| l + vr.start)));
+            Chunk {
+                indices: begin..triangles.len() as u32 * 3,
+                lo: c.lo,
+                hi: c.hi,
             }
-            out.chunks.push(Chunk {
-                indices: begin..out.triangles.len() as u32 * 3,
-                lo: bl,
-                hi: bh,
-            });
-        }
-        out.cell_chunks.push(first..out.chunks.len());
+        })
+        .collect();
+    let cell_chunks = mesh
+        .cell_chunks
+        .iter()
+        .map(|r| r.start as usize..r.end as usize)
+        .collect();
+    Layout {
+        vertices,
+        triangles,
+        chunks,
+        cell_chunks,
     }
-    out
 }
 
 /// The index ranges that draw `cells`, in the order given, with consecutive cells that are

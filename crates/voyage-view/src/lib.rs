@@ -28,9 +28,7 @@ pub use coverage::{
 pub use findings::{
     C0_BELOW_COVERAGE_PCT, CRads, FindingKind, Findings, Hit, Marker, Measurement, c_rads, pick,
 };
-pub use mesh::{
-    CHUNK_TRIANGLES, CellMesh, Chunk, DISPLAY_NORMAL_PASSES, chunk_runs, smooth_normals,
-};
+pub use mesh::{CHUNK_TRIANGLES, CellMesh, Chunk, DISPLAY_NORMAL_PASSES, smooth_normals};
 pub use polyp::{MIN_HEIGHT_MM, PolypSize, measure_polyp};
 pub use raster::{
     Frame, NO_TRIANGLE, Pixel, Rasterizer, ScreenRect, Shading, View, render_rgba, shade,

@@ -36,7 +36,7 @@ pub struct CellMesh {
     pub cell_ranges: Vec<Range<u32>>,
     /// Draw index → triangle index in the surface.
     pub surface_triangle: Vec<u32>,
-    /// Each cell's triangles in runs of at most [`CHUNK_TRIANGLES`] ([`chunk_runs`]),
+    /// Each cell's triangles in runs of at most [`CHUNK_TRIANGLES`],
     /// with their boxes; `chunks[cell_chunks[c]]` are cell c's (empty until
     /// [`CellMesh::index_cells`]).
     pub chunks: Vec<Chunk>,
@@ -149,9 +149,8 @@ impl CellMesh {
     }
 }
 
-/// A cell's triangles (its range) in runs of at most [`CHUNK_TRIANGLES`]: its chunks (a GPU
-/// lays its buffers out by the same runs).
-pub fn chunk_runs(cell: Range<u32>) -> impl Iterator<Item = Range<u32>> {
+/// A cell's triangles (its range) in runs of at most [`CHUNK_TRIANGLES`]: its chunks.
+fn chunk_runs(cell: Range<u32>) -> impl Iterator<Item = Range<u32>> {
     (cell.start..cell.end)
         .step_by(CHUNK_TRIANGLES)
         .map(move |s| s..(s + CHUNK_TRIANGLES as u32).min(cell.end))
