@@ -268,12 +268,6 @@ impl Study {
         self.cleansing.swapped_copy(&self.ct)
     }
 
-    /// Gravity as a volume-local unit vector (from the patient's position).
-    pub fn gravity_local(&self) -> DVec3 {
-        crate::anatomy::PatientFrame::of(self.ct.geometry())
-            .local(self.segmentation.orientation.gravity())
-    }
-
     /// The patient's anterior as a volume-local unit vector: up in the endoscopic view, in
     /// any position (prone, the anterior is down).
     pub fn anterior_local(&self) -> DVec3 {

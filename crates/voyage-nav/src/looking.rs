@@ -11,7 +11,7 @@
 //!   the wall) on a [`RAYS`]² grid: no renderer needed, and cheap enough for every frame.
 
 use glam::DVec3;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use voyage_core::Study;
 
 use crate::{
@@ -32,7 +32,7 @@ pub const RAYS: u32 = 16;
 const OFF_DEG: f64 = 45.0;
 
 /// The distribution of the view angle over a flight's frames (degrees).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct AngleStats {
     pub median: f64,
     pub p95: f64,

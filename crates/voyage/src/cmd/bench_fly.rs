@@ -10,8 +10,8 @@ use serde_json::{Value, json};
 use voyage_core::{PrepOptions, Study, Volume, prepare};
 use voyage_io::{self as io, LoadOptions};
 use voyage_nav::{
-    BoxStore, BrickStore, Direction, DistanceStore, FlightOptions, PotentialField, PotentialParams,
-    SortedStore, fly, looking,
+    BoxStore, BrickStore, Direction, DistanceStore, FlightOptions, Looking, PotentialField,
+    PotentialParams, SortedStore, fly, looking,
 };
 use voyage_phantom::{self as phantom, ColonOptions};
 
@@ -172,14 +172,15 @@ fn print_case(c: &Value) {
             fl["substeps_per_frame"].as_f64().unwrap_or(0.0),
             fl["step_ns"].as_f64().unwrap_or(0.0) / 1e3
         );
-        let a = &fl["view_angle_deg"];
-        let f = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
+        let looked = Looking {
+            view_angle_deg: serde_json::from_value(fl["view_angle_deg"].clone())
+                .unwrap_or_default(),
+            all_wall_share: fl["all_wall_share"].as_f64().unwrap_or(f64::NAN),
+            ..Looking::default()
+        };
         println!(
-            "         view {:.0}° off the way on (median; p95 {:.0}°, {:.1}% of frames over 45°), {:.1}% of frames all wall (targets ≤ 15°, ≤ 45°, ≤ 2%)",
-            f(&a["median"]),
-            f(&a["p95"]),
-            100.0 * f(&a["over_45_share"]),
-            100.0 * f(&fl["all_wall_share"])
+            "         {} (targets ≤ 15°, ≤ 45°, ≤ 2%)",
+            super::fly::describe_looking(&looked)
         );
     }
 }
