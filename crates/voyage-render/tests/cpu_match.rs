@@ -66,6 +66,11 @@ fn views(study: &Study, fractions: &[f64]) -> Vec<Camera> {
         .collect()
 }
 
+/// RGBA pixels that differ between two images of the same size.
+fn pixels_differing(a: &[u8], b: &[u8]) -> usize {
+    a.chunks(4).zip(b.chunks(4)).filter(|(x, y)| x != y).count()
+}
+
 fn write_ppm(path: &std::path::Path, rgba: &[u8], w: u32, h: u32) {
     let mut out = format!("P6\n{w} {h}\n255\n").into_bytes();
     for px in rgba.chunks(4) {
@@ -204,11 +209,7 @@ fn chunks_outside_the_view_change_nothing() {
         assert!(
             whole == culled,
             "view {k}: {} pixels differ",
-            whole
-                .chunks(4)
-                .zip(culled.chunks(4))
-                .filter(|(a, b)| a != b)
-                .count()
+            pixels_differing(&whole, &culled)
         );
     }
     eprintln!("chunk culling kept {kept} of {total} triangles");
@@ -243,7 +244,7 @@ fn chunks_outside_the_portals_window_change_nothing() {
         assert!(
             a == b,
             "view {k}: {} pixels differ",
-            a.chunks(4).zip(b.chunks(4)).filter(|(x, y)| x != y).count()
+            pixels_differing(&a, &b)
         );
     }
     eprintln!("the portals' windows kept {kept} of {whole_tris} triangles");
