@@ -15,14 +15,17 @@ use glam::DVec3;
 
 use super::{
     CenterlineOptions,
-    graph::colon_path,
+    graph::SkeletonGraph,
     refine::{Centerline, cost_weight, refine_points},
 };
 use crate::{
     Error, Result, Volume,
-    distance::{distance_to_wall, geodesic::TreeStart},
+    distance::{
+        distance_to_wall,
+        geodesic::{Search as Tree, TreeStart},
+    },
     grid::Blocks,
-    grid::{BoxGrid, Field, Padded},
+    grid::{BoxGrid, Field, PadIndex, Padded},
 };
 
 #[derive(Clone, Debug)]
@@ -40,6 +43,57 @@ pub struct Skeleton {
     pub given_target: Option<[usize; 3]>,
     /// The blocks the search ran on, if it did.
     pub blocks: Option<Blocks>,
+    /// The search behind the path, kept for [`Skeleton::detour`] (None on a detour).
+    route: Option<Route>,
+}
+
+impl Skeleton {
+    /// The path with the lumen voxels `closed` (volume indices) walled off, from the graph
+    /// the search kept: where the colon goes once they are plugged, without searching the
+    /// lumen again (the graph's edges through them are left out; no new edge appears). None
+    /// when the graph cannot say: they cut it, or the given source needs a search of its own.
+    pub fn detour(
+        &self,
+        lumen: &Volume<u8>,
+        closed: &[usize],
+        opts: &CenterlineOptions,
+    ) -> Option<Skeleton> {
+        let route = self.route.as_ref()?;
+        let g = lumen.geometry();
+        let mut walled: Vec<usize> = closed
+            .iter()
+            .filter_map(|&v| {
+                let ijk = g.ijk(v);
+                let cell = match &self.blocks {
+                    Some(b) => b.block_of_voxel(ijk)?,
+                    None => ijk,
+                };
+                route.pad.index_of_global(cell).map(|i| i.0)
+            })
+            .collect();
+        walled.sort_unstable();
+        walled.dedup();
+        let path = route.path(&walled, opts).ok()??;
+        let path_mm = path
+            .iter()
+            .map(|&c| match &self.blocks {
+                Some(b) => b.centre_mm(c),
+                None => mm_of(lumen, c),
+            })
+            .collect();
+        Some(Skeleton {
+            path_mm,
+            given_source: self.given_source,
+            given_target: self.given_target,
+            blocks: None,
+            route: None,
+        })
+    }
+
+    /// Lets the kept search go (its memory is a few fields over the skeleton's grid).
+    pub fn forget_route(&mut self) {
+        self.route = None;
+    }
 }
 
 /// Whether the skeleton search runs on 2×2×2 blocks: when the lumen is large and finely
@@ -85,7 +139,7 @@ pub fn trace_skeleton(
         let blocks = Blocks::new(lumen, grid, 2)?;
         let ds = distance_to_wall(&blocks.mask)?;
         let to_block = |v: [usize; 3]| blocks.nearest_full(v);
-        let voxels = skeleton_path(
+        let (voxels, route) = skeleton_path(
             &blocks.mask,
             &ds,
             to_block(seed)?,
@@ -99,6 +153,7 @@ pub fn trace_skeleton(
             given_source,
             given_target,
             blocks: Some(blocks),
+            route: Some(route),
         });
     }
     let own;
@@ -109,12 +164,13 @@ pub fn trace_skeleton(
             &own
         }
     };
-    let voxels = skeleton_path(lumen, ds, seed, given_source, given_target, opts)?;
+    let (voxels, route) = skeleton_path(lumen, ds, seed, given_source, given_target, opts)?;
     Ok(Skeleton {
         path_mm: voxels.iter().map(|v| mm_of(lumen, *v)).collect(),
         given_source,
         given_target,
         blocks: None,
+        route: Some(route),
     })
 }
 
@@ -168,13 +224,8 @@ pub fn find_endpoints(
 /// `min_width` of the widest, whichever is less.
 const START_WIDE_MM: f32 = 5.0;
 
-/// The raw colon path (voxels of `lumen`, source → target) from the skeleton graph.
-///
-/// Given endpoints are placed on the whole colon's path (automatic rectum to cecum) and the
-/// path between them is kept: the longest simple path between two given points is not the
-/// colon between them (from a point in the middle it would wander through contacts to gain
-/// length), and neither is the shortest. Only an endpoint that lies off that path (farther
-/// from it than the lumen is wide there) falls back to the longest path from the source.
+/// The raw colon path (voxels of `lumen`, source → target) from the skeleton graph
+/// ([`Route::path`]), and the search kept for detours.
 fn skeleton_path(
     lumen: &Volume<u8>,
     ds: &Field<f32>,
@@ -182,7 +233,7 @@ fn skeleton_path(
     given_source: Option<[usize; 3]>,
     given_target: Option<[usize; 3]>,
     opts: &CenterlineOptions,
-) -> Result<Vec<[usize; 3]>> {
+) -> Result<(Vec<[usize; 3]>, Route)> {
     let pad = Padded::new(lumen, &ds.grid);
     let sp = lumen.spacing();
     let ds_pad = pad.pad(&ds.data, 0.0);
@@ -212,33 +263,104 @@ fn skeleton_path(
             return Err(unreachable(v, what));
         }
     }
-    let colon = colon_path(&pad, &tree, &ds_pad, sp, rectum, None, opts)?;
-    let colon: Vec<[usize; 3]> = colon.iter().map(|&i| pad.global_of_index(i)).collect();
-    let place = |v: Option<[usize; 3]>, default: usize| match v {
-        None => Some(default),
-        Some(v) => place_on_path(&colon, v, &pad, &ds_pad, sp),
+    let graph = SkeletonGraph::new(&pad, &tree, &ds_pad, sp, rectum, opts);
+    let mut route = Route {
+        pad,
+        ds_pad,
+        sp,
+        tree,
+        graph,
+        from_rectum: true,
+        source: given_source,
+        target: given_target,
     };
-    if let (Some(a), Some(b)) = (place(given_source, 0), place(given_target, colon.len() - 1))
-        && a != b
-    {
-        let mut path: Vec<[usize; 3]> = if a < b {
-            colon[a..=b].to_vec()
-        } else {
-            colon[b..=a].iter().rev().copied().collect()
+    let s = match (route.path(&[], opts)?, given_source) {
+        (Some(path), _) => return Ok((path, route)),
+        (None, Some(s)) => route.pad.lumen_index(s)?,
+        (None, None) => return Err(Error::invalid("no colon path from the rectum")),
+    };
+    // The given source lies off the colon's path: the longest path from it (to the target,
+    // when given). Both were reached from the rectum above, so they reach each other.
+    route.tree = TreeStart::new(&route.pad, &weight).search(&route.pad, &[s], sp, &weight);
+    route.graph = SkeletonGraph::new(&route.pad, &route.tree, &route.ds_pad, sp, s, opts);
+    route.from_rectum = false;
+    let path = route
+        .path(&[], opts)?
+        .ok_or_else(|| Error::invalid("no colon path from the source"))?;
+    Ok((path, route))
+}
+
+/// The skeleton search kept for detours: the search over the skeleton's grid (the blocks or
+/// the voxels), its graph and the given ends in that grid, so that the path with part of the
+/// grid walled off is found again without searching the lumen again.
+pub(crate) struct Route {
+    pad: Padded,
+    ds_pad: Vec<f32>,
+    sp: [f64; 3],
+    tree: Tree,
+    graph: SkeletonGraph,
+    /// The search ran from the rectum (else from the given source).
+    from_rectum: bool,
+    source: Option<[usize; 3]>,
+    target: Option<[usize; 3]>,
+}
+
+impl Route {
+    /// The raw colon path (grid voxels, source → target) with the padded voxels `closed`
+    /// (sorted) walled off; None when the given source lies off the path from the rectum (the
+    /// source then needs a search of its own).
+    ///
+    /// Given endpoints are placed on the whole colon's path (automatic rectum to cecum) and
+    /// the path between them is kept: the longest simple path between two given points is not
+    /// the colon between them (from a point in the middle it would wander through contacts to
+    /// gain length), and neither is the shortest. Only an endpoint that lies off that path
+    /// (farther from it than the lumen is wide there) falls back to the longest path from the
+    /// source.
+    fn path(&self, closed: &[usize], opts: &CenterlineOptions) -> Result<Option<Vec<[usize; 3]>>> {
+        let Route {
+            pad,
+            ds_pad,
+            sp,
+            tree,
+            graph,
+            from_rectum,
+            source,
+            target,
+        } = self;
+        let grid_voxels = |p: Vec<PadIndex>| -> Vec<[usize; 3]> {
+            p.iter().map(|&i| pad.global_of_index(i)).collect()
         };
-        // The given points themselves are the ends (the centring puts them there too).
-        let last = path.len() - 1;
-        path[0] = given_source.unwrap_or(path[0]);
-        path[last] = given_target.unwrap_or(path[last]);
-        return Ok(path);
+        let target_index = target.map(|t| pad.lumen_index(t)).transpose()?;
+        if !from_rectum {
+            let path = graph.colon_path(tree, ds_pad, target_index, closed, opts)?;
+            return Ok(Some(grid_voxels(path)));
+        }
+        let colon = grid_voxels(graph.colon_path(tree, ds_pad, None, closed, opts)?);
+        let place = |v: Option<[usize; 3]>, default: usize| match v {
+            None => Some(default),
+            Some(v) => place_on_path(&colon, v, pad, ds_pad, *sp),
+        };
+        if let (Some(a), Some(b)) = (place(*source, 0), place(*target, colon.len() - 1))
+            && a != b
+        {
+            let mut path: Vec<[usize; 3]> = if a < b {
+                colon[a..=b].to_vec()
+            } else {
+                colon[b..=a].iter().rev().copied().collect()
+            };
+            // The given points themselves are the ends (the centring puts them there too).
+            let last = path.len() - 1;
+            path[0] = source.unwrap_or(path[0]);
+            path[last] = target.unwrap_or(path[last]);
+            return Ok(Some(path));
+        }
+        if source.is_some() {
+            return Ok(None);
+        }
+        // The target lies off the colon's path: the longest path from the rectum to it.
+        let path = graph.colon_path(tree, ds_pad, target_index, closed, opts)?;
+        Ok(Some(grid_voxels(path)))
     }
-    // Off the colon's path: the longest path from the source (to the target, when given).
-    // Both were reached from the rectum above, so they reach each other.
-    let s = pad.lumen_index(given_source.unwrap_or(pad.global_of_index(rectum)))?;
-    let tree = TreeStart::new(&pad, &weight).search(&pad, &[s], sp, &weight);
-    let t_given = given_target.map(|t| pad.lumen_index(t)).transpose()?;
-    let path = colon_path(&pad, &tree, &ds_pad, sp, s, t_given, opts)?;
-    Ok(path.iter().map(|&i| pad.global_of_index(i)).collect())
 }
 
 /// The index of the point of `path` nearest to voxel `v`, if `v` lies within the lumen's

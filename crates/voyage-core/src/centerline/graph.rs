@@ -89,61 +89,99 @@ struct Branch {
 const COVERED: u8 = 1;
 const SKELETON: u8 = 2;
 
-/// The raw centerline (padded indices, source → target): the longest simple path from
-/// `source` through the skeleton graph, ending at `target` when given, else where the longest
-/// path ends (the cecum). `tree` is the weighted search from `source`; `ds` is Ds in the
-/// padded layout. The steps of the module's docs, one function each.
-pub(crate) fn colon_path(
-    pad: &Padded,
-    tree: &Tree,
-    ds: &[f32],
-    spacing: [f64; 3],
-    source: PadIndex,
-    target: Option<PadIndex>,
-    opts: &CenterlineOptions,
-) -> Result<Vec<PadIndex>> {
-    let (source, target) = (source.0, target.map(|t| t.0));
-    let unreachable =
-        || Error::invalid("the target cannot be reached from the source through the lumen");
-    if let Some(t) = target
-        && !tree.dist[t].is_finite()
-    {
-        return Err(unreachable());
+/// Steps 2 and 3 of the module's docs for one search from the source: the skeleton's
+/// branches and where their fronts meet. The longest path to any target (step 4) is then
+/// cheap: the automatic ends ask for it twice, without and with the cecum placed by anatomy.
+pub(crate) struct SkeletonGraph {
+    sk: SkeletonTree,
+    near: Tree,
+    owner: Vec<u32>,
+    meetings: Vec<Meeting>,
+    source: usize,
+}
+
+impl SkeletonGraph {
+    /// `tree` is the weighted search from `source`; `ds` is Ds in the padded layout.
+    pub(crate) fn new(
+        pad: &Padded,
+        tree: &Tree,
+        ds: &[f32],
+        spacing: [f64; 3],
+        source: PadIndex,
+        opts: &CenterlineOptions,
+    ) -> SkeletonGraph {
+        let source = source.0;
+        // 2. Branches.
+        let sk = SkeletonTree::trace(pad, tree, ds, spacing, source, opts);
+        // 3. Cycles: the owner of every voxel is the nearest skeleton voxel through the lumen
+        // (a geodesic Voronoi partition by the skeleton), reached by the way `near` records.
+        let near = pad.search(spacing).tree().from(&sk.voxels());
+        let owner = sk.owners(&near);
+        let meetings = sk.meetings(&near, &owner, ds, opts);
+        SkeletonGraph {
+            sk,
+            near,
+            owner,
+            meetings,
+            source,
+        }
     }
-    // 2. Branches.
-    let sk = SkeletonTree::trace(pad, tree, ds, spacing, source, opts);
-    // 3. Cycles: the owner of every voxel is the nearest skeleton voxel through the lumen (a
-    // geodesic Voronoi partition by the skeleton), reached by the way `near` records.
-    let near = pad.search(spacing).tree().from(&sk.voxels());
-    let owner = sk.owners(&near);
-    let meetings = sk.meetings(&near, &owner, ds, opts);
-    // 4. The graph and its longest simple path.
-    let target_owner = match target.map(|t| owner[t]) {
-        Some(u32::MAX) => return Err(unreachable()),
-        o => o,
-    };
-    let graph = Graph::build(&sk, &near, &meetings, source, target_owner);
-    let goal = target_owner.map(|o| graph.node_of[&o]);
-    let lengths: Vec<f32> = graph.edges.iter().map(|e| e.length).collect();
-    let (best, _) = longest_path(
-        &longest::Graph {
-            adj: &graph.adj,
-            len: &lengths,
-        },
-        graph.start,
-        goal,
-        opts.skeleton.search_budget,
-    );
-    let best = best.ok_or_else(|| {
-        Error::invalid("the target cannot be reached from the source through the skeleton")
-    })?;
-    let mut out = graph.voxels_along(&best, source);
-    if let Some(t) = target {
-        // From the target's owner out to the target itself.
-        out.extend(sk.walk_to_skeleton(&near, t).iter().rev().skip(1));
+
+    /// Step 4, the raw centerline (padded indices, source → target): the longest simple path
+    /// from the source through the graph, ending at `target` when given, else where the
+    /// longest path ends (the cecum). `tree` and `ds` are those the graph was built from.
+    /// Edges through a voxel of `closed` (padded indices, sorted) are left out: where the
+    /// path goes once they are walled off, without searching the lumen again.
+    pub(crate) fn colon_path(
+        &self,
+        tree: &Tree,
+        ds: &[f32],
+        target: Option<PadIndex>,
+        closed: &[usize],
+        opts: &CenterlineOptions,
+    ) -> Result<Vec<PadIndex>> {
+        let Self {
+            sk,
+            near,
+            owner,
+            meetings,
+            source,
+        } = self;
+        let (source, target) = (*source, target.map(|t| t.0));
+        let unreachable =
+            || Error::invalid("the target cannot be reached from the source through the lumen");
+        if let Some(t) = target
+            && !tree.dist[t].is_finite()
+        {
+            return Err(unreachable());
+        }
+        let target_owner = match target.map(|t| owner[t]) {
+            Some(u32::MAX) => return Err(unreachable()),
+            o => o,
+        };
+        let graph = Graph::build(sk, near, meetings, source, target_owner, closed);
+        let goal = target_owner.map(|o| graph.node_of[&o]);
+        let lengths: Vec<f32> = graph.edges.iter().map(|e| e.length).collect();
+        let (best, _) = longest_path(
+            &longest::Graph {
+                adj: &graph.adj,
+                len: &lengths,
+            },
+            graph.start,
+            goal,
+            opts.skeleton.search_budget,
+        );
+        let best = best.ok_or_else(|| {
+            Error::invalid("the target cannot be reached from the source through the skeleton")
+        })?;
+        let mut out = graph.voxels_along(&best, source);
+        if let Some(t) = target {
+            // From the target's owner out to the target itself.
+            out.extend(sk.walk_to_skeleton(near, t).iter().rev().skip(1));
+        }
+        let out = erase_returns(&out, ds, sk.dims, sk.sp);
+        Ok(out.into_iter().map(PadIndex).collect())
     }
-    let out = erase_returns(&out, ds, sk.dims, sk.sp);
-    Ok(out.into_iter().map(PadIndex).collect())
 }
 
 /// The skeleton as a tree of branches traced back along the minimum-cost tree (step 2).
@@ -452,6 +490,7 @@ impl Graph {
         meetings: &[Meeting],
         source: usize,
         target_owner: Option<u32>,
+        closed: &[usize],
     ) -> Graph {
         let mut g = Graph {
             node_ords: Vec::new(),
@@ -508,6 +547,10 @@ impl Graph {
                 length: voxels.windows(2).map(|x| sk.step_len(x[0], x[1])).sum(),
                 voxels,
             });
+        }
+        if !closed.is_empty() {
+            g.edges
+                .retain(|e| e.voxels.iter().all(|v| closed.binary_search(v).is_err()));
         }
         g.adj = vec![Vec::new(); g.node_ords.len()];
         for (e, edge) in g.edges.iter().enumerate() {

@@ -29,7 +29,7 @@ use refine::refine;
 #[cfg(test)]
 use crate::{Result, Volume, grid::Field, grid::Padded};
 #[cfg(test)]
-use graph::colon_path;
+use graph::SkeletonGraph;
 #[cfg(test)]
 use refine::cost_weight;
 
@@ -96,7 +96,13 @@ pub fn centerline(
         .weighted(&weight)
         .tree()
         .from(&[src]);
-    let path = colon_path(&pad, &tree, &ds_pad, mask.spacing(), src, Some(dst), opts)?;
+    let path = SkeletonGraph::new(&pad, &tree, &ds_pad, mask.spacing(), src, opts).colon_path(
+        &tree,
+        &ds_pad,
+        Some(dst),
+        &[],
+        opts,
+    )?;
     let voxels: Vec<[usize; 3]> = path.iter().map(|&i| pad.global_of_index(i)).collect();
     Ok(refine(&voxels, mask, ds, opts))
 }
