@@ -298,34 +298,26 @@ const PLUG_MM: f64 = 8.0;
 /// all along ([`BYPASS_WIDE_MM`], [`BYPASS_PER_NECK`]), the narrow stretch is a short cut (the colon is one
 /// tube: it cannot go both ways). Returns the lumen voxels (volume indices) of a plug at each
 /// such hole, for the caller to take out and trace the centerline again. `lumen` is without
-/// contacts cut (a cut across the way round would hide it); `ds` is its Ds over `grid`, or
-/// when not given computed only when a stretch needs it. Points, radii and arcs are the
-/// centerline's. `necks` are the
+/// contacts cut (a cut across the way round would hide it); `ds` is its Ds over the
+/// lumen's box ([`may_have_shortcuts`] says whether it is worth computing). Points, radii and arcs are
+/// the centerline's. `necks` are the
 /// narrowest points of stretches found to be the only way (real necks) in earlier calls:
 /// they are not looked at again, and the new ones are added.
 pub fn shortcut_plugs(
     lumen: &Volume<u8>,
-    grid: &BoxGrid,
     points_mm: &[[f64; 3]],
     radius_mm: &[f64],
     arc_mm: &[f64],
     necks: &mut Vec<[f64; 3]>,
-    ds: Option<&crate::grid::Field<f32>>,
+    ds: &crate::grid::Field<f32>,
 ) -> Vec<usize> {
     let mut stretches = narrow_stretches(points_mm, radius_mm, arc_mm, necks);
     // Narrowest first: each way round is looked for with the holes plugged so far closed,
     // so that two stretches are never both taken for holes each by way of the other.
     stretches.sort_by(|x, y| radius_mm[x.neck].total_cmp(&radius_mm[y.neck]));
-    let mut own = None;
     let mut plugs: std::collections::HashSet<usize> = std::collections::HashSet::new();
     for s in stretches {
         let n = s.neck;
-        let ds = match ds {
-            Some(d) => d,
-            None => {
-                own.get_or_insert_with(|| crate::distance::distance_to_wall_in(lumen, grid.clone()))
-            }
-        };
         let way = Way {
             lumen,
             ds,
@@ -341,6 +333,17 @@ pub fn shortcut_plugs(
     let mut plugs: Vec<usize> = plugs.into_iter().collect();
     plugs.sort_unstable();
     plugs
+}
+
+/// Whether the centerline has a narrow stretch that may be a hole ([`shortcut_plugs`] has
+/// something to test), so that its Ds is worth computing.
+pub fn may_have_shortcuts(
+    points_mm: &[[f64; 3]],
+    radius_mm: &[f64],
+    arc_mm: &[f64],
+    necks: &[[f64; 3]],
+) -> bool {
+    !narrow_stretches(points_mm, radius_mm, arc_mm, necks).is_empty()
 }
 
 /// A narrow stretch of the centerline that may be a hole: its narrowest point, the widest
@@ -605,7 +608,9 @@ mod tests {
             let m = loops(joined);
             let grid = BoxGrid::around([[0; 3], [119, 69, 29]], 0, m.dims());
             let mut necks = Vec::new();
-            let plugs = shortcut_plugs(&m, &grid, &points, &radius, &arc, &mut necks, None);
+            let ds = crate::distance::distance_to_wall_in(&m, grid.clone());
+            assert!(may_have_shortcuts(&points, &radius, &arc, &necks));
+            let plugs = shortcut_plugs(&m, &points, &radius, &arc, &mut necks, &ds);
             if !joined {
                 assert!(plugs.is_empty(), "the only way was plugged");
                 assert_eq!(necks.len(), 1, "the neck is remembered");

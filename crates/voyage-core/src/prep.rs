@@ -14,7 +14,7 @@ use crate::{
         self, Centerline, CenterlineOptions, centre_skeleton, trace_skeleton, uses_blocks,
     },
     cleanse::{CleanseOptions, Cleansing, Scene, cleanse},
-    contacts::{ContactOptions, cut_contacts, shortcut_plugs},
+    contacts::{ContactOptions, cut_contacts, may_have_shortcuts, shortcut_plugs},
     distance::{
         distance_to_wall_in,
         geodesic::{SearchMemory, geodesic_distance_like},
@@ -212,6 +212,12 @@ pub const RECTUM_MM: f64 = 150.0;
 /// [`Study::arc_at`] and [`Study::segment_at`] read it (mm).
 pub const OFF_WALL_MM: f64 = 1.5;
 
+/// A point on the wall is read against the centerline of its cell and of this many cells on
+/// either side (cells are 6–20 mm of centerline). Dt's level sets, which bound the cells, bow
+/// in a wide chamber: by colon-a's cecal pole a marker on the wall beside the centerline
+/// point at 2900 mm lay in the cell two back, and with one on either side read 2882 mm.
+const CELLS_AROUND: usize = 2;
+
 /// Dt from the source is shorter than the arc along the centerline by up to this fraction
 /// (the geodesic cuts the bends).
 const ARC_SLACK: f64 = 0.25;
@@ -309,20 +315,42 @@ impl Study {
         Navigable::new(lumen, &self.ds, &self.centerline, min_wall_mm, &mut memory)
             .map(std::borrow::Cow::Owned)
     }
-    /// The centerline point nearest `p` (volume-local mm) of those as far from the source
-    /// along the centerline as `p` is through the lumen (Dt from the source, give or take
-    /// [`ARC_SLACK`]): where two loops lie side by side, the one `p` is in, not the one
-    /// across the wall. A point outside the lumen takes the nearest point of all.
+    /// The centerline point that serves the lumen around `p` (volume-local mm): the nearest
+    /// of those in the stretch of `p`'s cell and of the cells around it. The cells cut the
+    /// lumen along the centerline (level sets of Dt), so where two loops lie side by side `p`
+    /// is read in its own, and points along the colon read in order. Dt itself is no guide to
+    /// the arc: on real colons the centerline is 1.4–1.7× as long as the geodesic, which cuts
+    /// the bends. A point in no cell (outside the lumen) takes the nearest point of those as
+    /// far from the source along the centerline as it is through the lumen (give or take
+    /// [`ARC_SLACK`]), else of all.
     fn nearest_centerline_point(&self, p: DVec3) -> Option<usize> {
         let cl = &self.centerline;
+        let d = |i: &usize| DVec3::from_array(cl.points_mm[*i]).distance_squared(p);
+        let nearest = |is: &mut dyn Iterator<Item = usize>| is.min_by(|a, b| d(a).total_cmp(&d(b)));
+        if let Some(span) = self
+            .cells
+            .cell_of_point(p)
+            .and_then(|c| self.centerline_span_around(c))
+        {
+            return nearest(&mut (span.0..=span.1));
+        }
         let dt = self.dt_source.sample(p) as f64;
         let near_dt =
             |i: &usize| !dt.is_finite() || (cl.arc_mm[*i] - dt).abs() <= (ARC_SLACK * dt).max(50.0);
-        let d = |i: usize| DVec3::from_array(cl.points_mm[i]).distance_squared(p);
-        (0..cl.points_mm.len())
-            .filter(near_dt)
-            .min_by(|&a, &b| d(a).total_cmp(&d(b)))
-            .or_else(|| (0..cl.points_mm.len()).min_by(|&a, &b| d(a).total_cmp(&d(b))))
+        let all = 0..cl.points_mm.len();
+        nearest(&mut all.clone().filter(near_dt)).or_else(|| nearest(&mut all.clone()))
+    }
+
+    /// The centerline points (first, last) in cell `c` and the [`CELLS_AROUND`] either side,
+    /// None when none lies there.
+    fn centerline_span_around(&self, c: usize) -> Option<(usize, usize)> {
+        let cells = &self.cells.cells;
+        let last = cells.len().saturating_sub(1);
+        // A cell no centerline point lies in keeps the span (0, 0); only cell 0 holds point 0.
+        (c.saturating_sub(CELLS_AROUND)..=(c + CELLS_AROUND).min(last))
+            .filter(|&k| k == 0 || cells[k].centerline_span != (0, 0))
+            .map(|k| cells[k].centerline_span)
+            .reduce(|a, b| (a.0.min(b.0), a.1.max(b.1)))
     }
 
     /// Arc length (mm from the centerline's rectum end, about the anal verge) of the
@@ -474,29 +502,28 @@ fn prepare_stored(
     for round in 0..=MAX_PLUG_ROUNDS {
         set_voxels(&mut seg.lumen, &traced.taken, 1);
         let c = &traced.ends.centerline;
-        let ds = distance_to_wall_in(&seg.lumen, grid.clone());
-        let plugs = shortcut_plugs(
-            &seg.lumen,
-            &grid,
-            &c.points_mm,
-            &c.radius_mm,
-            &c.arc_mm,
-            &mut necks,
-            Some(&ds),
-        );
-        let more = match plugs.is_empty() || round == MAX_PLUG_ROUNDS {
-            true => Vec::new(),
-            false => holes_beyond(
-                &mut seg.lumen,
-                &grid,
-                &ds,
-                &traced.sk,
-                &plugs,
-                &cl_opts,
+        let (mut plugs, mut more) = (Vec::new(), Vec::new());
+        if may_have_shortcuts(&c.points_mm, &c.radius_mm, &c.arc_mm, &necks) {
+            let ds = distance_to_wall_in(&seg.lumen, grid.clone());
+            plugs = shortcut_plugs(
+                &seg.lumen,
+                &c.points_mm,
+                &c.radius_mm,
+                &c.arc_mm,
                 &mut necks,
-            ),
-        };
-        drop(ds);
+                &ds,
+            );
+            if !plugs.is_empty() && round < MAX_PLUG_ROUNDS {
+                more = holes_beyond(
+                    &mut seg.lumen,
+                    &ds,
+                    &traced.sk,
+                    &plugs,
+                    &cl_opts,
+                    &mut necks,
+                );
+            }
+        }
         let all: Vec<usize> = plugs.iter().chain(&more).copied().collect();
         // With the further holes plugged too, unless they cut the colon itself: then the
         // holes of the trace alone.
@@ -701,7 +728,6 @@ const MAX_DETOURS: usize = 8;
 /// `lumen` is without contacts cut, and is left as given; returns the further plugs.
 fn holes_beyond(
     lumen: &mut Volume<u8>,
-    grid: &BoxGrid,
     ds: &Field<f32>,
     sk: &centerline::Skeleton,
     plugs: &[usize],
@@ -719,15 +745,7 @@ fn holes_beyond(
             break;
         };
         let c = &ends.centerline;
-        let found = shortcut_plugs(
-            lumen,
-            grid,
-            &c.points_mm,
-            &c.radius_mm,
-            &c.arc_mm,
-            necks,
-            Some(ds),
-        );
+        let found = shortcut_plugs(lumen, &c.points_mm, &c.radius_mm, &c.arc_mm, necks, ds);
         if found.is_empty() {
             break;
         }

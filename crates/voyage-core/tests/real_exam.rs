@@ -8,6 +8,8 @@ use std::path::PathBuf;
 use glam::DVec3;
 use voyage_core::{ComponentKind, PrepOptions, Study, Volume, prepare};
 
+mod common;
+
 struct Exam {
     ct: Volume<i16>,
     colon: Volume<i16>,
@@ -166,6 +168,7 @@ fn the_real_exam_gives_the_whole_colon_rectum_to_cecum() {
         fluid <= 1.3 * air,
         "{fluid:.2}° where fluid lay, {air:.2}° in air"
     );
+    common::assert_markers_read_back(&s, "ctc/prone-tagged");
     // No large gas left out.
     for x in seg.segments.iter().filter(|x| !x.kept) {
         assert!(
