@@ -633,7 +633,8 @@ pub struct Visit {
 /// Visits every unseen patch, largest first, then the smaller bits down to
 /// `review_min_mm2`, and marks what each pose shows; patches a visit
 /// leaves (parts hidden from the first pose) are visited again, up to `rounds` times over.
-/// Returns the visits of all rounds in order.
+/// Returns the visits of all rounds in order. `progress` hears (round, patches visited,
+/// patches of the round) before each visit.
 pub fn review(
     reader: &mut Reader,
     mesh: &CellMesh,
@@ -641,15 +642,18 @@ pub fn review(
     coverage: &mut Coverage,
     lumen: &Lumen,
     rounds: usize,
+    mut progress: impl FnMut(usize, usize, usize),
 ) -> Vec<Visit> {
     let mut visits = Vec::new();
-    for _ in 0..rounds {
+    for round in 0..rounds {
         let patches = coverage.review_targets(mesh);
         if patches.is_empty() {
             break;
         }
         let mut shown = 0.0;
-        for patch in patches {
+        let total = patches.len();
+        for (n, patch) in patches.into_iter().enumerate() {
+            progress(round, n, total);
             let pose = viewing_pose(&patch, mesh, lumen, coverage.options());
             let shown_mm2 = pose.map_or(0.0, |p| reader.show(mesh, cells, p, coverage));
             shown += shown_mm2;
@@ -669,6 +673,37 @@ pub fn review(
 /// Review rounds of [`read_both_ways`]: a patch a pose showed only in part is visited again,
 /// from the rest's own viewpoint.
 pub const REVIEW_ROUNDS: usize = 10;
+
+/// How far a reading has got, for a progress bar: the step it is at, and of that step's
+/// `total` units (frames of a flight, patches of a review round) how many are done.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ReadingProgress {
+    pub step: ReadingStep,
+    pub done: usize,
+    pub total: usize,
+}
+
+/// The steps of [`read_both_ways`], in order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ReadingStep {
+    /// The automatic flight is simulated (one unit).
+    Fly(Direction),
+    /// Its frames are drawn and marked.
+    Read(Direction),
+    /// A review round visits the unseen patches (rounds from 0).
+    Review(usize),
+}
+
+impl ReadingStep {
+    /// A few words for a progress line.
+    pub fn describe(&self) -> String {
+        match self {
+            ReadingStep::Fly(d) => format!("flying {}", d.name()),
+            ReadingStep::Read(d) => format!("{} frames", d.name()),
+            ReadingStep::Review(r) => format!("review, round {}", r + 1),
+        }
+    }
+}
 
 /// What a two-way reading with review showed.
 pub struct Reading {
@@ -691,24 +726,32 @@ pub struct Reading {
 
 /// The reading the paper's system makes possible, measured: both automatic flights, every
 /// frame drawn at `size`² through `camera`'s lens and marked, then the review of every
-/// unseen patch of at least `options.min_patch_mm2`.
+/// unseen patch of at least `options.min_patch_mm2`. `progress` hears at each step's start
+/// and after each frame or visit.
 pub fn read_both_ways(
     study: &Study,
     mesh: &CellMesh,
     options: CoverageOptions,
     camera: Camera,
     size: u32,
+    mut progress: impl FnMut(ReadingProgress),
 ) -> Result<Reading> {
+    let mut tell = |step: ReadingStep, done: usize, total: usize| {
+        progress(ReadingProgress { step, done, total })
+    };
     let flight_opts = FlightOptions::for_study(study);
     let min_wall_mm = flight_opts.safety.min_wall_mm;
     let field = potential_field(study, min_wall_mm)?;
     let cells = &study.cells;
     let mut reader = Reader::new(cells, camera, size, size);
     let mut read_flight = |dir: Direction| -> Result<(Flight, Coverage, usize)> {
+        tell(ReadingStep::Fly(dir), 0, 1);
         let flight = fly(&field, &study.centerline, dir, &flight_opts)?;
         let mut seen = Coverage::new(mesh, options);
         let mut glances = Glances::new(cells, camera);
-        for &pose in &flight.poses {
+        let frames = flight.poses.len();
+        for (n, &pose) in flight.poses.iter().enumerate() {
+            tell(ReadingStep::Read(dir), n, frames);
             reader.show(mesh, cells, pose, &mut seen);
             if !options.look_around {
                 continue;
@@ -733,6 +776,7 @@ pub fn read_both_ways(
         &mut after_review,
         &lumen,
         REVIEW_ROUNDS,
+        |round, done, total| tell(ReadingStep::Review(round), done, total),
     );
     let total_visits = visits.len();
     // The review's first round visits the two-way reading's listed patches first, in order.

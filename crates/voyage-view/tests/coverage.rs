@@ -3,11 +3,12 @@
 
 use glam::{DQuat, DVec3};
 use voyage_core::{PrepOptions, Study, prepare};
-use voyage_nav::{Camera, Pose};
+use voyage_nav::{Camera, Direction, Pose};
 use voyage_phantom::{self as phantom, ColonOptions};
 use voyage_view::{
     CellMesh, Coverage, CoverageOptions, GLANCE_EVERY_MM, GLANCE_MIN_MM2, GLANCE_TURN_DEG,
-    GLANCE_WAYS, Glances, READING_FOV_DEG, Reader, Reading, glance_turns, read_both_ways,
+    GLANCE_WAYS, Glances, READING_FOV_DEG, Reader, Reading, ReadingProgress, ReadingStep,
+    glance_turns, read_both_ways,
 };
 
 fn camera() -> Camera {
@@ -45,8 +46,39 @@ fn check_reading(seed: u64) {
     .unwrap();
     let study = prepare(p.ct, &PrepOptions::default(), |_| {}).unwrap();
     let mesh = indexed_mesh(&study);
-    let r: Reading =
-        read_both_ways(&study, &mesh, CoverageOptions::default(), camera(), 256).unwrap();
+    let mut heard: Vec<ReadingProgress> = Vec::new();
+    let r: Reading = read_both_ways(
+        &study,
+        &mesh,
+        CoverageOptions::default(),
+        camera(),
+        256,
+        |p| heard.push(p),
+    )
+    .unwrap();
+    // The progress heard: the steps in their order, each unit told once, never past its total.
+    let mut steps: Vec<ReadingStep> = heard.iter().map(|p| p.step).collect();
+    steps.dedup();
+    assert_eq!(
+        steps[..4],
+        [
+            ReadingStep::Fly(Direction::Forward),
+            ReadingStep::Read(Direction::Forward),
+            ReadingStep::Fly(Direction::Backward),
+            ReadingStep::Read(Direction::Backward)
+        ]
+    );
+    assert!(
+        steps[4..]
+            .iter()
+            .all(|s| matches!(s, ReadingStep::Review(_)))
+    );
+    assert!(heard.iter().all(|p| p.done < p.total));
+    let frames = heard
+        .iter()
+        .filter(|p| p.step == ReadingStep::Read(Direction::Forward))
+        .count();
+    assert_eq!(frames, r.flights[0].poses.len());
     let [one, two, after] = [&r.one_way, &r.two_way, &r.after_review].map(|c| c.percent());
     eprintln!(
         "seed {seed}: one way {one:.2} %, two ways {two:.2} %, after review {after:.2} % ({} patches, {} visits)",
@@ -241,7 +273,7 @@ fn the_real_colon_is_read_to_the_end() {
     let study = prepare(mask, &PrepOptions::default(), |_| {}).unwrap();
     let mesh = indexed_mesh(&study);
     let lens = Camera::lens(READING_FOV_DEG);
-    let r = read_both_ways(&study, &mesh, CoverageOptions::default(), lens, 256).unwrap();
+    let r = read_both_ways(&study, &mesh, CoverageOptions::default(), lens, 256, |_| {}).unwrap();
     let [one, two, after] = [&r.one_way, &r.two_way, &r.after_review].map(|c| c.percent());
     eprintln!(
         "colon-a: one way {one:.2} %, two ways {two:.2} %, after review {after:.2} % ({} patches, {} visits, {:?} glances)",

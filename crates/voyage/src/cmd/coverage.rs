@@ -1,11 +1,16 @@
 //! `voyage coverage INPUT`: how much of the mucosa the automatic reading shows: one way,
 //! both ways, then after a review of every unseen patch.
 
+use std::io::IsTerminal;
+
 use anyhow::{Context, Result};
 use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::{Value, json};
 use voyage_nav::{Camera, FlightOptions};
-use voyage_view::{CellMesh, CoverageOptions, READING_FOV_DEG, Visit, read_both_ways};
+use voyage_view::{
+    CellMesh, CoverageOptions, READING_FOV_DEG, ReadingProgress, Visit, read_both_ways,
+};
 
 use super::prep::{InputArgs, Prepared, load_and_prepare};
 
@@ -95,8 +100,14 @@ pub fn run(a: &CoverageArgs) -> Result<()> {
     let mut mesh = CellMesh::new(&study.surface, &study.cells);
     mesh.index_cells();
     let camera = Camera::lens(a.fov);
-    let reading = read_both_ways(&study, &mesh, options, camera, a.size)
-        .with_context(|| format!("{name}: the two-way reading"))?;
+    let bar = reading_bar();
+    let reading = read_both_ways(&study, &mesh, options, camera, a.size, |p| {
+        show_reading(&bar, p)
+    })
+    .with_context(|| format!("{name}: the two-way reading"))?;
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
     for f in &reading.flights {
         if !f.reached {
             eprintln!(
@@ -169,4 +180,26 @@ pub fn run(a: &CoverageArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// A bar for the two-way reading on a terminal (None elsewhere), for [`show_reading`].
+pub(super) fn reading_bar() -> Option<ProgressBar> {
+    if !std::io::stderr().is_terminal() {
+        return None;
+    }
+    let b = ProgressBar::new(0);
+    b.set_style(ProgressStyle::with_template("{bar:24} {pos}/{len} {msg} ({elapsed})").ok()?);
+    Some(b)
+}
+
+/// The reading's step and its frames or patches on the bar.
+pub(super) fn show_reading(bar: &Option<ProgressBar>, p: ReadingProgress) {
+    let Some(b) = bar else {
+        return;
+    };
+    if b.length() != Some(p.total as u64) || p.done == 0 {
+        b.set_message(p.step.describe());
+        b.set_length(p.total as u64);
+    }
+    b.set_position(p.done as u64);
 }

@@ -48,8 +48,14 @@ pub fn run(a: &ReportArgs) -> Result<()> {
     } else {
         // The same reading as `voyage coverage` with its defaults, not the snapshots' lens.
         let lens = Camera::lens(READING_FOV_DEG);
-        let r = read_both_ways(&study, &mesh, CoverageOptions::default(), lens, 256)
-            .with_context(|| format!("{}: the two-way reading", a.input.input.display()))?;
+        let bar = super::coverage::reading_bar();
+        let r = read_both_ways(&study, &mesh, CoverageOptions::default(), lens, 256, |p| {
+            super::coverage::show_reading(&bar, p)
+        })
+        .with_context(|| format!("{}: the two-way reading", a.input.input.display()))?;
+        if let Some(b) = bar {
+            b.finish_and_clear();
+        }
         ReportCoverage {
             session_pct: None,
             one_way_pct: Some(r.one_way.percent()),
