@@ -37,7 +37,7 @@ pub use navigable::{DEFAULT_MIN_WALL_MM, Navigable};
 pub use prep::{
     COLON_SEGMENTS, OFF_WALL_MM, PrepOptions, RECTUM_MM, Stage, Study, Timings, prepare,
 };
-pub use segment::{ComponentKind, Gap, SegmentOptions, Segmentation, segment};
+pub use segment::{ComponentKind, Gap, LEFT_OUT_DOUBT_ML, SegmentOptions, Segmentation, segment};
 pub use storage::Storage;
 pub use surface::{Mesh, Surface, roughness};
 pub use volume::{Geometry, IDENTITY, Volume, check_dims};

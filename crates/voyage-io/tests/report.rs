@@ -4,7 +4,7 @@
 use std::{path::PathBuf, process::Command};
 
 use voyage_io::export::{Report, ReportCoverage, ReportFinding, write_report_html};
-use voyage_view::CRads;
+use voyage_view::{Adequacy, CRads, Findings, c_rads};
 
 fn temp_dir(name: &str) -> PathBuf {
     let dir =
@@ -158,4 +158,33 @@ fn a_browser_renders_the_report_with_its_images() {
     // And text: the page is mostly white with dark letters.
     assert!(count([255, 255, 255]) > img.pixels().len() / 3);
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The category is judged on what the reading showed in the end. The window's two-way reading
+/// at its 90° lens read 89.5 % where after review and over the whole session it read 99.3 %:
+/// judged on the flights, a fully reviewed negative exam was C0, which recalls the patient.
+#[test]
+fn a_reviewed_reading_is_judged_on_what_it_showed_in_the_end() {
+    let reviewed = ReportCoverage {
+        session_pct: Some(99.3),
+        one_way_pct: Some(80.0),
+        two_way_pct: Some(89.5),
+        after_review_pct: Some(99.3),
+        patches_left: Some(0),
+    };
+    let category = |cov: &ReportCoverage| {
+        let adequacy = Adequacy {
+            read_pct: cov.read_pct(),
+            left_out_ml: None,
+        };
+        c_rads(&Findings::default(), adequacy).category
+    };
+    assert_eq!(reviewed.read_pct(), Some(99.3));
+    assert_eq!(category(&reviewed), "C1");
+    let flights_only = ReportCoverage {
+        session_pct: None,
+        after_review_pct: None,
+        ..reviewed
+    };
+    assert_eq!(category(&flights_only), "C0");
 }

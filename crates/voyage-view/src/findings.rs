@@ -261,12 +261,27 @@ pub struct CRads {
     pub unsized_polyps: Vec<String>,
 }
 
-/// Two-way coverage of the mucosa below this (%) makes the exam inadequate (C0).
+/// Coverage of the mucosa the reading showed in the end below this (%) makes the exam
+/// inadequate (C0).
 pub const C0_BELOW_COVERAGE_PCT: f64 = 90.0;
 
-/// The C-RADS category of `findings`; `coverage_pct` (the share of mucosa the reading saw,
-/// when known) below [`C0_BELOW_COVERAGE_PCT`] makes a negative reading C0.
-pub fn c_rads(findings: &Findings, coverage_pct: Option<f64>) -> CRads {
+/// Whether a reading can call an exam negative: how much it showed, and what the colon it
+/// read may lack.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Adequacy {
+    /// The share of the mucosa the reading showed in the end (%), when known: after its
+    /// review, or over the window's whole session; a flight's own figure only when there is
+    /// nothing else (a reader who reviewed the unseen patches has seen them).
+    pub read_pct: Option<f64>,
+    /// Gas left out of the colon that may be colon (ml, the largest region of at least 100):
+    /// the reading then covered part of the colon only.
+    pub left_out_ml: Option<f64>,
+}
+
+/// The C-RADS category of `findings`. A negative reading is C0 (inadequate) when it showed
+/// under [`C0_BELOW_COVERAGE_PCT`] of the mucosa, or when a colon region was left out of it;
+/// a positive finding stands whatever was read.
+pub fn c_rads(findings: &Findings, adequacy: Adequacy) -> CRads {
     let polyps: Vec<&Marker> = findings
         .markers
         .iter()
@@ -294,7 +309,14 @@ pub fn c_rads(findings: &Findings, coverage_pct: Option<f64>) -> CRads {
         )
     } else if medium > 0 {
         ("C2", format!("{medium} polyp(s) of 6–9 mm"))
-    } else if let Some(pct) = coverage_pct.filter(|&p| p < C0_BELOW_COVERAGE_PCT) {
+    } else if let Some(ml) = adequacy.left_out_ml {
+        (
+            "C0",
+            format!(
+                "inadequate: no polyp of 6 mm or more in the colon read, but {ml:.0} ml of gas that may be colon was left out of it"
+            ),
+        )
+    } else if let Some(pct) = adequacy.read_pct.filter(|&p| p < C0_BELOW_COVERAGE_PCT) {
         // A negative reading of too little mucosa is no negative exam; a positive finding
         // stands however much was seen.
         (
@@ -433,7 +455,16 @@ mod tests {
     #[test]
     fn c_rads_follows_the_acr_categories() {
         use FindingKind::*;
-        let cat = |k: &[(FindingKind, Option<f64>)], cov| c_rads(&with(k), cov).category;
+        let cat = |k: &[(FindingKind, Option<f64>)], read_pct| {
+            c_rads(
+                &with(k),
+                Adequacy {
+                    read_pct,
+                    left_out_ml: None,
+                },
+            )
+            .category
+        };
         assert_eq!(cat(&[], Some(97.0)), "C1");
         assert_eq!(cat(&[(Polyp, Some(5.9)), (Diverticulum, None)], None), "C1");
         assert_eq!(cat(&[(Polyp, Some(6.0))], None), "C2");
@@ -450,8 +481,18 @@ mod tests {
         // Too little seen: a negative reading is inadequate; a positive finding stands.
         assert_eq!(cat(&[(Polyp, Some(4.0))], Some(85.0)), "C0");
         assert_eq!(cat(&[(Polyp, Some(12.0))], Some(85.0)), "C3");
+        // Part of the colon left out: a negative reading of the rest is no negative exam.
+        let part = Adequacy {
+            read_pct: Some(99.0),
+            left_out_ml: Some(3236.0),
+        };
+        assert_eq!(c_rads(&with(&[]), part).category, "C0");
+        assert_eq!(c_rads(&with(&[(Polyp, Some(7.0))]), part).category, "C2");
         // An unsized polyp is named, so that the category is not read as final.
-        let r = c_rads(&with(&[(Polyp, None), (Other, Some(20.0))]), None);
+        let r = c_rads(
+            &with(&[(Polyp, None), (Other, Some(20.0))]),
+            Adequacy::default(),
+        );
         assert_eq!(
             (r.category, r.unsized_polyps),
             ("C1", vec!["M1".to_string()])

@@ -26,7 +26,8 @@ pub use coverage::{
     ReadingProgress, ReadingStep, Visit, glance_turns, read_both_ways, review, viewing_pose,
 };
 pub use findings::{
-    C0_BELOW_COVERAGE_PCT, CRads, FindingKind, Findings, Hit, Marker, Measurement, c_rads, pick,
+    Adequacy, C0_BELOW_COVERAGE_PCT, CRads, FindingKind, Findings, Hit, Marker, Measurement,
+    c_rads, pick,
 };
 pub use mesh::{CHUNK_TRIANGLES, CellMesh, Chunk, DISPLAY_NORMAL_PASSES, smooth_normals};
 pub use polyp::{MIN_HEIGHT_MM, PolypSize, measure_polyp};

@@ -263,6 +263,10 @@ impl SegmentOptions {
     }
 }
 
+/// Gas left out of the colon from this size on (ml) makes a reading of the rest doubtful: a
+/// reached goal is not the colon's end, and a negative reading no negative exam.
+pub const LEFT_OUT_DOUBT_ML: f64 = 100.0;
+
 impl Segmentation {
     /// The largest gas region left out of the colon automatically (ml of gas), if any holds
     /// at least `min_ml`: the flight's end is then doubtful (not the user's choice).

@@ -5,8 +5,8 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 use serde_json::json;
-use voyage_core::{Error, Geometry, OFF_WALL_MM, Result, Study};
-use voyage_view::{Findings, Marker, c_rads};
+use voyage_core::{Error, Geometry, LEFT_OUT_DOUBT_ML, OFF_WALL_MM, Result, Study};
+use voyage_view::{Adequacy, Findings, Marker, c_rads};
 
 use super::{
     markups::{MarkupsPoint, markups_line_node, markups_node, write_markups_nodes},
@@ -72,7 +72,16 @@ pub fn export_reading(
             .iter()
             .map(|m| (m.label.clone(), m.length_mm()))
             .collect(),
-        c_rads: c_rads(findings, coverage.two_way_pct.or(coverage.session_pct)),
+        c_rads: c_rads(
+            findings,
+            Adequacy {
+                read_pct: coverage.read_pct(),
+                left_out_ml: study
+                    .segmentation
+                    .largest_left_out(LEFT_OUT_DOUBT_ML)
+                    .map(|s| s.gas_ml),
+            },
+        ),
         coverage,
     };
     let path = dir.join("report.html");

@@ -38,6 +38,16 @@ pub struct ReportCoverage {
     pub patches_left: Option<usize>,
 }
 
+impl ReportCoverage {
+    /// The share of the mucosa the reading showed in the end (%): after its review, else over
+    /// the whole session, else both flights.
+    pub fn read_pct(&self) -> Option<f64> {
+        self.after_review_pct
+            .or(self.session_pct)
+            .or(self.two_way_pct)
+    }
+}
+
 #[derive(Clone, Debug)]
 pub struct Report {
     /// The study's file or folder name (never a patient name).

@@ -11,6 +11,7 @@ use std::{
 use egui::{Color32, Key, Modifiers, Pos2, Rect, RichText, Sense, Stroke, Vec2};
 use glam::DVec3;
 use serde_json::json;
+use voyage_core::LEFT_OUT_DOUBT_ML;
 use voyage_io::export::{ReportCoverage, export_reading};
 use voyage_nav::{Camera, Direction};
 use voyage_view::{
@@ -81,8 +82,6 @@ const SLICE_IMAGES: [u64; 3] = [0, 1, 2];
 const SCOUT_IMAGE: u64 = 3;
 /// How long (simulated s) the window shows that the autopilot glided on after being stuck.
 const RESCUE_NOTICE_S: f64 = 8.0;
-/// Gas left out of the colon from this size on (ml) makes a reached goal doubtful.
-const LEFT_OUT_DOUBT_ML: f64 = 100.0;
 
 /// What the user asks of the window, from a key, a control or a script: [`App::apply`]
 /// carries it out, so the three cannot disagree.
