@@ -1251,7 +1251,7 @@ fn read_pixel_data(h: &Header) -> Result<Raw> {
                 return Err(Error::format(
                     path,
                     format!(
-                        "pixel data truncated: expected {expected} bytes, found {found} (the file ends early)"
+                        "pixel data truncated: its element announces {declared} bytes and the file holds {found} after it (the image needs {expected})"
                     ),
                 ));
             }

@@ -83,15 +83,38 @@ pub struct Loaded {
 /// Loads any supported volume from a path (file or DICOM folder).
 pub fn load(path: &Path, opts: &LoadOptions) -> Result<Loaded> {
     let md = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
-    if md.is_dir() {
-        return dicom::load_dir(path, opts);
+    let loaded = if md.is_dir() {
+        dicom::load_dir(path, opts)?
+    } else {
+        match detect_format(path)? {
+            Format::Nifti => nifti::load(path)?,
+            Format::MetaImage => metaimage::load(path)?,
+            Format::Nrrd => nrrd::load(path)?,
+            Format::Dicom => dicom::load_file(path, opts)?,
+        }
+    };
+    check_spacing(path, loaded.volume.spacing())?;
+    Ok(loaded)
+}
+
+/// Voxel sizes a scan of a body can have (mm): a header outside them is wrong, and every
+/// length the pipeline measures (and allocates by, as the centerline's resampling does)
+/// would be out of all proportion.
+pub const SPACING_RANGE_MM: std::ops::RangeInclusive<f64> = 0.01..=50.0;
+
+fn check_spacing(path: &Path, spacing: [f64; 3]) -> Result<()> {
+    if spacing.iter().all(|s| SPACING_RANGE_MM.contains(s)) {
+        return Ok(());
     }
-    match detect_format(path)? {
-        Format::Nifti => nifti::load(path),
-        Format::MetaImage => metaimage::load(path),
-        Format::Nrrd => nrrd::load(path),
-        Format::Dicom => dicom::load_file(path, opts),
-    }
+    Err(Error::format(
+        path,
+        format!(
+            "voxel spacing {:?} mm lies outside {}–{} mm: the header's voxel sizes (pixdim, sform, spacing) are not a scan's",
+            spacing,
+            SPACING_RANGE_MM.start(),
+            SPACING_RANGE_MM.end()
+        ),
+    ))
 }
 
 /// Decides the format of a file from its name, then from its first bytes.

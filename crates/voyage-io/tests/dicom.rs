@@ -449,7 +449,7 @@ fn broken_files_give_errors_naming_file_and_problem() {
     let expected = [
         (
             "MR_truncated.dcm",
-            "pixel data truncated: expected 8192 bytes, found 8130",
+            "pixel data truncated: its element announces 8192 bytes and the file holds 8130",
         ),
         ("badVR.dcm", "NumberOfFrames (0028,0008) is '1A'"),
         ("meta_missing_tsyntax.dcm", "no TransferSyntaxUID"),
@@ -557,6 +557,35 @@ fn huge_dimensions_are_refused_before_allocating() {
     let msg = err_text(dicom::load_file(&path, &opts()));
     assert!(
         msg.contains("pixel data truncated: expected 20000 bytes, found 128"),
+        "{msg}"
+    );
+}
+
+/// A pixel data element that announces more bytes than the file holds, though the file holds
+/// all the image needs: refused, and the message says what was announced, what is there and
+/// what is needed (it used to read "expected 128 bytes, found 128 (the file ends early)").
+#[test]
+fn an_overlong_pixel_data_element_is_refused_with_its_own_figures() {
+    let vol = synthetic([8, 8, 1], [1.0; 3], [0.0; 3], DMat3::IDENTITY);
+    let tmp = TempDir::new("overlong");
+    write_series(tmp.path(), &vol).unwrap();
+    let path = tmp.path().join("slice0000.dcm");
+    let mut bytes = std::fs::read(&path).unwrap();
+    // The last element is the pixel data: tag, VR, two reserved bytes, then its length.
+    let at = bytes
+        .windows(4)
+        .rposition(|w| w == [0xe0, 0x7f, 0x10, 0x00])
+        .unwrap();
+    let len_at = at + 8;
+    let len = u32::from_le_bytes(bytes[len_at..len_at + 4].try_into().unwrap());
+    assert_eq!(len, 128);
+    bytes[len_at..len_at + 4].copy_from_slice(&(len + 2).to_le_bytes());
+    std::fs::write(&path, &bytes).unwrap();
+    let msg = err_text(dicom::load_file(&path, &opts()));
+    assert!(
+        msg.contains("slice0000.dcm")
+            && msg.contains("announces 130 bytes and the file holds 128")
+            && msg.contains("needs 128"),
         "{msg}"
     );
 }

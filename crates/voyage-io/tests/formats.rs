@@ -642,6 +642,13 @@ fn huge_or_bad_dims_fail_fast() {
     h.pixdim[2] = f32::NAN;
     std::fs::write(&p, [h.bytes(), vec![0; 16]].concat()).unwrap();
     assert_err_names(&p, "voxel sizes must be positive and finite");
+    // Sizes no scan has: every length measured, and the centerline's resampling, would be
+    // out of all proportion (1e30 mm grew memory past 20 GB).
+    for size in [1e30, 1e-4] {
+        h.pixdim[2] = size;
+        std::fs::write(&p, [h.bytes(), vec![0; 16]].concat()).unwrap();
+        assert_err_names(&p, "lies outside 0.01–50 mm");
+    }
     let h = NiftiHeader::new([2, 2, 2], 128, 24);
     std::fs::write(&p, [h.bytes(), vec![0; 24]].concat()).unwrap();
     assert_err_names(&p, "datatype 128 is not supported");
@@ -650,6 +657,13 @@ fn huge_or_bad_dims_fail_fast() {
     std::fs::write(&mhd, "NDims = 3\nDimSize = 60000 60000 60000\nElementType = MET_SHORT\nElementDataFile = LOCAL\n")
         .unwrap();
     assert_err_names(&mhd, "over the limit");
+    std::fs::write(
+        &mhd,
+        "NDims = 3\nDimSize = 2 2 2\nElementSpacing = 1 1e30 1\nElementType = MET_SHORT\nElementDataFile = LOCAL\n",
+    )
+    .unwrap();
+    std::fs::write(&mhd, [std::fs::read(&mhd).unwrap(), vec![0; 16]].concat()).unwrap();
+    assert_err_names(&mhd, "lies outside 0.01–50 mm");
     let nrrd = dir.join("huge.nrrd");
     std::fs::write(
         &nrrd,
