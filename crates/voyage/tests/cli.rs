@@ -559,7 +559,13 @@ fn prep_cleanses_a_tagged_exam_unless_told_not_to() {
         serde_json::from_slice(&voyage(&["info", ct.to_str().unwrap(), "--json"]).stdout).unwrap(),
     );
     assert_eq!(a["dims"], b["dims"]);
-    let kept = dir.join("off");
+    // The same folder again, without cleansing: the tagged run's cleansed CT does not stay
+    // beside the new lumen, a stopped run's staging folder goes, the user's own file stays.
+    let kept = out.clone();
+    let stale = kept.join(".voyage-prep-4000000000");
+    std::fs::create_dir_all(&stale).unwrap();
+    std::fs::write(stale.join("lumen.nii.gz"), b"half written").unwrap();
+    std::fs::write(kept.join("notes.txt"), b"mine").unwrap();
     let o = voyage(&[
         "prep",
         ct.to_str().unwrap(),
@@ -571,11 +577,36 @@ fn prep_cleanses_a_tagged_exam_unless_told_not_to() {
     assert!(o.status.success(), "{}", text(&o));
     let k: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert!(k["cleanse"].is_null() && !kept.join("cleansed.nii.gz").exists());
+    assert!(!stale.exists() && kept.join("notes.txt").exists());
     assert!(
         k["surface_roughness"]["fluid_deg"].as_f64().unwrap() > fluid,
         "uncleansed {} vs {fluid}",
         k["surface_roughness"]
     );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// An output folder that cannot take the exports is refused before the input is even read:
+/// a file in its place used to fail after the whole preprocessing.
+#[test]
+fn an_unusable_out_folder_is_refused_first() {
+    let dir = scratch("outfirst");
+    let in_the_way = dir.join("taken");
+    std::fs::write(&in_the_way, b"a file").unwrap();
+    for out in [in_the_way.clone(), in_the_way.join("sub")] {
+        let o = voyage(&[
+            "prep",
+            dir.join("no-such-input.nii.gz").to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let t = text(&o);
+        assert!(!o.status.success(), "{t}");
+        assert!(
+            t.contains("taken") && t.contains("is not a folder") && !t.contains("no-such-input"),
+            "{t}"
+        );
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -17,16 +17,35 @@ pub struct StudyExports {
     pub stl: bool,
 }
 
+/// Every file [`write_study`] may write. Those a run does not write are removed from the
+/// folder it writes into: a plain exam's exports never stand beside an earlier tagged one's
+/// `cleansed.nii.gz`.
+pub const STUDY_FILES: [&str; 8] = [
+    "lumen.nii.gz",
+    "ds.nii.gz",
+    "cleansed.nii.gz",
+    "centerline.json",
+    "centerline.mrk.json",
+    "surface.ply",
+    "surface.stl",
+    "cells.json",
+];
+
+/// The staging folders' prefix (a process id follows).
+const STAGING: &str = ".voyage-prep-";
+
 /// Writes every export of a study into `dir`; returns the paths written.
 ///
 /// All or nothing: the files are written into a staging folder inside `dir` and moved into
 /// place only when every one of them is complete, so a failure (a full disk, a folder in the
 /// way) leaves `dir` as it was, never a new lumen beside an old surface. A `dir` this call
-/// created is removed again.
+/// created is removed again. Of [`STUDY_FILES`], those this study has none of are removed
+/// once the others are in place, and so are the staging folders of runs that were stopped.
 pub fn write_study(dir: &Path, study: &Study, extra: StudyExports) -> Result<Vec<PathBuf>> {
     let created = !dir.exists();
     std::fs::create_dir_all(dir).map_err(|e| voyage_core::Error::io(dir, e))?;
-    let staging = dir.join(format!(".voyage-prep-{}", std::process::id()));
+    remove_stale_staging(dir);
+    let staging = dir.join(format!("{STAGING}{}", std::process::id()));
     let result = std::fs::create_dir(&staging)
         .map_err(|e| voyage_core::Error::io(&staging, e))
         .and_then(|()| write_files(&staging, study, extra))
@@ -50,7 +69,72 @@ fn move_into(dir: &Path, staging: &Path, names: &[&str]) -> Result<Vec<PathBuf>>
     for (name, p) in names.iter().zip(&paths) {
         std::fs::rename(staging.join(name), p).map_err(|e| voyage_core::Error::io(p, e))?;
     }
+    for stale in STUDY_FILES.iter().filter(|n| !names.contains(n)) {
+        let p = dir.join(stale);
+        if p.is_file() {
+            std::fs::remove_file(&p).map_err(|e| voyage_core::Error::io(&p, e))?;
+        }
+    }
     Ok(paths)
+}
+
+/// Removes the staging folders in `dir` of runs no longer running (a `prep` stopped while it
+/// wrote leaves one behind).
+fn remove_stale_staging(dir: &Path) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name();
+        let Some(pid) = name
+            .to_str()
+            .and_then(|n| n.strip_prefix(STAGING))
+            .and_then(|p| p.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        if pid != std::process::id() && !process_runs(pid) && e.path().is_dir() {
+            let _ = std::fs::remove_dir_all(e.path());
+        }
+    }
+}
+
+/// Whether process `pid` runs (on Linux; elsewhere every process is taken to run, and a
+/// stale staging folder stays).
+fn process_runs(pid: u32) -> bool {
+    if cfg!(target_os = "linux") {
+        Path::new("/proc").join(pid.to_string()).exists()
+    } else {
+        true
+    }
+}
+
+/// Checks, before any work, that the exports can be written into `dir`: an existing folder
+/// that takes a file, or a folder that can be made (it is not made now). A file in the way or
+/// a read-only folder is found here, not after the preprocessing.
+pub fn check_out_dir(dir: &Path) -> Result<()> {
+    let mut existing = dir;
+    while !existing.exists() {
+        match existing.parent() {
+            Some(p) if !p.as_os_str().is_empty() => existing = p,
+            _ => {
+                existing = Path::new(".");
+                break;
+            }
+        }
+    }
+    if !existing.is_dir() {
+        return Err(voyage_core::Error::format(
+            existing,
+            "is not a folder: the exports cannot be written there",
+        ));
+    }
+    let probe = existing.join(format!(".voyage-probe-{}", std::process::id()));
+    std::fs::write(&probe, b"")
+        .map_err(|e| voyage_core::Error::io(existing, e))
+        .map(|()| {
+            let _ = std::fs::remove_file(&probe);
+        })
 }
 
 /// The lumen, Ds and the cleansed CT, on the input's grid (the study is made in its own

@@ -12,7 +12,7 @@ use voyage_core::{
 };
 use voyage_io::{
     self as io, LoadOptions,
-    export::study::{StudyExports, write_study},
+    export::study::{StudyExports, check_out_dir, write_study},
 };
 
 #[derive(Clone, Copy, Debug, Default, ValueEnum)]
@@ -177,6 +177,7 @@ pub fn load_and_prepare(a: &InputArgs, nav_min_wall_mm: Option<f64>) -> Result<P
 }
 
 pub fn run(a: &PrepArgs) -> Result<()> {
+    check_out_dir(&a.out)?;
     let Prepared { study, load_ms } = load_and_prepare(&a.input, None)?;
     let g = study.ct.geometry();
     let written = write_study(&a.out, &study, StudyExports { stl: a.stl })?;

@@ -38,6 +38,7 @@ pub struct ReportArgs {
 const SNAPSHOT_PX: u32 = 512;
 
 pub fn run(a: &ReportArgs) -> Result<()> {
+    voyage_io::export::study::check_out_dir(&a.out)?;
     let min_wall = FlightOptions::default().safety.min_wall_mm;
     let Prepared { study, .. } = load_and_prepare(&a.input, Some(min_wall))?;
     let findings = read_findings(&a.findings, study.ct.geometry())?;
