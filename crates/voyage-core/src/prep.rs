@@ -418,6 +418,7 @@ impl Study {
 /// back to the input's.
 pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, progress: impl FnMut(Stage)) -> Result<Study> {
     let start = Instant::now();
+    check_room_for_a_colon(ct.geometry())?;
     let storage = Storage::of(ct.geometry());
     if storage.is_identity() {
         return prepare_stored(ct, opts, storage, start, progress);
@@ -428,6 +429,26 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, progress: impl FnMut(Stage))
     o.centerline.source_mm = opts.centerline.source_mm.map(|p| storage.mm_in(p));
     o.centerline.target_mm = opts.centerline.target_mm.map(|p| storage.mm_in(p));
     prepare_stored(ct, &o, storage, start, progress)
+}
+
+/// A colon needs this much room each way (mm): the narrowest stretch is 20 mm across and the
+/// shortest course through a scan passes several. A thinner volume (a 3-slice series gave a
+/// 124 mm centerline and a "bridged" gap) is refused.
+const MIN_EXTENT_MM: f64 = 40.0;
+
+fn check_room_for_a_colon(g: &crate::Geometry) -> Result<()> {
+    for a in 0..3 {
+        let across = g.dims[a] as f64 * g.spacing[a];
+        if across < MIN_EXTENT_MM {
+            return Err(crate::Error::invalid(format!(
+                "the volume is {across:.1} mm across along its {} axis ({} voxels of {} mm): too thin to hold a colon (at least {MIN_EXTENT_MM:.0} mm each way)",
+                ["i", "j", "k"][a],
+                g.dims[a],
+                g.spacing[a]
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// [`prepare`] on a scan in the study storage.

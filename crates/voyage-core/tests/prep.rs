@@ -266,3 +266,25 @@ fn given_endpoints_and_their_errors() {
     let e = prepare(empty, &as_mask, |_| {}).unwrap_err().to_string();
     assert!(e.contains("the mask holds no lumen"), "{e}");
 }
+
+/// Three slices of the small colon phantom are no colon: refused with the reason, where they
+/// used to give a 124 mm centerline and a "bridged" gap.
+#[test]
+fn a_volume_too_thin_for_a_colon_is_refused() {
+    let p = phantom::colon(&ColonOptions {
+        small: true,
+        ..Default::default()
+    })
+    .unwrap();
+    let g = p.ct.geometry();
+    let [nx, ny, nz] = g.dims;
+    let k0 = nz / 2;
+    let slab = p.ct.data()[nx * ny * k0..nx * ny * (k0 + 3)].to_vec();
+    let geom = voyage_core::Geometry::new([nx, ny, 3], g.spacing, [0.0; 3]).unwrap();
+    let thin = voyage_core::Volume::from_vec(geom, slab).unwrap();
+    let err = prepare(thin, &PrepOptions::default(), |_| {})
+        .err()
+        .expect("three slices prepared as a colon")
+        .to_string();
+    assert!(err.contains("too thin to hold a colon"), "{err}");
+}

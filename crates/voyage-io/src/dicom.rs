@@ -69,9 +69,11 @@ use voyage_core::{Error, Geometry, Result, Volume, check_dims};
 pub const OUTSIDE_HU: i16 = -1024;
 
 /// Relative and absolute tolerance on slice gaps: a gap may differ from the typical one by at
-/// most `max(GAP_TOL_MM, GAP_TOL_REL × gap)`.
-const GAP_TOL_MM: f64 = 0.01;
-const GAP_TOL_REL: f64 = 0.01;
+/// most `max(GAP_TOL_MM, GAP_TOL_REL × gap)`. Real series round their positions to 0.1 mm
+/// (a 0.625 mm series then steps 0.6 and 0.7 mm); dcm2niix and ITK accept as much, and the
+/// slices are placed at the mean gap, nothing resampled.
+const GAP_TOL_MM: f64 = 0.1 + 1e-6;
+const GAP_TOL_REL: f64 = 0.1;
 /// Tolerance on direction cosines and pixel spacing agreeing between slices.
 const COSINE_TOL: f64 = 1e-4;
 
@@ -748,6 +750,8 @@ struct Stack {
     /// step off the normal (gantry tilt); `None` for an orthogonal stack.
     shear: Option<[f64; 2]>,
     notes: Vec<String>,
+    /// What the user must see: slices left out.
+    warnings: Vec<String>,
 }
 
 fn slice_label(headers: &[Header], s: &SliceRef) -> String {
@@ -819,6 +823,8 @@ fn build_stack(headers: &[Header]) -> Result<Stack> {
             .then(a.file.cmp(&b.file))
             .then(a.frame.cmp(&b.frame))
     });
+    let mut warnings = Vec::new();
+    let slices = drop_copies(headers, slices, &mut warnings);
 
     let steps: Vec<DVec3> = slices.windows(2).map(|w| pos(&w[1]) - pos(&w[0])).collect();
     let gaps: Vec<f64> = steps.iter().map(|s| s.dot(normal)).collect();
@@ -858,7 +864,41 @@ fn build_stack(headers: &[Header]) -> Result<Stack> {
         geometry,
         shear: (!negligible).then_some(shear_mm),
         notes,
+        warnings,
     })
+}
+
+/// `slices` (sorted along the normal) without the byte-identical copies of a file at the same
+/// position (a slice exported twice): each left out is warned about. Two different slices at
+/// one position stay, for the gap check to refuse.
+fn drop_copies(
+    headers: &[Header],
+    slices: Vec<SliceRef>,
+    warnings: &mut Vec<String>,
+) -> Vec<SliceRef> {
+    let pos = |s: &SliceRef| s.plane.position.unwrap_or_default();
+    let same_bytes = |a: &SliceRef, b: &SliceRef| {
+        let (pa, pb) = (&headers[a.file].path, &headers[b.file].path);
+        matches!((std::fs::read(pa), std::fs::read(pb)), (Ok(x), Ok(y)) if x == y)
+    };
+    let mut kept: Vec<SliceRef> = Vec::with_capacity(slices.len());
+    for s in slices {
+        let copy = kept
+            .iter()
+            .rev()
+            .take_while(|k| pos(k).distance(pos(&s)) < 1e-3)
+            .find(|k| k.file != s.file && k.frame == s.frame && same_bytes(k, &s));
+        if let Some(k) = copy {
+            warnings.push(format!(
+                "{} is a byte-identical copy of {}: left out",
+                slice_label(headers, &s),
+                slice_label(headers, k)
+            ));
+            continue;
+        }
+        kept.push(s);
+    }
+    kept
 }
 
 /// A single slice, or a multi-frame file whose frames carry no positions: frames are stacked
@@ -904,6 +944,7 @@ fn single_file_stack(
         geometry,
         shear: None,
         notes,
+        warnings: Vec::new(),
     })
 }
 
@@ -1137,7 +1178,7 @@ fn load_series(headers: Vec<Header>) -> Result<Loaded> {
         transfer_syntaxes,
         files: headers.len(),
         other_series: Vec::new(),
-        warnings: Vec::new(),
+        warnings: stack.warnings,
         notes,
         position: known,
     };

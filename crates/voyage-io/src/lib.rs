@@ -94,7 +94,31 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Loaded> {
         }
     };
     check_spacing(path, loaded.volume.spacing())?;
+    check_values(path, loaded.volume.data())?;
     Ok(loaded)
+}
+
+/// Most of a volume at the limits of 16-bit values after its rescale is no CT: a slope or
+/// intercept out of all proportion (`scl_slope` 1e30 made every voxel 32767, and all of it
+/// "lumen"). Padding outside a scan's round field of view is about a fifth of a slice.
+const MOST_SATURATED: f64 = 0.5;
+
+fn check_values(path: &Path, data: &[i16]) -> Result<()> {
+    let saturated = data
+        .iter()
+        .filter(|&&v| v == i16::MAX || v == i16::MIN)
+        .count();
+    let share = saturated as f64 / data.len().max(1) as f64;
+    if share <= MOST_SATURATED {
+        return Ok(());
+    }
+    Err(Error::format(
+        path,
+        format!(
+            "{:.0} % of the voxels lie at the limits of 16-bit values (±32767) after the rescale: these are not CT numbers (check the rescale slope and intercept, scl_slope / scl_inter)",
+            share * 100.0
+        ),
+    ))
 }
 
 /// Voxel sizes a scan of a body can have (mm): a header outside them is wrong, and every

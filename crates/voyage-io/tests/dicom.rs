@@ -694,7 +694,7 @@ fn a_missing_slice_is_an_error_naming_the_gap() {
         "{msg}"
     );
 
-    // A second copy of one slice: two slices at one position.
+    // A byte-identical second copy of one slice (exported twice): left out, with a warning.
     let dup = TempDir::new("duplicate");
     write_series(dup.path(), &vol).unwrap();
     std::fs::copy(
@@ -702,6 +702,20 @@ fn a_missing_slice_is_an_error_naming_the_gap() {
         dup.path().join("extra.dcm"),
     )
     .unwrap();
+    let l = dicom::load_dir(dup.path(), &opts()).unwrap();
+    assert_eq!(l.volume.dims(), vol.dims());
+    assert_eq!(l.volume.data(), vol.data());
+    assert!(
+        l.meta.warnings.iter().any(|w| w.contains("extra.dcm")
+            && w.contains("slice0004.dcm")
+            && w.contains("is a byte-identical copy of")),
+        "{:?}",
+        l.meta.warnings
+    );
+    // A different slice at the same position: refused.
+    edit_file(&dup.path().join("extra.dcm"), |o| {
+        put_pixels(o, vec![7; 20 * 16])
+    });
     let msg = err_text(dicom::load_dir(dup.path(), &opts()));
     assert!(
         msg.contains("two slices at the same position")
@@ -709,6 +723,25 @@ fn a_missing_slice_is_an_error_naming_the_gap() {
             && msg.contains("extra.dcm"),
         "{msg}"
     );
+
+    // Positions rounded to 0.1 mm, as real series store them: a 0.625 mm series steps 0.6
+    // and 0.7 mm. Accepted, the slices placed at the mean gap.
+    let fine = synthetic([16, 12, 9], [0.8, 0.8, 0.625], [0.0; 3], DMat3::IDENTITY);
+    let rounded = TempDir::new("rounded");
+    write_series(rounded.path(), &fine).unwrap();
+    for k in 0..9 {
+        let z = (k as f64 * 0.625 * 10.0).round() / 10.0;
+        edit_file(&rounded.path().join(format!("slice{k:04}.dcm")), |o| {
+            put_ds(o, tags::IMAGE_POSITION_PATIENT, &format!("0\\0\\{z}"))
+        });
+    }
+    let l = dicom::load_dir(rounded.path(), &opts()).unwrap();
+    assert!(
+        (l.volume.spacing()[2] - 0.625).abs() < 0.01,
+        "{:?}",
+        l.volume.spacing()
+    );
+    assert_eq!(l.volume.data(), fine.data());
 
     // Uneven gaps: one slice moved by a third of the spacing.
     let uneven = TempDir::new("uneven");

@@ -649,6 +649,11 @@ fn huge_or_bad_dims_fail_fast() {
         std::fs::write(&p, [h.bytes(), vec![0; 16]].concat()).unwrap();
         assert_err_names(&p, "lies outside 0.01–50 mm");
     }
+    // A rescale out of all proportion: every voxel saturates.
+    let mut h = NiftiHeader::new([2, 2, 2], 4, 16);
+    h.slope = 1e30;
+    std::fs::write(&p, [h.bytes(), vec![1; 16]].concat()).unwrap();
+    assert_err_names(&p, "are not CT numbers");
     let h = NiftiHeader::new([2, 2, 2], 128, 24);
     std::fs::write(&p, [h.bytes(), vec![0; 24]].concat()).unwrap();
     assert_err_names(&p, "datatype 128 is not supported");
