@@ -282,9 +282,9 @@ fn a_volume_too_thin_for_a_colon_is_refused() {
     let slab = p.ct.data()[nx * ny * k0..nx * ny * (k0 + 3)].to_vec();
     let geom = voyage_core::Geometry::new([nx, ny, 3], g.spacing, [0.0; 3]).unwrap();
     let thin = voyage_core::Volume::from_vec(geom, slab).unwrap();
-    let err = prepare(thin, &PrepOptions::default(), |_| {})
-        .err()
-        .expect("three slices prepared as a colon")
-        .to_string();
+    let Err(err) = prepare(thin, &PrepOptions::default(), |_| {}) else {
+        panic!("three slices prepared as a colon");
+    };
+    let err = err.to_string();
     assert!(err.contains("too thin to hold a colon"), "{err}");
 }

@@ -719,14 +719,12 @@ fn describe_series(s: &SeriesSummary) -> String {
     } else {
         &s.uid
     };
+    // No SeriesDescription: it is free text, and can hold a name (`info --show-descriptions`
+    // lists them).
     format!(
-        "{uid} ({}, {} slices{})",
+        "{uid} ({}, {} slices)",
         s.modality.as_deref().unwrap_or("no modality"),
-        s.slices,
-        s.description
-            .as_deref()
-            .map(|d| format!(", \"{d}\""))
-            .unwrap_or_default()
+        s.slices
     )
 }
 

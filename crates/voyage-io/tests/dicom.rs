@@ -863,6 +863,10 @@ fn two_series_pick_the_bigger_unless_told() {
             && msg.contains(l.meta.series_uid.as_deref().unwrap()),
         "{msg}"
     );
+    // The descriptions are free text (a name can be in them): no message quotes them.
+    for said in l.meta.notes.iter().chain(&l.meta.warnings).chain([&msg]) {
+        assert!(!said.contains("big") && !said.contains("small"), "{said}");
+    }
 }
 
 #[test]

@@ -216,6 +216,16 @@ fn phantom_files_round_trip_through_info() {
     }
     assert_eq!(b["modality"], "CT");
     assert_eq!(a["dims"], t["dims"]);
+    // SeriesDescription is free text (it can hold a name): shown only when asked for.
+    let described = |args: &[&str]| {
+        let mut all = vec!["info", series.to_str().unwrap()];
+        all.extend(args);
+        let o = voyage(&all);
+        assert!(o.status.success(), "{}", text(&o));
+        String::from_utf8_lossy(&o.stdout).contains("voyage volume")
+    };
+    assert!(!described(&[]) && !described(&["--json"]));
+    assert!(described(&["--show-descriptions"]));
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

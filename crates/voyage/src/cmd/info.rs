@@ -17,6 +17,10 @@ pub struct InfoArgs {
     /// DICOM: which SeriesInstanceUID to load when the folder holds several.
     #[arg(long)]
     pub series: Option<String>,
+    /// Print the series' descriptions (SeriesDescription), which are free text and can hold a
+    /// patient's name: left out unless asked for.
+    #[arg(long)]
+    pub show_descriptions: bool,
 }
 
 /// Everything `info` reports. Patient name and ID are never part of it.
@@ -43,7 +47,16 @@ pub struct Info {
 }
 
 impl Info {
-    pub fn new(path: &std::path::Path, loaded: &Loaded) -> Info {
+    /// What `info` says of `loaded`; the series' descriptions (free text) only when
+    /// `descriptions` is set.
+    pub fn new(path: &std::path::Path, loaded: &Loaded, descriptions: bool) -> Info {
+        let mut meta = loaded.meta.clone();
+        if !descriptions {
+            meta.series_description = None;
+            meta.other_series
+                .iter_mut()
+                .for_each(|s| s.description = None);
+        }
         let g = loaded.volume.geometry();
         let (lo, hi) = loaded.volume.min_max();
         Info {
@@ -59,7 +72,7 @@ impl Info {
             megabytes: (g.len() * 2) as f64 / 1e6,
             position: loaded.meta.position.map(|p| p.code()),
             gravity_lps: loaded.meta.position.map(|p| p.gravity_lps().to_array()),
-            meta: loaded.meta.clone(),
+            meta,
         }
     }
 
@@ -136,7 +149,7 @@ pub fn run(a: &InfoArgs) -> Result<()> {
         series_uid: a.series.clone(),
     };
     let loaded = io::load(&a.path, &opts)?;
-    let info = Info::new(&a.path, &loaded);
+    let info = Info::new(&a.path, &loaded, a.show_descriptions);
     if a.json {
         println!("{}", serde_json::to_string_pretty(&info)?);
     } else {

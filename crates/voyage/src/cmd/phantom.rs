@@ -240,7 +240,7 @@ pub fn demo(out: &Path, small: bool) -> Result<()> {
     let ct = out.join("colon.nii.gz");
     write_outputs(&p, &ct, Some(&out.join("colon.json")), None, None)?;
     let loaded = io::load(&ct, &LoadOptions::default())?;
-    super::info::Info::new(&ct, &loaded).print_text();
+    super::info::Info::new(&ct, &loaded, false).print_text();
     // The preprocessing on what was read back, checked against the phantom's truth.
     let study = voyage_core::prepare(loaded.volume, &Default::default(), |_| {})?;
     let written =
