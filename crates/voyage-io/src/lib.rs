@@ -206,6 +206,55 @@ pub(crate) fn at(path: &Path) -> impl Fn(Error) -> Error + '_ {
 }
 
 /// Returns the path with its extension(s) replaced, e.g. for the .raw of a .mhd.
+/// The data file a detached header (`.mhd` `ElementDataFile`, `.nhdr` `data file:`) names
+/// under `key`: only a relative path that stays inside the header's folder (no `..`, no
+/// absolute path, no link out of it), and only a regular file (a FIFO or a device would
+/// hang the reader or never end), as ITK's readers are commonly configured to.
+pub(crate) fn detached_data(header: &Path, name: &str, key: &str) -> Result<PathBuf> {
+    use std::path::Component;
+    let refuse = |why: &str| Err(Error::format(header, format!("{key} {name}: {why}")));
+    let relative = Path::new(name);
+    if relative
+        .components()
+        .any(|c| !matches!(c, Component::Normal(_) | Component::CurDir))
+    {
+        return refuse("only a file in the header's folder (or below it) is read");
+    }
+    let data = sibling(header, name);
+    let folder = header.parent().filter(|p| !p.as_os_str().is_empty());
+    let folder = folder.unwrap_or(Path::new("."));
+    let (Ok(real), Ok(home)) = (data.canonicalize(), folder.canonicalize()) else {
+        return refuse("no such file beside the header");
+    };
+    if !real.starts_with(&home) {
+        return refuse("it leads out of the header's folder");
+    }
+    match std::fs::metadata(&real) {
+        Ok(m) if m.is_file() => Ok(data),
+        Ok(_) => refuse("not a regular file"),
+        Err(e) => Err(Error::io(&data, e)),
+    }
+}
+
+/// Reads a small text file the user names (findings): only a regular file, of at most
+/// `max_bytes`; `/dev/zero` or a FIFO would never end.
+pub fn read_small_text(path: &Path, max_bytes: u64) -> Result<String> {
+    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+    if !meta.is_file() {
+        return Err(Error::format(path, "not a regular file"));
+    }
+    if meta.len() > max_bytes {
+        return Err(Error::format(
+            path,
+            format!(
+                "{} bytes: more than the {max_bytes} a findings file can hold",
+                meta.len()
+            ),
+        ));
+    }
+    std::fs::read_to_string(path).map_err(|e| Error::io(path, e))
+}
+
 pub(crate) fn sibling(path: &Path, file_name: &str) -> PathBuf {
     path.parent()
         .map(|p| p.join(file_name))

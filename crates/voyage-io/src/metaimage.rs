@@ -289,7 +289,7 @@ fn data_path(header: &Path, name: &str) -> Result<PathBuf> {
             ),
         ));
     }
-    Ok(sibling(header, name))
+    crate::detached_data(header, name, "ElementDataFile =")
 }
 
 /// Opens the separate data file; a missing file is reported against the header that names it.

@@ -378,7 +378,7 @@ fn data_path(header: &Path, name: &str) -> Result<PathBuf> {
             format!("data file: {name}: lists of data files are not supported, only one file"),
         ));
     }
-    Ok(sibling(header, name))
+    crate::detached_data(header, name, "data file:")
 }
 
 /// Opens the data file; a missing file is reported against the header that names it.

@@ -763,6 +763,55 @@ fn garbage_empty_and_missing_files() {
     .unwrap();
     assert_err_names(&nhdr, "gone.raw");
 
+    // A detached data file is read only inside the header's folder, and only when it is a
+    // regular file: a header could otherwise load /etc/shadow as voxels, or hang on a FIFO.
+    let voxels = dir.join("voxels.raw");
+    std::fs::write(&voxels, [0u8; 16]).unwrap();
+    let outside = std::env::temp_dir().join(format!("voyage-outside-{}.raw", std::process::id()));
+    std::fs::write(&outside, [0u8; 16]).unwrap();
+    std::os::unix::fs::symlink(&outside, dir.join("link.raw")).unwrap();
+    let fifo = dir.join("fifo.raw");
+    assert!(
+        std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    let header = |data: &str| {
+        format!("NDims = 3\nDimSize = 2 2 2\nElementType = MET_SHORT\nElementDataFile = {data}\n")
+    };
+    for (data, why) in [
+        (
+            outside.to_str().unwrap(),
+            "only a file in the header's folder",
+        ),
+        ("../voxels.raw", "only a file in the header's folder"),
+        ("link.raw", "leads out of the header's folder"),
+        ("fifo.raw", "not a regular file"),
+    ] {
+        std::fs::write(&mhd, header(data)).unwrap();
+        assert_err_names(&mhd, why);
+        std::fs::write(
+            &nhdr,
+            format!("NRRD0004\ntype: short\ndimension: 3\nsizes: 2 2 2\nencoding: raw\ndata file: {data}\n"),
+        )
+        .unwrap();
+        assert_err_names(&nhdr, why);
+    }
+    std::fs::write(&mhd, header("voxels.raw")).unwrap();
+    assert!(load_any(&mhd).is_ok());
+    std::fs::remove_file(&outside).unwrap();
+    // Findings: a device or a FIFO never ends.
+    let g = voyage_core::Geometry::new([2, 2, 2], [1.0; 3], [0.0; 3]).unwrap();
+    for path in [std::path::Path::new("/dev/zero"), fifo.as_path()] {
+        let err = voyage_io::export::read_findings(path, &g)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(err.contains("not a regular file"), "{err}");
+    }
+
     let bad = dir.join("badtype.nrrd");
     std::fs::write(
         &bad,

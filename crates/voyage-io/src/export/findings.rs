@@ -222,11 +222,15 @@ fn findings_json(
     })
 }
 
+/// A findings.json larger than this is no reading's (a thousand markers with notes take a
+/// few hundred kB).
+const MAX_FINDINGS_BYTES: u64 = 16 << 20;
+
 /// Reads the markers and measurements back from a `findings.json` an export wrote (for
 /// `voyage report`), into the volume-local frame of `geometry`. Errors name the file and
 /// what is wrong with it.
 pub fn read_findings(path: &Path, geometry: &Geometry) -> Result<Findings> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let text = crate::read_small_text(path, MAX_FINDINGS_BYTES)?;
     let v: serde_json::Value =
         serde_json::from_str(&text).map_err(|e| Error::format(path, format!("not JSON: {e}")))?;
     let bad = |what: &str| Error::format(path, format!("not a voyage findings.json: {what}"));
