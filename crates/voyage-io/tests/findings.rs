@@ -479,3 +479,71 @@ fn findings_json_reads_back_what_was_exported() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A findings.json is input like any other: its counts, sizes, texts and places are checked,
+/// and a file name made from a label stays short. Each case used to pass: a NUL byte went
+/// raw into report.html, a 1e308 mm polyp printed 309 digits, −5 mm was taken, a marker 1 km
+/// outside the volume was placed "804 mm, splenic flexure", a 5000-character label aborted
+/// the export, and 3000 markers made an 878 MB report.
+#[test]
+fn findings_read_back_are_checked_like_any_input() {
+    let dir = temp_dir("checked");
+    let g = tilted_geometry();
+    export_findings(&dir, &sample_findings(), &g, |_, _| {
+        Ok((2, 2, vec![255; 16]))
+    })
+    .unwrap();
+    let path = dir.join("findings.json");
+    let good = read_json(&path);
+    assert!(voyage_io::export::read_findings(&path, &g).is_ok());
+    let refused = |edit: &dyn Fn(&mut Value), expect: &str| {
+        let mut doc = good.clone();
+        edit(&mut doc);
+        let bad = dir.join("bad.json");
+        std::fs::write(&bad, serde_json::to_string(&doc).unwrap()).unwrap();
+        let err = voyage_io::export::read_findings(&bad, &g)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            err.contains("bad.json") && err.contains(expect),
+            "{expect}: {err}"
+        );
+    };
+    refused(
+        &|d| d["markers"][0]["label"] = "M\u{0}1".into(),
+        "control characters",
+    );
+    refused(
+        &|d| d["markers"][0]["size_mm"] = 1e308.into(),
+        "size_mm is not in",
+    );
+    refused(
+        &|d| d["markers"][0]["size_mm"] = (-5.0).into(),
+        "size_mm is not in",
+    );
+    refused(
+        &|d| d["markers"][0]["position_lps_mm"] = serde_json::json!([1e6, 0.0, 0.0]),
+        "outside the scanned volume",
+    );
+    refused(
+        &|d| d["markers"][0]["label"] = "x".repeat(5000).into(),
+        "longer than 64",
+    );
+    refused(
+        &|d| {
+            let m = d["markers"][0].clone();
+            d["markers"] = Value::Array(vec![m; 3000]);
+        },
+        "more than 500",
+    );
+    // A long label (under the limit) still names a file the file system takes.
+    let mut long = sample_findings();
+    long.markers[0].label = "polyp-".repeat(10);
+    let written = export_findings(&dir, &long, &g, |_, _| Ok((2, 2, vec![255; 16]))).unwrap();
+    assert!(
+        written.iter().all(|p| p.file_name().unwrap().len() <= 48),
+        "{written:?}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

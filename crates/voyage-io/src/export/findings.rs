@@ -143,6 +143,8 @@ fn snapshot_names(markers: &[Marker]) -> Vec<String> {
                 }
             })
             .collect();
+        // A short stem: a label of thousands of characters made a name the file system refused.
+        let safe: String = safe.chars().take(32).collect();
         let mut name = format!("finding_{safe}.png");
         let mut n = i + 1;
         while names.contains(&name) {
@@ -225,6 +227,15 @@ fn findings_json(
 /// A findings.json larger than this is no reading's (a thousand markers with notes take a
 /// few hundred kB).
 const MAX_FINDINGS_BYTES: u64 = 16 << 20;
+/// Markers and measurements a findings.json may hold (3000 made an 878 MB report).
+const MAX_FINDINGS: usize = 500;
+/// A label is a short name (it also names the snapshot's file); a note is a few lines.
+const MAX_LABEL_CHARS: usize = 64;
+const MAX_NOTE_CHARS: usize = 4000;
+/// A polyp or mass larger than this (mm) is no colon's.
+const MAX_SIZE_MM: f64 = 300.0;
+/// How far outside the scanned volume a marker may lie (mm): on the wall at its edge.
+const PLACE_SLACK_MM: f64 = 10.0;
 
 /// Reads the markers and measurements back from a `findings.json` an export wrote (for
 /// `voyage report`), into the volume-local frame of `geometry`. Errors name the file and
@@ -244,12 +255,41 @@ pub fn read_findings(path: &Path, geometry: &Geometry) -> Result<Findings> {
             .then(|| DVec3::new(f[0], f[1], f[2]))
             .ok_or_else(|| bad(&format!("{key} is not three numbers")))
     };
-    let text_of = |x: &serde_json::Value, key: &str| x[key].as_str().unwrap_or("").to_string();
+    let text_of = |x: &serde_json::Value, key: &str, most: usize| -> Result<String> {
+        let t = x[key].as_str().unwrap_or("").to_string();
+        if t.chars().count() > most {
+            return Err(bad(&format!("a {key} longer than {most} characters")));
+        }
+        if t.chars().any(|c| c.is_control() && c != '\n' && c != '\t') {
+            return Err(bad(&format!("a {key} with control characters")));
+        }
+        Ok(t)
+    };
+    // Within the scanned volume, give or take a few mm: a marker is on the colon's wall.
+    let inside = |p: DVec3, what: &str| -> Result<DVec3> {
+        let reach = geometry.extent_mm() + DVec3::splat(PLACE_SLACK_MM);
+        let ok =
+            (p + DVec3::splat(PLACE_SLACK_MM)).cmpge(DVec3::ZERO).all() && p.cmple(reach).all();
+        ok.then_some(p).ok_or_else(|| {
+            bad(&format!(
+                "{what} lies outside the scanned volume ({} mm LPS)",
+                geometry.local_to_patient(p).round()
+            ))
+        })
+    };
+    let (markers, measurements) = (
+        v["markers"]
+            .as_array()
+            .ok_or_else(|| bad("no markers list"))?,
+        v["measurements"].as_array(),
+    );
+    if markers.len() + measurements.map_or(0, |m| m.len()) > MAX_FINDINGS {
+        return Err(bad(&format!(
+            "more than {MAX_FINDINGS} markers and measurements"
+        )));
+    }
     let mut findings = Findings::default();
-    for m in v["markers"]
-        .as_array()
-        .ok_or_else(|| bad("no markers list"))?
-    {
+    for m in markers {
         let pose: Vec<f64> = m["view_pose_mm"]
             .as_array()
             .map(|a| a.iter().filter_map(|n| n.as_f64()).collect())
@@ -259,22 +299,39 @@ pub fn read_findings(path: &Path, geometry: &Geometry) -> Result<Findings> {
             .and_then(voyage_nav::Pose::from_array)
             .ok_or_else(|| bad("a marker's view_pose_mm is not a pose"))?;
         let kind = serde_json::from_value(m["kind"].clone()).unwrap_or_default();
+        let label = text_of(m, "label", MAX_LABEL_CHARS)?;
+        let size_mm = m["size_mm"].as_f64();
+        if size_mm.is_some_and(|s| !(s > 0.0 && s <= MAX_SIZE_MM)) {
+            return Err(bad(&format!(
+                "marker {label}'s size_mm is not in (0, {MAX_SIZE_MM}] mm"
+            )));
+        }
         findings.markers.push(Marker {
-            label: text_of(m, "label"),
-            note: text_of(m, "note"),
+            note: text_of(m, "note", MAX_NOTE_CHARS)?,
             kind,
-            size_mm: m["size_mm"].as_f64(),
-            position: geometry.patient_to_local(vec3(m, "position_lps_mm")?),
+            size_mm,
+            position: inside(
+                geometry.patient_to_local(vec3(m, "position_lps_mm")?),
+                &format!("marker {label}"),
+            )?,
+            label,
             normal: (geometry.direction_mat().transpose() * vec3(m, "normal_lps")?)
                 .normalize_or_zero(),
             view,
         });
     }
-    for m in v["measurements"].as_array().into_iter().flatten() {
+    for m in measurements.into_iter().flatten() {
+        let label = text_of(m, "label", MAX_LABEL_CHARS)?;
+        let end = |key: &str| {
+            inside(
+                geometry.patient_to_local(vec3(m, key)?),
+                &format!("measurement {label}"),
+            )
+        };
         findings.measurements.push(voyage_view::Measurement {
-            label: text_of(m, "label"),
-            a: geometry.patient_to_local(vec3(m, "a_lps_mm")?),
-            b: geometry.patient_to_local(vec3(m, "b_lps_mm")?),
+            a: end("a_lps_mm")?,
+            b: end("b_lps_mm")?,
+            label,
         });
     }
     Ok(findings)
