@@ -91,14 +91,24 @@ pub fn load_dir(path: &Path, opts: &LoadOptions) -> Result<Loaded> {
     let mut images = Vec::new();
     let mut skipped_non_dicom = Vec::new();
     let mut skipped_non_image = Vec::new();
+    let mut unusable: Vec<(String, Error)> = Vec::new();
     for probe in headers {
         match probe? {
             Probe::NotDicom(p) => skipped_non_dicom.push(p),
             Probe::NotImage(p, why) => skipped_non_image.push((p, why)),
             Probe::Image(h) => images.push(*h),
+            Probe::Unusable { series_uid, error } => unusable.push((series_uid, error)),
         }
     }
+    // Only the series loaded must be loadable: the one asked for, else the one chosen.
+    let fails = |uid: &str| unusable.iter().position(|(u, _)| u == uid);
+    if let Some(i) = opts.series_uid.as_deref().and_then(fails) {
+        return Err(unusable.swap_remove(i).1);
+    }
     if images.is_empty() {
+        if let Some((_, error)) = unusable.into_iter().next() {
+            return Err(error);
+        }
         return Err(no_images_error(
             path,
             files.len(),
@@ -108,6 +118,15 @@ pub fn load_dir(path: &Path, opts: &LoadOptions) -> Result<Loaded> {
     }
     let mut notes = skipped_notes(&skipped_non_dicom, &skipped_non_image);
     let (chosen, others, choice_note) = choose_series(path, images, opts)?;
+    if let Some(i) = chosen.first().and_then(|h| fails(&h.series_uid)) {
+        return Err(unusable.swap_remove(i).1);
+    }
+    if let Some((uid, error)) = unusable.first() {
+        notes.push(format!(
+            "skipped {} image(s) of other series that cannot be loaded, e.g. of series {uid}: {error}",
+            unusable.len()
+        ));
+    }
     let warning = choice_note
         .as_ref()
         .filter(|_| opts.series_uid.is_none())
@@ -131,6 +150,7 @@ pub fn load_file(path: &Path, opts: &LoadOptions) -> Result<Loaded> {
             "not a DICOM file (no 'DICM' marker at byte 128; files without the DICOM Part 10 header are not supported)",
         )),
         Probe::NotImage(_, why) => Err(Error::format(path, format!("no image to load: {why}"))),
+        Probe::Unusable { error, .. } => Err(error),
         Probe::Image(h) => match &opts.series_uid {
             Some(want) if *want != h.series_uid => Err(Error::format(
                 path,
@@ -154,6 +174,11 @@ enum Probe {
     /// A DICOM file without an image, and why (shown when a folder holds no image at all).
     NotImage(PathBuf, String),
     Image(Box<Header>),
+    /// An image of the series `series_uid` that cannot be loaded, and why.
+    Unusable {
+        series_uid: String,
+        error: Error,
+    },
 }
 
 /// The header of one image file, with the pixel data not read.
@@ -239,7 +264,15 @@ fn probe_file(path: &Path) -> Result<Probe> {
             .map_err(|e| e.into_error(path, "not a readable DICOM file"))
     })?;
     guarded(path, "reading the header", || {
-        parse_header(path, &obj).map_err(|m| Error::format(path, m))
+        // An image voyage cannot load (a colour dose screen, a 32-bit map) matters only when
+        // its series is the one loaded: its series is kept with the error.
+        parse_header(path, &obj).or_else(|m| match text(&obj, tags::SERIES_INSTANCE_UID) {
+            Some(series_uid) => Ok(Probe::Unusable {
+                series_uid,
+                error: Error::format(path, m),
+            }),
+            None => Err(Error::format(path, m)),
+        })
     })
 }
 

@@ -1198,3 +1198,44 @@ fn short_rle_segments_give_an_error_not_a_panic() {
     );
     assert_eq!(err.lines().count(), 1, "{err}");
 }
+
+/// A colour dose screen in another series (a secondary capture) is skipped and said, not a
+/// reason to refuse the folder; asked for by its series, it is refused with its reason.
+#[test]
+fn an_unloadable_image_of_another_series_does_not_refuse_the_folder() {
+    let vol = synthetic([16, 16, 6], [1.0; 3], [0.0; 3], DMat3::IDENTITY);
+    let tmp = TempDir::new("dosescreen");
+    write_series(tmp.path(), &vol).unwrap();
+    let screen = tmp.path().join("dose.dcm");
+    std::fs::copy(tmp.path().join("slice0000.dcm"), &screen).unwrap();
+    edit_file(&screen, |o| {
+        put_us(o, tags::SAMPLES_PER_PIXEL, 3);
+        o.put(DataElement::new(
+            tags::PHOTOMETRIC_INTERPRETATION,
+            VR::CS,
+            PrimitiveValue::from("RGB"),
+        ));
+        o.put(DataElement::new(
+            tags::SERIES_INSTANCE_UID,
+            VR::UI,
+            PrimitiveValue::from("1.2.3.99"),
+        ));
+    });
+    let l = dicom::load_dir(tmp.path(), &opts()).unwrap();
+    assert!(l.volume.data() == vol.data());
+    assert!(
+        l.meta.notes.iter().any(|n| n.contains("1.2.3.99")
+            && n.contains("dose.dcm")
+            && n.contains("not a grayscale image")),
+        "{:?}",
+        l.meta.notes
+    );
+    let want = LoadOptions {
+        series_uid: Some("1.2.3.99".into()),
+    };
+    let msg = err_text(dicom::load_dir(tmp.path(), &want));
+    assert!(
+        msg.contains("dose.dcm") && msg.contains("not a grayscale image"),
+        "{msg}"
+    );
+}
