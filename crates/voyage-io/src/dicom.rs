@@ -117,6 +117,8 @@ pub fn load_dir(path: &Path, opts: &LoadOptions) -> Result<Loaded> {
         ));
     }
     let mut notes = skipped_notes(&skipped_non_dicom, &skipped_non_image);
+    let gzipped = gzipped_files(&skipped_non_dicom);
+    notes.extend(gzipped.clone().map(|g| format!("not read: {g}")));
     let (chosen, others, choice_note) = choose_series(path, images, opts)?;
     if let Some(i) = chosen.first().and_then(|h| fails(&h.series_uid)) {
         return Err(unusable.swap_remove(i).1);
@@ -132,7 +134,11 @@ pub fn load_dir(path: &Path, opts: &LoadOptions) -> Result<Loaded> {
         .filter(|_| opts.series_uid.is_none())
         .map(|n| format!("{n}; --series UID loads another (`voyage info` lists them)"));
     notes.extend(choice_note);
-    let mut loaded = load_series(chosen)?;
+    let mut loaded = load_series(chosen).map_err(|e| match &gzipped {
+        // A slice left compressed is what a gap or a missing slice may come from.
+        Some(g) => Error::format(path, format!("{e}; the folder also holds {g}")),
+        None => e,
+    })?;
     loaded.meta.other_series = others;
     loaded.meta.warnings.extend(warning);
     notes.append(&mut loaded.meta.notes);
@@ -636,6 +642,28 @@ fn no_images_error(
         msg.push_str(&format!("; {}: {why}", file_name(p)));
     }
     Error::format(dir, msg)
+}
+
+/// The files among `non_dicom` that are gzip-compressed (`.dcm.gz`, or a `.gz` among plain
+/// slices), named: voyage reads no compressed DICOM file, and says which it left.
+fn gzipped_files(non_dicom: &[PathBuf]) -> Option<String> {
+    let gz: Vec<String> = non_dicom
+        .iter()
+        .filter(|p| {
+            let mut head = [0u8; 2];
+            matches!(super::read_prefix(p, &mut head), Ok(2)) && head == [0x1f, 0x8b]
+        })
+        .map(|p| file_name(p))
+        .collect();
+    let shown: Vec<&str> = gz.iter().take(5).map(String::as_str).collect();
+    (!gz.is_empty()).then(|| {
+        format!(
+            "{} gzip-compressed file(s), which voyage does not read ({}{}): gunzip them",
+            gz.len(),
+            shown.join(", "),
+            if gz.len() > shown.len() { ", ..." } else { "" }
+        )
+    })
 }
 
 fn skipped_notes(non_dicom: &[PathBuf], non_image: &[(PathBuf, String)]) -> Vec<String> {

@@ -1239,3 +1239,38 @@ fn an_unloadable_image_of_another_series_does_not_refuse_the_folder() {
         "{msg}"
     );
 }
+
+/// A slice left gzip-compressed (`.dcm.gz`) is named: in the note when the rest loads, and
+/// in the error when it leaves a slice missing.
+#[test]
+fn gzipped_slices_are_named() {
+    use std::io::Write;
+    let vol = synthetic([16, 16, 6], [1.0; 3], [0.0; 3], DMat3::IDENTITY);
+    let tmp = TempDir::new("gzipped");
+    write_series(tmp.path(), &vol).unwrap();
+    let gzip = |name: &str, to: &str| {
+        let bytes = std::fs::read(tmp.path().join(name)).unwrap();
+        let mut e = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+        e.write_all(&bytes).unwrap();
+        std::fs::write(tmp.path().join(to), e.finish().unwrap()).unwrap();
+    };
+    // A compressed copy beside the plain slices: the series loads, and the copy is named.
+    gzip("slice0002.dcm", "copy.dcm.gz");
+    let l = dicom::load_dir(tmp.path(), &opts()).unwrap();
+    assert!(
+        l.meta
+            .notes
+            .iter()
+            .any(|n| n.contains("copy.dcm.gz") && n.contains("gzip")),
+        "{:?}",
+        l.meta.notes
+    );
+    // A slice only compressed: the gap it leaves names it.
+    gzip("slice0003.dcm", "slice0003.dcm.gz");
+    std::fs::remove_file(tmp.path().join("slice0003.dcm")).unwrap();
+    let msg = err_text(dicom::load_dir(tmp.path(), &opts()));
+    assert!(
+        msg.contains("missing") && msg.contains("slice0003.dcm.gz") && msg.contains("gzip"),
+        "{msg}"
+    );
+}
