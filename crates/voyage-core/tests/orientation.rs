@@ -131,3 +131,48 @@ fn nifti_and_dicom_stored_upside_down_give_the_same_colon() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A prone exam whose header says HFS: the air–fluid levels win, and a warning names both.
+/// The header was trusted: cleansing found nothing and the lumen shrank, without a word.
+#[test]
+fn a_header_position_the_levels_contradict_is_overruled_and_said() {
+    let ct = phantom::colon(&ColonOptions {
+        small: true,
+        tagged_fluid: true,
+        prone: true,
+        ..ColonOptions::default()
+    })
+    .unwrap()
+    .ct;
+    let read = |position| {
+        let mut opts = PrepOptions::default();
+        opts.segment.position = position;
+        prepare(ct.clone(), &opts, |_| {}).unwrap()
+    };
+    let by_levels = read(None);
+    let tagged = read(Some((
+        voyage_core::PatientPosition::Hfs,
+        PositionSource::Dicom,
+    )));
+    let seg = &tagged.segmentation;
+    assert_eq!(
+        seg.orientation.position,
+        by_levels.segmentation.orientation.position
+    );
+    assert_eq!(seg.orientation.source, PositionSource::AirFluidLevels);
+    assert!(
+        seg.warnings
+            .iter()
+            .any(|w| w.contains("PatientPosition is HFS") && w.contains("air–fluid levels")),
+        "{:?}",
+        seg.warnings
+    );
+    assert!(tagged.cleansing.tagged_voxels > 0);
+    assert_eq!(seg.lumen_voxels, by_levels.segmentation.lumen_voxels);
+    // Given by the user, the position stands.
+    let given = read(Some((
+        voyage_core::PatientPosition::Hfs,
+        PositionSource::Given,
+    )));
+    assert_eq!(given.segmentation.orientation.source, PositionSource::Given);
+}

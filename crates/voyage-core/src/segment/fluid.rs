@@ -531,6 +531,8 @@ pub(super) struct Pooled {
     pub(super) pooled: usize,
     /// Per row (j + ny·k): whether it holds any of them (empty without bright runs).
     pub(super) pool_rows: Vec<bool>,
+    /// The header's position the levels overruled, in words.
+    pub(super) conflict: Option<String>,
 }
 
 /// Labels the gas of `found`, finds gravity (given, else from the air–fluid levels, else
@@ -556,6 +558,7 @@ pub(super) fn pool(
             cbox: gas_box,
             pooled: 0,
             pool_rows: Vec::new(),
+            conflict: None,
         });
     };
     let nx = vol.dims()[0];
@@ -565,14 +568,25 @@ pub(super) fn pool(
         vol.dims(),
     );
     let rows = label_rows(&found.runs, gas, bright, &cbox, nx, |_, _, _| true);
-    if opts.position.is_none()
+    // The levels decide unless the user gave the position: a header's PatientPosition that
+    // contradicts them (a prone exam tagged HFS) is overruled, and said.
+    let mut conflict = None;
+    let header = matches!(opts.position, Some((_, PositionSource::Dicom)));
+    if (opts.position.is_none() || header)
         && let Some(g) =
             gravity_from_levels(&level_rows(found, bright, &cbox, nx), vol.geometry(), &cbox)
     {
-        orientation = Orientation::new(
-            PatientPosition::from_gravity(g),
-            PositionSource::AirFluidLevels,
-        );
+        let levels = PatientPosition::from_gravity(g);
+        if header && orientation.gravity().dot(levels.gravity_lps()) < AGREE_COS {
+            conflict = Some(format!(
+                "the DICOM header's PatientPosition is {} but the air–fluid levels show {}: the levels are taken",
+                orientation.position.code(),
+                levels.code()
+            ));
+        }
+        if !header || conflict.is_some() {
+            orientation = Orientation::new(levels, PositionSource::AirFluidLevels);
+        }
     }
     let threshold = fluid_hu.unwrap_or(i16::MAX);
     let marks = pools(&rows, vol.geometry(), &cbox, orientation.gravity(), |v| {
@@ -586,8 +600,12 @@ pub(super) fn pool(
         cbox,
         pooled,
         pool_rows,
+        conflict,
     })
 }
+
+/// Gravity from the header and from the levels agree when within this cosine (60°).
+const AGREE_COS: f64 = 0.5;
 
 /// The position given, else supine assumed.
 fn given_or_assumed(position: Option<(PatientPosition, PositionSource)>) -> Orientation {
@@ -626,8 +644,11 @@ fn level_rows(found: &Found, bright: &Runs, cbox: &Bbox, nx: usize) -> LabelRows
 }
 
 impl Pooled {
-    /// The warning when the patient's position was assumed.
+    /// The warning when the patient's position was assumed, or the header's overruled.
     pub(super) fn position_warning(&self, from_mask: bool) -> Option<String> {
+        if let Some(c) = &self.conflict {
+            return Some(c.clone());
+        }
         (self.orientation.source == PositionSource::Assumed).then(|| if from_mask {
             "patient position unknown (a mask has no fluid levels): supine assumed; give --position if not".to_string()
         } else {
