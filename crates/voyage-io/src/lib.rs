@@ -104,10 +104,17 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Loaded> {
 const MOST_SATURATED: f64 = 0.5;
 
 fn check_values(path: &Path, data: &[i16]) -> Result<()> {
-    let saturated = data
-        .iter()
-        .filter(|&&v| v == i16::MAX || v == i16::MIN)
-        .count();
+    // In blocks with a narrow sum, which compiles to vector code: this is one more pass over
+    // every voxel loaded.
+    let saturated: usize = data
+        .chunks(1 << 16)
+        .map(|block| {
+            block
+                .iter()
+                .map(|&v| u32::from(v == i16::MAX || v == i16::MIN))
+                .sum::<u32>() as usize
+        })
+        .sum();
     let share = saturated as f64 / data.len().max(1) as f64;
     if share <= MOST_SATURATED {
         return Ok(());
