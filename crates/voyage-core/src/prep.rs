@@ -545,23 +545,18 @@ fn prepare_stored(
                 );
             }
         }
-        let all: Vec<usize> = plugs.iter().chain(&more).copied().collect();
         // With the further holes plugged too, unless they cut the colon itself: then the
         // holes of the trace alone.
-        let retraced = (!plugs.is_empty() && round < MAX_PLUG_ROUNDS)
-            .then(|| {
-                retrace_plugged(&mut seg, &grid, &cl_opts, opts, &mut laps, &all)
-                    .map(|t| (t, &all))
-                    .or_else(|| {
-                        (!more.is_empty())
-                            .then(|| {
-                                retrace_plugged(&mut seg, &grid, &cl_opts, opts, &mut laps, &plugs)
-                            })
-                            .flatten()
-                            .map(|t| (t, &plugs))
-                    })
-            })
-            .flatten();
+        let mut tries = Vec::new();
+        if !plugs.is_empty() && round < MAX_PLUG_ROUNDS {
+            if !more.is_empty() {
+                tries.push(plugs.iter().chain(&more).copied().collect());
+            }
+            tries.push(plugs.clone());
+        }
+        let retraced = tries.into_iter().find_map(|these: Vec<usize>| {
+            retrace_plugged(&mut seg, &grid, &cl_opts, opts, &mut laps, &these).map(|t| (t, these))
+        });
         match retraced {
             Some((t, these)) => {
                 plugged.extend(these);
