@@ -615,100 +615,184 @@ pub fn fly<S: DistanceStore>(
     dir: Direction,
     opts: &FlightOptions,
 ) -> Result<Flight> {
-    let guide = Guide::new(cl, dir);
-    let pose = start_pose(field, cl, dir, opts)?;
-    let mut sub = Submarine::new(field, pose, opts.safety)?;
-    sub.potential = opts.potential;
-    sub.dynamics = opts.dynamics;
-    sub.modes = opts.modes;
-    sub.direction = dir;
+    let mut run = FlightRun::new(field, cl, dir, opts)?;
+    while run.step(field).is_some() {}
+    Ok(run.finish(field))
+}
 
-    let max_sim = opts.max_sim_s.unwrap_or(cl.length_mm / 5.0 + 60.0);
-    let frame_dt = 1.0 / opts.fps;
+/// An automatic flight one frame at a time: [`fly`] runs it to its end, a reading or a
+/// window steps it as it goes. The field is passed to each step, the same one each time.
+pub struct FlightRun {
+    opts: FlightOptions,
+    guide: Guide,
+    sub: Submarine,
+    pilot: Autopilot,
+    max_sim: f64,
+    frame_dt: f64,
+    reach: f64,
+    start_dt_mm: f64,
+    flight: Flight,
+    wall_sum: f64,
+    radius_sum: f64,
+    physics_ns: u128,
+    track: Vec<(DVec3, DVec3)>,
+    over: bool,
+}
 
-    let mut f = Flight {
-        direction: dir,
-        reached: false,
-        frames: 0,
-        sim_seconds: 0.0,
-        min_wall_distance_mm: f64::INFINITY,
-        mean_wall_distance_mm: 0.0,
-        mean_local_radius_mm: 0.0,
-        stalls: 0,
-        path_length_mm: 0.0,
-        step_ns: 0.0,
-        substeps: 0,
-        clipped_substeps: 0,
-        final_dt_mm: f64::INFINITY,
-        rescues: Vec::new(),
-        short_end_mm: 0.0,
-        mean_heading_error_deg: 0.0,
-        poses: Vec::new(),
-    };
-    let dt_at = |x: DVec3| field.sample(x, dir).dt.unwrap_or(f64::INFINITY);
-    let (mut wall_sum, mut radius_sum) = (0.0, 0.0);
-    let mut physics_ns = 0u128;
-    let mut pilot = Autopilot::new(cl, dir, opts, sub.state.x, dt_at(sub.state.x));
-    f.short_end_mm = pilot.fit_reach(field, dir, opts.safety.min_wall_mm);
-    let reach = pilot.reach_mm;
-    let mut track: Vec<(DVec3, DVec3)> = Vec::new();
-    if opts.keep_poses {
-        f.poses.push(sub.pose());
+impl FlightRun {
+    /// At rest at the start of `dir` ([`start_pose`]); the first step moves.
+    pub fn new<S: DistanceStore>(
+        field: &PotentialField<S>,
+        cl: &Centerline,
+        dir: Direction,
+        opts: &FlightOptions,
+    ) -> Result<FlightRun> {
+        let guide = Guide::new(cl, dir);
+        let pose = start_pose(field, cl, dir, opts)?;
+        let mut sub = Submarine::new(field, pose, opts.safety)?;
+        sub.potential = opts.potential;
+        sub.dynamics = opts.dynamics;
+        sub.modes = opts.modes;
+        sub.direction = dir;
+        let dt_at = |x: DVec3| field.sample(x, dir).dt.unwrap_or(f64::INFINITY);
+        let start_dt_mm = dt_at(sub.state.x);
+        let mut pilot = Autopilot::new(cl, dir, opts, sub.state.x, start_dt_mm);
+        let short_end_mm = pilot.fit_reach(field, dir, opts.safety.min_wall_mm);
+        let mut flight = Flight {
+            direction: dir,
+            reached: false,
+            frames: 0,
+            sim_seconds: 0.0,
+            min_wall_distance_mm: f64::INFINITY,
+            mean_wall_distance_mm: 0.0,
+            mean_local_radius_mm: 0.0,
+            stalls: 0,
+            path_length_mm: 0.0,
+            step_ns: 0.0,
+            substeps: 0,
+            clipped_substeps: 0,
+            final_dt_mm: start_dt_mm,
+            rescues: Vec::new(),
+            short_end_mm,
+            mean_heading_error_deg: 0.0,
+            poses: Vec::new(),
+        };
+        if opts.keep_poses {
+            flight.poses.push(sub.pose());
+        }
+        Ok(FlightRun {
+            opts: opts.clone(),
+            guide,
+            max_sim: opts.max_sim_s.unwrap_or(cl.length_mm / 5.0 + 60.0),
+            frame_dt: 1.0 / opts.fps,
+            reach: pilot.reach_mm,
+            start_dt_mm,
+            sub,
+            pilot,
+            flight,
+            wall_sum: 0.0,
+            radius_sum: 0.0,
+            physics_ns: 0,
+            track: Vec::new(),
+            over: false,
+        })
     }
-    loop {
+
+    /// Where the submarine stands now.
+    pub fn pose(&self) -> Pose {
+        self.sub.pose()
+    }
+
+    pub fn direction(&self) -> Direction {
+        self.flight.direction
+    }
+
+    /// Frames flown so far.
+    pub fn frames(&self) -> usize {
+        self.flight.frames
+    }
+
+    /// Dt (mm along the lumen to the goal) at the start, and at the last frame: how far the
+    /// flight has got, for a progress bar.
+    pub fn start_dt_mm(&self) -> f64 {
+        self.start_dt_mm
+    }
+
+    pub fn dt_mm(&self) -> f64 {
+        self.flight.final_dt_mm
+    }
+
+    /// One frame: the pose after it, or None when the flight is over (the goal reached, the
+    /// time spent or too many stalls).
+    pub fn step<S: DistanceStore>(&mut self, field: &PotentialField<S>) -> Option<Pose> {
+        if self.over {
+            return None;
+        }
+        let dir = self.flight.direction;
+        let dt_at = |x: DVec3| field.sample(x, dir).dt.unwrap_or(f64::INFINITY);
+        let (sub, pilot, f) = (&mut self.sub, &mut self.pilot, &mut self.flight);
         let t = sub.state.t;
         let dt_now = dt_at(sub.state.x);
         f.final_dt_mm = dt_now;
-        if dt_now <= reach {
+        if dt_now <= self.reach {
             f.reached = true;
-            break;
+            self.over = true;
+            return None;
         }
-        if t >= max_sim || pilot.stalls >= opts.max_stalls {
-            break;
+        if t >= self.max_sim || pilot.stalls >= self.opts.max_stalls {
+            self.over = true;
+            return None;
         }
         let before = sub.state.x;
         let clock = Instant::now();
-        match pilot.glide(sub.state.x, t, dt_now, frame_dt) {
-            Some(pose) if sub.glide_to(field, pose, frame_dt) => {
+        match pilot.glide(sub.state.x, t, dt_now, self.frame_dt) {
+            Some(pose) if sub.glide_to(field, pose, self.frame_dt) => {
                 pilot.watch_from(sub.state.t, dt_at(sub.state.x));
                 pilot.forget_look();
             }
             _ => {
                 let input = pilot.input(t, dt_now, sub.state.x, sub.potential.ct);
-                sub.potential.rho = pilot.rho(&opts.potential);
-                sub.look_at = Some(pilot.look(sub.state.x, frame_dt));
-                let r = sub.step(field, frame_dt, &input);
+                sub.potential.rho = pilot.rho(&self.opts.potential);
+                sub.look_at = Some(pilot.look(sub.state.x, self.frame_dt));
+                let r = sub.step(field, self.frame_dt, &input);
                 f.substeps += r.substeps;
                 f.clipped_substeps += r.clipped;
             }
         }
-        physics_ns += clock.elapsed().as_nanos();
+        self.physics_ns += clock.elapsed().as_nanos();
         f.frames += 1;
 
         let x = sub.state.x;
         f.path_length_mm += x.distance(before);
         let ds = field.ds(x);
         f.min_wall_distance_mm = f.min_wall_distance_mm.min(ds);
-        wall_sum += ds;
-        radius_sum += guide.radius[pilot.moved_to(x)];
-        track.push((x, sub.pose().z_body()));
-        if opts.keep_poses {
-            f.poses.push(sub.pose());
+        self.wall_sum += ds;
+        self.radius_sum += self.guide.radius[pilot.moved_to(x)];
+        let pose = sub.pose();
+        self.track.push((x, pose.z_body()));
+        if self.opts.keep_poses {
+            f.poses.push(pose);
         }
+        Some(pose)
     }
-    f.sim_seconds = sub.state.t;
-    f.stalls = pilot.stalls;
-    f.rescues = std::mem::take(&mut pilot.rescues);
-    if f.frames > 0 {
-        f.mean_wall_distance_mm = wall_sum / f.frames as f64;
-        f.mean_local_radius_mm = radius_sum / f.frames as f64;
-        f.step_ns = physics_ns as f64 / f.frames as f64;
-    } else {
-        f.min_wall_distance_mm = field.ds(sub.state.x);
-        f.mean_wall_distance_mm = f.min_wall_distance_mm;
+
+    /// The flight's outcome: where it stopped, with what it met on the way.
+    pub fn finish<S: DistanceStore>(mut self, field: &PotentialField<S>) -> Flight {
+        let mut f = self.flight;
+        f.sim_seconds = self.sub.state.t;
+        f.stalls = self.pilot.stalls;
+        f.rescues = std::mem::take(&mut self.pilot.rescues);
+        if f.frames > 0 {
+            f.mean_wall_distance_mm = self.wall_sum / f.frames as f64;
+            f.mean_local_radius_mm = self.radius_sum / f.frames as f64;
+            f.step_ns = self.physics_ns as f64 / f.frames as f64;
+        } else {
+            f.min_wall_distance_mm = field.ds(self.sub.state.x);
+            f.mean_wall_distance_mm = f.min_wall_distance_mm;
+        }
+        f.mean_heading_error_deg = mean_heading_error(&self.track, self.opts.fps);
+        f
     }
-    f.mean_heading_error_deg = mean_heading_error(&track, opts.fps);
-    Ok(f)
 }
 
 /// Mean angle (degrees) between the view z_body and the direction of travel: the path's

@@ -1,5 +1,5 @@
 //! Coverage of the mucosa: which part of the surface the frames shown have shown, the
-//! unseen patches left, a camera pose that shows each, and the review that visits them.
+//! unseen patches left, and a camera pose that shows each.
 //!
 //! A triangle counts as seen when it covers a pixel of a shown frame within the reading
 //! distance of the eye and faces the eye within the reading angle (its smoothed normal, as
@@ -9,7 +9,8 @@
 //! Readers who fly one way see about 77 % of the mucosa and both ways about 94 %; stepping
 //! through the unseen patches raises that to about 98 % (Pickhardt et al., 2006). The
 //! paper's camera looks only where the flight goes, which leaves the wall of a wide stretch
-//! unseen; a reading flight here also glances around ([`Glances`]), as readers do.
+//! unseen; a reading flight here also glances around ([`Glances`]), as readers do. The
+//! reading itself, flights and review, is [`crate::ReadingRun`].
 
 use glam::{DQuat, DVec3};
 use serde::Serialize;
@@ -21,8 +22,8 @@ use crate::{
     shading::Lighting,
     visibility::{Strategy, Visibility},
 };
-use voyage_core::{Bricked, Cells, OFF_WALL_MM, Result, Study};
-use voyage_nav::{Camera, Direction, Flight, FlightOptions, Pose, fly, potential_field};
+use voyage_core::{Bricked, Cells, OFF_WALL_MM, Study};
+use voyage_nav::{Camera, Pose};
 
 /// What counts as seen, and which unseen patches are listed.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -618,176 +619,4 @@ impl Glances {
             turned(best_turn)
         })
     }
-}
-
-/// One patch as the review met it.
-#[derive(Clone, Debug)]
-pub struct Visit {
-    pub patch: Patch,
-    /// The pose shown, None where no viewpoint sees the patch.
-    pub pose: Option<Pose>,
-    /// Area of the surface the visit newly showed (mm²).
-    pub shown_mm2: f64,
-}
-
-/// Visits every unseen patch, largest first, then the smaller bits down to
-/// `review_min_mm2`, and marks what each pose shows; patches a visit
-/// leaves (parts hidden from the first pose) are visited again, up to `rounds` times over.
-/// Returns the visits of all rounds in order. `progress` hears (round, patches visited,
-/// patches of the round) before each visit.
-pub fn review(
-    reader: &mut Reader,
-    mesh: &CellMesh,
-    cells: &Cells,
-    coverage: &mut Coverage,
-    lumen: &Lumen,
-    rounds: usize,
-    mut progress: impl FnMut(usize, usize, usize),
-) -> Vec<Visit> {
-    let mut visits = Vec::new();
-    for round in 0..rounds {
-        let patches = coverage.review_targets(mesh);
-        if patches.is_empty() {
-            break;
-        }
-        let mut shown = 0.0;
-        let total = patches.len();
-        for (n, patch) in patches.into_iter().enumerate() {
-            progress(round, n, total);
-            let pose = viewing_pose(&patch, mesh, lumen, coverage.options());
-            let shown_mm2 = pose.map_or(0.0, |p| reader.show(mesh, cells, p, coverage));
-            shown += shown_mm2;
-            visits.push(Visit {
-                patch,
-                pose,
-                shown_mm2,
-            });
-        }
-        if shown == 0.0 {
-            break;
-        }
-    }
-    visits
-}
-
-/// Review rounds of [`read_both_ways`]: a patch a pose showed only in part is visited again,
-/// from the rest's own viewpoint.
-pub const REVIEW_ROUNDS: usize = 10;
-
-/// How far a reading has got, for a progress bar: the step it is at, and of that step's
-/// `total` units (frames of a flight, patches of a review round) how many are done.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ReadingProgress {
-    pub step: ReadingStep,
-    pub done: usize,
-    pub total: usize,
-}
-
-/// The steps of [`read_both_ways`], in order.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ReadingStep {
-    /// The automatic flight is simulated (one unit).
-    Fly(Direction),
-    /// Its frames are drawn and marked.
-    Read(Direction),
-    /// A review round visits the unseen patches (rounds from 0).
-    Review(usize),
-}
-
-impl ReadingStep {
-    /// A few words for a progress line.
-    pub fn describe(&self) -> String {
-        match self {
-            ReadingStep::Fly(d) => format!("flying {}", d.name()),
-            ReadingStep::Read(d) => format!("{} frames", d.name()),
-            ReadingStep::Review(r) => format!("review, round {}", r + 1),
-        }
-    }
-}
-
-/// What a two-way reading with review showed.
-pub struct Reading {
-    /// The automatic flights, rectum → cecum then cecum → rectum.
-    pub flights: [Flight; 2],
-    /// The glances each flight took ([`Glances`]).
-    pub glances: [usize; 2],
-    /// What the first flight showed.
-    pub one_way: Coverage,
-    /// What both flights showed.
-    pub two_way: Coverage,
-    /// Both flights and the review.
-    pub after_review: Coverage,
-    /// The unseen patches of the two-way reading (at least `min_patch_mm2`), largest first,
-    /// each with the pose the review showed it from and what that showed.
-    pub patches: Vec<Visit>,
-    /// Every visit of the review (its later rounds revisit what a first pose left).
-    pub visits: usize,
-}
-
-/// The reading the paper's system makes possible, measured: both automatic flights, every
-/// frame drawn at `size`² through `camera`'s lens and marked, then the review of every
-/// unseen patch of at least `options.min_patch_mm2`. `progress` hears at each step's start
-/// and after each frame or visit.
-pub fn read_both_ways(
-    study: &Study,
-    mesh: &CellMesh,
-    options: CoverageOptions,
-    camera: Camera,
-    size: u32,
-    mut progress: impl FnMut(ReadingProgress),
-) -> Result<Reading> {
-    let mut tell = |step: ReadingStep, done: usize, total: usize| {
-        progress(ReadingProgress { step, done, total })
-    };
-    let flight_opts = FlightOptions::for_study(study);
-    let min_wall_mm = flight_opts.safety.min_wall_mm;
-    let field = potential_field(study, min_wall_mm)?;
-    let cells = &study.cells;
-    let mut reader = Reader::new(cells, camera, size, size);
-    let mut read_flight = |dir: Direction| -> Result<(Flight, Coverage, usize)> {
-        tell(ReadingStep::Fly(dir), 0, 1);
-        let flight = fly(&field, &study.centerline, dir, &flight_opts)?;
-        let mut seen = Coverage::new(mesh, options);
-        let mut glances = Glances::new(cells, camera);
-        let frames = flight.poses.len();
-        for (n, &pose) in flight.poses.iter().enumerate() {
-            tell(ReadingStep::Read(dir), n, frames);
-            reader.show(mesh, cells, pose, &mut seen);
-            if !options.look_around {
-                continue;
-            }
-            if let Some(glance) = glances.next(mesh, cells, pose, &mut seen) {
-                reader.show(mesh, cells, glance, &mut seen);
-            }
-        }
-        Ok((flight, seen, glances.taken))
-    };
-    let (forward, one_way, glances_forward) = read_flight(Direction::Forward)?;
-    let (backward, back, glances_backward) = read_flight(Direction::Backward)?;
-    let mut two_way = one_way.clone();
-    two_way.union(&back);
-    let lumen = Lumen::of(study, min_wall_mm);
-    let mut after_review = two_way.clone();
-    let listed = two_way.patches(mesh).len();
-    let visits = review(
-        &mut reader,
-        mesh,
-        cells,
-        &mut after_review,
-        &lumen,
-        REVIEW_ROUNDS,
-        |round, done, total| tell(ReadingStep::Review(round), done, total),
-    );
-    let total_visits = visits.len();
-    // The review's first round visits the two-way reading's listed patches first, in order.
-    let patches = visits.into_iter().take(listed).collect();
-    Ok(Reading {
-        flights: [forward, backward],
-        glances: [glances_forward, glances_backward],
-        one_way,
-        two_way,
-        after_review,
-        patches,
-        visits: total_visits,
-    })
 }

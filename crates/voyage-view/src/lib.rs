@@ -4,7 +4,8 @@
 //! the CT in a small box (paper Fig. 9); and the translucency view, the surface coloured by
 //! what lies beneath it.
 //! Coverage of the mucosa: what the frames shown have shown, the unseen patches and a pose
-//! for each ([`Coverage`], [`review`]).
+//! for each ([`Coverage`]); the reading that marks it, stepped by the CLI and the window alike
+//! ([`ReadingRun`]).
 //! Markers and measurements ([`Findings`]) are picked on the same surface ([`pick`]).
 
 mod closeup;
@@ -13,6 +14,7 @@ mod findings;
 mod mesh;
 mod polyp;
 mod raster;
+mod reading;
 mod shading;
 #[cfg(feature = "survey")]
 mod survey;
@@ -22,8 +24,7 @@ mod visibility;
 pub use closeup::{CloseupBox, MAX_HALF_SIZE_MM, TfPoint, TransferFunction, render_closeup};
 pub use coverage::{
     Coverage, CoverageOptions, GLANCE_EVERY_MM, GLANCE_MIN_MM2, GLANCE_TURN_DEG, GLANCE_WAYS,
-    Glances, Lumen, Patch, READING_FOV_DEG, REVIEW_MIN_MM2, REVIEW_ROUNDS, Reader, Reading,
-    ReadingProgress, ReadingStep, Visit, glance_turns, read_both_ways, review, viewing_pose,
+    Glances, Lumen, Patch, READING_FOV_DEG, REVIEW_MIN_MM2, Reader, glance_turns, viewing_pose,
 };
 pub use findings::{
     Adequacy, C0_BELOW_COVERAGE_PCT, CRads, FindingKind, Findings, Hit, Marker, Measurement,
@@ -33,6 +34,10 @@ pub use mesh::{CHUNK_TRIANGLES, CellMesh, Chunk, DISPLAY_NORMAL_PASSES, smooth_n
 pub use polyp::{MIN_HEIGHT_MM, PolypSize, measure_polyp};
 pub use raster::{
     Frame, NO_TRIANGLE, Pixel, Rasterizer, ScreenRect, Shading, View, render_rgba, shade,
+};
+pub use reading::{
+    READING_PX, REVIEW_ROUNDS, Reading, ReadingMove, ReadingProgress, ReadingRun, ReadingStep,
+    Scene, Visit, read_both_ways,
 };
 pub use shading::{Lighting, encode};
 #[cfg(feature = "survey")]

@@ -123,6 +123,20 @@ fn turned_right_deg(before: &Value, after: &Value) -> f64 {
     z1.dot(right).atan2(z1.dot(forward)).to_degrees()
 }
 
+/// `voyage ARGS`, which must succeed: its standard output as JSON (null where it is not).
+fn cli_json(args: &[&str]) -> Value {
+    let out = Command::new(env!("CARGO_BIN_EXE_voyage"))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "voyage {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap_or(Value::Null)
+}
+
 fn read_json(p: &Path) -> Value {
     serde_json::from_str(
         &std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display())),
@@ -798,12 +812,14 @@ fn two_way_reading_runs_to_the_end_and_coverage_rises() {
     let ct = dir.join("colon.nii.gz");
     small_colon(&ct, &[]);
     let shots = ["partial", "read"].map(|n| dir.join(format!("{n}.png")));
+    let export = dir.join("export");
     let steps = serde_json::json!([
         {"play": true}, {"wait": 150}, {"play": false}, {"wait": 2},
         {"screenshot": shots[0]},
         {"two_way": true},
         {"wait": 3},
         {"screenshot": shots[1]},
+        {"export": export}, {"wait": 2},
         {"quit": true}
     ]);
     let r = view_script(&display, &ct, &["--paused"], steps, &dir, "script");
@@ -816,33 +832,67 @@ fn two_way_reading_runs_to_the_end_and_coverage_rises() {
         pct("after_review_pct"),
     );
     eprintln!(
-        "window: one way {one:.1} %, two ways {two:.1} %, after review {after:.1} %, {} patches, {} visits, {} glances (a try {:.2} ms); marked {} of {} frames at {:.2} ms",
+        "window: one way {one:.2} %, two ways {two:.2} %, after review {after:.2} %, {} patches, {} visits, {} glances (a step {:.2} ms); marked {} of {} frames at {:.2} ms",
         reading["patches"],
         reading["visits"],
         reading["glances"],
-        c["probe_ms"],
+        c["step_ms"],
         c["frames_marked"],
         c["frames_asked"],
         c["mark_ms"]
     );
     assert_eq!(reading["stage"], "done", "{c}");
-    assert!(one < two && two < after, "{c}");
-    // The small phantom (half scale, 1.5 mm voxels) reads 97 % on the CLI; the window marks
-    // within a time budget, so a little less.
+    assert!(one < two && two <= after, "{c}");
     assert!(after >= 94.0, "after review {after:.1} %");
-    // The review visits what the flights left: since the flights look down the lumen (93 %
-    // one way) that is none or one patch of 30 mm² or more (three when they looked down
-    // −∇V), and smaller bits; the window marks within a time budget, so which varies.
     let (patches, visits) = (
         reading["patches"].as_u64().unwrap(),
         reading["visits"].as_u64().unwrap(),
     );
-    assert!(visits >= 1 && visits >= patches, "{c}");
+    assert!(visits >= patches, "{c}");
     assert!(c["session_pct"].as_f64().unwrap() >= after - 1e-9);
-    // The flights try looking around as `voyage coverage`'s do (a try was timed). Whether a
-    // glance is worth showing varies: looking down the lumen, the small phantom's flights
-    // leave little unseen beside them (0–3 glances in runs of this test).
-    assert!(c["probe_ms"].as_f64().is_some_and(|ms| ms > 0.0), "{c}");
+    assert!(c["step_ms"].as_f64().is_some_and(|ms| ms > 0.0), "{c}");
+    // One reading engine: `voyage coverage` on the same file gives the same figures, and
+    // `voyage report` the same C-RADS category and coverage table as the window's Export.
+    let cli = cli_json(&["coverage", ct.to_str().unwrap(), "--json"]);
+    for k in ["one_way_pct", "two_way_pct", "after_review_pct"] {
+        let (w, c) = (reading[k].as_f64().unwrap(), cli[k].as_f64().unwrap());
+        assert!(
+            (w - c).abs() < 1e-9,
+            "{k}: window {w} against the CLI's {c}"
+        );
+    }
+    let cli_glances: u64 = cli["glances"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|g| g.as_u64().unwrap())
+        .sum();
+    assert_eq!(reading["glances"].as_u64(), Some(cli_glances), "{cli}");
+    let cli_export = dir.join("cli-export");
+    cli_json(&[
+        "report",
+        ct.to_str().unwrap(),
+        "--findings",
+        export.join("findings.json").to_str().unwrap(),
+        "--out",
+        cli_export.to_str().unwrap(),
+    ]);
+    let [window_html, cli_html] =
+        [&export, &cli_export].map(|d| std::fs::read_to_string(d.join("report.html")).unwrap());
+    let part = |html: &str, from: &str, to: &str| {
+        let i = html.find(from).expect(from);
+        html[i..i + html[i..].find(to).expect(to)].to_string()
+    };
+    assert_eq!(
+        part(&window_html, "<span id=\"c-rads\">", "</span>"),
+        part(&cli_html, "<span id=\"c-rads\">", "</span>")
+    );
+    let flights_and_review =
+        |html: &str| part(html, "<table id=\"coverage\">", "<tr><th>Whole session");
+    assert_eq!(
+        flights_and_review(&window_html),
+        flights_and_review(&cli_html)
+    );
     // The scout shows the unseen mucosa in blue: much of it after 150 frames, little after.
     let view = view_rect(&r);
     let scout = [view[2] + 4.0, view[1] + 20.0, 1280.0, view[3]];

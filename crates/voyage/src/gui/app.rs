@@ -15,8 +15,8 @@ use voyage_core::LEFT_OUT_DOUBT_ML;
 use voyage_io::export::{ReportCoverage, export_reading};
 use voyage_nav::{Camera, Direction};
 use voyage_view::{
-    CloseupBox, FindingKind, Findings, Hit, Material, TransferFunction, TranslucencyOptions,
-    encode, pick, render_closeup, render_translucency,
+    CloseupBox, FindingKind, Findings, Hit, Material, ReadingStep, TransferFunction,
+    TranslucencyOptions, encode, pick, render_closeup, render_translucency,
 };
 
 use voyage_nav::Input;
@@ -24,7 +24,7 @@ use voyage_nav::Input;
 use super::{
     WindowArgs,
     corrections::{self, Correction},
-    coverage::{Stage, WindowCoverage},
+    coverage::WindowCoverage,
     endoscopy::{Endoscope, label, project, ray_at, surface_point_on_screen, visible_centerline},
     frame_times::FrameTimes,
     loader::{Job, Source},
@@ -586,9 +586,16 @@ impl App {
             }
             Action::TwoWayReading => {
                 if let Some(s) = &mut self.session {
-                    s.coverage.on = true;
-                    s.start_reading();
-                    self.status = "two-way reading started".into();
+                    if s.coverage.reading_running() {
+                        s.stop_reading();
+                        self.status = "two-way reading stopped".into();
+                    } else {
+                        s.coverage.on = true;
+                        self.status = match s.start_reading() {
+                            Ok(()) => "two-way reading started".into(),
+                            Err(e) => format!("the two-way reading cannot start: {e}"),
+                        };
+                    }
                 }
             }
             Action::NextUnseenPatch => self.next_unseen_patch(),
@@ -718,13 +725,16 @@ impl App {
             self.status = "nothing to export: no study is open".into();
             return;
         };
-        let reading = s.coverage.report();
+        // The reading's figures are those of `voyage report` on the same study: one engine.
+        let reading = s.coverage.reading.as_ref();
         let coverage = ReportCoverage {
-            session_pct: Some(reading.session_pct),
-            one_way_pct: reading.reading.as_ref().and_then(|r| r.one_way_pct),
-            two_way_pct: reading.reading.as_ref().and_then(|r| r.two_way_pct),
-            after_review_pct: reading.reading.as_ref().and_then(|r| r.after_review_pct),
-            patches_left: None,
+            session_pct: Some(s.coverage.session.percent()),
+            one_way_pct: reading.and_then(|r| r.one_way_pct()),
+            two_way_pct: reading.and_then(|r| r.two_way_pct()),
+            after_review_pct: reading.and_then(|r| r.after_review_pct()),
+            patches_left: reading
+                .filter(|r| r.is_done())
+                .map(|r| r.seen().patches(&s.mesh).len()),
         };
         let result = export_reading(&dir, &self.findings, &s.study, &s.name, coverage, |_, m| {
             let cam = Camera::new(m.view).with_fov(s.fov);
@@ -1353,7 +1363,10 @@ impl App {
                 self.last_cells = self.endoscope.last_cells.clone();
                 self.times.record_render(self.endoscope.stats.render_ms);
                 s.mark_shown(&s.camera(), size, self.times.last_frame_ms());
-                s.step_reading(size);
+                if let Err(e) = s.step_reading() {
+                    s.stop_reading();
+                    self.status = format!("the two-way reading stopped: {e}");
+                }
                 self.closeup_overlay(ui, rect);
                 self.translucency_overlay(ui, rect);
                 self.overlays(ui, rect);
@@ -1592,8 +1605,8 @@ impl App {
             "{} · {} · wall {:.1} mm{}{}{}",
             if s.playing {
                 "flying"
-            } else if s.coverage.glancing() {
-                "glancing around"
+            } else if s.coverage.reading_running() {
+                "reading"
             } else {
                 "paused"
             },
@@ -1800,19 +1813,34 @@ fn coverage_section(ui: &mut egui::Ui, c: &WindowCoverage, actions: &mut Vec<Act
     ));
     if let Some(r) = &c.reading {
         let pct = |v: Option<f64>| v.map_or("…".to_string(), |x| format!("{x:.1} %"));
-        let stage = match &r.stage {
-            Stage::Forward => format!("rectum to cecum, {} glances", r.glances_taken),
-            Stage::Backward => format!("cecum to rectum, {} glances", r.glances_taken),
-            Stage::Review { .. } => format!("review: patch {} of {}", r.visits, r.patches),
-            Stage::Done => "done".to_string(),
+        let p = r.progress();
+        let stage = match p.step {
+            ReadingStep::Read(Direction::Forward) => {
+                format!("rectum to cecum, {} glances", r.glances())
+            }
+            ReadingStep::Read(Direction::Backward) => {
+                format!("cecum to rectum, {} glances", r.glances())
+            }
+            ReadingStep::Review(round) => format!(
+                "review round {}: patch {} of {}",
+                round + 1,
+                p.done,
+                p.total
+            ),
+            ReadingStep::Done => "done".to_string(),
         };
         ui.label(format!("two-way reading: {stage}"));
+        if !r.is_done() {
+            let fraction = p.done as f32 / p.total.max(1) as f32;
+            ui.add(egui::ProgressBar::new(fraction).desired_width(200.0))
+                .on_hover_text("W stops the reading");
+        }
         ui.label(
             RichText::new(format!(
                 "one way {} · both ways {} · after review {}",
-                pct(r.one_way_pct),
-                pct(r.two_way_pct),
-                pct(r.after_review_pct)
+                pct(r.one_way_pct()),
+                pct(r.two_way_pct()),
+                pct(r.after_review_pct())
             ))
             .small(),
         );

@@ -6,17 +6,18 @@
 //! stands still is marked once. The session's coverage counts every frame since the study
 //! opened; the flight's, the frames since the direction was last set.
 //! The two-way reading (rectum → cecum, cecum → rectum, then a review of every unseen
-//! patch) is a small state machine the window steps once per frame; its flights glance
-//! around as `voyage coverage`'s do, pausing on each glance for [`GLANCE_FRAMES`].
+//! patch) is `voyage_view`'s [`ReadingRun`], the one `voyage coverage` and `voyage report`
+//! run: the window steps it once per frame and shows each move, holding a glance for
+//! [`GLANCE_FRAMES`] and a review's visit for [`DWELL_FRAMES`].
 
 use std::time::Instant;
 
 use glam::DVec3;
 use voyage_core::{Cells, Study};
-use voyage_nav::{Camera, Pose};
+use voyage_nav::{BrickStore, Camera, Pose};
 use voyage_view::{
-    CellMesh, Coverage, CoverageOptions, Glances, Lumen, Patch, READING_FOV_DEG, REVIEW_ROUNDS,
-    Reader, viewing_pose,
+    CellMesh, Coverage, CoverageOptions, Lumen, Patch, READING_FOV_DEG, Reader, ReadingMove,
+    ReadingRun, ReadingStep, Scene, viewing_pose,
 };
 
 use super::{
@@ -33,10 +34,10 @@ pub const MARK_HEIGHT: u32 = 128;
 /// Patches "next unseen" tries for a viewpoint, largest first.
 const NEXT_TRIES: usize = 10;
 
-/// Frames the review stays at each patch (it marks every one of them).
+/// Frames the window holds a review's visit on screen (the reading marked it once).
 pub const DWELL_FRAMES: u32 = 20;
 
-/// Frames a glance of the reading's flights is held (it is marked when taken).
+/// Frames the window holds a glance of the reading's flights on screen.
 pub const GLANCE_FRAMES: u32 = 8;
 
 pub struct WindowCoverage {
@@ -48,16 +49,17 @@ pub struct WindowCoverage {
     /// What the current flight (direction) has shown.
     pub flight: Coverage,
     /// The two-way reading, while it runs and after.
-    pub reading: Option<TwoWay>,
+    pub reading: Option<ReadingRun>,
+    /// Frames the reading's last move stays on screen before the next step.
+    hold: u32,
     /// The patch last visited, outlined in the view: its boundary edges.
     pub outline: Vec<[DVec3; 2]>,
     last: Option<(Pose, f64, [u32; 2])>,
     mark_ms: Vec<f64>,
-    /// Marking time the frames so far have allowed and not used (ms); the reading's glances
-    /// try their ways out of it too.
+    /// Marking time the frames so far have allowed and not used (ms).
     budget_ms: f64,
-    /// Running mean time of one try of a glance's way (ms).
-    probe_ms: f64,
+    /// Running mean time of one step of the reading (ms).
+    step_ms: f64,
     /// Frames that asked to be marked, and those that were.
     pub frames_asked: u64,
     pub frames_marked: u64,
@@ -67,56 +69,6 @@ pub struct WindowCoverage {
     tinted_at: Option<Instant>,
     /// The camera keeps this far from the wall (the session's safety margin).
     min_wall_mm: f64,
-}
-
-/// Where the two-way reading is.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Stage {
-    Forward,
-    Backward,
-    /// At patch `index` of this round's list, for `dwell` more frames.
-    Review {
-        round: usize,
-        index: usize,
-        dwell: u32,
-    },
-    Done,
-}
-
-pub struct TwoWay {
-    pub stage: Stage,
-    /// What the reading showed (from its start).
-    pub seen: Coverage,
-    pub one_way_pct: Option<f64>,
-    pub two_way_pct: Option<f64>,
-    pub after_review_pct: Option<f64>,
-    /// This round's patches, largest first.
-    queue: Vec<Patch>,
-    /// Unseen patches when the review began, and the visits made.
-    pub patches: usize,
-    pub visits: usize,
-    /// Area the current round's visits newly showed (mm²).
-    round_shown: f64,
-    /// The current flight's looking around ([`Glances`]), and the glance held now: frames
-    /// left.
-    glances: Option<Glances>,
-    glancing: Option<u32>,
-    /// Glances taken by both flights.
-    pub glances_taken: usize,
-}
-
-/// What the window must do for the reading this frame.
-pub enum Move {
-    Nothing,
-    /// Fly from the start of the direction, playing.
-    FlyForward,
-    FlyBackward,
-    /// Stand still at this pose.
-    Place(Pose),
-    /// Pause the flight and look from this pose (a glance around).
-    Glance(Pose),
-    /// The glance is over: the flight goes on from where it paused.
-    Resume,
 }
 
 impl WindowCoverage {
@@ -130,11 +82,12 @@ impl WindowCoverage {
             session: Coverage::new(mesh, options),
             flight: Coverage::new(mesh, options),
             reading: None,
+            hold: 0,
             outline: Vec::new(),
             last: None,
             mark_ms: Vec::new(),
             budget_ms: 0.0,
-            probe_ms: 0.0,
+            step_ms: 0.0,
             frames_asked: 0,
             frames_marked: 0,
             scout_tint: (Vec::new(), 0, f64::NAN),
@@ -164,7 +117,7 @@ impl WindowCoverage {
         self.frames_asked += 1;
         let cost = self.mean_mark_ms();
         // A long stall (loading, a dialog) must not save up a burst of marking.
-        let most = 2.0 * cost.max(self.probe_ms) + 1.0;
+        let most = 2.0 * cost + 1.0;
         self.budget_ms = (self.budget_ms + BUDGET_SHARE * frame_ms).min(most);
         if self.budget_ms < cost {
             return;
@@ -185,26 +138,15 @@ impl WindowCoverage {
         self.reader.set_lens(*camera, width, MARK_HEIGHT);
         self.reader
             .show(mesh, cells, camera.pose, &mut self.session);
-        // The same frame marks the flight's and the reading's coverage.
+        // The same frame marks the flight's coverage.
         let frame = self.reader.frame();
         let view = voyage_view::View::new(camera, width, MARK_HEIGHT);
         self.flight.mark(frame, &view, mesh);
-        if let Some(r) = &mut self.reading {
-            let shown = r.seen.mark(frame, &view, mesh);
-            r.round_shown += shown;
-        }
     }
 
     /// A two-way reading is under way.
     pub fn reading_running(&self) -> bool {
-        self.reading
-            .as_ref()
-            .is_some_and(|r| r.stage != Stage::Done)
-    }
-
-    /// The reading's flight has paused for a glance around.
-    pub fn glancing(&self) -> bool {
-        self.reading.as_ref().is_some_and(|r| r.glancing.is_some())
+        self.reading.as_ref().is_some_and(|r| !r.is_done())
     }
 
     /// Mean time to mark a frame (ms), over the frames marked.
@@ -223,183 +165,82 @@ impl WindowCoverage {
             session_pct: self.session.percent(),
             flight_pct: self.flight.percent(),
             mark_ms: self.mean_mark_ms(),
-            probe_ms: self.probe_ms,
+            step_ms: self.step_ms,
             frames_asked: self.frames_asked,
             frames_marked: self.frames_marked,
             reading: self.reading.as_ref().map(|r| ReadingReport {
-                stage: match r.stage {
-                    Stage::Forward => "forward",
-                    Stage::Backward => "backward",
-                    Stage::Review { .. } => "review",
-                    Stage::Done => "done",
+                stage: match r.progress().step {
+                    ReadingStep::Read(d) => d.name(),
+                    ReadingStep::Review(_) => "review",
+                    ReadingStep::Done => "done",
                 }
                 .into(),
-                one_way_pct: r.one_way_pct,
-                two_way_pct: r.two_way_pct,
-                after_review_pct: r.after_review_pct,
-                patches: r.patches,
-                visits: r.visits,
-                glances: r.glances_taken,
+                one_way_pct: r.one_way_pct(),
+                two_way_pct: r.two_way_pct(),
+                after_review_pct: r.after_review_pct(),
+                patches: r.listed_patches(),
+                visits: r.visits(),
+                glances: r.glances(),
             }),
         }
     }
 
-    /// Starts the two-way reading afresh.
-    pub fn start_reading(&mut self, mesh: &CellMesh) -> Move {
-        self.reading = Some(TwoWay {
-            stage: Stage::Forward,
-            seen: Coverage::new(mesh, *self.session.options()),
-            one_way_pct: None,
-            two_way_pct: None,
-            after_review_pct: None,
-            queue: Vec::new(),
-            patches: 0,
-            visits: 0,
-            round_shown: 0.0,
-            glances: None,
-            glancing: None,
-            glances_taken: 0,
-        });
+    /// Starts the two-way reading afresh (the reading's own lens and frames, as the CLI's).
+    pub fn start_reading(&mut self, scene: &Scene<BrickStore>) -> voyage_core::Result<()> {
+        self.reading = Some(ReadingRun::standard(scene)?);
+        self.hold = 0;
         self.flight.clear();
-        Move::FlyForward
+        Ok(())
     }
 
-    /// One frame of the reading: `reached` says the flight of the current direction has
-    /// reached its goal; `camera` is the view's now, in a view of `size` pixels.
+    /// Stops the reading where it is; what it showed stays in the session's coverage.
+    pub fn stop_reading(&mut self) {
+        if let Some(r) = self.reading.take() {
+            self.session.union(r.seen());
+        }
+        self.outline.clear();
+    }
+
+    /// One frame of the reading: its next move, or None while the last one is held on
+    /// screen or no reading runs.
     pub fn step_reading(
         &mut self,
-        reached: bool,
-        camera: &Camera,
-        size: [u32; 2],
-        mesh: &CellMesh,
-        study: &Study,
-    ) -> Move {
+        scene: &Scene<BrickStore>,
+    ) -> voyage_core::Result<Option<ReadingMove>> {
         let Some(r) = &mut self.reading else {
-            return Move::Nothing;
+            return Ok(None);
         };
-        match r.stage.clone() {
-            Stage::Forward | Stage::Backward if r.glancing.is_some() => {
-                let left = r.glancing.unwrap_or(0);
-                r.glancing = left.checked_sub(1);
-                if r.glancing.is_some() {
-                    Move::Nothing
-                } else {
-                    Move::Resume
-                }
-            }
-            Stage::Forward | Stage::Backward if !reached => self.glance(camera, size, mesh, study),
-            Stage::Forward => {
-                r.one_way_pct = Some(r.seen.percent());
-                r.stage = Stage::Backward;
-                r.glances = None;
-                self.flight.clear();
-                Move::FlyBackward
-            }
-            Stage::Backward => {
-                r.two_way_pct = Some(r.seen.percent());
-                // The listed patches lead the targets (largest first): counted, not found again.
-                r.queue = r.seen.review_targets(mesh);
-                let min_patch = r.seen.options().min_patch_mm2;
-                r.patches = r
-                    .queue
-                    .iter()
-                    .take_while(|p| p.area_mm2 >= min_patch)
-                    .count();
-                r.round_shown = 0.0;
-                r.stage = Stage::Review {
-                    round: 0,
-                    index: 0,
-                    dwell: 0,
-                };
-                Move::Nothing
-            }
-            Stage::Review {
-                round,
-                index,
-                dwell,
-            } => {
-                if dwell > 0 {
-                    r.stage = Stage::Review {
-                        round,
-                        index,
-                        dwell: dwell - 1,
-                    };
-                    return Move::Nothing;
-                }
-                // The next patch this round that a pose shows, its pose found now (one at a
-                // time, as voyage_view::review does, not all at the round's start in one frame).
-                let lumen = Lumen::of(study, self.min_wall_mm);
-                let next = (index..r.queue.len()).find_map(|i| {
-                    viewing_pose(&r.queue[i], mesh, &lumen, r.seen.options()).map(|p| (i, p))
-                });
-                if let Some((i, pose)) = next {
-                    self.outline = outline(&r.queue[i], mesh);
-                    r.visits += 1;
-                    r.stage = Stage::Review {
-                        round,
-                        index: i + 1,
-                        dwell: DWELL_FRAMES,
-                    };
-                    return Move::Place(pose);
-                }
-                // The round is over: another, for what the poses left, while it shows more.
-                let again = round + 1 < REVIEW_ROUNDS && r.round_shown > 0.0;
-                r.queue = if again {
-                    r.seen.review_targets(mesh)
-                } else {
-                    Vec::new()
-                };
-                if r.queue.is_empty() {
-                    r.after_review_pct = Some(r.seen.percent());
-                    r.stage = Stage::Done;
-                    self.outline.clear();
-                } else {
-                    r.round_shown = 0.0;
-                    r.stage = Stage::Review {
-                        round: round + 1,
-                        index: 0,
-                        dwell: 0,
-                    };
-                }
-                Move::Nothing
-            }
-            Stage::Done => Move::Nothing,
+        if r.is_done() {
+            return Ok(None);
         }
-    }
-
-    /// The reading's flights look around as `voyage coverage`'s do ([`Glances`], through
-    /// the view's lens). Its tries come out of the marking budget (a frame without budget
-    /// skips its try); a glance worth taking is marked now, whatever the budget, and held on
-    /// screen for [`GLANCE_FRAMES`].
-    fn glance(&mut self, camera: &Camera, size: [u32; 2], mesh: &CellMesh, study: &Study) -> Move {
-        let Some(r) = &mut self.reading else {
-            return Move::Nothing;
-        };
-        if !r.seen.options().look_around || self.budget_ms < self.probe_ms {
-            return Move::Nothing;
+        if self.hold > 0 {
+            self.hold -= 1;
+            return Ok(None);
         }
-        let cells = &study.cells;
-        let glances = r
-            .glances
-            .get_or_insert_with(|| Glances::new(cells, *camera));
-        let (clock, tries) = (Instant::now(), glances.tries);
-        let next = glances.next(mesh, cells, camera.pose, &mut r.seen);
+        let clock = Instant::now();
+        let step = r.step(scene)?;
         let ms = clock.elapsed().as_secs_f64() * 1e3;
-        self.budget_ms -= ms;
-        if glances.tries > tries {
-            self.probe_ms = if self.probe_ms == 0.0 {
-                ms
-            } else {
-                0.9 * self.probe_ms + 0.1 * ms
-            };
-        }
-        let Some(pose) = next else {
-            return Move::Nothing;
+        self.step_ms = if self.step_ms == 0.0 {
+            ms
+        } else {
+            0.95 * self.step_ms + 0.05 * ms
         };
-        r.glancing = Some(GLANCE_FRAMES);
-        r.glances_taken += 1;
-        self.mark_now(mesh, cells, &Camera { pose, ..*camera }, size);
-        Move::Glance(pose)
+        match step {
+            ReadingMove::Glance(_) => self.hold = GLANCE_FRAMES,
+            ReadingMove::Visit(_) => {
+                self.hold = DWELL_FRAMES;
+                if let Some(v) = r.last_visit() {
+                    self.outline = outline(&v.patch, scene.mesh);
+                }
+            }
+            ReadingMove::Done => {
+                // The session has seen all the reading showed.
+                self.session.union(r.seen());
+                self.outline.clear();
+            }
+            ReadingMove::Fly(_) => {}
+        }
+        Ok(Some(step))
     }
 
     /// The largest unseen patch of the session that a pose shows (of the [`NEXT_TRIES`]

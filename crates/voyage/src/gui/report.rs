@@ -56,8 +56,8 @@ pub struct CoverageReport {
     pub flight_pct: f64,
     /// Mean time to mark a frame, ms (coverage's own cost per frame marked).
     pub mark_ms: f64,
-    /// Mean time of one try of a glance's way in the two-way reading (ms; 0 before one).
-    pub probe_ms: f64,
+    /// Mean time of one step of the two-way reading (ms; 0 before one).
+    pub step_ms: f64,
     /// Frames shown from a new pose, and those marked (within the time budget).
     pub frames_asked: u64,
     pub frames_marked: u64,

@@ -10,12 +10,9 @@ use voyage_nav::{
     Autopilot, BrickStore, Camera, Direction, FlightOptions, Input, Pose, PotentialField,
     Submarine, potential_field, start_pose,
 };
-use voyage_view::{CellMesh, Strategy, Visibility};
+use voyage_view::{CellMesh, ReadingMove, Scene, Strategy, Visibility};
 
-use super::{
-    coverage::{Move, WindowCoverage},
-    scout::ScoutMesh,
-};
+use super::{coverage::WindowCoverage, scout::ScoutMesh};
 
 /// Longest simulated step of one displayed frame: a slow frame must not fling the
 /// submarine (the physics sub-steps anyway; this keeps the flight's pace steady).
@@ -54,8 +51,8 @@ pub struct Session {
     pub coverage: WindowCoverage,
     /// The cleansed CT, made the first time the translucency view asks for it.
     cleansed: OnceLock<Volume<i16>>,
-    /// Where the reading's flight was when it paused for a glance around.
-    glanced_from: Option<voyage_nav::State>,
+    /// The view's field of view before the reading took its own lens.
+    fov_before_reading: Option<f64>,
 }
 
 impl Session {
@@ -123,7 +120,7 @@ impl Session {
             start,
             coverage,
             cleansed: OnceLock::new(),
-            glanced_from: None,
+            fov_before_reading: None,
         })
     }
 
@@ -370,55 +367,74 @@ impl Session {
             .mark(&self.mesh, &self.study.cells, camera, size, frame_ms);
     }
 
-    /// Carries out what the two-way reading asks this frame, in a view of `size` pixels.
-    pub fn step_reading(&mut self, size: [u32; 2]) {
-        let camera = self.camera();
-        let wanted =
-            self.coverage
-                .step_reading(self.reached, &camera, size, &self.mesh, &self.study);
-        self.follow(wanted);
-    }
-
-    /// Starts the two-way reading: rectum → cecum, cecum → rectum, then the review.
-    pub fn start_reading(&mut self) {
-        let wanted = self.coverage.start_reading(&self.mesh);
-        self.follow(wanted);
-    }
-
-    fn follow(&mut self, wanted: Move) {
-        match wanted {
-            Move::Nothing => {}
-            Move::FlyForward | Move::FlyBackward => {
-                let dir = if matches!(wanted, Move::FlyForward) {
-                    Direction::Forward
-                } else {
-                    Direction::Backward
-                };
-                let from_start = dir == Direction::Forward;
-                self.set_direction(dir);
-                if from_start {
-                    self.restart();
+    /// Shows the two-way reading's next move, if it has one this frame.
+    pub fn step_reading(&mut self) -> Result<(), String> {
+        let scene = Scene {
+            study: &self.study,
+            mesh: &self.mesh,
+            field: &self.field,
+        };
+        let step = self
+            .coverage
+            .step_reading(&scene)
+            .map_err(|e| e.to_string());
+        match step? {
+            None | Some(ReadingMove::Done) => {}
+            Some(ReadingMove::Fly(pose)) => {
+                let direction = self.coverage.reading.as_ref().and_then(|r| r.direction());
+                if let Some(d) = direction {
+                    self.set_direction(d);
                 }
-                self.set_playing(true);
+                self.follow(pose);
             }
-            Move::Place(pose) => {
+            Some(ReadingMove::Glance(pose) | ReadingMove::Visit(pose)) => {
                 self.show_from(pose);
             }
-            Move::Glance(pose) => {
-                self.glanced_from = Some(self.sub.state);
-                self.set_playing(false);
-                self.place(pose);
-            }
-            Move::Resume => {
-                if let Some(state) = self.glanced_from.take() {
-                    // On as it was, moving: a glance turns the head, it does not stop the flight.
-                    let t = self.sub.state.t;
-                    self.sub.state = voyage_nav::State { t, ..state };
-                    self.vis.reset();
-                }
-                self.set_playing(true);
-            }
         }
+        if !self.coverage.reading_running() {
+            self.end_reading_lens();
+        }
+        Ok(())
+    }
+
+    /// Starts the two-way reading: rectum → cecum, cecum → rectum, then the review. The view
+    /// takes the reading's lens while it runs, so that it shows what is counted.
+    pub fn start_reading(&mut self) -> Result<(), String> {
+        let scene = Scene {
+            study: &self.study,
+            mesh: &self.mesh,
+            field: &self.field,
+        };
+        self.coverage
+            .start_reading(&scene)
+            .map_err(|e| e.to_string())?;
+        self.set_playing(false);
+        if let Some(r) = &self.coverage.reading {
+            self.fov_before_reading.get_or_insert(self.fov);
+            self.fov = r.lens().fov_y_deg;
+        }
+        Ok(())
+    }
+
+    /// Stops the two-way reading where it is.
+    pub fn stop_reading(&mut self) {
+        self.coverage.stop_reading();
+        self.end_reading_lens();
+    }
+
+    fn end_reading_lens(&mut self) {
+        if let Some(fov) = self.fov_before_reading.take() {
+            self.fov = fov;
+        }
+    }
+
+    /// Stands at the next frame of a flight drawn elsewhere (the reading's): the culling
+    /// state carries over, as from one frame of a flight to the next.
+    fn follow(&mut self, pose: Pose) {
+        let t = self.sub.state.t;
+        self.sub.state = voyage_nav::State::at(pose);
+        self.sub.state.t = t;
+        self.reached = false;
     }
 
     /// Stops and stands at `pose` when it is in the safe set (a review's or a patch's pose
