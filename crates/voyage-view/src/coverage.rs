@@ -18,8 +18,7 @@ use serde::Serialize;
 use crate::{
     findings::pick,
     mesh::CellMesh,
-    raster::{Frame, NO_TRIANGLE, Rasterizer, Shading, View},
-    shading::Lighting,
+    raster::{Frame, NO_TRIANGLE, Rasterizer, View},
     visibility::{Strategy, Visibility},
 };
 use voyage_core::{Bricked, Cells, OFF_WALL_MM, Study};
@@ -450,12 +449,11 @@ fn viewpoint_along(c: DVec3, u: DVec3, max_t: f64, lumen: &Lumen) -> Option<DVec
     best.map(|(_, q)| q)
 }
 
-/// Draws frames with the CPU rasterizer (exact culling) and marks what they show: the
+/// Draws frames with the CPU rasterizer (exact culling, ids and depths only) and marks what they show: the
 /// reading of a flight, a movie, a review, or the window's frames (on a small frame of the
 /// same view). It owns the frame and the culling state from frame to frame.
 pub struct Reader {
     camera: Camera,
-    shading: Shading,
     visibility: Visibility,
     frame: Frame,
 }
@@ -466,7 +464,6 @@ impl Reader {
     pub fn new(cells: &Cells, camera: Camera, width: u32, height: u32) -> Self {
         Reader {
             camera,
-            shading: Shading::new(&Lighting::default()),
             visibility: Visibility::new(cells, Strategy::Ours),
             frame: Frame::new(width, height),
         }
@@ -512,7 +509,7 @@ impl Reader {
             ..self.camera
         };
         let view = View::new(&camera, self.frame.width, self.frame.height);
-        let raster = Rasterizer::new(mesh, view, &self.shading);
+        let raster = Rasterizer::ids_only(mesh, view);
         self.frame.clear();
         self.visibility.draw(&mut self.frame, &raster, cells);
         view

@@ -36,18 +36,18 @@ pub fn pick(mesh: &CellMesh, cells: Option<&[u32]>, origin: DVec3, dir: DVec3) -
     if !origin.is_finite() {
         return None;
     }
-    let in_range = |r: &Range<u32>| nearest_in_range(mesh, r.clone(), origin, dir);
+    let ray = Ray::new(origin, dir);
+    let in_cell = |c: usize| nearest_in_cell(mesh, c, &ray);
     // A click searches about a million triangles; cells are the natural parallel chunks.
     let best = match cells {
         Some(list) => list
             .par_iter()
-            .filter_map(|&c| mesh.cell_ranges.get(c as usize))
-            .filter_map(in_range)
+            .filter(|&&c| (c as usize) < mesh.cell_ranges.len())
+            .filter_map(|&c| in_cell(c as usize))
             .min_by(nearer),
-        None => mesh
-            .cell_ranges
-            .par_iter()
-            .filter_map(in_range)
+        None => (0..mesh.cell_ranges.len())
+            .into_par_iter()
+            .filter_map(in_cell)
             .min_by(nearer),
     }?;
     let (distance, triangle) = best;
@@ -63,6 +63,60 @@ pub fn pick(mesh: &CellMesh, cells: Option<&[u32]>, origin: DVec3, dir: DVec3) -
 /// Orders (distance, triangle) candidates: nearer first, then the smaller triangle.
 fn nearer(x: &(f64, u32), y: &(f64, u32)) -> std::cmp::Ordering {
     x.0.total_cmp(&y.0).then(x.1.cmp(&y.1))
+}
+
+/// A ray from `origin` along the unit `dir`, with what its box tests need.
+struct Ray {
+    origin: DVec3,
+    dir: DVec3,
+    inv_dir: DVec3,
+}
+
+impl Ray {
+    fn new(origin: DVec3, dir: DVec3) -> Ray {
+        Ray {
+            origin,
+            dir,
+            inv_dir: dir.recip(),
+        }
+    }
+
+    /// Whether the ray meets the box (slab test), padded by [`BOX_PAD_MM`] against rounding:
+    /// a triangle the ray meets lies in its chunk's box, so a chunk it misses holds no hit.
+    fn meets_box(&self, lo: [f32; 3], hi: [f32; 3]) -> bool {
+        let lo = DVec3::from_array(lo.map(f64::from)) - BOX_PAD_MM;
+        let hi = DVec3::from_array(hi.map(f64::from)) + BOX_PAD_MM;
+        let (mut near, mut far) = (0.0f64, f64::INFINITY);
+        for k in 0..3 {
+            if self.dir[k] == 0.0 {
+                if self.origin[k] < lo[k] || self.origin[k] > hi[k] {
+                    return false;
+                }
+                continue;
+            }
+            let a = (lo[k] - self.origin[k]) * self.inv_dir[k];
+            let b = (hi[k] - self.origin[k]) * self.inv_dir[k];
+            near = near.max(a.min(b));
+            far = far.min(a.max(b));
+        }
+        near <= far
+    }
+}
+
+/// Padding of a chunk's box in the ray's box test (mm).
+const BOX_PAD_MM: f64 = 1e-3;
+
+/// The nearest hit in cell `c`: over its chunks the ray's line meets where the mesh has
+/// chunks ([`CellMesh::index_cells`]), else over all its triangles. The same hit either way.
+fn nearest_in_cell(mesh: &CellMesh, c: usize, ray: &Ray) -> Option<(f64, u32)> {
+    let Some(chunks) = mesh.cell_chunks.get(c) else {
+        return nearest_in_range(mesh, mesh.cell_ranges[c].clone(), ray.origin, ray.dir);
+    };
+    mesh.chunks[chunks.start as usize..chunks.end as usize]
+        .iter()
+        .filter(|k| ray.meets_box(k.lo, k.hi))
+        .filter_map(|k| nearest_in_range(mesh, k.triangles.clone(), ray.origin, ray.dir))
+        .min_by(nearer)
 }
 
 fn nearest_in_range(

@@ -361,3 +361,32 @@ fn glances_look_around_where_mucosa_is_unseen() {
     }
     assert!((0..2 * GLANCE_WAYS).all(|_| glances.next(&mesh, cells, last, &mut seen).is_none()));
 }
+
+/// A pick over the chunks the ray's line meets (an indexed mesh, as the reading's) finds
+/// the same hit as one over every triangle: rays from centerline points in all directions.
+#[test]
+fn a_pick_over_chunks_finds_what_a_pick_over_all_does() {
+    let study = small_study();
+    let plain = CellMesh::new(&study.surface, &study.cells);
+    let indexed = indexed_mesh(&study);
+    let mut rng = voyage_core::rng::Rng::new(7, 0);
+    let points = &study.centerline.points_mm;
+    let (mut hits, mut misses) = (0, 0);
+    for i in (0..points.len()).step_by(points.len() / 40 + 1) {
+        let origin = DVec3::from_array(points[i]);
+        for _ in 0..25 {
+            let dir = DVec3::new(rng.gauss(), rng.gauss(), rng.gauss());
+            let (a, b) = (
+                voyage_view::pick(&plain, None, origin, dir),
+                voyage_view::pick(&indexed, None, origin, dir),
+            );
+            assert_eq!(a, b, "from {origin} along {dir}");
+            if a.is_some() {
+                hits += 1;
+            } else {
+                misses += 1;
+            }
+        }
+    }
+    assert!(hits > 500, "{hits} hits, {misses} misses");
+}
