@@ -401,6 +401,36 @@ impl Study {
             .collect()
     }
 
+    /// The segment of each cell (as [`Study::segment_at`] names them): that of the middle
+    /// of the centerline stretch through the cell and the cells around it.
+    pub fn cell_segments(&self) -> Vec<&'static str> {
+        let along = self.segments_along();
+        (0..self.cells.cells.len())
+            .map(|c| {
+                self.centerline_span_around(c)
+                    .and_then(|(a, b)| along.get((a + b) / 2).copied())
+                    .unwrap_or("colon")
+            })
+            .collect()
+    }
+
+    /// The segment of each bridged gap, at the middle of its stretch of the centerline
+    /// (None where the centerline does not cross it).
+    pub fn gap_segments(&self) -> Vec<Option<&'static str>> {
+        let along = self.segments_along();
+        let arcs = &self.centerline.arc_mm;
+        self.gap_spans
+            .iter()
+            .map(|&span| {
+                let mid = 0.5 * (span?[0] + span?[1]);
+                let i = arcs
+                    .partition_point(|&a| a < mid)
+                    .min(arcs.len().checked_sub(1)?);
+                along.get(i).copied()
+            })
+            .collect()
+    }
+
     pub fn target_mm(&self) -> DVec3 {
         self.ct.geometry().index_to_local(DVec3::new(
             self.target[0] as f64,

@@ -3,8 +3,8 @@
 
 use std::{path::PathBuf, process::Command};
 
-use voyage_io::export::{Report, ReportCoverage, ReportFinding, write_report_html};
-use voyage_view::{Adequacy, CRads, Findings, c_rads};
+use voyage_io::export::{ColonRead, Report, ReportCoverage, ReportFinding, write_report_html};
+use voyage_view::{Adequacy, CRads, Findings, SegmentSeen, c_rads};
 
 fn temp_dir(name: &str) -> PathBuf {
     let dir =
@@ -59,6 +59,25 @@ fn sample() -> Report {
             two_way_pct: Some(96.0),
             after_review_pct: Some(99.6),
             patches_left: Some(0),
+            by_segment: vec![
+                SegmentSeen {
+                    segment: "rectum",
+                    seen_mm2: 9_000.0,
+                    total_mm2: 10_000.0,
+                },
+                SegmentSeen {
+                    segment: "sigmoid",
+                    seen_mm2: 19_900.0,
+                    total_mm2: 20_000.0,
+                },
+            ],
+        },
+        colon: ColonRead {
+            found_ml: 2400.0,
+            centerline_mm: 1650.0,
+            left_out_ml: vec![320.0],
+            position: Some("prone, head first (HFP), given".into()),
+            bridged_mm: vec![("sigmoid".into(), 42.0), ("descending".into(), 120.0)],
         },
     }
 }
@@ -116,6 +135,20 @@ fn the_report_is_self_contained_and_well_formed() {
     ] {
         assert!(html.contains(text), "{text} missing");
     }
+    // What was read: the colon found against the gas left out, the position, and per
+    // segment the mucosa seen and the stretches bridged (a segment only bridged included).
+    let colon = &html[html.find("<p id=\"colon\">").unwrap()..];
+    assert!(colon.starts_with("<p id=\"colon\">Colon found: 2400 ml of gas, centerline 165 cm. Patient prone, head first (HFP), given.</p>"));
+    assert!(html.contains(
+        "<p class=\"warn\" id=\"left-out\">Gas left out of the colon that may be colon: 320 ml."
+    ));
+    for row in [
+        "<tr><td>rectum</td><td>100 cm²</td><td>90.0 %</td><td>&mdash;</td></tr>",
+        "<tr><td>sigmoid</td><td>200 cm²</td><td>99.5 %</td><td>42 mm</td></tr>",
+        "<tr><td>descending</td><td>&mdash;</td><td>&mdash;</td><td>120 mm</td></tr>",
+    ] {
+        assert!(html.contains(row), "{row} missing");
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -171,6 +204,7 @@ fn a_reviewed_reading_is_judged_on_what_it_showed_in_the_end() {
         two_way_pct: Some(89.5),
         after_review_pct: Some(99.3),
         patches_left: Some(0),
+        by_segment: Vec::new(),
     };
     let category = |cov: &ReportCoverage| {
         let adequacy = Adequacy {

@@ -21,7 +21,7 @@ use crate::{
     raster::{Frame, NO_TRIANGLE, Rasterizer, View},
     visibility::{Strategy, Visibility},
 };
-use voyage_core::{Bricked, Cells, OFF_WALL_MM, Study};
+use voyage_core::{Bricked, COLON_SEGMENTS, Cells, OFF_WALL_MM, Study};
 use voyage_nav::{Camera, Pose};
 
 /// What counts as seen, and which unseen patches are listed.
@@ -201,6 +201,37 @@ impl Coverage {
         }
     }
 
+    /// Seen and whole area of the mucosa per colon segment, in the segments' order from the
+    /// rectum ([`COLON_SEGMENTS`]; "colon" last for cells the centerline does not serve).
+    /// `mesh` must be `study`'s surface cut into its cells.
+    pub fn by_segment(&self, mesh: &CellMesh, study: &Study) -> Vec<SegmentSeen> {
+        let names = study.cell_segments();
+        let mut out: Vec<SegmentSeen> = COLON_SEGMENTS
+            .iter()
+            .chain(&["colon"])
+            .map(|&segment| SegmentSeen {
+                segment,
+                seen_mm2: 0.0,
+                total_mm2: 0.0,
+            })
+            .collect();
+        for (c, range) in mesh.cell_ranges.iter().enumerate() {
+            let name = names.get(c).copied().unwrap_or("colon");
+            let Some(row) = out.iter_mut().find(|r| r.segment == name) else {
+                continue;
+            };
+            for t in range.clone() {
+                let area = self.area_mm2[t as usize] as f64;
+                row.total_mm2 += area;
+                if self.seen[t as usize] {
+                    row.seen_mm2 += area;
+                }
+            }
+        }
+        out.retain(|r| r.total_mm2 > 0.0);
+        out
+    }
+
     /// Joins in what `other` (over the same mesh) has seen.
     pub fn union(&mut self, other: &Coverage) {
         assert_eq!(
@@ -257,6 +288,24 @@ impl Coverage {
             .collect();
         patches.sort_by(|a, b| b.area_mm2.total_cmp(&a.area_mm2));
         patches
+    }
+}
+
+/// The mucosa of one colon segment: its area and what was seen of it (mm²).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SegmentSeen {
+    pub segment: &'static str,
+    pub seen_mm2: f64,
+    pub total_mm2: f64,
+}
+
+impl SegmentSeen {
+    pub fn percent(&self) -> f64 {
+        if self.total_mm2 > 0.0 {
+            100.0 * self.seen_mm2 / self.total_mm2
+        } else {
+            0.0
+        }
     }
 }
 

@@ -390,3 +390,44 @@ fn a_pick_over_chunks_finds_what_a_pick_over_all_does() {
     }
     assert!(hits > 500, "{hits} hits, {misses} misses");
 }
+
+/// Per segment, the areas add up to the whole and the segments come in their order along the
+/// colon, the phantom's from the rectum to the cecum.
+#[test]
+fn coverage_by_segment_adds_up_in_the_colons_order() {
+    let study = small_study();
+    let mesh = indexed_mesh(&study);
+    let mut seen = Coverage::new(&mesh, CoverageOptions::default());
+    let mut reader = Reader::new(&study.cells, Camera::lens(READING_FOV_DEG), 128, 128);
+    let points = &study.centerline.points_mm;
+    for i in (0..points.len()).step_by(25) {
+        let (p, q) = (points[i], points[(i + 5).min(points.len() - 1)]);
+        let (p, q) = (DVec3::from_array(p), DVec3::from_array(q));
+        let pose = Pose::looking(p, q - p, study.anterior_local());
+        reader.show(&mesh, &study.cells, pose, &mut seen);
+    }
+    let rows = seen.by_segment(&mesh, &study);
+    let total: f64 = rows.iter().map(|r| r.total_mm2).sum();
+    let shown: f64 = rows.iter().map(|r| r.seen_mm2).sum();
+    assert!((total - seen.total_mm2()).abs() < 1e-6 * total, "{rows:?}");
+    assert!(
+        (shown - seen.seen_mm2()).abs() < 1e-6 * total.max(1.0),
+        "{rows:?}"
+    );
+    let order: Vec<usize> = rows
+        .iter()
+        .map(|r| {
+            voyage_core::COLON_SEGMENTS
+                .iter()
+                .position(|&s| s == r.segment)
+                .unwrap_or(usize::MAX)
+        })
+        .collect();
+    assert!(order.windows(2).all(|w| w[0] < w[1]), "{rows:?}");
+    assert_eq!(rows[0].segment, "rectum", "{rows:?}");
+    assert!(rows.len() >= 5, "{rows:?}");
+    assert!(
+        rows.iter()
+            .all(|r| r.seen_mm2 <= r.total_mm2 && r.percent() > 0.0)
+    );
+}

@@ -271,10 +271,16 @@ impl Segmentation {
     /// The largest gas region left out of the colon automatically (ml of gas), if any holds
     /// at least `min_ml`: the flight's end is then doubtful (not the user's choice).
     pub fn largest_left_out(&self, min_ml: f64) -> Option<&SegmentReport> {
+        self.left_out(min_ml)
+            .max_by(|a, b| a.gas_ml.total_cmp(&b.gas_ml))
+    }
+
+    /// The gas regions of at least `min_ml` left out of the colon automatically (not by the
+    /// user).
+    pub fn left_out(&self, min_ml: f64) -> impl Iterator<Item = &SegmentReport> {
         self.segments
             .iter()
-            .filter(|s| !s.kept && s.gas_ml >= min_ml && s.reason.as_deref() != Some(EXCLUDED))
-            .max_by(|a, b| a.gas_ml.total_cmp(&b.gas_ml))
+            .filter(move |s| !s.kept && s.gas_ml >= min_ml && s.reason.as_deref() != Some(EXCLUDED))
     }
 
     /// The segmentation of a scan in its study storage, in the input storage.

@@ -10,7 +10,7 @@ use voyage_view::{Adequacy, Findings, Marker, c_rads};
 
 use super::{
     markups::{MarkupsPoint, markups_line_node, markups_node, write_markups_nodes},
-    report::{Report, ReportCoverage, ReportFinding, write_report_html},
+    report::{ColonRead, Report, ReportCoverage, ReportFinding, write_report_html},
     study::write_json,
 };
 use crate::atomic::write_atomic;
@@ -83,6 +83,7 @@ pub fn export_reading(
             },
         ),
         coverage,
+        colon: ColonRead::of(study),
     };
     let path = dir.join("report.html");
     write_report_html(&path, &report)?;

@@ -7,7 +7,7 @@
 use std::path::Path;
 
 use voyage_core::Result;
-use voyage_view::CRads;
+use voyage_view::{CRads, SegmentSeen};
 
 use crate::atomic::write_atomic;
 
@@ -36,6 +36,9 @@ pub struct ReportCoverage {
     pub after_review_pct: Option<f64>,
     /// Unseen patches left (≥ the listing threshold).
     pub patches_left: Option<usize>,
+    /// The mucosa seen per segment by the figure [`ReportCoverage::read_pct`] gives (empty:
+    /// not measured).
+    pub by_segment: Vec<SegmentSeen>,
 }
 
 impl ReportCoverage {
@@ -57,6 +60,59 @@ pub struct Report {
     pub measurements: Vec<(String, f64)>,
     pub c_rads: CRads,
     pub coverage: ReportCoverage,
+    pub colon: ColonRead,
+}
+
+/// What of the exam was read: the colon found and the gas left out of it, the patient's
+/// position, and per segment its bridged stretches.
+#[derive(Clone, Debug, Default)]
+pub struct ColonRead {
+    /// Gas in the colon found (ml), and its centerline's length (mm).
+    pub found_ml: f64,
+    pub centerline_mm: f64,
+    /// Gas regions of [`voyage_core::LEFT_OUT_DOUBT_ML`] or more left out (ml), largest first.
+    pub left_out_ml: Vec<f64>,
+    /// The patient's position and where it was read from.
+    pub position: Option<String>,
+    /// Collapsed or fluid-filled stretches bridged, per segment: (segment, mm).
+    pub bridged_mm: Vec<(String, f64)>,
+}
+
+impl ColonRead {
+    /// The colon of `study` as prep found it.
+    pub fn of(study: &voyage_core::Study) -> ColonRead {
+        let seg = &study.segmentation;
+        let mut left_out_ml: Vec<f64> = seg
+            .left_out(voyage_core::LEFT_OUT_DOUBT_ML)
+            .map(|s| s.gas_ml)
+            .collect();
+        left_out_ml.sort_by(|a, b| b.total_cmp(a));
+        let mut bridged_mm: Vec<(String, f64)> = Vec::new();
+        for (gap, name) in seg.gaps.iter().zip(study.gap_segments()) {
+            let name = name.unwrap_or("colon").to_string();
+            match bridged_mm.iter_mut().find(|(n, _)| *n == name) {
+                Some((_, mm)) => *mm += gap.length_mm,
+                None => bridged_mm.push((name, gap.length_mm)),
+            }
+        }
+        ColonRead {
+            found_ml: seg
+                .segments
+                .iter()
+                .filter(|s| s.kept)
+                .map(|s| s.gas_ml)
+                .sum(),
+            centerline_mm: study.centerline.length_mm,
+            left_out_ml,
+            position: Some(format!(
+                "{} ({}), {}",
+                seg.orientation.position.describe(),
+                seg.orientation.position.code(),
+                seg.orientation.source.describe()
+            )),
+            bridged_mm,
+        }
+    }
 }
 
 /// Writes `report` as self-contained HTML to `path` (atomically).
@@ -92,6 +148,7 @@ pub fn report_html(r: &Report) -> String {
         ));
     }
     h.push_str(&coverage_html(&r.coverage));
+    h.push_str(&colon_html(&r.colon, &r.coverage.by_segment));
     h.push_str(&findings_html(&r.findings));
     if !r.measurements.is_empty() {
         h.push_str("<h2>Measurements</h2>\n<table>\n<tr><th>Label</th><th>Length</th></tr>\n");
@@ -126,6 +183,60 @@ fn coverage_html(c: &ReportCoverage) -> String {
     if let Some(n) = c.patches_left {
         h.push_str(&format!(
             "<tr><th>Unseen patches left</th><td>{n}</td></tr>\n"
+        ));
+    }
+    h.push_str("</table>\n");
+    h
+}
+
+/// The colon read: what was found against what was left out, and per segment the mucosa
+/// seen and the stretches bridged.
+fn colon_html(c: &ColonRead, seen: &[SegmentSeen]) -> String {
+    let mut h = String::from("<h2>The colon read</h2>\n<p id=\"colon\">");
+    h.push_str(&format!(
+        "Colon found: {:.0} ml of gas, centerline {:.0} cm.",
+        c.found_ml,
+        c.centerline_mm / 10.0
+    ));
+    if let Some(p) = &c.position {
+        h.push_str(&format!(" Patient {}.", escape(p)));
+    }
+    h.push_str("</p>\n");
+    if !c.left_out_ml.is_empty() {
+        let list: Vec<String> = c
+            .left_out_ml
+            .iter()
+            .map(|ml| format!("{ml:.0} ml"))
+            .collect();
+        h.push_str(&format!(
+            "<p class=\"warn\" id=\"left-out\">Gas left out of the colon that may be colon: {}. The coverage is of the colon found only.</p>\n",
+            list.join(", ")
+        ));
+    }
+    let mut names: Vec<&str> = seen.iter().map(|s| s.segment).collect();
+    for (name, _) in &c.bridged_mm {
+        if !names.contains(&name.as_str()) {
+            names.push(name);
+        }
+    }
+    if names.is_empty() {
+        return h;
+    }
+    h.push_str("<table id=\"segments\">\n<tr><th>Segment</th><th>Mucosa</th><th>Seen</th><th>Bridged (collapsed or under fluid)</th></tr>\n");
+    for name in names {
+        let row = seen.iter().find(|s| s.segment == name);
+        let area = row.map_or("&mdash;".to_string(), |s| {
+            format!("{:.0} cm²", s.total_mm2 / 100.0)
+        });
+        let pct = row.map_or("&mdash;".to_string(), |s| format!("{:.1} %", s.percent()));
+        let bridged = c
+            .bridged_mm
+            .iter()
+            .find(|(n, _)| n == name)
+            .map_or("&mdash;".to_string(), |(_, mm)| format!("{mm:.0} mm"));
+        h.push_str(&format!(
+            "<tr><td>{}</td><td>{area}</td><td>{pct}</td><td>{bridged}</td></tr>\n",
+            escape(name)
         ));
     }
     h.push_str("</table>\n");

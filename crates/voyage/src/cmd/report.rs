@@ -63,6 +63,7 @@ pub fn run(a: &ReportArgs) -> Result<()> {
             two_way_pct: Some(r.two_way.percent()),
             after_review_pct: Some(r.after_review.percent()),
             patches_left: Some(r.after_review.patches(&mesh).len()),
+            by_segment: r.after_review.by_segment(&mesh, &study),
         }
     };
     let name = a.input.input.file_name().map_or_else(

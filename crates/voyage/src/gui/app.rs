@@ -735,6 +735,11 @@ impl App {
             patches_left: reading
                 .filter(|r| r.is_done())
                 .map(|r| r.seen().patches(&s.mesh).len()),
+            // Per segment, the figure the category reads: after the review, else the session.
+            by_segment: reading
+                .filter(|r| r.is_done())
+                .map_or(&s.coverage.session, |r| r.seen())
+                .by_segment(&s.mesh, &s.study),
         };
         let result = export_reading(&dir, &self.findings, &s.study, &s.name, coverage, |_, m| {
             let cam = Camera::new(m.view).with_fov(s.fov);
