@@ -346,6 +346,37 @@ fn smooth_normal(mesh: &CellMesh, t: u32) -> DVec3 {
 /// A patch's normal is the mean over its surface within this distance of its centre (mm).
 const NORMAL_RADIUS_MM: f64 = 4.0;
 
+/// Points of a patch tried after its centre, at least this far from those before (mm).
+const MORE_ANCHORS: usize = 4;
+const ANCHOR_APART_MM: f64 = 3.0;
+
+/// A point of a patch a review aims at.
+struct Anchor {
+    point: DVec3,
+    normal: DVec3,
+    triangle: u32,
+}
+
+fn centroid_of(mesh: &CellMesh, t: u32) -> DVec3 {
+    let [a, b, c] = triangle_points(mesh, t);
+    (a + b + c) / 3.0
+}
+
+/// The area-weighted normal of `triangles` within [`NORMAL_RADIUS_MM`] of `p` (unit): the
+/// normal around a point, not the whole patch's (a long patch round a fold or a tube's whole
+/// wall has normals that cancel).
+fn normal_around(mesh: &CellMesh, triangles: &[u32], p: DVec3) -> DVec3 {
+    let sum: DVec3 = triangles
+        .iter()
+        .filter(|&&t| centroid_of(mesh, t).distance(p) <= NORMAL_RADIUS_MM)
+        .map(|&t| {
+            let [a, b, c] = triangle_points(mesh, t);
+            (b - a).cross(c - a)
+        })
+        .sum();
+    sum.try_normalize().unwrap_or(DVec3::Z)
+}
+
 /// A connected unseen part of the surface.
 #[derive(Clone, Debug)]
 pub struct Patch {
@@ -355,6 +386,8 @@ pub struct Patch {
     /// Volume-local mm: the centroid of the patch's triangle nearest the area-weighted
     /// centre, so that it lies on the patch even where the patch is curved.
     pub center_mm: DVec3,
+    /// The triangle whose centroid is the centre.
+    pub center_triangle: u32,
     /// Area-weighted mean normal around the centre (unit, into the lumen).
     pub normal: DVec3,
     /// The largest distance from the centre to a vertex of the patch, times two (mm).
@@ -373,37 +406,73 @@ impl Patch {
             let [a, b, c] = triangle_points(mesh, t);
             (a + b + c) / 3.0
         };
-        let center_mm = triangles
+        let center_triangle = triangles
             .iter()
-            .map(|&t| centroid(t))
-            .min_by(|p, q| {
-                p.distance_squared(mean)
-                    .total_cmp(&q.distance_squared(mean))
+            .copied()
+            .min_by(|&p, &q| {
+                centroid(p)
+                    .distance_squared(mean)
+                    .total_cmp(&centroid(q).distance_squared(mean))
             })
-            .unwrap_or(mean);
+            .unwrap_or(0);
+        let center_mm = triangles
+            .first()
+            .map_or(mean, |_| centroid(center_triangle));
         let across_mm = 2.0
             * triangles
                 .iter()
                 .flat_map(|&t| triangle_points(mesh, t))
                 .map(|p| p.distance(center_mm))
                 .fold(0.0, f64::max);
-        // The normal around the centre, not the whole patch's: a long patch round a fold or
-        // a tube's whole wall has normals that cancel.
-        let normal: DVec3 = triangles
-            .iter()
-            .filter(|&&t| centroid(t).distance(center_mm) <= NORMAL_RADIUS_MM)
-            .map(|&t| {
-                let [a, b, c] = triangle_points(mesh, t);
-                (b - a).cross(c - a)
-            })
-            .sum();
+        let normal = normal_around(mesh, &triangles, center_mm);
         Patch {
             area_mm2,
             triangles,
             center_mm,
-            normal: normal.try_normalize().unwrap_or(DVec3::Z),
+            center_triangle,
+            normal,
             across_mm,
         }
+    }
+
+    /// Where a review may aim at the patch, in turn: its centre, then up to
+    /// [`MORE_ANCHORS`] triangles spread over it (each the farthest from those before), for
+    /// a patch whose centre no viewpoint shows. Each with its centroid and the normal
+    /// around it.
+    fn anchors<'m>(&'m self, mesh: &'m CellMesh) -> impl Iterator<Item = Anchor> + 'm {
+        let first = Anchor {
+            point: self.center_mm,
+            normal: self.normal,
+            triangle: self.center_triangle,
+        };
+        let mut nearest: Vec<f64> = Vec::new();
+        let more = (0..MORE_ANCHORS).map_while(move |_| {
+            if nearest.is_empty() {
+                nearest = self
+                    .triangles
+                    .iter()
+                    .map(|&t| centroid_of(mesh, t).distance_squared(self.center_mm))
+                    .collect();
+            }
+            let (i, &d) = nearest
+                .iter()
+                .enumerate()
+                .max_by(|a, b| a.1.total_cmp(b.1))?;
+            if d < ANCHOR_APART_MM * ANCHOR_APART_MM {
+                return None;
+            }
+            let t = self.triangles[i];
+            let point = centroid_of(mesh, t);
+            for (k, &u) in self.triangles.iter().enumerate() {
+                nearest[k] = nearest[k].min(centroid_of(mesh, u).distance_squared(point));
+            }
+            Some(Anchor {
+                point,
+                normal: normal_around(mesh, &self.triangles, point),
+                triangle: t,
+            })
+        });
+        std::iter::once(first).chain(more)
     }
 
     /// Arc length (mm from the centerline's rectum end) of the centerline point nearest the
@@ -446,19 +515,34 @@ const SIGHT_STEP_MM: f64 = 0.5;
 
 /// A pose that shows `patch`: a point in the lumen, at least `min_wall_mm` from the wall
 /// and within the reading distance of the patch's centre, that sees the centre unoccluded
-/// (a ray pick against the surface meets the patch, not a fold before it), looking at it.
+/// (a ray pick against the surface meets the patch, not a fold before it) and as the reading
+/// counts it (the centre's triangle faces the eye within the reading angle), looking at it.
 /// Lines of sight are tried from along the patch's normal outward in tilts up to 60°
 /// (inside the reading angle); along each, the viewpoint is the one farthest from the wall.
+/// Where no line of sight shows the centre, other points spread over the patch are tried.
 pub fn viewing_pose(
     patch: &Patch,
     mesh: &CellMesh,
     lumen: &Lumen,
     options: &CoverageOptions,
 ) -> Option<Pose> {
-    let c = patch.center_mm;
-    let n = patch.normal;
+    patch
+        .anchors(mesh)
+        .find_map(|anchor| pose_showing(&anchor, mesh, lumen, options))
+}
+
+/// A pose that shows `anchor` (see [`viewing_pose`]).
+fn pose_showing(
+    anchor: &Anchor,
+    mesh: &CellMesh,
+    lumen: &Lumen,
+    options: &CoverageOptions,
+) -> Option<Pose> {
+    let (c, n) = (anchor.point, anchor.normal);
     let (e1, e2) = n.any_orthonormal_pair();
     let max_t = options.reading_distance_mm * 0.8;
+    let cos_max = options.max_angle_deg.to_radians().cos();
+    let facing = smooth_normal(mesh, anchor.triangle);
     for tilt in TILTS_DEG {
         let azimuths = if tilt == 0.0 { 1 } else { AZIMUTHS };
         for k in 0..azimuths {
@@ -469,6 +553,10 @@ pub fn viewing_pose(
                 continue;
             };
             let to_patch = c - eye;
+            let to_eye = -to_patch;
+            if facing.dot(to_eye) < cos_max * facing.length() * to_eye.length() {
+                continue;
+            }
             let sees = pick(mesh, None, eye, to_patch)
                 .is_some_and(|hit| hit.distance >= to_patch.length() - 1.0);
             if sees {

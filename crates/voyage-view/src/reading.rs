@@ -23,7 +23,7 @@ pub const READING_PX: u32 = 256;
 
 /// Review rounds: a patch a pose showed only in part is visited again, from the rest's own
 /// viewpoint.
-pub const REVIEW_ROUNDS: usize = 10;
+pub const REVIEW_ROUNDS: usize = 30;
 
 /// What a reading reads: the same study, surface and potential field at every step.
 pub struct Scene<'a, S: DistanceStore> {
