@@ -47,7 +47,9 @@ pub(super) fn find(
     let inside = if from_mask {
         vec![true; runs.runs.len()]
     } else {
-        inside_body(&runs, vol.dims())
+        let mut inside = inside_body(&runs, vol.dims());
+        reclaim_cut_gas(&runs, &mut inside, vol.dims());
+        inside
     };
     let mut labels = UnionFind::new(runs.runs.len());
     connect_3d(&runs, &inside, vol.dims(), &mut labels);
@@ -184,6 +186,54 @@ fn inside_body(runs: &Runs, dims: [usize; 3]) -> Vec<bool> {
         })
         .collect();
     per_slice.into_iter().flatten().collect()
+}
+
+/// Step 2, second half: gas the side of the volume cuts. Bowel gas that reaches the
+/// scan's edge touches a slice's border, so step 2 takes it for outside air; but in 3D it is
+/// cut off from the outside air around the body (tissue encloses it everywhere but at the
+/// edge). Of the 6-connected pieces of what step 2 found outside, those other than the
+/// largest (the air around the body, joined from slice to slice) that reach the slices'
+/// border on one side, or on two that meet at a corner, are inside after all. A piece that
+/// reaches opposite sides lies across the scan (air under a table as wide as the field of
+/// view) and stays outside. A colon cut by the scan's side would otherwise lose that gas
+/// without a word.
+fn reclaim_cut_gas(runs: &Runs, inside: &mut [bool], dims: [usize; 3]) {
+    let [nx, ny, nz] = dims;
+    let outside: Vec<bool> = inside.iter().map(|&i| !i).collect();
+    let mut uf = UnionFind::new(runs.runs.len());
+    connect_3d(runs, &outside, dims, &mut uf);
+    let mut voxels = vec![0usize; runs.runs.len()];
+    // Per piece, the sides of the slices it reaches: bits 0–3 for x = 0, x = nx − 1, y = 0,
+    // y = ny − 1.
+    let mut sides = vec![0u8; runs.runs.len()];
+    for k in 0..nz {
+        for j in 0..ny {
+            for r in runs.row(j, k) {
+                if !outside[r] {
+                    continue;
+                }
+                let run = runs.runs[r];
+                let root = uf.find(r);
+                voxels[root] += (run.x1 - run.x0) as usize;
+                sides[root] |= u8::from(run.x0 == 0)
+                    | u8::from(run.x1 as usize == nx) << 1
+                    | u8::from(j == 0) << 2
+                    | u8::from(j == ny - 1) << 3;
+            }
+        }
+    }
+    let Some(air) = (0..voxels.len()).max_by_key(|&r| voxels[r]) else {
+        return;
+    };
+    let across = |s: u8| s & 0b0011 == 0b0011 || s & 0b1100 == 0b1100;
+    for r in 0..runs.runs.len() {
+        if outside[r] {
+            let root = uf.find(r);
+            if root != air && !across(sides[root]) {
+                inside[r] = true;
+            }
+        }
+    }
 }
 
 /// Step 3: 6-connected components of the inside runs.

@@ -168,6 +168,9 @@ pub struct Gap {
     pub to_lps_mm: [f64; 3],
     /// Mean cost per mm of the path (1: soft tissue, i.e. collapsed bowel, all the way).
     pub mean_cost: f64,
+    /// An end lies at the side of the scanned volume: the colon leaves the scan there, and
+    /// the bridge joins its two ends inside (what lies beyond is not read).
+    pub at_edge: bool,
     /// The lumen voxels (volume indices, sorted) the bridge added: its tube and the fluid
     /// filling the stretch it crosses.
     #[serde(skip)]

@@ -57,6 +57,7 @@ pub(super) fn report(
         segments.push(tube_report(t, &found.runs, geom, parts.voxel_ml));
     }
     let (gaps, mut warnings) = gaps(&chained.chain.gaps, gap_voxels, &segments, geom);
+    warnings.extend(edge_warnings(parts, chained, geom));
     warnings.extend(left_out_warnings(&segments));
     let comps = labelled(found.comps, &parts.of_gas, &classes);
     let (components, small_components) = list_components(comps, opts.min_report_ml);
@@ -216,25 +217,98 @@ fn gaps(
     let mut warnings = Vec::new();
     for (i, (p, voxels)) in paths.iter().zip(gap_voxels).enumerate() {
         let ends = (p.voxels[0], p.voxels[p.voxels.len() - 1]);
+        let edge = side_near(ends.0, geom).or_else(|| side_near(ends.1, geom));
         gaps.push(Gap {
             between: [i, i + 1],
             length_mm: p.length_mm,
             from_lps_mm: lps(ends.0),
             to_lps_mm: lps(ends.1),
             mean_cost: p.mean_cost,
+            at_edge: edge.is_some(),
             voxels,
         });
-        warnings.push(format!(
-            "collapsed or fluid-filled stretch bridged: {:.0} mm between the {} and the {} segment, from LPS ({:.0}, {:.0}, {:.0})",
-            p.length_mm,
-            segments[i].label,
-            segments[i + 1].label,
-            lps(ends.0)[0],
-            lps(ends.0)[1],
-            lps(ends.0)[2]
-        ));
+        let [x, y, z] = lps(ends.0);
+        let (a, b) = (&segments[i].label, &segments[i + 1].label);
+        let mm = p.length_mm;
+        warnings.push(match edge {
+            Some(side) => format!(
+                "the colon leaves the scanned volume at the patient's {side}: the {a} and the {b} segment are joined inside it by {mm:.0} mm from LPS ({x:.0}, {y:.0}, {z:.0}); what lies beyond the scan is not read"
+            ),
+            None => format!(
+                "collapsed or fluid-filled stretch bridged: {mm:.0} mm between the {a} and the {b} segment, from LPS ({x:.0}, {y:.0}, {z:.0})"
+            ),
+        });
     }
     (gaps, warnings)
+}
+
+/// A colon compartment that reaches the side of the scanned volume: the colon goes on
+/// beyond the scan there. One warning per side, naming where.
+fn edge_warnings(parts: &Compartments, chained: &Chained, geom: &crate::Geometry) -> Vec<String> {
+    let mut sides: Vec<(&'static str, [f64; 3])> = Vec::new();
+    for l in &chained.chain.links {
+        let b = &parts.list[l.comp as usize].bbox;
+        let mid = [0, 1, 2].map(|a| (b.lo[a] + b.hi[a]) / 2);
+        for (axis, at) in [(0, b.lo[0]), (0, b.hi[0]), (1, b.lo[1]), (1, b.hi[1])] {
+            let mut v = mid;
+            v[axis] = at;
+            if let Some(side) = side_at(v, geom, 0.0)
+                && !sides.iter().any(|(s, _)| *s == side)
+            {
+                let p = geom.index_to_patient(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64));
+                sides.push((side, p.to_array()));
+            }
+        }
+    }
+    sides
+        .into_iter()
+        .map(|(side, [x, y, z])| {
+            format!(
+                "the colon reaches the side of the scanned volume at the patient's {side} (about LPS {x:.0}, {y:.0}, {z:.0}): it may go on beyond the scan, and what lies there is not read"
+            )
+        })
+        .collect()
+}
+
+/// Within this distance of a side of the scanned volume (mm), a gap's end is at its edge.
+const EDGE_MM: f64 = 5.0;
+
+fn side_near(v: [usize; 3], geom: &crate::Geometry) -> Option<&'static str> {
+    side_at(v, geom, EDGE_MM)
+}
+
+/// The side of the scanned volume (the slices' border, not their first or last) within
+/// `within_mm` of voxel `v`, named by the patient's direction it faces.
+fn side_at(v: [usize; 3], geom: &crate::Geometry, within_mm: f64) -> Option<&'static str> {
+    let sp = geom.spacing_vec();
+    for axis in 0..2 {
+        let n = geom.dims[axis];
+        let near_lo = v[axis] as f64 * sp[axis] <= within_mm;
+        let near_hi = (n - 1 - v[axis].min(n - 1)) as f64 * sp[axis] <= within_mm;
+        if !(near_lo || near_hi) {
+            continue;
+        }
+        let mut step = DVec3::ZERO;
+        step[axis] = if near_hi { 1.0 } else { -1.0 };
+        let centre = DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64);
+        let out = geom.index_to_patient(centre + step) - geom.index_to_patient(centre);
+        return Some(patient_direction(out));
+    }
+    None
+}
+
+/// The patient's direction `d` (LPS) points most along.
+fn patient_direction(d: DVec3) -> &'static str {
+    let a = d.abs();
+    if a.x >= a.y && a.x >= a.z {
+        if d.x > 0.0 { "left" } else { "right" }
+    } else if a.y >= a.z {
+        if d.y > 0.0 { "back" } else { "front" }
+    } else if d.z > 0.0 {
+        "head end"
+    } else {
+        "feet end"
+    }
 }
 
 /// A warning for each large gas region left out of the colon automatically (not by the user).

@@ -1640,10 +1640,17 @@ impl App {
             Color32::from_gray(220),
         );
         if let Some(gap) = s.collapsed_here() {
-            let text = format!(
-                "collapsed segment, {:.0} mm: no air here, the flight keeps to the path",
-                gap.length_mm
-            );
+            let text = if gap.at_edge {
+                format!(
+                    "the colon leaves the scan here: {:.0} mm joined inside it, the flight keeps to the path",
+                    gap.length_mm
+                )
+            } else {
+                format!(
+                    "collapsed segment, {:.0} mm: no air here, the flight keeps to the path",
+                    gap.length_mm
+                )
+            };
             label(
                 &painter,
                 rect.left_top() + Vec2::new(8.0, 30.0),
