@@ -203,3 +203,26 @@ fn the_checker_sees_grouped_and_plain_uses() {
         assert!(got.contains(want), "{want} not in {got:?}");
     }
 }
+
+/// The window reaches nothing of the command line: what both need (opening a study, the
+/// user's points) lives in the binary's `open` module, image writing in voyage-io.
+#[test]
+fn the_window_imports_nothing_from_the_commands() {
+    let gui = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../voyage/src/gui"));
+    let mut checked = 0;
+    for entry in std::fs::read_dir(gui).unwrap_or_else(|e| panic!("{}: {e}", gui.display())) {
+        let path = entry.unwrap().path();
+        if path.extension().is_none_or(|e| e != "rs") {
+            continue;
+        }
+        let text = std::fs::read_to_string(&path).unwrap();
+        let used = uses(&text);
+        assert!(!used.contains("cmd"), "{} uses crate::cmd", path.display());
+        checked += 1;
+    }
+    assert!(
+        checked >= 10,
+        "only {checked} files under {}",
+        gui.display()
+    );
+}

@@ -12,11 +12,13 @@ pub mod metaimage;
 pub mod nifti;
 pub mod nrrd;
 mod panic;
+mod png;
 
 pub mod export;
 
 pub use atomic::write_atomic;
 pub use panic::install_panic_hook;
+pub use png::{encode_png, write_png};
 
 use std::path::{Path, PathBuf};
 

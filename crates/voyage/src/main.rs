@@ -4,6 +4,7 @@
 
 mod cmd;
 mod gui;
+mod open;
 
 use std::process::ExitCode;
 

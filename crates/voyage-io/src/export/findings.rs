@@ -13,7 +13,7 @@ use super::{
     report::{ColonRead, Report, ReportCoverage, ReportFinding, write_report_html},
     study::write_json,
 };
-use crate::atomic::write_atomic;
+use crate::{atomic::write_atomic, encode_png};
 
 /// Markers in red and measurements in yellow in Slicer, apart from the green centerline.
 const MARKER_COLOR: [f64; 3] = [1.0, 0.2, 0.2];
@@ -155,26 +155,6 @@ fn snapshot_names(markers: &[Marker]) -> Vec<String> {
         names.push(name);
     }
     names
-}
-
-/// The RGBA image as PNG bytes; `path` names it in the error.
-fn encode_png(path: &Path, width: u32, height: u32, rgba: &[u8]) -> Result<Vec<u8>> {
-    use image::ImageEncoder;
-    let want = width as u64 * height as u64 * 4;
-    if width == 0 || height == 0 || rgba.len() as u64 != want {
-        return Err(Error::format(
-            path,
-            format!(
-                "snapshot of {width}×{height} pixels has {} bytes, not {want}",
-                rgba.len()
-            ),
-        ));
-    }
-    let mut png = Vec::new();
-    image::codecs::png::PngEncoder::new(&mut png)
-        .write_image(rgba, width, height, image::ExtendedColorType::Rgba8)
-        .map_err(|e| Error::format(path, format!("cannot encode the snapshot: {e}")))?;
-    Ok(png)
 }
 
 /// The report: LPS for other tools, volume-local mm and the pose for voyage itself. It

@@ -12,7 +12,8 @@ use voyage_view::{
     CellMesh, CoverageOptions, READING_FOV_DEG, ReadingProgress, Visit, read_both_ways,
 };
 
-use super::prep::{InputArgs, Prepared, load_and_prepare};
+use super::prep::load_and_prepare;
+use crate::open::{InputArgs, Prepared};
 
 #[derive(Args, Debug)]
 pub struct CoverageArgs {

@@ -13,7 +13,8 @@ use voyage_nav::{
     Direction, Flight, FlightOptions, Looking, Rescue, STUCK_S, fly, looking, potential_field,
 };
 
-use super::prep::{InputArgs, Prepared, load_and_prepare};
+use super::prep::load_and_prepare;
+use crate::open::{InputArgs, Prepared};
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum Directions {

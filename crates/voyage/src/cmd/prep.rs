@@ -1,105 +1,16 @@
 //! `voyage prep INPUT --out DIR`: the whole preprocessing, with its exports.
 
-use std::{io::IsTerminal, path::PathBuf, time::Instant};
+use std::{io::IsTerminal, path::PathBuf};
 
-use anyhow::{Context, Result, bail};
-use clap::{Args, ValueEnum};
+use anyhow::Result;
+use clap::Args;
 use glam::DVec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
-use voyage_core::{
-    ComponentKind, Geometry, PatientPosition, PositionSource, PrepOptions, Stage, Study, prepare,
-};
-use voyage_io::{
-    self as io, LoadOptions,
-    export::study::{StudyExports, check_out_dir, write_study},
-};
+use voyage_core::{ComponentKind, Geometry, Stage, Study};
+use voyage_io::export::study::{StudyExports, check_out_dir, write_study};
 
-#[derive(Clone, Copy, Debug, Default, ValueEnum)]
-pub enum Frame {
-    /// DICOM patient coordinates (LPS mm), as viewers show them.
-    #[default]
-    Lps,
-    /// Volume-local mm (x = i·sx, y = j·sy, z = k·sz), as the phantoms' truth files give them.
-    Local,
-}
-
-/// The input and the preprocessing choices every command that runs `prep` shares.
-#[derive(Args, Debug, Clone)]
-pub struct InputArgs {
-    /// A CT (DICOM folder or file, NIfTI, MetaImage, NRRD) or a lumen mask (0/1 labels).
-    pub input: PathBuf,
-    /// Treat the input as a lumen mask, every non-zero label lumen (default: detected when it
-    /// holds 0 and one other value, as 0/1 or 0/255; labels 0/1/2... need it).
-    #[arg(long)]
-    pub mask: bool,
-    #[command(flatten)]
-    pub points: PointArgs,
-    /// DICOM: which series to load when the folder holds several.
-    #[arg(long)]
-    pub series: Option<String>,
-}
-
-/// A DICOM PatientPosition code, any case.
-fn parse_position(s: &str) -> Result<PatientPosition, String> {
-    PatientPosition::parse(s)
-        .ok_or_else(|| format!("{s}: expected one of HFS, HFP, FFS, FFP, HFDR, HFDL, FFDR, FFDL"))
-}
-
-/// Corrections to the automatic choices: which gas is colon, where the flight starts and
-/// ends, how the patient lay, whether the colon's tagged fluid is cleansed.
-#[derive(Args, Debug, Clone, Default)]
-pub struct PointArgs {
-    /// A point in gas that is colon (mm, see --coords): its gas joins the colon. It does not
-    /// move the start; --source does. Repeat it for several segments (`prep --json` lists
-    /// each segment with a point in it, `anchor_lps_mm`).
-    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
-    pub seed: Vec<DVec3>,
-    /// A point in gas that is not colon (mm, see --coords): its gas is left out, even when it
-    /// is the lowest (the rectum is then the lowest of the rest). Repeatable.
-    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
-    pub exclude: Vec<DVec3>,
-    /// The rectum end of the flight (mm, see --coords).
-    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
-    pub source: Option<DVec3>,
-    /// The cecum end of the flight (mm, see --coords).
-    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
-    pub target: Option<DVec3>,
-    /// The coordinate frame of --seed, --source and --target.
-    #[arg(long, value_enum, default_value_t = Frame::Lps)]
-    pub coords: Frame,
-    /// How the patient lay, as a DICOM PatientPosition code (HFS, HFP, FFS, FFP, HFDR, HFDL,
-    /// FFDR, FFDL), overriding the file and the air–fluid levels: decides on which side fluid
-    /// lies and which way is up in the view.
-    #[arg(long, value_parser = parse_position)]
-    pub position: Option<PatientPosition>,
-    /// Keep the colon's tagged fluid: no electronic cleansing (on by default where the
-    /// colon holds tagged fluid; the surface is then cut at the fluid's edge).
-    #[arg(long)]
-    pub no_cleanse: bool,
-}
-
-impl PointArgs {
-    /// Puts the choices into `opts` for a volume of geometry `g` whose loader found `meta`.
-    pub fn apply(&self, g: &Geometry, meta: &io::Meta, opts: &mut PrepOptions) {
-        let to_local = |p: DVec3| match self.coords {
-            Frame::Lps => g.patient_to_local(p),
-            Frame::Local => p,
-        };
-        opts.segment.seeds_mm = self.seed.iter().map(|&p| to_local(p)).collect();
-        opts.segment.exclude_mm = self.exclude.iter().map(|&p| to_local(p)).collect();
-        opts.centerline.source_mm = self.source.map(to_local);
-        opts.centerline.target_mm = self.target.map(to_local);
-        opts.segment.position = match (self.position, meta.position) {
-            (Some(p), _) => Some((p, PositionSource::Given)),
-            (None, Some(p)) => Some((p, PositionSource::Dicom)),
-            (None, None) => None,
-        };
-        if self.no_cleanse {
-            opts.cleanse = None;
-        }
-    }
-}
+use crate::open::{InputArgs, Prepared, open_study};
 
 #[derive(Args, Debug)]
 pub struct PrepArgs {
@@ -116,64 +27,24 @@ pub struct PrepArgs {
     pub stl: bool,
 }
 
-pub fn parse_point(s: &str) -> Result<DVec3, String> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|x| x.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .map_err(|e| format!("{s}: {e}"))?;
-    match v[..] {
-        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(DVec3::new(x, y, z)),
-        _ => Err(format!("{s}: expected three numbers x,y,z")),
-    }
-}
-
-/// A study ready for navigation, and what it cost to load.
-pub struct Prepared {
-    /// In the study storage: its local mm are read with `study.ct.geometry()`.
-    pub study: Study,
-    pub load_ms: f64,
-}
-
-/// Loads the input and runs the whole preprocessing (a progress bar on a terminal), with the
-/// navigable core for a camera `nav_min_wall_mm` from the wall (None: no navigation).
+/// Opens the input ([`open_study`]) with a progress bar on a terminal, and prints the
+/// study's warnings.
 pub fn load_and_prepare(a: &InputArgs, nav_min_wall_mm: Option<f64>) -> Result<Prepared> {
-    let t0 = Instant::now();
-    let loaded = io::load(
-        &a.input,
-        &LoadOptions {
-            series_uid: a.series.clone(),
-        },
-    )?;
-    let load_ms = t0.elapsed().as_secs_f64() * 1e3;
-    let g = loaded.volume.geometry().clone();
-    let mut opts = PrepOptions::default();
-    a.points.apply(&g, &loaded.meta, &mut opts);
-    opts.segment.mask = a.mask.then_some(true);
-    opts.nav_min_wall_mm = nav_min_wall_mm;
-
     let bar = progress_bar();
-    let mut study = prepare(loaded.volume, &opts, |stage| {
+    let prepared = open_study(a, nav_min_wall_mm, |o| {
         if let Some(b) = &bar {
-            b.set_message(stage.name());
-            b.set_position(Stage::ALL.iter().position(|s| *s == stage).unwrap_or(0) as u64);
+            b.set_message(o.what.to_string());
+            b.set_position(o.step as u64);
         }
-    })
-    .with_context(|| format!("{}", a.input.display()))?;
+    });
     if let Some(b) = bar {
         b.finish_and_clear();
     }
-    if study.centerline.points_mm.len() < 2 {
-        bail!("{}: the centerline is empty", a.input.display());
-    }
-    study
-        .segmentation
-        .warnings
-        .splice(0..0, loaded.meta.warnings);
-    for w in &study.segmentation.warnings {
+    let prepared = prepared?;
+    for w in &prepared.study.segmentation.warnings {
         eprintln!("warning: {}: {w}", a.input.display());
     }
-    Ok(Prepared { study, load_ms })
+    Ok(prepared)
 }
 
 pub fn run(a: &PrepArgs) -> Result<()> {
@@ -197,7 +68,7 @@ fn progress_bar() -> Option<ProgressBar> {
     if !std::io::stderr().is_terminal() {
         return None;
     }
-    let b = ProgressBar::new(Stage::ALL.len() as u64);
+    let b = ProgressBar::new(crate::open::OPEN_STEPS as u64);
     b.set_style(ProgressStyle::with_template("{bar:30} {pos}/{len} {msg}").ok()?);
     Some(b)
 }

@@ -10,7 +10,6 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use voyage_core::Study;
-use voyage_io::write_atomic;
 use voyage_nav::{Camera, Direction, Flight, Pose, fly, potential_field};
 use voyage_render::GpuRenderer;
 use voyage_view::{
@@ -18,10 +17,8 @@ use voyage_view::{
     View, Visibility, render_translucency, shade, surface_point,
 };
 
-use super::{
-    fly::PhysicsArgs,
-    prep::{InputArgs, Prepared, load_and_prepare},
-};
+use super::{fly::PhysicsArgs, prep::load_and_prepare};
+use crate::open::{InputArgs, Prepared};
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum OneDirection {
@@ -193,16 +190,6 @@ impl<'a> Renderer<'a> {
     }
 }
 
-pub fn write_png(path: &Path, rgba: &[u8], width: u32, height: u32) -> Result<()> {
-    use image::ImageEncoder;
-    write_atomic(path, |w| {
-        image::codecs::png::PngEncoder::new(w)
-            .write_image(rgba, width, height, image::ExtendedColorType::Rgba8)
-            .map_err(std::io::Error::other)
-    })?;
-    Ok(())
-}
-
 fn flight(study: &Study, physics: &PhysicsArgs, dir: OneDirection, input: &Path) -> Result<Flight> {
     let opts = physics.options()?.fitted_to(study);
     let field = potential_field(study, opts.safety.min_wall_mm)
@@ -238,7 +225,7 @@ pub fn render(a: &RenderArgs) -> Result<()> {
     if a.translucency {
         translucency_over(&study, &camera, &mut rgba, a.view.width, a.view.height)?;
     }
-    write_png(&a.out, &rgba, a.view.width, a.view.height)?;
+    voyage_io::write_png(&a.out, &rgba, a.view.width, a.view.height)?;
     println!(
         "wrote {} ({}×{}, {})",
         a.out.display(),
@@ -329,7 +316,7 @@ pub fn movie(a: &MovieArgs) -> Result<()> {
     );
     for (i, pose) in poses.iter().enumerate() {
         let rgba = r.draw(&a.view.camera(*pose))?;
-        write_png(
+        voyage_io::write_png(
             &a.out.join(format!("frame_{i:05}.png")),
             &rgba,
             a.view.width,

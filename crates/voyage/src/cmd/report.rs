@@ -14,7 +14,8 @@ use voyage_view::{
     read_both_ways, render_rgba,
 };
 
-use super::prep::{InputArgs, Prepared, load_and_prepare};
+use super::prep::load_and_prepare;
+use crate::open::{InputArgs, Prepared};
 
 #[derive(Args, Debug)]
 pub struct ReportArgs {

@@ -939,7 +939,7 @@ impl App {
             egui::ScreenshotCallback::new(move |image| {
                 let (w, h) = (image.size[0] as u32, image.size[1] as u32);
                 let rgba: Vec<u8> = image.pixels.iter().flat_map(|c| c.to_array()).collect();
-                if let Err(e) = crate::cmd::render::write_png(&path, &rgba, w, h) {
+                if let Err(e) = voyage_io::write_png(&path, &rgba, w, h) {
                     note_error(&outcome, format!("{}: {e:#}", path.display()));
                 }
                 if then_quit {

@@ -7,7 +7,7 @@ use glam::DVec3;
 use serde::{Deserialize, Serialize};
 use voyage_core::Geometry;
 
-use crate::cmd::prep::{Frame, PointArgs};
+use crate::open::{Frame, PointArgs};
 
 /// One correction, a point in patient LPS mm (script steps and the report use this form:
 /// `{"include": [x, y, z]}`, `"reset"`).

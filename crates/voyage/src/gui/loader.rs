@@ -8,12 +8,11 @@ use std::{
 };
 
 use anyhow::Context as _;
-use voyage_core::{PrepOptions, Stage, prepare};
-use voyage_io::{self as io, LoadOptions};
+use voyage_io as io;
 use voyage_phantom::{self as phantom, ColonOptions};
 
 use super::session::Session;
-use crate::cmd::prep::PointArgs;
+use crate::open::{Choices, InputArgs, OPEN_STEPS, Opening, PointArgs, open_study, prepare_volume};
 
 /// What to open.
 #[derive(Clone, Debug)]
@@ -86,9 +85,9 @@ pub struct Job {
     pub started: std::time::Instant,
 }
 
-/// The stages a job goes through, for the progress bar: reading (or making the phantom),
-/// the preprocessing stages, and setting up navigation and rendering.
-const EXTRA_STEPS: usize = 2;
+/// Steps a job takes beyond opening ([`OPEN_STEPS`]: reading or making the phantom, the
+/// preprocessing stages): setting up navigation and rendering.
+const EXTRA_STEPS: usize = 1;
 
 impl Job {
     pub fn start(source: Source, ctx: egui::Context) -> Job {
@@ -100,7 +99,7 @@ impl Job {
                 let progress = |step: usize, what: &str| {
                     let _ = tx.send(Message::Progress {
                         step,
-                        of: Stage::ALL.len() + EXTRA_STEPS,
+                        of: OPEN_STEPS + EXTRA_STEPS,
                         what: what.to_string(),
                     });
                     ctx.request_repaint();
@@ -114,7 +113,7 @@ impl Job {
             source,
             rx,
             step: 0,
-            of: Stage::ALL.len() + EXTRA_STEPS,
+            of: OPEN_STEPS + EXTRA_STEPS,
             what: "starting".into(),
             started: std::time::Instant::now(),
         }
@@ -145,26 +144,21 @@ impl Job {
 }
 
 fn open(source: &Source, progress: &dyn Fn(usize, &str)) -> anyhow::Result<Session> {
-    let mut opts = PrepOptions::default();
-    let mut load_warnings = Vec::new();
-    let ct = match source {
+    let tell = |o: Opening| progress(o.step, o.what);
+    let study = match source {
         Source::File {
             path,
             mask,
             series,
             points,
         } => {
-            progress(0, "reading");
-            let loaded = io::load(
-                path,
-                &LoadOptions {
-                    series_uid: series.clone(),
-                },
-            )?;
-            opts.segment.mask = mask.then_some(true);
-            points.apply(loaded.volume.geometry(), &loaded.meta, &mut opts);
-            load_warnings = loaded.meta.warnings;
-            loaded.volume
+            let input = InputArgs {
+                input: path.clone(),
+                mask: *mask,
+                points: points.clone(),
+                series: series.clone(),
+            };
+            open_study(&input, None, tell)?.study
         }
         Source::Phantom { small, points } => {
             progress(0, "making the colon phantom");
@@ -173,17 +167,14 @@ fn open(source: &Source, progress: &dyn Fn(usize, &str)) -> anyhow::Result<Sessi
                 ..ColonOptions::default()
             })?
             .ct;
-            points.apply(ct.geometry(), &io::Meta::default(), &mut opts);
-            ct
+            let choices = Choices {
+                points,
+                mask: false,
+                nav_min_wall_mm: None,
+            };
+            prepare_volume(ct, io::Meta::default(), &choices, &source.describe(), tell)?
         }
     };
-    let mut study = prepare(ct, &opts, |stage| {
-        let i = Stage::ALL.iter().position(|s| *s == stage).unwrap_or(0);
-        progress(1 + i, stage.name());
-    })
-    .with_context(|| source.describe())?;
-    // The loader's doubts (a series taken among several) head the study's warnings.
-    study.segmentation.warnings.splice(0..0, load_warnings);
-    progress(Stage::ALL.len() + 1, "setting up the flight");
+    progress(OPEN_STEPS, "setting up the flight");
     Session::new(source.title(), study).with_context(|| source.describe())
 }

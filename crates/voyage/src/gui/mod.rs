@@ -86,7 +86,7 @@ pub struct ViewArgs {
     #[arg(long)]
     pub series: Option<String>,
     #[command(flatten)]
-    pub points: crate::cmd::prep::PointArgs,
+    pub points: crate::open::PointArgs,
     #[command(flatten)]
     pub window: WindowArgs,
 }

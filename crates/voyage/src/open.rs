@@ -1,0 +1,195 @@
+//! Opening a study, one way for every command and the window: the input and the user's
+//! choices ([`InputArgs`], [`PointArgs`]) loaded ([`voyage_io::load`]) and preprocessed
+//! ([`voyage_core::prepare`]), the loader's doubts heading the study's warnings.
+
+use std::{path::PathBuf, time::Instant};
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, ValueEnum};
+use glam::DVec3;
+use voyage_core::{
+    Geometry, PatientPosition, PositionSource, PrepOptions, Stage, Study, Volume, prepare,
+};
+use voyage_io::{self as io, LoadOptions};
+
+#[derive(Clone, Copy, Debug, Default, ValueEnum)]
+pub enum Frame {
+    /// DICOM patient coordinates (LPS mm), as viewers show them.
+    #[default]
+    Lps,
+    /// Volume-local mm (x = i·sx, y = j·sy, z = k·sz), as the phantoms' truth files give them.
+    Local,
+}
+
+/// The input and the preprocessing choices every command that runs `prep` shares.
+#[derive(Args, Debug, Clone)]
+pub struct InputArgs {
+    /// A CT (DICOM folder or file, NIfTI, MetaImage, NRRD) or a lumen mask (0/1 labels).
+    pub input: PathBuf,
+    /// Treat the input as a lumen mask, every non-zero label lumen (default: detected when it
+    /// holds 0 and one other value, as 0/1 or 0/255; labels 0/1/2... need it).
+    #[arg(long)]
+    pub mask: bool,
+    #[command(flatten)]
+    pub points: PointArgs,
+    /// DICOM: which series to load when the folder holds several.
+    #[arg(long)]
+    pub series: Option<String>,
+}
+
+/// A DICOM PatientPosition code, any case.
+fn parse_position(s: &str) -> Result<PatientPosition, String> {
+    PatientPosition::parse(s)
+        .ok_or_else(|| format!("{s}: expected one of HFS, HFP, FFS, FFP, HFDR, HFDL, FFDR, FFDL"))
+}
+
+/// Corrections to the automatic choices: which gas is colon, where the flight starts and
+/// ends, how the patient lay, whether the colon's tagged fluid is cleansed.
+#[derive(Args, Debug, Clone, Default)]
+pub struct PointArgs {
+    /// A point in gas that is colon (mm, see --coords): its gas joins the colon. It does not
+    /// move the start; --source does. Repeat it for several segments (`prep --json` lists
+    /// each segment with a point in it, `anchor_lps_mm`).
+    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
+    pub seed: Vec<DVec3>,
+    /// A point in gas that is not colon (mm, see --coords): its gas is left out, even when it
+    /// is the lowest (the rectum is then the lowest of the rest). Repeatable.
+    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
+    pub exclude: Vec<DVec3>,
+    /// The rectum end of the flight (mm, see --coords).
+    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
+    pub source: Option<DVec3>,
+    /// The cecum end of the flight (mm, see --coords).
+    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
+    pub target: Option<DVec3>,
+    /// The coordinate frame of --seed, --source and --target.
+    #[arg(long, value_enum, default_value_t = Frame::Lps)]
+    pub coords: Frame,
+    /// How the patient lay, as a DICOM PatientPosition code (HFS, HFP, FFS, FFP, HFDR, HFDL,
+    /// FFDR, FFDL), overriding the file and the air–fluid levels: decides on which side fluid
+    /// lies and which way is up in the view.
+    #[arg(long, value_parser = parse_position)]
+    pub position: Option<PatientPosition>,
+    /// Keep the colon's tagged fluid: no electronic cleansing (on by default where the
+    /// colon holds tagged fluid; the surface is then cut at the fluid's edge).
+    #[arg(long)]
+    pub no_cleanse: bool,
+}
+
+impl PointArgs {
+    /// Puts the choices into `opts` for a volume of geometry `g` whose loader found `meta`.
+    pub fn apply(&self, g: &Geometry, meta: &io::Meta, opts: &mut PrepOptions) {
+        let to_local = |p: DVec3| match self.coords {
+            Frame::Lps => g.patient_to_local(p),
+            Frame::Local => p,
+        };
+        opts.segment.seeds_mm = self.seed.iter().map(|&p| to_local(p)).collect();
+        opts.segment.exclude_mm = self.exclude.iter().map(|&p| to_local(p)).collect();
+        opts.centerline.source_mm = self.source.map(to_local);
+        opts.centerline.target_mm = self.target.map(to_local);
+        opts.segment.position = match (self.position, meta.position) {
+            (Some(p), _) => Some((p, PositionSource::Given)),
+            (None, Some(p)) => Some((p, PositionSource::Dicom)),
+            (None, None) => None,
+        };
+        if self.no_cleanse {
+            opts.cleanse = None;
+        }
+    }
+}
+
+pub fn parse_point(s: &str) -> Result<DVec3, String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{s}: {e}"))?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(DVec3::new(x, y, z)),
+        _ => Err(format!("{s}: expected three numbers x,y,z")),
+    }
+}
+
+/// A study ready for navigation, and what it cost to load.
+pub struct Prepared {
+    /// In the study storage: its local mm are read with `study.ct.geometry()`.
+    pub study: Study,
+    pub load_ms: f64,
+}
+
+/// How far opening has got: step `step` of [`OPEN_STEPS`] (reading, then the
+/// preprocessing's stages), doing `what`.
+#[derive(Clone, Copy, Debug)]
+pub struct Opening<'a> {
+    pub step: usize,
+    pub what: &'a str,
+}
+
+/// Steps [`open_study`] tells: reading, then each preprocessing stage.
+pub const OPEN_STEPS: usize = Stage::ALL.len() + 1;
+
+/// Loads the input and runs the whole preprocessing, with the navigable core for a camera
+/// `nav_min_wall_mm` from the wall (None: made when navigation first asks).
+pub fn open_study(
+    a: &InputArgs,
+    nav_min_wall_mm: Option<f64>,
+    mut progress: impl FnMut(Opening),
+) -> Result<Prepared> {
+    progress(Opening {
+        step: 0,
+        what: "reading",
+    });
+    let t0 = Instant::now();
+    let loaded = io::load(
+        &a.input,
+        &LoadOptions {
+            series_uid: a.series.clone(),
+        },
+    )?;
+    let load_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let choices = Choices {
+        points: &a.points,
+        mask: a.mask,
+        nav_min_wall_mm,
+    };
+    let name = a.input.display().to_string();
+    let study = prepare_volume(loaded.volume, loaded.meta, &choices, &name, progress)?;
+    Ok(Prepared { study, load_ms })
+}
+
+/// What the user chose for a volume already in memory.
+pub struct Choices<'a> {
+    pub points: &'a PointArgs,
+    /// The volume is a lumen mask.
+    pub mask: bool,
+    pub nav_min_wall_mm: Option<f64>,
+}
+
+/// Preprocesses `ct` (named `name` in errors), whose loader found `meta`, with the user's
+/// `choices`; the loader's warnings head the study's. `progress` hears each stage, from
+/// step 1 of [`OPEN_STEPS`].
+pub fn prepare_volume(
+    ct: Volume<i16>,
+    meta: io::Meta,
+    choices: &Choices,
+    name: &str,
+    mut progress: impl FnMut(Opening),
+) -> Result<Study> {
+    let mut opts = PrepOptions::default();
+    choices.points.apply(ct.geometry(), &meta, &mut opts);
+    opts.segment.mask = choices.mask.then_some(true);
+    opts.nav_min_wall_mm = choices.nav_min_wall_mm;
+    let mut study = prepare(ct, &opts, |stage| {
+        let i = Stage::ALL.iter().position(|s| *s == stage).unwrap_or(0);
+        progress(Opening {
+            step: 1 + i,
+            what: stage.name(),
+        })
+    })
+    .with_context(|| name.to_string())?;
+    if study.centerline.points_mm.len() < 2 {
+        bail!("{name}: the centerline is empty");
+    }
+    study.segmentation.warnings.splice(0..0, meta.warnings);
+    Ok(study)
+}
