@@ -14,6 +14,12 @@ pub fn scratch(name: &str) -> PathBuf {
     dir.join(name)
 }
 
+/// Saves `bytes` as `name` in the scratch folder (a file a header beside it may name).
+#[allow(dead_code)]
+pub fn save_as(name: &str, bytes: &[u8]) {
+    std::fs::write(scratch(name), bytes).expect("write scratch file");
+}
+
 /// Loads `bytes` saved as `name`; any `Err` is fine, a panic is the bug being hunted.
 pub fn load_as(name: &str, bytes: &[u8]) {
     let path = scratch(name);
