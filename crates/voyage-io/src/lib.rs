@@ -1,5 +1,5 @@
-//! voyage's files: loading and saving volumes, and the exports other tools open. The only
-//! crate that touches files; the pipeline (`voyage-core`) takes values and returns values.
+//! voyage's files: loading and saving volumes and images (the exports other tools open are
+//! `voyage-export`'s, over this crate). It depends on `voyage-core` alone.
 //!
 //! [`load`] takes a path and returns a HU volume with geometry in the DICOM patient frame
 //! (LPS), whatever the format: a DICOM series folder or file (also multi-frame), NIfTI-1
@@ -13,8 +13,6 @@ pub mod nifti;
 pub mod nrrd;
 mod panic;
 mod png;
-
-pub mod export;
 
 pub use atomic::write_atomic;
 pub use panic::install_panic_hook;

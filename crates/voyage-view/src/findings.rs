@@ -1,6 +1,6 @@
 //! The radiologist's findings: markers dropped on the colon wall under the mouse cursor, each
 //! with a note and the camera pose to fly back to; two-click measurements in mm. Their
-//! export is `voyage_io::export_findings`.
+//! export is `voyage_export::export_findings`.
 //!
 //! Everything here is in volume-local mm, the frame of the mesh and of the camera's poses;
 //! LPS appears only in the exported files.

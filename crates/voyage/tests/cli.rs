@@ -734,7 +734,7 @@ fn fly_reports_both_directions_and_writes_a_trajectory() {
         assert!(f["min_wall_distance_mm"].as_f64().unwrap() >= 1.0);
     }
     // The trajectory holds one pose per frame (plus the start) for each direction.
-    let poses = voyage_io::export::trajectory::read_poses(&traj).unwrap();
+    let poses = voyage_export::trajectory::read_poses(&traj).unwrap();
     assert_eq!(poses.len(), 2);
     assert_eq!(
         poses[0].len() as u64,
@@ -834,7 +834,7 @@ fn render_movie_and_bench_render_on_the_small_phantom() {
         traj.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", text(&o));
-    let pose = voyage_io::export::trajectory::read_poses(&traj).unwrap()[0][40];
+    let pose = voyage_export::trajectory::read_poses(&traj).unwrap()[0][40];
     let pose_arg = pose.to_array().map(|v| format!("{v}")).join(",");
     let again = dir.join("pose.png");
     let o = voyage(&[

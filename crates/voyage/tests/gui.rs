@@ -151,18 +151,8 @@ fn small_colon(out: &Path, args: &[&str]) {
 
 /// `voyage phantom colon ARGS --out OUT`, which must succeed.
 fn colon(out: &Path, args: &[&str]) {
-    let made = Command::new(env!("CARGO_BIN_EXE_voyage"))
-        .args(["phantom", "colon"])
-        .args(args)
-        .arg("--out")
-        .arg(out)
-        .output()
-        .unwrap();
-    assert!(
-        made.status.success(),
-        "{}",
-        String::from_utf8_lossy(&made.stderr)
-    );
+    let out = out.to_str().unwrap();
+    cli_json(&[&["phantom", "colon"], args, &["--out", out]].concat());
 }
 
 /// `voyage view CT ARGS --script` with `steps` (written to DIR/NAME.json), which must

@@ -8,7 +8,7 @@ use clap::{Args, ValueEnum};
 use glam::DVec3;
 use serde_json::json;
 use voyage_core::Geometry;
-use voyage_io::export::trajectory::write_trajectory;
+use voyage_export::trajectory::write_trajectory;
 use voyage_nav::{
     Direction, Flight, FlightOptions, Looking, Rescue, STUCK_S, fly, looking, potential_field,
 };

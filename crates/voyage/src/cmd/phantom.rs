@@ -243,8 +243,7 @@ pub fn demo(out: &Path, small: bool) -> Result<()> {
     super::info::Info::new(&ct, &loaded, false).print_text();
     // The preprocessing on what was read back, checked against the phantom's truth.
     let study = voyage_core::prepare(loaded.volume, &Default::default(), |_| {})?;
-    let written =
-        voyage_io::export::study::write_study(&out.join("prep"), &study, Default::default())?;
+    let written = voyage_export::study::write_study(&out.join("prep"), &study, Default::default())?;
     let (mut both, mut a, mut b) = (0usize, 0usize, 0usize);
     for (&x, &y) in p.lumen.data().iter().zip(study.segmentation.lumen.data()) {
         both += (x != 0 && y != 0) as usize;

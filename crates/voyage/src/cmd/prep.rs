@@ -8,7 +8,7 @@ use glam::DVec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use voyage_core::{ComponentKind, Geometry, Stage, Study};
-use voyage_io::export::study::{StudyExports, check_out_dir, write_study};
+use voyage_export::study::{StudyExports, check_out_dir, write_study};
 
 use crate::open::{InputArgs, Prepared, open_study};
 

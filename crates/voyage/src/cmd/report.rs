@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::Args;
-use voyage_io::export::{ReportCoverage, export_reading, read_findings};
+use voyage_export::{ReportCoverage, export_reading, read_findings};
 use voyage_nav::{Camera, FlightOptions};
 use voyage_view::{
     CellMesh, CoverageOptions, Lighting, READING_FOV_DEG, Strategy, View, Visibility,
@@ -39,7 +39,7 @@ pub struct ReportArgs {
 const SNAPSHOT_PX: u32 = 512;
 
 pub fn run(a: &ReportArgs) -> Result<()> {
-    voyage_io::export::study::check_out_dir(&a.out)?;
+    voyage_export::study::check_out_dir(&a.out)?;
     let min_wall = FlightOptions::default().safety.min_wall_mm;
     let Prepared { study, .. } = load_and_prepare(&a.input, Some(min_wall))?;
     let findings = read_findings(&a.findings, study.ct.geometry())?;

@@ -12,7 +12,7 @@ use egui::{Color32, Key, Modifiers, Pos2, Rect, RichText, Sense, Stroke, Vec2};
 use glam::DVec3;
 use serde_json::json;
 use voyage_core::LEFT_OUT_DOUBT_ML;
-use voyage_io::export::{ReportCoverage, export_reading};
+use voyage_export::{ReportCoverage, export_reading};
 use voyage_nav::{Camera, Direction};
 use voyage_view::{
     CloseupBox, FindingKind, Findings, Hit, Material, ReadingStep, TransferFunction,

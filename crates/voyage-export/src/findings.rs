@@ -13,7 +13,7 @@ use super::{
     report::{ColonRead, Report, ReportCoverage, ReportFinding, write_report_html},
     study::write_json,
 };
-use crate::{atomic::write_atomic, encode_png};
+use voyage_io::{encode_png, write_atomic};
 
 /// Markers in red and measurements in yellow in Slicer, apart from the green centerline.
 const MARKER_COLOR: [f64; 3] = [1.0, 0.2, 0.2];
@@ -222,7 +222,7 @@ const PLACE_SLACK_MM: f64 = 10.0;
 /// `voyage report`), into the volume-local frame of `geometry`. Errors name the file and
 /// what is wrong with it.
 pub fn read_findings(path: &Path, geometry: &Geometry) -> Result<Findings> {
-    let text = crate::read_small_text(path, MAX_FINDINGS_BYTES)?;
+    let text = voyage_io::read_small_text(path, MAX_FINDINGS_BYTES)?;
     let v: serde_json::Value =
         serde_json::from_str(&text).map_err(|e| Error::format(path, format!("not JSON: {e}")))?;
     let bad = |what: &str| Error::format(path, format!("not a voyage findings.json: {what}"));

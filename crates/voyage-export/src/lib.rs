@@ -1,5 +1,6 @@
-//! Exports that other tools open. With the loaders, the only place that writes files; every file
-//! is written atomically (temp + rename). Patient coordinates (LPS mm) are used here, at the
+//! Exports that other tools open, over the study, its flights and its reading (`voyage-io`
+//! stays the loaders and writers of volumes, below navigation and views). Every file is
+//! written atomically (temp + rename). Patient coordinates (LPS mm) are used here, at the
 //! edge, and nowhere inside the pipeline. No patient identity is ever written.
 
 mod findings;

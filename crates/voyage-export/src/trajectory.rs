@@ -4,8 +4,8 @@ use std::path::Path;
 
 use serde_json::json;
 
-use crate::atomic::write_atomic;
 use voyage_core::{Geometry, Result};
+use voyage_io::write_atomic;
 use voyage_nav::Flight;
 
 /// Writes `flights` as JSON: per flight its summary and its poses `[x, y, z, qw, qx, qy, qz]`

@@ -7,8 +7,8 @@ use std::path::Path;
 
 use glam::{DMat3, DVec3, Vec3};
 
-use crate::atomic::write_atomic;
 use voyage_core::{Geometry, Mesh, Result};
+use voyage_io::write_atomic;
 
 /// Volume-local → patient: a rotation and a translation, applied in f64.
 struct ToPatient {

@@ -3,7 +3,7 @@
 
 use std::{path::PathBuf, process::Command};
 
-use voyage_io::export::{ColonRead, Report, ReportCoverage, ReportFinding, write_report_html};
+use voyage_export::{ColonRead, Report, ReportCoverage, ReportFinding, write_report_html};
 use voyage_view::{Adequacy, CRads, Findings, SegmentSeen, c_rads};
 
 fn temp_dir(name: &str) -> PathBuf {

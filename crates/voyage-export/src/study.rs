@@ -6,8 +6,8 @@ use glam::DVec3;
 use serde_json::json;
 
 use super::{MarkupsPoint, write_markups_curve, write_ply, write_stl};
-use crate::{atomic::write_atomic, nifti};
 use voyage_core::{Result, Study};
+use voyage_io::{nifti, write_atomic};
 
 /// Which optional exports [`write_study`] adds.
 #[derive(Clone, Copy, Debug, Default)]

@@ -11,7 +11,7 @@ use std::{
 use glam::DVec3;
 use serde_json::Value;
 use voyage_core::{Geometry, PrepOptions, Study, prepare};
-use voyage_io::export::{
+use voyage_export::{
     export_findings,
     markups::{MarkupsPoint, write_markups_curve},
 };
@@ -455,7 +455,7 @@ fn findings_json_reads_back_what_was_exported() {
     f.markers[0].size_mm = Some(6.25);
     let g = tilted_geometry();
     export_findings(&dir, &f, &g, |_, _| Ok((2, 2, vec![255; 16]))).unwrap();
-    let back = voyage_io::export::read_findings(&dir.join("findings.json"), &g).unwrap();
+    let back = voyage_export::read_findings(&dir.join("findings.json"), &g).unwrap();
     assert_eq!(back.markers.len(), 2);
     for (a, b) in f.markers.iter().zip(&back.markers) {
         assert_eq!(
@@ -470,7 +470,7 @@ fn findings_json_reads_back_what_was_exported() {
     }
     // Not a findings file: the error names the file.
     let other = dir.join("findings.mrk.json");
-    let e = voyage_io::export::read_findings(&other, &g)
+    let e = voyage_export::read_findings(&other, &g)
         .unwrap_err()
         .to_string();
     assert!(
@@ -495,13 +495,13 @@ fn findings_read_back_are_checked_like_any_input() {
     .unwrap();
     let path = dir.join("findings.json");
     let good = read_json(&path);
-    assert!(voyage_io::export::read_findings(&path, &g).is_ok());
+    assert!(voyage_export::read_findings(&path, &g).is_ok());
     let refused = |edit: &dyn Fn(&mut Value), expect: &str| {
         let mut doc = good.clone();
         edit(&mut doc);
         let bad = dir.join("bad.json");
         std::fs::write(&bad, serde_json::to_string(&doc).unwrap()).unwrap();
-        let err = voyage_io::export::read_findings(&bad, &g)
+        let err = voyage_export::read_findings(&bad, &g)
             .err()
             .map(|e| e.to_string())
             .unwrap_or_default();
@@ -545,5 +545,30 @@ fn findings_read_back_are_checked_like_any_input() {
         written.iter().all(|p| p.file_name().unwrap().len() <= 48),
         "{written:?}"
     );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Findings are read only from a regular file: a device or a FIFO never ends.
+#[test]
+fn findings_are_read_only_from_a_regular_file() {
+    let dir = std::env::temp_dir().join(format!("voyage-findings-fifo-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let fifo = dir.join("findings.json");
+    assert!(
+        std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    let g = voyage_core::Geometry::new([2, 2, 2], [1.0; 3], [0.0; 3]).unwrap();
+    for path in [std::path::Path::new("/dev/zero"), fifo.as_path()] {
+        let err = voyage_export::read_findings(path, &g)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(err.contains("not a regular file"), "{err}");
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -9,7 +9,7 @@ use std::path::Path;
 use voyage_core::Result;
 use voyage_view::{CRads, SegmentSeen};
 
-use crate::atomic::write_atomic;
+use voyage_io::write_atomic;
 
 /// One finding as the report lists it.
 #[derive(Clone, Debug)]
