@@ -402,10 +402,7 @@ impl Patch {
             weighted += (a + b + c) / 3.0 * (0.5 * (b - a).cross(c - a).length());
         }
         let mean = weighted / area_mm2.max(f64::MIN_POSITIVE);
-        let centroid = |t: u32| {
-            let [a, b, c] = triangle_points(mesh, t);
-            (a + b + c) / 3.0
-        };
+        let centroid = |t: u32| centroid_of(mesh, t);
         let center_triangle = triangles
             .iter()
             .copied()
@@ -445,13 +442,20 @@ impl Patch {
             normal: self.normal,
             triangle: self.center_triangle,
         };
+        // Made when the centre fails: the centroids, and each one's squared distance to the
+        // nearest anchor so far.
+        let mut centroids: Vec<DVec3> = Vec::new();
         let mut nearest: Vec<f64> = Vec::new();
         let more = (0..MORE_ANCHORS).map_while(move |_| {
-            if nearest.is_empty() {
-                nearest = self
+            if centroids.is_empty() {
+                centroids = self
                     .triangles
                     .iter()
-                    .map(|&t| centroid_of(mesh, t).distance_squared(self.center_mm))
+                    .map(|&t| centroid_of(mesh, t))
+                    .collect();
+                nearest = centroids
+                    .iter()
+                    .map(|c| c.distance_squared(self.center_mm))
                     .collect();
             }
             let (i, &d) = nearest
@@ -462,9 +466,9 @@ impl Patch {
                 return None;
             }
             let t = self.triangles[i];
-            let point = centroid_of(mesh, t);
-            for (k, &u) in self.triangles.iter().enumerate() {
-                nearest[k] = nearest[k].min(centroid_of(mesh, u).distance_squared(point));
+            let point = centroids[i];
+            for (n, c) in nearest.iter_mut().zip(&centroids) {
+                *n = n.min(c.distance_squared(point));
             }
             Some(Anchor {
                 point,

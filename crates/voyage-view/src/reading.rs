@@ -298,17 +298,18 @@ impl ReadingRun {
     ) -> Result<()> {
         let direction = run.direction();
         self.flights.push(run.finish(scene.field));
-        let flown = std::mem::replace(&mut self.seen, Coverage::new(scene.mesh, self.options));
         if direction == Direction::Forward {
-            self.one_way = Some(flown);
+            self.one_way = Some(self.seen.clone());
+            self.seen.clear();
             self.stage = flying(scene, Direction::Backward, &self.flight_opts, self.lens)?;
             return Ok(());
         }
-        let mut both = self.one_way.clone().unwrap_or(flown.clone());
-        both.union(&flown);
+        // `seen` holds what the way back showed: joined to the first flight's, both ways.
+        let mut both = self.one_way.clone().unwrap_or_else(|| self.seen.clone());
+        both.union(&self.seen);
         self.listed = both.patches(scene.mesh).len();
-        self.seen = both.clone();
-        self.two_way = Some(both);
+        self.two_way = Some(both.clone());
+        self.seen = both;
         self.stage = self.review_round(scene.mesh, 0);
         Ok(())
     }

@@ -35,6 +35,7 @@ use super::{
     session::Session,
     slices::{SliceAction, SlicePanel, SliceSource},
 };
+use crate::open::InputArgs;
 
 /// What a click on the endoscopic view does.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -1007,12 +1008,12 @@ impl App {
                 if ui.button("Open").clicked() && !self.open_path.trim().is_empty() {
                     let path = PathBuf::from(self.open_path.trim());
                     self.open(
-                        Source::File {
-                            path,
+                        Source::File(InputArgs {
+                            input: path,
                             mask: false,
                             series: None,
                             points: Default::default(),
-                        },
+                        }),
                         ui.ctx(),
                     );
                 }

@@ -2,7 +2,6 @@
 //! the window stays responsive and shows the progress.
 
 use std::{
-    path::PathBuf,
     sync::mpsc::{Receiver, TryRecvError, channel},
     thread,
 };
@@ -17,13 +16,9 @@ use crate::open::{Choices, InputArgs, OPEN_STEPS, Opening, PointArgs, open_study
 /// What to open.
 #[derive(Clone, Debug)]
 pub enum Source {
-    /// A CT (DICOM folder or file, NIfTI, MetaImage, NRRD) or a lumen mask.
-    File {
-        path: PathBuf,
-        mask: bool,
-        series: Option<String>,
-        points: PointArgs,
-    },
+    /// A CT (DICOM folder or file, NIfTI, MetaImage, NRRD) or a lumen mask, with the
+    /// user's choices, as the commands take it.
+    File(InputArgs),
     /// The built-in colon phantom, made on the fly.
     Phantom { small: bool, points: PointArgs },
 }
@@ -31,7 +26,7 @@ pub enum Source {
 impl Source {
     pub fn describe(&self) -> String {
         match self {
-            Source::File { path, .. } => path.display().to_string(),
+            Source::File(a) => a.input.display().to_string(),
             Source::Phantom { small: false, .. } => "the colon phantom".into(),
             Source::Phantom { small: true, .. } => "the small colon phantom".into(),
         }
@@ -40,7 +35,7 @@ impl Source {
     /// The user's choices of points (seeds, exclusions, ends) and position.
     pub fn points(&self) -> &PointArgs {
         match self {
-            Source::File { points, .. } | Source::Phantom { points, .. } => points,
+            Source::File(InputArgs { points, .. }) | Source::Phantom { points, .. } => points,
         }
     }
 
@@ -48,7 +43,9 @@ impl Source {
     pub fn with_points(&self, points: PointArgs) -> Source {
         let mut s = self.clone();
         match &mut s {
-            Source::File { points: p, .. } | Source::Phantom { points: p, .. } => *p = points,
+            Source::File(InputArgs { points: p, .. }) | Source::Phantom { points: p, .. } => {
+                *p = points
+            }
         }
         s
     }
@@ -57,10 +54,11 @@ impl Source {
     /// often named after the patient; the last component is what the user chose to open).
     fn title(&self) -> String {
         match self {
-            Source::File { path, .. } => path
+            Source::File(a) => a
+                .input
                 .file_name()
                 .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_else(|| path.display().to_string()),
+                .unwrap_or_else(|| a.input.display().to_string()),
             Source::Phantom { .. } => "colon phantom".into(),
         }
     }
@@ -146,20 +144,7 @@ impl Job {
 fn open(source: &Source, progress: &dyn Fn(usize, &str)) -> anyhow::Result<Session> {
     let tell = |o: Opening| progress(o.step, o.what);
     let study = match source {
-        Source::File {
-            path,
-            mask,
-            series,
-            points,
-        } => {
-            let input = InputArgs {
-                input: path.clone(),
-                mask: *mask,
-                points: points.clone(),
-                series: series.clone(),
-            };
-            open_study(&input, None, tell)?.study
-        }
+        Source::File(input) => open_study(input, None, tell)?.study,
         Source::Phantom { small, points } => {
             progress(0, "making the colon phantom");
             let ct = phantom::colon(&ColonOptions {

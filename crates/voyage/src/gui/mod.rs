@@ -26,6 +26,8 @@ use clap::Args;
 use app::{App, Outcome};
 pub use loader::Source;
 
+use crate::open::{InputArgs, PointArgs};
+
 /// Options of the window, shared by `view` and `demo`.
 #[derive(Args, Debug, Clone, Default)]
 pub struct WindowArgs {
@@ -86,17 +88,19 @@ pub struct ViewArgs {
     #[arg(long)]
     pub series: Option<String>,
     #[command(flatten)]
-    pub points: crate::open::PointArgs,
+    pub points: PointArgs,
     #[command(flatten)]
     pub window: WindowArgs,
 }
 
 pub fn view(a: &ViewArgs) -> anyhow::Result<()> {
-    let source = a.input.clone().map(|path| Source::File {
-        path,
-        mask: a.mask,
-        series: a.series.clone(),
-        points: a.points.clone(),
+    let source = a.input.clone().map(|input| {
+        Source::File(InputArgs {
+            input,
+            mask: a.mask,
+            series: a.series.clone(),
+            points: a.points.clone(),
+        })
     });
     run(source, &a.window)
 }

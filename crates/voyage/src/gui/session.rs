@@ -263,12 +263,10 @@ impl Session {
 
     /// Puts the submarine at rest at `pose` (which must be safe: a pose it had before).
     pub fn place(&mut self, pose: Pose) {
-        let t = self.sub.state.t;
-        self.sub.state = voyage_nav::State::at(pose);
-        self.sub.state.t = t;
+        self.follow(pose);
         self.vis.reset();
-        self.reached = false;
-        self.pilot.restart(t, self.dt_to_goal(), pose.position);
+        self.pilot
+            .restart(self.sub.state.t, self.dt_to_goal(), pose.position);
     }
 
     /// Jumps to centerline point `i`, looking down the colon toward the current goal.
