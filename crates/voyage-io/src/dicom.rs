@@ -2337,17 +2337,22 @@ fn scan_lengths(buf: &[u8], start: usize, file_size: u64, layout: Layout, whole:
         }
         let (group, element) = (layout.u16(&buf[pos..]), layout.u16(&buf[pos + 2..]));
         if group == 0xFFFE {
-            // Item (E000) opens a container; delimiters (E00D, E0DD) close one.
+            // Item (E000) opens a container; delimiters (E00D, E0DD) close one. A delimiter's
+            // length should be 0, but dicom-rs reads whatever it declares as a value: bounded
+            // by the file here, and stepped over as dicom-rs does.
             let len = layout.u32(&buf[pos + 4..]);
-            if element == 0xE000 {
-                if let Some(bad) = check_len(group, element, len, pos + 8, file_size) {
-                    return bad;
-                }
-                open.push((len != UNDEFINED).then_some(pos + 8 + len as usize));
-            } else if open.last().is_some_and(Option::is_none) {
-                open.pop();
+            if let Some(bad) = check_len(group, element, len, pos + 8, file_size) {
+                return bad;
             }
-            pos += 8;
+            if element == 0xE000 {
+                open.push((len != UNDEFINED).then_some(pos + 8 + len as usize));
+                pos += 8;
+            } else {
+                if open.last().is_some_and(Option::is_none) {
+                    open.pop();
+                }
+                pos += 8 + if len == UNDEFINED { 0 } else { len as usize };
+            }
         } else {
             let (header, len, sequence) = match element_header(buf, pos, layout) {
                 Some(h) => h,

@@ -1165,6 +1165,22 @@ fn huge_length_inside_a_deflated_data_set_is_refused() {
     );
 }
 
+/// Found by the `load_dicom` fuzzer (kept in `fuzz/finds`): a sequence delimiter (FFFE,E0DD)
+/// declaring 4.28 GB, where a delimiter's length should be 0. dicom-rs read it as a value and
+/// reserved 4 GB before failing; the length walk now bounds delimiters too.
+#[test]
+fn huge_delimiter_length_is_refused_before_allocating() {
+    let bytes = include_bytes!("../../../fuzz/finds/load_dicom-oom-element-length.dcm");
+    let dir = TempDir::new("huge-delimiter");
+    let p = dir.path().join("huge-delimiter.dcm");
+    std::fs::write(&p, bytes).unwrap();
+    let err = voyage_io::load(&p, &opts()).unwrap_err().to_string();
+    assert!(
+        err.contains("huge-delimiter.dcm") && err.contains("(FFFE,E0DD) announces 4278190080"),
+        "{err}"
+    );
+}
+
 /// Writes a 4×4 CT slice whose RLE segments decode to one byte each instead of sixteen: the
 /// shape of a file the `load_dicom` fuzzer found to panic inside dicom-rs's RLE decoder.
 pub fn short_rle_file(path: &Path) {
