@@ -16,7 +16,7 @@ use crate::{
     cleanse::{CleanseOptions, Cleansing, Scene, cleanse},
     contacts::{ContactOptions, cut_contacts, may_have_shortcuts, shortcut_plugs},
     distance::{
-        distance_to_wall_in,
+        distance_to_wall_reusing,
         geodesic::{SearchMemory, geodesic_distance_like},
     },
     grid::{BoxGrid, Bricked, Field},
@@ -526,14 +526,14 @@ fn prepare_stored(
 
     // Every Ds below is over this box: cutting contacts only takes lumen away, and a box
     // larger than the lumen's own changes no distance.
-    let grid = BoxGrid::around(seg.extent, 1, seg.lumen.dims());
+    let mut box_ds = BoxDs::new(BoxGrid::around(seg.extent, 1, seg.lumen.dims()));
     // Where the segmentation placed the cecum by anatomy, the centerline ends there unless
     // the user gave the end.
     let mut cl_opts = opts.centerline.clone();
     if cl_opts.target_mm.is_none() {
         cl_opts.target_mm = seg.cecum_voxel.map(|v| centerline::mm_of(&seg.lumen, v));
     }
-    let mut traced = match trace(&mut seg, &grid, &cl_opts, opts, &mut laps) {
+    let mut traced = match trace(&mut seg, &mut box_ds, &cl_opts, opts, &mut laps) {
         Ok(t) => t,
         // Without them the colon came apart (cleansing took wall voxels out beside them):
         // traced with them.
@@ -541,7 +541,7 @@ fn prepare_stored(
             set_voxels(&mut seg.lumen, &beside, 1);
             seg.lumen_voxels += beside.len();
             beside.clear();
-            trace(&mut seg, &grid, &cl_opts, opts, &mut laps)?
+            trace(&mut seg, &mut box_ds, &cl_opts, opts, &mut laps)?
         }
         Err(e) => return Err(e),
     };
@@ -555,7 +555,7 @@ fn prepare_stored(
         let c = &traced.ends.centerline;
         let (mut plugs, mut more) = (Vec::new(), Vec::new());
         if may_have_shortcuts(&c.points_mm, &c.radius_mm, &c.arc_mm, &necks) {
-            let ds = distance_to_wall_in(&seg.lumen, grid.clone());
+            let ds = box_ds.of(&seg.lumen);
             plugs = shortcut_plugs(
                 &seg.lumen,
                 &c.points_mm,
@@ -574,6 +574,7 @@ fn prepare_stored(
                     &mut necks,
                 );
             }
+            box_ds.give_back(ds);
         }
         // With the further holes plugged too, unless they cut the colon itself: then the
         // holes of the trace alone.
@@ -585,12 +586,13 @@ fn prepare_stored(
             tries.push(plugs.clone());
         }
         let retraced = tries.into_iter().find_map(|these: Vec<usize>| {
-            retrace_plugged(&mut seg, &grid, &cl_opts, opts, &mut laps, &these).map(|t| (t, these))
+            retrace_plugged(&mut seg, &mut box_ds, &cl_opts, opts, &mut laps, &these)
+                .map(|t| (t, these))
         });
         match retraced {
             Some((t, these)) => {
                 plugged.extend(these);
-                traced = t;
+                box_ds.give_back(std::mem::replace(&mut traced, t).ds_box);
             }
             None => {
                 settled = plugs.is_empty();
@@ -630,20 +632,22 @@ fn prepare_stored(
         let blocks = sk
             .blocks
             .as_ref()
-            .map(|_| crate::grid::Blocks::new(&seg.lumen, &grid, 2))
+            .map(|_| crate::grid::Blocks::new(&seg.lumen, &box_ds.grid, 2))
             .transpose()?;
         taken.extend(cut_along(
             &mut seg.lumen,
-            &grid,
+            &box_ds.grid,
             &sk,
             blocks.as_ref(),
             opts,
         )?);
         taken.sort_unstable();
         laps.start(Stage::Ds);
-        ds_box = distance_to_wall_in(&seg.lumen, grid.clone());
+        let fresh = box_ds.of(&seg.lumen);
+        box_ds.give_back(std::mem::replace(&mut ds_box, fresh));
     }
     // Ds moves into bricks, and the Dt searches work in its box array.
+    let grid = box_ds.grid; // and its spare memory freed
     let mut ds = Bricked::from_field(&ds_box, 0.0);
     let mut memory = SearchMemory::from(ds_box.data);
 
@@ -658,7 +662,7 @@ fn prepare_stored(
             seg.lumen.data_mut()[v] = 1;
         }
         contact_voxels = 0;
-        let ds_box = distance_to_wall_in(&seg.lumen, grid.clone());
+        let ds_box = crate::distance::distance_to_wall_in(&seg.lumen, grid);
         ends = centre_skeleton(&seg.lumen, &ds_box, &sk, &cl_opts)?;
         ds = Bricked::from_field(&ds_box, 0.0);
         memory = SearchMemory::from(ds_box.data);
@@ -725,6 +729,29 @@ fn prepare_stored(
     })
 }
 
+/// Ds over the lumen's box, computed anew each time the lumen changes (each trace, each round
+/// of plugging): the box, and the memory of a field no longer needed, written over by the
+/// next one instead of fresh pages (on `ctc/prone-tagged`, 218 MB each time).
+struct BoxDs {
+    grid: BoxGrid,
+    spare: Vec<f32>,
+}
+
+impl BoxDs {
+    fn new(grid: BoxGrid) -> Self {
+        BoxDs {
+            grid,
+            spare: Vec::new(),
+        }
+    }
+    fn of(&mut self, lumen: &Volume<u8>) -> Field<f32> {
+        distance_to_wall_reusing(lumen, self.grid.clone(), std::mem::take(&mut self.spare))
+    }
+    fn give_back(&mut self, ds: Field<f32>) {
+        self.spare = ds.data;
+    }
+}
+
 /// The centerline traced through the lumen: its ends and centred path, the contact voxels
 /// cut from the lumen (sorted), and Ds over the lumen's box.
 struct Traced {
@@ -744,7 +771,7 @@ const MAX_PLUG_ROUNDS: usize = 16;
 /// the colon itself.
 fn retrace_plugged(
     seg: &mut Segmentation,
-    grid: &BoxGrid,
+    box_ds: &mut BoxDs,
     cl_opts: &CenterlineOptions,
     opts: &PrepOptions,
     laps: &mut Laps<impl FnMut(Stage)>,
@@ -752,7 +779,7 @@ fn retrace_plugged(
 ) -> Option<Traced> {
     set_voxels(&mut seg.lumen, plugs, 0);
     seg.lumen_voxels -= plugs.len();
-    let traced = trace(seg, grid, cl_opts, opts, laps).ok();
+    let traced = trace(seg, box_ds, cl_opts, opts, laps).ok();
     if traced.is_none() {
         set_voxels(&mut seg.lumen, plugs, 1);
         seg.lumen_voxels += plugs.len();
@@ -813,7 +840,7 @@ fn set_voxels(mask: &mut Volume<u8>, voxels: &[usize], v: u8) {
 /// on a small lumen it needs Ds first.
 fn trace(
     seg: &mut Segmentation,
-    grid: &BoxGrid,
+    box_ds: &mut BoxDs,
     cl_opts: &CenterlineOptions,
     opts: &PrepOptions,
     laps: &mut Laps<impl FnMut(Stage)>,
@@ -822,23 +849,28 @@ fn trace(
     let early_ds = if uses_blocks(&seg.lumen, seg.lumen_voxels, cl_opts) {
         None
     } else {
-        Some(distance_to_wall_in(&seg.lumen, grid.clone()))
+        Some(box_ds.of(&seg.lumen))
     };
     let sk = trace_skeleton(
         &seg.lumen,
-        grid,
+        &box_ds.grid,
         seg.lumen_voxels,
         seg.seed_voxel,
         early_ds.as_ref(),
         cl_opts,
     )?;
     laps.start(Stage::Contacts);
-    let mut taken = cut_along(&mut seg.lumen, grid, &sk, sk.blocks.as_ref(), opts)?;
+    let mut taken = cut_along(&mut seg.lumen, &box_ds.grid, &sk, sk.blocks.as_ref(), opts)?;
     taken.sort_unstable();
     laps.start(Stage::Ds);
     let ds_box = match early_ds {
         Some(d) if taken.is_empty() => d,
-        _ => distance_to_wall_in(&seg.lumen, grid.clone()),
+        early => {
+            if let Some(d) = early {
+                box_ds.give_back(d);
+            }
+            box_ds.of(&seg.lumen)
+        }
     };
     laps.start(Stage::Centerline);
     let ends = centre_skeleton(&seg.lumen, &ds_box, &sk, cl_opts)?;

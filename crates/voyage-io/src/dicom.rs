@@ -1956,11 +1956,18 @@ fn open_dicom(
     if meta.ts_uid == DEFLATED_EXPLICIT_LE {
         return open_deflated(meta, buf, file, until);
     }
+    // Where the header pass stops: the top-level pixel data, as the walk found it. dicom-rs is
+    // given the bytes before it only, so that a reader that disagrees with the walk on where
+    // a sequence ends cannot go on to read (and allocate) the pixel data.
+    let mut header_end = None;
     if let Some(layout) = Layout::of(&meta.ts_uid) {
         let size = file.metadata().map_err(OpenError::Io)?.len();
         loop {
             match scan_lengths(&buf, meta.end, size, layout, until.is_none()) {
-                Scan::Sound => break,
+                Scan::Sound { pixel_data } => {
+                    header_end = pixel_data;
+                    break;
+                }
                 Scan::NeedMore(upto) if !eof && (buf.len() as u64) < size => {
                     let want = upto.max(buf.len() * 2).min(size as usize) - buf.len();
                     let got = (&mut file)
@@ -1972,17 +1979,29 @@ fn open_dicom(
                 // Cut short within the header: dicom-rs reports where.
                 Scan::NeedMore(_) => break,
                 // The header pass stops before the pixel data; the pixel pass reports this.
-                Scan::Truncated { .. } if until.is_some() => break,
-                Scan::Truncated { declared, found } => {
+                Scan::Truncated { at, .. } if until.is_some() => {
+                    header_end = Some(at);
+                    break;
+                }
+                Scan::Truncated {
+                    declared, found, ..
+                } => {
                     return Err(OpenError::Truncated { declared, found });
                 }
                 Scan::Bad(m) => return Err(OpenError::Meta(m)),
             }
         }
     }
+    let rest = match header_end {
+        Some(at) => {
+            buf.truncate(at);
+            0
+        }
+        None => u64::MAX,
+    };
     let source = Cursor::new(meta.clean)
         .chain(Cursor::new(buf.split_off(meta.end)))
-        .chain(file);
+        .chain(file.take(rest));
     let mut options = OpenFileOptions::new().read_preamble(dicom_object::file::ReadPreamble::Never);
     if let Some(tag) = until {
         options = options.read_until(tag);
@@ -2036,9 +2055,11 @@ fn open_deflated(
         big_endian: false,
     };
     match scan_lengths(&inflated, 0, inflated.len() as u64, layout, until.is_none()) {
-        Scan::Sound | Scan::NeedMore(_) => {}
+        Scan::Sound { .. } | Scan::NeedMore(_) => {}
         Scan::Truncated { .. } if until.is_some() => {}
-        Scan::Truncated { declared, found } => {
+        Scan::Truncated {
+            declared, found, ..
+        } => {
             return Err(OpenError::Truncated { declared, found });
         }
         Scan::Bad(m) => return Err(OpenError::Meta(m)),
@@ -2298,13 +2319,18 @@ impl Layout {
 }
 
 enum Scan {
-    /// Every length up to the top-level pixel data (or the end) fits in the file.
-    Sound,
+    /// Every length up to the top-level pixel data (or the end) fits in the file; where the
+    /// walk stopped at the pixel data (without `whole`), its offset.
+    Sound {
+        pixel_data: Option<usize>,
+    },
     /// Needs the file's bytes up to this offset.
     NeedMore(usize),
+    /// The top-level pixel data, at `at`, announces more than the file holds.
     Truncated {
         declared: u32,
         found: u64,
+        at: usize,
     },
     Bad(String),
 }
@@ -2330,16 +2356,17 @@ fn scan_lengths(buf: &[u8], start: usize, file_size: u64, layout: Layout, whole:
             open.pop();
         }
         if pos as u64 >= file_size {
-            return Scan::Sound;
+            return Scan::Sound { pixel_data: None };
         }
         if pos + 8 > buf.len() {
             return Scan::NeedMore(pos + 12);
         }
         let (group, element) = (layout.u16(&buf[pos..]), layout.u16(&buf[pos + 2..]));
         if group == 0xFFFE {
-            // Item (E000) opens a container; delimiters (E00D, E0DD) close one. A delimiter's
-            // length should be 0, but dicom-rs reads whatever it declares as a value: bounded
-            // by the file here, and stepped over as dicom-rs does.
+            // Item (E000) opens a container; delimiters (E00D, E0DD) close one; as in dicom-rs,
+            // any other (FFFE,xxxx) is a plain element. A delimiter's length should be 0, but
+            // dicom-rs reads whatever it declares as a value: bounded by the file here, and
+            // stepped over as dicom-rs does.
             let len = layout.u32(&buf[pos + 4..]);
             if let Some(bad) = check_len(group, element, len, pos + 8, file_size) {
                 return bad;
@@ -2348,7 +2375,8 @@ fn scan_lengths(buf: &[u8], start: usize, file_size: u64, layout: Layout, whole:
                 open.push((len != UNDEFINED).then_some(pos + 8 + len as usize));
                 pos += 8;
             } else {
-                if open.last().is_some_and(Option::is_none) {
+                let delimiter = matches!(element, 0xE00D | 0xE0DD);
+                if delimiter && open.last().is_some_and(Option::is_none) {
                     open.pop();
                 }
                 pos += 8 + if len == UNDEFINED { 0 } else { len as usize };
@@ -2365,10 +2393,13 @@ fn scan_lengths(buf: &[u8], start: usize, file_size: u64, layout: Layout, whole:
                     return Scan::Truncated {
                         declared: len,
                         found,
+                        at: pos,
                     };
                 }
                 if !whole {
-                    return Scan::Sound;
+                    return Scan::Sound {
+                        pixel_data: Some(pos),
+                    };
                 }
                 if len == UNDEFINED {
                     match scan_fragments(buf, value, file_size, layout) {

@@ -1165,20 +1165,35 @@ fn huge_length_inside_a_deflated_data_set_is_refused() {
     );
 }
 
-/// Found by the `load_dicom` fuzzer (kept in `fuzz/finds`): a sequence delimiter (FFFE,E0DD)
-/// declaring 4.28 GB, where a delimiter's length should be 0. dicom-rs read it as a value and
-/// reserved 4 GB before failing; the length walk now bounds delimiters too.
+/// Found by the `load_dicom` fuzzer (kept in `fuzz/finds`), each made dicom-rs reserve 3.5–4.3 GB
+/// before failing:
+/// - a sequence delimiter (FFFE,E0DD) declaring 4.28 GB, where a delimiter's length should be
+///   0 (dicom-rs reads it as a value); the length walk now bounds delimiters too;
+/// - an unknown (FFFE,E02D) inside a sequence, which the walk took for a delimiter and dicom-rs
+///   for a plain element, so dicom-rs was still inside the sequence at the pixel data, which
+///   declares 3.55 GB. The walk now reads (FFFE,xxxx) as dicom-rs does, and the header read is
+///   given only the bytes before the pixel data.
 #[test]
-fn huge_delimiter_length_is_refused_before_allocating() {
-    let bytes = include_bytes!("../../../fuzz/finds/load_dicom-oom-element-length.dcm");
-    let dir = TempDir::new("huge-delimiter");
-    let p = dir.path().join("huge-delimiter.dcm");
-    std::fs::write(&p, bytes).unwrap();
-    let err = voyage_io::load(&p, &opts()).unwrap_err().to_string();
-    assert!(
-        err.contains("huge-delimiter.dcm") && err.contains("(FFFE,E0DD) announces 4278190080"),
-        "{err}"
-    );
+fn huge_lengths_the_fuzzer_found_are_refused_before_allocating() {
+    let finds: [(&str, &[u8], &str); 2] = [
+        (
+            "huge-delimiter.dcm",
+            include_bytes!("../../../fuzz/finds/load_dicom-oom-element-length.dcm"),
+            "(FFFE,E0DD) announces 4278190080",
+        ),
+        (
+            "unknown-item-tag.dcm",
+            include_bytes!("../../../fuzz/finds/load_dicom-oom-unknown-item-tag.dcm"),
+            "(7FE0,0010) announces 3553874689",
+        ),
+    ];
+    let dir = TempDir::new("fuzz-finds");
+    for (name, bytes, says) in finds {
+        let p = dir.path().join(name);
+        std::fs::write(&p, bytes).unwrap();
+        let err = voyage_io::load(&p, &opts()).unwrap_err().to_string();
+        assert!(err.contains(name) && err.contains(says), "{err}");
+    }
 }
 
 /// Writes a 4×4 CT slice whose RLE segments decode to one byte each instead of sixteen: the
