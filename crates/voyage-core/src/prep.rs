@@ -555,6 +555,11 @@ fn prepare_stored(
         let c = &traced.ends.centerline;
         let (mut plugs, mut more) = (Vec::new(), Vec::new());
         if may_have_shortcuts(&c.points_mm, &c.radius_mm, &c.arc_mm, &necks) {
+            // The trace's Ds (with the contacts cut) makes room: it is computed again after
+            // the rounds when no trace replaces it, and two fields of fresh pages cost more.
+            if let Some(d) = traced.ds_box.take() {
+                box_ds.give_back(d);
+            }
             let ds = box_ds.of(&seg.lumen);
             plugs = shortcut_plugs(
                 &seg.lumen,
@@ -592,7 +597,7 @@ fn prepare_stored(
         match retraced {
             Some((t, these)) => {
                 plugged.extend(these);
-                box_ds.give_back(std::mem::replace(&mut traced, t).ds_box);
+                traced = t;
             }
             None => {
                 settled = plugs.is_empty();
@@ -643,9 +648,11 @@ fn prepare_stored(
         )?);
         taken.sort_unstable();
         laps.start(Stage::Ds);
-        let fresh = box_ds.of(&seg.lumen);
-        box_ds.give_back(std::mem::replace(&mut ds_box, fresh));
+        if let Some(d) = ds_box.take() {
+            box_ds.give_back(d);
+        }
     }
+    let ds_box = ds_box.unwrap_or_else(|| box_ds.of(&seg.lumen));
     // Ds moves into bricks, and the Dt searches work in its box array.
     let grid = box_ds.grid; // and its spare memory freed
     let mut ds = Bricked::from_field(&ds_box, 0.0);
@@ -758,7 +765,8 @@ struct Traced {
     sk: centerline::Skeleton,
     ends: centerline::Endpoints,
     taken: Vec<usize>,
-    ds_box: Field<f32>,
+    /// None once a round of plugging took its memory.
+    ds_box: Option<Field<f32>>,
 }
 
 /// Rounds of plugging holes between loops (each traces the centerline again). The right
@@ -878,7 +886,7 @@ fn trace(
         sk,
         ends,
         taken,
-        ds_box,
+        ds_box: Some(ds_box),
     })
 }
 
