@@ -10,7 +10,7 @@ use voyage_view::{Adequacy, Findings, Marker, c_rads};
 
 use super::{
     markups::{MarkupsPoint, markups_line_node, markups_node, write_markups_nodes},
-    report::{ColonRead, Report, ReportCoverage, ReportFinding, write_report_html},
+    report::{ColonRead, Exam, Report, ReportCoverage, ReportFinding, write_report_html},
     study::write_json,
 };
 use voyage_io::{encode_png, write_atomic};
@@ -35,20 +35,20 @@ pub fn export_findings(
 
 /// [`export_findings`] with each marker's segment and distance from the rectum end from
 /// `study`, then `report.html` ([`super::report`]): the same snapshots, the C-RADS category
-/// (with `coverage`'s two-way figure, where measured) and the coverage. `name` is the
-/// study's file name (no patient identity).
+/// (with `coverage`'s two-way figure, where measured), the coverage, and what `exam` says
+/// (no patient identity).
 pub fn export_reading(
     dir: &Path,
     findings: &Findings,
     study: &Study,
-    name: &str,
+    exam: &Exam,
     coverage: ReportCoverage,
     snapshot: impl FnMut(usize, &Marker) -> Result<(u32, u32, Vec<u8>)>,
 ) -> Result<Vec<PathBuf>> {
     let geometry = study.ct.geometry();
     let (mut out, pngs) = write_findings(dir, findings, geometry, Some(study), snapshot)?;
     let report = Report {
-        study: name.to_string(),
+        exam: exam.clone(),
         findings: findings
             .markers
             .iter()
@@ -83,7 +83,7 @@ pub fn export_reading(
             },
         ),
         coverage,
-        colon: ColonRead::of(study),
+        colon: ColonRead::of(study, &exam.by_hand),
     };
     let path = dir.join("report.html");
     write_report_html(&path, &report)?;

@@ -13,4 +13,6 @@ pub mod trajectory;
 pub use findings::{export_findings, export_reading, read_findings};
 pub use markups::{MarkupsPoint, write_markups_curve};
 pub use mesh::{write_ply, write_stl};
-pub use report::{ColonRead, Report, ReportCoverage, ReportFinding, write_report_html};
+pub use report::{
+    ColonRead, Exam, HandCorrection, Report, ReportCoverage, ReportFinding, write_report_html,
+};

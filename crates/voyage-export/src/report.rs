@@ -51,10 +51,32 @@ impl ReportCoverage {
     }
 }
 
+/// What the report says of the exam besides the colon: the file, the series and the date
+/// when the file has them, and the corrections made by hand. Never the patient's identity
+/// (nor the series' free-text description, which can hold it).
+#[derive(Clone, Debug, Default)]
+pub struct Exam {
+    /// The study's file or folder name.
+    pub name: String,
+    /// The series read, e.g. "CT series 2, 412 slices (DICOM)".
+    pub series: Option<String>,
+    /// YYYY-MM-DD.
+    pub date: Option<String>,
+    /// The corrections made by hand before this reading, in the order given.
+    pub by_hand: Vec<HandCorrection>,
+}
+
+/// One correction made by hand to the colon found: a start, an end, gas taken in or left out.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HandCorrection {
+    /// e.g. "gas taken in as colon".
+    pub what: &'static str,
+    pub lps_mm: [f64; 3],
+}
+
 #[derive(Clone, Debug)]
 pub struct Report {
-    /// The study's file or folder name (never a patient name).
-    pub study: String,
+    pub exam: Exam,
     pub findings: Vec<ReportFinding>,
     /// (label, length mm).
     pub measurements: Vec<(String, f64)>,
@@ -76,11 +98,15 @@ pub struct ColonRead {
     pub position: Option<String>,
     /// Collapsed or fluid-filled stretches bridged, per segment: (segment, mm).
     pub bridged_mm: Vec<(String, f64)>,
+    /// Where the colon leaves the scanned volume (one entry per place): the segment.
+    pub leaves_the_scan: Vec<String>,
+    /// The corrections made by hand, each with the segment it lies in: (segment, what, LPS).
+    pub by_hand: Vec<(String, &'static str, [f64; 3])>,
 }
 
 impl ColonRead {
-    /// The colon of `study` as prep found it.
-    pub fn of(study: &voyage_core::Study) -> ColonRead {
+    /// The colon of `study` as prep found it, after the corrections `by_hand`.
+    pub fn of(study: &voyage_core::Study, by_hand: &[HandCorrection]) -> ColonRead {
         let seg = &study.segmentation;
         let mut left_out_ml: Vec<f64> = seg
             .left_out(voyage_core::LEFT_OUT_DOUBT_ML)
@@ -88,8 +114,14 @@ impl ColonRead {
             .collect();
         left_out_ml.sort_by(|a, b| b.total_cmp(a));
         let mut bridged_mm: Vec<(String, f64)> = Vec::new();
+        let mut leaves_the_scan = Vec::new();
         for (gap, name) in seg.gaps.iter().zip(study.gap_segments()) {
             let name = name.unwrap_or("colon").to_string();
+            if gap.at_edge {
+                // Not bridged: the colon goes on outside the scan.
+                leaves_the_scan.push(name);
+                continue;
+            }
             match bridged_mm.iter_mut().find(|(n, _)| *n == name) {
                 Some((_, mm)) => *mm += gap.length_mm,
                 None => bridged_mm.push((name, gap.length_mm)),
@@ -111,6 +143,17 @@ impl ColonRead {
                 seg.orientation.source.describe()
             )),
             bridged_mm,
+            leaves_the_scan,
+            by_hand: by_hand
+                .iter()
+                .map(|c| {
+                    let local = study
+                        .ct
+                        .geometry()
+                        .patient_to_local(glam::DVec3::from_array(c.lps_mm));
+                    (study.segment_at(local).to_string(), c.what, c.lps_mm)
+                })
+                .collect(),
         }
     }
 }
@@ -127,13 +170,13 @@ pub fn report_html(r: &Report) -> String {
     h.push_str("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n");
     h.push_str(&format!(
         "<title>CT colonography report: {}</title>\n",
-        escape(&r.study)
+        escape(&r.exam.name)
     ));
     h.push_str(STYLE);
     h.push_str("</head>\n<body>\n");
     h.push_str(&format!(
-        "<h1>CT colonography report</h1>\n<p class=\"study\">Study: {} &middot; voyage {}</p>\n",
-        escape(&r.study),
+        "<h1>CT colonography report</h1>\n<p class=\"study\" id=\"exam\">{} &middot; voyage {}</p>\n",
+        exam_line(&r.exam),
         env!("CARGO_PKG_VERSION")
     ));
     h.push_str(&format!(
@@ -165,6 +208,18 @@ pub fn report_html(r: &Report) -> String {
     );
     h.push_str("</body>\n</html>\n");
     h
+}
+
+/// "Study: NAME · SERIES · exam of DATE", each part where known.
+fn exam_line(e: &Exam) -> String {
+    let mut parts = vec![format!("Study: {}", escape(&e.name))];
+    if let Some(s) = &e.series {
+        parts.push(escape(s));
+    }
+    if let Some(d) = &e.date {
+        parts.push(format!("exam of {}", escape(d)));
+    }
+    parts.join(" &middot; ")
 }
 
 const STYLE: &str = "<style>\nbody{font-family:sans-serif;margin:2em;max-width:60em;color:#222}\ntable{border-collapse:collapse;margin:1em 0}\nth,td{border:1px solid #bbb;padding:.3em .6em;text-align:left;vertical-align:top}\nimg{width:256px;height:auto}\n.warn{color:#a40}\n.study,.foot{color:#666;font-size:.9em}\n</style>\n";
@@ -213,8 +268,19 @@ fn colon_html(c: &ColonRead, seen: &[SegmentSeen]) -> String {
             list.join(", ")
         ));
     }
+    if !c.leaves_the_scan.is_empty() {
+        h.push_str(&format!(
+            "<p class=\"warn\" id=\"leaves-the-scan\">The colon leaves the scanned volume ({}): what lies outside it was not read.</p>\n",
+            escape(&c.leaves_the_scan.join(", "))
+        ));
+    }
     let mut names: Vec<&str> = seen.iter().map(|s| s.segment).collect();
-    for (name, _) in &c.bridged_mm {
+    for name in c
+        .bridged_mm
+        .iter()
+        .map(|(n, _)| n)
+        .chain(c.by_hand.iter().map(|(n, ..)| n))
+    {
         if !names.contains(&name.as_str()) {
             names.push(name);
         }
@@ -222,7 +288,7 @@ fn colon_html(c: &ColonRead, seen: &[SegmentSeen]) -> String {
     if names.is_empty() {
         return h;
     }
-    h.push_str("<table id=\"segments\">\n<tr><th>Segment</th><th>Mucosa</th><th>Seen</th><th>Bridged (collapsed or under fluid)</th></tr>\n");
+    h.push_str("<table id=\"segments\">\n<tr><th>Segment</th><th>Mucosa</th><th>Seen</th><th>Bridged (collapsed or under fluid)</th><th>Corrected by hand</th></tr>\n");
     for name in names {
         let row = seen.iter().find(|s| s.segment == name);
         let area = row.map_or("&mdash;".to_string(), |s| {
@@ -234,8 +300,19 @@ fn colon_html(c: &ColonRead, seen: &[SegmentSeen]) -> String {
             .iter()
             .find(|(n, _)| n == name)
             .map_or("&mdash;".to_string(), |(_, mm)| format!("{mm:.0} mm"));
+        let hand: Vec<String> = c
+            .by_hand
+            .iter()
+            .filter(|(n, ..)| n == name)
+            .map(|(_, what, [x, y, z])| format!("{what} at LPS ({x:.0}, {y:.0}, {z:.0})"))
+            .collect();
+        let hand = if hand.is_empty() {
+            "&mdash;".to_string()
+        } else {
+            escape(&hand.join("; "))
+        };
         h.push_str(&format!(
-            "<tr><td>{}</td><td>{area}</td><td>{pct}</td><td>{bridged}</td></tr>\n",
+            "<tr><td>{}</td><td>{area}</td><td>{pct}</td><td>{bridged}</td><td>{hand}</td></tr>\n",
             escape(name)
         ));
     }

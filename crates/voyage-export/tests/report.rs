@@ -3,7 +3,9 @@
 
 use std::{path::PathBuf, process::Command};
 
-use voyage_export::{ColonRead, Report, ReportCoverage, ReportFinding, write_report_html};
+use voyage_export::{
+    ColonRead, Exam, HandCorrection, Report, ReportCoverage, ReportFinding, write_report_html,
+};
 use voyage_view::{Adequacy, CRads, Findings, SegmentSeen, c_rads};
 
 fn temp_dir(name: &str) -> PathBuf {
@@ -24,7 +26,15 @@ fn png(side: u32, rgb: [u8; 3]) -> Vec<u8> {
 
 fn sample() -> Report {
     Report {
-        study: "colon <1>.nii.gz".into(),
+        exam: Exam {
+            name: "colon <1>.nii.gz".into(),
+            series: Some("CT series 2, 412 slices (DICOM)".into()),
+            date: Some("2026-11-27".into()),
+            by_hand: vec![HandCorrection {
+                what: "gas taken in as colon",
+                lps_mm: [94.5, 128.25, -279.0],
+            }],
+        },
         findings: vec![
             ReportFinding {
                 label: "M1".into(),
@@ -78,6 +88,12 @@ fn sample() -> Report {
             left_out_ml: vec![320.0],
             position: Some("prone, head first (HFP), given".into()),
             bridged_mm: vec![("sigmoid".into(), 42.0), ("descending".into(), 120.0)],
+            leaves_the_scan: vec!["cecum".into()],
+            by_hand: vec![(
+                "transverse".into(),
+                "gas taken in as colon",
+                [94.5, 128.25, -279.0],
+            )],
         },
     }
 }
@@ -142,10 +158,18 @@ fn the_report_is_self_contained_and_well_formed() {
     assert!(html.contains(
         "<p class=\"warn\" id=\"left-out\">Gas left out of the colon that may be colon: 320 ml."
     ));
+    // The exam: the series and its date (never a description or a patient's identity).
+    assert!(html.contains(
+        "<p class=\"study\" id=\"exam\">Study: colon &lt;1&gt;.nii.gz &middot; CT series 2, 412 slices (DICOM) &middot; exam of 2026-11-27 &middot; voyage"
+    ));
+    // A colon that leaves the scan is said to, not counted as bridged.
+    assert!(html.contains("id=\"leaves-the-scan\">The colon leaves the scanned volume (cecum)"));
     for row in [
-        "<tr><td>rectum</td><td>100 cm²</td><td>90.0 %</td><td>&mdash;</td></tr>",
-        "<tr><td>sigmoid</td><td>200 cm²</td><td>99.5 %</td><td>42 mm</td></tr>",
-        "<tr><td>descending</td><td>&mdash;</td><td>&mdash;</td><td>120 mm</td></tr>",
+        "<tr><td>rectum</td><td>100 cm²</td><td>90.0 %</td><td>&mdash;</td><td>&mdash;</td></tr>",
+        "<tr><td>sigmoid</td><td>200 cm²</td><td>99.5 %</td><td>42 mm</td><td>&mdash;</td></tr>",
+        "<tr><td>descending</td><td>&mdash;</td><td>&mdash;</td><td>120 mm</td><td>&mdash;</td></tr>",
+        // A segment only corrected by hand has its row too.
+        "<tr><td>transverse</td><td>&mdash;</td><td>&mdash;</td><td>&mdash;</td><td>gas taken in as colon at LPS (94, 128, -279)</td></tr>",
     ] {
         assert!(html.contains(row), "{row} missing");
     }

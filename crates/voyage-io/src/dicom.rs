@@ -209,6 +209,9 @@ struct Header {
     lossy: bool,
     /// PatientPosition (0018,5100) as written ("HFS", "FFP", ...).
     position: Option<String>,
+    series_number: Option<i64>,
+    /// YYYY-MM-DD ([`exam_date`]).
+    exam_date: Option<String>,
 }
 
 /// How stored pixel values are laid out.
@@ -360,6 +363,8 @@ fn parse_header(path: &Path, obj: &DefaultDicomObject) -> std::result::Result<Pr
         path: path.to_path_buf(),
         series_uid: text(obj, tags::SERIES_INSTANCE_UID).unwrap_or_default(),
         series_description: text(obj, tags::SERIES_DESCRIPTION),
+        series_number: text(obj, tags::SERIES_NUMBER).and_then(|t| t.parse().ok()),
+        exam_date: exam_date(obj),
         modality,
         ts_uid: obj
             .meta()
@@ -559,6 +564,26 @@ fn text(obj: &InMemDicomObject, tag: Tag) -> Option<String> {
     let s = obj.get(tag)?.to_str().ok()?;
     let s = s.trim_matches(|c: char| c.is_whitespace() || c == '\0');
     (!s.is_empty()).then(|| s.to_string())
+}
+
+/// The exam's date, YYYY-MM-DD: StudyDate, else SeriesDate, else AcquisitionDate (DA,
+/// "YYYYMMDD"; the old "YYYY.MM.DD" too). A value that is not a date is passed over.
+fn exam_date(obj: &InMemDicomObject) -> Option<String> {
+    [tags::STUDY_DATE, tags::SERIES_DATE, tags::ACQUISITION_DATE]
+        .into_iter()
+        .find_map(|tag| {
+            let digits: String = text(obj, tag)?.chars().filter(|c| *c != '.').collect();
+            let (y, m, d) = (
+                digits.get(0..4)?.parse::<u32>().ok()?,
+                digits.get(4..6)?.parse::<u32>().ok()?,
+                digits.get(6..8)?.parse::<u32>().ok()?,
+            );
+            (digits.len() == 8
+                && (1900..=2200).contains(&y)
+                && (1..=12).contains(&m)
+                && (1..=31).contains(&d))
+            .then(|| format!("{y:04}-{m:02}-{d:02}"))
+        })
 }
 
 /// An unsigned integer attribute: `None` when absent or empty, an error when unreadable.
@@ -1234,6 +1259,8 @@ fn load_series(headers: Vec<Header>) -> Result<Loaded> {
         modality: first.modality.clone(),
         series_uid: (!first.series_uid.is_empty()).then(|| first.series_uid.clone()),
         series_description: first.series_description.clone(),
+        series_number: first.series_number,
+        exam_date: first.exam_date.clone(),
         transfer_syntaxes,
         files: headers.len(),
         other_series: Vec::new(),

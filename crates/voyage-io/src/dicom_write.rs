@@ -34,6 +34,8 @@ pub struct SeriesWriteOptions {
     /// PatientPosition (0018,5100), e.g. "HFS" (head first, supine) or "HFP" (prone), which
     /// tells a reader which way gravity pointed; `None` leaves the element out.
     pub patient_position: Option<String>,
+    /// StudyDate (0008,0020), DICOM DA "YYYYMMDD"; `None` leaves it empty.
+    pub study_date: Option<String>,
 }
 
 impl Default for SeriesWriteOptions {
@@ -43,6 +45,7 @@ impl Default for SeriesWriteOptions {
             series_number: 1,
             uid_seed: 0,
             patient_position: None,
+            study_date: None,
         }
     }
 }
@@ -198,7 +201,12 @@ fn encode_slice(
     e.text(0x0008, 0x0008, b"CS", "DERIVED\\SECONDARY\\AXIAL");
     e.uid(0x0008, 0x0016, CT_IMAGE_STORAGE);
     e.uid(0x0008, 0x0018, &sop_instance);
-    e.text(0x0008, 0x0020, b"DA", "");
+    e.text(
+        0x0008,
+        0x0020,
+        b"DA",
+        opts.study_date.as_deref().unwrap_or(""),
+    );
     e.text(0x0008, 0x0030, b"TM", "");
     e.text(0x0008, 0x0050, b"SH", "");
     e.text(0x0008, 0x0060, b"CS", "CT");

@@ -60,6 +60,11 @@ pub struct Meta {
     /// Doubtful choices the user must see wherever the study is opened (prep, the window):
     /// a series taken among several without being asked for.
     pub warnings: Vec<String>,
+    /// DICOM SeriesNumber (0020,0011), when the file says.
+    pub series_number: Option<i64>,
+    /// The exam's date as YYYY-MM-DD: DICOM StudyDate (0008,0020), else SeriesDate, else
+    /// AcquisitionDate, when one is a valid date.
+    pub exam_date: Option<String>,
     /// DICOM PatientPosition (0018,5100), when the file says and the code is known.
     #[serde(skip)]
     pub position: Option<voyage_core::PatientPosition>,

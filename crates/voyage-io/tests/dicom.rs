@@ -777,6 +777,35 @@ fn a_left_handed_volume_comes_back_in_the_same_place() {
     }
 }
 
+/// The report's series and exam date come from SeriesNumber and StudyDate; a date that is no
+/// date is passed over, and a series without one has none.
+#[test]
+fn series_number_and_exam_date_are_read() {
+    let v = synthetic([8, 8, 6], [1.0; 3], [0.0; 3], DMat3::IDENTITY);
+    for (date, want) in [
+        (Some("20261127"), Some("2026-11-27")),
+        (Some("2026.11.27"), Some("2026-11-27")),
+        (Some("20261399"), None),
+        (Some("unknown"), None),
+        (None, None),
+    ] {
+        let dir = TempDir::new("exam-date");
+        write_series_with(
+            dir.path(),
+            &v,
+            &SeriesWriteOptions {
+                series_number: 7,
+                study_date: date.map(str::to_string),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let l = dicom::load_dir(dir.path(), &opts()).unwrap();
+        assert_eq!(l.meta.series_number, Some(7));
+        assert_eq!(l.meta.exam_date.as_deref(), want, "{date:?}");
+    }
+}
+
 #[test]
 fn two_series_pick_the_bigger_unless_told() {
     let big = synthetic([16, 16, 20], [1.0; 3], [0.0; 3], DMat3::IDENTITY);

@@ -10,6 +10,7 @@ use glam::DVec3;
 use voyage_core::{
     Geometry, PatientPosition, PositionSource, PrepOptions, Stage, Study, Volume, prepare,
 };
+use voyage_export::{Exam, HandCorrection};
 use voyage_io::{self as io, LoadOptions};
 
 #[derive(Clone, Copy, Debug, Default, ValueEnum)]
@@ -96,6 +97,62 @@ impl PointArgs {
             opts.cleanse = None;
         }
     }
+
+    /// The corrections made by hand, in patient LPS, for the report: ends, then gas taken in,
+    /// then gas left out.
+    pub fn by_hand(&self, g: &Geometry) -> Vec<HandCorrection> {
+        let lps = |p: DVec3| {
+            match self.coords {
+                Frame::Lps => p,
+                Frame::Local => g.local_to_patient(p),
+            }
+            .to_array()
+        };
+        let ends = [
+            (self.source, "start of the flight placed"),
+            (self.target, "end of the flight placed"),
+        ];
+        let ends = ends.into_iter().filter_map(|(p, what)| Some((p?, what)));
+        let gas = (self.seed.iter().map(|&p| (p, "gas taken in as colon"))).chain(
+            self.exclude
+                .iter()
+                .map(|&p| (p, "gas left out of the colon")),
+        );
+        ends.chain(gas)
+            .map(|(p, what)| HandCorrection {
+                what,
+                lps_mm: lps(p),
+            })
+            .collect()
+    }
+}
+
+/// What the report says of an exam named `name` (its file name), of geometry `g`, whose
+/// loader found `meta`, corrected by `points`: the series (never its free-text description,
+/// which can hold a name) and the date when the file has them.
+pub fn exam_of(name: &str, meta: &io::Meta, points: &PointArgs, g: &Geometry) -> Exam {
+    let series = match meta.format {
+        Some(io::Format::Dicom) => {
+            let number = meta
+                .series_number
+                .map_or(String::new(), |n| format!(" {n}"));
+            Some(format!(
+                "{} series{number}, {} slices (DICOM)",
+                meta.modality.as_deref().unwrap_or("image"),
+                meta.files
+            ))
+        }
+        Some(io::Format::Nifti) => Some("NIfTI file".into()),
+        Some(io::Format::MetaImage) => Some("MetaImage file".into()),
+        Some(io::Format::Nrrd) => Some("NRRD file".into()),
+        None => None,
+    };
+    Exam {
+        name: name.to_string(),
+        series,
+        date: meta.exam_date.clone(),
+        by_hand: points.by_hand(g),
+    }
 }
 
 pub fn parse_point(s: &str) -> Result<DVec3, String> {
@@ -114,6 +171,8 @@ pub fn parse_point(s: &str) -> Result<DVec3, String> {
 pub struct Prepared {
     /// In the study storage: its local mm are read with `study.ct.geometry()`.
     pub study: Study,
+    /// What the report says of the exam.
+    pub exam: Exam,
     pub load_ms: f64,
 }
 
@@ -153,8 +212,22 @@ pub fn open_study(
         nav_min_wall_mm,
     };
     let name = a.input.display().to_string();
+    let file_name = a
+        .input
+        .file_name()
+        .map_or_else(|| name.clone(), |n| n.to_string_lossy().into_owned());
+    let exam = exam_of(
+        &file_name,
+        &loaded.meta,
+        &a.points,
+        loaded.volume.geometry(),
+    );
     let study = prepare_volume(loaded.volume, loaded.meta, &choices, &name, progress)?;
-    Ok(Prepared { study, load_ms })
+    Ok(Prepared {
+        study,
+        exam,
+        load_ms,
+    })
 }
 
 /// What the user chose for a volume already in memory.

@@ -1025,3 +1025,71 @@ fn coverage_reports_json_and_reads_with_glances_unless_told_not_to() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The report says which series was read (its number and slices, never its free-text
+/// description, which can hold a name) and the corrections made by hand, each in the row of
+/// the segment it lies in.
+#[test]
+fn the_report_names_the_series_and_the_corrections_by_hand() {
+    let dir = scratch("report-exam");
+    let (ct, series, out) = (dir.join("ct.nii.gz"), dir.join("series"), dir.join("out"));
+    let o = voyage(&[
+        "phantom",
+        "colon",
+        "--small",
+        "--out",
+        ct.to_str().unwrap(),
+        "--dicom",
+        series.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let slices = std::fs::read_dir(&series).unwrap().count();
+    // A seed in the colon's own gas: the colon found is the same, and the seed is said.
+    let prep = voyage(&[
+        "prep",
+        "--json",
+        series.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(prep.status.success(), "{}", text(&prep));
+    let j: serde_json::Value = serde_json::from_slice(&prep.stdout).unwrap();
+    let anchor = &j["segments"][0]["anchor_lps_mm"];
+    let seed = format!("{},{},{}", anchor[0], anchor[1], anchor[2]);
+    let findings = dir.join("findings.json");
+    std::fs::write(&findings, r#"{"markers": [], "measurements": []}"#).unwrap();
+    let report = dir.join("report");
+    let o = voyage(&[
+        "report",
+        series.to_str().unwrap(),
+        "--seed",
+        &seed,
+        "--findings",
+        findings.to_str().unwrap(),
+        "--no-coverage",
+        "--out",
+        report.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let html = std::fs::read_to_string(report.join("report.html")).unwrap();
+    assert!(
+        html.contains(&format!(
+            "Study: series &middot; CT series 1, {slices} slices (DICOM) &middot; voyage"
+        )),
+        "{}",
+        &html[html.find("<p class=\"study\"").unwrap()..][..200]
+    );
+    assert!(
+        !html.contains("voyage volume"),
+        "the series description was printed"
+    );
+    let table = &html[html
+        .find("<table id=\"segments\">")
+        .expect("segments table")..];
+    let row = table
+        .split("<tr>")
+        .find(|r| r.contains("gas taken in as colon at LPS ("))
+        .expect("the seed in a segment's row");
+    assert!(row.starts_with("<td>"), "{row}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -49,7 +49,7 @@ pub fn load_and_prepare(a: &InputArgs, nav_min_wall_mm: Option<f64>) -> Result<P
 
 pub fn run(a: &PrepArgs) -> Result<()> {
     check_out_dir(&a.out)?;
-    let Prepared { study, load_ms } = load_and_prepare(&a.input, None)?;
+    let Prepared { study, load_ms, .. } = load_and_prepare(&a.input, None)?;
     let g = study.ct.geometry();
     let written = write_study(&a.out, &study, StudyExports { stl: a.stl })?;
     let summary = summary(&study, g, load_ms);

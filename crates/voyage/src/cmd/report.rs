@@ -41,7 +41,7 @@ const SNAPSHOT_PX: u32 = 512;
 pub fn run(a: &ReportArgs) -> Result<()> {
     voyage_export::study::check_out_dir(&a.out)?;
     let min_wall = FlightOptions::default().safety.min_wall_mm;
-    let Prepared { study, .. } = load_and_prepare(&a.input, Some(min_wall))?;
+    let Prepared { study, exam, .. } = load_and_prepare(&a.input, Some(min_wall))?;
     let findings = read_findings(&a.findings, study.ct.geometry())?;
     let mut mesh = CellMesh::new(&study.surface, &study.cells);
     mesh.index_cells();
@@ -67,11 +67,7 @@ pub fn run(a: &ReportArgs) -> Result<()> {
             by_segment: r.after_review.by_segment(&mesh, &study),
         }
     };
-    let name = a.input.input.file_name().map_or_else(
-        || a.input.input.display().to_string(),
-        |n| n.to_string_lossy().into_owned(),
-    );
-    let files = export_reading(&a.out, &findings, &study, &name, coverage, |_, m| {
+    let files = export_reading(&a.out, &findings, &study, &exam, coverage, |_, m| {
         let camera = Camera::new(m.view).with_fov(a.fov);
         let view = View::new(&camera, SNAPSHOT_PX, SNAPSHOT_PX);
         let cells = Visibility::new(&study.cells, Strategy::Lg)

@@ -742,7 +742,7 @@ impl App {
                 .map_or(&s.coverage.session, |r| r.seen())
                 .by_segment(&s.mesh, &s.study),
         };
-        let result = export_reading(&dir, &self.findings, &s.study, &s.name, coverage, |_, m| {
+        let result = export_reading(&dir, &self.findings, &s.study, &s.exam, coverage, |_, m| {
             let cam = Camera::new(m.view).with_fov(s.fov);
             let cells = voyage_view::Visibility::new(&s.study.cells, voyage_view::Strategy::Lg)
                 .select(&s.study.cells, &voyage_view::View::new(&cam, 512, 512))

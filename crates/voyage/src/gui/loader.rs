@@ -11,7 +11,9 @@ use voyage_io as io;
 use voyage_phantom::{self as phantom, ColonOptions};
 
 use super::session::Session;
-use crate::open::{Choices, InputArgs, OPEN_STEPS, Opening, PointArgs, open_study, prepare_volume};
+use crate::open::{
+    Choices, InputArgs, OPEN_STEPS, Opening, PointArgs, exam_of, open_study, prepare_volume,
+};
 
 /// What to open.
 #[derive(Clone, Debug)]
@@ -143,8 +145,11 @@ impl Job {
 
 fn open(source: &Source, progress: &dyn Fn(usize, &str)) -> anyhow::Result<Session> {
     let tell = |o: Opening| progress(o.step, o.what);
-    let study = match source {
-        Source::File(input) => open_study(input, None, tell)?.study,
+    let (study, exam) = match source {
+        Source::File(input) => {
+            let p = open_study(input, None, tell)?;
+            (p.study, p.exam)
+        }
         Source::Phantom { small, points } => {
             progress(0, "making the colon phantom");
             let ct = phantom::colon(&ColonOptions {
@@ -157,9 +162,12 @@ fn open(source: &Source, progress: &dyn Fn(usize, &str)) -> anyhow::Result<Sessi
                 mask: false,
                 nav_min_wall_mm: None,
             };
-            prepare_volume(ct, io::Meta::default(), &choices, &source.describe(), tell)?
+            let exam = exam_of(&source.title(), &io::Meta::default(), points, ct.geometry());
+            let meta = io::Meta::default();
+            let study = prepare_volume(ct, meta, &choices, &source.describe(), tell)?;
+            (study, exam)
         }
     };
     progress(OPEN_STEPS, "setting up the flight");
-    Session::new(source.title(), study).with_context(|| source.describe())
+    Session::new(exam, study).with_context(|| source.describe())
 }

@@ -31,6 +31,8 @@ const SPOT_STEP_MM: f64 = 0.5;
 pub struct Session {
     /// The file name shown in the title (never a patient name).
     pub name: String,
+    /// What the report says of the exam: the name, series, date and corrections by hand.
+    pub exam: voyage_export::Exam,
     pub study: Study,
     pub field: PotentialField<BrickStore>,
     pub mesh: CellMesh,
@@ -79,7 +81,7 @@ impl Session {
 
     /// Everything the window needs for a preprocessed study; the submarine waits at the
     /// rectum, looking up the colon.
-    pub fn new(name: String, study: Study) -> anyhow::Result<Self> {
+    pub fn new(exam: voyage_export::Exam, study: Study) -> anyhow::Result<Self> {
         let opts = FlightOptions {
             keep_poses: false,
             ..FlightOptions::for_study(&study)
@@ -105,7 +107,8 @@ impl Session {
         let mut pilot = Autopilot::new(&study.centerline, dir, &opts, start.position, dt0);
         pilot.fit_reach(&field, dir, opts.safety.min_wall_mm);
         Ok(Session {
-            name,
+            name: exam.name.clone(),
+            exam,
             study,
             field,
             mesh,
@@ -483,6 +486,13 @@ mod tests {
     use super::*;
     use voyage_core::{PrepOptions, prepare};
 
+    fn pipe_exam() -> voyage_export::Exam {
+        voyage_export::Exam {
+            name: "pipe".into(),
+            ..Default::default()
+        }
+    }
+
     /// The plain form: each sample mapped from mm to the nearest voxel.
     fn reference(s: &Session, from: DVec3, to: DVec3, skip_end_mm: f64) -> bool {
         let lumen = &s.study.segmentation.lumen;
@@ -514,7 +524,7 @@ mod tests {
     fn a_drag_turns_the_flying_view_away_while_it_lasts_and_the_view_eases_back() {
         let p = voyage_phantom::pipe(1).unwrap();
         let study = prepare(p.ct, &PrepOptions::default(), |_| {}).unwrap();
-        let mut s = Session::new("pipe".into(), study).unwrap();
+        let mut s = Session::new(pipe_exam(), study).unwrap();
         let frame = 1.0 / 30.0;
         s.set_playing(true);
         for _ in 0..45 {
@@ -559,7 +569,7 @@ mod tests {
     fn line_of_sight_agrees_with_the_voxel_walk_and_sees_along_the_pipe_not_through_its_wall() {
         let p = voyage_phantom::pipe(1).unwrap();
         let study = prepare(p.ct, &PrepOptions::default(), |_| {}).unwrap();
-        let s = Session::new("pipe".into(), study).unwrap();
+        let s = Session::new(pipe_exam(), study).unwrap();
         let pts: Vec<DVec3> = s
             .study
             .centerline
