@@ -49,6 +49,7 @@ use super::{
     Phantom, arr,
     axis::{Axis, Knot},
     body::{self, Body, Lung, Spine},
+    frame::Frame,
     label, label_counts,
     polyp::{PolypSpec, place},
     raster::{Materials, Scene},
@@ -64,7 +65,9 @@ use super::{
         segment_distance,
     },
 };
-use voyage_core::{Error, Geometry, Result};
+use voyage_core::{Error, Result};
+
+pub use super::frame::{FULL_DIMS, FULL_SPACING, SMALL_DIMS, SMALL_SCALE, SMALL_SPACING};
 
 /// What colon to make.
 #[derive(Clone, Debug)]
@@ -162,12 +165,6 @@ pub const FILLABLE: &[&str] = &[
     "cecum",
 ];
 
-pub const FULL_DIMS: [usize; 3] = [512, 512, 400];
-pub const FULL_SPACING: [f64; 3] = [0.75, 0.75, 1.0];
-pub const SMALL_DIMS: [usize; 3] = [128, 128, 125];
-pub const SMALL_SPACING: [f64; 3] = [1.5, 1.5, 1.6];
-pub const SMALL_SCALE: f64 = 0.5;
-
 /// Colon wall thickness at full size.
 const WALL: f64 = 2.5;
 /// Lumen-to-lumen tissue that different parts of the colon must keep (full size).
@@ -190,10 +187,9 @@ const STREAM_GAS: u64 = 0xC010_0005;
 // Streams of the newer options: drawn only when the option is on, so the older phantoms
 // stay bit for bit what they were.
 const STREAM_FILLED: u64 = 0xC010_0006;
-pub(super) const STREAM_BOWEL: u64 = 0xC010_0007;
 const STREAM_VALVE_POOL: u64 = 0xC010_0008;
 const STREAM_STOOL: u64 = 0xC010_0009;
-pub(super) const STREAM_SKIN_FOLDS: u64 = 0xC010_000A;
+// 0xC010_0007 and 0xC010_000A: the small bowel's and the skin folds' (frame.rs).
 
 /// Full-size height (z, mm) of the perineum's skin when the body has one (rectal tube): the
 /// rectum's wall ends ≈ 10.5 mm above the first slice, so this keeps ≥ 5 mm of tissue.
@@ -272,47 +268,6 @@ const POLYPS: &[(&str, f64, bool, Option<f64>)] = &[
 /// has a flat level and leaves gas above it.
 const POOL_SEGMENTS: &[&str] = &["rectum", "descending", "ascending"];
 const PRONE_POOL_SEGMENTS: &[&str] = &["sigmoid", "transverse", "cecum"];
-
-/// Size, spacing and the map from full-size anatomy to this volume.
-#[derive(Clone, Debug)]
-pub(super) struct Frame {
-    pub(super) geom: Geometry,
-    pub(super) scale: f64,
-    offset: DVec3,
-}
-
-impl Frame {
-    fn new(small: bool) -> Result<Frame> {
-        let (dims, spacing, scale) = if small {
-            (SMALL_DIMS, SMALL_SPACING, SMALL_SCALE)
-        } else {
-            (FULL_DIMS, FULL_SPACING, 1.0)
-        };
-        let geom = Geometry::new(dims, spacing, [0.0; 3])?;
-        let full = Geometry::new(FULL_DIMS, FULL_SPACING, [0.0; 3])?;
-        let ext = |g: &Geometry| g.extent_mm() - g.spacing_vec();
-        let offset = (ext(&geom) - ext(&full) * scale) * 0.5;
-        Ok(Frame {
-            geom,
-            scale,
-            offset,
-        })
-    }
-
-    /// Full-size anatomy position → this volume's local mm.
-    pub(super) fn pos(&self, p: [f64; 3]) -> DVec3 {
-        DVec3::from_array(p) * self.scale + self.offset
-    }
-
-    pub(super) fn max_spacing(&self) -> f64 {
-        self.geom.spacing.iter().cloned().fold(0.0, f64::max)
-    }
-
-    /// A full-size length scaled, but not below `voxels` voxels.
-    pub(super) fn thin(&self, mm: f64, voxels: f64) -> f64 {
-        (mm * self.scale).max(voxels * self.max_spacing())
-    }
-}
 
 /// Makes the colon phantom.
 pub fn colon(opts: &ColonOptions) -> Result<Phantom> {

@@ -29,6 +29,7 @@ pub mod axis;
 pub mod body;
 pub mod colon;
 pub mod fixtures;
+pub mod frame;
 pub mod pipe;
 pub mod polyp;
 pub mod raster;

@@ -22,7 +22,7 @@ use glam::{DVec2, DVec3};
 use super::{
     arr,
     body::{self, Body, SkinFold, Table},
-    colon::Frame,
+    frame::Frame,
     rng::Rng,
     truth::{SkinFoldTruth, TableTruth},
     tube::{Blob, Catheter, Tube},
@@ -111,7 +111,7 @@ pub(super) fn make_folds(
     near: &Obstacles,
     seed: u64,
 ) -> Vec<(SkinFold, SkinFoldTruth)> {
-    let mut rng = Rng::new(seed, super::colon::STREAM_SKIN_FOLDS);
+    let mut rng = Rng::new(seed, super::frame::STREAM_SKIN_FOLDS);
     let sides = 3 + (rng.uniform() * 4.0) as usize;
     let lows = 1 + (rng.uniform() * 2.0) as usize;
     let dependent = if gravity.y >= 0.0 { 1.0 } else { -1.0 };

@@ -32,7 +32,7 @@ use super::{
     arr,
     axis::{Axis, Knot},
     body::Body,
-    colon::Frame,
+    frame::Frame,
     rng::Rng,
     truth::{LoopTruth, SegmentTruth},
     tube::{Blob, BlobKind, Catheter, Tube},
@@ -144,7 +144,7 @@ pub(super) fn make(
 ) -> Result<SmallBowel> {
     let s = frame.scale;
     let prone = gravity.y < 0.0;
-    let mut rng = Rng::new(seed, super::colon::STREAM_BOWEL);
+    let mut rng = Rng::new(seed, super::frame::STREAM_BOWEL);
     let wall = frame.thin(WALL, 0.7);
     let cecum = segments
         .iter()

@@ -11,7 +11,7 @@ use std::{cmp::Reverse, collections::BinaryHeap};
 use glam::DVec3;
 
 use super::{
-    chain::Coarse,
+    coarse::Coarse,
     compartments::Compartments,
     fluid::MAX_DEPTH_MM,
     work::{BRIDGE, Bbox, GAS, Key, LAYER, POOL},

@@ -7,14 +7,42 @@ use glam::DVec3;
 
 use super::{
     SegmentOptions,
-    chain::{self, Compartment, Role},
     components::{Found, Points, UnionFind, connect_3d},
     fluid::Pooled,
-    report::lps_box,
     runs::{Run, Runs, row_of, work_runs},
-    work::{Bbox, GAS, LAYER, POOL},
+    work::{Bbox, GAS, LAYER, POOL, height, lps_box},
 };
 use crate::{Error, Result, Volume, anatomy::PatientFrame};
+
+/// One gas region with its fluid.
+#[derive(Clone, Debug)]
+pub struct Compartment {
+    pub voxels: usize,
+    pub gas_voxels: usize,
+    /// Sum of voxel positions (volume-local mm), for the centroid.
+    pub sum_mm: DVec3,
+    pub bbox: Bbox,
+    /// Its lowest gas voxel in the patient frame (see [`lowest_in`]).
+    pub lowest: [usize; 3],
+    pub lowest_height: f64,
+}
+
+impl Compartment {
+    pub fn centroid_mm(&self) -> DVec3 {
+        self.sum_mm / self.voxels.max(1) as f64
+    }
+}
+
+/// What a compartment may be in the chain.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Role {
+    /// Large gas that is neither lung nor stomach: colon, wherever it lies.
+    Major,
+    /// Big enough for a segment; colon where it lies on the colon's way.
+    Minor,
+    /// Too small, or excluded.
+    Out,
+}
 
 /// The compartments and their runs.
 pub(super) struct Compartments {
@@ -268,7 +296,7 @@ fn compartment_stats(
                 };
                 // The lowest voxel of the run lies at one of its ends.
                 for x in [x0, x1 - 1] {
-                    let h = chain::height(
+                    let h = height(
                         inferior,
                         geom.index_to_local(DVec3::new(x as f64, j as f64, k as f64)),
                     );
@@ -316,7 +344,7 @@ fn lowest_middle(
             for r in runs.row(j, k).filter(|&r| run_comp[r] == c) {
                 let run = runs.runs[r];
                 for x in run.x0 as usize..run.x1 as usize {
-                    if chain::height(
+                    if height(
                         inferior,
                         geom.index_to_local(DVec3::new(x as f64, j as f64, k as f64)),
                     ) >= floor

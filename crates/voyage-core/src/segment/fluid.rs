@@ -27,7 +27,7 @@ use rayon::prelude::*;
 use super::{
     SegmentOptions,
     components::Found,
-    runs::{Runs, label_rows, paint, row_of, runs_box, runs_near},
+    runs::{BRIGHT, LabelRows, Runs, label_rows, paint, row_of, runs_box, runs_near},
     work::{BRIDGE, Bbox, GAS, LAYER, POOL},
 };
 use crate::{
@@ -60,29 +60,9 @@ const NARROW_BELOW_MM: f64 = 4.0;
 const WIDE_MM: f64 = 27.0;
 const TUBE_MM: f64 = 3.0;
 
-/// Bright (tagged fluid or bone) in [`LabelRows`].
-pub const BRIGHT: u8 = 2;
-
 /// The layer's thickness in voxels along an axis of spacing `step`.
 fn max_gap(step: f64) -> i64 {
     ((MAX_LAYER_MM / step).round() as i64).clamp(1, 3)
-}
-
-/// A run of one label: voxels x0..x1 of a row, and the label.
-pub type LabelRun = (u32, u32, u8);
-
-/// Gas and bright runs, row by row (row = j + ny·k), in x order.
-pub struct LabelRows {
-    pub runs: Vec<LabelRun>,
-    pub row_start: Vec<u32>,
-    pub dims: [usize; 3],
-}
-
-impl LabelRows {
-    fn row(&self, j: usize, k: usize) -> &[LabelRun] {
-        let r = j + self.dims[1] * k;
-        &self.runs[self.row_start[r] as usize..self.row_start[r + 1] as usize]
-    }
 }
 
 /// What one line (a column along gravity) has seen so far.

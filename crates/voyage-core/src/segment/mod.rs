@@ -44,6 +44,7 @@
 
 mod bridge;
 mod chain;
+mod coarse;
 mod compartments;
 mod components;
 mod course;

@@ -7,13 +7,14 @@ use glam::DVec3;
 use super::{
     Component, ComponentKind, EXCLUDED, Gap, SegmentOptions, SegmentReport,
     bridge::Path,
-    chain::{self, Chained, Compartment, Left},
+    chain::{self, Chained, Left},
+    compartments::Compartment,
     compartments::{CREVICE_MM, Candidates, Compartments, colon_box},
     components::{Found, report as list_components},
     course::Course,
     runs::{Runs, row_of, run_voxels},
     tube,
-    work::Bbox,
+    work::{Bbox, lps_box},
 };
 
 /// Gas left out of the colon from this size on (ml) gets a warning.
@@ -340,11 +341,6 @@ fn labelled(
         comp.kind = of_gas[c].map_or(ComponentKind::Other, |x| classes[x as usize]);
     }
     comps
-}
-
-/// The LPS box of a voxel box (all eight corners: the direction may turn the axes).
-pub(super) fn lps_box(geom: &crate::Geometry, b: &Bbox) -> [DVec3; 2] {
-    geom.patient_box(b.lo, b.hi)
 }
 
 /// The anatomical region of a volume-local point within the colon's LPS box.

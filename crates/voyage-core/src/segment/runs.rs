@@ -4,14 +4,31 @@
 
 use rayon::prelude::*;
 
-use super::{
-    fluid,
-    work::{Bbox, GAS},
-};
+use super::work::{Bbox, GAS};
 use crate::{
     Volume,
     simd::{self, Test},
 };
+
+/// Bright (tagged fluid or bone) in [`LabelRows`].
+pub(super) const BRIGHT: u8 = 2;
+
+/// A run of one label: voxels x0..x1 of a row, and the label.
+pub(super) type LabelRun = (u32, u32, u8);
+
+/// Gas and bright runs, row by row (row = j + ny·k), in x order.
+pub(super) struct LabelRows {
+    pub(super) runs: Vec<LabelRun>,
+    pub(super) row_start: Vec<u32>,
+    pub(super) dims: [usize; 3],
+}
+
+impl LabelRows {
+    pub(super) fn row(&self, j: usize, k: usize) -> &[LabelRun] {
+        let r = j + self.dims[1] * k;
+        &self.runs[self.row_start[r] as usize..self.row_start[r + 1] as usize]
+    }
+}
 
 /// One stretch of lumen candidates along x: voxels x0..x1 of row (j, k).
 #[derive(Clone, Copy, Debug)]
@@ -284,10 +301,10 @@ pub(super) fn label_rows(
     bx: &Bbox,
     nx: usize,
     keep_bright: impl Fn((u32, u32), usize, usize) -> bool + Sync,
-) -> fluid::LabelRows {
+) -> LabelRows {
     let ny = runs.ny;
     let nz = (runs.row_start.len() - 1) / ny;
-    let per_slice: Vec<(Vec<fluid::LabelRun>, Vec<u32>)> = (0..nz)
+    let per_slice: Vec<(Vec<LabelRun>, Vec<u32>)> = (0..nz)
         .into_par_iter()
         .map(|k| {
             let (mut out, mut counts) = (Vec::new(), Vec::with_capacity(ny));
@@ -300,7 +317,7 @@ pub(super) fn label_rows(
                         .map(|r| (runs.runs[r].x0, runs.runs[r].x1, GAS));
                     let b = bright
                         .row(j, k)
-                        .map(|r| (bright.runs[r].x0, bright.runs[r].x1, fluid::BRIGHT))
+                        .map(|r| (bright.runs[r].x0, bright.runs[r].x1, BRIGHT))
                         .filter(|r| keep_bright((r.0, r.1), j, k));
                     out.extend(g.chain(b));
                     out[before..].sort_unstable_by_key(|r| r.0);
@@ -310,7 +327,7 @@ pub(super) fn label_rows(
             (out, counts)
         })
         .collect();
-    let mut rows = fluid::LabelRows {
+    let mut rows = LabelRows {
         runs: Vec::new(),
         row_start: vec![0],
         dims: [nx, ny, nz],

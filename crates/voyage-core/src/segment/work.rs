@@ -53,3 +53,13 @@ impl PartialOrd for Key {
         Some(self.cmp(o))
     }
 }
+
+/// Height toward the feet (mm) of a volume-local point: larger is lower in the patient.
+pub fn height(inferior: glam::DVec3, p: glam::DVec3) -> f64 {
+    inferior.dot(p)
+}
+
+/// The LPS box of a voxel box (all eight corners: the direction may turn the axes).
+pub(super) fn lps_box(geom: &crate::Geometry, b: &Bbox) -> [glam::DVec3; 2] {
+    geom.patient_box(b.lo, b.hi)
+}

@@ -1,9 +1,7 @@
 //! The subcommands.
 
+#[cfg(feature = "bench")]
 mod bench;
-mod bench_fly;
-mod bench_prep;
-mod bench_render;
 mod coverage;
 mod fly;
 mod info;
@@ -62,6 +60,7 @@ enum Command {
     /// segments, C-RADS, each marker's view, and the coverage of a two-way reading.
     Report(report::ReportArgs),
     /// Benchmarks against reference libraries.
+    #[cfg(feature = "bench")]
     Bench(bench::BenchArgs),
     /// One endoscopic frame to a PNG: frame N of the automatic flight, or a given pose.
     Render(render::RenderArgs),
@@ -85,6 +84,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Fly(a) => fly::run(&a),
         Command::Coverage(a) => coverage::run(&a),
         Command::Report(a) => report::run(&a),
+        #[cfg(feature = "bench")]
         Command::Bench(a) => bench::run(&a),
         Command::Render(a) => render::render(&a),
         Command::Movie(a) => render::movie(&a),

@@ -15,7 +15,7 @@ use voyage_nav::{
 };
 use voyage_phantom::{self as phantom, ColonOptions};
 
-use super::bench::Common;
+use super::common::Common;
 
 pub fn run(inputs: &[PathBuf], phantoms: bool, samples: usize, common: &Common) -> Result<()> {
     rayon::ThreadPoolBuilder::new()
@@ -180,7 +180,7 @@ fn print_case(c: &Value) {
         };
         println!(
             "         {} (targets ≤ 15°, ≤ 45°, ≤ 2%)",
-            super::fly::describe_looking(&looked)
+            crate::cmd::fly::describe_looking(&looked)
         );
     }
 }

@@ -17,7 +17,7 @@ use voyage_view::{
     Survey, View, Visibility, look_around, survey,
 };
 
-use super::bench::Common;
+use super::common::Common;
 
 /// What `bench render` was asked for.
 pub struct Plan {

@@ -1,7 +1,5 @@
-//! `voyage bench ...`: speed, measured against the reference libraries in the same run.
-//!
-//! Timings are medians of several repeats after one warm-up, with the page cache warm for
-//! both sides, so that the comparison is of decoding work, not of the disk.
+//! `voyage bench load`: the colon phantom as a 400-slice uncompressed DICOM series and as
+//! .nii.gz, against pydicom+numpy and nibabel.
 
 use std::{
     path::{Path, PathBuf},
@@ -10,114 +8,15 @@ use std::{
 };
 
 use anyhow::{Context, Result, bail};
-use clap::{Args, Subcommand};
+use clap::Args;
 use serde::Serialize;
 use voyage_io::{self as io, LoadOptions};
 use voyage_phantom::{self as phantom, ColonOptions};
 
-#[derive(Args, Debug)]
-pub struct BenchArgs {
-    #[command(subcommand)]
-    what: BenchWhat,
-}
-
-#[derive(Subcommand, Debug)]
-enum BenchWhat {
-    /// Loading: the colon phantom as a 400-slice uncompressed DICOM series and as .nii.gz,
-    /// against pydicom+numpy and nibabel.
-    Load(LoadBench),
-    /// Preprocessing, stage by stage, on the colon phantom and any CT or mask given, against
-    /// edt/scipy (Ds), dijkstra3d (Dt), scikit-image and VTK flying edges (surface).
-    Prep(PrepBench),
-    /// Navigation: a potential-field sample in each storage layout, and the physics per frame
-    /// of the automatic flights, on the pipe and colon phantoms and any CT or mask given.
-    Fly(FlyBench),
-    /// Rendering (paper Table 1): triangles per frame per visibility strategy along both
-    /// automatic flights, exactness against drawing everything, CPU and GPU frames/s.
-    Render(RenderBench),
-}
+use super::common::{Common, find_python, median};
 
 #[derive(Args, Debug)]
-struct RenderBench {
-    /// CTs or lumen masks (default, with no input and no --pipe: the colon phantom).
-    inputs: Vec<PathBuf>,
-    /// Add the pipe phantom.
-    #[arg(long)]
-    pipe: bool,
-    /// Add the full-size colon phantom.
-    #[arg(long)]
-    colon: bool,
-    /// Image size for the CPU renderer and the exactness check (square).
-    #[arg(long, default_value_t = 512)]
-    size: u32,
-    /// Frames taken evenly from each flight.
-    #[arg(long, default_value_t = 300)]
-    frames: usize,
-    /// Random look-around views besides the flights.
-    #[arg(long, default_value_t = 100)]
-    random: usize,
-    /// Leave out the GPU renderer.
-    #[arg(long)]
-    no_gpu: bool,
-    #[command(flatten)]
-    common: Common,
-}
-
-#[derive(Args, Debug)]
-struct FlyBench {
-    /// CTs or lumen masks to measure besides the phantoms.
-    inputs: Vec<PathBuf>,
-    /// Leave out the phantoms.
-    #[arg(long)]
-    no_phantom: bool,
-    /// Samples per layout.
-    #[arg(long, default_value_t = 2_000_000)]
-    samples: usize,
-    #[command(flatten)]
-    common: Common,
-}
-
-#[derive(Args, Debug)]
-struct PrepBench {
-    /// CTs or lumen masks to measure besides the full-size colon phantom.
-    inputs: Vec<PathBuf>,
-    /// Leave out the colon phantom.
-    #[arg(long)]
-    no_phantom: bool,
-    /// Working folder for the masks handed to the reference.
-    #[arg(long, default_value = "target/bench-prep")]
-    dir: PathBuf,
-    /// Timed repeats (after one warm-up).
-    #[arg(long, default_value_t = 3)]
-    repeats: usize,
-    /// Rounds per case, voyage and the references taking turns; ratios are paired within a
-    /// round and the median round is reported with the range (a noisy machine drifts over
-    /// the minutes one round takes).
-    #[arg(long, default_value_t = 1)]
-    rounds: usize,
-    /// Skip the reference libraries.
-    #[arg(long)]
-    no_reference: bool,
-    #[command(flatten)]
-    common: Common,
-}
-
-/// What every benchmark takes.
-#[derive(Args, Debug)]
-pub struct Common {
-    /// Worker threads for voyage (the targets are for one core).
-    #[arg(long, default_value_t = 1)]
-    pub threads: usize,
-    /// Python with the reference libraries (default: bench/.venv from bench/setup.sh).
-    #[arg(long)]
-    pub python: Option<PathBuf>,
-    /// Print one JSON object.
-    #[arg(long)]
-    pub json: bool,
-}
-
-#[derive(Args, Debug)]
-struct LoadBench {
+pub struct LoadBench {
     /// Working folder for the phantom files (kept, reused when already there).
     #[arg(long, default_value = "target/bench-load")]
     dir: PathBuf,
@@ -129,35 +28,6 @@ struct LoadBench {
     repeats: usize,
     #[command(flatten)]
     common: Common,
-}
-
-pub fn run(a: &BenchArgs) -> Result<()> {
-    match &a.what {
-        BenchWhat::Load(l) => load(l),
-        BenchWhat::Prep(p) => super::bench_prep::run(
-            p.inputs.clone(),
-            !p.no_phantom,
-            &p.dir,
-            p.repeats,
-            p.rounds,
-            !p.no_reference,
-            &p.common,
-        ),
-        BenchWhat::Fly(f) => super::bench_fly::run(&f.inputs, !f.no_phantom, f.samples, &f.common),
-        BenchWhat::Render(r) => {
-            anyhow::ensure!((16..=4096).contains(&r.size), "--size must lie in 16..4096");
-            let plan = super::bench_render::Plan {
-                inputs: r.inputs.clone(),
-                pipe: r.pipe,
-                colon: r.colon,
-                size: r.size,
-                frames_per_flight: r.frames.max(1),
-                random: r.random,
-                gpu: !r.no_gpu,
-            };
-            super::bench_render::run(&plan, &r.common)
-        }
-    }
 }
 
 #[derive(Serialize)]
@@ -173,7 +43,7 @@ struct LoadRow {
     target_speedup: f64,
 }
 
-fn load(a: &LoadBench) -> Result<()> {
+pub fn run(a: &LoadBench) -> Result<()> {
     rayon::ThreadPoolBuilder::new()
         .num_threads(a.common.threads)
         .build_global()
@@ -297,12 +167,7 @@ fn median_ms(repeats: usize, mut f: impl FnMut() -> voyage_core::Result<()>) -> 
     Ok(median(&mut times))
 }
 
-pub fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
-const LOAD_REFERENCE_PY: &str = include_str!("../../../../bench/load_reference.py");
+const LOAD_REFERENCE_PY: &str = include_str!("../../../../../bench/load_reference.py");
 
 /// Runs bench/load_reference.py; returns the median (DICOM ms, NIfTI ms).
 fn run_reference(a: &LoadBench, series: &Path, nii: &Path) -> Result<(f64, f64)> {
@@ -342,16 +207,4 @@ fn run_reference(a: &LoadBench, series: &Path, nii: &Path) -> Result<(f64, f64)>
         Ok(median(&mut t))
     };
     Ok((med("dicom_s")?, med("nifti_s")?))
-}
-
-/// The reference Python: the one given, else bench/.venv (made by bench/setup.sh).
-pub fn find_python(given: Option<&Path>) -> Result<PathBuf> {
-    if let Some(p) = given {
-        return Ok(p.to_path_buf());
-    }
-    let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../bench/.venv/bin/python");
-    if venv.exists() {
-        return Ok(venv);
-    }
-    bail!("no reference Python: run `bash bench/setup.sh` (makes bench/.venv) or pass --python")
 }

@@ -13,9 +13,9 @@ use voyage_core::{PrepOptions, Stage, Study, Timings, Volume, geodesic_distance,
 use voyage_io::{self as io, LoadOptions, nifti};
 use voyage_phantom::{self as phantom, ColonOptions};
 
-use super::bench::{Common, find_python, median};
+use super::common::{Common, find_python, median};
 
-const PREP_REFERENCE_PY: &str = include_str!("../../../../bench/prep_reference.py");
+const PREP_REFERENCE_PY: &str = include_str!("../../../../../bench/prep_reference.py");
 
 pub fn run(
     inputs: Vec<PathBuf>,
@@ -145,7 +145,7 @@ fn measure(name: &str, ct: Volume<i16>, repeats: usize) -> Result<Measured> {
         study: Some(study),
         timings,
         ct_mb,
-        peak_rss_mb: super::prep::peak_rss_mb(),
+        peak_rss_mb: crate::cmd::prep::peak_rss_mb(),
     })
 }
 
