@@ -1,7 +1,8 @@
 //! The architecture's layering, checked on the sources: the workspace's crates depend only on
 //! crates below them; voyage-core depends on no file-format, codec, image, GPU or GUI crate;
 //! and inside it every module imports only modules that come before it in the order the CT
-//! goes through `prepare` (no cycles, nothing climbs back up).
+//! goes through `prepare` (no cycles, nothing climbs back up). And ARCHITECTURE.md, the map,
+//! names every source file and nothing that is not there.
 
 use std::{collections::BTreeSet, path::Path};
 
@@ -227,5 +228,131 @@ fn the_window_imports_nothing_from_the_commands() {
         checked >= 10,
         "only {checked} files under {}",
         gui.display()
+    );
+}
+
+/// The repository's root.
+fn repo() -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// Every file under `dir` (recursively) whose name ends with one of `exts`.
+fn files_under(dir: &Path, exts: &[&str]) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        let Ok(entries) = std::fs::read_dir(&d) else {
+            continue;
+        };
+        for entry in entries {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+            } else if exts.iter().any(|e| path.to_string_lossy().ends_with(e)) {
+                out.push(path);
+            }
+        }
+    }
+    out
+}
+
+/// ARCHITECTURE.md's section for each crate (`### \`name\`` up to the next heading).
+fn map_sections(map: &str) -> Vec<(String, String)> {
+    let mut out: Vec<(String, String)> = Vec::new();
+    for line in map.lines() {
+        if line.starts_with('#') {
+            let name = line
+                .strip_prefix("### `")
+                .and_then(|rest| rest.split('`').next())
+                .filter(|n| n.starts_with("voyage"));
+            if let Some(n) = name {
+                out.push((n.to_string(), String::new()));
+                continue;
+            }
+            out.push((String::new(), String::new()));
+        } else if let Some(last) = out.last_mut() {
+            last.1.push_str(line);
+            last.1.push('\n');
+        }
+    }
+    out.retain(|(n, _)| !n.is_empty());
+    out
+}
+
+/// The paths `text` names: words ending in a source or script extension, or in `/` (a
+/// folder), inside backticks or not.
+fn named_paths(text: &str) -> Vec<String> {
+    let exts = [".rs", ".wgsl", ".sh", ".patch", ".toml", ".py"];
+    text.split(|c: char| !(c.is_ascii_alphanumeric() || "_./-".contains(c)))
+        .map(|w| w.trim_start_matches("./").trim_end_matches('.'))
+        .filter(|w| exts.iter().any(|e| w.ends_with(e)) || (w.ends_with('/') && w.len() > 1))
+        .map(str::to_string)
+        .collect()
+}
+
+/// ARCHITECTURE.md is a true map: every source file of every crate is named in its crate's
+/// section (by its path under `src/`, its file name, or a folder it sits in), and every path
+/// the map names exists.
+#[test]
+fn the_map_names_every_source_file_and_every_path_it_names_exists() {
+    let root = repo();
+    let map = std::fs::read_to_string(root.join("ARCHITECTURE.md")).unwrap();
+    let sections = map_sections(&map);
+    let crates: Vec<String> = std::fs::read_dir(root.join("crates"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    let mut unnamed = Vec::new();
+    for krate in &crates {
+        let text = sections
+            .iter()
+            .find(|(n, _)| n == krate)
+            .map(|(_, t)| t.as_str())
+            .unwrap_or_else(|| panic!("ARCHITECTURE.md has no section for {krate}"));
+        let names = named_paths(text);
+        let src = root.join("crates").join(krate).join("src");
+        for file in files_under(&src, &[".rs", ".wgsl"]) {
+            let rel = file
+                .strip_prefix(&src)
+                .unwrap()
+                .to_string_lossy()
+                .replace('\\', "/");
+            let base = rel.rsplit('/').next().unwrap().to_string();
+            let root_file = rel == "lib.rs" || rel == "main.rs";
+            let in_named_folder = names
+                .iter()
+                .any(|n| n.ends_with('/') && rel.starts_with(n.as_str()));
+            let named = names.iter().any(|n| *n == rel || *n == base);
+            if !(root_file || named || in_named_folder) {
+                unnamed.push(format!("crates/{krate}/src/{rel}"));
+            }
+        }
+    }
+    assert!(
+        unnamed.is_empty(),
+        "source files ARCHITECTURE.md does not name: {unnamed:?}"
+    );
+    // Every path named exists: from the root, under a crate, or as the end of a source
+    // file's or test's path.
+    let everything: Vec<String> = files_under(&root.join("crates"), &[""])
+        .iter()
+        .map(|p| p.to_string_lossy().replace('\\', "/"))
+        .collect();
+    let missing: Vec<String> = named_paths(&map)
+        .into_iter()
+        .filter(|n| {
+            let folder = n.trim_end_matches('/');
+            !(root.join(n).exists()
+                || crates
+                    .iter()
+                    .any(|c| root.join("crates").join(c).join(n).exists())
+                || everything
+                    .iter()
+                    .any(|p| p.ends_with(&format!("/{n}")) || p.contains(&format!("/{folder}/"))))
+        })
+        .collect();
+    assert!(
+        missing.is_empty(),
+        "ARCHITECTURE.md names paths that do not exist: {missing:?}"
     );
 }
