@@ -30,6 +30,23 @@ fn text(o: &Output) -> String {
     )
 }
 
+/// The small colon phantom written into `dir` as `ct.nii` and as a DICOM series, `series/`
+/// (returned).
+fn small_series(dir: &Path) -> PathBuf {
+    let (ct, series) = (dir.join("ct.nii"), dir.join("series"));
+    let made = voyage(&[
+        "phantom",
+        "colon",
+        "--small",
+        "--out",
+        ct.to_str().unwrap(),
+        "--dicom",
+        series.to_str().unwrap(),
+    ]);
+    assert!(made.status.success(), "{}", text(&made));
+    series
+}
+
 /// Identity strings present in the shared test files' headers; none may ever be printed.
 const IDENTITIES: [&str; 6] = [
     "MISTER",
@@ -254,18 +271,7 @@ fn a_panicking_decoder_still_gives_one_line() {
     };
     use dicom_dictionary_std::tags;
     let dir = scratch("rle");
-    let ct = dir.join("ct.nii");
-    let series = dir.join("series");
-    let made = voyage(&[
-        "phantom",
-        "colon",
-        "--small",
-        "--out",
-        ct.to_str().unwrap(),
-        "--dicom",
-        series.to_str().unwrap(),
-    ]);
-    assert!(made.status.success(), "{}", text(&made));
+    let series = small_series(&dir);
     let first = std::fs::read_dir(&series)
         .unwrap()
         .map(|e| e.unwrap().path())
@@ -1032,17 +1038,7 @@ fn coverage_reports_json_and_reads_with_glances_unless_told_not_to() {
 #[test]
 fn the_report_names_the_series_and_the_corrections_by_hand() {
     let dir = scratch("report-exam");
-    let (ct, series, out) = (dir.join("ct.nii.gz"), dir.join("series"), dir.join("out"));
-    let o = voyage(&[
-        "phantom",
-        "colon",
-        "--small",
-        "--out",
-        ct.to_str().unwrap(),
-        "--dicom",
-        series.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
+    let (series, out) = (small_series(&dir), dir.join("out"));
     let slices = std::fs::read_dir(&series).unwrap().count();
     // A seed in the colon's own gas: the colon found is the same, and the seed is said.
     let prep = voyage(&[

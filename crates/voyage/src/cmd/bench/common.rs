@@ -1,8 +1,12 @@
 //! What every benchmark shares: its options, the median, the reference Python.
 
-use std::path::{Path, PathBuf};
+use std::{
+    ffi::OsStr,
+    path::{Path, PathBuf},
+    process::Command,
+};
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use clap::Args;
 
 /// What every benchmark takes.
@@ -34,4 +38,31 @@ pub fn find_python(given: Option<&Path>) -> Result<PathBuf> {
         return Ok(venv);
     }
     bail!("no reference Python: run `bash bench/setup.sh` (makes bench/.venv) or pass --python")
+}
+
+/// Writes the reference script `name` (its text `script`) into `dir` and runs it on `args`
+/// with the reference Python ([`find_python`]), one thread; its standard output.
+pub fn run_reference_script(
+    python: Option<&Path>,
+    dir: &Path,
+    (name, script): (&str, &str),
+    args: &[&OsStr],
+) -> Result<Vec<u8>> {
+    let python = find_python(python)?;
+    let path = dir.join(name);
+    std::fs::write(&path, script).with_context(|| format!("{}: cannot write", path.display()))?;
+    let out = Command::new(&python)
+        .arg(&path)
+        .args(args)
+        .env("OMP_NUM_THREADS", "1")
+        .output()
+        .with_context(|| format!("cannot run {}", python.display()))?;
+    if !out.status.success() {
+        bail!(
+            "{} failed: {}",
+            path.display(),
+            String::from_utf8_lossy(&out.stderr).trim()
+        );
+    }
+    Ok(out.stdout)
 }

@@ -3,7 +3,6 @@
 
 use std::{
     path::{Path, PathBuf},
-    process::Command,
     time::Instant,
 };
 
@@ -13,7 +12,7 @@ use serde::Serialize;
 use voyage_io::{self as io, LoadOptions};
 use voyage_phantom::{self as phantom, ColonOptions};
 
-use super::common::{Common, find_python, median};
+use super::common::{Common, median, run_reference_script};
 
 #[derive(Args, Debug)]
 pub struct LoadBench {
@@ -171,27 +170,16 @@ const LOAD_REFERENCE_PY: &str = include_str!("../../../../../bench/load_referenc
 
 /// Runs bench/load_reference.py; returns the median (DICOM ms, NIfTI ms).
 fn run_reference(a: &LoadBench, series: &Path, nii: &Path) -> Result<(f64, f64)> {
-    let python = find_python(a.common.python.as_deref())?;
-    let script = a.dir.join("load_reference.py");
-    std::fs::write(&script, LOAD_REFERENCE_PY)
-        .with_context(|| format!("{}: cannot write", script.display()))?;
     // One more repeat than ours: the reference's first run is its warm-up.
-    let out = Command::new(&python)
-        .arg(&script)
-        .arg(series)
-        .arg(nii)
-        .arg((a.repeats + 1).to_string())
-        .output()
-        .with_context(|| format!("cannot run {}", python.display()))?;
-    if !out.status.success() {
-        bail!(
-            "{} failed: {}",
-            script.display(),
-            String::from_utf8_lossy(&out.stderr).trim()
-        );
-    }
+    let repeats = (a.repeats + 1).to_string();
+    let stdout = run_reference_script(
+        a.common.python.as_deref(),
+        &a.dir,
+        ("load_reference.py", LOAD_REFERENCE_PY),
+        &[series.as_os_str(), nii.as_os_str(), repeats.as_ref()],
+    )?;
     let v: serde_json::Value =
-        serde_json::from_slice(&out.stdout).context("reference printed no JSON")?;
+        serde_json::from_slice(&stdout).context("reference printed no JSON")?;
     let med = |key: &str| -> Result<f64> {
         let mut t: Vec<f64> = v[key]
             .as_array()

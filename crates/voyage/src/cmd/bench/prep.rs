@@ -3,7 +3,6 @@
 
 use std::{
     path::{Path, PathBuf},
-    process::Command,
     time::Instant,
 };
 
@@ -13,7 +12,7 @@ use voyage_core::{PrepOptions, Stage, Study, Timings, Volume, geodesic_distance,
 use voyage_io::{self as io, LoadOptions, nifti};
 use voyage_phantom::{self as phantom, ColonOptions};
 
-use super::common::{Common, find_python, median};
+use super::common::{Common, median, run_reference_script};
 
 const PREP_REFERENCE_PY: &str = include_str!("../../../../../bench/prep_reference.py");
 
@@ -162,26 +161,15 @@ fn run_reference(
     source: [usize; 3],
     repeats: usize,
 ) -> Result<Value> {
-    let python = find_python(python)?;
-    let script = dir.join("prep_reference.py");
-    std::fs::write(&script, PREP_REFERENCE_PY)
-        .with_context(|| format!("{}: cannot write", script.display()))?;
-    let out = Command::new(&python)
-        .arg(&script)
-        .arg(mask)
-        .arg(format!("{},{},{}", source[0], source[1], source[2]))
-        .arg(repeats.max(1).to_string())
-        .env("OMP_NUM_THREADS", "1")
-        .output()
-        .with_context(|| format!("cannot run {}", python.display()))?;
-    if !out.status.success() {
-        bail!(
-            "{} failed: {}",
-            script.display(),
-            String::from_utf8_lossy(&out.stderr).trim()
-        );
-    }
-    serde_json::from_slice(&out.stdout).context("reference printed no JSON")
+    let source = format!("{},{},{}", source[0], source[1], source[2]);
+    let repeats = repeats.max(1).to_string();
+    let stdout = run_reference_script(
+        python,
+        dir,
+        ("prep_reference.py", PREP_REFERENCE_PY),
+        &[mask.as_os_str(), source.as_ref(), repeats.as_ref()],
+    )?;
+    serde_json::from_slice(&stdout).context("reference printed no JSON")
 }
 
 /// One case's rows from its rounds: per stage the median over rounds of voyage's and the
