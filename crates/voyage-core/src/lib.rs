@@ -25,18 +25,15 @@ mod storage;
 mod surface;
 mod volume;
 
-pub use anatomy::{Orientation, PatientFrame, PatientPosition, PositionSource};
-pub use cells::{CellOptions, Cells, convex_hull};
-pub use centerline::{Centerline, CenterlineOptions, SkeletonOptions};
-pub use cleanse::{CleanseOptions, Cleansing};
-pub use contacts::ContactOptions;
-pub use distance::{Geodesic, distance_to_wall, geodesic_distance};
+pub use anatomy::{Orientation, PatientPosition, PositionSource};
+pub use cells::{Cells, convex_hull};
+pub use centerline::Centerline;
+pub use cleanse::Cleansing;
+pub use distance::geodesic_distance;
 pub use error::{Error, Result};
-pub use grid::{BoxGrid, BoxIndex, BrickIndex, Bricked, Field, bounding_box};
+pub use grid::{BoxGrid, BrickIndex, Bricked, Field, bounding_box};
 pub use navigable::{DEFAULT_MIN_WALL_MM, Navigable};
-pub use prep::{
-    COLON_SEGMENTS, OFF_WALL_MM, PrepOptions, RECTUM_MM, Stage, Study, Timings, prepare,
-};
+pub use prep::{COLON_SEGMENTS, OFF_WALL_MM, PrepOptions, Stage, Study, Timings, prepare};
 pub use segment::{ComponentKind, Gap, LEFT_OUT_DOUBT_ML, SegmentOptions, Segmentation, segment};
 pub use storage::Storage;
 pub use surface::{Mesh, Surface, roughness};

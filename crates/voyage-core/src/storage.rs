@@ -10,7 +10,7 @@
 
 use glam::DVec3;
 
-use crate::{Geometry, PatientFrame, Result, Volume};
+use crate::{Geometry, Result, Volume, anatomy::PatientFrame};
 
 /// How the study storage is made from a scan's input storage: `Volume::reoriented(perm,
 /// flip)`, and the input's geometry to go back.
