@@ -3,6 +3,9 @@
 mod common;
 use libfuzzer_sys::fuzz_target;
 
+#[global_allocator]
+static ALLOCATOR: voyage_io::GuardedAllocator = voyage_io::GuardedAllocator;
+
 fuzz_target!(|data: &[u8]| {
     common::load_as("input.dcm", data);
 });

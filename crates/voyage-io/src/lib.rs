@@ -5,6 +5,7 @@
 //! (LPS), whatever the format: a DICOM series folder or file (also multi-frame), NIfTI-1
 //! (.nii, .nii.gz; RAS converted to LPS), MetaImage (.mha, .mhd + raw) or NRRD.
 
+mod alloc_guard;
 mod atomic;
 pub mod dicom;
 pub mod dicom_write;
@@ -14,6 +15,7 @@ pub mod nrrd;
 mod panic;
 mod png;
 
+pub use alloc_guard::GuardedAllocator;
 pub use atomic::write_atomic;
 pub use panic::install_panic_hook;
 pub use png::{encode_png, write_png};

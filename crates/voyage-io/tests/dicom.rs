@@ -1,6 +1,10 @@
 //! DICOM reading and writing: the real series and test files in `../shared/data/dicom` (skipped
 //! when absent), and synthetic series written by `dicom_write` (always run).
 
+/// As the `voyage` binary: what a DICOM parser may allocate for one file is bounded.
+#[global_allocator]
+static ALLOCATOR: voyage_io::GuardedAllocator = voyage_io::GuardedAllocator;
+
 use std::{
     path::{Path, PathBuf},
     sync::atomic::{AtomicUsize, Ordering},
@@ -1204,7 +1208,7 @@ fn huge_length_inside_a_deflated_data_set_is_refused() {
 ///   given only the bytes before the pixel data.
 #[test]
 fn huge_lengths_the_fuzzer_found_are_refused_before_allocating() {
-    let finds: [(&str, &[u8], &str); 2] = [
+    let finds: [(&str, &[u8], &str); 3] = [
         (
             "huge-delimiter.dcm",
             include_bytes!("../../../fuzz/finds/load_dicom-oom-element-length.dcm"),
@@ -1214,6 +1218,13 @@ fn huge_lengths_the_fuzzer_found_are_refused_before_allocating() {
             "unknown-item-tag.dcm",
             include_bytes!("../../../fuzz/finds/load_dicom-oom-unknown-item-tag.dcm"),
             "(7FE0,0010) announces 3553874689",
+        ),
+        // The walk cannot see this one (a defined-length sequence its item overruns): the
+        // bound on what dicom-rs may allocate for the file refuses the 4.27 GB.
+        (
+            "overrun-sequence.dcm",
+            include_bytes!("../../../fuzz/finds/load_dicom-oom-overrun-sequence.dcm"),
+            "not a readable DICOM file",
         ),
     ];
     let dir = TempDir::new("fuzz-finds");

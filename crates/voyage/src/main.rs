@@ -10,6 +10,11 @@ use std::process::ExitCode;
 
 use clap::Parser;
 
+/// Bounds what a DICOM parser may allocate while it reads one file (`voyage_io`'s
+/// `GuardedAllocator`); the system allocator otherwise.
+#[global_allocator]
+static ALLOCATOR: voyage_io::GuardedAllocator = voyage_io::GuardedAllocator;
+
 fn main() -> ExitCode {
     quiet_vulkan_layer();
     voyage_io::install_panic_hook();

@@ -9,6 +9,7 @@ use dicom_encoding::transfer_syntax::{Endianness, TransferSyntaxIndex};
 use dicom_object::{DefaultDicomObject, OpenFileOptions};
 use dicom_transfer_syntax_registry::TransferSyntaxRegistry;
 
+use crate::alloc_guard::capped;
 use voyage_core::{Error, Result};
 // ---------------------------------------------------------------------------------------------
 // Lenient opening
@@ -169,6 +170,7 @@ pub(super) fn open_dicom(
         }
         None => u64::MAX,
     };
+    let bound = parse_bound(file.metadata().map_err(OpenError::Io)?.len());
     let source = Cursor::new(meta.clean)
         .chain(Cursor::new(buf.split_off(meta.end)))
         .chain(file.take(rest));
@@ -176,7 +178,17 @@ pub(super) fn open_dicom(
     if let Some(tag) = until {
         options = options.read_until(tag);
     }
-    options.from_reader(source).map_err(OpenError::Parse)
+    capped(bound, || options.from_reader(source)).map_err(OpenError::Parse)
+}
+
+/// The largest single allocation dicom-rs may make while it parses `bytes` of data set: the
+/// largest value is at most the file, and its element records take a few times the bytes
+/// they come from.
+fn parse_bound(bytes: u64) -> usize {
+    usize::try_from(bytes)
+        .unwrap_or(usize::MAX)
+        .saturating_mul(16)
+        .saturating_add(16 << 20)
 }
 
 /// The file meta group as found, and rewritten.
@@ -235,12 +247,14 @@ pub(super) fn open_deflated(
         Scan::Bad(m) => return Err(OpenError::Meta(m)),
     }
     let clean = with_transfer_syntax(&meta.clean, EXPLICIT_LE);
+    let inflated_len = inflated.len();
     let source = Cursor::new(clean).chain(Cursor::new(inflated));
     let mut options = OpenFileOptions::new().read_preamble(dicom_object::file::ReadPreamble::Never);
     if let Some(tag) = until {
         options = options.read_until(tag);
     }
-    let mut obj = options.from_reader(source).map_err(OpenError::Parse)?;
+    let bound = parse_bound(inflated_len as u64);
+    let mut obj = capped(bound, || options.from_reader(source)).map_err(OpenError::Parse)?;
     // Report the file as it is: deflated.
     obj.meta_mut().transfer_syntax = DEFLATED_EXPLICIT_LE.to_string();
     Ok(obj)
