@@ -14,6 +14,7 @@ pub mod nifti;
 pub mod nrrd;
 mod panic;
 mod png;
+mod raw;
 
 pub use alloc_guard::GuardedAllocator;
 pub use atomic::write_atomic;

@@ -24,23 +24,20 @@ use glam::{DMat3, DVec3};
 
 use super::{
     Format, Loaded, Meta, at,
-    nifti::{
-        NiftiVoxel,
-        shared::{self, Avail, Endian, Scalar},
-    },
+    raw::{self, Avail, Endian, Scalar, Voxel},
     sibling,
 };
 use voyage_core::{Error, Result, Volume};
 
 /// Loads a .mha or .mhd (+ data file) as an `i16` volume in LPS.
 pub fn load(path: &Path) -> Result<Loaded> {
-    let (mut r, len) = shared::open_nonempty(path)?;
-    let mut lines = shared::HeaderLines::new(path, &mut r);
+    let (mut r, len) = raw::open_nonempty(path)?;
+    let mut lines = raw::HeaderLines::new(path, &mut r);
     let h = Header::read(path, &mut lines)?;
     let consumed = lines.consumed;
     let fmt = |m: String| Error::format(path, m);
 
-    let (dims, n) = shared::dims3(path, &h.dim_size)?;
+    let (dims, n) = raw::dims3(path, &h.dim_size)?;
     let ty = h
         .element_type
         .ok_or_else(|| fmt("ElementType is missing".into()))?;
@@ -66,7 +63,7 @@ pub fn load(path: &Path) -> Result<Loaded> {
                 .map_err(|e| Error::io(&data_path, e))?;
             h.decode(&data_path, &mut dr, n, ty, endian)
         })()
-        .map_err(shared::in_data_file(path, &data_path))?
+        .map_err(raw::in_data_file(path, &data_path))?
     };
     notes.extend(decoded.notes());
     let volume = Volume::from_vec(geom, decoded.voxels).map_err(at(path))?;
@@ -105,7 +102,7 @@ struct Header {
 
 impl Header {
     /// Reads `Key = Value` lines up to and including `ElementDataFile`, which ends the header.
-    fn read(path: &Path, lines: &mut shared::HeaderLines) -> Result<Header> {
+    fn read(path: &Path, lines: &mut raw::HeaderLines) -> Result<Header> {
         let mut h = Header::default();
         let mut any = false;
         let not_text = |e: Error| match e {
@@ -122,7 +119,7 @@ impl Header {
             let Some((key, value)) = line.split_once('=') else {
                 return Err(Error::format(
                     path,
-                    format!("not a MetaImage header line: \"{}\"", shared::clip(line)),
+                    format!("not a MetaImage header line: \"{}\"", raw::clip(line)),
                 ));
             };
             any = true;
@@ -144,25 +141,25 @@ impl Header {
     fn set(&mut self, key: &str, value: &str) -> Result<(), String> {
         match key.to_ascii_lowercase().as_str() {
             "ndims" => {
-                let n = shared::numbers::<usize>(key, value, 1)?[0];
+                let n = raw::numbers::<usize>(key, value, 1)?[0];
                 if n != 3 {
                     return Err(format!("NDims = {n}: voyage reads 3D images only"));
                 }
                 self.ndims = Some(n);
             }
-            "dimsize" => self.dim_size = shared::numbers(key, value, 3)?,
-            "elementspacing" => self.spacing = Some(shared::numbers(key, value, 3)?),
-            "elementsize" => self.element_size = Some(shared::numbers(key, value, 3)?),
-            "offset" | "origin" | "position" => self.offset = Some(shared::numbers(key, value, 3)?),
+            "dimsize" => self.dim_size = raw::numbers(key, value, 3)?,
+            "elementspacing" => self.spacing = Some(raw::numbers(key, value, 3)?),
+            "elementsize" => self.element_size = Some(raw::numbers(key, value, 3)?),
+            "offset" | "origin" | "position" => self.offset = Some(raw::numbers(key, value, 3)?),
             "transformmatrix" | "rotation" | "orientation" => {
-                self.matrix = Some(shared::numbers(key, value, 9)?)
+                self.matrix = Some(raw::numbers(key, value, 9)?)
             }
             "elementtype" => self.element_type = Some(element_type(value)?),
             "binarydatabyteordermsb" | "elementbyteordermsb" => self.msb = boolean(key, value)?,
             "compresseddata" => self.compressed = boolean(key, value)?,
-            "compresseddatasize" => self.compressed_size = Some(shared::numbers(key, value, 1)?[0]),
+            "compresseddatasize" => self.compressed_size = Some(raw::numbers(key, value, 1)?[0]),
             "headersize" => {
-                self.header_size = shared::numbers::<i64>(key, value, 1)?[0];
+                self.header_size = raw::numbers::<i64>(key, value, 1)?[0];
                 if self.header_size < -1 {
                     return Err(format!(
                         "HeaderSize = {}: must be -1 or more",
@@ -174,7 +171,7 @@ impl Header {
                 return Err("BinaryData = False (ASCII voxels) is not supported".into());
             }
             "elementnumberofchannels" => {
-                let c = shared::numbers::<u64>(key, value, 1)?[0];
+                let c = raw::numbers::<u64>(key, value, 1)?[0];
                 if c != 1 {
                     return Err(format!(
                         "ElementNumberOfChannels = {c}: only scalar images are supported"
@@ -220,19 +217,19 @@ impl Header {
             None => DMat3::IDENTITY,
             Some(m) => {
                 let axes = [0, 3, 6].map(|c| DVec3::new(m[c], m[c + 1], m[c + 2]));
-                shared::direction_from_axes(axes)
+                raw::direction_from_axes(axes)
                     .map_err(|e| Error::format(path, format!("TransformMatrix: {e}")))?
                     .1
             }
         };
-        Ok((shared::geometry(path, dims, spacing, origin, dir)?, notes))
+        Ok((raw::geometry(path, dims, spacing, origin, dir)?, notes))
     }
 
     /// How much voxel data a stream of `len` bytes can hold.
     fn avail(&self, len: u64) -> Avail {
         if self.compressed {
             let c = self.compressed_size.map_or(len, |s| s.min(len));
-            Avail::AtMost(shared::max_inflated_len(c))
+            Avail::AtMost(raw::max_inflated_len(c))
         } else {
             Avail::Exact(len)
         }
@@ -258,20 +255,20 @@ impl Header {
         n: usize,
         ty: Scalar,
         endian: Endian,
-    ) -> Result<shared::Decoded> {
+    ) -> Result<raw::Decoded> {
         if !self.compressed {
-            return shared::read_voxels(path, r, n, ty, endian, None);
+            return raw::read_voxels(path, r, n, ty, endian, None);
         }
         let limit = self.compressed_size.unwrap_or(u64::MAX);
         let mut limited = r.take(limit);
         let head = limited.fill_buf().map_err(|e| Error::io(path, e))?;
-        let mut d: Box<dyn Read> = if shared::is_gzip(head) {
+        let mut d: Box<dyn Read> = if raw::is_gzip(head) {
             Box::new(flate2::bufread::MultiGzDecoder::new(limited))
         } else {
             Box::new(flate2::bufread::ZlibDecoder::new(limited))
         };
-        let decoded = shared::read_voxels(path, &mut d, n, ty, endian, None)?;
-        shared::finish_compressed(path, &mut d)?;
+        let decoded = raw::read_voxels(path, &mut d, n, ty, endian, None)?;
+        raw::finish_compressed(path, &mut d)?;
         Ok(decoded)
     }
 }

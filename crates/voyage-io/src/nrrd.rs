@@ -20,22 +20,19 @@ use glam::{DMat3, DVec3};
 
 use super::{
     Format, Loaded, Meta, at,
-    nifti::{
-        NiftiVoxel,
-        shared::{self, Avail, Endian, Scalar},
-    },
+    raw::{self, Avail, Endian, Scalar, Voxel},
     sibling,
 };
 use voyage_core::{Error, Geometry, Result, Volume};
 
 /// Loads a .nrrd or .nhdr (+ data file) as an `i16` volume in LPS.
 pub fn load(path: &Path) -> Result<Loaded> {
-    let (mut r, len) = shared::open_nonempty(path)?;
-    let mut lines = shared::HeaderLines::new(path, &mut r);
+    let (mut r, len) = raw::open_nonempty(path)?;
+    let mut lines = raw::HeaderLines::new(path, &mut r);
     let h = Header::read(path, &mut lines)?;
     let consumed = lines.consumed;
 
-    let (dims, n) = shared::dims3(path, &h.sizes)?;
+    let (dims, n) = raw::dims3(path, &h.sizes)?;
     let ty =
         h.ty.ok_or_else(|| Error::format(path, "the type: field is missing"))?;
     let encoding = h
@@ -63,7 +60,7 @@ pub fn load(path: &Path) -> Result<Loaded> {
             let data_path = data_path(path, name)?;
             let (mut dr, data_len) = open_data(path, &data_path)?;
             h.decode(&data_path, &mut dr, data_len, (n, ty, endian, encoding))
-                .map_err(shared::in_data_file(path, &data_path))?
+                .map_err(raw::in_data_file(path, &data_path))?
         }
     };
     notes.extend(decoded.notes());
@@ -129,7 +126,7 @@ type Layout = (usize, Scalar, Endian, Encoding);
 
 impl Header {
     /// Reads the magic line, then fields up to a blank line or the end of the file.
-    fn read(path: &Path, lines: &mut shared::HeaderLines) -> Result<Header> {
+    fn read(path: &Path, lines: &mut raw::HeaderLines) -> Result<Header> {
         match lines.next_line() {
             Ok(Some(magic)) if magic.starts_with("NRRD") => {}
             Ok(_) | Err(Error::Format { .. }) => {
@@ -149,7 +146,7 @@ impl Header {
             let Some((field, value)) = line.split_once(": ") else {
                 return Err(Error::format(
                     path,
-                    format!("not a NRRD field line: \"{}\"", shared::clip(&line)),
+                    format!("not a NRRD field line: \"{}\"", raw::clip(&line)),
                 ));
             };
             h.set(&field.trim().to_ascii_lowercase(), value.trim())
@@ -163,16 +160,16 @@ impl Header {
         match field {
             "type" => self.ty = Some(scalar(value)?),
             "dimension" => {
-                let d = shared::numbers::<usize>(field, value, 1)?[0];
+                let d = raw::numbers::<usize>(field, value, 1)?[0];
                 if d != 3 {
                     return Err(format!("dimension: {d}: voyage reads 3D volumes only"));
                 }
                 self.dimension = Some(d);
             }
-            "sizes" => self.sizes = shared::numbers(field, value, 3)?,
+            "sizes" => self.sizes = raw::numbers(field, value, 3)?,
             "space" => self.space = Some(space(value)?),
             "space dimension" => {
-                let d = shared::numbers::<usize>(field, value, 1)?[0];
+                let d = raw::numbers::<usize>(field, value, 1)?[0];
                 if d != 3 {
                     return Err(format!(
                         "space dimension: {d}: only 3D spaces are supported"
@@ -194,7 +191,7 @@ impl Header {
                     _ => return Err(format!("space origin: expected one vector in \"{value}\"")),
                 }
             }
-            "spacings" => self.spacings = Some(shared::numbers(field, value, 3)?),
+            "spacings" => self.spacings = Some(raw::numbers(field, value, 3)?),
             "endian" => {
                 self.endian = Some(match value {
                     "little" => Endian::Little,
@@ -211,12 +208,12 @@ impl Header {
             }
             "data file" | "datafile" => self.data_file = Some(value.to_string()),
             "byte skip" | "byteskip" => {
-                self.byte_skip = shared::numbers::<i64>(field, value, 1)?[0];
+                self.byte_skip = raw::numbers::<i64>(field, value, 1)?[0];
                 if self.byte_skip < -1 {
                     return Err(format!("byte skip: {}: must be -1 or more", self.byte_skip));
                 }
             }
-            "line skip" | "lineskip" => self.line_skip = shared::numbers(field, value, 1)?[0],
+            "line skip" | "lineskip" => self.line_skip = raw::numbers(field, value, 1)?[0],
             _ => {}
         }
         Ok(())
@@ -234,7 +231,7 @@ impl Header {
         }
         let to_lps = space.to_lps();
         let (spacing, dir) = match (&self.directions, &self.spacings) {
-            (Some(axes), _) => shared::direction_from_axes(axes.map(|a| to_lps * a))
+            (Some(axes), _) => raw::direction_from_axes(axes.map(|a| to_lps * a))
                 .map_err(|m| Error::format(path, format!("space directions: {m}")))?,
             (None, Some(s)) => {
                 notes.push("no space directions: axes taken as LPS".to_string());
@@ -246,7 +243,7 @@ impl Header {
             }
         };
         let origin = self.origin.map_or(DVec3::ZERO, |o| to_lps * o);
-        Ok((shared::geometry(path, dims, spacing, origin, dir)?, notes))
+        Ok((raw::geometry(path, dims, spacing, origin, dir)?, notes))
     }
 
     /// Skips `line skip` lines and `byte skip` bytes, then decodes the voxels from `r`, a
@@ -257,7 +254,7 @@ impl Header {
         r: &mut dyn BufRead,
         len: u64,
         layout: Layout,
-    ) -> Result<shared::Decoded> {
+    ) -> Result<raw::Decoded> {
         let (n, ty, endian, encoding) = layout;
         let expected = (n as u64).saturating_mul(ty.size() as u64);
         let mut skipped = 0u64;
@@ -282,10 +279,10 @@ impl Header {
                     b => b as u64,
                 };
                 Avail::Exact(left).check(path, offset, expected)?;
-                shared::skip(r, offset)
-                    .map_err(|e| shared::read_error(path, e))?
+                raw::skip(r, offset)
+                    .map_err(|e| raw::read_error(path, e))?
                     .check(path, offset)?;
-                shared::read_voxels(path, r, n, ty, endian, None)
+                raw::read_voxels(path, r, n, ty, endian, None)
             }
             Encoding::Gzip => {
                 if self.byte_skip < 0 {
@@ -295,13 +292,13 @@ impl Header {
                     ));
                 }
                 let offset = self.byte_skip as u64;
-                Avail::AtMost(shared::max_inflated_len(left)).check(path, offset, expected)?;
+                Avail::AtMost(raw::max_inflated_len(left)).check(path, offset, expected)?;
                 let mut d = flate2::bufread::MultiGzDecoder::new(r);
-                shared::skip(&mut d, offset)
-                    .map_err(|e| shared::read_error(path, e))?
+                raw::skip(&mut d, offset)
+                    .map_err(|e| raw::read_error(path, e))?
                     .check(path, offset)?;
-                let decoded = shared::read_voxels(path, &mut d, n, ty, endian, None)?;
-                shared::finish_compressed(path, &mut d)?;
+                let decoded = raw::read_voxels(path, &mut d, n, ty, endian, None)?;
+                raw::finish_compressed(path, &mut d)?;
                 Ok(decoded)
             }
         }
@@ -347,13 +344,13 @@ fn vectors(field: &str, value: &str) -> Result<Vec<DVec3>, String> {
         let Some(inner) = rest.strip_prefix('(') else {
             return Err(format!(
                 "{field}: expected \"(x,y,z)\" vectors in \"{}\"",
-                shared::clip(value)
+                raw::clip(value)
             ));
         };
         let Some((inside, after)) = inner.split_once(')') else {
             return Err(format!(
                 "{field}: unclosed parenthesis in \"{}\"",
-                shared::clip(value)
+                raw::clip(value)
             ));
         };
         let v: Vec<f64> = inside
