@@ -1208,7 +1208,7 @@ fn huge_length_inside_a_deflated_data_set_is_refused() {
 ///   given only the bytes before the pixel data.
 #[test]
 fn huge_lengths_the_fuzzer_found_are_refused_before_allocating() {
-    let finds: [(&str, &[u8], &str); 3] = [
+    let finds: [(&str, &[u8], &str); 4] = [
         (
             "huge-delimiter.dcm",
             include_bytes!("../../../fuzz/finds/load_dicom-oom-element-length.dcm"),
@@ -1224,6 +1224,13 @@ fn huge_lengths_the_fuzzer_found_are_refused_before_allocating() {
         (
             "overrun-sequence.dcm",
             include_bytes!("../../../fuzz/finds/load_dicom-oom-overrun-sequence.dcm"),
+            "not a readable DICOM file",
+        ),
+        // Below the bound: dicom-rs allocates 766 MB where a refusal would abort the process,
+        // and fails into an error, as before the bound.
+        (
+            "766mb-then-error.dcm",
+            include_bytes!("../../../fuzz/finds/load_dicom-766mb-then-error.dcm"),
             "not a readable DICOM file",
         ),
     ];

@@ -183,12 +183,14 @@ pub(super) fn open_dicom(
 
 /// The largest single allocation dicom-rs may make while it parses `bytes` of data set: the
 /// largest value is at most the file, and its element records take a few times the bytes
-/// they come from.
+/// they come from; and 2 GiB more, because where dicom-rs allocates without `try_reserve` a
+/// refusal aborts the process (a corrupt 1 kB file made it allocate 766 MB and then fail
+/// cleanly: that must stay an error). What is refused is what no machine should be asked for.
 fn parse_bound(bytes: u64) -> usize {
     usize::try_from(bytes)
         .unwrap_or(usize::MAX)
         .saturating_mul(16)
-        .saturating_add(16 << 20)
+        .saturating_add(2 << 30)
 }
 
 /// The file meta group as found, and rewritten.
