@@ -1,8 +1,9 @@
 //! The architecture's layering, checked on the sources: the workspace's crates depend only on
 //! crates below them; voyage-core depends on no file-format, codec, image, GPU or GUI crate;
 //! and inside it every module imports only modules that come before it in the order the CT
-//! goes through `prepare` (no cycles, nothing climbs back up). And ARCHITECTURE.md, the map,
-//! names every source file and nothing that is not there.
+//! goes through `prepare` (no cycles, nothing climbs back up); no two files of any crate
+//! import each other, round a circle or directly. And ARCHITECTURE.md, the map, names every
+//! source file and nothing that is not there.
 
 use std::{collections::BTreeSet, path::Path};
 
@@ -354,5 +355,138 @@ fn the_map_names_every_source_file_and_every_path_it_names_exists() {
     assert!(
         missing.is_empty(),
         "ARCHITECTURE.md names paths that do not exist: {missing:?}"
+    );
+}
+
+/// The module path of a source file under a crate's `src` (`segment/mod.rs` → `segment`,
+/// `segment/runs.rs` → `segment::runs`; the crate root → empty).
+fn module_of(rel: &str) -> Vec<String> {
+    let mut parts: Vec<String> = rel
+        .trim_end_matches(".rs")
+        .split('/')
+        .map(str::to_string)
+        .collect();
+    if matches!(
+        parts.last().map(String::as_str),
+        Some("mod" | "lib" | "main")
+    ) {
+        parts.pop();
+    }
+    parts
+}
+
+/// The first-level paths a `use` tree names: `a::{b, c::{d}}` → `a::b`, `a::c::d`.
+fn use_paths(tree: &str) -> Vec<String> {
+    let tree = tree.trim();
+    let Some(open) = tree.find('{') else {
+        return vec![tree.split(" as ").next().unwrap_or("").trim().to_string()];
+    };
+    let prefix = tree[..open].trim();
+    let inner = &tree[open + 1..tree.rfind('}').unwrap_or(tree.len())];
+    let (mut depth, mut start, mut out) = (0, 0, Vec::new());
+    for (i, c) in inner.char_indices().chain([(inner.len(), ',')]) {
+        match c {
+            '{' => depth += 1,
+            '}' => depth -= 1,
+            ',' if depth == 0 => {
+                let part = inner[start..i].trim();
+                if !part.is_empty() {
+                    out.extend(use_paths(part).into_iter().map(|p| {
+                        if p == "self" {
+                            prefix.trim_end_matches("::").to_string()
+                        } else {
+                            format!("{prefix}{p}")
+                        }
+                    }));
+                }
+                start = i + 1;
+            }
+            _ => {}
+        }
+    }
+    out
+}
+
+/// No two source files import each other, directly or round a circle (a crate's root,
+/// which re-exports, left out): each file's `use` lines resolved to the file of the module
+/// they name, or of the module that holds the item they name.
+#[test]
+fn no_circle_between_files() {
+    let root = repo();
+    let mut circles = Vec::new();
+    for entry in std::fs::read_dir(root.join("crates")).unwrap() {
+        let src = entry.unwrap().path().join("src");
+        let files: Vec<(Vec<String>, String)> = files_under(&src, &[".rs"])
+            .into_iter()
+            .map(|f| {
+                let rel = f
+                    .strip_prefix(&src)
+                    .unwrap()
+                    .to_string_lossy()
+                    .replace('\\', "/");
+                (module_of(&rel), std::fs::read_to_string(&f).unwrap())
+            })
+            .filter(|(m, _)| !m.is_empty())
+            .collect();
+        let index = |m: &[String]| files.iter().position(|(fm, _)| fm.as_slice() == m);
+        let mut edges: Vec<BTreeSet<usize>> = vec![BTreeSet::new(); files.len()];
+        for (i, (module, text)) in files.iter().enumerate() {
+            let code = text.split("#[cfg(test)]").next().unwrap_or("");
+            for stmt in code
+                .split(';')
+                .filter_map(|s| s.trim().strip_prefix("use "))
+            {
+                let stmt = stmt.trim_start_matches("pub ");
+                for path in use_paths(stmt) {
+                    let segs: Vec<&str> = path.split("::").collect();
+                    // `super` of `a::b` (a/b.rs) is `a`; of `a` (a/mod.rs) the root.
+                    let mut base: Vec<String> = match segs[0] {
+                        "crate" => Vec::new(),
+                        "super" => module[..module.len() - 1].to_vec(),
+                        "self" => module.clone(),
+                        _ => continue,
+                    };
+                    // The deepest module of the path that is a file of this crate.
+                    let mut target = None;
+                    for s in &segs[1..] {
+                        base.push(s.to_string());
+                        match index(&base) {
+                            Some(t) => target = Some(t),
+                            None => break,
+                        }
+                    }
+                    let target = target.or_else(|| {
+                        base.truncate(base.len().saturating_sub(1));
+                        index(&base)
+                    });
+                    if let Some(t) = target.filter(|&t| t != i) {
+                        edges[i].insert(t);
+                    }
+                }
+            }
+        }
+        // A circle: a file that reaches itself.
+        for start in 0..files.len() {
+            let mut seen = vec![false; files.len()];
+            let mut stack: Vec<usize> = edges[start].iter().copied().collect();
+            while let Some(f) = stack.pop() {
+                if f == start {
+                    let krate = src.parent().and_then(|c| c.file_name()).unwrap_or_default();
+                    circles.push(format!(
+                        "{}: {}",
+                        krate.to_string_lossy(),
+                        files[start].0.join("::")
+                    ));
+                    break;
+                }
+                if !std::mem::replace(&mut seen[f], true) {
+                    stack.extend(edges[f].iter().copied());
+                }
+            }
+        }
+    }
+    assert!(
+        circles.is_empty(),
+        "files in a circle of imports: {circles:?}"
     );
 }
