@@ -647,12 +647,18 @@ fn prepare_stored(
             opts,
         )?);
         taken.sort_unstable();
-        laps.start(Stage::Ds);
         if let Some(d) = ds_box.take() {
             box_ds.give_back(d);
         }
     }
-    let ds_box = ds_box.unwrap_or_else(|| box_ds.of(&seg.lumen));
+    // Ds again where a round of plugging took the trace's, or the fluid came back.
+    let ds_box = match ds_box {
+        Some(d) => d,
+        None => {
+            laps.start(Stage::Ds);
+            box_ds.of(&seg.lumen)
+        }
+    };
     // Ds moves into bricks, and the Dt searches work in its box array.
     let grid = box_ds.grid; // and its spare memory freed
     let mut ds = Bricked::from_field(&ds_box, 0.0);

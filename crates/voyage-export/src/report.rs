@@ -100,8 +100,8 @@ pub struct ColonRead {
     pub bridged_mm: Vec<(String, f64)>,
     /// Where the colon leaves the scanned volume (one entry per place): the segment.
     pub leaves_the_scan: Vec<String>,
-    /// The corrections made by hand, each with the segment it lies in: (segment, what, LPS).
-    pub by_hand: Vec<(String, &'static str, [f64; 3])>,
+    /// The corrections made by hand, each with the segment it lies in.
+    pub by_hand: Vec<(String, HandCorrection)>,
 }
 
 impl ColonRead {
@@ -151,7 +151,7 @@ impl ColonRead {
                         .ct
                         .geometry()
                         .patient_to_local(glam::DVec3::from_array(c.lps_mm));
-                    (study.segment_at(local).to_string(), c.what, c.lps_mm)
+                    (study.segment_at(local).to_string(), c.clone())
                 })
                 .collect(),
         }
@@ -304,7 +304,10 @@ fn colon_html(c: &ColonRead, seen: &[SegmentSeen]) -> String {
             .by_hand
             .iter()
             .filter(|(n, ..)| n == name)
-            .map(|(_, what, [x, y, z])| format!("{what} at LPS ({x:.0}, {y:.0}, {z:.0})"))
+            .map(|(_, c)| {
+                let [x, y, z] = c.lps_mm;
+                format!("{} at LPS ({x:.0}, {y:.0}, {z:.0})", c.what)
+            })
             .collect();
         let hand = if hand.is_empty() {
             "&mdash;".to_string()

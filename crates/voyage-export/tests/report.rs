@@ -91,8 +91,10 @@ fn sample() -> Report {
             leaves_the_scan: vec!["cecum".into()],
             by_hand: vec![(
                 "transverse".into(),
-                "gas taken in as colon",
-                [94.5, 128.25, -279.0],
+                HandCorrection {
+                    what: "gas taken in as colon",
+                    lps_mm: [94.5, 128.25, -279.0],
+                },
             )],
         },
     }

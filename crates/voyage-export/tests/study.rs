@@ -2,39 +2,13 @@
 
 use voyage_core::Volume;
 use voyage_io::{self as io, LoadOptions};
-use voyage_phantom::{self as phantom, ColonOptions};
+use voyage_phantom::{self as phantom, ColonOptions, fixtures::assert_same_volume};
 
 fn scratch(name: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("voyage-export-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
-}
-
-fn assert_same(a: &Volume<i16>, b: &Volume<i16>, what: &str) {
-    let (ga, gb) = (a.geometry(), b.geometry());
-    assert_eq!(ga.dims, gb.dims, "{what}: dims");
-    for i in 0..3 {
-        assert!(
-            (ga.spacing[i] - gb.spacing[i]).abs() < 1e-5,
-            "{what}: spacing {:?} vs {:?}",
-            ga.spacing,
-            gb.spacing
-        );
-        assert!(
-            (ga.origin[i] - gb.origin[i]).abs() < 1e-4,
-            "{what}: origin {:?} vs {:?}",
-            ga.origin,
-            gb.origin
-        );
-        for j in 0..3 {
-            assert!(
-                (ga.direction[i][j] - gb.direction[i][j]).abs() < 1e-6,
-                "{what}: direction"
-            );
-        }
-    }
-    assert!(a.data() == b.data(), "{what}: voxels differ");
 }
 
 /// A scan stored upside down and transposed is prepared in the study storage, and `voyage
@@ -91,7 +65,7 @@ fn exports_of_a_scan_stored_otherwise_are_on_its_grid() {
     // values turned back elsewhere.
     let cleansed = load("cleansed.nii.gz");
     let want = study.storage.to_input(&study.cleansed_ct()).unwrap();
-    assert_same(&cleansed, &want, "cleansed.nii.gz");
+    assert_same_volume(&cleansed, &want, "cleansed.nii.gz");
     // Ds (read back as whole mm): zero outside the lumen, and in its middle where it is
     // wider than a voxel.
     let ds = load("ds.nii.gz");

@@ -2,41 +2,14 @@
 //! through a full-size DICOM series; and `voyage prep`'s volumes of a scan stored otherwise
 //! come back on that scan's grid.
 
-use voyage_core::Volume;
 use voyage_io::{self as io, LoadOptions, dicom_write, nifti};
-use voyage_phantom::{self as phantom, ColonOptions};
+use voyage_phantom::{self as phantom, ColonOptions, fixtures::assert_same_volume};
 
 fn scratch(name: &str) -> std::path::PathBuf {
     let d = std::env::temp_dir().join(format!("voyage-rt-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d
-}
-
-fn assert_same(a: &Volume<i16>, b: &Volume<i16>, what: &str) {
-    let (ga, gb) = (a.geometry(), b.geometry());
-    assert_eq!(ga.dims, gb.dims, "{what}: dims");
-    for i in 0..3 {
-        assert!(
-            (ga.spacing[i] - gb.spacing[i]).abs() < 1e-5,
-            "{what}: spacing {:?} vs {:?}",
-            ga.spacing,
-            gb.spacing
-        );
-        assert!(
-            (ga.origin[i] - gb.origin[i]).abs() < 1e-4,
-            "{what}: origin {:?} vs {:?}",
-            ga.origin,
-            gb.origin
-        );
-        for j in 0..3 {
-            assert!(
-                (ga.direction[i][j] - gb.direction[i][j]).abs() < 1e-6,
-                "{what}: direction"
-            );
-        }
-    }
-    assert!(a.data() == b.data(), "{what}: voxels differ");
 }
 
 #[test]
@@ -50,7 +23,7 @@ fn small_colon_and_pipe_through_nifti() {
     .unwrap();
     let p = dir.join("colon.nii.gz");
     nifti::save(&p, &colon.ct).unwrap();
-    assert_same(
+    assert_same_volume(
         &colon.ct,
         &io::load(&p, &LoadOptions::default()).unwrap().volume,
         "colon .nii.gz",
@@ -68,7 +41,7 @@ fn small_colon_and_pipe_through_nifti() {
     let pipe = phantom::pipe(1).unwrap();
     let p = dir.join("pipe.nii.gz");
     nifti::save(&p, &pipe.ct).unwrap();
-    assert_same(
+    assert_same_volume(
         &pipe.ct,
         &io::load(&p, &LoadOptions::default()).unwrap().volume,
         "pipe .nii.gz",
@@ -85,6 +58,6 @@ fn full_size_colon_through_a_dicom_series() {
     assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 400);
     let loaded = io::load(&dir, &LoadOptions::default()).unwrap();
     assert_eq!(loaded.meta.files, 400);
-    assert_same(&colon.ct, &loaded.volume, "colon DICOM series");
+    assert_same_volume(&colon.ct, &loaded.volume, "colon DICOM series");
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use glam::DVec3;
-use voyage_core::Study;
+use voyage_core::{Study, Volume};
 
 /// `../shared/data` beside the checkout, or None after [`skip`] where it is not there.
 pub fn shared_data() -> Option<PathBuf> {
@@ -61,4 +61,32 @@ pub fn random_lumen_points(study: &Study, n: usize, seed: u64) -> Vec<DVec3> {
         }
     }
     out
+}
+
+/// Asserts that two volumes have the same geometry (to 1e-5 mm in spacing, 1e-4 mm in origin,
+/// 1e-6 in direction) and the same voxels; `what` names them in the failure.
+pub fn assert_same_volume(a: &Volume<i16>, b: &Volume<i16>, what: &str) {
+    let (ga, gb) = (a.geometry(), b.geometry());
+    assert_eq!(ga.dims, gb.dims, "{what}: dims");
+    for i in 0..3 {
+        assert!(
+            (ga.spacing[i] - gb.spacing[i]).abs() < 1e-5,
+            "{what}: spacing {:?} vs {:?}",
+            ga.spacing,
+            gb.spacing
+        );
+        assert!(
+            (ga.origin[i] - gb.origin[i]).abs() < 1e-4,
+            "{what}: origin {:?} vs {:?}",
+            ga.origin,
+            gb.origin
+        );
+        for j in 0..3 {
+            assert!(
+                (ga.direction[i][j] - gb.direction[i][j]).abs() < 1e-6,
+                "{what}: direction"
+            );
+        }
+    }
+    assert!(a.data() == b.data(), "{what}: voxels differ");
 }

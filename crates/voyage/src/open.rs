@@ -212,6 +212,8 @@ pub fn open_study(
         nav_min_wall_mm,
     };
     let name = a.input.display().to_string();
+    // The file name only: folders of DICOM files are often named after the patient, and the
+    // last component is what the user chose to open.
     let file_name = a
         .input
         .file_name()

@@ -131,8 +131,8 @@ pub(super) fn open_dicom(
     // given the bytes before it only, so that a reader that disagrees with the walk on where
     // a sequence ends cannot go on to read (and allocate) the pixel data.
     let mut header_end = None;
+    let size = file.metadata().map_err(OpenError::Io)?.len();
     if let Some(layout) = Layout::of(&meta.ts_uid) {
-        let size = file.metadata().map_err(OpenError::Io)?.len();
         loop {
             match scan_lengths(&buf, meta.end, size, layout, until.is_none()) {
                 Scan::Sound { pixel_data } => {
@@ -170,7 +170,6 @@ pub(super) fn open_dicom(
         }
         None => u64::MAX,
     };
-    let bound = parse_bound(file.metadata().map_err(OpenError::Io)?.len());
     let source = Cursor::new(meta.clean)
         .chain(Cursor::new(buf.split_off(meta.end)))
         .chain(file.take(rest));
@@ -178,7 +177,7 @@ pub(super) fn open_dicom(
     if let Some(tag) = until {
         options = options.read_until(tag);
     }
-    capped(bound, || options.from_reader(source)).map_err(OpenError::Parse)
+    capped(parse_bound(size), || options.from_reader(source)).map_err(OpenError::Parse)
 }
 
 /// The largest single allocation dicom-rs may make while it parses `bytes` of data set: the

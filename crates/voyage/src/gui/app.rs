@@ -417,7 +417,7 @@ impl App {
                 s.set_playing(!self.args.paused);
                 self.status = format!(
                     "{} ready in {:.1} s: centerline {:.0} mm, {} triangles in {} cells",
-                    s.name,
+                    s.exam.name,
                     seconds,
                     s.study.centerline.length_mm,
                     s.mesh.triangles.len(),
@@ -997,7 +997,7 @@ impl App {
             ui.horizontal(|ui| {
                 ui.label(RichText::new("voyage").strong());
                 if let Some(s) = &self.session {
-                    ui.label(&s.name);
+                    ui.label(&s.exam.name);
                 }
                 ui.separator();
                 ui.add(
@@ -1771,7 +1771,7 @@ impl eframe::App for App {
         self.shortcuts(&ctx);
         self.run_script(&ctx);
         let title = match &self.session {
-            Some(s) => format!("voyage — {}", s.name),
+            Some(s) => format!("voyage — {}", s.exam.name),
             None => "voyage".into(),
         };
         ctx.send_viewport_cmd(egui::ViewportCommand::Title(title));

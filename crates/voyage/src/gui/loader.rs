@@ -51,19 +51,6 @@ impl Source {
         }
         s
     }
-
-    /// The name shown in the title bar: the file name only (folders of DICOM files are
-    /// often named after the patient; the last component is what the user chose to open).
-    fn title(&self) -> String {
-        match self {
-            Source::File(a) => a
-                .input
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_else(|| a.input.display().to_string()),
-            Source::Phantom { .. } => "colon phantom".into(),
-        }
-    }
 }
 
 enum Message {
@@ -162,8 +149,8 @@ fn open(source: &Source, progress: &dyn Fn(usize, &str)) -> anyhow::Result<Sessi
                 mask: false,
                 nav_min_wall_mm: None,
             };
-            let exam = exam_of(&source.title(), &io::Meta::default(), points, ct.geometry());
             let meta = io::Meta::default();
+            let exam = exam_of("colon phantom", &meta, points, ct.geometry());
             let study = prepare_volume(ct, meta, &choices, &source.describe(), tell)?;
             (study, exam)
         }

@@ -29,9 +29,8 @@ const SPOT_CANDIDATES: usize = 64;
 const SPOT_STEP_MM: f64 = 0.5;
 
 pub struct Session {
-    /// The file name shown in the title (never a patient name).
-    pub name: String,
-    /// What the report says of the exam: the name, series, date and corrections by hand.
+    /// What the report says of the exam: its name (the file name shown in the title, never a
+    /// patient name), series, date and corrections by hand.
     pub exam: voyage_export::Exam,
     pub study: Study,
     pub field: PotentialField<BrickStore>,
@@ -107,7 +106,6 @@ impl Session {
         let mut pilot = Autopilot::new(&study.centerline, dir, &opts, start.position, dt0);
         pilot.fit_reach(&field, dir, opts.safety.min_wall_mm);
         Ok(Session {
-            name: exam.name.clone(),
             exam,
             study,
             field,
