@@ -332,3 +332,33 @@ fn the_rectal_tube_is_not_colon_and_the_rectum_starts_at_its_tip() {
         );
     }
 }
+
+/// A collapsed descending colon at full size: the sigmoid's loop passes 15 mm under the
+/// transverse colon, nearer than the collapsed stretch is long, yet the chain joins the two
+/// stumps of the collapse, not the loop's middle to the transverse (which left 600 mm of the
+/// colon out).
+#[test]
+fn a_collapse_is_bridged_stump_to_stump_when_another_loop_passes_nearer() {
+    for prone in [false, true] {
+        let p = phantom::colon(&ColonOptions {
+            prone,
+            collapsed: vec![if prone { "sigmoid" } else { "descending" }.into()],
+            ..ColonOptions::default()
+        })
+        .unwrap();
+        let s = prepare(p.ct, &PrepOptions::default(), |_| {}).unwrap();
+        let (found, truth) = (s.centerline.length_mm, p.truth.centerline_length_mm);
+        eprintln!("prone {prone}: centerline {found:.0} mm, truth {truth:.0} mm");
+        assert!(
+            found >= 0.97 * truth,
+            "prone {prone}: {found:.0} of {truth:.0} mm"
+        );
+        let gap = &s.segmentation.gaps;
+        assert_eq!(gap.len(), 1);
+        assert!(
+            gap[0].length_mm <= 60.0,
+            "bridged {:.0} mm",
+            gap[0].length_mm
+        );
+    }
+}

@@ -36,6 +36,9 @@ pub struct SeriesWriteOptions {
     pub patient_position: Option<String>,
     /// StudyDate (0008,0020), DICOM DA "YYYYMMDD"; `None` leaves it empty.
     pub study_date: Option<String>,
+    /// The files are named PREFIX0000.dcm, PREFIX0001.dcm ...: two series of one exam can
+    /// share a folder.
+    pub file_prefix: String,
 }
 
 impl Default for SeriesWriteOptions {
@@ -46,6 +49,7 @@ impl Default for SeriesWriteOptions {
             uid_seed: 0,
             patient_position: None,
             study_date: None,
+            file_prefix: "slice".into(),
         }
     }
 }
@@ -55,7 +59,8 @@ pub fn write_series(dir: &Path, vol: &Volume<i16>) -> Result<()> {
     write_series_with(dir, vol, &SeriesWriteOptions::default())
 }
 
-/// Writes `vol` as a CT series into `dir`: files `slice0000.dcm`, `slice0001.dcm`, ... one per
+/// Writes `vol` as a CT series into `dir`: files `slice0000.dcm`, `slice0001.dcm`, ... (the
+/// prefix as `opts` says) one per
 /// k-slice, each written atomically.
 pub fn write_series_with(dir: &Path, vol: &Volume<i16>, opts: &SeriesWriteOptions) -> Result<()> {
     let g = vol.geometry();
@@ -71,7 +76,7 @@ pub fn write_series_with(dir: &Path, vol: &Volume<i16>, opts: &SeriesWriteOption
     let digits = nz.saturating_sub(1).to_string().len().max(4);
     (0..nz).into_par_iter().try_for_each(|k| {
         let bytes = encode_slice(vol, k, &uids, opts);
-        let path = dir.join(format!("slice{k:0digits$}.dcm"));
+        let path = dir.join(format!("{}{k:0digits$}.dcm", opts.file_prefix));
         write_atomic(&path, |w| w.write_all(&bytes))
     })
 }

@@ -29,6 +29,10 @@ pub struct Axis {
     /// Arc length at each knot.
     pub knot_arc: Vec<f64>,
     pub length: f64,
+    /// Arc length at the dense spline samples, [`SPAN_SAMPLES`] per knot span: the map
+    /// between arc and the spline's parameter (knot index and fraction), which two shapes of
+    /// one colon through the same knots share.
+    span_arc: Vec<f64>,
 }
 
 /// Dense samples per knot span before resampling.
@@ -85,7 +89,50 @@ impl Axis {
             binormal,
             knot_arc,
             length,
+            span_arc: dense_arc,
         })
+    }
+
+    /// The spline's parameter at arc length `s`: knot index plus the fraction of the span.
+    pub fn param_at(&self, s: f64) -> f64 {
+        let a = &self.span_arc;
+        let i = a.partition_point(|&x| x <= s).clamp(1, a.len() - 1);
+        let (s0, s1) = (a[i - 1], a[i]);
+        let t = if s1 > s0 {
+            ((s - s0) / (s1 - s0)).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        ((i - 1) as f64 + t) / SPAN_SAMPLES as f64
+    }
+
+    /// Arc length at the spline's parameter `u` (see [`Axis::param_at`]).
+    pub fn arc_at_param(&self, u: f64) -> f64 {
+        let a = &self.span_arc;
+        let x = (u * SPAN_SAMPLES as f64).clamp(0.0, (a.len() - 1) as f64);
+        let i = (x.floor() as usize).min(a.len() - 2);
+        a[i] + (a[i + 1] - a[i]) * (x - i as f64)
+    }
+
+    /// Arc length on `other` (the same knots moved) of the point at arc `s` here: the same
+    /// place of the same colon in its other shape.
+    pub fn arc_on(&self, other: &Axis, s: f64) -> f64 {
+        other.arc_at_param(self.param_at(s))
+    }
+
+    /// Takes `reference`'s frames (the same knots, before they moved), each turned onto this
+    /// axis's tangent at the same place: an angle around the tube then names the same side of
+    /// it in the patient's frame in both shapes, where each shape's own rotation-minimising
+    /// frame would have twisted differently along the way.
+    pub fn reframe_like(&mut self, reference: &Axis) {
+        for i in 0..self.len() {
+            let at = reference.vertex_at(self.arc_on(reference, self.arc[i]));
+            let t = self.tangent[i];
+            let n = reference.normal[at];
+            let n = (n - t * n.dot(t)).normalize_or(self.normal[i]);
+            self.normal[i] = n;
+            self.binormal[i] = t.cross(n);
+        }
     }
 
     pub fn len(&self) -> usize {

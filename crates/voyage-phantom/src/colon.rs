@@ -52,6 +52,7 @@ use super::{
     frame::Frame,
     label, label_counts,
     polyp::{PolypSpec, place},
+    posture::{dependent_angle, pair_collapsed, supine_knot},
     raster::{Materials, Scene},
     rng::{Rng, stream_key},
     skin::{self, Obstacles},
@@ -128,6 +129,11 @@ pub struct ColonOptions {
     /// Round the CT (after the noise) to multiples of this many HU, as a windowed 8-bit
     /// export leaves it.
     pub quantize_hu: Option<f64>,
+    /// One position of a supine–prone pair (`colon_pair`): supine, the transverse
+    /// colon and the sigmoid's anterior loop sag posteriorly by centimetres while folds and
+    /// polyps keep their places on the wall (the same place along the colon, the same side of
+    /// it in the patient's frame); in either position tagged stool lies on the dependent side.
+    pub pair_member: bool,
 }
 
 impl Default for ColonOptions {
@@ -149,6 +155,7 @@ impl Default for ColonOptions {
             lung_bases: true,
             noise_hu: 20.0,
             quantize_hu: None,
+            pair_member: false,
         }
     }
 }
@@ -279,19 +286,54 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
     if opts.table {
         body.table = Some(skin::make_table(&frame, &body, gravity));
     }
-    let axis = make_axis(&frame)?;
-    let segments = segments(&axis);
+    let axis = make_axis(&frame, false)?;
+    let mut segments = segments(&axis);
     check_anatomy(&frame, &axis, &body)?;
     let mut tube = Tube::new(axis, frame.thin(WALL, 1.0), Ends::Round);
-    let collapses = make_collapses(&frame, &segments, &opts.collapsed)?;
-    tube.collapse = collapses.iter().map(|(c, _)| c.clone()).collect();
-    tube.collapse
-        .extend(make_necks(&frame, &segments, &opts.narrowed)?);
+    let necks = make_necks(&frame, &segments, &opts.narrowed)?;
+    let (collapsed, placing) = if opts.pair_member {
+        // Folds and polyps keep clear of both positions' collapses, so they are the same in
+        // both.
+        (
+            pair_collapsed(&opts.collapsed, Some(opts.prone)),
+            pair_collapsed(&opts.collapsed, None),
+        )
+    } else {
+        (opts.collapsed.clone(), opts.collapsed.clone())
+    };
+    let collapses = make_collapses(&frame, &segments, &collapsed)?;
+    tube.collapse = make_collapses(&frame, &segments, &placing)?
+        .into_iter()
+        .map(|(c, _)| c)
+        .chain(necks.iter().cloned())
+        .collect();
     let folds = make_folds(&frame, &tube, &segments, opts.seed);
     tube.set_folds(folds);
-    let (mut blobs, polyps) = make_polyps(&frame, &mut tube, &segments, opts.seed)?;
-    let filled = make_filled(&frame, &tube, &segments, &opts.fluid_filled, opts.seed)?;
+    let mut polyp_specs = make_polyps(&frame, &mut tube, &segments, opts.seed)?;
+    tube.collapse = collapses.iter().map(|(c, _)| c.clone()).collect();
+    tube.collapse.extend(necks);
+    let mut filled = make_filled(&frame, &tube, &segments, &opts.fluid_filled, opts.seed)?;
     tube.filled = filled.iter().map(|(f, _)| f.clone()).collect();
+    let mut collapses = collapses;
+    if opts.pair_member && !opts.prone {
+        // Everything along the colon was placed on the prone shape; it keeps its place on
+        // the wall as the loops sag.
+        let mut moved = make_axis(&frame, true)?;
+        moved.reframe_like(&tube.axis);
+        check_anatomy(&frame, &moved, &body)?;
+        let at = |s: f64| tube.axis.arc_on(&moved, s);
+        polyp_specs.iter_mut().for_each(|p| p.arc = at(p.arc));
+        for (_, t) in &mut collapses {
+            (t.start_arc_mm, t.end_arc_mm) = (at(t.start_arc_mm), at(t.end_arc_mm));
+        }
+        for (_, t) in &mut filled {
+            (t.start_arc_mm, t.end_arc_mm) = (at(t.start_arc_mm), at(t.end_arc_mm));
+        }
+        tube = tube.moved_to(moved);
+        segments = self::segments(&tube.axis);
+    }
+    let (mut blobs, polyps): (Vec<Blob>, Vec<PolypTruth>) =
+        polyp_specs.iter().map(|sp| place(&tube, sp)).unzip();
     let catheter = if opts.rectal_tube {
         Some(make_catheter(&frame, &tube, &blobs, floor.unwrap_or(0.0))?)
     } else {
@@ -319,7 +361,8 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
         bowel.as_ref().map(|b| &b.valve),
     );
     let stool = if opts.tagged_stool {
-        make_stool(&frame, &tube, &segments, &polyps, opts.seed)?
+        let dependent = opts.pair_member.then_some(gravity);
+        make_stool(&frame, &tube, &segments, &polyps, dependent, opts.seed)?
     } else {
         Vec::new()
     };
@@ -594,11 +637,13 @@ fn make_body(frame: &Frame, lungs: bool, floor: Option<f64>) -> Body {
     }
 }
 
-fn make_axis(frame: &Frame) -> Result<Axis> {
+/// The colon's axis; `supine_pair`: as it lies supine in a supine–prone pair.
+fn make_axis(frame: &Frame, supine_pair: bool) -> Result<Axis> {
     let knots: Vec<Knot> = KNOTS
         .iter()
-        .map(|(p, r, _)| Knot {
-            pos: frame.pos(*p),
+        .enumerate()
+        .map(|(i, (p, r, _))| Knot {
+            pos: frame.pos(if supine_pair { supine_knot(i, *p) } else { *p }),
             radius: r * frame.scale,
         })
         .collect();
@@ -884,7 +929,7 @@ fn make_polyps(
     tube: &mut Tube,
     segments: &[SegmentTruth],
     seed: u64,
-) -> Result<(Vec<Blob>, Vec<PolypTruth>)> {
+) -> Result<Vec<PolypSpec>> {
     let s = frame.scale;
     let small = s < 1.0;
     let mut rng = Rng::new(seed, STREAM_POLYPS);
@@ -946,7 +991,7 @@ fn make_polyps(
     // Re-index folds after any deepening (the reach of a fold does not change).
     let folds = std::mem::take(&mut tube.folds);
     tube.set_folds(folds);
-    Ok(specs.iter().map(|sp| place(tube, sp)).unzip())
+    Ok(specs)
 }
 
 /// Segments that get tagged stool, two lumps each; the lumps' diameters (full size) and HU.
@@ -962,6 +1007,7 @@ fn make_stool(
     tube: &Tube,
     segments: &[SegmentTruth],
     polyps: &[PolypTruth],
+    dependent: Option<DVec3>,
     seed: u64,
 ) -> Result<Vec<(Blob, StoolTruth)>> {
     let s = frame.scale;
@@ -978,6 +1024,10 @@ fn make_stool(
                     seg.start_arc_mm + rng.range(0.1, 0.9) * (seg.end_arc_mm - seg.start_arc_mm);
                 let angle = rng.range(0.0, std::f64::consts::TAU);
                 let at = folds_around(tube, arc).map_or(arc, |(a, b)| 0.5 * (a + b));
+                // Stool sinks: within ±30° of the bottom of the lumen.
+                let angle = dependent.map_or(angle, |g| {
+                    dependent_angle(&tube.axis, at, g) + (angle / std::f64::consts::TAU - 0.5)
+                });
                 let d = fit_diameter(wanted, None, tube.axis.radius_at(at))
                     .max(2.0 * frame.max_spacing());
                 let clear = polyps.iter().all(|p| (p.arc_mm - at).abs() > 15.0 * s)
@@ -1360,7 +1410,7 @@ fn fat_roi(
 #[doc(hidden)]
 pub fn anatomy_report(small: bool) -> Result<String> {
     let frame = Frame::new(small)?;
-    let axis = make_axis(&frame)?;
+    let axis = make_axis(&frame, false)?;
     let wall = frame.thin(WALL, 1.0);
     let (bend, at) = axis.min_bend_ratio(wall);
     let (gap, i, j) = axis.min_part_gap(wall, 2);
@@ -1389,7 +1439,7 @@ pub fn anatomy_report(small: bool) -> Result<String> {
 #[doc(hidden)]
 pub fn free_space_map(z_from: f64, z_to: f64) -> Result<String> {
     let frame = Frame::new(false)?;
-    let axis = make_axis(&frame)?;
+    let axis = make_axis(&frame, false)?;
     let body = make_body(&frame, true, None);
     let wall = frame.thin(WALL, 1.0);
     let mut out = String::new();
@@ -1439,7 +1489,7 @@ pub fn free_space_map(z_from: f64, z_to: f64) -> Result<String> {
 #[doc(hidden)]
 pub fn loop_room_report(knots: &[[f64; 3]], r: f64) -> Result<String> {
     let frame = Frame::new(false)?;
-    let axis = make_axis(&frame)?;
+    let axis = make_axis(&frame, false)?;
     let body = make_body(&frame, true, None);
     let wall = frame.thin(WALL, 1.0);
     let ks: Vec<Knot> = knots
@@ -1515,6 +1565,15 @@ pub fn loop_room_report(knots: &[[f64; 3]], r: f64) -> Result<String> {
     Ok(out)
 }
 
+/// The colon's axis as it lies supine and as it lies prone in a pair (`pair_member`).
+pub(crate) fn pair_axes(small: bool) -> Result<(Axis, Axis)> {
+    let frame = Frame::new(small)?;
+    let prone = make_axis(&frame, false)?;
+    let mut supine = make_axis(&frame, true)?;
+    supine.reframe_like(&prone);
+    Ok((supine, prone))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1529,7 +1588,7 @@ mod tests {
         let mut body = make_body(&frame, true, floor);
         body.table = Some(skin::make_table(&frame, &body, gravity));
         let tube = Tube::new(
-            make_axis(&frame).expect("axis"),
+            make_axis(&frame, false).expect("axis"),
             frame.thin(WALL, 1.0),
             Ends::Round,
         );

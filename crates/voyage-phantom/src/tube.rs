@@ -230,6 +230,45 @@ impl Tube {
         self.fold_at.len()
     }
 
+    /// The same tube round `axis`, its knots moved: every place along it (fold, collapse,
+    /// filled stretch) stays where it was on the colon, at the same spline parameter, not at
+    /// the same arc length. Pools are left out: gravity makes them anew on the moved tube.
+    pub fn moved_to(&self, axis: Axis) -> Tube {
+        let at = |s: f64| self.axis.arc_on(&axis, s);
+        let collapse = self
+            .collapse
+            .iter()
+            .map(|c| Collapse {
+                start: at(c.start),
+                end: at(c.end),
+                ..c.clone()
+            })
+            .collect();
+        let filled = self
+            .filled
+            .iter()
+            .map(|f| Filled {
+                start: at(f.start),
+                end: at(f.end),
+                ..f.clone()
+            })
+            .collect();
+        let folds = self
+            .folds
+            .iter()
+            .map(|f| Fold {
+                arc: at(f.arc),
+                ..f.clone()
+            })
+            .collect();
+        let mut moved = Tube::new(axis, self.wall_mm, self.ends);
+        moved.end_margin = self.end_margin;
+        moved.collapse = collapse;
+        moved.filled = filled;
+        moved.set_folds(folds);
+        moved
+    }
+
     /// Sets the folds and indexes which segments each can reach (folds must not overlap).
     pub fn set_folds(&mut self, folds: Vec<Fold>) {
         self.fold_at.iter_mut().for_each(|f| *f = u32::MAX);

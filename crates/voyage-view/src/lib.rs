@@ -8,9 +8,11 @@
 //! ([`ReadingRun`]).
 //! Markers and measurements ([`Findings`]) are picked on the same surface ([`pick`]).
 
+mod both;
 mod closeup;
 mod coverage;
 mod findings;
+mod link;
 mod mesh;
 mod polyp;
 mod raster;
@@ -21,6 +23,10 @@ mod survey;
 mod translucency;
 mod visibility;
 
+pub use both::{
+    ARC_BIN_MM, BothCoverage, LinkedFinding, MOVED_ANGLE_DEG, MOVED_MM, MucosaMap, Read,
+    SAME_FINDING_ARC_MM, SAME_FINDING_MM, SECTORS, both_coverage, link_findings,
+};
 pub use closeup::{CloseupBox, MAX_HALF_SIZE_MM, TfPoint, TransferFunction, render_closeup};
 pub use coverage::{
     Coverage, CoverageOptions, GLANCE_EVERY_MM, GLANCE_MIN_MM2, GLANCE_TURN_DEG, GLANCE_WAYS,
@@ -31,6 +37,7 @@ pub use findings::{
     Adequacy, C0_BELOW_COVERAGE_PCT, CRads, FindingKind, Findings, Hit, Marker, Measurement,
     c_rads, pick,
 };
+pub use link::{Link, STEP_MM as LINK_STEP_MM, centerline_at};
 pub use mesh::{CHUNK_TRIANGLES, CellMesh, Chunk, DISPLAY_NORMAL_PASSES, smooth_normals};
 pub use polyp::{MIN_HEIGHT_MM, PolypSize, measure_polyp};
 pub use raster::{

@@ -374,11 +374,25 @@ const COURSE_END: f64 = 0.9;
 /// How far short of the course's end (fraction) a block may be and still be the cecum's.
 const CECUM_BAND: f64 = 0.03;
 
+/// A compartment left farther than this (mm, through its gas) short of its far end would
+/// leave the rest of it a dead end: a loop passing close by another compartment's middle,
+/// not where the colon goes on (see [`facing_ends`]).
+const EARLY_EXIT_MM: f64 = 100.0;
+
+/// How much a block's distance from its compartment's end adds to the cost of joining there
+/// (mm per mm), when the nearest join leaves early ([`EARLY_EXIT_MM`]).
+const OFF_END: f64 = 0.5;
+
 /// Where compartment `a` (entered at `a.entry`) and compartment `b` face each other: a block
 /// in the far half of `a` from its entry and a block of `b`, each the nearest to the other
-/// (two rounds from `b`'s centroid).
+/// (two rounds from `b`'s centroid). A collapsed stretch leaves two stumps that face each
+/// other end to end; where the nearest block of `a` instead lies far short of its far end
+/// (a sigmoid loop under a sagging transverse colon, [`EARLY_EXIT_MM`]), the blocks are
+/// chosen again, each the cheapest for the other, a pair costing its distance plus [`OFF_END`]
+/// times how far each block lies from its compartment's end (`a`'s end farthest from its
+/// entry, `b`'s nearer end).
 fn facing_ends(coarse: &Coarse, blocks: &[Vec<usize>], a: &Link, b: u32) -> Option<(usize, usize)> {
-    let (dist, (_, far)) = coarse.distances(a.comp, a.entry);
+    let (dist, (far_end, far)) = coarse.distances(a.comp, a.entry);
     let far_half: Vec<usize> = blocks[a.comp as usize]
         .iter()
         .copied()
@@ -393,7 +407,42 @@ fn facing_ends(coarse: &Coarse, blocks: &[Vec<usize>], a: &Link, b: u32) -> Opti
         exit = coarse.nearest(&far_half, coarse.centre_mm(entry))?;
         entry = coarse.nearest(of_b, coarse.centre_mm(exit))?;
     }
+    let off_b = off_ends(coarse, b, of_b)?;
+    let off_a = |x: usize| far - dist[x];
+    if off_a(exit) <= EARLY_EXIT_MM {
+        return Some((exit, entry));
+    }
+    let off_b = |x: usize| off_b[x];
+    let cheapest = |candidates: &[usize], off: &dyn Fn(usize) -> f64, to: usize| {
+        let to = coarse.centre_mm(to);
+        candidates.iter().copied().min_by(|&x, &y| {
+            let cost = |x: usize| coarse.centre_mm(x).distance(to) + OFF_END * off(x);
+            cost(x).total_cmp(&cost(y))
+        })
+    };
+    let mut exit = far_end;
+    let mut entry = cheapest(of_b, &off_b, exit)?;
+    for _ in 0..2 {
+        exit = cheapest(&far_half, &off_a, entry)?;
+        entry = cheapest(of_b, &off_b, exit)?;
+    }
     Some((exit, entry))
+}
+
+/// For each block of compartment `c` (`blocks`), the geodesic distance (mm) to the nearer
+/// of its two ends (a double sweep from its first block); None when it has no blocks.
+fn off_ends(coarse: &Coarse, c: u32, blocks: &[usize]) -> Option<Vec<f64>> {
+    let start = *blocks.first()?;
+    let (one, _) = coarse.farthest(c, start);
+    let (from_one, (other, _)) = coarse.distances(c, one);
+    let (from_other, _) = coarse.distances(c, other);
+    Some(
+        from_one
+            .iter()
+            .zip(&from_other)
+            .map(|(a, b)| a.min(*b))
+            .collect(),
+    )
 }
 
 /// A minor compartment is on the way between two neighbours when passing by it is at most

@@ -95,10 +95,21 @@ pub struct PhantomArgs {
     /// Noise standard deviation in HU.
     #[arg(long, default_value_t = 20.0)]
     pub noise: f64,
+    /// Colon only: the same colon supine and prone, as an exam scans it twice: the transverse
+    /// colon and sigmoid lie further posterior supine, the fluid moves to the other side, the
+    /// descending colon is collapsed supine and the sigmoid prone, stool lies on the dependent
+    /// side, polyps stay. Every output name gets -supine and -prone (NAME-supine.nii.gz ...);
+    /// --truth's own name holds the link's truth (each supine arc with the prone arc of the
+    /// same place); --dicom writes both series into the one folder (HFS and HFP).
+    #[arg(long, conflicts_with = "prone")]
+    pub pair: bool,
 }
 
 pub fn run(a: &PhantomArgs) -> Result<()> {
     writable_format(&a.out)?;
+    if a.pair {
+        return run_pair(a);
+    }
     let t = Instant::now();
     let p = make(a)?;
     eprintln!(
@@ -115,27 +126,92 @@ pub fn run(a: &PhantomArgs) -> Result<()> {
     )
 }
 
+/// `--pair`: both positions, their truths and the link's.
+fn run_pair(a: &PhantomArgs) -> Result<()> {
+    if !matches!(a.kind, Kind::Colon) {
+        anyhow::bail!("--pair makes the colon phantom only");
+    }
+    let t = Instant::now();
+    let pair = phantom::pair::colon_pair(&colon_options(a))?;
+    eprintln!(
+        "made the colon phantom supine and prone in {:.2} s",
+        t.elapsed().as_secs_f64()
+    );
+    for (p, name, number) in [(&pair.supine, "supine", 1), (&pair.prone, "prone", 2)] {
+        let truth = a.truth.as_deref().map(|t| with_suffix(t, name));
+        let mask = a.mask.as_deref().map(|m| with_suffix(m, name));
+        write_outputs(
+            p,
+            &with_suffix(&a.out, name),
+            truth.as_deref(),
+            mask.as_deref(),
+            None,
+        )?;
+        if let Some(dir) = &a.dicom {
+            let opts = io::dicom_write::SeriesWriteOptions {
+                patient_position: Some(p.truth.position.clone()),
+                series_description: format!("voyage phantom {name}"),
+                series_number: number,
+                uid_seed: a.seed,
+                file_prefix: name.into(),
+                ..Default::default()
+            };
+            io::dicom_write::write_series_with(dir, &p.ct, &opts)?;
+            eprintln!(
+                "wrote {} DICOM slices ({name}) to {}",
+                p.ct.dims()[2],
+                dir.display()
+            );
+        }
+    }
+    if let Some(path) = &a.truth {
+        write_atomic(path, |w| {
+            w.write_all((pair.truth.to_json() + "\n").as_bytes())
+        })?;
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+/// `dir/name.nii.gz` → `dir/name-supine.nii.gz` (every extension kept).
+fn with_suffix(path: &Path, suffix: &str) -> PathBuf {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let (stem, ext) = match name.find('.') {
+        Some(i) if i > 0 => name.split_at(i),
+        _ => (name.as_str(), ""),
+    };
+    path.with_file_name(format!("{stem}-{suffix}{ext}"))
+}
+
+fn colon_options(a: &PhantomArgs) -> ColonOptions {
+    ColonOptions {
+        seed: a.seed,
+        small: a.small,
+        tagged_fluid: a.tagged_fluid,
+        prone: a.prone,
+        collapsed: a.collapsed.clone(),
+        fluid_filled: a.fluid_filled.clone(),
+        narrowed: a.narrowed.clone(),
+        opacified_small_bowel: a.opacified_small_bowel,
+        rectal_tube: a.rectal_tube,
+        tagged_stool: a.tagged_stool,
+        table: a.table,
+        skin_folds: a.skin_folds,
+        small_bowel_gas: !a.no_small_bowel_gas,
+        lung_bases: !a.no_lungs,
+        noise_hu: a.noise,
+        quantize_hu: a.quantize,
+        pair_member: false,
+    }
+}
+
 fn make(a: &PhantomArgs) -> Result<Phantom> {
     Ok(match a.kind {
         Kind::Pipe => phantom::pipe(a.seed)?,
-        Kind::Colon => phantom::colon(&ColonOptions {
-            seed: a.seed,
-            small: a.small,
-            tagged_fluid: a.tagged_fluid,
-            prone: a.prone,
-            collapsed: a.collapsed.clone(),
-            fluid_filled: a.fluid_filled.clone(),
-            narrowed: a.narrowed.clone(),
-            opacified_small_bowel: a.opacified_small_bowel,
-            rectal_tube: a.rectal_tube,
-            tagged_stool: a.tagged_stool,
-            table: a.table,
-            skin_folds: a.skin_folds,
-            small_bowel_gas: !a.no_small_bowel_gas,
-            lung_bases: !a.no_lungs,
-            noise_hu: a.noise,
-            quantize_hu: a.quantize,
-        })?,
+        Kind::Colon => phantom::colon(&colon_options(a))?,
     })
 }
 
