@@ -106,6 +106,18 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Loaded> {
     Ok(loaded)
 }
 
+/// The positions an exam at `path` was scanned in, each with its series (see
+/// [`dicom::positions_in`]); empty for a file, or a folder whose series do not say how the
+/// patient lay.
+pub fn positions_in(path: &Path) -> Result<Vec<(voyage_core::PatientPosition, String)>> {
+    let md = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+    if md.is_dir() {
+        dicom::positions_in(path)
+    } else {
+        Ok(Vec::new())
+    }
+}
+
 /// Most of a volume at the limits of 16-bit values after its rescale is no CT: a slope or
 /// intercept out of all proportion (`scl_slope` 1e30 made every voxel 32767, and all of it
 /// "lumen"). Padding outside a scan's round field of view is about a fifth of a slice.

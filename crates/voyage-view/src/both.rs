@@ -158,8 +158,8 @@ pub const ARC_BIN_MM: f64 = 5.0;
 pub const SECTORS: usize = 12;
 
 /// Where each triangle of a position's surface lies on the common map: its arc and sector
-/// (None for a triangle no centerline serves).
-#[derive(Clone, Debug)]
+/// (None for a triangle no centerline serves). The default maps nothing.
+#[derive(Clone, Debug, Default)]
 pub struct MucosaMap {
     place: Vec<Option<(f64, usize)>>,
 }

@@ -173,6 +173,8 @@ pub struct Prepared {
     pub study: Study,
     /// What the report says of the exam.
     pub exam: Exam,
+    /// The DICOM series loaded, when the file says.
+    pub series_uid: Option<String>,
     pub load_ms: f64,
 }
 
@@ -224,12 +226,61 @@ pub fn open_study(
         &a.points,
         loaded.volume.geometry(),
     );
+    let series_uid = loaded.meta.series_uid.clone();
     let study = prepare_volume(loaded.volume, loaded.meta, &choices, &name, progress)?;
     Ok(Prepared {
         study,
         exam,
+        series_uid,
         load_ms,
     })
+}
+
+/// The series to open for each position the exam at `a.input` was scanned in: one entry
+/// per position when a DICOM folder holds series of different patient positions (supine and
+/// prone ...) and `--series` names none; else one, None (the input as the user gave it).
+pub fn exam_positions(a: &InputArgs) -> Result<Vec<Option<String>>> {
+    if a.series.is_some() {
+        return Ok(vec![a.series.clone()]);
+    }
+    let positions = io::positions_in(&a.input)?;
+    Ok(if positions.len() >= 2 {
+        positions.into_iter().map(|(_, uid)| Some(uid)).collect()
+    } else {
+        vec![None]
+    })
+}
+
+/// Opens every position of the exam (see [`exam_positions`]), one after another (each
+/// peaks at the memory of one): `progress` hears which position (from 0, of how many) and
+/// how far it has got.
+pub fn open_exam(
+    a: &InputArgs,
+    nav_min_wall_mm: Option<f64>,
+    mut progress: impl FnMut(usize, usize, Opening),
+) -> Result<Vec<Prepared>> {
+    let series = exam_positions(a)?;
+    let n = series.len();
+    series
+        .into_iter()
+        .enumerate()
+        .map(|(i, uid)| {
+            let one = InputArgs {
+                series: uid,
+                ..a.clone()
+            };
+            let mut p = open_study(&one, nav_min_wall_mm, |o| progress(i, n, o))?;
+            if n > 1 {
+                p.exam.name = format!("{} ({})", p.exam.name, position_of(&p.study));
+            }
+            Ok(p)
+        })
+        .collect()
+}
+
+/// How the patient lay for `study`: "supine", "prone" ...
+pub fn position_of(study: &Study) -> &'static str {
+    study.segmentation.orientation.position.describe()
 }
 
 /// What the user chose for a volume already in memory.

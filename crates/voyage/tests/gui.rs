@@ -1286,3 +1286,97 @@ fn every_slice_shows_its_orientation_letters_and_a_prone_exam_is_named() {
     assert!(shot.is_file());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The truth's centerline point of arc `s`, and the arc of the truth's centerline point
+/// nearest `p`.
+fn truth_point(t: &Value, s: f64) -> DVec3 {
+    let arcs: Vec<f64> = serde_json::from_value(t["centerline_arc_mm"].clone()).unwrap();
+    let pts: Vec<[f64; 3]> = serde_json::from_value(t["centerline_mm"].clone()).unwrap();
+    DVec3::from_array(pts[arcs.partition_point(|&a| a < s).min(pts.len() - 1)])
+}
+
+fn truth_arc(t: &Value, p: DVec3) -> f64 {
+    let arcs: Vec<f64> = serde_json::from_value(t["centerline_arc_mm"].clone()).unwrap();
+    let pts: Vec<[f64; 3]> = serde_json::from_value(t["centerline_mm"].clone()).unwrap();
+    let i = (0..pts.len())
+        .min_by(|&a, &b| {
+            DVec3::from_array(pts[a])
+                .distance(p)
+                .total_cmp(&DVec3::from_array(pts[b]).distance(p))
+        })
+        .unwrap();
+    arcs[i]
+}
+
+/// Issue 39: a folder holding the exam supine and prone opens both; the other position's
+/// scout marks where the camera's place lies in it, O switches there, and a marker is
+/// looked up in the other position where the truth puts it.
+#[test]
+fn both_positions_open_linked_and_a_marker_is_shown_in_the_other() {
+    let Some(display) = Display::start() else {
+        return;
+    };
+    let dir = scratch("pair");
+    let exam = dir.join("exam");
+    let out = |n: &str| dir.join(n).to_str().unwrap().to_string();
+    cli_json(&[
+        "phantom",
+        "colon",
+        "--pair",
+        "--small",
+        "--tagged-fluid",
+        "--out",
+        &out("p.nii.gz"),
+        "--truth",
+        &out("p.json"),
+        "--dicom",
+        exam.to_str().unwrap(),
+    ]);
+    let (supine, prone, link) = (
+        read_json(&dir.join("p-supine.json")),
+        read_json(&dir.join("p-prone.json")),
+        read_json(&dir.join("p.json")),
+    );
+    let shot = dir.join("prone.png");
+    let steps = serde_json::json!([
+        {"jump": 0.62}, {"wait": 5}, {"record": "supine"},
+        {"marker": {"at": [0.5, 0.5], "note": "look it up"}},
+        {"switch_position": true}, {"wait": 5}, {"record": "prone"},
+        {"switch_position": true}, {"wait": 5},
+        {"show_in_other": "M1"}, {"wait": 10}, {"screenshot": shot.to_str().unwrap()},
+        {"quit": true}
+    ]);
+    let r = view_script(&display, &exam, &["--paused"], steps, &dir, "script");
+    let prone_arc = |s: f64| -> f64 {
+        let a: Vec<f64> = serde_json::from_value(link["supine_arc_mm"].clone()).unwrap();
+        let b: Vec<f64> = serde_json::from_value(link["prone_arc_mm"].clone()).unwrap();
+        b[a.partition_point(|&x| x < s).min(b.len() - 1)]
+    };
+    // Switching stands the camera where the truth puts the supine camera's place.
+    let (at_supine, _) = pose(&r["recorded"]["supine"]);
+    let (at_prone, _) = pose(&r["recorded"]["prone"]);
+    let want = truth_point(&prone, prone_arc(truth_arc(&supine, at_supine)));
+    let off = at_prone.distance(want);
+    eprintln!("switched: {off:.1} mm from the truth's place");
+    assert!(off <= 12.0, "switched {off:.1} mm from the place");
+    // The marker looked up in prone lies by the truth's place of the supine marker.
+    assert_eq!(r["positions"]["shown"], "prone", "{r}");
+    assert_eq!(r["positions"]["other"], "supine");
+    let m = DVec3::from_array(
+        serde_json::from_value(r["positions"]["other_markers"][0]["position_mm"].clone()).unwrap(),
+    );
+    let (label, there): (String, [f64; 3]) =
+        serde_json::from_value(r["positions"]["looked_up"].clone()).unwrap();
+    assert_eq!(label, "M1 (supine)");
+    let there = DVec3::from_array(there);
+    let want = truth_point(&prone, prone_arc(truth_arc(&supine, m)));
+    let radius = 16.0; // the small colon's widest lumen, with the wall
+    assert!(
+        there.distance(want) <= radius,
+        "M1 looked up {:.1} mm from the truth's centerline point there",
+        there.distance(want)
+    );
+    let img = image::open(&shot).unwrap().to_rgba8();
+    assert!(img.width() > 0);
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -49,12 +49,14 @@ use std::path::Path;
 
 use rayon::prelude::*;
 
-use self::header::{Probe, gzipped_files, list_files, no_images_error, probe_file, skipped_notes};
+use self::header::{
+    Header, Probe, gzipped_files, list_files, no_images_error, probe_file, skipped_notes,
+};
 use self::pixels::load_series;
-use self::series::choose_series;
+use self::series::{choose_series, rank, summary};
 pub use self::stack::OUTSIDE_HU;
-use super::{LoadOptions, Loaded};
-use voyage_core::{Error, Result};
+use super::{LoadOptions, Loaded, SeriesSummary};
+use voyage_core::{Error, PatientPosition, Result};
 
 mod header;
 mod lenient;
@@ -126,6 +128,54 @@ pub fn load_dir(path: &Path, opts: &LoadOptions) -> Result<Loaded> {
     notes.append(&mut loaded.meta.notes);
     loaded.meta.notes = notes;
     Ok(loaded)
+}
+
+/// The series of an exam scanned in several positions (supine and prone ...): for each
+/// patient position the CT series hold, by the way gravity pulls (head or feet first alike),
+/// the one a folder of that position alone would load (CT first, the most slices, ties by
+/// UID), as (position, SeriesInstanceUID): supine first, then prone, then the decubitus
+/// ones. Series that do not say their position are not among them. Only headers are read.
+pub fn positions_in(path: &Path) -> Result<Vec<(PatientPosition, String)>> {
+    let files = list_files(path)?;
+    let headers: Vec<Result<Probe>> = files.par_iter().map(|f| probe_file(f)).collect();
+    let mut by_series: Vec<(String, Vec<Header>)> = Vec::new();
+    for probe in headers {
+        if let Probe::Image(h) = probe? {
+            match by_series.iter_mut().find(|(uid, _)| *uid == h.series_uid) {
+                Some((_, hs)) => hs.push(*h),
+                None => by_series.push((h.series_uid.clone(), vec![*h])),
+            }
+        }
+    }
+    let mut best: Vec<(PatientPosition, SeriesSummary)> = Vec::new();
+    for (uid, hs) in &by_series {
+        let Some(position) = hs
+            .iter()
+            .find_map(|h| h.position.as_deref().and_then(PatientPosition::parse))
+        else {
+            continue;
+        };
+        let s = summary(uid, hs);
+        let same_way = |p: &PatientPosition| p.gravity_lps() == position.gravity_lps();
+        match best.iter_mut().find(|(p, _)| same_way(p)) {
+            Some(b)
+                if (rank(&s), std::cmp::Reverse(&s.uid))
+                    > (rank(&b.1), std::cmp::Reverse(&b.1.uid)) =>
+            {
+                *b = (position, s)
+            }
+            Some(_) => {}
+            None => best.push((position, s)),
+        }
+    }
+    let order = |p: &PatientPosition| match p.gravity_lps().to_array() {
+        [_, y, _] if y > 0.5 => 0,
+        [_, y, _] if y < -0.5 => 1,
+        [x, _, _] if x < 0.0 => 2,
+        _ => 3,
+    };
+    best.sort_by_key(|(p, _)| order(p));
+    Ok(best.into_iter().map(|(p, s)| (p, s.uid)).collect())
 }
 
 /// Loads one DICOM file: a multi-frame image becomes a volume of its frames, a single slice a

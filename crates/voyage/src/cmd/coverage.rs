@@ -1,5 +1,6 @@
 //! `voyage coverage INPUT`: how much of the mucosa the automatic reading shows: one way,
-//! both ways, then after a review of every unseen patch.
+//! both ways, then after a review of every unseen patch. An exam scanned supine and prone
+//! is read in both positions, and coverage over both counts mucosa seen in either.
 
 use std::io::IsTerminal;
 
@@ -7,13 +8,15 @@ use anyhow::{Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::{Value, json};
+use voyage_core::Study;
 use voyage_nav::{Camera, FlightOptions};
 use voyage_view::{
-    CellMesh, CoverageOptions, READING_FOV_DEG, ReadingProgress, Visit, read_both_ways,
+    BothCoverage, CellMesh, Coverage, CoverageOptions, Link, MucosaMap, READING_FOV_DEG, Reading,
+    ReadingProgress, Visit, both_coverage, read_both_ways,
 };
 
-use super::prep::load_and_prepare;
-use crate::open::{InputArgs, Prepared};
+use super::prep::load_and_prepare_exam;
+use crate::open::{InputArgs, Prepared, position_of};
 
 #[derive(Args, Debug)]
 pub struct CoverageArgs {
@@ -94,15 +97,91 @@ impl CoverageArgs {
 
 pub fn run(a: &CoverageArgs) -> Result<()> {
     let options = a.options()?;
-    let name = a.input.input.display().to_string();
     let min_wall = FlightOptions::default().safety.min_wall_mm;
-    let Prepared { study, .. } = load_and_prepare(&a.input, Some(min_wall))?;
-    let geometry = study.ct.geometry();
+    let positions = load_and_prepare_exam(&a.input, Some(min_wall))?;
+    let read: Vec<Read> = positions
+        .iter()
+        .map(|p| read_position(a, options, p, positions.len() > 1))
+        .collect::<Result<_>>()?;
+    let link = (read.len() >= 2).then(|| Link::between(&positions[0].study, &positions[1].study));
+    let both = link.as_ref().map(|link| {
+        let of = |pick: fn(&Reading) -> &Coverage| {
+            both_coverage(link, &read[0].seen(pick), &read[1].seen(pick))
+        };
+        [
+            of(|r| &r.one_way),
+            of(|r| &r.two_way),
+            of(|r| &r.after_review),
+        ]
+    });
+    if a.json {
+        let mut out: Vec<Value> = read.iter().map(|r| position_json(r, options, a)).collect();
+        let out = match (&link, both) {
+            (Some(link), Some([one_way, two_way, after_review])) => json!({
+                "positions": out,
+                "link": link_json(link, &read),
+                "both_positions": {
+                    "one_way": one_way,
+                    "two_way": two_way,
+                    "after_review": after_review,
+                },
+            }),
+            _ => out.remove(0),
+        };
+        println!("{}", serde_json::to_string_pretty(&out)?);
+    } else {
+        for r in &read {
+            if read.len() > 1 {
+                println!("{}:", r.position);
+            }
+            print_position(r, options);
+        }
+        if let (Some(link), Some([one_way, two_way, after_review])) = (&link, both) {
+            print_both(link, &read, [one_way, two_way, after_review]);
+        }
+    }
+    Ok(())
+}
+
+/// One position read both ways and reviewed.
+struct Read<'a> {
+    /// "supine", "prone" ...
+    position: &'static str,
+    study: &'a Study,
+    mesh: CellMesh,
+    map: MucosaMap,
+    reading: Reading,
+}
+
+impl Read<'_> {
+    /// This position as the coverage over both sees it, at the reading's stage `pick`.
+    fn seen(&self, pick: fn(&Reading) -> &Coverage) -> voyage_view::Read<'_> {
+        voyage_view::Read {
+            study: self.study,
+            map: &self.map,
+            seen: pick(&self.reading),
+        }
+    }
+}
+
+fn read_position<'a>(
+    a: &CoverageArgs,
+    options: CoverageOptions,
+    p: &'a Prepared,
+    several: bool,
+) -> Result<Read<'a>> {
+    let study = &p.study;
+    let position = position_of(study);
+    let name = if several {
+        format!("{} ({position})", a.input.input.display())
+    } else {
+        a.input.input.display().to_string()
+    };
     let mut mesh = CellMesh::new(&study.surface, &study.cells);
     mesh.index_cells();
     let camera = Camera::lens(a.fov);
     let bar = reading_bar();
-    let reading = read_both_ways(&study, &mesh, options, camera, a.size, |p| {
+    let reading = read_both_ways(study, &mesh, options, camera, a.size, |p| {
         show_reading(&bar, p)
     })
     .with_context(|| format!("{name}: the two-way reading"))?;
@@ -124,63 +203,119 @@ pub fn run(a: &CoverageArgs) -> Result<()> {
             "warning: {name}: {without_pose} unseen patch(es) have no viewpoint in the lumen that sees them"
         );
     }
-    let left = reading.after_review.patches(&mesh).len();
+    let map = if several {
+        MucosaMap::of(study, &mesh)
+    } else {
+        MucosaMap::default()
+    };
+    Ok(Read {
+        position,
+        study,
+        mesh,
+        map,
+        reading,
+    })
+}
+
+fn position_json(r: &Read, options: CoverageOptions, a: &CoverageArgs) -> Value {
+    let (study, reading) = (r.study, &r.reading);
+    let geometry = study.ct.geometry();
+    let patch_json = |v: &Visit| {
+        json!({
+            "area_mm2": v.patch.area_mm2,
+            "across_mm": v.patch.across_mm,
+            "center_lps_mm": geometry.local_to_patient(v.patch.center_mm).to_array(),
+            "arc_mm": v.patch.arc_mm(study),
+            "pose": v.pose.map(|p| {
+                let mut a = p.to_array();
+                a[..3].copy_from_slice(&geometry.local_to_patient(p.position).to_array());
+                a
+            }),
+        })
+    };
     let [one_way, two_way, after_review] =
         [&reading.one_way, &reading.two_way, &reading.after_review].map(|c| c.percent());
-    if a.json {
-        let patch_json = |v: &Visit| {
-            json!({
-                "area_mm2": v.patch.area_mm2,
-                "across_mm": v.patch.across_mm,
-                "center_lps_mm": geometry.local_to_patient(v.patch.center_mm).to_array(),
-                "arc_mm": v.patch.arc_mm(&study),
-                "pose": v.pose.map(|p| {
-                    let mut a = p.to_array();
-                    a[..3].copy_from_slice(&geometry.local_to_patient(p.position).to_array());
-                    a
-                }),
-            })
-        };
-        let out = json!({
-            "one_way_pct": one_way,
-            "two_way_pct": two_way,
-            "after_review_pct": after_review,
-            "surface_mm2": reading.after_review.total_mm2(),
-            "flights_reached": {
-                "forward": reading.flights[0].reached,
-                "backward": reading.flights[1].reached,
-            },
-            "options": options,
-            "frame_px": a.size,
-            "fov_deg": a.fov,
-            "unseen_patches": reading.patches.iter().map(patch_json).collect::<Vec<Value>>(),
-            "glances": reading.glances,
-            "review_visits": reading.visits,
-            "patches_left_after_review": left,
-        });
-        println!("{}", serde_json::to_string_pretty(&out)?);
-    } else {
-        println!(
-            "coverage of the mucosa ({:.0} mm², seen within {:.0} mm and {:.0}°):",
-            reading.after_review.total_mm2(),
-            options.reading_distance_mm,
-            options.max_angle_deg
-        );
-        println!("  one way (rectum → cecum)   {one_way:5.1} %");
-        println!("  both ways                  {two_way:5.1} %");
-        println!(
-            "  after the review           {after_review:5.1} %  ({} patches ≥ {:.0} mm² visited, {} visits, {} left)",
-            reading.patches.len(),
-            options.min_patch_mm2,
-            reading.visits,
-            left
-        );
-        if options.look_around {
-            let [forward, backward] = reading.glances;
-            println!("  glances around             {forward} forward, {backward} backward");
-        }
+    json!({
+        "position": r.position,
+        "one_way_pct": one_way,
+        "two_way_pct": two_way,
+        "after_review_pct": after_review,
+        "surface_mm2": reading.after_review.total_mm2(),
+        "flights_reached": {
+            "forward": reading.flights[0].reached,
+            "backward": reading.flights[1].reached,
+        },
+        "options": options,
+        "frame_px": a.size,
+        "fov_deg": a.fov,
+        "unseen_patches": reading.patches.iter().map(patch_json).collect::<Vec<Value>>(),
+        "glances": reading.glances,
+        "review_visits": reading.visits,
+        "patches_left_after_review": reading.after_review.patches(&r.mesh).len(),
+    })
+}
+
+fn print_position(r: &Read, options: CoverageOptions) {
+    let reading = &r.reading;
+    let left = reading.after_review.patches(&r.mesh).len();
+    let [one_way, two_way, after_review] =
+        [&reading.one_way, &reading.two_way, &reading.after_review].map(|c| c.percent());
+    println!(
+        "coverage of the mucosa ({:.0} mm², seen within {:.0} mm and {:.0}°):",
+        reading.after_review.total_mm2(),
+        options.reading_distance_mm,
+        options.max_angle_deg
+    );
+    println!("  one way (rectum → cecum)   {one_way:5.1} %");
+    println!("  both ways                  {two_way:5.1} %");
+    println!(
+        "  after the review           {after_review:5.1} %  ({} patches ≥ {:.0} mm² visited, {} visits, {} left)",
+        reading.patches.len(),
+        options.min_patch_mm2,
+        reading.visits,
+        left
+    );
+    if options.look_around {
+        let [forward, backward] = reading.glances;
+        println!("  glances around             {forward} forward, {backward} backward");
     }
-    Ok(())
+}
+
+/// What the link says of the two positions: their lengths, whether the flexures anchored
+/// it, how far the colon moved.
+fn link_json(link: &Link, read: &[Read]) -> Value {
+    json!({
+        "positions": [read[0].position, read[1].position],
+        "centerline_mm": [read[0].study.centerline.length_mm, read[1].study.centerline.length_mm],
+        "anchored_at_flexures": link.anchored,
+        "mean_moved_mm": link.mean_moved_mm,
+    })
+}
+
+fn print_both(link: &Link, read: &[Read], [one_way, two_way, after]: [BothCoverage; 3]) {
+    let (a, b) = (read[0].position, read[1].position);
+    println!(
+        "{a} and {b} linked along the colon ({:.0} and {:.0} mm; {}; the colon moved {:.0} mm on average between them)",
+        read[0].study.centerline.length_mm,
+        read[1].study.centerline.length_mm,
+        if link.anchored {
+            "anchored at the ends and flexures"
+        } else {
+            "anchored at the ends only: the flexures did not agree"
+        },
+        link.mean_moved_mm
+    );
+    println!("coverage over both positions (mucosa unseen in one, seen in the other, counts):");
+    for (what, c) in [
+        ("one way", one_way),
+        ("both ways", two_way),
+        ("after the reviews", after),
+    ] {
+        println!(
+            "  {what:<18} {a} {:5.1} % → {:5.1} %, {b} {:5.1} % → {:5.1} %, together {:5.1} %",
+            c.a_pct, c.a_with_b_pct, c.b_pct, c.b_with_a_pct, c.combined_pct
+        );
+    }
 }
 
 /// A bar for the two-way reading on a terminal (None elsewhere), for [`show_reading`].

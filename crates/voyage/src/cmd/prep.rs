@@ -10,7 +10,7 @@ use serde_json::json;
 use voyage_core::{ComponentKind, Geometry, Stage, Study};
 use voyage_export::study::{StudyExports, check_out_dir, write_study};
 
-use crate::open::{InputArgs, Prepared, open_study};
+use crate::open::{InputArgs, Prepared, open_exam, open_study, position_of};
 
 #[derive(Args, Debug)]
 pub struct PrepArgs {
@@ -45,6 +45,36 @@ pub fn load_and_prepare(a: &InputArgs, nav_min_wall_mm: Option<f64>) -> Result<P
         eprintln!("warning: {}: {w}", a.input.display());
     }
     Ok(prepared)
+}
+
+/// [`load_and_prepare`] for every position of the exam (see [`crate::open::open_exam`]).
+pub fn load_and_prepare_exam(a: &InputArgs, nav_min_wall_mm: Option<f64>) -> Result<Vec<Prepared>> {
+    let bar = progress_bar();
+    let positions = open_exam(a, nav_min_wall_mm, |i, n, o| {
+        if let Some(b) = &bar {
+            let of = if n > 1 {
+                format!("position {} of {n}: ", i + 1)
+            } else {
+                String::new()
+            };
+            b.set_message(format!("{of}{}", o.what));
+            b.set_position(o.step as u64);
+        }
+    });
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let positions = positions?;
+    for p in &positions {
+        let name = match positions.len() {
+            1 => a.input.display().to_string(),
+            _ => format!("{} ({})", a.input.display(), position_of(&p.study)),
+        };
+        for w in &p.study.segmentation.warnings {
+            eprintln!("warning: {name}: {w}");
+        }
+    }
+    Ok(positions)
 }
 
 pub fn run(a: &PrepArgs) -> Result<()> {

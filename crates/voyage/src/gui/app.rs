@@ -29,7 +29,8 @@ use super::{
     frame_times::FrameTimes,
     loader::{Job, Source},
     pixels::WindowGpu,
-    report::{MarkerReport, Report},
+    positions::{Other, switch},
+    report::{MarkerReport, PositionsReport, Report},
     scout::{ScoutClick, ScoutMarks, ScoutView},
     script::{Script, Step},
     session::Session,
@@ -81,6 +82,8 @@ const PANEL_BACKGROUND: Color32 = Color32::from_gray(27);
 /// The panels' images among the window's [`voyage_render::PixelImages`].
 const SLICE_IMAGES: [u64; 3] = [0, 1, 2];
 const SCOUT_IMAGE: u64 = 3;
+/// The other position's scout.
+const OTHER_SCOUT_IMAGE: u64 = 4;
 /// How long (simulated s) the window shows that the autopilot glided on after being stuck.
 const RESCUE_NOTICE_S: f64 = 8.0;
 
@@ -111,6 +114,8 @@ enum Action {
     TwoWayReading,
     /// Fly to the largest unseen patch and outline it.
     NextUnseenPatch,
+    /// Show the exam's other position at the same place (issue 39).
+    SwitchPosition,
 }
 
 /// The window's on/off settings.
@@ -162,6 +167,11 @@ const KEYMAP: &[Binding] = &[
         keys: "right button (drag)",
         what: "look around",
         bound: &[],
+    },
+    Binding {
+        keys: "O",
+        what: "the exam's other position (supine / prone), at the same place",
+        bound: &[(NONE, Key::O, Action::SwitchPosition)],
     },
     Binding {
         keys: "M",
@@ -259,6 +269,12 @@ pub struct App {
     args: WindowArgs,
     job: Option<Job>,
     session: Option<Session>,
+    /// The exam's other position (supine and prone), waiting beside the one shown, and its
+    /// scout (which shows where the camera's place lies in it).
+    other: Option<Other>,
+    other_scout: Option<ScoutView>,
+    /// A marker of the other position looked up in the one shown: its label and place.
+    looked_up: Option<(String, DVec3)>,
     /// What the open session was made from (its points are the corrections so far).
     source: Option<Source>,
     /// The job running is a correction of the open session, which stays in use meanwhile.
@@ -306,6 +322,22 @@ pub struct App {
     quitting: bool,
 }
 
+/// The other position's scout, its linked place marked (clicks there do nothing: the
+/// position is not shown).
+fn other_scout(ui: &mut egui::Ui, o: &Other, view: &mut ScoutView) {
+    let s = &o.session;
+    let here = o.linked.unwrap_or_else(|| s.pose().position);
+    let marks = ScoutMarks {
+        centerline: &s.study.centerline.points_mm,
+        arc_mm: &s.study.centerline.arc_mm,
+        markers: vec![("here".to_string(), here)],
+        submarine: here,
+        view_dir: s.pose().z_body(),
+        unseen: None,
+    };
+    let _ = view.show(ui, &s.scout, &marks);
+}
+
 impl App {
     pub fn new(
         cc: &eframe::CreationContext<'_>,
@@ -342,6 +374,9 @@ impl App {
             correcting: None,
             correction_error: None,
             generation: 0,
+            other: None,
+            other_scout: None,
+            looked_up: None,
             error: None,
             open_path: String::new(),
             endoscope,
@@ -399,6 +434,11 @@ impl App {
         self.status = format!("preprocessing again: {}", c.describe());
         self.correction_error = None;
         self.correcting = Some(c);
+        // With two positions open, the correction is of the one shown.
+        let source = match self.other.is_some() {
+            true => source.with_series(s.series_uid.clone()),
+            false => source.clone(),
+        };
         self.job = Some(Job::start(source.with_points(points), ctx.clone()));
     }
 
@@ -409,11 +449,23 @@ impl App {
         let source = job.source.clone();
         self.job = None;
         if let Some(c) = self.correcting.take() {
-            self.corrected(c, source, result, seconds);
+            let one = result.and_then(|v| {
+                v.into_iter()
+                    .next()
+                    .ok_or_else(|| anyhow::anyhow!("nothing was opened"))
+            });
+            self.corrected(c, source, one, seconds);
             return;
         }
+        let result = result.and_then(|v| {
+            let mut v = v.into_iter();
+            let first = v
+                .next()
+                .ok_or_else(|| anyhow::anyhow!("nothing was opened"))?;
+            Ok((first, v.next()))
+        });
         match result {
-            Ok(mut s) => {
+            Ok((mut s, second)) => {
                 s.set_playing(!self.args.paused);
                 self.status = format!(
                     "{} ready in {:.1} s: centerline {:.0} mm, {} triangles in {} cells",
@@ -439,6 +491,21 @@ impl App {
                 self.translucency = None;
                 self.closeup_at = None;
                 self.measure_from = None;
+                self.other = second.map(|o| Other::new(&s, o, Findings::default()));
+                self.other_scout = self.other.as_ref().map(|o| {
+                    ScoutView::new(
+                        o.session.study.ct.geometry(),
+                        PANEL_BACKGROUND,
+                        OTHER_SCOUT_IMAGE,
+                        self.pixels_gpu,
+                    )
+                });
+                if let Some(o) = &self.other {
+                    self.status += &format!(
+                        "; {} open beside it (O switches to the same place there)",
+                        o.name()
+                    );
+                }
                 self.session = Some(s);
                 self.source = Some(source);
                 self.correction_error = None;
@@ -493,6 +560,9 @@ impl App {
                 self.slices.follow();
                 if let Some(v) = &mut self.scout {
                     v.colon_changed();
+                }
+                if let Some(o) = self.other.take() {
+                    self.other = Some(Other::new(&s, o.session, o.findings));
                 }
                 self.session = Some(s);
                 self.source = Some(source);
@@ -565,6 +635,7 @@ impl App {
                     s.set_playing(!s.playing);
                 }
             }
+            Action::SwitchPosition => self.switch_position(),
             Action::Reverse => {
                 if let Some(s) = &mut self.session {
                     s.set_direction(s.direction().reversed());
@@ -860,6 +931,12 @@ impl App {
                 }
             }
             Step::GoTo(label) => self.go_to_marker(&label),
+            Step::SwitchPosition(on) => {
+                if on {
+                    self.switch_position()
+                }
+            }
+            Step::ShowInOther(label) => self.show_in_other(&label),
             Step::Pose(a) => {
                 if let (Some(s), Some(p)) = (&mut self.session, voyage_nav::Pose::from_array(a)) {
                     if s.sub.is_safe(&s.field, p.position) {
@@ -913,6 +990,61 @@ impl App {
     fn view_point(&self, f: [f32; 2]) -> Option<Pos2> {
         self.view_rect
             .map(|r| r.min + Vec2::new(f[0], f[1]) * r.size())
+    }
+
+    /// Shows the exam's other position, standing where the camera's place lies in it; what
+    /// was shown waits beside it.
+    fn switch_position(&mut self) {
+        let (Some(s), Some(o)) = (self.session.take(), self.other.take()) else {
+            self.status = "the exam has one position open".into();
+            return;
+        };
+        let from = crate::open::position_of(&s.study);
+        let findings = std::mem::take(&mut self.findings);
+        let (s, findings, o) = switch(s, findings, o);
+        self.status = format!(
+            "{}: at the place the camera was in {from}",
+            crate::open::position_of(&s.study)
+        );
+        self.findings = findings;
+        self.session = Some(s);
+        self.other = Some(o);
+        self.looked_up = None;
+        std::mem::swap(&mut self.scout, &mut self.other_scout);
+        self.closeup = None;
+        self.translucency = None;
+        self.closeup_at = None;
+        self.measure_from = None;
+        self.slices.follow();
+        self.generation += 1;
+    }
+
+    /// Switches to the other position at the place the link puts marker `label` there, and
+    /// shows the place (the close-up box and the scout mark it).
+    fn show_in_other(&mut self, label: &str) {
+        let (Some(s), Some(o)) = (&self.session, &self.other) else {
+            self.status = "the exam has one position open".into();
+            return;
+        };
+        let Some(m) = self.findings.markers.iter().find(|m| m.label == label) else {
+            self.status = format!("no marker {label}");
+            return;
+        };
+        let Some(there) = o.place_of(s, m) else {
+            self.status = format!("{label} lies near no part of the colon's centerline");
+            return;
+        };
+        let from = crate::open::position_of(&s.study);
+        let label = format!("{label} ({from})");
+        self.switch_position();
+        if let Some(s) = &mut self.session {
+            if super::positions::look_at(s, there) {
+                self.status = format!("{label}: where the link puts it here");
+            }
+            self.closeup_at = Some(there);
+        }
+        self.looked_up = Some((label, there));
+        self.slices.follow();
     }
 
     fn go_to_marker(&mut self, label: &str) {
@@ -988,6 +1120,16 @@ impl App {
             scout_hovered: self.scout.as_ref().and_then(|v| v.hovered),
             coverage: s.map(|s| s.coverage.report()),
             correction_error: self.correction_error.clone(),
+            positions: s.zip(self.other.as_ref()).map(|(s, o)| PositionsReport {
+                shown: crate::open::position_of(&s.study),
+                other: o.name(),
+                linked_mm: o.linked.map(|p| p.to_array()),
+                looked_up: self
+                    .looked_up
+                    .as_ref()
+                    .map(|(l, p)| (l.clone(), p.to_array())),
+                other_markers: o.findings.markers.iter().map(MarkerReport::of).collect(),
+            }),
             status: self.status.clone(),
         }
     }
@@ -1185,6 +1327,7 @@ impl App {
         }
         ui.add(egui::TextEdit::singleline(&mut self.note).hint_text("note for the next marker"));
         let mut go = None;
+        let mut show_in_other = None;
         let mut remove_marker = None;
         for (i, m) in self.findings.markers.iter().enumerate() {
             ui.horizontal(|ui| {
@@ -1198,6 +1341,16 @@ impl App {
                 let size = m.size_mm.map(|s| format!(" {s:.1} mm")).unwrap_or_default();
                 ui.label(format!("{}{size}", m.kind.name()));
                 ui.label(if m.note.is_empty() { "—" } else { &m.note });
+                if let Some(o) = &self.other
+                    && ui
+                        .small_button(format!("show in {}", o.name()))
+                        .on_hover_text(
+                            "switch to the other position, where the link puts this marker",
+                        )
+                        .clicked()
+                {
+                    show_in_other = Some(m.label.clone());
+                }
                 if ui.small_button("x").clicked() {
                     remove_marker = Some(i);
                 }
@@ -1221,6 +1374,9 @@ impl App {
         if let Some(l) = go {
             self.go_to_marker(&l);
         }
+        if let Some(l) = show_in_other {
+            self.show_in_other(&l);
+        }
         ui.horizontal(|ui| {
             ui.add(egui::TextEdit::singleline(&mut self.export_dir).desired_width(120.0));
             if ui
@@ -1242,6 +1398,18 @@ impl App {
             .resizable(false)
             .exact_size(360.0)
             .show(ui, |ui| {
+                // With two positions open, the other's scout below shows where the camera's
+                // place lies in it, moving as the camera moves.
+                if let (Some(o), Some(view)) = (&self.other, &mut self.other_scout) {
+                    let height = 0.42 * ui.available_height();
+                    egui::Panel::bottom("other position")
+                        .resizable(false)
+                        .exact_size(height)
+                        .show(ui, |ui| {
+                            ui.label(format!("{}: the same place", o.name()));
+                            other_scout(ui, o, view);
+                        });
+                }
                 let (Some(s), Some(view)) = (&mut self.session, &mut self.scout) else {
                     ui.label("scout");
                     return;
@@ -1259,6 +1427,7 @@ impl App {
                         .markers
                         .iter()
                         .map(|m| (m.label.clone(), m.position))
+                        .chain(self.looked_up.clone())
                         .collect(),
                     submarine: pose.position,
                     view_dir: pose.z_body(),
@@ -1353,6 +1522,9 @@ impl App {
                     input.torque = (-p.y_body() * rate.x + p.x_body() * rate.y) * s.sub.dynamics.ka;
                 }
                 s.step(dt, &input);
+                if let Some(o) = &mut self.other {
+                    o.follow(s);
+                }
 
                 let ppp = ui.ctx().pixels_per_point();
                 let size = [
@@ -1532,6 +1704,13 @@ impl App {
             if let (Some(a), Some(b)) = (on_screen(*a), on_screen(*b)) {
                 painter.line_segment([a, b], orange);
             }
+        }
+        if let Some((name, x)) = &self.looked_up
+            && let Some(p) = surface_point_on_screen(s, &cam, rect, *x)
+        {
+            let cyan = Color32::from_rgb(80, 220, 255);
+            painter.circle_stroke(p, 9.0, Stroke::new(2.0, cyan));
+            label(&painter, p + Vec2::new(10.0, 6.0), name, cyan);
         }
         for m in &self.findings.markers {
             if let Some(p) = surface_point_on_screen(s, &cam, rect, m.position) {

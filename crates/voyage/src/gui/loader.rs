@@ -12,7 +12,7 @@ use voyage_phantom::{self as phantom, ColonOptions};
 
 use super::session::Session;
 use crate::open::{
-    Choices, InputArgs, OPEN_STEPS, Opening, PointArgs, exam_of, open_study, prepare_volume,
+    Choices, InputArgs, OPEN_STEPS, Opening, PointArgs, exam_of, open_exam, prepare_volume,
 };
 
 /// What to open.
@@ -41,6 +41,15 @@ impl Source {
         }
     }
 
+    /// The same input, its series `uid` (one position of an exam) when it is a file.
+    pub fn with_series(&self, uid: Option<String>) -> Source {
+        let mut s = self.clone();
+        if let Source::File(a) = &mut s {
+            a.series = uid;
+        }
+        s
+    }
+
     /// The same input with other points.
     pub fn with_points(&self, points: PointArgs) -> Source {
         let mut s = self.clone();
@@ -59,7 +68,7 @@ enum Message {
         of: usize,
         what: String,
     },
-    Done(Box<anyhow::Result<Session>>),
+    Done(Box<anyhow::Result<Vec<Session>>>),
 }
 
 /// A study being opened.
@@ -83,10 +92,10 @@ impl Job {
         thread::Builder::new()
             .name("voyage-open".into())
             .spawn(move || {
-                let progress = |step: usize, what: &str| {
+                let progress = |step: usize, of: usize, what: &str| {
                     let _ = tx.send(Message::Progress {
                         step,
-                        of: OPEN_STEPS + EXTRA_STEPS,
+                        of,
                         what: what.to_string(),
                     });
                     ctx.request_repaint();
@@ -106,8 +115,9 @@ impl Job {
         }
     }
 
-    /// The session when it is ready (Some(Err) when opening failed), None while working.
-    pub fn poll(&mut self) -> Option<anyhow::Result<Session>> {
+    /// The sessions when they are ready, one per position of the exam, the first shown
+    /// (Some(Err) when opening failed), None while working.
+    pub fn poll(&mut self) -> Option<anyhow::Result<Vec<Session>>> {
         loop {
             match self.rx.try_recv() {
                 Ok(Message::Progress { step, of, what }) => {
@@ -130,15 +140,26 @@ impl Job {
     }
 }
 
-fn open(source: &Source, progress: &dyn Fn(usize, &str)) -> anyhow::Result<Session> {
-    let tell = |o: Opening| progress(o.step, o.what);
-    let (study, exam) = match source {
+fn open(source: &Source, progress: &dyn Fn(usize, usize, &str)) -> anyhow::Result<Vec<Session>> {
+    let one = OPEN_STEPS + EXTRA_STEPS;
+    let opened: Vec<(voyage_core::Study, voyage_export::Exam, Option<String>)> = match source {
         Source::File(input) => {
-            let p = open_study(input, None, tell)?;
-            (p.study, p.exam)
+            // Every position of the exam, one after another: the steps of all of them.
+            open_exam(input, None, |i, n, o| {
+                let of = n * OPEN_STEPS + EXTRA_STEPS;
+                let what = if n > 1 {
+                    format!("position {} of {n}: {}", i + 1, o.what)
+                } else {
+                    o.what.to_string()
+                };
+                progress(i * OPEN_STEPS + o.step, of, &what)
+            })?
+            .into_iter()
+            .map(|p| (p.study, p.exam, p.series_uid))
+            .collect()
         }
         Source::Phantom { small, points } => {
-            progress(0, "making the colon phantom");
+            progress(0, one, "making the colon phantom");
             let ct = phantom::colon(&ColonOptions {
                 small: *small,
                 ..ColonOptions::default()
@@ -151,10 +172,23 @@ fn open(source: &Source, progress: &dyn Fn(usize, &str)) -> anyhow::Result<Sessi
             };
             let meta = io::Meta::default();
             let exam = exam_of("colon phantom", &meta, points, ct.geometry());
+            let tell = |o: Opening| progress(o.step, one, o.what);
             let study = prepare_volume(ct, meta, &choices, &source.describe(), tell)?;
-            (study, exam)
+            vec![(study, exam, None)]
         }
     };
-    progress(OPEN_STEPS, "setting up the flight");
-    Session::new(exam, study).with_context(|| source.describe())
+    let n = opened.len();
+    progress(
+        n * OPEN_STEPS,
+        n * OPEN_STEPS + EXTRA_STEPS,
+        "setting up the flight",
+    );
+    opened
+        .into_iter()
+        .map(|(study, exam, series_uid)| {
+            let mut s = Session::new(exam, study).with_context(|| source.describe())?;
+            s.series_uid = series_uid;
+            Ok(s)
+        })
+        .collect()
 }

@@ -9,6 +9,7 @@ mod endoscopy;
 mod frame_times;
 mod loader;
 mod pixels;
+mod positions;
 mod report;
 mod scout;
 mod script;

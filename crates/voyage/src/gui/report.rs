@@ -44,6 +44,8 @@ pub struct Report {
     /// What the frames shown showed of the mucosa, and the two-way reading.
     pub coverage: Option<CoverageReport>,
     pub correction_error: Option<String>,
+    /// With two positions of an exam open (supine and prone): which.
+    pub positions: Option<PositionsReport>,
     /// The status line at the top of the window, as last shown.
     pub status: String,
 }
@@ -76,6 +78,19 @@ pub struct ReadingReport {
     pub visits: usize,
     /// Glances around the flights took.
     pub glances: usize,
+}
+
+#[derive(Serialize)]
+pub struct PositionsReport {
+    /// "supine", "prone" ...
+    pub shown: &'static str,
+    pub other: &'static str,
+    /// Where the camera's place lies in the other position (its volume-local mm).
+    pub linked_mm: Option<[f64; 3]>,
+    /// A marker of the other position looked up in the one shown: label, volume-local mm.
+    pub looked_up: Option<(String, [f64; 3])>,
+    /// The other position's markers (its volume-local mm).
+    pub other_markers: Vec<MarkerReport>,
 }
 
 #[derive(Serialize)]

@@ -72,6 +72,11 @@ pub enum Step {
     Pose([f64; 7]),
     /// Fly back to a marker (by label, e.g. "M1").
     GoTo(String),
+    /// Show the exam's other position (supine / prone) at the same place, as the O key does.
+    SwitchPosition(bool),
+    /// Switch to the other position where the link puts a marker (by label), as its "show
+    /// in" button does.
+    ShowInOther(String),
     /// Run the two-way reading (rectum → cecum, back, then every unseen patch); the script
     /// waits until it is done.
     TwoWay(bool),

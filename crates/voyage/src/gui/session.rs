@@ -32,6 +32,9 @@ pub struct Session {
     /// What the report says of the exam: its name (the file name shown in the title, never a
     /// patient name), series, date and corrections by hand.
     pub exam: voyage_export::Exam,
+    /// The series it was opened from, when the input held several (one position of an
+    /// exam): a correction opens that one again.
+    pub series_uid: Option<String>,
     pub study: Study,
     pub field: PotentialField<BrickStore>,
     pub mesh: CellMesh,
@@ -107,6 +110,7 @@ impl Session {
         pilot.fit_reach(&field, dir, opts.safety.min_wall_mm);
         Ok(Session {
             exam,
+            series_uid: None,
             study,
             field,
             mesh,
