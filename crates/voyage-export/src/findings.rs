@@ -93,7 +93,7 @@ pub fn export_reading(
 
 /// A marker's segment and distance along the centerline from the rectum end, read just off
 /// the wall in the lumen.
-fn placed(m: &Marker, study: &Study) -> (&'static str, Option<f64>) {
+pub(crate) fn placed(m: &Marker, study: &Study) -> (&'static str, Option<f64>) {
     let p = m.position + m.normal.normalize_or_zero() * OFF_WALL_MM;
     (study.segment_at(p), study.arc_at(p))
 }
@@ -130,7 +130,7 @@ fn write_findings(
 
 /// `finding_<label>.png`, the label reduced to characters safe in any file system (labels
 /// can be edited), and numbered further if two markers end up with the same name.
-fn snapshot_names(markers: &[Marker]) -> Vec<String> {
+pub(crate) fn snapshot_names(markers: &[Marker]) -> Vec<String> {
     let mut names: Vec<String> = Vec::with_capacity(markers.len());
     for (i, m) in markers.iter().enumerate() {
         let safe: String = m

@@ -6,6 +6,7 @@
 mod findings;
 pub mod markups;
 pub mod mesh;
+mod pair;
 pub mod report;
 pub mod study;
 pub mod trajectory;
@@ -13,6 +14,7 @@ pub mod trajectory;
 pub use findings::{export_findings, export_reading, read_findings};
 pub use markups::{MarkupsPoint, write_markups_curve};
 pub use mesh::{write_ply, write_stl};
+pub use pair::{PositionReading, export_pair_reading};
 pub use report::{
     ColonRead, Exam, HandCorrection, Report, ReportCoverage, ReportFinding, write_report_html,
 };

@@ -211,7 +211,7 @@ pub fn report_html(r: &Report) -> String {
 }
 
 /// "Study: NAME · SERIES · exam of DATE", each part where known.
-fn exam_line(e: &Exam) -> String {
+pub(crate) fn exam_line(e: &Exam) -> String {
     let mut parts = vec![format!("Study: {}", escape(&e.name))];
     if let Some(s) = &e.series {
         parts.push(escape(s));
@@ -222,7 +222,7 @@ fn exam_line(e: &Exam) -> String {
     parts.join(" &middot; ")
 }
 
-const STYLE: &str = "<style>\nbody{font-family:sans-serif;margin:2em;max-width:60em;color:#222}\ntable{border-collapse:collapse;margin:1em 0}\nth,td{border:1px solid #bbb;padding:.3em .6em;text-align:left;vertical-align:top}\ntd:nth-child(-n+4){white-space:nowrap}\nimg{width:256px;height:auto}\n.warn{color:#a40}\n.study,.foot{color:#666;font-size:.9em}\n</style>\n";
+pub(crate) const STYLE: &str = "<style>\nbody{font-family:sans-serif;margin:2em;max-width:60em;color:#222}\ntable{border-collapse:collapse;margin:1em 0}\nth,td{border:1px solid #bbb;padding:.3em .6em;text-align:left;vertical-align:top}\ntd:nth-child(-n+4){white-space:nowrap}\nimg{width:256px;height:auto}\n.warn{color:#a40}\n.study,.foot{color:#666;font-size:.9em}\n</style>\n";
 
 fn coverage_html(c: &ReportCoverage) -> String {
     let pct = |v: Option<f64>| v.map_or("not measured".to_string(), |x| format!("{x:.1} %"));

@@ -1338,12 +1338,15 @@ fn both_positions_open_linked_and_a_marker_is_shown_in_the_other() {
         read_json(&dir.join("p.json")),
     );
     let shot = dir.join("prone.png");
+    let exported = dir.join("exported");
     let steps = serde_json::json!([
         {"jump": 0.62}, {"wait": 5}, {"record": "supine"},
-        {"marker": {"at": [0.5, 0.5], "note": "look it up"}},
+        {"marker": {"at": [0.5, 0.5], "note": "look it up", "kind": "polyp"}},
         {"switch_position": true}, {"wait": 5}, {"record": "prone"},
         {"switch_position": true}, {"wait": 5},
         {"show_in_other": "M1"}, {"wait": 10}, {"screenshot": shot.to_str().unwrap()},
+        {"marker": {"at": [0.5, 0.5], "note": "the same, prone", "kind": "polyp"}},
+        {"export": exported.to_str().unwrap()},
         {"quit": true}
     ]);
     let r = view_script(&display, &exam, &["--paused"], steps, &dir, "script");
@@ -1378,5 +1381,31 @@ fn both_positions_open_linked_and_a_marker_is_shown_in_the_other() {
     );
     let img = image::open(&shot).unwrap().to_rgba8();
     assert!(img.width() > 0);
+    // The window exported each position into a folder of its name; `voyage report` on the
+    // exam lists the finding marked in both positions once, with both places.
+    for p in ["supine", "prone"] {
+        assert!(exported.join(p).join("findings.json").exists(), "{p}");
+    }
+    let report = dir.join("report");
+    let out = Command::new(env!("CARGO_BIN_EXE_voyage"))
+        .arg("report")
+        .arg(&exam)
+        .arg("--findings")
+        .arg(&exported)
+        .arg("--out")
+        .arg(&report)
+        .arg("--no-coverage")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let html = std::fs::read_to_string(report.join("report.html")).unwrap();
+    assert_eq!(html.matches("<tr class=\"finding\">").count(), 1, "{html}");
+    assert!(html.contains("look it up") && html.contains("the same, prone"));
+    assert!(html.contains("stayed on the wall"), "{html}");
+    assert!(report.join("supine").join("report.html").exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }

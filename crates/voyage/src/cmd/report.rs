@@ -1,27 +1,35 @@
 //! `voyage report INPUT --findings findings.json --out DIR`: the reading's report from the
 //! findings the window exported: each marker's view drawn again, its segment and distance
 //! from the rectum end, the C-RADS category, and the coverage of a two-way reading with
-//! review, as `report.html` beside the findings' files.
+//! review, as `report.html` beside the findings' files. An exam scanned supine and prone
+//! gives a report over both positions (each finding once, the coverage over both) and each
+//! position's own.
 
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::Args;
-use voyage_export::{ReportCoverage, export_reading, read_findings};
+use voyage_core::Study;
+use voyage_export::{
+    PositionReading, ReportCoverage, export_pair_reading, export_reading, read_findings,
+};
 use voyage_nav::{Camera, FlightOptions};
 use voyage_view::{
-    CellMesh, CoverageOptions, Lighting, READING_FOV_DEG, Strategy, View, Visibility,
-    read_both_ways, render_rgba,
+    BothCoverage, CellMesh, Coverage, CoverageOptions, Findings, Lighting, Link, Marker, MucosaMap,
+    READING_FOV_DEG, Reading, Strategy, View, Visibility, both_coverage, read_both_ways,
+    render_rgba,
 };
 
-use super::prep::load_and_prepare;
-use crate::open::{InputArgs, Prepared};
+use super::prep::load_and_prepare_exam;
+use crate::open::{InputArgs, Prepared, position_of};
 
 #[derive(Args, Debug)]
 pub struct ReportArgs {
     #[command(flatten)]
     pub input: InputArgs,
-    /// The findings.json the window's Export wrote for this study.
+    /// The findings.json the window's Export wrote for this study; for an exam of two
+    /// positions, the folder it exported into (a findings.json in a folder per position,
+    /// e.g. supine/findings.json and prone/findings.json).
     #[arg(long)]
     pub findings: PathBuf,
     /// Folder to write into: report.html, findings.json and .mrk.json, a PNG per marker.
@@ -41,53 +49,177 @@ const SNAPSHOT_PX: u32 = 512;
 pub fn run(a: &ReportArgs) -> Result<()> {
     voyage_export::study::check_out_dir(&a.out)?;
     let min_wall = FlightOptions::default().safety.min_wall_mm;
-    let Prepared { study, exam, .. } = load_and_prepare(&a.input, Some(min_wall))?;
+    let mut positions = load_and_prepare_exam(&a.input, Some(min_wall))?;
+    if positions.len() >= 2 {
+        return both_positions(a, &positions[..2]);
+    }
+    let Prepared { study, exam, .. } = positions.remove(0);
     let findings = read_findings(&a.findings, study.ct.geometry())?;
-    let mut mesh = CellMesh::new(&study.surface, &study.cells);
-    mesh.index_cells();
-    let coverage = if a.no_coverage {
-        ReportCoverage::default()
-    } else {
-        // The same reading as `voyage coverage` with its defaults, not the snapshots' lens.
-        let lens = Camera::lens(READING_FOV_DEG);
-        let bar = super::coverage::reading_bar();
-        let r = read_both_ways(&study, &mesh, CoverageOptions::default(), lens, 256, |p| {
-            super::coverage::show_reading(&bar, p)
-        })
-        .with_context(|| format!("{}: the two-way reading", a.input.input.display()))?;
-        if let Some(b) = bar {
-            b.finish_and_clear();
-        }
-        ReportCoverage {
-            session_pct: None,
-            one_way_pct: Some(r.one_way.percent()),
-            two_way_pct: Some(r.two_way.percent()),
-            after_review_pct: Some(r.after_review.percent()),
-            patches_left: Some(r.after_review.patches(&mesh).len()),
-            by_segment: r.after_review.by_segment(&mesh, &study),
-        }
-    };
-    let files = export_reading(&a.out, &findings, &study, &exam, coverage, |_, m| {
-        let camera = Camera::new(m.view).with_fov(a.fov);
-        let view = View::new(&camera, SNAPSHOT_PX, SNAPSHOT_PX);
-        let cells = Visibility::new(&study.cells, Strategy::Lg)
-            .select(&study.cells, &view)
-            .cells;
-        let rgba = render_rgba(
-            &mesh,
-            &camera,
-            &cells,
-            SNAPSHOT_PX,
-            SNAPSHOT_PX,
-            &Lighting::default(),
-        );
-        Ok((SNAPSHOT_PX, SNAPSHOT_PX, rgba))
+    let read = read(a, &study, a.input.input.display().to_string())?;
+    let files = export_reading(&a.out, &findings, &study, &exam, read.coverage, |_, m| {
+        Ok(snapshot(a, &study, &read.mesh, m))
     })?;
     println!(
         "wrote {} files to {} (report.html: {} findings)",
         files.len(),
         a.out.display(),
         findings.markers.len()
+    );
+    Ok(())
+}
+
+/// One position read for the report: its mesh, the reading (None with --no-coverage) and
+/// the figures.
+struct Read {
+    mesh: CellMesh,
+    reading: Option<Reading>,
+    coverage: ReportCoverage,
+}
+
+fn read(a: &ReportArgs, study: &Study, name: String) -> Result<Read> {
+    let mut mesh = CellMesh::new(&study.surface, &study.cells);
+    mesh.index_cells();
+    if a.no_coverage {
+        return Ok(Read {
+            mesh,
+            reading: None,
+            coverage: ReportCoverage::default(),
+        });
+    }
+    // The same reading as `voyage coverage` with its defaults, not the snapshots' lens.
+    let lens = Camera::lens(READING_FOV_DEG);
+    let bar = super::coverage::reading_bar();
+    let r = read_both_ways(study, &mesh, CoverageOptions::default(), lens, 256, |p| {
+        super::coverage::show_reading(&bar, p)
+    })
+    .with_context(|| format!("{name}: the two-way reading"))?;
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let coverage = ReportCoverage {
+        session_pct: None,
+        one_way_pct: Some(r.one_way.percent()),
+        two_way_pct: Some(r.two_way.percent()),
+        after_review_pct: Some(r.after_review.percent()),
+        patches_left: Some(r.after_review.patches(&mesh).len()),
+        by_segment: r.after_review.by_segment(&mesh, study),
+    };
+    Ok(Read {
+        mesh,
+        reading: Some(r),
+        coverage,
+    })
+}
+
+fn position_reading<'a>(p: &'a Prepared, findings: &'a Findings, r: &Read) -> PositionReading<'a> {
+    PositionReading {
+        name: position_of(&p.study),
+        study: &p.study,
+        exam: &p.exam,
+        findings,
+        coverage: r.coverage.clone(),
+    }
+}
+
+/// Marker `m`'s view drawn again (RGBA, [`SNAPSHOT_PX`]²).
+fn snapshot(a: &ReportArgs, study: &Study, mesh: &CellMesh, m: &Marker) -> (u32, u32, Vec<u8>) {
+    let camera = Camera::new(m.view).with_fov(a.fov);
+    let view = View::new(&camera, SNAPSHOT_PX, SNAPSHOT_PX);
+    let cells = Visibility::new(&study.cells, Strategy::Lg)
+        .select(&study.cells, &view)
+        .cells;
+    let rgba = render_rgba(
+        mesh,
+        &camera,
+        &cells,
+        SNAPSHOT_PX,
+        SNAPSHOT_PX,
+        &Lighting::default(),
+    );
+    (SNAPSHOT_PX, SNAPSHOT_PX, rgba)
+}
+
+/// The report of an exam read in two positions: each position's findings from the folder
+/// the window exported into (a position without its findings.json has none marked), each
+/// read both ways, the coverage over both, the report over both.
+fn both_positions(a: &ReportArgs, positions: &[Prepared]) -> Result<()> {
+    let (pa, pb) = (&positions[0], &positions[1]);
+    let mut findings = Vec::new();
+    let mut reads = Vec::new();
+    for p in [pa, pb] {
+        let name = position_of(&p.study);
+        let file = a.findings.join(name).join("findings.json");
+        findings.push(if file.exists() {
+            read_findings(&file, p.study.ct.geometry())?
+        } else {
+            eprintln!(
+                "note: {}: not found; no findings marked {name}",
+                file.display()
+            );
+            Findings::default()
+        });
+        reads.push(read(
+            a,
+            &p.study,
+            format!("{} ({name})", a.input.input.display()),
+        )?);
+    }
+    let link = Link::between(&pa.study, &pb.study);
+    let maps = [
+        MucosaMap::of(&pa.study, &reads[0].mesh),
+        MucosaMap::of(&pb.study, &reads[1].mesh),
+    ];
+    let stages: Vec<(&str, BothCoverage)> = match (&reads[0].reading, &reads[1].reading) {
+        (Some(ra), Some(rb)) => {
+            let stage = |pick: fn(&Reading) -> &Coverage| {
+                both_coverage(
+                    &link,
+                    &voyage_view::Read {
+                        study: &pa.study,
+                        map: &maps[0],
+                        seen: pick(ra),
+                    },
+                    &voyage_view::Read {
+                        study: &pb.study,
+                        map: &maps[1],
+                        seen: pick(rb),
+                    },
+                )
+            };
+            vec![
+                ("One way (rectum to cecum)", stage(|r| &r.one_way)),
+                ("Both ways", stage(|r| &r.two_way)),
+                (
+                    "After the review of unseen patches",
+                    stage(|r| &r.after_review),
+                ),
+            ]
+        }
+        _ => Vec::new(),
+    };
+    let files = export_pair_reading(
+        &a.out,
+        position_reading(pa, &findings[0], &reads[0]),
+        position_reading(pb, &findings[1], &reads[1]),
+        &link,
+        &stages,
+        |p, _, m| {
+            let (study, read) = if p == 0 {
+                (&pa.study, &reads[0])
+            } else {
+                (&pb.study, &reads[1])
+            };
+            Ok(snapshot(a, study, &read.mesh, m))
+        },
+    )?;
+    println!(
+        "wrote {} files to {} (report.html over {} and {}: {} and {} findings)",
+        files.len(),
+        a.out.display(),
+        position_of(&pa.study),
+        position_of(&pb.study),
+        findings[0].markers.len(),
+        findings[1].markers.len()
     );
     Ok(())
 }

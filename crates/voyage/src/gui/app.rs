@@ -12,11 +12,11 @@ use egui::{Color32, Key, Modifiers, Pos2, Rect, RichText, Sense, Stroke, Vec2};
 use glam::DVec3;
 use serde_json::json;
 use voyage_core::LEFT_OUT_DOUBT_ML;
-use voyage_export::{ReportCoverage, export_reading};
+use voyage_export::{PositionReading, ReportCoverage, export_pair_reading, export_reading};
 use voyage_nav::{Camera, Direction};
 use voyage_view::{
-    CloseupBox, FindingKind, Findings, Hit, Material, ReadingStep, TransferFunction,
-    TranslucencyOptions, encode, pick, render_closeup, render_translucency,
+    CloseupBox, FindingKind, Findings, Hit, Material, MucosaMap, ReadingStep, TransferFunction,
+    TranslucencyOptions, both_coverage, encode, pick, render_closeup, render_translucency,
 };
 
 use voyage_nav::Input;
@@ -320,6 +320,57 @@ pub struct App {
     announced: bool,
     outcome: Arc<Mutex<Outcome>>,
     quitting: bool,
+}
+
+/// The reading's figures of session `s`, as `voyage report` gives them on the same study
+/// (one engine).
+fn report_coverage(s: &Session) -> ReportCoverage {
+    let reading = s.coverage.reading.as_ref();
+    ReportCoverage {
+        session_pct: Some(s.coverage.session.percent()),
+        one_way_pct: reading.and_then(|r| r.one_way_pct()),
+        two_way_pct: reading.and_then(|r| r.two_way_pct()),
+        after_review_pct: reading.and_then(|r| r.after_review_pct()),
+        patches_left: reading
+            .filter(|r| r.is_done())
+            .map(|r| r.seen().patches(&s.mesh).len()),
+        // Per segment, the figure the category reads: after the review, else the session.
+        by_segment: reading
+            .filter(|r| r.is_done())
+            .map_or(&s.coverage.session, |r| r.seen())
+            .by_segment(&s.mesh, &s.study),
+    }
+}
+
+/// Session `s` with its `findings`, for the report over both positions.
+fn position_reading<'a>(s: &'a Session, findings: &'a Findings) -> PositionReading<'a> {
+    PositionReading {
+        name: crate::open::position_of(&s.study),
+        study: &s.study,
+        exam: &s.exam,
+        findings,
+        coverage: report_coverage(s),
+    }
+}
+
+/// Marker `m`'s view in session `s`, drawn again for the export (512², RGBA).
+fn snapshot(s: &Session, m: &voyage_view::Marker) -> voyage_core::Result<(u32, u32, Vec<u8>)> {
+    let cam = Camera::new(m.view).with_fov(s.fov);
+    let cells = voyage_view::Visibility::new(&s.study.cells, voyage_view::Strategy::Lg)
+        .select(&s.study.cells, &voyage_view::View::new(&cam, 512, 512))
+        .cells;
+    Ok((
+        512,
+        512,
+        voyage_view::render_rgba(
+            &s.mesh,
+            &cam,
+            &cells,
+            512,
+            512,
+            &voyage_view::Lighting::default(),
+        ),
+    ))
 }
 
 /// The other position's scout, its linked place marked (clicks there do nothing: the
@@ -797,40 +848,45 @@ impl App {
             self.status = "nothing to export: no study is open".into();
             return;
         };
-        // The reading's figures are those of `voyage report` on the same study: one engine.
-        let reading = s.coverage.reading.as_ref();
-        let coverage = ReportCoverage {
-            session_pct: Some(s.coverage.session.percent()),
-            one_way_pct: reading.and_then(|r| r.one_way_pct()),
-            two_way_pct: reading.and_then(|r| r.two_way_pct()),
-            after_review_pct: reading.and_then(|r| r.after_review_pct()),
-            patches_left: reading
-                .filter(|r| r.is_done())
-                .map(|r| r.seen().patches(&s.mesh).len()),
-            // Per segment, the figure the category reads: after the review, else the session.
-            by_segment: reading
-                .filter(|r| r.is_done())
-                .map_or(&s.coverage.session, |r| r.seen())
-                .by_segment(&s.mesh, &s.study),
+        let result = match &self.other {
+            None => export_reading(
+                &dir,
+                &self.findings,
+                &s.study,
+                &s.exam,
+                report_coverage(s),
+                |_, m| snapshot(s, m),
+            ),
+            // Both positions: each into a folder of its name, the report over both beside.
+            Some(o) => {
+                let (a, b) = (s, &o.session);
+                let (map_a, map_b) = (
+                    MucosaMap::of(&a.study, &a.mesh),
+                    MucosaMap::of(&b.study, &b.mesh),
+                );
+                let both = both_coverage(
+                    &o.link,
+                    &voyage_view::Read {
+                        study: &a.study,
+                        map: &map_a,
+                        seen: &a.coverage.session,
+                    },
+                    &voyage_view::Read {
+                        study: &b.study,
+                        map: &map_b,
+                        seen: &b.coverage.session,
+                    },
+                );
+                export_pair_reading(
+                    &dir,
+                    position_reading(a, &self.findings),
+                    position_reading(b, &o.findings),
+                    &o.link,
+                    &[("whole session", both)],
+                    |p, _, m| snapshot(if p == 0 { a } else { b }, m),
+                )
+            }
         };
-        let result = export_reading(&dir, &self.findings, &s.study, &s.exam, coverage, |_, m| {
-            let cam = Camera::new(m.view).with_fov(s.fov);
-            let cells = voyage_view::Visibility::new(&s.study.cells, voyage_view::Strategy::Lg)
-                .select(&s.study.cells, &voyage_view::View::new(&cam, 512, 512))
-                .cells;
-            Ok((
-                512,
-                512,
-                voyage_view::render_rgba(
-                    &s.mesh,
-                    &cam,
-                    &cells,
-                    512,
-                    512,
-                    &voyage_view::Lighting::default(),
-                ),
-            ))
-        });
         match result {
             Ok(files) => {
                 // Where the files went, in full: a relative folder is relative to where
