@@ -181,6 +181,12 @@ impl Link {
         }
     }
 
+    /// The correspondence as it is kept: arcs on the first centerline and, at the same
+    /// index, on the second (both increasing).
+    pub fn arcs(&self) -> (&[f64], &[f64]) {
+        (&self.a_arc, &self.b_arc)
+    }
+
     /// The arc on the second centerline of the place at arc `s` on the first.
     pub fn map(&self, s: f64) -> f64 {
         interpolate(&self.a_arc, &self.b_arc, s)

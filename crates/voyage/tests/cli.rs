@@ -1089,3 +1089,84 @@ fn the_report_names_the_series_and_the_corrections_by_hand() {
     assert!(row.starts_with("<td>"), "{row}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Issue 39: a folder holding the exam supine and prone is opened as an exam: `info` names
+/// both positions, `prep` exports each with the link of their centerlines, `coverage` reads
+/// both and counts mucosa seen in either.
+#[test]
+fn an_exam_of_two_positions_is_prepared_and_read_in_both() {
+    let dir = scratch("pair");
+    let exam = dir.join("exam");
+    let made = voyage(&[
+        "phantom",
+        "colon",
+        "--pair",
+        "--small",
+        "--tagged-fluid",
+        "--out",
+        dir.join("p.nii.gz").to_str().unwrap(),
+        "--truth",
+        dir.join("p.json").to_str().unwrap(),
+        "--dicom",
+        exam.to_str().unwrap(),
+    ]);
+    assert!(made.status.success(), "{}", text(&made));
+    for f in [
+        "p-supine.nii.gz",
+        "p-prone.nii.gz",
+        "p-supine.json",
+        "p-prone.json",
+        "p.json",
+    ] {
+        assert!(dir.join(f).exists(), "{f} not written");
+    }
+    let info = voyage(&["info", exam.to_str().unwrap(), "--json"]);
+    let info: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
+    let positions: Vec<&str> = info["exam_positions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["position"].as_str().unwrap())
+        .collect();
+    assert_eq!(positions, ["HFS", "HFP"]);
+
+    let out = dir.join("prep");
+    let prep = voyage(&[
+        "prep",
+        exam.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(prep.status.success(), "{}", text(&prep));
+    let summary: serde_json::Value = serde_json::from_slice(&prep.stdout).unwrap();
+    assert_eq!(summary["positions"][0]["position"], "supine");
+    assert_eq!(summary["positions"][1]["position"], "prone");
+    assert_eq!(summary["link"]["anchored_at_flexures"], true);
+    for p in ["supine", "prone"] {
+        assert!(out.join(p).join("centerline.json").exists(), "{p}");
+    }
+    let link: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("link.json")).unwrap()).unwrap();
+    let arcs = link["arc_mm"].as_array().unwrap();
+    assert_eq!(
+        arcs[0].as_array().unwrap().len(),
+        arcs[1].as_array().unwrap().len()
+    );
+
+    let cov = voyage(&["coverage", exam.to_str().unwrap(), "--json"]);
+    assert!(cov.status.success(), "{}", text(&cov));
+    let cov: serde_json::Value = serde_json::from_slice(&cov.stdout).unwrap();
+    let one_way = &cov["both_positions"]["one_way"];
+    let pct = |v: &serde_json::Value| v.as_f64().unwrap();
+    assert!(
+        pct(&one_way["combined_pct"]) > pct(&one_way["a_pct"]).max(pct(&one_way["b_pct"])),
+        "{one_way}"
+    );
+    assert!(
+        pct(&cov["both_positions"]["after_review"]["combined_pct"]) >= 99.0,
+        "{cov}"
+    );
+    assert_eq!(cov["positions"].as_array().unwrap().len(), 2);
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -41,9 +41,19 @@ pub struct Info {
     pub position: Option<&'static str>,
     /// Where gravity pulls (LPS unit vector), from the position.
     pub gravity_lps: Option<[f64; 3]>,
+    /// An exam scanned in several positions: each position and its series, which `prep`,
+    /// `coverage`, `report` and `view` open together (empty otherwise).
+    pub exam_positions: Vec<ExamPosition>,
     /// The loader's findings, `format` among them (flattened: each key once).
     #[serde(flatten)]
     pub meta: io::Meta,
+}
+
+#[derive(Serialize)]
+pub struct ExamPosition {
+    pub position: &'static str,
+    pub describe: &'static str,
+    pub series: String,
 }
 
 impl Info {
@@ -72,6 +82,7 @@ impl Info {
             megabytes: (g.len() * 2) as f64 / 1e6,
             position: loaded.meta.position.map(|p| p.code()),
             gravity_lps: loaded.meta.position.map(|p| p.gravity_lps().to_array()),
+            exam_positions: Vec::new(),
             meta,
         }
     }
@@ -138,6 +149,18 @@ impl Info {
                     .unwrap_or_default()
             );
         }
+        if self.exam_positions.len() >= 2 {
+            let list: Vec<String> = self
+                .exam_positions
+                .iter()
+                .map(|p| format!("{} ({}, series {})", p.describe, p.position, p.series))
+                .collect();
+            println!(
+                "  exam         {} positions, opened together by prep, coverage, report and view (--series opens one): {}",
+                list.len(),
+                list.join("; ")
+            );
+        }
         for n in &m.notes {
             println!("  note         {n}");
         }
@@ -149,7 +172,17 @@ pub fn run(a: &InfoArgs) -> Result<()> {
         series_uid: a.series.clone(),
     };
     let loaded = io::load(&a.path, &opts)?;
-    let info = Info::new(&a.path, &loaded, a.show_descriptions);
+    let mut info = Info::new(&a.path, &loaded, a.show_descriptions);
+    if a.series.is_none() {
+        info.exam_positions = io::positions_in(&a.path)?
+            .into_iter()
+            .map(|(p, series)| ExamPosition {
+                position: p.code(),
+                describe: p.describe(),
+                series,
+            })
+            .collect();
+    }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&info)?);
     } else {

@@ -1,4 +1,6 @@
-//! `voyage prep INPUT --out DIR`: the whole preprocessing, with its exports.
+//! `voyage prep INPUT --out DIR`: the whole preprocessing, with its exports. An exam
+//! scanned supine and prone: each position's exports in a folder of its name, and the link
+//! of their centerlines.
 
 use std::{io::IsTerminal, path::PathBuf};
 
@@ -9,6 +11,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use voyage_core::{ComponentKind, Geometry, Stage, Study};
 use voyage_export::study::{StudyExports, check_out_dir, write_study};
+use voyage_io::write_atomic;
+use voyage_view::Link;
 
 use crate::open::{InputArgs, Prepared, open_exam, open_study, position_of};
 
@@ -79,7 +83,11 @@ pub fn load_and_prepare_exam(a: &InputArgs, nav_min_wall_mm: Option<f64>) -> Res
 
 pub fn run(a: &PrepArgs) -> Result<()> {
     check_out_dir(&a.out)?;
-    let Prepared { study, load_ms, .. } = load_and_prepare(&a.input, None)?;
+    let mut positions = load_and_prepare_exam(&a.input, None)?;
+    if positions.len() >= 2 {
+        return both_positions(a, &positions[..2]);
+    }
+    let Prepared { study, load_ms, .. } = positions.remove(0);
     let g = study.ct.geometry();
     let written = write_study(&a.out, &study, StudyExports { stl: a.stl })?;
     let summary = summary(&study, g, load_ms);
@@ -87,6 +95,67 @@ pub fn run(a: &PrepArgs) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
         print_text(&study, g, load_ms);
+        for p in written {
+            println!("  wrote {}", p.display());
+        }
+    }
+    Ok(())
+}
+
+/// An exam of two positions: each one's exports in a folder of its name, and `link.json`,
+/// the correspondence of their centerlines.
+fn both_positions(a: &PrepArgs, positions: &[Prepared]) -> Result<()> {
+    let link = Link::between(&positions[0].study, &positions[1].study);
+    let mut summaries = Vec::new();
+    let mut written = Vec::new();
+    for p in positions {
+        let name = position_of(&p.study);
+        let g = p.study.ct.geometry();
+        written.extend(write_study(
+            &a.out.join(name),
+            &p.study,
+            StudyExports { stl: a.stl },
+        )?);
+        let mut s = summary(&p.study, g, p.load_ms);
+        s["position"] = json!(name);
+        summaries.push(s);
+        if !a.json {
+            println!("{name}:");
+            print_text(&p.study, g, p.load_ms);
+        }
+    }
+    let (from, to) = link.arcs();
+    let link_json = json!({
+        "positions": positions.iter().map(|p| position_of(&p.study)).collect::<Vec<_>>(),
+        "note": "arc_mm[0][i] along the first position's centerline (centerline.json) is the same place of the colon as arc_mm[1][i] along the second's",
+        "arc_mm": [from, to],
+        "anchored_at_flexures": link.anchored,
+        "mean_moved_mm": link.mean_moved_mm,
+    });
+    let path = a.out.join("link.json");
+    write_atomic(&path, |w| {
+        w.write_all((serde_json::to_string_pretty(&link_json)? + "\n").as_bytes())
+    })?;
+    written.push(path);
+    if a.json {
+        let out = json!({
+            "positions": summaries,
+            "link": {
+                "anchored_at_flexures": link.anchored,
+                "mean_moved_mm": link.mean_moved_mm,
+            },
+        });
+        println!("{}", serde_json::to_string_pretty(&out)?);
+    } else {
+        println!(
+            "linked: {} ({})",
+            if link.anchored {
+                "anchored at the ends and flexures"
+            } else {
+                "anchored at the ends only"
+            },
+            format_args!("the colon moved {:.0} mm on average", link.mean_moved_mm)
+        );
         for p in written {
             println!("  wrote {}", p.display());
         }
