@@ -46,6 +46,10 @@ enum Command {
         /// Folder to write the phantom into (with --headless).
         #[arg(long, default_value = "voyage-demo")]
         out: PathBuf,
+        /// The phantom supine and prone, as an exam scans it twice (with tagged fluid and
+        /// stool): both open, linked; O switches between them at the same place.
+        #[arg(long, conflicts_with = "headless")]
+        pair: bool,
         #[command(flatten)]
         window: crate::gui::WindowArgs,
     },
@@ -79,7 +83,12 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             out,
             ..
         } => phantom::demo(&out, small),
-        Command::Demo { small, window, .. } => crate::gui::demo(&window, small),
+        Command::Demo {
+            small,
+            pair,
+            window,
+            ..
+        } => crate::gui::demo(&window, small, pair),
         Command::Prep(a) => prep::run(&a),
         Command::Fly(a) => fly::run(&a),
         Command::Coverage(a) => coverage::run(&a),

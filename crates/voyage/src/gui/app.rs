@@ -1219,6 +1219,7 @@ impl App {
                     self.open(
                         Source::Phantom {
                             small: false,
+                            pair: false,
                             points: Default::default(),
                         },
                         ui.ctx(),

@@ -21,14 +21,25 @@ pub enum Source {
     /// A CT (DICOM folder or file, NIfTI, MetaImage, NRRD) or a lumen mask, with the
     /// user's choices, as the commands take it.
     File(InputArgs),
-    /// The built-in colon phantom, made on the fly.
-    Phantom { small: bool, points: PointArgs },
+    /// The built-in colon phantom, made on the fly; `pair`: supine and prone, with tagged
+    /// fluid and stool (`voyage phantom colon --pair`).
+    Phantom {
+        small: bool,
+        pair: bool,
+        points: PointArgs,
+    },
 }
 
 impl Source {
     pub fn describe(&self) -> String {
         match self {
             Source::File(a) => a.input.display().to_string(),
+            Source::Phantom {
+                small, pair: true, ..
+            } => format!(
+                "the {}colon phantom supine and prone",
+                if *small { "small " } else { "" }
+            ),
             Source::Phantom { small: false, .. } => "the colon phantom".into(),
             Source::Phantom { small: true, .. } => "the small colon phantom".into(),
         }
@@ -158,7 +169,11 @@ fn open(source: &Source, progress: &dyn Fn(usize, usize, &str)) -> anyhow::Resul
             .map(|p| (p.study, p.exam, p.series_uid))
             .collect()
         }
-        Source::Phantom { small, points } => {
+        Source::Phantom {
+            small,
+            pair: false,
+            points,
+        } => {
             progress(0, one, "making the colon phantom");
             let ct = phantom::colon(&ColonOptions {
                 small: *small,
@@ -175,6 +190,51 @@ fn open(source: &Source, progress: &dyn Fn(usize, usize, &str)) -> anyhow::Resul
             let tell = |o: Opening| progress(o.step, one, o.what);
             let study = prepare_volume(ct, meta, &choices, &source.describe(), tell)?;
             vec![(study, exam, None)]
+        }
+        Source::Phantom {
+            small,
+            pair: true,
+            points,
+        } => {
+            progress(
+                0,
+                2 * OPEN_STEPS + EXTRA_STEPS,
+                "making the colon phantom supine and prone",
+            );
+            let pair = phantom::pair::colon_pair(&ColonOptions {
+                small: *small,
+                tagged_fluid: true,
+                tagged_stool: true,
+                ..ColonOptions::default()
+            })?;
+            let choices = Choices {
+                points,
+                mask: false,
+                nav_min_wall_mm: None,
+            };
+            let mut opened = Vec::new();
+            for (i, p) in [pair.supine, pair.prone].into_iter().enumerate() {
+                // As the phantom's DICOM series say it.
+                let meta = io::Meta {
+                    position: voyage_core::PatientPosition::parse(&p.truth.position),
+                    ..Default::default()
+                };
+                let name = format!(
+                    "colon phantom ({})",
+                    if i == 0 { "supine" } else { "prone" }
+                );
+                let exam = exam_of(&name, &meta, points, p.ct.geometry());
+                let tell = |o: Opening| {
+                    progress(
+                        i * OPEN_STEPS + o.step,
+                        2 * OPEN_STEPS + EXTRA_STEPS,
+                        o.what,
+                    )
+                };
+                let study = prepare_volume(p.ct, meta, &choices, &name, tell)?;
+                opened.push((study, exam, None));
+            }
+            opened
         }
     };
     let n = opened.len();

@@ -106,10 +106,11 @@ pub fn view(a: &ViewArgs) -> anyhow::Result<()> {
     run(source, &a.window)
 }
 
-pub fn demo(window: &WindowArgs, small: bool) -> anyhow::Result<()> {
+pub fn demo(window: &WindowArgs, small: bool, pair: bool) -> anyhow::Result<()> {
     run(
         Some(Source::Phantom {
             small,
+            pair,
             points: Default::default(),
         }),
         window,
