@@ -17,7 +17,7 @@
 
 use glam::{DQuat, DVec3};
 
-use voyage_core::Study;
+use voyage_core::{Centerline, Study};
 
 /// The profiles are sampled this often along each centerline (mm).
 pub const STEP_MM: f64 = 2.0;
@@ -59,19 +59,7 @@ impl Profile {
         let n = (length / STEP_MM).floor() as usize + 1;
         let arc: Vec<f64> = (0..n).map(|k| (k as f64 * STEP_MM).min(length)).collect();
         let at = |s: f64| {
-            let i = cl
-                .arc_mm
-                .partition_point(|&a| a <= s)
-                .clamp(1, cl.arc_mm.len().max(2) - 1);
-            let (a0, a1) = (cl.arc_mm[i - 1], cl.arc_mm[i]);
-            let t = if a1 > a0 {
-                ((s - a0) / (a1 - a0)).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            let p =
-                DVec3::from_array(cl.points_mm[i - 1]).lerp(DVec3::from_array(cl.points_mm[i]), t);
-            let r = cl.radius_mm[i - 1] + (cl.radius_mm[i] - cl.radius_mm[i - 1]) * t;
+            let (p, r) = on_centerline(cl, s);
             (g.local_to_patient(p), r)
         };
         let (place, radius): (Vec<DVec3>, Vec<f64>) = arc.iter().map(|&s| at(s)).unzip();
@@ -441,23 +429,30 @@ fn interpolate(xs: &[f64], ys: &[f64], x: f64) -> f64 {
 
 /// The centerline point (local mm) at arc `s` and the way on there (over ±5 mm).
 pub fn centerline_at(study: &Study, s: f64) -> (DVec3, DVec3) {
-    let cl = &study.centerline;
-    let point = |s: f64| {
-        let i = cl
-            .arc_mm
-            .partition_point(|&a| a <= s)
-            .clamp(1, cl.arc_mm.len().max(2) - 1);
-        let (a0, a1) = (cl.arc_mm[i - 1], cl.arc_mm[i]);
-        let t = if a1 > a0 {
-            ((s - a0) / (a1 - a0)).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        DVec3::from_array(cl.points_mm[i - 1]).lerp(DVec3::from_array(cl.points_mm[i]), t)
-    };
+    let point = |s: f64| on_centerline(&study.centerline, s).0;
     let c = point(s);
     let t = (point(s + 5.0) - point(s - 5.0)).normalize_or(DVec3::Z);
     (c, t)
+}
+
+/// The centerline's point (local mm) and radius at arc `s`, linear between its points.
+fn on_centerline(cl: &Centerline, s: f64) -> (DVec3, f64) {
+    if cl.points_mm.len() < 2 {
+        let p = cl.points_mm.first().map_or(DVec3::ZERO, |p| DVec3::from_array(*p));
+        return (p, cl.radius_mm.first().copied().unwrap_or(0.0));
+    }
+    let i = cl
+        .arc_mm
+        .partition_point(|&a| a <= s)
+        .clamp(1, cl.arc_mm.len().max(2) - 1);
+    let (a0, a1) = (cl.arc_mm[i - 1], cl.arc_mm[i]);
+    let t = if a1 > a0 {
+        ((s - a0) / (a1 - a0)).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let p = DVec3::from_array(cl.points_mm[i - 1]).lerp(DVec3::from_array(cl.points_mm[i]), t);
+    (p, cl.radius_mm[i - 1] + (cl.radius_mm[i] - cl.radius_mm[i - 1]) * t)
 }
 
 /// How far (mm) from `c` along the unit `dir` the lumen reaches (Ds falls to the wall), at
