@@ -39,6 +39,13 @@ pub fn export_pair_reading(
     both: &[(&str, BothCoverage)],
     mut snapshot: impl FnMut(usize, usize, &Marker) -> Result<(u32, u32, Vec<u8>)>,
 ) -> Result<Vec<PathBuf>> {
+    if a.name == b.name {
+        return Err(voyage_core::Error::invalid(format!(
+            "{}: both positions are {}: each needs a folder of its own",
+            dir.display(),
+            a.name
+        )));
+    }
     let mut out = Vec::new();
     let mut pngs: Vec<Vec<Vec<u8>>> = Vec::new();
     for (p, r) in [&a, &b].into_iter().enumerate() {

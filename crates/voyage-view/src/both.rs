@@ -21,15 +21,18 @@ use super::{
 use voyage_core::{OFF_WALL_MM, Study};
 
 /// Two findings, one in each position, are the same one only when the second lies within
-/// this distance (mm) of where the link puts the first ...
-pub const SAME_FINDING_MM: f64 = 60.0;
-/// ... and within this much of it along the colon (mm of arc).
+/// this much of where the link puts the first along the colon (mm of arc) ...
 pub const SAME_FINDING_ARC_MM: f64 = 40.0;
+/// ... and within this distance of it (mm), or across the lumen there (twice its radius
+/// and this much more): stool rolls across a wide cecum.
+pub const SAME_FINDING_MM: f64 = 60.0;
 /// A finding that moved round the colon by more than this angle (degrees) between the
-/// positions, or farther than [`MOVED_MM`] from where the colon put it, moved by itself:
-/// probably stool, which rolls to the dependent side; a polyp stays on the wall.
+/// positions moved by itself: probably stool, which rolls to the dependent side; a polyp
+/// stays on the wall. So is one farther than [`MOVED_MM`] from where the link puts it: the
+/// link's own error is within that along the colon (its p95 on the phantom pair is 7 mm,
+/// its bound 25 mm), and a polyp lies within 3.3 mm of its place.
 pub const MOVED_ANGLE_DEG: f64 = 60.0;
-pub const MOVED_MM: f64 = 15.0;
+pub const MOVED_MM: f64 = 25.0;
 
 /// A finding in one position, the other or both.
 #[derive(Clone, Debug, Serialize)]
@@ -51,8 +54,8 @@ pub struct LinkedFinding {
 
 /// Pairs the findings of two positions (`a`'s markers `fa`, `b`'s `fb`, positions in each
 /// study's local mm): each pair the nearest to where the link puts the first, of a kind that
-/// can be the same thing, within [`SAME_FINDING_MM`] and [`SAME_FINDING_ARC_MM`]; the rest
-/// alone. First position's order, then the second's unpaired.
+/// can be the same thing, within [`SAME_FINDING_ARC_MM`] along the colon and
+/// [`SAME_FINDING_MM`] (or across the lumen) of it; the rest alone. First position's order, then the second's unpaired.
 pub fn link_findings(
     link: &Link,
     a: &Study,
@@ -71,11 +74,11 @@ pub fn link_findings(
     let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
     for (i, e) in expected.iter().enumerate() {
         let Some((at, arc)) = e else { continue };
+        let across = SAME_FINDING_MM.max(2.0 * radius_at(b, *arc) + SAME_FINDING_MM / 4.0);
         for (j, m) in fb.iter().enumerate() {
             let d = at.distance(in_lumen(m));
             let along = arc_b[j].map_or(f64::INFINITY, |s| (s - arc).abs());
-            if same_kind(fa[i].kind, m.kind) && d <= SAME_FINDING_MM && along <= SAME_FINDING_ARC_MM
-            {
+            if same_kind(fa[i].kind, m.kind) && d <= across && along <= SAME_FINDING_ARC_MM {
                 pairs.push((d, i, j));
             }
         }
@@ -122,6 +125,16 @@ pub fn link_findings(
             }),
     );
     out
+}
+
+/// The lumen's radius (Ds on the centerline, mm) at arc `s` of `study`.
+fn radius_at(study: &Study, s: f64) -> f64 {
+    let cl = &study.centerline;
+    let i = cl
+        .arc_mm
+        .partition_point(|&a| a < s)
+        .min(cl.radius_mm.len().saturating_sub(1));
+    cl.radius_mm.get(i).copied().unwrap_or(0.0)
 }
 
 /// A marker's point moved off the wall into the lumen, where places along the colon are

@@ -438,7 +438,10 @@ pub fn centerline_at(study: &Study, s: f64) -> (DVec3, DVec3) {
 /// The centerline's point (local mm) and radius at arc `s`, linear between its points.
 fn on_centerline(cl: &Centerline, s: f64) -> (DVec3, f64) {
     if cl.points_mm.len() < 2 {
-        let p = cl.points_mm.first().map_or(DVec3::ZERO, |p| DVec3::from_array(*p));
+        let p = cl
+            .points_mm
+            .first()
+            .map_or(DVec3::ZERO, |p| DVec3::from_array(*p));
         return (p, cl.radius_mm.first().copied().unwrap_or(0.0));
     }
     let i = cl
@@ -452,7 +455,10 @@ fn on_centerline(cl: &Centerline, s: f64) -> (DVec3, f64) {
         0.0
     };
     let p = DVec3::from_array(cl.points_mm[i - 1]).lerp(DVec3::from_array(cl.points_mm[i]), t);
-    (p, cl.radius_mm[i - 1] + (cl.radius_mm[i] - cl.radius_mm[i - 1]) * t)
+    (
+        p,
+        cl.radius_mm[i - 1] + (cl.radius_mm[i] - cl.radius_mm[i - 1]) * t,
+    )
 }
 
 /// How far (mm) from `c` along the unit `dir` the lumen reaches (Ds falls to the wall), at

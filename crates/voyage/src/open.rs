@@ -236,19 +236,51 @@ pub fn open_study(
     })
 }
 
-/// The series to open for each position the exam at `a.input` was scanned in: one entry
-/// per position when a DICOM folder holds series of different patient positions (supine and
-/// prone ...) and `--series` names none; else one, None (the input as the user gave it).
+/// The series to open for each position the exam at `a.input` was scanned in: the supine
+/// and the prone (else the first two positions) when a DICOM folder holds CT series of
+/// different patient positions and `--series` names none; else one, None (the input as the
+/// user gave it). Positions beyond two are left, said on stderr with their series.
+/// Points (`--seed`, `--exclude`, `--source`, `--target`) and `--position` are of one
+/// position: with two they are refused, asking for `--series`.
 pub fn exam_positions(a: &InputArgs) -> Result<Vec<Option<String>>> {
     if a.series.is_some() {
         return Ok(vec![a.series.clone()]);
     }
     let positions = io::positions_in(&a.input)?;
-    Ok(if positions.len() >= 2 {
-        positions.into_iter().map(|(_, uid)| Some(uid)).collect()
-    } else {
-        vec![None]
-    })
+    if positions.len() < 2 {
+        return Ok(vec![None]);
+    }
+    let p = &a.points;
+    let given = !p.seed.is_empty()
+        || !p.exclude.is_empty()
+        || p.source.is_some()
+        || p.target.is_some()
+        || p.position.is_some();
+    if given {
+        let list: Vec<String> = positions
+            .iter()
+            .map(|(pos, uid)| format!("{} {uid}", pos.code()))
+            .collect();
+        bail!(
+            "{}: the folder holds the exam in {} positions ({}): --seed, --exclude, --source, --target and --position are of one of them; give --series UID with them",
+            a.input.display(),
+            positions.len(),
+            list.join(", ")
+        );
+    }
+    for (pos, uid) in positions.iter().skip(2) {
+        eprintln!(
+            "note: {}: the exam's {} series ({}) is not opened with the first two positions; --series {uid} opens it",
+            a.input.display(),
+            pos.describe(),
+            pos.code()
+        );
+    }
+    Ok(positions
+        .into_iter()
+        .take(2)
+        .map(|(_, uid)| Some(uid))
+        .collect())
 }
 
 /// Opens every position of the exam (see [`exam_positions`]), one after another (each
@@ -266,10 +298,15 @@ pub fn open_exam(
         .enumerate()
         .map(|(i, uid)| {
             let one = InputArgs {
-                series: uid,
+                series: uid.clone(),
                 ..a.clone()
             };
-            let mut p = open_study(&one, nav_min_wall_mm, |o| progress(i, n, o))?;
+            let mut p = open_study(&one, nav_min_wall_mm, |o| progress(i, n, o)).with_context(
+                || match &uid {
+                    Some(uid) if n > 1 => format!("the exam's series {uid}"),
+                    _ => "the exam".to_string(),
+                },
+            )?;
             if n > 1 {
                 p.exam.name = format!("{} ({})", p.exam.name, position_of(&p.study));
             }
@@ -278,9 +315,15 @@ pub fn open_exam(
         .collect()
 }
 
-/// How the patient lay for `study`: "supine", "prone" ...
+/// How the patient lay for `study`, as a short name that also names its folder in the
+/// exports: "supine", "prone", "right-decubitus", "left-decubitus".
 pub fn position_of(study: &Study) -> &'static str {
-    study.segmentation.orientation.position.describe()
+    match study.segmentation.orientation.position {
+        PatientPosition::Hfs | PatientPosition::Ffs => "supine",
+        PatientPosition::Hfp | PatientPosition::Ffp => "prone",
+        PatientPosition::Hfdr | PatientPosition::Ffdr => "right-decubitus",
+        PatientPosition::Hfdl | PatientPosition::Ffdl => "left-decubitus",
+    }
 }
 
 /// What the user chose for a volume already in memory.

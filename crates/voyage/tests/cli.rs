@@ -1168,5 +1168,33 @@ fn an_exam_of_two_positions_is_prepared_and_read_in_both() {
         "{cov}"
     );
     assert_eq!(cov["positions"].as_array().unwrap().len(), 2);
+    // A point is of one position: with two it is refused, asking for --series.
+    let seeded = voyage(&[
+        "prep",
+        exam.to_str().unwrap(),
+        "--seed",
+        "100,100,100",
+        "--out",
+        dir.join("seeded").to_str().unwrap(),
+    ]);
+    assert!(!seeded.status.success());
+    assert!(text(&seeded).contains("--series"), "{}", text(&seeded));
+    // A report over both positions needs their findings: none found is an error that names
+    // where it looked, never an empty report.
+    let report = voyage(&[
+        "report",
+        exam.to_str().unwrap(),
+        "--findings",
+        dir.join("nothing").to_str().unwrap(),
+        "--out",
+        dir.join("report").to_str().unwrap(),
+        "--no-coverage",
+    ]);
+    assert!(!report.status.success());
+    assert!(
+        text(&report).contains("supine/findings.json"),
+        "{}",
+        text(&report)
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }

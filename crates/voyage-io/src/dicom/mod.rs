@@ -130,11 +130,17 @@ pub fn load_dir(path: &Path, opts: &LoadOptions) -> Result<Loaded> {
     Ok(loaded)
 }
 
+/// A series of fewer slices is no position of an exam (a localizer, a few slices of a
+/// region): a colon spans 40 slices even at 5 mm.
+pub const EXAM_MIN_SLICES: usize = 40;
+
 /// The series of an exam scanned in several positions (supine and prone ...): for each
 /// patient position the CT series hold, by the way gravity pulls (head or feet first alike),
 /// the one a folder of that position alone would load (CT first, the most slices, ties by
 /// UID), as (position, SeriesInstanceUID): supine first, then prone, then the decubitus
-/// ones. Series that do not say their position are not among them. Only headers are read.
+/// ones. Only CT series of [`EXAM_MIN_SLICES`] slices or more that say their position count
+/// (a localizer or a secondary capture beside the exam is not a position). Only headers are
+/// read.
 pub fn positions_in(path: &Path) -> Result<Vec<(PatientPosition, String)>> {
     let files = list_files(path)?;
     let headers: Vec<Result<Probe>> = files.par_iter().map(|f| probe_file(f)).collect();
@@ -156,6 +162,9 @@ pub fn positions_in(path: &Path) -> Result<Vec<(PatientPosition, String)>> {
             continue;
         };
         let s = summary(uid, hs);
+        if s.modality.as_deref() != Some("CT") || s.slices < EXAM_MIN_SLICES {
+            continue;
+        }
         let same_way = |p: &PatientPosition| p.gravity_lps() == position.gravity_lps();
         match best.iter_mut().find(|(p, _)| same_way(p)) {
             Some(b)

@@ -41,8 +41,9 @@ pub struct Info {
     pub position: Option<&'static str>,
     /// Where gravity pulls (LPS unit vector), from the position.
     pub gravity_lps: Option<[f64; 3]>,
-    /// An exam scanned in several positions: each position and its series, which `prep`,
-    /// `coverage`, `report` and `view` open together (empty otherwise).
+    /// An exam scanned in several positions: each position and its series, supine first,
+    /// then prone; `prep`, `coverage`, `report` and `view` open the first two together
+    /// (empty otherwise).
     pub exam_positions: Vec<ExamPosition>,
     /// The loader's findings, `format` among them (flattened: each key once).
     #[serde(flatten)]
@@ -156,7 +157,7 @@ impl Info {
                 .map(|p| format!("{} ({}, series {})", p.describe, p.position, p.series))
                 .collect();
             println!(
-                "  exam         {} positions, opened together by prep, coverage, report and view (--series opens one): {}",
+                "  exam         {} positions: {} (prep, coverage, report and view open the first two together; --series opens one)",
                 list.len(),
                 list.join("; ")
             );

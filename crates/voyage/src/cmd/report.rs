@@ -144,16 +144,30 @@ fn snapshot(a: &ReportArgs, study: &Study, mesh: &CellMesh, m: &Marker) -> (u32,
 /// read both ways, the coverage over both, the report over both.
 fn both_positions(a: &ReportArgs, positions: &[Prepared]) -> Result<()> {
     let (pa, pb) = (&positions[0], &positions[1]);
+    let files: Vec<PathBuf> = [pa, pb]
+        .iter()
+        .map(|p| a.findings.join(position_of(&p.study)).join("findings.json"))
+        .collect();
+    if !files.iter().any(|f| f.exists()) {
+        anyhow::bail!(
+            "{}: the exam has two positions: --findings names the folder the window exported them into, with {} (neither found)",
+            a.findings.display(),
+            files
+                .iter()
+                .map(|f| f.display().to_string())
+                .collect::<Vec<_>>()
+                .join(" and ")
+        );
+    }
     let mut findings = Vec::new();
     let mut reads = Vec::new();
-    for p in [pa, pb] {
+    for (p, file) in [pa, pb].into_iter().zip(&files) {
         let name = position_of(&p.study);
-        let file = a.findings.join(name).join("findings.json");
         findings.push(if file.exists() {
-            read_findings(&file, p.study.ct.geometry())?
+            read_findings(file, p.study.ct.geometry())?
         } else {
             eprintln!(
-                "note: {}: not found; no findings marked {name}",
+                "warning: {}: not found: the report counts no findings marked {name}",
                 file.display()
             );
             Findings::default()

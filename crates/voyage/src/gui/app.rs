@@ -481,11 +481,16 @@ impl App {
             self.status = "a correction is still being preprocessed".into();
             return;
         }
-        let points = c.applied_to(source.points(), s.study.storage.input_geometry());
+        if matches!(source, Source::Phantom { pair: true, .. }) {
+            self.status = "the phantom pair is made afresh each time: corrections are for a scan's files (voyage phantom colon --pair --dicom DIR writes them)".into();
+            return;
+        }
+        // The points of the position shown: with two positions open, the correction is of
+        // that one alone.
+        let points = c.applied_to(&s.points, s.study.storage.input_geometry());
         self.status = format!("preprocessing again: {}", c.describe());
         self.correction_error = None;
         self.correcting = Some(c);
-        // With two positions open, the correction is of the one shown.
         let source = match self.other.is_some() {
             true => source.with_series(s.series_uid.clone()),
             false => source.clone(),
@@ -538,6 +543,8 @@ impl App {
                     (self.slices.window, self.slices.level) = (2.0, 0.5);
                 }
                 self.findings = Findings::default();
+                self.looked_up = None;
+                self.polyp_span = None;
                 self.closeup = None;
                 self.translucency = None;
                 self.closeup_at = None;
@@ -613,10 +620,16 @@ impl App {
                     v.colon_changed();
                 }
                 if let Some(o) = self.other.take() {
+                    // The exam's name, with its position, and the exam as the source: the
+                    // other position's corrections are its own.
+                    if let Some(old) = &self.session {
+                        s.exam.name = old.exam.name.clone();
+                    }
                     self.other = Some(Other::new(&s, o.session, o.findings));
+                } else {
+                    self.source = Some(source);
                 }
                 self.session = Some(s);
-                self.source = Some(source);
                 self.generation += 1;
             }
             Err(e) => {
@@ -686,7 +699,9 @@ impl App {
                     s.set_playing(!s.playing);
                 }
             }
-            Action::SwitchPosition => self.switch_position(),
+            Action::SwitchPosition => {
+                self.switch_position();
+            }
             Action::Reverse => {
                 if let Some(s) = &mut self.session {
                     s.set_direction(s.direction().reversed());
@@ -989,7 +1004,7 @@ impl App {
             Step::GoTo(label) => self.go_to_marker(&label),
             Step::SwitchPosition(on) => {
                 if on {
-                    self.switch_position()
+                    self.switch_position();
                 }
             }
             Step::ShowInOther(label) => self.show_in_other(&label),
@@ -1050,10 +1065,16 @@ impl App {
 
     /// Shows the exam's other position, standing where the camera's place lies in it; what
     /// was shown waits beside it.
-    fn switch_position(&mut self) {
+    /// Whether it switched.
+    fn switch_position(&mut self) -> bool {
+        if self.correcting.is_some() || self.job.is_some() {
+            self.status =
+                "a correction is being preprocessed: switch position when it is done".into();
+            return false;
+        }
         let (Some(s), Some(o)) = (self.session.take(), self.other.take()) else {
             self.status = "the exam has one position open".into();
-            return;
+            return false;
         };
         let from = crate::open::position_of(&s.study);
         let findings = std::mem::take(&mut self.findings);
@@ -1071,8 +1092,10 @@ impl App {
         self.translucency = None;
         self.closeup_at = None;
         self.measure_from = None;
-        self.slices.follow();
+        self.polyp_span = None;
+        self.slices.volume_changed();
         self.generation += 1;
+        true
     }
 
     /// Switches to the other position at the place the link puts marker `label` there, and
@@ -1092,7 +1115,9 @@ impl App {
         };
         let from = crate::open::position_of(&s.study);
         let label = format!("{label} ({from})");
-        self.switch_position();
+        if !self.switch_position() {
+            return;
+        }
         if let Some(s) = &mut self.session {
             if super::positions::look_at(s, there) {
                 self.status = format!("{label}: where the link puts it here");

@@ -248,6 +248,7 @@ fn open(source: &Source, progress: &dyn Fn(usize, usize, &str)) -> anyhow::Resul
         .map(|(study, exam, series_uid)| {
             let mut s = Session::new(exam, study).with_context(|| source.describe())?;
             s.series_uid = series_uid;
+            s.points = source.points().clone();
             Ok(s)
         })
         .collect()

@@ -35,6 +35,9 @@ pub struct Session {
     /// The series it was opened from, when the input held several (one position of an
     /// exam): a correction opens that one again.
     pub series_uid: Option<String>,
+    /// The user's points (seeds, exclusions, ends, position) it was made with: a correction
+    /// adds to them.
+    pub points: crate::open::PointArgs,
     pub study: Study,
     pub field: PotentialField<BrickStore>,
     pub mesh: CellMesh,
@@ -111,6 +114,7 @@ impl Session {
         Ok(Session {
             exam,
             series_uid: None,
+            points: Default::default(),
             study,
             field,
             mesh,

@@ -173,6 +173,15 @@ impl SlicePanel {
         }
     }
 
+    /// The slices show another volume (the exam's other position): every image is drawn
+    /// again, whatever it showed.
+    pub fn volume_changed(&mut self) {
+        self.follow();
+        for v in &mut self.views {
+            v.shows = None;
+        }
+    }
+
     /// The three slices side by side; returns what a click asked for, if anything. `busy`:
     /// a correction is being preprocessed (no other is offered meanwhile).
     pub fn show(
