@@ -121,6 +121,8 @@ pub fn run(a: &CoverageArgs) -> Result<()> {
                 "positions": out,
                 "link": link_json(link, &read),
                 "both_positions": {
+                    "a": read[0].position,
+                    "b": read[1].position,
                     "one_way": one_way,
                     "two_way": two_way,
                     "after_review": after_review,

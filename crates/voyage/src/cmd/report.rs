@@ -48,6 +48,19 @@ const SNAPSHOT_PX: u32 = 512;
 
 pub fn run(a: &ReportArgs) -> Result<()> {
     voyage_export::study::check_out_dir(&a.out)?;
+    // Before any work: an exam of two positions reads its findings from a folder.
+    if a.findings.is_file() && crate::open::exam_positions(&a.input)?.len() >= 2 {
+        let folder = a
+            .findings
+            .parent()
+            .and_then(|p| p.parent())
+            .filter(|p| !p.as_os_str().is_empty())
+            .map_or_else(|| "the folder".to_string(), |p| p.display().to_string());
+        anyhow::bail!(
+            "{}: the exam has two positions: give --findings the folder the window exported them into (e.g. {folder}, which holds supine/findings.json and prone/findings.json), not one position's file",
+            a.findings.display()
+        );
+    }
     let min_wall = FlightOptions::default().safety.min_wall_mm;
     let mut positions = load_and_prepare_exam(&a.input, Some(min_wall))?;
     if positions.len() >= 2 {

@@ -15,8 +15,9 @@ use voyage_core::LEFT_OUT_DOUBT_ML;
 use voyage_export::{PositionReading, ReportCoverage, export_pair_reading, export_reading};
 use voyage_nav::{Camera, Direction};
 use voyage_view::{
-    CloseupBox, FindingKind, Findings, Hit, Material, MucosaMap, ReadingStep, TransferFunction,
-    TranslucencyOptions, both_coverage, encode, pick, render_closeup, render_translucency,
+    BothCoverage, CloseupBox, FindingKind, Findings, Hit, Material, MucosaMap, ReadingStep,
+    TransferFunction, TranslucencyOptions, both_coverage, encode, pick, render_closeup,
+    render_translucency,
 };
 
 use voyage_nav::Input;
@@ -381,7 +382,14 @@ fn other_scout(ui: &mut egui::Ui, o: &Other, view: &mut ScoutView) {
     let marks = ScoutMarks {
         centerline: &s.study.centerline.points_mm,
         arc_mm: &s.study.centerline.arc_mm,
-        markers: vec![("here".to_string(), here)],
+        markers: std::iter::once(("here".to_string(), here))
+            .chain(
+                o.findings
+                    .markers
+                    .iter()
+                    .map(|m| (m.label.clone(), m.position)),
+            )
+            .collect(),
         submarine: here,
         view_dir: s.pose().z_body(),
         unseen: None,
@@ -892,14 +900,38 @@ impl App {
                         seen: &b.coverage.session,
                     },
                 );
-                export_pair_reading(
-                    &dir,
+                // Supine first, as `voyage report` lists them, whichever is shown.
+                let (ra, rb) = (
                     position_reading(a, &self.findings),
                     position_reading(b, &o.findings),
-                    &o.link,
-                    &[("whole session", both)],
-                    |p, _, m| snapshot(if p == 0 { a } else { b }, m),
-                )
+                );
+                if crate::open::position_of(&a.study) == "prone" {
+                    let back = o.link.reversed();
+                    let flipped = BothCoverage {
+                        a_pct: both.b_pct,
+                        b_pct: both.a_pct,
+                        a_with_b_pct: both.b_with_a_pct,
+                        b_with_a_pct: both.a_with_b_pct,
+                        ..both
+                    };
+                    export_pair_reading(
+                        &dir,
+                        rb,
+                        ra,
+                        &back,
+                        &[("whole session", flipped)],
+                        |p, _, m| snapshot(if p == 0 { b } else { a }, m),
+                    )
+                } else {
+                    export_pair_reading(
+                        &dir,
+                        ra,
+                        rb,
+                        &o.link,
+                        &[("whole session", both)],
+                        |p, _, m| snapshot(if p == 0 { a } else { b }, m),
+                    )
+                }
             }
         };
         match result {
@@ -1106,7 +1138,10 @@ impl App {
             return;
         };
         let Some(m) = self.findings.markers.iter().find(|m| m.label == label) else {
-            self.status = format!("no marker {label}");
+            // A marker of the other position: looked up here.
+            if !self.show_other_marker_here(label) {
+                self.status = format!("no marker {label} in either position");
+            }
             return;
         };
         let Some(there) = o.place_of(s, m) else {
@@ -1126,6 +1161,37 @@ impl App {
         }
         self.looked_up = Some((label, there));
         self.slices.follow();
+    }
+
+    /// Looks at where the link puts the other position's marker `label` in the one shown;
+    /// false when the other position has no such marker.
+    fn show_other_marker_here(&mut self, label: &str) -> bool {
+        let (Some(s), Some(o)) = (&self.session, &self.other) else {
+            return false;
+        };
+        let Some(m) = o.findings.markers.iter().find(|m| m.label == label) else {
+            return false;
+        };
+        let here = o.link.reversed().show_in(
+            &o.session.study,
+            &s.study,
+            m.position + m.normal * voyage_core::OFF_WALL_MM,
+        );
+        let name = format!("{label} ({})", o.name());
+        match here {
+            Some(x) => {
+                if let Some(s) = &mut self.session
+                    && super::positions::look_at(s, x)
+                {
+                    self.status = format!("{name}: where the link puts it here");
+                }
+                self.closeup_at = Some(x);
+                self.looked_up = Some((name, x));
+                self.slices.follow();
+            }
+            None => self.status = format!("{name} lies near no part of the colon's centerline"),
+        }
+        true
     }
 
     fn go_to_marker(&mut self, label: &str) {
@@ -1438,6 +1504,23 @@ impl App {
                 }
             });
         }
+        let mut show_here = None;
+        if let Some(o) = &self.other {
+            for m in &o.findings.markers {
+                ui.horizontal(|ui| {
+                    ui.label(format!("{}: {} {}", o.name(), m.label, m.kind.name()));
+                    if ui
+                        .small_button("show here")
+                        .on_hover_text(
+                            "look at where the link puts this marker in the position shown",
+                        )
+                        .clicked()
+                    {
+                        show_here = Some(m.label.clone());
+                    }
+                });
+            }
+        }
         let mut remove_measure = None;
         for (i, m) in self.findings.measurements.iter().enumerate() {
             ui.horizontal(|ui| {
@@ -1458,6 +1541,9 @@ impl App {
         }
         if let Some(l) = show_in_other {
             self.show_in_other(&l);
+        }
+        if let Some(l) = show_here {
+            self.show_other_marker_here(&l);
         }
         ui.horizontal(|ui| {
             ui.add(egui::TextEdit::singleline(&mut self.export_dir).desired_width(120.0));

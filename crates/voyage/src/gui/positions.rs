@@ -107,10 +107,27 @@ pub fn stand_at(session: &mut Session, x: DVec3) -> bool {
     session.move_to_spot(x).is_ok()
 }
 
-/// Moves `session`'s camera to the viewing spot for `x` (a place on or by the wall) and
-/// turns it to look at `x`, anterior up.
+/// How far back along the colon from a place the camera stands to look at it (mm): the
+/// place with the wall around it, as a marker is seen.
+const LOOK_BACK_MM: f64 = 20.0;
+
+/// Moves `session`'s camera to look at `x` (a place on or by the wall), anterior up: from
+/// the centerline [`LOOK_BACK_MM`] before it in the flight's direction where that is safe,
+/// else from the viewing spot for it.
 pub fn look_at(session: &mut Session, x: DVec3) -> bool {
-    if session.move_to_spot(x).is_err() && !stand_at(session, x) {
+    let back = session.study.arc_at(x).map(|arc| {
+        let back = match session.direction() {
+            Direction::Forward => arc - LOOK_BACK_MM,
+            Direction::Backward => arc + LOOK_BACK_MM,
+        };
+        centerline_at(
+            &session.study,
+            back.clamp(0.0, session.study.centerline.length_mm),
+        )
+        .0
+    });
+    let from_back = back.is_some_and(|c| session.jump_to(c, x - c).is_ok());
+    if !from_back && session.move_to_spot(x).is_err() && !stand_at(session, x) {
         return false;
     }
     let at = session.pose().position;
