@@ -407,11 +407,11 @@ fn facing_ends(coarse: &Coarse, blocks: &[Vec<usize>], a: &Link, b: u32) -> Opti
         exit = coarse.nearest(&far_half, coarse.centre_mm(entry))?;
         entry = coarse.nearest(of_b, coarse.centre_mm(exit))?;
     }
-    let off_b = off_ends(coarse, b, of_b)?;
     let off_a = |x: usize| far - dist[x];
     if off_a(exit) <= EARLY_EXIT_MM {
         return Some((exit, entry));
     }
+    let off_b = off_ends(coarse, b, of_b)?;
     let off_b = |x: usize| off_b[x];
     let cheapest = |candidates: &[usize], off: &dyn Fn(usize) -> f64, to: usize| {
         let to = coarse.centre_mm(to);
