@@ -17,6 +17,7 @@ use super::{
     findings::{FindingKind, Marker},
     link::{Link, centerline_at},
     mesh::CellMesh,
+    reading::Reading,
 };
 use voyage_core::{OFF_WALL_MM, Study};
 
@@ -157,12 +158,16 @@ fn angle_round(study: &Study, p: DVec3, q: DVec3) -> f64 {
         return 0.0;
     };
     let (c, t) = centerline_at(study, s);
-    let flat = |v: DVec3| (v - t * v.dot(t)).normalize_or_zero();
-    let (u, v) = (flat(p - c), flat(q - c));
+    let (u, v) = (across(t, p - c), across(t, q - c));
     if u == DVec3::ZERO || v == DVec3::ZERO {
         return 0.0;
     }
     u.dot(v).clamp(-1.0, 1.0).acos().to_degrees()
+}
+
+/// The unit direction of `v` across the axis of way `t` (zero along it).
+fn across(t: DVec3, v: DVec3) -> DVec3 {
+    (v - t * v.dot(t)).normalize_or_zero()
 }
 
 /// Mucosa binned along the colon every this many mm of arc ...
@@ -203,12 +208,10 @@ fn vertex(mesh: &CellMesh, v: u32) -> DVec3 {
 /// run along the patient's L, P, S, so the sectors mean the same side in both.
 fn sector(study: &Study, s: f64, p: DVec3) -> usize {
     let (c, t) = centerline_at(study, s);
-    let flat = |v: DVec3| (v - t * v.dot(t)).normalize_or_zero();
     // Where the colon runs front to back, the patient's left stands in for the anterior.
-    let front = if flat(DVec3::NEG_Y).length_squared() > 0.1 {
-        flat(DVec3::NEG_Y)
-    } else {
-        flat(DVec3::X)
+    let front = match across(t, DVec3::NEG_Y) {
+        f if f.length_squared() > 0.1 => f,
+        _ => across(t, DVec3::X),
     };
     let side = t.cross(front);
     let r = p - c;
@@ -302,4 +305,33 @@ pub fn both_coverage(link: &Link, a: &Read, b: &Read) -> BothCoverage {
         b_with_a_pct: pct(sb, wb),
         combined_pct: pct(sa + sb, wa + wb),
     }
+}
+
+/// [`both_coverage`] at each stage of two positions' readings (each its study, map and
+/// reading): one way, both ways, after the review.
+pub fn both_readings(
+    link: &Link,
+    a: (&Study, &MucosaMap, &Reading),
+    b: (&Study, &MucosaMap, &Reading),
+) -> [BothCoverage; 3] {
+    let stage = |pick: fn(&Reading) -> &Coverage| {
+        let (x, y) = (
+            Read {
+                study: a.0,
+                map: a.1,
+                seen: pick(a.2),
+            },
+            Read {
+                study: b.0,
+                map: b.1,
+                seen: pick(b.2),
+            },
+        );
+        both_coverage(link, &x, &y)
+    };
+    [
+        stage(|r| &r.one_way),
+        stage(|r| &r.two_way),
+        stage(|r| &r.after_review),
+    ]
 }

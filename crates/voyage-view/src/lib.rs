@@ -25,7 +25,7 @@ mod visibility;
 
 pub use both::{
     ARC_BIN_MM, BothCoverage, LinkedFinding, MOVED_ANGLE_DEG, MOVED_MM, MucosaMap, Read,
-    SAME_FINDING_ARC_MM, SAME_FINDING_MM, SECTORS, both_coverage, link_findings,
+    SAME_FINDING_ARC_MM, SAME_FINDING_MM, SECTORS, both_coverage, both_readings, link_findings,
 };
 pub use closeup::{CloseupBox, MAX_HALF_SIZE_MM, TfPoint, TransferFunction, render_closeup};
 pub use coverage::{

@@ -131,7 +131,7 @@ impl Link {
         let (pa, pb) = (Profile::of(a), Profile::of(b));
         // A first fit by the centroids, then the rigid fit of what the warp matched, twice.
         let mut fit = Rigid::centroids(&pa.place, &pb.place);
-        let mut pieces = anchors(&pa, &pb);
+        let pieces = anchors(&pa, &pb);
         let anchored = pieces.len() > 2;
         let mut path = Vec::new();
         for _ in 0..3 {
@@ -141,7 +141,6 @@ impl Link {
                 .map(|&(i, j)| (pa.place[i], pb.place[j]))
                 .unzip();
             fit = Rigid::fit(&x, &y);
-            pieces = anchors(&pa, &pb);
         }
         let mean_moved_mm = if path.is_empty() {
             0.0

@@ -11,8 +11,8 @@ use serde_json::{Value, json};
 use voyage_core::Study;
 use voyage_nav::{Camera, FlightOptions};
 use voyage_view::{
-    BothCoverage, CellMesh, Coverage, CoverageOptions, Link, MucosaMap, READING_FOV_DEG, Reading,
-    ReadingProgress, Visit, both_coverage, read_both_ways,
+    BothCoverage, CellMesh, CoverageOptions, Link, MucosaMap, READING_FOV_DEG, Reading,
+    ReadingProgress, Visit, both_readings, read_both_ways,
 };
 
 use super::prep::load_and_prepare_exam;
@@ -105,14 +105,12 @@ pub fn run(a: &CoverageArgs) -> Result<()> {
         .collect::<Result<_>>()?;
     let link = (read.len() >= 2).then(|| Link::between(&positions[0].study, &positions[1].study));
     let both = link.as_ref().map(|link| {
-        let of = |pick: fn(&Reading) -> &Coverage| {
-            both_coverage(link, &read[0].seen(pick), &read[1].seen(pick))
-        };
-        [
-            of(|r| &r.one_way),
-            of(|r| &r.two_way),
-            of(|r| &r.after_review),
-        ]
+        let (x, y) = (&read[0], &read[1]);
+        both_readings(
+            link,
+            (x.study, &x.map, &x.reading),
+            (y.study, &y.map, &y.reading),
+        )
     });
     if a.json {
         let mut out: Vec<Value> = read.iter().map(|r| position_json(r, options, a)).collect();
@@ -155,17 +153,6 @@ struct Read<'a> {
     reading: Reading,
 }
 
-impl Read<'_> {
-    /// This position as the coverage over both sees it, at the reading's stage `pick`.
-    fn seen(&self, pick: fn(&Reading) -> &Coverage) -> voyage_view::Read<'_> {
-        voyage_view::Read {
-            study: self.study,
-            map: &self.map,
-            seen: pick(&self.reading),
-        }
-    }
-}
-
 fn read_position<'a>(
     a: &CoverageArgs,
     options: CoverageOptions,
@@ -181,15 +168,7 @@ fn read_position<'a>(
     };
     let mut mesh = CellMesh::new(&study.surface, &study.cells);
     mesh.index_cells();
-    let camera = Camera::lens(a.fov);
-    let bar = reading_bar();
-    let reading = read_both_ways(study, &mesh, options, camera, a.size, |p| {
-        show_reading(&bar, p)
-    })
-    .with_context(|| format!("{name}: the two-way reading"))?;
-    if let Some(b) = bar {
-        b.finish_and_clear();
-    }
+    let reading = read_with_bar(study, &mesh, options, Camera::lens(a.fov), a.size, &name)?;
     for f in &reading.flights {
         if !f.reached {
             eprintln!(
@@ -320,8 +299,28 @@ fn print_both(link: &Link, read: &[Read], [one_way, two_way, after]: [BothCovera
     }
 }
 
+/// The two-way reading of `study` (named `name` in errors), with a bar on a terminal.
+pub(super) fn read_with_bar(
+    study: &Study,
+    mesh: &CellMesh,
+    options: CoverageOptions,
+    camera: Camera,
+    size: u32,
+    name: &str,
+) -> Result<Reading> {
+    let bar = reading_bar();
+    let reading = read_both_ways(study, mesh, options, camera, size, |p| {
+        show_reading(&bar, p)
+    })
+    .with_context(|| format!("{name}: the two-way reading"))?;
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    Ok(reading)
+}
+
 /// A bar for the two-way reading on a terminal (None elsewhere), for [`show_reading`].
-pub(super) fn reading_bar() -> Option<ProgressBar> {
+fn reading_bar() -> Option<ProgressBar> {
     if !std::io::stderr().is_terminal() {
         return None;
     }
@@ -331,7 +330,7 @@ pub(super) fn reading_bar() -> Option<ProgressBar> {
 }
 
 /// The reading's step and its frames or patches on the bar.
-pub(super) fn show_reading(bar: &Option<ProgressBar>, p: ReadingProgress) {
+fn show_reading(bar: &Option<ProgressBar>, p: ReadingProgress) {
     let Some(b) = bar else {
         return;
     };

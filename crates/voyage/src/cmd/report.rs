@@ -7,7 +7,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args;
 use voyage_core::Study;
 use voyage_export::{
@@ -15,9 +15,8 @@ use voyage_export::{
 };
 use voyage_nav::{Camera, FlightOptions};
 use voyage_view::{
-    BothCoverage, CellMesh, Coverage, CoverageOptions, Findings, Lighting, Link, Marker, MucosaMap,
-    READING_FOV_DEG, Reading, Strategy, View, Visibility, both_coverage, read_both_ways,
-    render_rgba,
+    BothCoverage, CellMesh, CoverageOptions, Findings, Lighting, Link, Marker, MucosaMap,
+    READING_FOV_DEG, Reading, Strategy, View, Visibility, both_readings, render_rgba,
 };
 
 use super::prep::load_and_prepare_exam;
@@ -101,14 +100,8 @@ fn read(a: &ReportArgs, study: &Study, name: String) -> Result<Read> {
     }
     // The same reading as `voyage coverage` with its defaults, not the snapshots' lens.
     let lens = Camera::lens(READING_FOV_DEG);
-    let bar = super::coverage::reading_bar();
-    let r = read_both_ways(study, &mesh, CoverageOptions::default(), lens, 256, |p| {
-        super::coverage::show_reading(&bar, p)
-    })
-    .with_context(|| format!("{name}: the two-way reading"))?;
-    if let Some(b) = bar {
-        b.finish_and_clear();
-    }
+    let r =
+        super::coverage::read_with_bar(study, &mesh, CoverageOptions::default(), lens, 256, &name)?;
     let coverage = ReportCoverage {
         session_pct: None,
         one_way_pct: Some(r.one_way.percent()),
@@ -198,28 +191,12 @@ fn both_positions(a: &ReportArgs, positions: &[Prepared]) -> Result<()> {
     ];
     let stages: Vec<(&str, BothCoverage)> = match (&reads[0].reading, &reads[1].reading) {
         (Some(ra), Some(rb)) => {
-            let stage = |pick: fn(&Reading) -> &Coverage| {
-                both_coverage(
-                    &link,
-                    &voyage_view::Read {
-                        study: &pa.study,
-                        map: &maps[0],
-                        seen: pick(ra),
-                    },
-                    &voyage_view::Read {
-                        study: &pb.study,
-                        map: &maps[1],
-                        seen: pick(rb),
-                    },
-                )
-            };
+            let [one_way, two_way, after_review] =
+                both_readings(&link, (&pa.study, &maps[0], ra), (&pb.study, &maps[1], rb));
             vec![
-                ("One way (rectum to cecum)", stage(|r| &r.one_way)),
-                ("Both ways", stage(|r| &r.two_way)),
-                (
-                    "After the review of unseen patches",
-                    stage(|r| &r.after_review),
-                ),
+                ("One way (rectum to cecum)", one_way),
+                ("Both ways", two_way),
+                ("After the review of unseen patches", after_review),
             ]
         }
         _ => Vec::new(),

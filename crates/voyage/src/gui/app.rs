@@ -15,9 +15,8 @@ use voyage_core::LEFT_OUT_DOUBT_ML;
 use voyage_export::{PositionReading, ReportCoverage, export_pair_reading, export_reading};
 use voyage_nav::{Camera, Direction};
 use voyage_view::{
-    BothCoverage, CloseupBox, FindingKind, Findings, Hit, Material, MucosaMap, ReadingStep,
-    TransferFunction, TranslucencyOptions, both_coverage, encode, pick, render_closeup,
-    render_translucency,
+    CloseupBox, FindingKind, Findings, Hit, Material, MucosaMap, ReadingStep, TransferFunction,
+    TranslucencyOptions, both_coverage, encode, pick, render_closeup, render_translucency,
 };
 
 use voyage_nav::Input;
@@ -882,13 +881,21 @@ impl App {
             ),
             // Both positions: each into a folder of its name, the report over both beside.
             Some(o) => {
-                let (a, b) = (s, &o.session);
+                // Supine first, as `voyage report` lists them, whichever is shown.
+                let shown = (s, &self.findings);
+                let waiting = (&o.session, &o.findings);
+                let prone_shown = crate::open::position_of(&s.study) == "prone";
+                let ((a, fa), (b, fb), link) = if prone_shown {
+                    (waiting, shown, o.link.reversed())
+                } else {
+                    (shown, waiting, o.link.clone())
+                };
                 let (map_a, map_b) = (
                     MucosaMap::of(&a.study, &a.mesh),
                     MucosaMap::of(&b.study, &b.mesh),
                 );
                 let both = both_coverage(
-                    &o.link,
+                    &link,
                     &voyage_view::Read {
                         study: &a.study,
                         map: &map_a,
@@ -900,38 +907,14 @@ impl App {
                         seen: &b.coverage.session,
                     },
                 );
-                // Supine first, as `voyage report` lists them, whichever is shown.
-                let (ra, rb) = (
-                    position_reading(a, &self.findings),
-                    position_reading(b, &o.findings),
-                );
-                if crate::open::position_of(&a.study) == "prone" {
-                    let back = o.link.reversed();
-                    let flipped = BothCoverage {
-                        a_pct: both.b_pct,
-                        b_pct: both.a_pct,
-                        a_with_b_pct: both.b_with_a_pct,
-                        b_with_a_pct: both.a_with_b_pct,
-                        ..both
-                    };
-                    export_pair_reading(
-                        &dir,
-                        rb,
-                        ra,
-                        &back,
-                        &[("whole session", flipped)],
-                        |p, _, m| snapshot(if p == 0 { b } else { a }, m),
-                    )
-                } else {
-                    export_pair_reading(
-                        &dir,
-                        ra,
-                        rb,
-                        &o.link,
-                        &[("whole session", both)],
-                        |p, _, m| snapshot(if p == 0 { a } else { b }, m),
-                    )
-                }
+                export_pair_reading(
+                    &dir,
+                    position_reading(a, fa),
+                    position_reading(b, fb),
+                    &link,
+                    &[("whole session", both)],
+                    |p, _, m| snapshot(if p == 0 { a } else { b }, m),
+                )
             }
         };
         match result {
@@ -1150,16 +1133,21 @@ impl App {
         };
         let from = crate::open::position_of(&s.study);
         let label = format!("{label} ({from})");
-        if !self.switch_position() {
-            return;
+        if self.switch_position() {
+            self.look_up(label, there);
         }
-        if let Some(s) = &mut self.session {
-            if super::positions::look_at(s, there) {
-                self.status = format!("{label}: where the link puts it here");
-            }
-            self.closeup_at = Some(there);
+    }
+
+    /// Looks at `x` in the position shown, where the link put the other position's marker
+    /// `name`, and marks it there.
+    fn look_up(&mut self, name: String, x: DVec3) {
+        if let Some(s) = &mut self.session
+            && super::positions::look_at(s, x)
+        {
+            self.status = format!("{name}: where the link puts it here");
         }
-        self.looked_up = Some((label, there));
+        self.closeup_at = Some(x);
+        self.looked_up = Some((name, x));
         self.slices.follow();
     }
 
@@ -1179,16 +1167,7 @@ impl App {
         );
         let name = format!("{label} ({})", o.name());
         match here {
-            Some(x) => {
-                if let Some(s) = &mut self.session
-                    && super::positions::look_at(s, x)
-                {
-                    self.status = format!("{name}: where the link puts it here");
-                }
-                self.closeup_at = Some(x);
-                self.looked_up = Some((name, x));
-                self.slices.follow();
-            }
+            Some(x) => self.look_up(name, x),
             None => self.status = format!("{name} lies near no part of the colon's centerline"),
         }
         true

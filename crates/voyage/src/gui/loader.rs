@@ -171,67 +171,59 @@ fn open(source: &Source, progress: &dyn Fn(usize, usize, &str)) -> anyhow::Resul
         }
         Source::Phantom {
             small,
-            pair: false,
+            pair,
             points,
         } => {
-            progress(0, one, "making the colon phantom");
-            let ct = phantom::colon(&ColonOptions {
-                small: *small,
-                ..ColonOptions::default()
-            })?
-            .ct;
-            let choices = Choices {
-                points,
-                mask: false,
-                nav_min_wall_mm: None,
-            };
-            let meta = io::Meta::default();
-            let exam = exam_of("colon phantom", &meta, points, ct.geometry());
-            let tell = |o: Opening| progress(o.step, one, o.what);
-            let study = prepare_volume(ct, meta, &choices, &source.describe(), tell)?;
-            vec![(study, exam, None)]
-        }
-        Source::Phantom {
-            small,
-            pair: true,
-            points,
-        } => {
-            progress(
-                0,
-                2 * OPEN_STEPS + EXTRA_STEPS,
-                "making the colon phantom supine and prone",
-            );
-            let pair = phantom::pair::colon_pair(&ColonOptions {
-                small: *small,
-                tagged_fluid: true,
-                tagged_stool: true,
-                ..ColonOptions::default()
-            })?;
-            let choices = Choices {
-                points,
-                mask: false,
-                nav_min_wall_mm: None,
-            };
-            let mut opened = Vec::new();
-            for (i, p) in [pair.supine, pair.prone].into_iter().enumerate() {
-                // As the phantom's DICOM series say it.
-                let meta = io::Meta {
-                    position: voyage_core::PatientPosition::parse(&p.truth.position),
-                    ..Default::default()
-                };
-                let name = format!(
-                    "colon phantom ({})",
-                    if i == 0 { "supine" } else { "prone" }
+            // (CT, what the loader would have found, exam name, name in errors).
+            let made: Vec<(voyage_core::Volume<i16>, io::Meta, String, String)> = if *pair {
+                progress(
+                    0,
+                    2 * OPEN_STEPS + EXTRA_STEPS,
+                    "making the colon phantom supine and prone",
                 );
-                let exam = exam_of(&name, &meta, points, p.ct.geometry());
-                let tell = |o: Opening| {
-                    progress(
-                        i * OPEN_STEPS + o.step,
-                        2 * OPEN_STEPS + EXTRA_STEPS,
-                        o.what,
-                    )
-                };
-                let study = prepare_volume(p.ct, meta, &choices, &name, tell)?;
+                let pair = phantom::pair::colon_pair(&ColonOptions {
+                    small: *small,
+                    tagged_fluid: true,
+                    tagged_stool: true,
+                    ..ColonOptions::default()
+                })?;
+                [(pair.supine, "supine"), (pair.prone, "prone")]
+                    .into_iter()
+                    .map(|(p, position)| {
+                        // As the phantom's DICOM series say it.
+                        let meta = io::Meta {
+                            position: voyage_core::PatientPosition::parse(&p.truth.position),
+                            ..Default::default()
+                        };
+                        let name = format!("colon phantom ({position})");
+                        (p.ct, meta, name.clone(), name)
+                    })
+                    .collect()
+            } else {
+                progress(0, one, "making the colon phantom");
+                let ct = phantom::colon(&ColonOptions {
+                    small: *small,
+                    ..ColonOptions::default()
+                })?
+                .ct;
+                vec![(
+                    ct,
+                    io::Meta::default(),
+                    "colon phantom".into(),
+                    source.describe(),
+                )]
+            };
+            let choices = Choices {
+                points,
+                mask: false,
+                nav_min_wall_mm: None,
+            };
+            let of = made.len() * OPEN_STEPS + EXTRA_STEPS;
+            let mut opened = Vec::new();
+            for (i, (ct, meta, name, what)) in made.into_iter().enumerate() {
+                let exam = exam_of(&name, &meta, points, ct.geometry());
+                let tell = |o: Opening| progress(i * OPEN_STEPS + o.step, of, o.what);
+                let study = prepare_volume(ct, meta, &choices, &what, tell)?;
                 opened.push((study, exam, None));
             }
             opened
