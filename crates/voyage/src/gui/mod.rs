@@ -12,7 +12,6 @@ mod pixels;
 mod positions;
 mod report;
 mod scout;
-mod script;
 mod session;
 mod slices;
 

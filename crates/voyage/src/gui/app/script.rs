@@ -21,7 +21,16 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
+use egui::Vec2;
+use glam::DVec3;
 use serde::Deserialize;
+use voyage_nav::Direction;
+
+use super::{
+    App,
+    actions::{Action, Fly, Switch, ViewPoint},
+};
+use crate::gui::corrections::Correction;
 
 #[derive(Clone, Debug, Deserialize)]
 #[serde(rename_all = "snake_case", deny_unknown_fields)]
@@ -31,7 +40,7 @@ pub enum Step {
     /// Start or stop the automatic flight.
     Play(bool),
     /// "forward" (rectum → cecum) or "backward".
-    Direction(String),
+    Direction(Direction),
     /// Hold the left button on a point of the view for some frames (F_user, paper §3.3).
     Steer {
         at: [f32; 2],
@@ -100,7 +109,7 @@ pub enum Step {
     /// Correct the colon found, as the slices' right-click menu and the segment list do
     /// (`{"include": [x, y, z]}`, `{"exclude": ...}`, `{"source": ...}`, `{"target": ...}`,
     /// LPS mm; or `"reset"`), and wait until it has been preprocessed again.
-    Correct(super::corrections::Correction),
+    Correct(Correction),
     /// Close the window.
     Quit(bool),
 }
@@ -138,6 +147,105 @@ impl Script {
 
     pub fn finished(&self) -> bool {
         self.busy == 0 && self.next >= self.steps.len()
+    }
+}
+
+impl Step {
+    /// The action a user would take for this step, for the steps that are one (the rest
+    /// are the script's own: waiting, holding the mouse, recording, screenshots).
+    fn action(self) -> Option<Action> {
+        let when = |on: bool, a: Action| on.then_some(a);
+        Some(match self {
+            Step::Play(on) => Action::Fly(Fly::Play(on)),
+            Step::Direction(d) => Action::Fly(Fly::SetDirection(d)),
+            Step::Marker { at, note, kind } => Action::Marker {
+                at: ViewPoint::Fraction(at),
+                note: Some(note),
+                kind: Some(kind),
+            },
+            Step::Polyp { at, note } => Action::Polyp {
+                at: ViewPoint::Fraction(at),
+                note: Some(note),
+            },
+            Step::Measure { from, to } => {
+                Action::MeasureBetween(ViewPoint::Fraction(from), ViewPoint::Fraction(to))
+            }
+            Step::Jump(f) => Action::Jump(f),
+            Step::MoveTo(lps) => Action::MoveToPatient(DVec3::from_array(lps)),
+            Step::Pose(a) => Action::Pose(a),
+            Step::GoTo(label) => Action::GoToMarker(label),
+            Step::SwitchPosition(on) => return when(on, Action::SwitchPosition),
+            Step::ShowInOther(label) => Action::ShowInOther(label),
+            Step::TwoWay(on) => return when(on, Action::TwoWayReading),
+            Step::NextUnseen(on) => return when(on, Action::NextUnseenPatch),
+            Step::Coverage(on) => Action::Set(Switch::Coverage, on),
+            Step::Closeup(on) => Action::Set(Switch::Closeup, on),
+            Step::Translucency(on) => Action::Set(Switch::Translucency, on),
+            Step::Centerline(on) => Action::Set(Switch::Centerline, on),
+            Step::SlicesCleansed(on) => Action::Set(Switch::SlicesCleansed, on),
+            Step::SlicesOutline(on) => Action::Set(Switch::SlicesOutline, on),
+            Step::Export(dir) => Action::Export(Some(dir)),
+            Step::Correct(c) => Action::Correct(c),
+            Step::Quit(now) => return when(now, Action::Quit),
+            Step::Wait(_)
+            | Step::Steer { .. }
+            | Step::Look { .. }
+            | Step::Record(_)
+            | Step::Screenshot(_) => return None,
+        })
+    }
+}
+
+impl App {
+    /// Starts the script's next step once the one before is done: a user's action goes
+    /// through [`App::apply`], as a key or a control would.
+    pub(super) fn run_script(&mut self, ctx: &egui::Context) {
+        // A correction being preprocessed holds the script: the next step sees its result.
+        if self.session.is_none() || self.job.is_some() {
+            return;
+        }
+        // A two-way reading holds the script until it is done.
+        if self
+            .session
+            .as_ref()
+            .is_some_and(|s| s.coverage.reading_running())
+        {
+            return;
+        }
+        let Some(script) = &mut self.script else {
+            return;
+        };
+        let Some(step) = script.next_step() else {
+            return;
+        };
+        match step {
+            Step::Wait(n) => script.busy = n,
+            Step::Steer { at, frames } => {
+                self.steer_script = Some((at, frames));
+                script.busy = frames;
+            }
+            Step::Look { dx, dy, frames } => {
+                self.look_script = Some((Vec2::new(dx, dy), frames));
+                script.busy = frames;
+            }
+            Step::Record(name) => {
+                if let Some(s) = &self.session {
+                    self.recorded.insert(name, s.pose().to_array());
+                }
+            }
+            Step::Screenshot(path) => {
+                self.screenshot(ctx, path, false);
+                // The picture is of a frame still to come: let it come before the next step.
+                if let Some(script) = &mut self.script {
+                    script.busy = 2;
+                }
+            }
+            step => {
+                if let Some(action) = step.action() {
+                    self.apply(action, ctx);
+                }
+            }
+        }
     }
 }
 
