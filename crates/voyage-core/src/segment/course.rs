@@ -7,7 +7,8 @@
 //! where it lies in the colon's box in the patient frame (left–right and head–feet, both
 //! taken from the direction matrix and the position, never from array order): its *course* is
 //! the fraction along the template of the nearest point, 0 at the rectum and 1 at the cecum.
-//! Gas compartments are ordered by it, and named by its nearest landmark.
+//! Gas compartments are ordered by it, and named by its landmarks: those nearest their ends,
+//! and the one halfway along the course between them.
 
 use glam::{DVec2, DVec3};
 
@@ -89,6 +90,16 @@ impl Course {
             .min_by(|&a, &b| p.distance(landmark(a)).total_cmp(&p.distance(landmark(b))))
             .map_or("colon", |i| LANDMARKS[i].0)
     }
+
+    /// The landmark nearest a fraction `t` of the course (0 at the rectum, 1 at the cecum):
+    /// what a stretch of colon passes through between two places, where their midpoint in
+    /// space (a U-shaped compartment's centroid lies in the middle of the abdomen, off the
+    /// colon) would name the wrong landmark.
+    pub fn name_along(&self, t: f64) -> &'static str {
+        (0..8)
+            .min_by(|&a, &b| (self.at[a] - t).abs().total_cmp(&(self.at[b] - t).abs()))
+            .map_or("colon", |i| LANDMARKS[i].0)
+    }
 }
 
 fn landmark(i: usize) -> DVec2 {
@@ -120,6 +131,8 @@ mod tests {
                 assert_eq!(c.name(local), name);
                 last = t;
             }
+            assert_eq!(c.name_along(0.0), "rectum");
+            assert_eq!(c.name_along(1.0), "cecum");
             assert!(c.along(g.patient_to_local(lps_at(0.5, 0.0))) < 0.01);
             assert!(c.along(g.patient_to_local(lps_at(0.12, 0.28))) > 0.99);
         }

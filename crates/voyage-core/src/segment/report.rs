@@ -90,8 +90,8 @@ fn classes(
         .collect()
 }
 
-/// The colon's segments in order, each named by where its entry, middle and exit lie along
-/// the whole colon's course (`colon_lps`: its box).
+/// The colon's segments in order, each named by the landmarks nearest its entry and exit
+/// and the one halfway along the course between them (`colon_lps`: the whole colon's box).
 fn colon_segments(
     parts: &Compartments,
     chained: &Chained,
@@ -103,23 +103,11 @@ fn colon_segments(
     let mut segments = Vec::new();
     for (i, l) in chained.chain.links.iter().enumerate() {
         let comp = &parts.list[l.comp as usize];
-        let names: Vec<&str> = [
-            coarse.centre_mm(l.entry),
-            comp.centroid_mm(),
-            coarse.centre_mm(l.exit),
-        ]
-        .iter()
-        .map(|&p| named.name(p))
-        .fold(Vec::new(), |mut v, n| {
-            if v.last() != Some(&n) {
-                v.push(n);
-            }
-            v
-        });
+        let (entry, exit) = (coarse.centre_mm(l.entry), coarse.centre_mm(l.exit));
         segments.push(segment_report(
             comp,
             geom,
-            names.join("–"),
+            segment_name(&named, entry, exit),
             ComponentKind::Colon,
             Some(i),
             None,
@@ -127,6 +115,23 @@ fn colon_segments(
         ));
     }
     segments
+}
+
+/// A colon segment's name from its entry and exit (volume-local mm): the landmarks nearest
+/// them and, between, the one halfway along the course; the whole colon is "rectum–cecum".
+fn segment_name(named: &Course, entry: DVec3, exit: DVec3) -> String {
+    let ends = [named.name(entry), named.name(exit)];
+    if ends == ["rectum", "cecum"] {
+        return ends.join("–");
+    }
+    let halfway = named.name_along(0.5 * (named.along(entry) + named.along(exit)));
+    let mut names = vec![ends[0]];
+    for n in [halfway, ends[1]] {
+        if names.last() != Some(&n) {
+            names.push(n);
+        }
+    }
+    names.join("–")
 }
 
 /// The gas left out of the colon (`left`), most gas first, from `min_report_ml` on: each
