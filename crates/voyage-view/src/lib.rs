@@ -7,6 +7,9 @@
 //! for each ([`Coverage`]); the reading that marks it, stepped by the CLI and the window alike
 //! ([`ReadingRun`]).
 //! Markers and measurements ([`Findings`]) are picked on the same surface ([`pick`]).
+//! The window's panels drawn on the CPU, without a window toolkit: the scout, the colon
+//! from outside ([`ScoutMesh`], [`scout_image`]), and the CT resliced for the slices
+//! ([`SliceLayout`], [`slice_image`]).
 
 mod both;
 mod closeup;
@@ -17,7 +20,10 @@ mod mesh;
 mod polyp;
 mod raster;
 mod reading;
+mod rgba;
+mod scout;
 mod shading;
+mod slices;
 #[cfg(feature = "survey")]
 mod survey;
 mod translucency;
@@ -47,7 +53,10 @@ pub use reading::{
     READING_PX, REVIEW_ROUNDS, Reading, ReadingMove, ReadingProgress, ReadingRun, ReadingStep,
     Scene, Visit, read_both_ways,
 };
+pub use rgba::Rgba;
+pub use scout::{ScoutCanvas, ScoutMesh, ScoutOrbit, ScoutProjection, scout_image};
 pub use shading::{Lighting, encode};
+pub use slices::{Plane, SliceLayout, SliceShading, changes_in_plane, slice_image};
 #[cfg(feature = "survey")]
 pub use survey::{StrategyStats, Survey, look_around, survey};
 pub use translucency::{

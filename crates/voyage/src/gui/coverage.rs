@@ -17,13 +17,10 @@ use voyage_core::{Cells, Study};
 use voyage_nav::{BrickStore, Camera, Pose};
 use voyage_view::{
     CellMesh, Coverage, CoverageOptions, Lumen, Patch, READING_FOV_DEG, Reader, ReadingMove,
-    ReadingRun, ReadingStep, Scene, viewing_pose,
+    ReadingRun, ReadingStep, Scene, ScoutMesh, viewing_pose,
 };
 
-use super::{
-    report::{CoverageReport, ReadingReport},
-    scout::ScoutMesh,
-};
+use super::report::{CoverageReport, ReadingReport};
 
 /// The share of the window's frame time marking may take.
 pub const BUDGET_SHARE: f64 = 0.08;

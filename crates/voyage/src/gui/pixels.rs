@@ -14,6 +14,7 @@ use std::sync::Arc;
 use eframe::egui_wgpu;
 use egui::{Color32, ColorImage, Pos2, Rect, TextureHandle, TextureOptions, Vec2};
 use voyage_render::{GpuRenderer, PixelImages};
+use voyage_view::Rgba;
 
 /// Kept in egui-wgpu's callback resources, so that paint callbacks reach it while egui
 /// records the window's render pass.
@@ -40,13 +41,6 @@ impl WindowGpu {
             .callback_resources
             .insert(WindowGpu { renderer, images });
     }
-}
-
-/// RGBA pixels, 4 bytes each, rows top to bottom, opaque, display values.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Rgba {
-    pub size: [usize; 2],
-    pub bytes: Vec<u8>,
 }
 
 /// One image slot of the window. `key` names it among the window's [`PixelImages`].

@@ -2,89 +2,18 @@
 //! centerline, the markers and the submarine; orbit and zoom; a click on the centerline
 //! moves the submarine there.
 //!
-//! The surface drawn here is the study's mesh decimated by vertex clustering (a few mm):
-//! the scout shows shape, not mucosa, and tens of thousands of triangles blend fast on any
-//! renderer, where the full mesh (over a million) would not. It is alpha-blended on the
-//! CPU over the panel's colour into an opaque image (redrawn when the view changes) that is
-//! shown pixel for pixel ([`PanelImage`]), so it needs no depth buffer and costs little per
-//! frame while the submarine flies.
-
-use std::collections::HashMap;
+//! Only the widget is here: input, picking on the screen, the highlight, the markers and
+//! the submarine drawn over the picture. The picture itself (the study's mesh decimated,
+//! alpha-blended on the CPU over the panel's colour) is voyage-view's [`scout_image`]; it
+//! is redrawn only when the view changes and shown pixel for pixel ([`PanelImage`]), so it
+//! needs no depth buffer and costs little per frame while the submarine flies.
 
 use egui::{Color32, Pos2, Rect, Sense, Shape, Stroke, Vec2};
 use glam::{DMat3, DVec3};
-use voyage_core::{Geometry, Mesh};
+use voyage_core::Geometry;
+use voyage_view::{ScoutCanvas, ScoutMesh, ScoutOrbit, ScoutProjection, scout_image};
 
-use super::pixels::{PanelImage, Rgba};
-
-/// The colon's surface at scout detail, in volume-local mm.
-pub struct ScoutMesh {
-    pub positions: Vec<DVec3>,
-    pub triangles: Vec<[u32; 3]>,
-    /// Per triangle, unit.
-    pub normals: Vec<DVec3>,
-    pub center: DVec3,
-    pub radius: f64,
-    /// The scout vertex (cluster) of each surface vertex.
-    pub vertex_cluster: Vec<u32>,
-}
-
-impl ScoutMesh {
-    /// Clusters `mesh`'s vertices on a grid of `cell_mm` and keeps the triangles whose
-    /// corners land in three different clusters.
-    pub fn new(mesh: &Mesh, cell_mm: f64) -> Self {
-        let mut cluster: HashMap<[i32; 3], u32> = HashMap::new();
-        let mut sums: Vec<(DVec3, u32)> = Vec::new();
-        let mut vertex_cluster = Vec::with_capacity(mesh.positions.len());
-        for p in &mesh.positions {
-            let p = DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-            let key = (p / cell_mm).floor().as_ivec3().to_array();
-            let id = *cluster.entry(key).or_insert_with(|| {
-                sums.push((DVec3::ZERO, 0));
-                sums.len() as u32 - 1
-            });
-            sums[id as usize].0 += p;
-            sums[id as usize].1 += 1;
-            vertex_cluster.push(id);
-        }
-        let positions: Vec<DVec3> = sums.iter().map(|(s, n)| *s / (*n).max(1) as f64).collect();
-        let mut triangles = Vec::new();
-        let mut normals = Vec::new();
-        for t in &mesh.triangles {
-            let c = t.map(|v| vertex_cluster[v as usize]);
-            if c[0] == c[1] || c[1] == c[2] || c[0] == c[2] {
-                continue;
-            }
-            let [a, b, d] = c.map(|v| positions[v as usize]);
-            if let Some(n) = (b - a).cross(d - a).try_normalize() {
-                triangles.push(c);
-                normals.push(n);
-            }
-        }
-        let (lo, hi) = positions.iter().fold(
-            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-            |(lo, hi), p| (lo.min(*p), hi.max(*p)),
-        );
-        let center = if positions.is_empty() {
-            DVec3::ZERO
-        } else {
-            0.5 * (lo + hi)
-        };
-        let radius = if positions.is_empty() {
-            1.0
-        } else {
-            (0.5 * (hi - lo).length()).max(1.0)
-        };
-        ScoutMesh {
-            positions,
-            triangles,
-            normals,
-            center,
-            radius,
-            vertex_cluster,
-        }
-    }
-}
+use super::pixels::PanelImage;
 
 /// What the scout shows besides the colon.
 pub struct ScoutMarks<'a> {
@@ -120,9 +49,7 @@ pub struct ScoutView {
     pub probe: Option<[Pos2; 2]>,
     /// The centerline point under the pointer in the last frame, if any.
     pub hovered: Option<usize>,
-    yaw: f64,
-    pitch: f64,
-    zoom: f64,
+    orbit: ScoutOrbit,
     /// Patient axes in the volume's local frame: left, posterior, superior.
     anatomy: DMat3,
     /// The view the image was drawn for, and where the image's top-left pixel lies in the
@@ -135,31 +62,15 @@ pub struct ScoutView {
 
 #[derive(Clone, Copy, PartialEq)]
 struct CacheKey {
-    yaw: f64,
-    pitch: f64,
-    zoom: f64,
+    orbit: ScoutOrbit,
     rect: Rect,
     unseen: Option<u64>,
 }
 
-/// An orthographic view: screen right, screen up and the viewing direction in local mm.
-struct Projection {
-    right: DVec3,
-    up: DVec3,
-    forward: DVec3,
-    center: DVec3,
-    scale: f64,
-    origin: Pos2,
-}
-
-impl Projection {
-    fn to_screen(&self, p: DVec3) -> Pos2 {
-        let d = p - self.center;
-        Pos2::new(
-            self.origin.x + (d.dot(self.right) * self.scale) as f32,
-            self.origin.y - (d.dot(self.up) * self.scale) as f32,
-        )
-    }
+/// Where a local point lies on the scout's panel (points).
+fn to_screen(proj: &ScoutProjection, p: DVec3) -> Pos2 {
+    let s = proj.to_screen(p);
+    Pos2::new(s.x, s.y)
 }
 
 impl ScoutView {
@@ -171,9 +82,7 @@ impl ScoutView {
         ScoutView {
             probe: None,
             hovered: None,
-            yaw: 0.0,
-            pitch: 0.0,
-            zoom: 1.0,
+            orbit: ScoutOrbit::FRONT,
             anatomy: d,
             cached: None,
             image: PanelImage::new(image_key, "scout", gpu),
@@ -181,28 +90,17 @@ impl ScoutView {
         }
     }
 
-    /// Front view (from the patient's anterior, the patient's right on the screen's left,
-    /// head up), the radiologist's usual first look at a colon.
-    fn projection(&self, mesh: &ScoutMesh, rect: Rect) -> Projection {
-        let (l, p, s) = (
-            self.anatomy.x_axis,
-            self.anatomy.y_axis,
-            self.anatomy.z_axis,
-        );
-        // Orbit: yaw about the body's long axis, then pitch about the screen's right.
-        let yaw = DMat3::from_axis_angle(s, self.yaw);
-        let (right0, forward0) = (yaw * l, yaw * p);
-        let pitch = DMat3::from_axis_angle(right0, self.pitch);
-        let (forward, up) = (pitch * forward0, pitch * s);
-        let scale = 0.5 * rect.width().min(rect.height()) as f64 / mesh.radius * self.zoom;
-        Projection {
-            right: right0,
-            up,
-            forward,
-            center: mesh.center,
-            scale,
-            origin: rect.center(),
-        }
+    /// The orbit's view of `mesh` in `rect`; from the front at first (from the patient's
+    /// anterior, the patient's right on the screen's left, head up).
+    fn projection(&self, mesh: &ScoutMesh, rect: Rect) -> ScoutProjection {
+        let centre = rect.center();
+        ScoutProjection::new(
+            self.anatomy,
+            self.orbit,
+            mesh,
+            glam::Vec2::new(rect.width(), rect.height()),
+            glam::Vec2::new(centre.x, centre.y),
+        )
     }
 
     /// Draws the scout into `ui`'s remaining space, the centerline under the pointer
@@ -219,17 +117,19 @@ impl ScoutView {
             || response.dragged_by(egui::PointerButton::Secondary)
         {
             let d = response.drag_delta();
-            self.yaw += d.x as f64 * 0.01;
-            self.pitch = (self.pitch + d.y as f64 * 0.01).clamp(-1.55, 1.55);
+            let o = &mut self.orbit;
+            o.yaw += d.x as f64 * 0.01;
+            o.pitch = (o.pitch + d.y as f64 * 0.01).clamp(-1.55, 1.55);
         }
         if response.hovered() {
             let scroll = ui.input(|i| i.smooth_scroll_delta.y);
             if scroll != 0.0 {
-                self.zoom = (self.zoom * (1.0 + scroll as f64 * 0.002)).clamp(0.3, 12.0);
+                let o = &mut self.orbit;
+                o.zoom = (o.zoom * (1.0 + scroll as f64 * 0.002)).clamp(0.3, 12.0);
             }
         }
         if response.double_clicked() {
-            (self.yaw, self.pitch, self.zoom) = (0.0, 0.0, 1.0);
+            self.orbit = ScoutOrbit::FRONT;
         }
         let painter = ui.painter_at(rect);
         let proj = self.projection(mesh, rect);
@@ -245,10 +145,10 @@ impl ScoutView {
         let line: Vec<Pos2> = marks
             .centerline
             .iter()
-            .map(|p| proj.to_screen(DVec3::from_array(*p)))
+            .map(|p| to_screen(&proj, DVec3::from_array(*p)))
             .collect();
         for (label, p) in &marks.markers {
-            let s = proj.to_screen(*p);
+            let s = to_screen(&proj, *p);
             painter.circle_filled(s, 4.0, Color32::YELLOW);
             painter.text(
                 s + Vec2::new(6.0, -6.0),
@@ -296,24 +196,20 @@ impl ScoutView {
         self.cached = None;
     }
 
-    /// The decimated surface, drawn on the CPU into an image that is redrawn only when the
-    /// view changes: the scout stands still while the submarine flies, and a CPU Vulkan
-    /// driver would otherwise blend every scout triangle again each frame. Faces seen
-    /// edge-on are more opaque than faces seen head-on: the outline and the folds stand out
-    /// while the far side shows through (an "x-ray" look). Returns where the image's
-    /// top-left pixel lies in the panel.
+    /// The decimated surface, drawn on the CPU ([`scout_image`]) into an image that is
+    /// redrawn only when the view changes: the scout stands still while the submarine
+    /// flies, and a CPU Vulkan driver would otherwise blend every scout triangle again each
+    /// frame. Returns where the image's top-left pixel lies in the panel.
     fn surface(
         &mut self,
         mesh: &ScoutMesh,
         marks: &ScoutMarks,
-        proj: &Projection,
+        proj: &ScoutProjection,
         rect: Rect,
         ppp: f32,
     ) -> [usize; 2] {
         let key = CacheKey {
-            yaw: self.yaw,
-            pitch: self.pitch,
-            zoom: self.zoom,
+            orbit: self.orbit,
             rect,
             unseen: marks.unseen.map(|(_, version)| version),
         };
@@ -327,8 +223,20 @@ impl ScoutView {
             ((rect.height() * ppp).round() as usize).max(1),
         );
         let unseen = marks.unseen.map(|(shares, _)| shares);
-        let buf = rasterize(mesh, marks.centerline, unseen, proj, rect, ppp, [w, h]);
-        let (offset, image) = over_background(&buf, [w, h], self.background);
+        let canvas = ScoutCanvas {
+            top_left: glam::Vec2::new(rect.left(), rect.top()),
+            ppp,
+            size: [w, h],
+        };
+        let bg = self.background;
+        let (offset, image) = scout_image(
+            mesh,
+            marks.centerline,
+            unseen,
+            proj,
+            canvas,
+            [bg.r(), bg.g(), bg.b()],
+        );
         self.image.set(image);
         self.cached = Some((key, offset));
         offset
@@ -378,197 +286,9 @@ fn highlight(painter: &egui::Painter, line: &[Pos2], i: usize, arc_mm: &[f64]) {
     }
 }
 
-/// The premultiplied image `buf` of `size` over an opaque `background`, cropped to the
-/// pixels that are not fully transparent: (the crop's top-left pixel, the crop). An image
-/// with nothing in it gives a 0 × 0 crop.
-fn over_background(buf: &[[f32; 4]], size: [usize; 2], background: Color32) -> ([usize; 2], Rgba) {
-    let [w, h] = size;
-    let (mut x0, mut y0, mut x1, mut y1) = (w, h, 0, 0);
-    for (i, p) in buf.iter().enumerate() {
-        if p[3] > 0.0 {
-            let (x, y) = (i % w, i / w);
-            (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x + 1), y1.max(y + 1));
-        }
-    }
-    if x0 >= x1 {
-        return (
-            [0, 0],
-            Rgba {
-                size: [0, 0],
-                bytes: Vec::new(),
-            },
-        );
-    }
-    let bg = [background.r(), background.g(), background.b()].map(|c| c as f32 / 255.0);
-    let mut bytes = Vec::with_capacity((x1 - x0) * (y1 - y0) * 4);
-    for y in y0..y1 {
-        for p in &buf[y * w + x0..y * w + x1] {
-            let k = 1.0 - p[3];
-            for c in 0..3 {
-                bytes.push(((p[c] + bg[c] * k) * 255.0).round().clamp(0.0, 255.0) as u8);
-            }
-            bytes.push(255);
-        }
-    }
-    (
-        [x0, y0],
-        Rgba {
-            size: [x1 - x0, y1 - y0],
-            bytes,
-        },
-    )
-}
-
-/// Alpha-blends the scout's triangles, in the mesh's order, into an image of `rect` at
-/// `ppp` pixels per point, `size` pixels (premultiplied colour, transparent where nothing
-/// is), and draws the centerline over them in green (the paper's colour). With `unseen`
-/// shares per vertex, mucosa not yet seen is blue, and more opaque, so that it shows
-/// through the rest.
-fn rasterize(
-    mesh: &ScoutMesh,
-    centerline: &[[f64; 3]],
-    unseen: Option<&[f32]>,
-    proj: &Projection,
-    rect: Rect,
-    ppp: f32,
-    size: [usize; 2],
-) -> Vec<[f32; 4]> {
-    let [w, h] = size;
-    let mut buf = vec![[0f32; 4]; w * h];
-    let to_px = |p: DVec3| {
-        let s = proj.to_screen(p);
-        [
-            ((s.x - rect.left()) * ppp) as f64,
-            ((s.y - rect.top()) * ppp) as f64,
-        ]
-    };
-    for (t, n) in mesh.triangles.iter().zip(&mesh.normals) {
-        let facing = n.dot(proj.forward).abs();
-        let share = unseen.map_or(0.0, |u| {
-            t.iter()
-                .map(|&v| u.get(v as usize).copied().unwrap_or(0.0))
-                .sum::<f32>()
-                / 3.0
-        });
-        // Unseen where most of the corners' mucosa is: blue, and opaque enough to show.
-        let blue = if share >= 0.5 { 1.0 } else { 0.0 };
-        let alpha = (0.05 + 0.40 * (1.0 - facing).powi(2)) as f32 * (1.0 - blue) + 0.55 * blue;
-        let light = (0.55 + 0.45 * facing) as f32;
-        let base = [230.0, 140.0, 120.0].map(|c: f32| c / 255.0);
-        let unseen_rgb = [60.0, 120.0, 255.0].map(|c: f32| c / 255.0);
-        let rgb = [0, 1, 2].map(|i| base[i] * (1.0 - blue) + unseen_rgb[i] * blue);
-        let color = [
-            rgb[0] * light * alpha,
-            rgb[1] * light * alpha,
-            rgb[2] * light * alpha,
-            alpha,
-        ];
-        let v = t.map(|i| to_px(mesh.positions[i as usize]));
-        fill_triangle(&mut buf, w, h, v, color);
-    }
-    let green = [40.0 / 255.0, 220.0 / 255.0, 60.0 / 255.0, 1.0];
-    for pair in centerline.windows(2) {
-        let (a, b) = (
-            to_px(DVec3::from_array(pair[0])),
-            to_px(DVec3::from_array(pair[1])),
-        );
-        stroke(&mut buf, w, h, a, b, (1.5 * ppp) as f64, green);
-    }
-    buf
-}
-
-/// Paints the pixels within `width / 2` of the segment a–b with an opaque colour.
-fn stroke(
-    buf: &mut [[f32; 4]],
-    w: usize,
-    h: usize,
-    a: [f64; 2],
-    b: [f64; 2],
-    width: f64,
-    c: [f32; 4],
-) {
-    let r = 0.5 * width.max(1.0);
-    let (x0, x1) = (
-        (a[0].min(b[0]) - r).floor().max(0.0) as usize,
-        ((a[0].max(b[0]) + r).ceil().max(0.0) as usize).min(w),
-    );
-    let (y0, y1) = (
-        (a[1].min(b[1]) - r).floor().max(0.0) as usize,
-        ((a[1].max(b[1]) + r).ceil().max(0.0) as usize).min(h),
-    );
-    let d = [b[0] - a[0], b[1] - a[1]];
-    let len2 = (d[0] * d[0] + d[1] * d[1]).max(1e-12);
-    for y in y0..y1 {
-        for x in x0..x1 {
-            let p = [x as f64 + 0.5 - a[0], y as f64 + 0.5 - a[1]];
-            let t = ((p[0] * d[0] + p[1] * d[1]) / len2).clamp(0.0, 1.0);
-            let (ex, ey) = (p[0] - t * d[0], p[1] - t * d[1]);
-            if ex * ex + ey * ey <= r * r {
-                buf[y * w + x] = c;
-            }
-        }
-    }
-}
-
-/// Blends a premultiplied colour "over" every pixel whose centre lies in the triangle
-/// (either winding: the scout shows both sides of the wall).
-fn fill_triangle(buf: &mut [[f32; 4]], w: usize, h: usize, v: [[f64; 2]; 3], c: [f32; 4]) {
-    let area =
-        (v[1][0] - v[0][0]) * (v[2][1] - v[0][1]) - (v[1][1] - v[0][1]) * (v[2][0] - v[0][0]);
-    if area.abs() < 1e-12 {
-        return;
-    }
-    let x0 = v
-        .iter()
-        .map(|p| p[0])
-        .fold(f64::INFINITY, f64::min)
-        .floor()
-        .max(0.0) as usize;
-    let x1 = (v
-        .iter()
-        .map(|p| p[0])
-        .fold(f64::NEG_INFINITY, f64::max)
-        .ceil()
-        .max(0.0) as usize)
-        .min(w);
-    let y0 = v
-        .iter()
-        .map(|p| p[1])
-        .fold(f64::INFINITY, f64::min)
-        .floor()
-        .max(0.0) as usize;
-    let y1 = (v
-        .iter()
-        .map(|p| p[1])
-        .fold(f64::NEG_INFINITY, f64::max)
-        .ceil()
-        .max(0.0) as usize)
-        .min(h);
-    let sign = area.signum();
-    let edge = |a: [f64; 2], b: [f64; 2], x: f64, y: f64| {
-        ((b[0] - a[0]) * (y - a[1]) - (b[1] - a[1]) * (x - a[0])) * sign
-    };
-    for y in y0..y1 {
-        let py = y as f64 + 0.5;
-        for x in x0..x1 {
-            let px = x as f64 + 0.5;
-            if edge(v[0], v[1], px, py) >= 0.0
-                && edge(v[1], v[2], px, py) >= 0.0
-                && edge(v[2], v[0], px, py) >= 0.0
-            {
-                let d = &mut buf[y * w + x];
-                let k = 1.0 - c[3];
-                for i in 0..4 {
-                    d[i] = c[i] + d[i] * k;
-                }
-            }
-        }
-    }
-}
-
 /// The submarine: a dot where it is and an arrow along its view direction.
-fn draw_submarine(painter: &egui::Painter, proj: &Projection, at: DVec3, dir: DVec3) {
-    let s = proj.to_screen(at);
+fn draw_submarine(painter: &egui::Painter, proj: &ScoutProjection, at: DVec3, dir: DVec3) {
+    let s = to_screen(proj, at);
     let screen_dir = Vec2::new(dir.dot(proj.right) as f32, -dir.dot(proj.up) as f32);
     let len = screen_dir.length();
     let tip = if len > 1e-3 {
@@ -593,29 +313,4 @@ fn draw_submarine(painter: &egui::Painter, proj: &Projection, at: DVec3, dir: DV
         Color32::from_rgb(20, 60, 90),
         Stroke::new(2.0, color),
     );
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_scout_image_is_cropped_and_laid_over_the_background() {
-        let bg = Color32::from_gray(20);
-        // 4 × 3, nothing drawn: an empty crop.
-        let empty = vec![[0.0f32; 4]; 12];
-        assert_eq!(over_background(&empty, [4, 3], bg).1.size, [0, 0]);
-        // One opaque red pixel at (1, 1) and one half-transparent white at (2, 2).
-        let mut buf = empty.clone();
-        buf[4 + 1] = [1.0, 0.0, 0.0, 1.0];
-        buf[2 * 4 + 2] = [0.5, 0.5, 0.5, 0.5];
-        let (at, img) = over_background(&buf, [4, 3], bg);
-        assert_eq!((at, img.size), ([1, 1], [2, 2]));
-        let px = |x: usize, y: usize| img.bytes[4 * (y * 2 + x)..][..4].to_vec();
-        assert_eq!(px(0, 0), vec![255, 0, 0, 255]);
-        // Premultiplied 0.5 over 20: 127.5 + 10 → 138 (rounded), opaque.
-        assert_eq!(px(1, 1), vec![138, 138, 138, 255]);
-        // Untouched pixels inside the crop show the background.
-        assert_eq!(px(1, 0), vec![20, 20, 20, 255]);
-    }
 }

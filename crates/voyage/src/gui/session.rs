@@ -10,9 +10,9 @@ use voyage_nav::{
     Autopilot, BrickStore, Camera, Direction, FlightOptions, Input, Pose, PotentialField,
     Submarine, potential_field, start_pose,
 };
-use voyage_view::{CellMesh, ReadingMove, Scene, Strategy, Visibility};
+use voyage_view::{CellMesh, ReadingMove, Scene, ScoutMesh, Strategy, Visibility};
 
-use super::{coverage::WindowCoverage, scout::ScoutMesh};
+use super::coverage::WindowCoverage;
 
 /// Longest simulated step of one displayed frame: a slow frame must not fling the
 /// submarine (the physics sub-steps anyway; this keeps the flight's pace steady).
