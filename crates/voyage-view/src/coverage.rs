@@ -395,6 +395,26 @@ pub struct Patch {
 }
 
 impl Patch {
+    /// The edges of the patch's triangles that no other of its triangles shares: its
+    /// outline (drawn over the view when a review visits it).
+    pub fn outline(&self, mesh: &CellMesh) -> Vec<[DVec3; 2]> {
+        let mut count: std::collections::HashMap<[u32; 2], u32> = Default::default();
+        for &t in &self.triangles {
+            let [a, b, c] = mesh.triangles[t as usize];
+            for (u, v) in [(a, b), (b, c), (c, a)] {
+                *count.entry([u.min(v), u.max(v)]).or_insert(0) += 1;
+            }
+        }
+        let at = |v: u32| DVec3::from_array(mesh.positions[v as usize].map(f64::from));
+        let mut edges: Vec<[u32; 2]> = count
+            .into_iter()
+            .filter(|&(_, n)| n == 1)
+            .map(|(e, _)| e)
+            .collect();
+        edges.sort_unstable();
+        edges.into_iter().map(|[u, v]| [at(u), at(v)]).collect()
+    }
+
     fn new(mesh: &CellMesh, triangles: Vec<u32>, area_mm2: f64) -> Patch {
         let mut weighted = DVec3::ZERO;
         for &t in &triangles {

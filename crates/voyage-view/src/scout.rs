@@ -15,7 +15,7 @@ use std::collections::HashMap;
 use glam::{DMat3, DVec3, Vec2};
 use voyage_core::Mesh;
 
-use crate::rgba::Rgba;
+use crate::{coverage::Coverage, mesh::CellMesh, rgba::Rgba};
 
 /// The colon's surface at scout detail, in volume-local mm.
 pub struct ScoutMesh {
@@ -83,6 +83,29 @@ impl ScoutMesh {
             radius,
             vertex_cluster,
         }
+    }
+
+    /// Per scout vertex (a cluster of surface vertices), the unseen share of its area in
+    /// `seen` of the surface `mesh` (the scout colours unseen mucosa by it).
+    pub fn unseen_shares(&self, seen: &Coverage, mesh: &CellMesh) -> Vec<f32> {
+        let clusters = self.positions.len();
+        let mut area = vec![0f32; clusters];
+        let mut unseen = vec![0f32; clusters];
+        for (t, tri) in mesh.triangles.iter().enumerate() {
+            let Some(&c) = self.vertex_cluster.get(tri[0] as usize) else {
+                continue;
+            };
+            let a = seen.area_of(t as u32);
+            area[c as usize] += a;
+            if !seen.is_seen(t as u32) {
+                unseen[c as usize] += a;
+            }
+        }
+        unseen
+            .iter()
+            .zip(&area)
+            .map(|(&u, &a)| if a > 0.0 { u / a } else { 0.0 })
+            .collect()
     }
 }
 

@@ -227,7 +227,7 @@ impl WindowCoverage {
             ReadingMove::Visit(_) => {
                 self.hold = DWELL_FRAMES;
                 if let Some(v) = r.last_visit() {
-                    self.outline = outline(&v.patch, scene.mesh);
+                    self.outline = v.patch.outline(scene.mesh);
                 }
             }
             ReadingMove::Done => {
@@ -251,11 +251,11 @@ impl WindowCoverage {
                 .map(|pose| (p.clone(), Some(pose)))
         });
         let (patch, pose) = shown.or_else(|| patches.into_iter().next().map(|p| (p, None)))?;
-        self.outline = outline(&patch, mesh);
+        self.outline = patch.outline(mesh);
         Some((patch, pose))
     }
 
-    /// The scout's colouring (see [`unseen_by_cluster`]), made again when the session's
+    /// The scout's colouring (see [`ScoutMesh::unseen_shares`]), made again when the session's
     /// coverage has moved by [`TINT_STEP_PCT`], at most every [`TINT_EVERY_S`]: a new
     /// colouring costs a pass over the surface and a redraw of the scout image.
     pub fn scout_tint(&mut self, mesh: &CellMesh, scout: &ScoutMesh) -> (&[f32], u64) {
@@ -266,12 +266,7 @@ impl WindowCoverage {
             .is_none_or(|t| t.elapsed().as_secs_f64() >= TINT_EVERY_S);
         if at.is_nan() || due && (pct - at).abs() >= TINT_STEP_PCT {
             self.tinted_at = Some(Instant::now());
-            let shares = unseen_by_cluster(
-                &self.session,
-                mesh,
-                &scout.vertex_cluster,
-                scout.positions.len(),
-            );
+            let shares = scout.unseen_shares(&self.session, mesh);
             self.scout_tint = (shares, version + 1, pct);
         }
         (&self.scout_tint.0, self.scout_tint.1)
@@ -282,48 +277,3 @@ impl WindowCoverage {
 /// points), and at most this often (seconds).
 const TINT_STEP_PCT: f64 = 0.5;
 const TINT_EVERY_S: f64 = 2.0;
-
-/// Per scout vertex (a cluster of surface vertices), the unseen share of its area.
-fn unseen_by_cluster(
-    seen: &Coverage,
-    mesh: &CellMesh,
-    vertex_cluster: &[u32],
-    clusters: usize,
-) -> Vec<f32> {
-    let mut area = vec![0f32; clusters];
-    let mut unseen = vec![0f32; clusters];
-    for (t, tri) in mesh.triangles.iter().enumerate() {
-        let Some(&c) = vertex_cluster.get(tri[0] as usize) else {
-            continue;
-        };
-        let a = seen.area_of(t as u32);
-        area[c as usize] += a;
-        if !seen.is_seen(t as u32) {
-            unseen[c as usize] += a;
-        }
-    }
-    unseen
-        .iter()
-        .zip(&area)
-        .map(|(&u, &a)| if a > 0.0 { u / a } else { 0.0 })
-        .collect()
-}
-
-/// The edges of a patch's triangles that no other of its triangles shares: its outline.
-pub fn outline(patch: &Patch, mesh: &CellMesh) -> Vec<[DVec3; 2]> {
-    let mut count: std::collections::HashMap<[u32; 2], u32> = Default::default();
-    for &t in &patch.triangles {
-        let [a, b, c] = mesh.triangles[t as usize];
-        for (u, v) in [(a, b), (b, c), (c, a)] {
-            *count.entry([u.min(v), u.max(v)]).or_insert(0) += 1;
-        }
-    }
-    let at = |v: u32| DVec3::from_array(mesh.positions[v as usize].map(f64::from));
-    let mut edges: Vec<[u32; 2]> = count
-        .into_iter()
-        .filter(|&(_, n)| n == 1)
-        .map(|(e, _)| e)
-        .collect();
-    edges.sort_unstable();
-    edges.into_iter().map(|[u, v]| [at(u), at(v)]).collect()
-}
