@@ -261,6 +261,31 @@ fn bad_arguments_are_refused() {
     assert!(!o.status.success());
 }
 
+/// A window script with a step the window does not know is refused with the script's name
+/// before any window opens (no display is needed to say so): an unattended run would
+/// otherwise wait with nothing to do.
+#[test]
+fn a_script_with_an_unknown_step_is_refused_before_the_window_opens() {
+    let dir = scratch("bad-script");
+    for (name, steps) in [
+        ("direction.json", r#"[{"direction": "sideways"}]"#),
+        ("step.json", r#"[{"fly_to_moon": 1}]"#),
+    ] {
+        let script = dir.join(name);
+        std::fs::write(&script, steps).unwrap();
+        let o = Command::new(env!("CARGO_BIN_EXE_voyage"))
+            .args(["demo", "--small", "--script", script.to_str().unwrap()])
+            .env_remove("DISPLAY")
+            .env_remove("WAYLAND_DISPLAY")
+            .output()
+            .expect("run voyage");
+        assert!(!o.status.success(), "{}", text(&o));
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(name) && err.contains("script"), "{err}");
+        assert!(!err.contains("display"), "{err}");
+    }
+}
+
 /// A CT slice whose RLE segments decode short makes dicom-rs's decoder panic (found by the
 /// fuzzer). voyage turns that into its usual one-line error, with no panic report or backtrace.
 #[test]

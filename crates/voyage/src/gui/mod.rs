@@ -23,7 +23,7 @@ use std::{
 use anyhow::{Context as _, bail};
 use clap::Args;
 
-use app::{App, Outcome};
+use app::{App, Outcome, Script};
 pub use loader::Source;
 
 use crate::open::{InputArgs, PointArgs};
@@ -120,6 +120,9 @@ pub fn demo(window: &WindowArgs, small: bool, pair: bool) -> anyhow::Result<()> 
 /// on the way (the study could not be opened, a file could not be written) make the
 /// command fail after the window closes.
 fn run(source: Option<Source>, w: &WindowArgs) -> anyhow::Result<()> {
+    // A script that cannot be read or has an unknown step is refused before the window
+    // opens: an unattended run would otherwise wait with nothing to do.
+    let script = w.script.as_deref().map(Script::load).transpose()?;
     let outcome = Arc::new(Mutex::new(Outcome::default()));
     let options = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default()
@@ -138,7 +141,7 @@ fn run(source: Option<Source>, w: &WindowArgs) -> anyhow::Result<()> {
     eframe::run_native(
         "voyage",
         options,
-        Box::new(move |cc| Ok(Box::new(App::new(cc, source, args, out)))),
+        Box::new(move |cc| Ok(Box::new(App::new(cc, source, args, script, out)))),
     )
     .map_err(|e| {
         anyhow::anyhow!(

@@ -29,7 +29,7 @@ use voyage_view::{FindingKind, Findings};
 
 use actions::Tool;
 use overlays::Closeup;
-use script::Script;
+pub use script::Script;
 
 use super::{
     WindowArgs,
@@ -125,6 +125,7 @@ impl App {
         cc: &eframe::CreationContext<'_>,
         source: Option<Source>,
         args: WindowArgs,
+        script: Option<Script>,
         outcome: Arc<Mutex<Outcome>>,
     ) -> Self {
         // Panels are not filled: the frame is cleared to the panel colour instead. On a CPU
@@ -140,13 +141,6 @@ impl App {
         }
         let pixels_gpu = cc.wgpu_render_state.is_some();
         let endoscope = Endoscope::new(cc.wgpu_render_state.as_ref(), args.cpu);
-        let script = match args.script.as_deref().map(Script::load).transpose() {
-            Ok(s) => s,
-            Err(e) => {
-                note_error(&outcome, format!("{e:#}"));
-                None
-            }
-        };
         let job = source.map(|s| Job::start(s, cc.egui_ctx.clone()));
         App {
             args,
