@@ -1,0 +1,81 @@
+//! The three materials' model: air, soft tissue and tagged fluid, their values, and a
+//! tissue–fluid mixture unmixed with the fluid made air. Pools, lumps and the wall's first
+//! voxel are all cleansed by it.
+
+/// HU written for air.
+pub const AIR_HU: i16 = -1000;
+
+#[derive(Clone, Debug)]
+pub struct CleanseOptions {
+    /// Soft tissue (HU): the wall's value, the second material of the model.
+    pub tissue_hu: i16,
+    /// Soft tissue is at most this (HU): a wall, a fold or a polyp (0–100 HU) at or below it
+    /// keeps its value, noise and all.
+    pub tissue_max_hu: i16,
+}
+
+impl Default for CleanseOptions {
+    fn default() -> Self {
+        CleanseOptions {
+            tissue_hu: 40,
+            tissue_max_hu: 100,
+        }
+    }
+}
+
+/// A pool too thin for a core is seeded where fluid this far above the fluid threshold lies
+/// under lumen air: a plastic pipe's or a wall's noise (≈ 150 ± 20, 40 ± 40 HU) does not
+/// reach it.
+pub(super) const LEVEL_MARGIN_HU: i16 = 100;
+
+/// Below this a voxel is more air than soft tissue: halfway between the air level and soft
+/// tissue's 40 HU.
+pub(super) fn mostly_air(air_hu: i16) -> i16 {
+    ((air_hu as i32 + 40) / 2) as i16
+}
+
+/// The local tagged fluid's HU: the mean of the brighter half (by range, above the midpoint
+/// of the fluid threshold and the brightest) of the pools' core voxels in the 5³ cube
+/// around `v` (a core voxel may be the pool's partial-volume skin); None when there is none.
+pub(super) fn fluid_value(
+    v: usize,
+    hu: &[i16],
+    m: &[u8],
+    cube: &[isize],
+    fluid_hu: i16,
+    mark: u8,
+) -> Option<f32> {
+    let core = |d: isize| {
+        let w = (v as isize + d) as usize;
+        (m[w] & mark != 0 && hu[w] >= fluid_hu).then_some(hu[w])
+    };
+    let max = cube.iter().filter_map(|&d| core(d)).max()?;
+    let half = ((max as i32 + fluid_hu as i32) / 2) as i16;
+    let (sum, n) = cube
+        .iter()
+        .filter_map(|&d| core(d))
+        .filter(|&h| h >= half)
+        .fold((0f32, 0f32), |(s, n), h| (s + h as f32, n + 1.0));
+    Some(sum / n)
+}
+
+/// A tissue–fluid mixture of value `h` (soft tissue `t`, fluid `c`) with its fluid made air.
+pub(super) fn unmix(h: f32, t: f32, c: f32) -> i16 {
+    if c <= t + 1.0 {
+        return h as i16;
+    }
+    let f = ((h - t) / (c - t)).clamp(0.0, 1.0);
+    ((1.0 - f) * t + f * AIR_HU as f32).round() as i16
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unmixing_keeps_the_tissue_fraction() {
+        assert_eq!(unmix(600.0, 40.0, 600.0), AIR_HU);
+        assert_eq!(unmix(320.0, 40.0, 600.0), -480);
+        assert_eq!(unmix(40.0, 40.0, 600.0), 40);
+    }
+}
