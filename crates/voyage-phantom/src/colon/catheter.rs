@@ -1,0 +1,70 @@
+//! The rectal catheter: from the rectum out through the perineum into the air outside.
+
+use glam::DVec3;
+
+use crate::{
+    axis::{Axis, Knot},
+    frame::Frame,
+    tube::{Blob, Catheter, Tube},
+};
+use voyage_core::{Error, Result};
+
+/// Full-size height (z, mm) of the perineum's skin when the body has one (rectal tube): the
+/// rectum's wall ends ≈ 10.5 mm above the first slice, so this keeps ≥ 5 mm of tissue.
+pub(super) const FLOOR_Z: f64 = 4.0;
+/// Where (full-size arc, mm) and how far off the axis (fraction of the radius) the rectal
+/// catheter's tip lies, and its plastic's HU.
+const CATHETER_TIP_ARC: f64 = 35.0;
+const CATHETER_OFFSET: f64 = 0.6;
+pub(super) const CATHETER_HU: f64 = 100.0;
+
+/// The rectal catheter (full size: air channel 3 mm in radius, 1 mm plastic wall; kept ≥ a
+/// voxel in the small phantom). Its open tip lies `CATHETER_TIP_ARC` mm up the rectum,
+/// `CATHETER_OFFSET` of the radius off the axis (so the true centerline stays in the
+/// lumen), on the side (posterior first, then left, right, anterior) that keeps clear of
+/// the polyps; it runs down beside the axis to the rectum's lower end, bends there and runs
+/// on inferiorly and a little posteriorly (like the anal canal) through the pelvic floor to
+/// its open end half a slice below the perineum's skin, in the outside air.
+pub(super) fn make_catheter(
+    frame: &Frame,
+    tube: &Tube,
+    polyps: &[Blob],
+    floor: f64,
+) -> Result<Catheter> {
+    let s = frame.scale;
+    let ax = &tube.axis;
+    let inner = frame.thin(3.0, 1.1);
+    let wall = frame.thin(1.0, 0.75);
+    let (tip_arc, low_arc) = (CATHETER_TIP_ARC * s, 5.0 * s);
+    let end_z = floor - 0.5 * frame.geom.spacing[2];
+    let sides = [DVec3::Y, DVec3::X, DVec3::NEG_X, DVec3::NEG_Y];
+    for side in sides {
+        let off = |arc: f64| {
+            let t = ax.tangent[ax.vertex_at(arc)];
+            (side - t * side.dot(t)).normalize_or_zero() * CATHETER_OFFSET * ax.radius_at(arc)
+        };
+        let tip = ax.point_at(tip_arc) + off(tip_arc);
+        let low = ax.point_at(low_arc) + off(low_arc);
+        // Below the rectum: inferior and a little posterior.
+        let dir = DVec3::new(0.0, 0.25, -1.0).normalize();
+        let exit = low + dir * ((low.z - end_z) / -dir.z);
+        let mid = low + dir * (0.5 * (low.z - end_z) / -dir.z);
+        let knots = [tip, low, mid, exit].map(|pos| Knot { pos, radius: inner });
+        let path = Axis::through(&knots, 1.0 * s)?;
+        let c = Catheter {
+            points: path.points,
+            inner_radius: inner,
+            wall_mm: wall,
+            hu: CATHETER_HU,
+        };
+        let clear = polyps
+            .iter()
+            .all(|b| c.distance(b.center) - c.outer_radius() - b.reach() >= frame.max_spacing());
+        if clear {
+            return Ok(c);
+        }
+    }
+    Err(Error::invalid(
+        "colon phantom: no room for the rectal catheter beside the rectal polyp",
+    ))
+}

@@ -1,0 +1,140 @@
+//! What colon to make: the options, each drawing what a real exam does, and the check that
+//! refuses a combination that cannot make a phantom.
+
+use voyage_core::{Error, Result};
+
+/// What colon to make.
+#[derive(Clone, Debug)]
+pub struct ColonOptions {
+    pub seed: u64,
+    /// ≈128³ at 1.5–1.6 mm with the anatomy scaled by ½, for fast tests.
+    pub small: bool,
+    /// Pools of tagged fluid (+400..+700 HU) with flat air–fluid levels in the dependent
+    /// parts of the colon: the rectum, descending and ascending colon supine (posterior);
+    /// the sigmoid, transverse colon and caecum prone (anterior).
+    pub tagged_fluid: bool,
+    /// The patient lies face down (DICOM "HFP"): gravity points anterior (−y), so tagged
+    /// fluid pools anteriorly. The volume's geometry does not change.
+    pub prone: bool,
+    /// Segments (sigmoid, descending, transverse; each at most once) in which a 30 mm
+    /// stretch (full size) is collapsed to a tissue cord: N collapses leave the gas in N + 1
+    /// pieces.
+    pub collapsed: Vec<String>,
+    /// Segments (rectum, sigmoid, descending, transverse, ascending, caecum; each at most
+    /// once) with a 40–60 mm stretch (full size) filled to the brim with tagged fluid: lumen,
+    /// but no gas, so the gas is split there while the lumen goes on.
+    pub fluid_filled: Vec<String>,
+    /// Segments (sigmoid, descending, transverse; each at most once) with a neck 30 % of
+    /// the way along: over 10 mm (full size) the gas narrows to a thread
+    /// [`NECK_RADIUS_MM`](super::NECK_RADIUS_MM) in radius, joined but narrower than the
+    /// camera's distance from the wall allows (a real sigmoid's spasm).
+    pub narrowed: Vec<String>,
+    /// Loops of small bowel filled with oral contrast (+300..+600 HU, no gas) in the right
+    /// and central lower abdomen and pelvis, some touching the colon near the descending
+    /// colon, the terminal ileum opening into the caecum under the level of a caecal pool
+    /// (made even without `tagged_fluid`): one bright region with the caecal fluid.
+    pub opacified_small_bowel: bool,
+    /// A rectal catheter from the lower rectum out of the body through a perineum (the body
+    /// then ends 4 mm above the first slice): colon gas joins the air outside in 3D.
+    pub rectal_tube: bool,
+    /// Lumps of tagged stool (+500..+900 HU, 4–9 mm at full size) on the wall, two in each
+    /// of the rectum, sigmoid, descending, transverse and ascending colon, one of each two
+    /// mottled with air: colon content, labelled 11, in the truth's `stool`.
+    pub tagged_stool: bool,
+    /// A CT table under the patient on the dependent side (posterior supine, anterior prone):
+    /// a 2.5 mm shell (+350 HU) round a foam core (−935 HU), 45 mm thick at full size, in
+    /// every slice, running out of the field of view on both sides as on a real exam; the
+    /// skin lies flat on it over a contact strip, with a wedge of outside air beside it. Not
+    /// the patient: label 0, the air round it 1.
+    pub table: bool,
+    /// 4–8 skin folds: crevices of outside air (label 1) 1–2 mm wide, 15–40 mm deep and
+    /// 30–80 mm long at full size, 3–6 on the dependent side beside the table's contact and
+    /// 1–2 low in the scan (rising from the perineum beside the rectal catheter's exit, or
+    /// without one in the gluteal cleft off the scan's inferior edge); most closed over by skin
+    /// in part of their length, where axial slices hold their air enclosed in the body.
+    pub skin_folds: bool,
+    /// A few separate small-bowel gas pockets (not colon).
+    pub small_bowel_gas: bool,
+    /// The bases of both lungs in the top slices (not colon).
+    pub lung_bases: bool,
+    /// Standard deviation of the CT noise (HU).
+    pub noise_hu: f64,
+    /// Round the CT (after the noise) to multiples of this many HU, as a windowed 8-bit
+    /// export leaves it.
+    pub quantize_hu: Option<f64>,
+    /// One position of a supine–prone pair (`colon_pair`): supine, the transverse
+    /// colon and the sigmoid's anterior loop sag posteriorly by centimetres while folds and
+    /// polyps keep their places on the wall (the same place along the colon, the same side of
+    /// it in the patient's frame); in either position tagged stool lies on the dependent side.
+    pub pair_member: bool,
+}
+
+impl Default for ColonOptions {
+    fn default() -> Self {
+        ColonOptions {
+            seed: 1,
+            small: false,
+            tagged_fluid: false,
+            prone: false,
+            collapsed: Vec::new(),
+            fluid_filled: Vec::new(),
+            narrowed: Vec::new(),
+            opacified_small_bowel: false,
+            rectal_tube: false,
+            tagged_stool: false,
+            table: false,
+            skin_folds: false,
+            small_bowel_gas: true,
+            lung_bases: true,
+            noise_hu: 20.0,
+            quantize_hu: None,
+            pair_member: false,
+        }
+    }
+}
+
+/// Segments that `ColonOptions::collapsed` may name.
+pub const COLLAPSIBLE: &[&str] = &["sigmoid", "descending", "transverse"];
+/// Segments that `ColonOptions::fluid_filled` may name.
+pub const FILLABLE: &[&str] = &[
+    "rectum",
+    "sigmoid",
+    "descending",
+    "transverse",
+    "ascending",
+    "cecum",
+];
+
+/// Refuses options that cannot make a phantom, with a message that says why.
+pub(super) fn check_options(opts: &ColonOptions) -> Result<()> {
+    if !(opts.noise_hu >= 0.0 && opts.noise_hu.is_finite()) {
+        return Err(Error::invalid(format!(
+            "noise {} HU is not a non-negative number",
+            opts.noise_hu
+        )));
+    }
+    if let Some(q) = opts.quantize_hu
+        && !(q > 0.0 && q.is_finite())
+    {
+        return Err(Error::invalid(format!(
+            "quantisation step {q} HU is not a positive number"
+        )));
+    }
+    let names = |what: &str, list: &[String], allowed: &[&str]| -> Result<()> {
+        for (i, n) in list.iter().enumerate() {
+            if !allowed.contains(&n.as_str()) {
+                return Err(Error::invalid(format!(
+                    "{what} segment '{n}': choose from {}",
+                    allowed.join(", ")
+                )));
+            }
+            if list[..i].contains(n) {
+                return Err(Error::invalid(format!("{what} segment '{n}' named twice")));
+            }
+        }
+        Ok(())
+    };
+    names("collapsed", &opts.collapsed, COLLAPSIBLE)?;
+    names("narrowed", &opts.narrowed, COLLAPSIBLE)?;
+    names("fluid-filled", &opts.fluid_filled, FILLABLE)
+}
