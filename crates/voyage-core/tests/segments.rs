@@ -364,6 +364,24 @@ fn a_collapse_is_bridged_stump_to_stump_when_another_loop_passes_nearer() {
     }
 }
 
+/// A neck 0.9 mm in radius in the descending colon and a collapsed transverse colon: the
+/// skeleton's 2×2×2 blocks (full only where all eight voxels are lumen) parted at the neck
+/// where the voxels hold together, and preparation failed ("the target cannot be reached
+/// from the rectum"). The voxels' own search takes over where the blocks part.
+#[test]
+fn a_neck_the_skeleton_blocks_part_is_traced_on_the_voxels() {
+    let p = phantom::colon(&ColonOptions {
+        narrowed: vec!["descending".into()],
+        collapsed: vec!["transverse".into()],
+        ..ColonOptions::default()
+    })
+    .unwrap();
+    let s = prepare(p.ct, &PrepOptions::default(), |_| {}).unwrap();
+    let (found, truth) = (s.centerline.length_mm, p.truth.centerline_length_mm);
+    assert!(found >= 0.97 * truth, "{found:.0} of {truth:.0} mm");
+    assert_eq!(s.segmentation.gaps.len(), 1);
+}
+
 /// The colon's segments, in their order along the chain, are named by landmarks in the
 /// colon's order (rectum first, cecum last), and a segment's middle name is the landmark
 /// halfway along the colon between its ends: not the one nearest its centroid, which for a

@@ -136,25 +136,12 @@ pub fn trace_skeleton(
         )));
     }
     if uses_blocks(lumen, lumen_voxels, opts) {
-        let blocks = Blocks::new(lumen, grid, 2)?;
-        let ds = distance_to_wall(&blocks.mask)?;
-        let to_block = |v: [usize; 3]| blocks.nearest_full(v);
-        let (voxels, route) = skeleton_path(
-            &blocks.mask,
-            &ds,
-            to_block(seed)?,
-            given_source.map(to_block).transpose()?,
-            given_target.map(to_block).transpose()?,
-            opts,
-        )?;
-        let path_mm = voxels.iter().map(|&v| blocks.centre_mm(v)).collect();
-        return Ok(Skeleton {
-            path_mm,
-            given_source,
-            given_target,
-            blocks: Some(blocks),
-            route: Some(route),
-        });
+        // A neck about two voxels wide can part the full blocks where the voxels hold
+        // together (it depends on how the blocks fall on it): then the voxels' own search,
+        // slower, which fails only where the lumen itself is apart.
+        if let Ok(sk) = skeleton_on_blocks(lumen, grid, seed, given_source, given_target, opts) {
+            return Ok(sk);
+        }
     }
     let own;
     let ds = match fine_ds {
@@ -170,6 +157,36 @@ pub fn trace_skeleton(
         given_source,
         given_target,
         blocks: None,
+        route: Some(route),
+    })
+}
+
+/// [`trace_skeleton`] on 2×2×2 blocks of `lumen` (those all lumen), with the blocks' own Ds.
+fn skeleton_on_blocks(
+    lumen: &Volume<u8>,
+    grid: &BoxGrid,
+    seed: [usize; 3],
+    given_source: Option<[usize; 3]>,
+    given_target: Option<[usize; 3]>,
+    opts: &CenterlineOptions,
+) -> Result<Skeleton> {
+    let blocks = Blocks::new(lumen, grid, 2)?;
+    let ds = distance_to_wall(&blocks.mask)?;
+    let to_block = |v: [usize; 3]| blocks.nearest_full(v);
+    let (voxels, route) = skeleton_path(
+        &blocks.mask,
+        &ds,
+        to_block(seed)?,
+        given_source.map(to_block).transpose()?,
+        given_target.map(to_block).transpose()?,
+        opts,
+    )?;
+    let path_mm = voxels.iter().map(|&v| blocks.centre_mm(v)).collect();
+    Ok(Skeleton {
+        path_mm,
+        given_source,
+        given_target,
+        blocks: Some(blocks),
         route: Some(route),
     })
 }
