@@ -4,7 +4,7 @@
 
 use super::{
     changes::{overwrite, value_after},
-    marks::{LUMP, NEAR, SOLID},
+    marks::{LUMP, NEAR, RowMarks, SOLID},
     model::AIR_HU,
 };
 use crate::Geometry;
@@ -52,11 +52,17 @@ impl Islands<'_> {
     }
 
     /// Voxels marked near a pool or in a lump (within lo..=hi grown by one; the marks reach
-    /// two past it, and lo..=hi lies two inside the volume) that are solid once cleansed but
-    /// joined to nothing solid outside the marks, through face neighbours solid and marked:
-    /// ascending. `m` is the lumen before cleansing, with the marks; the two spare bits it
+    /// two past it, and lo..=hi lies two inside the volume; `rows` says which rows hold
+    /// marks) that are solid once cleansed but joined to nothing solid outside the marks,
+    /// through face neighbours solid and marked: ascending. `m` is the lumen before cleansing, with the marks; the two spare bits it
     /// lends are clear again on return.
-    pub(super) fn find(&self, m: &mut [u8], lo: [usize; 3], hi: [usize; 3]) -> Vec<usize> {
+    pub(super) fn find(
+        &self,
+        m: &mut [u8],
+        lo: [usize; 3],
+        hi: [usize; 3],
+        rows: &RowMarks,
+    ) -> Vec<usize> {
         let [nx, ny, _] = self.g.dims;
         let six = [
             1isize,
@@ -80,6 +86,9 @@ impl Islands<'_> {
         let mut queue = Vec::new();
         for k in blo[2]..=bhi[2] {
             for j in blo[1]..=bhi[1] {
+                if !rows.any(j, k, MARKED) {
+                    continue;
+                }
                 let row = nx * (j + ny * k);
                 for i in blo[0]..=bhi[0] {
                     let v = row + i;

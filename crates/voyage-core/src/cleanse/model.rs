@@ -36,7 +36,8 @@ pub(super) fn mostly_air(air_hu: i16) -> i16 {
 
 /// The local tagged fluid's HU: the mean of the brighter half (by range, above the midpoint
 /// of the fluid threshold and the brightest) of the pools' core voxels in the 5³ cube
-/// around `v` (a core voxel may be the pool's partial-volume skin); None when there is none.
+/// around `v` (`cube`: its offsets, at most 125; a core voxel may be the pool's
+/// partial-volume skin); None when there is none.
 pub(super) fn fluid_value(
     v: usize,
     hu: &[i16],
@@ -45,17 +46,23 @@ pub(super) fn fluid_value(
     fluid_hu: i16,
     mark: u8,
 ) -> Option<f32> {
-    let core = |d: isize| {
+    // The core voxels' values, read once (in the cube's order, which the sum keeps).
+    let mut cores = [0i16; 125];
+    let mut n = 0;
+    for &d in &cube[..cube.len().min(cores.len())] {
         let w = (v as isize + d) as usize;
-        (m[w] & mark != 0 && hu[w] >= fluid_hu).then_some(hu[w])
-    };
-    let max = cube.iter().filter_map(|&d| core(d)).max()?;
+        if m[w] & mark != 0 && hu[w] >= fluid_hu {
+            cores[n] = hu[w];
+            n += 1;
+        }
+    }
+    let cores = &cores[..n];
+    let max = *cores.iter().max()?;
     let half = ((max as i32 + fluid_hu as i32) / 2) as i16;
-    let (sum, n) = cube
+    let (sum, n) = cores
         .iter()
-        .filter_map(|&d| core(d))
-        .filter(|&h| h >= half)
-        .fold((0f32, 0f32), |(s, n), h| (s + h as f32, n + 1.0));
+        .filter(|&&h| h >= half)
+        .fold((0f32, 0f32), |(s, n), &h| (s + h as f32, n + 1.0));
     Some(sum / n)
 }
 
