@@ -149,14 +149,7 @@ fn the_real_exam_gives_the_whole_colon_rectum_to_cecum() {
         far * 100.0
     );
     // Named in the colon's order: the rectum first, the cecum last.
-    assert!(
-        labels.first().is_some_and(|l| l.starts_with("rectum")),
-        "{labels:?}"
-    );
-    assert!(
-        labels.last().is_some_and(|l| l.ends_with("cecum")),
-        "{labels:?}"
-    );
+    common::assert_labelled_in_anatomical_order(seg);
     // Cleansing: the mucosa where fluid lay is nearly as smooth as in air (mean angle between
     // neighbouring faces; 2.3× before the model's values were smoothed, 1.35× before the
     // lumen followed them). The study's CT is the

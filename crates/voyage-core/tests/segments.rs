@@ -2,6 +2,8 @@
 //! a seed adds gas to the colon but never moves its start, an excluded point takes its gas
 //! out; the patient's position decides on which side fluid lies.
 
+mod common;
+
 use glam::DVec3;
 use voyage_core::{
     PatientPosition, PositionSource, PrepOptions, SegmentOptions, Volume, prepare, segment,
@@ -360,7 +362,7 @@ fn a_collapse_is_bridged_stump_to_stump_when_another_loop_passes_nearer() {
             "bridged {:.0} mm",
             gap[0].length_mm
         );
-        assert_labelled_in_anatomical_order(&s.segmentation);
+        common::assert_labelled_in_anatomical_order(&s.segmentation);
     }
 }
 
@@ -380,59 +382,4 @@ fn a_neck_the_skeleton_blocks_part_is_traced_on_the_voxels() {
     let (found, truth) = (s.centerline.length_mm, p.truth.centerline_length_mm);
     assert!(found >= 0.97 * truth, "{found:.0} of {truth:.0} mm");
     assert_eq!(s.segmentation.gaps.len(), 1);
-}
-
-/// The colon's segments, in their order along the chain, are named by landmarks in the
-/// colon's order (rectum first, cecum last), and a segment's middle name is the landmark
-/// halfway along the colon between its ends: not the one nearest its centroid, which for a
-/// U-shaped compartment lies in the middle of the abdomen (it named the phantom's
-/// splenic-flexure-to-cecum compartment "splenic flexure–ascending–cecum").
-fn assert_labelled_in_anatomical_order(seg: &voyage_core::Segmentation) {
-    const ORDER: [&str; 8] = [
-        "rectum",
-        "sigmoid",
-        "descending",
-        "splenic flexure",
-        "transverse",
-        "hepatic flexure",
-        "ascending",
-        "cecum",
-    ];
-    let mut chained: Vec<(usize, &str)> = seg
-        .segments
-        .iter()
-        .filter_map(|x| Some((x.order?, x.label.as_str())))
-        .collect();
-    chained.sort();
-    let labels: Vec<&str> = chained.iter().map(|&(_, l)| l).collect();
-    let index = |name: &str| {
-        ORDER
-            .iter()
-            .position(|&n| n == name)
-            .unwrap_or_else(|| panic!("{name} is no landmark: {labels:?}"))
-    };
-    let mut last = 0;
-    for label in &labels {
-        let names: Vec<usize> = label.split('–').map(index).collect();
-        assert!(
-            names.windows(2).all(|w| w[0] < w[1]) && names[0] >= last,
-            "out of order: {labels:?}"
-        );
-        if let [a, mid, b] = names[..] {
-            let halfway = 0.5 * (a + b) as f64;
-            assert!(
-                (mid as f64 - halfway).abs() <= 0.5,
-                "{label}: its middle is not halfway along the colon"
-            );
-        }
-        last = *names.last().unwrap();
-    }
-    assert!(
-        labels.first().is_some_and(|l| l.starts_with("rectum")),
-        "{labels:?}"
-    );
-    assert!(
-        labels.last().is_some_and(|l| l.ends_with("cecum")),
-        "{labels:?}"
-    );
 }

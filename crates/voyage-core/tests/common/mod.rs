@@ -1,7 +1,8 @@
-//! Helpers shared by the tests on real colons.
+//! Helpers shared by the tests on real colons and phantoms (each test file uses some).
+#![allow(dead_code)]
 
 use glam::DVec3;
-use voyage_core::{OFF_WALL_MM, Study};
+use voyage_core::{COLON_SEGMENTS, OFF_WALL_MM, Segmentation, Study};
 
 /// Markers dropped on the wall every `step_mm` of the centerline's arc, as a reader drops
 /// them, and read back: for each, where it lies along the colon and [`Study::arc_at`]'s
@@ -86,5 +87,50 @@ pub fn assert_markers_read_back(study: &Study, what: &str) {
     assert!(
         read.windows(2).all(|w| w[0].1 < w[1].1),
         "{what}: markers read out of order"
+    );
+}
+
+/// The colon's segments, in their order along the chain, are named by landmarks in the
+/// colon's order (rectum first, cecum last), and a segment's middle name is the landmark
+/// halfway along the colon between its ends: not the one nearest its centroid, which for a
+/// U-shaped compartment lies in the middle of the abdomen (it named the phantom's
+/// splenic-flexure-to-cecum compartment "splenic flexure–ascending–cecum").
+pub fn assert_labelled_in_anatomical_order(seg: &Segmentation) {
+    let mut chained: Vec<(usize, &str)> = seg
+        .segments
+        .iter()
+        .filter_map(|x| Some((x.order?, x.label.as_str())))
+        .collect();
+    chained.sort();
+    let labels: Vec<&str> = chained.iter().map(|&(_, l)| l).collect();
+    let index = |name: &str| {
+        COLON_SEGMENTS
+            .iter()
+            .position(|&n| n == name)
+            .unwrap_or_else(|| panic!("{name} is no landmark: {labels:?}"))
+    };
+    let mut last = 0;
+    for label in &labels {
+        let names: Vec<usize> = label.split('–').map(index).collect();
+        assert!(
+            names.windows(2).all(|w| w[0] < w[1]) && names[0] >= last,
+            "out of order: {labels:?}"
+        );
+        if let [a, mid, b] = names[..] {
+            let halfway = 0.5 * (a + b) as f64;
+            assert!(
+                (mid as f64 - halfway).abs() <= 0.5,
+                "{label}: its middle is not halfway along the colon"
+            );
+        }
+        last = *names.last().unwrap();
+    }
+    assert!(
+        labels.first().is_some_and(|l| l.starts_with("rectum")),
+        "{labels:?}"
+    );
+    assert!(
+        labels.last().is_some_and(|l| l.ends_with("cecum")),
+        "{labels:?}"
     );
 }
