@@ -557,8 +557,8 @@ impl App {
     pub(super) fn switch(&mut self, switch: Switch) -> Option<&mut bool> {
         Some(match switch {
             Switch::Centerline => &mut self.show_centerline,
-            Switch::Closeup => &mut self.closeup_on,
-            Switch::Translucency => &mut self.translucency_on,
+            Switch::Closeup => &mut self.boxes.closeup_on,
+            Switch::Translucency => &mut self.boxes.translucency_on,
             Switch::Compass => &mut self.session.as_mut()?.sub.modes.compass,
             Switch::Leveling => &mut self.session.as_mut()?.sub.modes.leveling,
             Switch::Still => &mut self.session.as_mut()?.sub.modes.still,
@@ -741,9 +741,7 @@ impl App {
         self.other = Some(o);
         self.looked_up = None;
         std::mem::swap(&mut self.scout, &mut self.other_scout);
-        self.closeup = None;
-        self.translucency = None;
-        self.closeup_at = None;
+        self.boxes.moved();
         self.measure_from = None;
         self.polyp_span = None;
         self.slices.volume_changed();
@@ -784,7 +782,7 @@ impl App {
         {
             self.status = format!("{name}: where the link puts it here");
         }
-        self.closeup_at = Some(x);
+        self.boxes.at = Some(x);
         self.looked_up = Some((name, x));
         self.slices.follow();
     }
@@ -820,7 +818,7 @@ impl App {
         if let Some(s) = &mut self.session {
             s.set_playing(false);
             s.place(view);
-            self.closeup_at = Some(position);
+            self.boxes.at = Some(position);
             self.slices.follow();
             self.status = format!("back at {label}");
         }

@@ -28,7 +28,7 @@ use serde_json::json;
 use voyage_view::{FindingKind, Findings};
 
 use actions::Tool;
-use overlays::Closeup;
+use overlays::BoxViews;
 pub use script::Script;
 
 use super::{
@@ -98,12 +98,8 @@ pub struct App {
     export_dir: String,
     show_help: bool,
     show_centerline: bool,
-    closeup_on: bool,
-    closeup: Option<Closeup>,
-    /// Marker whose neighbourhood the close-up shows (instead of the view centre).
-    closeup_at: Option<DVec3>,
-    translucency_on: bool,
-    translucency: Option<Closeup>,
+    /// The close-up and translucency views over the endoscopic view.
+    boxes: BoxViews,
     status: String,
     times: FrameTimes,
     /// Frames drawn since the study became ready (or failed).
@@ -168,11 +164,7 @@ impl App {
             export_dir: "findings".into(),
             show_help: false,
             show_centerline: true,
-            closeup_on: false,
-            closeup: None,
-            closeup_at: None,
-            translucency_on: false,
-            translucency: None,
+            boxes: BoxViews::default(),
             status: String::new(),
             times: FrameTimes::default(),
             frames: 0,
@@ -270,9 +262,7 @@ impl App {
                 self.findings = Findings::default();
                 self.looked_up = None;
                 self.polyp_span = None;
-                self.closeup = None;
-                self.translucency = None;
-                self.closeup_at = None;
+                self.boxes.moved();
                 self.measure_from = None;
                 self.other = second.map(|o| Other::new(&s, o, Findings::default()));
                 self.other_scout = self.other.as_ref().map(|o| {
@@ -337,8 +327,8 @@ impl App {
                     if kept == 1 { "" } else { "s" },
                     s.study.centerline.length_mm
                 );
-                self.closeup = None;
-                self.translucency = None;
+                // The CT is the same: a marker's place shown stays.
+                self.boxes.images_stale();
                 self.measure_from = None;
                 self.slices.follow();
                 if let Some(v) = &mut self.scout {

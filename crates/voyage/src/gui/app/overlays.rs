@@ -15,10 +15,35 @@ use crate::gui::endoscopy::{label, project, surface_point_on_screen, visible_cen
 
 /// An image shown over the view (the close-up volume rendering, the translucency view), and
 /// the camera and box centre it was made for.
-pub(super) struct Closeup {
+struct Closeup {
     texture: egui::TextureHandle,
     camera: Camera,
     center: DVec3,
+}
+
+/// The close-up volume rendering and the translucency view over the endoscopic view: each on
+/// or off with the last image drawn, and the marker whose neighbourhood they show.
+#[derive(Default)]
+pub(super) struct BoxViews {
+    pub(super) closeup_on: bool,
+    pub(super) translucency_on: bool,
+    closeup: Option<Closeup>,
+    translucency: Option<Closeup>,
+    /// Marker whose neighbourhood the boxes show (instead of the view centre's surface).
+    pub(super) at: Option<DVec3>,
+}
+
+impl BoxViews {
+    /// The images are of another CT or lumen: drawn again.
+    pub(super) fn images_stale(&mut self) {
+        (self.closeup, self.translucency) = (None, None);
+    }
+
+    /// Another study or position: the images and the marker shown go.
+    pub(super) fn moved(&mut self) {
+        self.images_stale();
+        self.at = None;
+    }
 }
 
 impl App {
@@ -26,7 +51,7 @@ impl App {
     /// the surface point at the view's centre.
     fn overlay_target(&self, rect: Rect) -> Option<(Camera, DVec3)> {
         let s = self.session.as_ref()?;
-        let center = match self.closeup_at {
+        let center = match self.boxes.at {
             Some(c) => c,
             None => self.pick(rect.center())?.point,
         };
@@ -36,8 +61,8 @@ impl App {
     /// The close-up volume rendering over the view: the CT ray-cast in a small box around
     /// the marker flown back to, or around the surface point at the view's centre.
     pub(super) fn closeup_overlay(&mut self, ui: &egui::Ui, rect: Rect) {
-        if !self.closeup_on {
-            self.closeup = None;
+        if !self.boxes.closeup_on {
+            self.boxes.closeup = None;
             return;
         }
         let (Some((cam, center)), Some(s)) = (self.overlay_target(rect), &self.session) else {
@@ -48,7 +73,7 @@ impl App {
             half_size_mm: 15.0,
         };
         show_overlay(
-            &mut self.closeup,
+            &mut self.boxes.closeup,
             ui,
             rect,
             "closeup",
@@ -71,8 +96,8 @@ impl App {
     /// to, or around the surface point at the view's centre, coloured by what lies beneath
     /// it, with its legend.
     pub(super) fn translucency_overlay(&mut self, ui: &egui::Ui, rect: Rect) {
-        if !self.translucency_on {
-            self.translucency = None;
+        if !self.boxes.translucency_on {
+            self.boxes.translucency = None;
             return;
         }
         let (Some((cam, center)), Some(s)) = (self.overlay_target(rect), &self.session) else {
@@ -83,7 +108,7 @@ impl App {
             half_size_mm: voyage_view::HALF_SIZE_MM,
         };
         show_overlay(
-            &mut self.translucency,
+            &mut self.boxes.translucency,
             ui,
             rect,
             "translucency",
