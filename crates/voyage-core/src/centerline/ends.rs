@@ -109,8 +109,9 @@ pub fn uses_blocks(lumen: &Volume<u8>, lumen_voxels: usize, opts: &CenterlineOpt
 
 /// Finds (or checks) the endpoints and traces the raw colon path through the lumen inside
 /// `grid`. On blocks ([`uses_blocks`]) the search needs only the mask (the blocks get their
-/// own Ds), so it can run before the voxels' Ds; otherwise it uses `fine_ds`, computing it
-/// when not given.
+/// own Ds), so it can run before the voxels' Ds; where it fails on them (a neck the blocks
+/// part), and on a small lumen, it searches the voxels with `fine_ds`, computing it when not
+/// given. An error is the voxels' own.
 pub fn trace_skeleton(
     lumen: &Volume<u8>,
     grid: &BoxGrid,

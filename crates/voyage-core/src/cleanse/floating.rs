@@ -54,8 +54,8 @@ impl Islands<'_> {
     /// Voxels marked near a pool or in a lump (within lo..=hi grown by one; the marks reach
     /// two past it, and lo..=hi lies two inside the volume; `rows` says which rows hold
     /// marks) that are solid once cleansed but joined to nothing solid outside the marks,
-    /// through face neighbours solid and marked: ascending. `m` is the lumen before cleansing, with the marks; the two spare bits it
-    /// lends are clear again on return.
+    /// through face neighbours solid and marked: ascending. `m` is the lumen before
+    /// cleansing, with the marks; the two spare bits it lends are clear again on return.
     pub(super) fn find(
         &self,
         m: &mut [u8],

@@ -48,8 +48,9 @@ pub(super) fn fluid_value(
 ) -> Option<f32> {
     // The core voxels' values, read once (in the cube's order, which the sum keeps).
     let mut cores = [0i16; 125];
+    assert!(cube.len() <= cores.len(), "a cube of at most 5³ offsets");
     let mut n = 0;
-    for &d in &cube[..cube.len().min(cores.len())] {
+    for &d in cube {
         let w = (v as isize + d) as usize;
         if m[w] & mark != 0 && hu[w] >= fluid_hu {
             cores[n] = hu[w];

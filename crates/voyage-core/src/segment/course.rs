@@ -91,6 +91,11 @@ impl Course {
             .map_or("colon", |i| LANDMARKS[i].0)
     }
 
+    /// Where landmark `name` comes along the colon (0 the rectum, 7 the cecum).
+    pub fn order_of(name: &str) -> Option<usize> {
+        LANDMARKS.iter().position(|l| l.0 == name)
+    }
+
     /// The landmark nearest a fraction `t` of the course (0 at the rectum, 1 at the cecum):
     /// what a stretch of colon passes through between two places, where their midpoint in
     /// space (a U-shaped compartment's centroid lies in the middle of the abdomen, off the

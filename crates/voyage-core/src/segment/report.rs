@@ -118,19 +118,29 @@ fn colon_segments(
 }
 
 /// A colon segment's name from its entry and exit (volume-local mm): the landmarks nearest
-/// them and, between, the one halfway along the course; the whole colon is "rectum–cecum".
+/// them and, between, the one halfway along the course (only if it lies between them in the
+/// colon's order: the ends are named by place, the middle by course). A segment from rectum
+/// to cecum is the whole colon, and a middle name would only suggest it stops there.
 fn segment_name(named: &Course, entry: DVec3, exit: DVec3) -> String {
     let ends = [named.name(entry), named.name(exit)];
     if ends == ["rectum", "cecum"] {
         return ends.join("–");
     }
     let halfway = named.name_along(0.5 * (named.along(entry) + named.along(exit)));
-    let mut names = vec![ends[0]];
-    for n in [halfway, ends[1]] {
-        if names.last() != Some(&n) {
-            names.push(n);
-        }
-    }
+    let between = match ends.map(Course::order_of) {
+        [Some(a), Some(b)] => Course::order_of(halfway).is_some_and(|m| a < m && m < b),
+        _ => false,
+    };
+    let middle = between.then_some(halfway);
+    let names: Vec<&str> = [Some(ends[0]), middle, Some(ends[1])]
+        .into_iter()
+        .flatten()
+        .fold(Vec::new(), |mut v, n| {
+            if v.last() != Some(&n) {
+                v.push(n);
+            }
+            v
+        });
     names.join("–")
 }
 

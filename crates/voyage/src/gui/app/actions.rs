@@ -93,7 +93,7 @@ pub(super) enum Action {
     /// a slice).
     MoveTo(DVec3),
     /// The same with the point in LPS mm.
-    MoveToPatient(DVec3),
+    MoveToLps(DVec3),
     /// The camera at a pose [x, y, z, qw, qx, qy, qz] (volume-local mm), if it lies inside
     /// the colon.
     Pose([f64; 7]),
@@ -420,9 +420,11 @@ impl App {
                     self.measure_point(b);
                 }
             }
-            Action::RemoveMarker(label) => self.findings.markers.retain(|m| m.label != label),
+            Action::RemoveMarker(label) => {
+                self.findings.remove_marker(&label);
+            }
             Action::RemoveMeasurement(label) => {
-                self.findings.measurements.retain(|m| m.label != label)
+                self.findings.remove_measurement(&label);
             }
             Action::GoToMarker(label) => self.go_to_marker(&label),
             Action::ShowInOther(label) => self.show_in_other(&label),
@@ -440,7 +442,7 @@ impl App {
             Action::Jump(f) => self.jump(f),
             Action::JumpToCenterline(i) => self.jump_to_centerline(i),
             Action::MoveTo(x) => self.move_to_point(x),
-            Action::MoveToPatient(lps) => {
+            Action::MoveToLps(lps) => {
                 if let Some(s) = &mut self.session {
                     let x = s.study.ct.geometry().patient_to_local(lps);
                     s.set_playing(false);
@@ -466,15 +468,20 @@ impl App {
         }
     }
 
-    /// The point of the view an action is about, if it lies in the view.
-    fn view_point(&self, at: ViewPoint, ctx: &egui::Context) -> Option<Pos2> {
+    /// The point of the view an action is about, if it lies in the view (else says so,
+    /// unless it is the cursor: a key pressed with the cursor elsewhere does nothing).
+    fn view_point(&mut self, at: ViewPoint, ctx: &egui::Context) -> Option<Pos2> {
         let rect = self.view_rect?;
         let p = match at {
             ViewPoint::Cursor => ctx.input(|i| i.pointer.hover_pos())?,
             ViewPoint::At(p) => p,
             ViewPoint::Fraction(f) => rect.min + Vec2::new(f[0], f[1]) * rect.size(),
         };
-        rect.contains(p).then_some(p)
+        let inside = rect.contains(p);
+        if !inside && at != ViewPoint::Cursor {
+            self.status = "the point lies outside the view".into();
+        }
+        inside.then_some(p)
     }
 
     /// Starts the two-way reading, or stops the one running.
@@ -741,7 +748,7 @@ impl App {
         self.other = Some(o);
         self.looked_up = None;
         std::mem::swap(&mut self.scout, &mut self.other_scout);
-        self.boxes.moved();
+        self.boxes.reset();
         self.measure_from = None;
         self.polyp_span = None;
         self.slices.volume_changed();

@@ -262,7 +262,7 @@ impl App {
                 self.findings = Findings::default();
                 self.looked_up = None;
                 self.polyp_span = None;
-                self.boxes.moved();
+                self.boxes.reset();
                 self.measure_from = None;
                 self.other = second.map(|o| Other::new(&s, o, Findings::default()));
                 self.other_scout = self.other.as_ref().map(|o| {

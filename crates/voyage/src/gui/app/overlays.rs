@@ -40,7 +40,7 @@ impl BoxViews {
     }
 
     /// Another study or position: the images and the marker shown go.
-    pub(super) fn moved(&mut self) {
+    pub(super) fn reset(&mut self) {
         self.images_stale();
         self.at = None;
     }

@@ -171,7 +171,7 @@ impl Step {
                 Action::MeasureBetween(ViewPoint::Fraction(from), ViewPoint::Fraction(to))
             }
             Step::Jump(f) => Action::Jump(f),
-            Step::MoveTo(lps) => Action::MoveToPatient(DVec3::from_array(lps)),
+            Step::MoveTo(lps) => Action::MoveToLps(DVec3::from_array(lps)),
             Step::Pose(a) => Action::Pose(a),
             Step::GoTo(label) => Action::GoToMarker(label),
             Step::SwitchPosition(on) => return when(on, Action::SwitchPosition),
