@@ -11,6 +11,8 @@ pub(super) const POOL: u8 = 8;
 /// their partial-volume skin (`LUMP`).
 pub(super) const SOLID: u8 = 16;
 pub(super) const LUMP: u8 = 32;
+/// All of them: what cleansing clears before it returns.
+pub(super) const ALL: u8 = NEAR | CORE | POOL | SOLID | LUMP;
 
 /// The marks each row of a box holds (the bits of its voxels, or-ed; a row runs along the
 /// first axis): the passes over the colon's box skip the rows that hold none, since pools

@@ -409,12 +409,12 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
     let m = lumen.data_mut();
     for k in lo[2] - 2..=hi[2] + 2 {
         for j in lo[1] - 2..=hi[1] + 2 {
-            if !marked.any(j, k, NEAR | CORE | POOL | SOLID | LUMP) {
+            if !marked.any(j, k, marks::ALL) {
                 continue;
             }
             let row = nx * (j + ny * k);
             for x in &mut m[row + lo[0] - 2..=row + hi[0] + 2] {
-                *x &= !(NEAR | CORE | POOL | SOLID | LUMP);
+                *x &= !marks::ALL;
             }
         }
     }

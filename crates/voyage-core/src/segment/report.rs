@@ -131,17 +131,12 @@ fn segment_name(named: &Course, entry: DVec3, exit: DVec3) -> String {
         [Some(a), Some(b)] => Course::order_of(halfway).is_some_and(|m| a < m && m < b),
         _ => false,
     };
-    let middle = between.then_some(halfway);
-    let names: Vec<&str> = [Some(ends[0]), middle, Some(ends[1])]
-        .into_iter()
-        .flatten()
-        .fold(Vec::new(), |mut v, n| {
-            if v.last() != Some(&n) {
-                v.push(n);
-            }
-            v
-        });
-    names.join("–")
+    // A middle name lies strictly between the ends, so it differs from both.
+    match (between, ends[0] == ends[1]) {
+        (true, _) => [ends[0], halfway, ends[1]].join("–"),
+        (false, true) => ends[0].to_string(),
+        (false, false) => ends.join("–"),
+    }
 }
 
 /// The gas left out of the colon (`left`), most gas first, from `min_report_ml` on: each
