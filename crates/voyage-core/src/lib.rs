@@ -33,8 +33,10 @@ pub use distance::geodesic_distance;
 pub use error::{Error, Result};
 pub use grid::{BoxGrid, BrickIndex, Bricked, Field, bounding_box};
 pub use navigable::{DEFAULT_MIN_WALL_MM, Navigable};
-pub use prep::{COLON_SEGMENTS, OFF_WALL_MM, PrepOptions, Stage, Study, Timings, prepare};
-pub use segment::{ComponentKind, Gap, LEFT_OUT_DOUBT_ML, SegmentOptions, Segmentation, segment};
+pub use prep::{OFF_WALL_MM, PrepOptions, Stage, Study, Timings, prepare};
+pub use segment::{
+    COLON_SEGMENTS, ComponentKind, Gap, LEFT_OUT_DOUBT_ML, SegmentOptions, Segmentation, segment,
+};
 pub use storage::Storage;
 pub use surface::{Mesh, Surface, roughness};
 pub use volume::{Geometry, IDENTITY, Volume, check_dims};

@@ -21,7 +21,7 @@ use crate::{
     },
     grid::{BoxGrid, Bricked, Field},
     navigable::{DEFAULT_MIN_WALL_MM, Navigable},
-    segment::{SegmentOptions, Segmentation, segment},
+    segment::{COLON_SEGMENTS, Course, SegmentOptions, Segmentation, segment},
     surface::{Surface, extract_surface},
 };
 
@@ -222,18 +222,6 @@ const CELLS_AROUND: usize = 2;
 /// (the geodesic cuts the bends).
 const ARC_SLACK: f64 = 0.25;
 
-/// The colon's segments from the rectum to the cecum.
-pub const COLON_SEGMENTS: [&str; 8] = [
-    "rectum",
-    "sigmoid",
-    "descending",
-    "splenic flexure",
-    "transverse",
-    "hepatic flexure",
-    "ascending",
-    "cecum",
-];
-
 /// The non-decreasing sequence of labels (0..n) that differs from `wanted` in the fewest
 /// places (dynamic programming; ties go to the earlier label).
 fn monotone_labels(wanted: &[usize], n: usize) -> Vec<usize> {
@@ -392,7 +380,7 @@ impl Study {
                         region => region,
                     }
                 };
-                COLON_SEGMENTS.iter().position(|&s| s == name).unwrap_or(0)
+                Course::order_of(name).unwrap_or(0)
             })
             .collect();
         monotone_labels(&wanted, COLON_SEGMENTS.len())

@@ -14,17 +14,29 @@ use glam::{DVec2, DVec3};
 
 use crate::Geometry;
 
-/// The template: landmarks in the colon's box, u from the patient's right (0) to left (1),
-/// v from inferior (0) to superior (1), in their order along the colon.
+/// The colon's segments from the rectum to the cecum.
+pub const COLON_SEGMENTS: [&str; 8] = [
+    "rectum",
+    "sigmoid",
+    "descending",
+    "splenic flexure",
+    "transverse",
+    "hepatic flexure",
+    "ascending",
+    "cecum",
+];
+
+/// The template: the segments' landmarks in the colon's box, u from the patient's right (0)
+/// to left (1), v from inferior (0) to superior (1), in their order along the colon.
 const LANDMARKS: [(&str, f64, f64); 8] = [
-    ("rectum", 0.5, 0.0),
-    ("sigmoid", 0.62, 0.22),
-    ("descending", 0.9, 0.5),
-    ("splenic flexure", 0.88, 0.95),
-    ("transverse", 0.5, 0.85),
-    ("hepatic flexure", 0.12, 0.92),
-    ("ascending", 0.1, 0.55),
-    ("cecum", 0.12, 0.28),
+    (COLON_SEGMENTS[0], 0.5, 0.0),
+    (COLON_SEGMENTS[1], 0.62, 0.22),
+    (COLON_SEGMENTS[2], 0.9, 0.5),
+    (COLON_SEGMENTS[3], 0.88, 0.95),
+    (COLON_SEGMENTS[4], 0.5, 0.85),
+    (COLON_SEGMENTS[5], 0.12, 0.92),
+    (COLON_SEGMENTS[6], 0.1, 0.55),
+    (COLON_SEGMENTS[7], 0.12, 0.28),
 ];
 
 /// The colon's course within a box in the patient frame (LPS mm).
@@ -93,7 +105,7 @@ impl Course {
 
     /// Where landmark `name` comes along the colon (0 the rectum, 7 the cecum).
     pub fn order_of(name: &str) -> Option<usize> {
-        LANDMARKS.iter().position(|l| l.0 == name)
+        COLON_SEGMENTS.iter().position(|&s| s == name)
     }
 
     /// The landmark nearest a fraction `t` of the course (0 at the rectum, 1 at the cecum):

@@ -65,6 +65,8 @@ use crate::{
 };
 use chain::ChainOptions;
 use compartments::{Candidates, Compartments};
+pub use course::COLON_SEGMENTS;
+pub(crate) use course::Course;
 pub(crate) use report::region_of;
 
 #[derive(Clone, Debug)]
