@@ -1075,6 +1075,22 @@ fn small_demo_script(display: &Display, steps: Value, dir: &Path) -> Value {
     read_json(&report)
 }
 
+/// O (switch position) on a study of one position says so and keeps the study open: it was
+/// dropped, the window showed nothing, and a script waited for a study for ever.
+#[test]
+fn switching_position_with_one_position_open_keeps_the_study() {
+    let Some(display) = Display::start() else {
+        return;
+    };
+    let dir = scratch("one-position");
+    let steps = serde_json::json!([{"switch_position": true}, {"wait": 2}, {"quit": true}]);
+    let r = small_demo_script(&display, steps, &dir);
+    assert_eq!(r["ready"], true, "{r}");
+    assert!(r["pose"].is_array(), "{r}");
+    assert_eq!(r["status"], "the exam has one position open");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// Issue 24, item 7: after Export the window says where the files went, in full, however
 /// the folder was given.
 #[test]

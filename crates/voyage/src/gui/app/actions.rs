@@ -732,9 +732,15 @@ impl App {
                 "a correction is being preprocessed: switch position when it is done".into();
             return false;
         }
-        let (Some(s), Some(o)) = (self.session.take(), self.other.take()) else {
-            self.status = "the exam has one position open".into();
-            return false;
+        let (s, o) = match (self.session.take(), self.other.take()) {
+            (Some(s), Some(o)) => (s, o),
+            // A study of one position stays open (it was dropped here, and the window
+            // showed nothing).
+            (s, o) => {
+                (self.session, self.other) = (s, o);
+                self.status = "the exam has one position open".into();
+                return false;
+            }
         };
         let from = crate::open::position_of(&s.study);
         let findings = std::mem::take(&mut self.findings);
