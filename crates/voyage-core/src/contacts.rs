@@ -315,23 +315,20 @@ pub fn shortcut_plugs(
     // Narrowest first: each way round is looked for with the holes plugged so far closed,
     // so that two stretches are never both taken for holes each by way of the other.
     stretches.sort_by(|x, y| radius_mm[x.neck].total_cmp(&radius_mm[y.neck]));
-    let mut plugs: std::collections::HashSet<usize> = std::collections::HashSet::new();
+    let mut ways = Ways::new(lumen, ds);
+    let mut plugs: Vec<usize> = Vec::new();
     for s in stretches {
         let n = s.neck;
-        let way = Way {
-            lumen,
-            ds,
-            closed: &plugs,
-            wide: s.wide,
-        };
-        if way.joins(points_mm[s.ends.0], points_mm[s.ends.1]) {
-            plugs.extend(plug(lumen, ds, points_mm[n], radius_mm[n]));
+        if ways.joins(points_mm[s.ends.0], points_mm[s.ends.1], s.wide) {
+            let more = plug(lumen, ds, points_mm[n], radius_mm[n]);
+            ways.close(&more);
+            plugs.extend(more);
         } else {
             necks.push(points_mm[n]);
         }
     }
-    let mut plugs: Vec<usize> = plugs.into_iter().collect();
     plugs.sort_unstable();
+    plugs.dedup();
     plugs
 }
 
@@ -444,27 +441,53 @@ fn plug(lumen: &Volume<u8>, ds: &crate::grid::Field<f32>, at: [f64; 3], r: f64) 
         .collect()
 }
 
-/// A search for a way through the lumen at least `wide` mm wide (Ds), not through the
-/// voxels `closed`.
-struct Way<'a> {
+/// Searches for ways through the lumen round a narrow stretch, not through the voxels closed
+/// so far; one search's memory serves the next. On `ctc/prone-tagged` a search can reach
+/// millions of voxels (the wide colon on one side of a real neck), some thirty times per
+/// preparation: visited and closed voxels are bits over Ds's box, not a fresh box of flags
+/// and a hash set.
+struct Ways<'a> {
     lumen: &'a Volume<u8>,
     ds: &'a crate::grid::Field<f32>,
-    closed: &'a std::collections::HashSet<usize>,
-    wide: f64,
+    closed: BoxBits,
+    seen: BoxBits,
+    /// Box voxels to visit, nearest the goal first, and every voxel one search reached (to
+    /// clear `seen` after it).
+    todo: std::collections::BinaryHeap<std::cmp::Reverse<(u64, usize)>>,
+    reached: Vec<usize>,
 }
 
-impl Way<'_> {
-    /// Whether `from` and `to` (volume-local mm) are joined through lumen voxels with Ds at least
-    /// `wide` mm, none closed (6-connected, within Ds's box).
-    fn joins(&self, from: [f64; 3], to: [f64; 3]) -> bool {
-        let Way {
+impl<'a> Ways<'a> {
+    fn new(lumen: &'a Volume<u8>, ds: &'a crate::grid::Field<f32>) -> Self {
+        let n = ds.grid.len();
+        Ways {
             lumen,
             ds,
-            closed,
-            wide,
-        } = *self;
-        let grid = &ds.grid;
-        let sp = lumen.spacing();
+            closed: BoxBits::new(n),
+            seen: BoxBits::new(n),
+            todo: std::collections::BinaryHeap::new(),
+            reached: Vec::new(),
+        }
+    }
+
+    /// Walls off lumen voxels (volume indices inside Ds's box) for the searches after.
+    fn close(&mut self, voxels: &[usize]) {
+        let g = self.lumen.geometry();
+        for &v in voxels {
+            if let Some(b) = self.ds.grid.index_of_global(g.ijk(v)) {
+                self.closed.set(b.0);
+            }
+        }
+    }
+
+    /// Whether `from` and `to` (volume-local mm) are joined through lumen voxels with Ds at
+    /// least `wide` mm, none closed (6-connected, within Ds's box). Only whether they are
+    /// joined counts, so the search takes the voxel nearest `to` first (greedy best-first):
+    /// along a tube it runs nearly straight there, where a breadth-first search fills every
+    /// voxel nearer than `to`.
+    fn joins(&mut self, from: [f64; 3], to: [f64; 3], wide: f64) -> bool {
+        let grid = &self.ds.grid;
+        let sp = self.lumen.spacing();
         let local = |p: [f64; 3]| -> Option<[usize; 3]> {
             let g = [0, 1, 2].map(|a| (p[a] / sp[a]).round().max(0.0) as usize);
             grid.index_of_global(g)
@@ -474,38 +497,79 @@ impl Way<'_> {
             return false;
         };
         let d = grid.dims;
-        let at = |l: [usize; 3]| grid.index(l[0], l[1], l[2]).0;
-        let open = |l: [usize; 3]| {
-            let g = [0, 1, 2].map(|a| l[a] + grid.lo[a]);
-            lumen.get(g[0], g[1], g[2]) != 0
-                && ds.data[at(l)] as f64 >= wide
-                && !closed.contains(&lumen.geometry().index(g[0], g[1], g[2]))
+        let vd = self.lumen.dims();
+        let (lumen, ds) = (self.lumen.data(), &self.ds.data);
+        let to_volume = |l: [usize; 3]| {
+            (l[0] + grid.lo[0]) + vd[0] * ((l[1] + grid.lo[1]) + vd[1] * (l[2] + grid.lo[2]))
         };
-        if !open(s) || !open(t) {
+        let closed = &self.closed;
+        let open = |b: usize, l: [usize; 3]| {
+            ds[b] as f64 >= wide && !closed.get(b) && lumen[to_volume(l)] != 0
+        };
+        // Squared distance to `to` in tenths of a mm, as the queue's key.
+        let key = |l: [usize; 3]| {
+            let d2: f64 = (0..3)
+                .map(|a| ((l[a] as f64 - t[a] as f64) * sp[a] * 10.0).powi(2))
+                .sum();
+            d2.min(u64::MAX as f64) as u64
+        };
+        let (sb, tb) = (grid.index(s[0], s[1], s[2]).0, grid.index(t[0], t[1], t[2]).0);
+        if !open(sb, s) || !open(tb, t) {
             return false;
         }
-        let mut seen = vec![false; d[0] * d[1] * d[2]];
-        let mut queue = std::collections::VecDeque::from([s]);
-        seen[at(s)] = true;
-        while let Some(l) = queue.pop_front() {
-            if l == t {
-                return true;
+        let stride = [1, d[0], d[0] * d[1]];
+        self.todo.clear();
+        self.todo.push(std::cmp::Reverse((key(s), sb)));
+        self.seen.set(sb);
+        self.reached.push(sb);
+        let mut joined = false;
+        while let Some(std::cmp::Reverse((_, b))) = self.todo.pop() {
+            if b == tb {
+                joined = true;
+                break;
             }
+            let l = crate::volume::grid_ijk(d, b);
             for a in 0..3 {
                 for up in [false, true] {
                     if (!up && l[a] == 0) || (up && l[a] + 1 >= d[a]) {
                         continue;
                     }
-                    let mut n = l;
-                    n[a] = if up { l[a] + 1 } else { l[a] - 1 };
-                    if !seen[at(n)] && open(n) {
-                        seen[at(n)] = true;
-                        queue.push_back(n);
+                    let (n, mut nl) = (if up { b + stride[a] } else { b - stride[a] }, l);
+                    nl[a] = if up { l[a] + 1 } else { l[a] - 1 };
+                    if !self.seen.get(n) && open(n, nl) {
+                        self.seen.set(n);
+                        self.reached.push(n);
+                        self.todo.push(std::cmp::Reverse((key(nl), n)));
                     }
                 }
             }
         }
-        false
+        for &b in &self.reached {
+            self.seen.unset(b);
+        }
+        self.reached.clear();
+        joined
+    }
+}
+
+/// One bit per voxel of a box.
+struct BoxBits(Vec<u64>);
+
+impl BoxBits {
+    fn new(n: usize) -> Self {
+        BoxBits(vec![0; n.div_ceil(64)])
+    }
+    #[inline]
+    fn get(&self, i: usize) -> bool {
+        self.0[i / 64] >> (i % 64) & 1 != 0
+    }
+    #[inline]
+    fn set(&mut self, i: usize) {
+        self.0[i / 64] |= 1 << (i % 64);
+    }
+    #[inline]
+    fn unset(&mut self, i: usize) {
+        self.0[i / 64] &= !(1 << (i % 64));
     }
 }
 
