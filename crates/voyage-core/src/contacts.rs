@@ -513,7 +513,10 @@ impl<'a> Ways<'a> {
                 .sum();
             d2.min(u64::MAX as f64) as u64
         };
-        let (sb, tb) = (grid.index(s[0], s[1], s[2]).0, grid.index(t[0], t[1], t[2]).0);
+        let (sb, tb) = (
+            grid.index(s[0], s[1], s[2]).0,
+            grid.index(t[0], t[1], t[2]).0,
+        );
         if !open(sb, s) || !open(tb, t) {
             return false;
         }

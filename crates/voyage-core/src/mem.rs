@@ -22,6 +22,19 @@ pub fn filled_with_room<T: Copy>(n: usize, capacity: usize, fill: T) -> Vec<T> {
     v
 }
 
+/// `n` copies of `fill` in the memory of `reuse` where it is large enough (an array some
+/// search is done with), else in a fresh vector.
+pub(crate) fn refilled<T: Copy>(reuse: Vec<T>, n: usize, fill: T) -> Vec<T> {
+    if reuse.capacity() >= n {
+        let mut v = reuse;
+        v.clear();
+        v.resize(n, fill);
+        v
+    } else {
+        vec![fill; n]
+    }
+}
+
 /// A vector collected from `iter` of known length `n`, in huge pages where given.
 pub fn collect<T>(n: usize, iter: impl Iterator<Item = T>) -> Vec<T> {
     let mut v: Vec<T> = Vec::with_capacity(n);

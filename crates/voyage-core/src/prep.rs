@@ -514,14 +514,14 @@ fn prepare_stored(
 
     // Every Ds below is over this box: cutting contacts only takes lumen away, and a box
     // larger than the lumen's own changes no distance.
-    let mut box_ds = BoxDs::new(BoxGrid::around(seg.extent, 1, seg.lumen.dims()));
+    let mut traces = TraceMemory::new(BoxGrid::around(seg.extent, 1, seg.lumen.dims()));
     // Where the segmentation placed the cecum by anatomy, the centerline ends there unless
     // the user gave the end.
     let mut cl_opts = opts.centerline.clone();
     if cl_opts.target_mm.is_none() {
         cl_opts.target_mm = seg.cecum_voxel.map(|v| centerline::mm_of(&seg.lumen, v));
     }
-    let mut traced = match trace(&mut seg, &mut box_ds, &cl_opts, opts, &mut laps) {
+    let mut traced = match trace(&mut seg, &mut traces, &cl_opts, opts, &mut laps) {
         Ok(t) => t,
         // Without them the colon came apart (cleansing took wall voxels out beside them):
         // traced with them.
@@ -529,7 +529,7 @@ fn prepare_stored(
             set_voxels(&mut seg.lumen, &beside, 1);
             seg.lumen_voxels += beside.len();
             beside.clear();
-            trace(&mut seg, &mut box_ds, &cl_opts, opts, &mut laps)?
+            trace(&mut seg, &mut traces, &cl_opts, opts, &mut laps)?
         }
         Err(e) => return Err(e),
     };
@@ -546,9 +546,9 @@ fn prepare_stored(
             // The trace's Ds (with the contacts cut) makes room: it is computed again after
             // the rounds when no trace replaces it, and two fields of fresh pages cost more.
             if let Some(d) = traced.ds_box.take() {
-                box_ds.give_back(d);
+                traces.give_back(d);
             }
-            let ds = box_ds.of(&seg.lumen);
+            let ds = traces.ds_of(&seg.lumen);
             plugs = shortcut_plugs(
                 &seg.lumen,
                 &c.points_mm,
@@ -567,7 +567,7 @@ fn prepare_stored(
                     &mut necks,
                 );
             }
-            box_ds.give_back(ds);
+            traces.give_back(ds);
         }
         // With the further holes plugged too, unless they cut the colon itself: then the
         // holes of the trace alone.
@@ -578,8 +578,12 @@ fn prepare_stored(
             }
             tries.push(plugs.clone());
         }
+        if !tries.is_empty() {
+            // The skeleton search's arrays serve the next one.
+            traces.skeleton = traced.sk.forget_route();
+        }
         let retraced = tries.into_iter().find_map(|these: Vec<usize>| {
-            retrace_plugged(&mut seg, &mut box_ds, &cl_opts, opts, &mut laps, &these)
+            retrace_plugged(&mut seg, &mut traces, &cl_opts, opts, &mut laps, &these)
                 .map(|t| (t, these))
         });
         match retraced {
@@ -625,18 +629,18 @@ fn prepare_stored(
         let blocks = sk
             .blocks
             .as_ref()
-            .map(|_| crate::grid::Blocks::new(&seg.lumen, &box_ds.grid, 2))
+            .map(|_| crate::grid::Blocks::new(&seg.lumen, &traces.grid, 2))
             .transpose()?;
         taken.extend(cut_along(
             &mut seg.lumen,
-            &box_ds.grid,
+            &traces.grid,
             &sk,
             blocks.as_ref(),
             opts,
         )?);
         taken.sort_unstable();
         if let Some(d) = ds_box.take() {
-            box_ds.give_back(d);
+            traces.give_back(d);
         }
     }
     // Ds again where a round of plugging took the trace's, or the fluid came back.
@@ -644,11 +648,11 @@ fn prepare_stored(
         Some(d) => d,
         None => {
             laps.start(Stage::Ds);
-            box_ds.of(&seg.lumen)
+            traces.ds_of(&seg.lumen)
         }
     };
     // Ds moves into bricks, and the Dt searches work in its box array.
-    let grid = box_ds.grid; // and its spare memory freed
+    let grid = traces.grid; // and its spare memory freed
     let mut ds = Bricked::from_field(&ds_box, 0.0);
     let mut memory = SearchMemory::from(ds_box.data);
 
@@ -730,26 +734,29 @@ fn prepare_stored(
     })
 }
 
-/// Ds over the lumen's box, computed anew each time the lumen changes (each trace, each round
-/// of plugging): the box, and the memory of a field no longer needed, written over by the
-/// next one instead of fresh pages (on `ctc/prone-tagged`, 218 MB each time).
-struct BoxDs {
+/// The lumen's box and the memory the traces reuse. Ds over the box is computed anew each
+/// time the lumen changes (each trace, each round of plugging): the memory of a field no
+/// longer needed is written over by the next one instead of fresh pages (on
+/// `ctc/prone-tagged`, 218 MB each time). So are the arrays of the last skeleton search.
+struct TraceMemory {
     grid: BoxGrid,
-    spare: Vec<f32>,
+    spare_ds: Vec<f32>,
+    skeleton: centerline::SkeletonMemory,
 }
 
-impl BoxDs {
+impl TraceMemory {
     fn new(grid: BoxGrid) -> Self {
-        BoxDs {
+        TraceMemory {
             grid,
-            spare: Vec::new(),
+            spare_ds: Vec::new(),
+            skeleton: Default::default(),
         }
     }
-    fn of(&mut self, lumen: &Volume<u8>) -> Field<f32> {
-        distance_to_wall_reusing(lumen, self.grid.clone(), std::mem::take(&mut self.spare))
+    fn ds_of(&mut self, lumen: &Volume<u8>) -> Field<f32> {
+        distance_to_wall_reusing(lumen, self.grid.clone(), std::mem::take(&mut self.spare_ds))
     }
     fn give_back(&mut self, ds: Field<f32>) {
-        self.spare = ds.data;
+        self.spare_ds = ds.data;
     }
 }
 
@@ -773,7 +780,7 @@ const MAX_PLUG_ROUNDS: usize = 16;
 /// the colon itself.
 fn retrace_plugged(
     seg: &mut Segmentation,
-    box_ds: &mut BoxDs,
+    traces: &mut TraceMemory,
     cl_opts: &CenterlineOptions,
     opts: &PrepOptions,
     laps: &mut Laps<impl FnMut(Stage)>,
@@ -781,7 +788,7 @@ fn retrace_plugged(
 ) -> Option<Traced> {
     set_voxels(&mut seg.lumen, plugs, 0);
     seg.lumen_voxels -= plugs.len();
-    let traced = trace(seg, box_ds, cl_opts, opts, laps).ok();
+    let traced = trace(seg, traces, cl_opts, opts, laps).ok();
     if traced.is_none() {
         set_voxels(&mut seg.lumen, plugs, 1);
         seg.lumen_voxels += plugs.len();
@@ -842,7 +849,7 @@ fn set_voxels(mask: &mut Volume<u8>, voxels: &[usize], v: u8) {
 /// on a small lumen it needs Ds first.
 fn trace(
     seg: &mut Segmentation,
-    box_ds: &mut BoxDs,
+    traces: &mut TraceMemory,
     cl_opts: &CenterlineOptions,
     opts: &PrepOptions,
     laps: &mut Laps<impl FnMut(Stage)>,
@@ -851,27 +858,28 @@ fn trace(
     let early_ds = if uses_blocks(&seg.lumen, seg.lumen_voxels, cl_opts) {
         None
     } else {
-        Some(box_ds.of(&seg.lumen))
+        Some(traces.ds_of(&seg.lumen))
     };
     let sk = trace_skeleton(
         &seg.lumen,
-        &box_ds.grid,
+        &traces.grid,
         seg.lumen_voxels,
         seg.seed_voxel,
         early_ds.as_ref(),
         cl_opts,
+        std::mem::take(&mut traces.skeleton),
     )?;
     laps.start(Stage::Contacts);
-    let mut taken = cut_along(&mut seg.lumen, &box_ds.grid, &sk, sk.blocks.as_ref(), opts)?;
+    let mut taken = cut_along(&mut seg.lumen, &traces.grid, &sk, sk.blocks.as_ref(), opts)?;
     taken.sort_unstable();
     laps.start(Stage::Ds);
     let ds_box = match early_ds {
         Some(d) if taken.is_empty() => d,
         early => {
             if let Some(d) = early {
-                box_ds.give_back(d);
+                traces.give_back(d);
             }
-            box_ds.of(&seg.lumen)
+            traces.ds_of(&seg.lumen)
         }
     };
     laps.start(Stage::Centerline);

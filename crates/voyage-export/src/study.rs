@@ -138,37 +138,58 @@ pub fn check_out_dir(dir: &Path) -> Result<()> {
 }
 
 /// The lumen, Ds and the cleansed CT, on the input's grid (the study is made in its own
-/// storage: [`voyage_core::Storage`]).
+/// storage: [`voyage_core::Storage`]). Each is compressed on a thread of its own: gzip is most
+/// of the exports' time (on `ctc/prone-tagged` 2.6 s of a 10 s `voyage prep`).
 fn write_volumes(study: &Study, put: &mut impl FnMut(&'static str) -> PathBuf) -> Result<()> {
+    let lumen = put("lumen.nii.gz");
+    let ds = put("ds.nii.gz");
+    let cleansed = (!study.cleansing.is_empty()).then(|| put("cleansed.nii.gz"));
+    let (a, (b, c)) = rayon::join(
+        || write_lumen(study, &lumen),
+        || {
+            rayon::join(
+                || write_ds(study, &ds),
+                || cleansed.map_or(Ok(()), |path| write_cleansed(study, &path)),
+            )
+        },
+    );
+    a.and(b).and(c)
+}
+
+fn write_lumen(study: &Study, path: &Path) -> Result<()> {
+    let st = &study.storage;
+    if st.is_identity() {
+        nifti::save(path, &study.segmentation.lumen)
+    } else {
+        nifti::save(path, &st.to_input(&study.segmentation.lumen)?)
+    }
+}
+
+fn write_ds(study: &Study, path: &Path) -> Result<()> {
     let st = &study.storage;
     let g = st.input_geometry();
     if st.is_identity() {
-        nifti::save(&put("lumen.nii.gz"), &study.segmentation.lumen)?;
-        nifti::save_slices(&put("ds.nii.gz"), g, |k, out: &mut [f32]| {
-            study.ds.fill_slice(k, out)
-        })?;
-        if !study.cleansing.is_empty() {
-            nifti::save_slices(&put("cleansed.nii.gz"), g, |k, out: &mut [i16]| {
-                study.cleansing.fill_slice(&study.ct, k, out)
-            })?;
-        }
-        return Ok(());
+        nifti::save_slices(path, g, |k, out: &mut [f32]| study.ds.fill_slice(k, out))
+    } else {
+        nifti::save_slices(path, g, |k, out: &mut [f32]| {
+            st.fill_input_slice(k, out, |v| study.ds.get(v))
+        })
     }
-    nifti::save(
-        &put("lumen.nii.gz"),
-        &st.to_input(&study.segmentation.lumen)?,
-    )?;
-    nifti::save_slices(&put("ds.nii.gz"), g, |k, out: &mut [f32]| {
-        st.fill_input_slice(k, out, |v| study.ds.get(v))
-    })?;
-    if !study.cleansing.is_empty() {
-        let c = study.cleansed_ct();
-        let cg = c.geometry();
-        nifti::save_slices(&put("cleansed.nii.gz"), g, |k, out: &mut [i16]| {
-            st.fill_input_slice(k, out, |v| c.data()[cg.index(v[0], v[1], v[2])])
-        })?;
+}
+
+fn write_cleansed(study: &Study, path: &Path) -> Result<()> {
+    let st = &study.storage;
+    let g = st.input_geometry();
+    if st.is_identity() {
+        return nifti::save_slices(path, g, |k, out: &mut [i16]| {
+            study.cleansing.fill_slice(&study.ct, k, out)
+        });
     }
-    Ok(())
+    let c = study.cleansed_ct();
+    let cg = c.geometry();
+    nifti::save_slices(path, g, |k, out: &mut [i16]| {
+        st.fill_input_slice(k, out, |v| c.data()[cg.index(v[0], v[1], v[2])])
+    })
 }
 
 /// Writes the exports into `dir`; returns their file names.

@@ -15,8 +15,8 @@ use glam::DVec3;
 
 use super::{
     CenterlineOptions,
-    graph::SkeletonGraph,
-    refine::{Centerline, cost_weight, refine_points},
+    graph::{SkeletonGraph, SkeletonMemory},
+    refine::{Centerline, cost_weight_in, refine_points},
 };
 use crate::{
     Error, Result, Volume,
@@ -90,9 +90,14 @@ impl Skeleton {
         })
     }
 
-    /// Lets the kept search go (its memory is a few fields over the skeleton's grid).
-    pub fn forget_route(&mut self) {
-        self.route = None;
+    /// Lets the kept search go, handing back its arrays (a few fields over the skeleton's
+    /// grid) for the next search.
+    pub fn forget_route(&mut self) -> SkeletonMemory {
+        let mut memory = SkeletonMemory::default();
+        if let Some(route) = self.route.take() {
+            route.recycle(&mut memory);
+        }
+        memory
     }
 }
 
@@ -111,7 +116,8 @@ pub fn uses_blocks(lumen: &Volume<u8>, lumen_voxels: usize, opts: &CenterlineOpt
 /// `grid`. On blocks ([`uses_blocks`]) the search needs only the mask (the blocks get their
 /// own Ds), so it can run before the voxels' Ds; where it fails on them (a neck the blocks
 /// part), and on a small lumen, it searches the voxels with `fine_ds`, computing it when not
-/// given. An error is the voxels' own.
+/// given. An error is the voxels' own. The search works in `memory` where it can (an
+/// earlier search's, [`Skeleton::forget_route`]).
 pub fn trace_skeleton(
     lumen: &Volume<u8>,
     grid: &BoxGrid,
@@ -119,6 +125,7 @@ pub fn trace_skeleton(
     seed: [usize; 3],
     fine_ds: Option<&Field<f32>>,
     opts: &CenterlineOptions,
+    mut memory: SkeletonMemory,
 ) -> Result<Skeleton> {
     let given_source = opts
         .source_mm
@@ -140,7 +147,16 @@ pub fn trace_skeleton(
         // A neck about two voxels wide can part the full blocks where the voxels hold
         // together (it depends on how the blocks fall on it): then the voxels' own search,
         // slower, which fails only where the lumen itself is apart.
-        if let Ok(sk) = skeleton_on_blocks(lumen, grid, seed, given_source, given_target, opts) {
+        let on_blocks = skeleton_on_blocks(
+            lumen,
+            grid,
+            seed,
+            given_source,
+            given_target,
+            opts,
+            &mut memory,
+        );
+        if let Ok(sk) = on_blocks {
             return Ok(sk);
         }
     }
@@ -152,7 +168,15 @@ pub fn trace_skeleton(
             &own
         }
     };
-    let (voxels, route) = skeleton_path(lumen, ds, seed, given_source, given_target, opts)?;
+    let (voxels, route) = skeleton_path(
+        lumen,
+        ds,
+        seed,
+        given_source,
+        given_target,
+        opts,
+        &mut memory,
+    )?;
     Ok(Skeleton {
         path_mm: voxels.iter().map(|v| mm_of(lumen, *v)).collect(),
         given_source,
@@ -170,6 +194,7 @@ fn skeleton_on_blocks(
     given_source: Option<[usize; 3]>,
     given_target: Option<[usize; 3]>,
     opts: &CenterlineOptions,
+    memory: &mut SkeletonMemory,
 ) -> Result<Skeleton> {
     let blocks = Blocks::new(lumen, grid, 2)?;
     let ds = distance_to_wall(&blocks.mask)?;
@@ -181,6 +206,7 @@ fn skeleton_on_blocks(
         given_source.map(to_block).transpose()?,
         given_target.map(to_block).transpose()?,
         opts,
+        memory,
     )?;
     let path_mm = voxels.iter().map(|&v| blocks.centre_mm(v)).collect();
     Ok(Skeleton {
@@ -234,7 +260,15 @@ pub fn find_endpoints(
     opts: &CenterlineOptions,
 ) -> Result<Endpoints> {
     let lumen_voxels = ds.data.iter().filter(|&&d| d > 0.0).count();
-    let sk = trace_skeleton(lumen, &ds.grid, lumen_voxels, seed, Some(ds), opts)?;
+    let sk = trace_skeleton(
+        lumen,
+        &ds.grid,
+        lumen_voxels,
+        seed,
+        Some(ds),
+        opts,
+        SkeletonMemory::default(),
+    )?;
     centre_skeleton(lumen, ds, &sk, opts)
 }
 
@@ -251,16 +285,17 @@ fn skeleton_path(
     given_source: Option<[usize; 3]>,
     given_target: Option<[usize; 3]>,
     opts: &CenterlineOptions,
+    memory: &mut SkeletonMemory,
 ) -> Result<(Vec<[usize; 3]>, Route)> {
-    let pad = Padded::new(lumen, &ds.grid);
+    let pad = Padded::new_in(lumen, &ds.grid, memory.u8s());
     let sp = lumen.spacing();
-    let ds_pad = pad.pad(&ds.data, 0.0);
-    let weight = cost_weight(&ds_pad, opts);
+    let ds_pad = pad.pad_in(&ds.data, 0.0, memory.f32s());
+    let weight = cost_weight_in(&ds_pad, opts, memory.f32s());
     let dmax = ds.data.iter().cloned().fold(0.0f32, f32::max);
     // The rectum needs room for the camera, not a share of the widest chamber: with the
     // whole colon in, a wide cecum would push the start tens of mm up the rectum.
     let floor = (opts.min_width as f32 * dmax).min(dmax).min(START_WIDE_MM);
-    let start = TreeStart::new(&pad, &weight);
+    let start = TreeStart::new_in(&pad, &weight, memory.f32s(), memory.u8s());
     // The search stops at the first wide voxel it settles: the nearest.
     let wide = |v: usize| ds_pad[v] > 0.0 && ds_pad[v] >= floor;
     let (nearest, start) = start.nearest(&pad, &[pad.lumen_index(seed)?], sp, &weight, &wide);
@@ -281,10 +316,11 @@ fn skeleton_path(
             return Err(unreachable(v, what));
         }
     }
-    let graph = SkeletonGraph::new(&pad, &tree, &ds_pad, sp, rectum, opts);
+    let graph = SkeletonGraph::new(&pad, &tree, &ds_pad, sp, rectum, opts, memory);
     let mut route = Route {
         pad,
         ds_pad,
+        weight,
         sp,
         tree,
         graph,
@@ -299,8 +335,9 @@ fn skeleton_path(
     };
     // The given source lies off the colon's path: the longest path from it (to the target,
     // when given). Both were reached from the rectum above, so they reach each other.
-    route.tree = TreeStart::new(&route.pad, &weight).search(&route.pad, &[s], sp, &weight);
-    route.graph = SkeletonGraph::new(&route.pad, &route.tree, &route.ds_pad, sp, s, opts);
+    let start = TreeStart::new_in(&route.pad, &route.weight, memory.f32s(), memory.u8s());
+    route.tree = start.search(&route.pad, &[s], sp, &route.weight);
+    route.graph = SkeletonGraph::new(&route.pad, &route.tree, &route.ds_pad, sp, s, opts, memory);
     route.from_rectum = false;
     let path = route
         .path(&[], opts)?
@@ -314,6 +351,8 @@ fn skeleton_path(
 pub(crate) struct Route {
     pad: Padded,
     ds_pad: Vec<f32>,
+    /// The search's cost weight, kept for its memory.
+    weight: Vec<f32>,
     sp: [f64; 3],
     tree: Tree,
     graph: SkeletonGraph,
@@ -324,6 +363,16 @@ pub(crate) struct Route {
 }
 
 impl Route {
+    /// Its arrays, for the next search.
+    fn recycle(self, memory: &mut SkeletonMemory) {
+        memory.keep_u8s(self.pad.inside);
+        memory.keep_f32s(self.ds_pad);
+        memory.keep_f32s(self.weight);
+        memory.keep_f32s(self.tree.dist);
+        memory.keep_u8s(self.tree.parent);
+        self.graph.recycle(memory);
+    }
+
     /// The raw colon path (grid voxels, source → target) with the padded voxels `closed`
     /// (sorted) walled off; None when the given source lies off the path from the rectum (the
     /// source then needs a search of its own).
@@ -344,6 +393,7 @@ impl Route {
             from_rectum,
             source,
             target,
+            ..
         } = self;
         let grid_voxels = |p: Vec<PadIndex>| -> Vec<[usize; 3]> {
             p.iter().map(|&i| pad.global_of_index(i)).collect()

@@ -20,7 +20,7 @@ use glam::DVec3;
 #[cfg(test)]
 pub(crate) use ends::find_endpoints;
 pub use ends::{Endpoints, Skeleton, centre_skeleton, mm_of, trace_skeleton, uses_blocks};
-pub use graph::SkeletonOptions;
+pub use graph::{SkeletonMemory, SkeletonOptions};
 pub use refine::Centerline;
 pub(crate) use refine::arc_lengths;
 #[cfg(test)]
@@ -31,7 +31,7 @@ use crate::{Result, Volume, grid::Field, grid::Padded};
 #[cfg(test)]
 use graph::SkeletonGraph;
 #[cfg(test)]
-use refine::cost_weight;
+use refine::cost_weight_in;
 
 #[derive(Clone, Debug)]
 pub struct CenterlineOptions {
@@ -87,8 +87,8 @@ pub fn centerline(
     opts: &CenterlineOptions,
 ) -> Result<Centerline> {
     let pad = Padded::new(mask, &ds.grid);
-    let ds_pad = pad.pad(&ds.data, 0.0);
-    let weight = cost_weight(&ds_pad, opts);
+    let ds_pad = pad.pad_in(&ds.data, 0.0, Vec::new());
+    let weight = cost_weight_in(&ds_pad, opts, Vec::new());
     let src = pad.lumen_index(source)?;
     let dst = pad.lumen_index(target)?;
     let tree = pad
@@ -96,13 +96,9 @@ pub fn centerline(
         .weighted(&weight)
         .tree()
         .from(&[src]);
-    let path = SkeletonGraph::new(&pad, &tree, &ds_pad, mask.spacing(), src, opts).colon_path(
-        &tree,
-        &ds_pad,
-        Some(dst),
-        &[],
-        opts,
-    )?;
+    let mut memory = graph::SkeletonMemory::default();
+    let graph = SkeletonGraph::new(&pad, &tree, &ds_pad, mask.spacing(), src, opts, &mut memory);
+    let path = graph.colon_path(&tree, &ds_pad, Some(dst), &[], opts)?;
     let voxels: Vec<[usize; 3]> = path.iter().map(|&i| pad.global_of_index(i)).collect();
     Ok(refine(&voxels, mask, ds, opts))
 }

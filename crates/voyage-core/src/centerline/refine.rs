@@ -53,8 +53,12 @@ pub fn refine_points(raw: Vec<DVec3>, ds: &Field<f32>, opts: &CenterlineOptions)
 /// cost plus the length; a high power (Bitter et al. 2001 use 16) makes narrow places so dear
 /// that the path never takes a short cut where two loops of the colon touch, as they do in
 /// real scans, while in the middle of the lumen it is nearly the plain length. `ds_pad`: Ds
-/// in the padded layout.
-pub fn cost_weight(ds_pad: &[f32], opts: &CenterlineOptions) -> Vec<f32> {
+/// in the padded layout. Written in the memory of `reuse` where it is large enough.
+pub(crate) fn cost_weight_in(
+    ds_pad: &[f32],
+    opts: &CenterlineOptions,
+    reuse: Vec<f32>,
+) -> Vec<f32> {
     let dmax = ds_pad.iter().cloned().fold(0.0f32, f32::max).max(1e-3);
     let k = opts.penalty_scale as f32;
     let p = opts.penalty_power;
@@ -66,7 +70,15 @@ pub fn cost_weight(ds_pad: &[f32], opts: &CenterlineOptions) -> Vec<f32> {
             1.0 + k * power(((dmax - d) / dmax).max(0.0), p)
         }
     };
-    crate::mem::collect(ds_pad.len(), ds_pad.iter().map(|&d| weight(d)))
+    let weights = ds_pad.iter().map(|&d| weight(d));
+    if reuse.capacity() >= ds_pad.len() {
+        let mut v = reuse;
+        v.clear();
+        v.extend(weights);
+        v
+    } else {
+        crate::mem::collect(ds_pad.len(), weights)
+    }
 }
 
 /// `x` to the power `n` by squaring, as `f32::powi` computes it (the same products in the same

@@ -315,8 +315,13 @@ impl<'a> SearchBuilder<'a> {
 
     /// Record predecessors and the settling order.
     pub fn tree(self) -> Self {
+        self.tree_reusing(Vec::new())
+    }
+
+    /// [`SearchBuilder::tree`] in the memory of `parent` where it is large enough.
+    pub(crate) fn tree_reusing(self, parent: Vec<u8>) -> Self {
         let n = self.pad.inside.len();
-        self.tree_in(vec![NO_PARENT; n])
+        self.tree_in(crate::mem::refilled(parent, n, NO_PARENT))
     }
 
     /// [`SearchBuilder::tree`] in `parent` (all [`NO_PARENT`], as long as the padded grid).
@@ -440,7 +445,13 @@ pub(crate) struct TreeStart {
 }
 
 impl TreeStart {
+    #[cfg(test)]
     pub(crate) fn new(pad: &Padded, weight: &[f32]) -> Self {
+        Self::new_in(pad, weight, Vec::new(), Vec::new())
+    }
+
+    /// In the memory of `dist` and `parent` where they are large enough (a search done with).
+    pub(crate) fn new_in(pad: &Padded, weight: &[f32], dist: Vec<f32>, parent: Vec<u8>) -> Self {
         let range = weight
             .iter()
             .zip(&pad.inside)
@@ -449,8 +460,8 @@ impl TreeStart {
                 (lo.min(x), hi.max(x))
             });
         TreeStart {
-            dist: start_from_inside(pad),
-            parent: vec![NO_PARENT; pad.inside.len()],
+            dist: start_from_inside_in(pad, dist),
+            parent: crate::mem::refilled(parent, pad.inside.len(), NO_PARENT),
             range,
         }
     }
@@ -520,13 +531,25 @@ impl TreeStart {
 /// +∞, and one spare wall at the end: the four-wide row loads read a lane past the last
 /// neighbour.
 fn start_from_inside(pad: &Padded) -> Vec<f32> {
-    crate::mem::collect(
-        pad.inside.len() + 1,
-        pad.inside
-            .iter()
-            .map(|&m| if m != 0 { f32::INFINITY } else { 0.0 })
-            .chain([0.0]),
-    )
+    start_from_inside_in(pad, Vec::new())
+}
+
+/// [`start_from_inside`] in the memory of `reuse` where it is large enough.
+pub(crate) fn start_from_inside_in(pad: &Padded, reuse: Vec<f32>) -> Vec<f32> {
+    let values = pad
+        .inside
+        .iter()
+        .map(|&m| if m != 0 { f32::INFINITY } else { 0.0 })
+        .chain([0.0]);
+    let n = pad.inside.len() + 1;
+    if reuse.capacity() >= n {
+        let mut v = reuse;
+        v.clear();
+        v.extend(values);
+        v
+    } else {
+        crate::mem::collect(n, values)
+    }
 }
 
 /// A search's final distance from its working value: settled voxels carry their distance

@@ -24,8 +24,13 @@ pub struct PadIndex(pub usize);
 
 impl Padded {
     pub fn new(mask: &Volume<u8>, grid: &BoxGrid) -> Self {
+        Self::new_in(mask, grid, Vec::new())
+    }
+
+    /// [`Padded::new`] in the memory of `reuse` where it is large enough.
+    pub(crate) fn new_in(mask: &Volume<u8>, grid: &BoxGrid, reuse: Vec<u8>) -> Self {
         let mut pad = Padded::shape(grid);
-        pad.inside = pad.lay_out_mask(mask, 0, 0u8, |m| (m != 0) as u8, Vec::new(), None);
+        pad.inside = pad.lay_out_mask(mask, 0, 0u8, |m| (m != 0) as u8, reuse, None);
         pad
     }
 
@@ -146,10 +151,11 @@ impl Padded {
         out
     }
 
-    /// Copies a box-layout field into the padded layout (`fill` in the padding).
-    pub fn pad(&self, v: &[f32], fill: f32) -> Vec<f32> {
+    /// Copies a box-layout field into the padded layout (`fill` in the padding), in the
+    /// memory of `reuse` where it is large enough.
+    pub(crate) fn pad_in(&self, v: &[f32], fill: f32, reuse: Vec<f32>) -> Vec<f32> {
         let [bx, by, bz] = self.grid.dims;
-        let mut out = vec![fill; self.inside.len()];
+        let mut out = crate::mem::refilled(reuse, self.inside.len(), fill);
         for k in 0..bz {
             for j in 0..by {
                 let d = self.row_start(j, k);
