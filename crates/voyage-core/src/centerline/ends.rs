@@ -287,15 +287,16 @@ fn skeleton_path(
     opts: &CenterlineOptions,
     memory: &mut SkeletonMemory,
 ) -> Result<(Vec<[usize; 3]>, Route)> {
-    let pad = Padded::new_in(lumen, &ds.grid, memory.u8s());
+    let n = ds.grid.dims.iter().map(|d| d + 2).product();
+    let pad = Padded::new_in(lumen, &ds.grid, memory.u8s(n));
     let sp = lumen.spacing();
-    let ds_pad = pad.pad_in(&ds.data, 0.0, memory.f32s());
-    let weight = cost_weight_in(&ds_pad, opts, memory.f32s());
+    let ds_pad = pad.pad_in(&ds.data, 0.0, memory.f32s(n));
+    let weight = cost_weight_in(&ds_pad, opts, memory.f32s(n));
     let dmax = ds.data.iter().cloned().fold(0.0f32, f32::max);
     // The rectum needs room for the camera, not a share of the widest chamber: with the
     // whole colon in, a wide cecum would push the start tens of mm up the rectum.
     let floor = (opts.min_width as f32 * dmax).min(dmax).min(START_WIDE_MM);
-    let start = TreeStart::new_in(&pad, &weight, memory.f32s(), memory.u8s());
+    let start = TreeStart::new_in(&pad, &weight, memory.f32s(n + 1), memory.u8s(n));
     // The search stops at the first wide voxel it settles: the nearest.
     let wide = |v: usize| ds_pad[v] > 0.0 && ds_pad[v] >= floor;
     let (nearest, start) = start.nearest(&pad, &[pad.lumen_index(seed)?], sp, &weight, &wide);
@@ -335,7 +336,8 @@ fn skeleton_path(
     };
     // The given source lies off the colon's path: the longest path from it (to the target,
     // when given). Both were reached from the rectum above, so they reach each other.
-    let start = TreeStart::new_in(&route.pad, &route.weight, memory.f32s(), memory.u8s());
+    let n = route.pad.inside.len();
+    let start = TreeStart::new_in(&route.pad, &route.weight, memory.f32s(n + 1), memory.u8s(n));
     route.tree = start.search(&route.pad, &[s], sp, &route.weight);
     route.graph = SkeletonGraph::new(&route.pad, &route.tree, &route.ds_pad, sp, s, opts, memory);
     route.from_rectum = false;

@@ -69,6 +69,16 @@ impl Default for SkeletonOptions {
 /// A minimum-cost search with predecessors and settling order.
 pub(crate) type Tree = Search;
 
+/// The vector of `kept` with the least capacity of at least `len`, taken out; else an empty one.
+fn take_room<T>(kept: &mut Vec<Vec<T>>, len: usize) -> Vec<T> {
+    kept.iter()
+        .enumerate()
+        .filter(|(_, v)| v.capacity() >= len)
+        .min_by_key(|(_, v)| v.capacity())
+        .map(|(i, _)| i)
+        .map_or_else(Vec::new, |i| kept.swap_remove(i))
+}
+
 /// The arrays of a skeleton search that is done with, kept for the next search over the same
 /// box: prep traces the centerline again after each round of plugging holes, and on
 /// `ctc/prone-tagged` a search's fresh arrays cost it about a quarter of its time in page
@@ -77,14 +87,19 @@ pub(crate) type Tree = Search;
 pub struct SkeletonMemory {
     f32s: Vec<Vec<f32>>,
     u8s: Vec<Vec<u8>>,
+    u32s: Vec<Vec<u32>>,
 }
 
 impl SkeletonMemory {
-    pub(crate) fn f32s(&mut self) -> Vec<f32> {
-        self.f32s.pop().unwrap_or_default()
+    /// A kept array with room for `len` values (the least such), else an empty one.
+    pub(crate) fn f32s(&mut self, len: usize) -> Vec<f32> {
+        take_room(&mut self.f32s, len)
     }
-    pub(crate) fn u8s(&mut self) -> Vec<u8> {
-        self.u8s.pop().unwrap_or_default()
+    pub(crate) fn u8s(&mut self, len: usize) -> Vec<u8> {
+        take_room(&mut self.u8s, len)
+    }
+    fn u32s(&mut self, len: usize) -> Vec<u32> {
+        take_room(&mut self.u32s, len)
     }
     pub(crate) fn keep_f32s(&mut self, v: Vec<f32>) {
         self.f32s.push(v);
@@ -139,15 +154,16 @@ impl SkeletonGraph {
     ) -> SkeletonGraph {
         let source = source.0;
         // 2. Branches.
-        let sk = SkeletonTree::trace(pad, tree, ds, spacing, source, opts, memory.u8s());
+        let n = pad.inside.len();
+        let sk = SkeletonTree::trace(pad, tree, ds, spacing, source, opts, memory.u8s(n));
         // 3. Cycles: the owner of every voxel is the nearest skeleton voxel through the lumen
         // (a geodesic Voronoi partition by the skeleton), reached by the way `near` records.
         let near = pad
             .search(spacing)
-            .tree_reusing(memory.u8s())
-            .start(start_from_inside_in(pad, memory.f32s()))
+            .tree_reusing(memory.u8s(n))
+            .start(start_from_inside_in(pad, memory.f32s(pad.search_len())))
             .from(&sk.voxels());
-        let owner = sk.owners(&near);
+        let owner = sk.owners(&near, memory.u32s(n));
         let meetings = sk.meetings(&near, &owner, ds, opts);
         SkeletonGraph {
             sk,
@@ -163,6 +179,7 @@ impl SkeletonGraph {
         memory.keep_f32s(self.near.dist);
         memory.keep_u8s(self.near.parent);
         memory.keep_u8s(self.sk.flags);
+        memory.u32s.push(self.owner);
     }
 
     /// Step 4, the raw centerline (padded indices, source → target): the longest simple path
@@ -396,8 +413,8 @@ impl SkeletonTree {
     }
 
     /// The skeleton ordinal owning each voxel `near` reached (`u32::MAX` elsewhere).
-    fn owners(&self, near: &Tree) -> Vec<u32> {
-        let mut owner = vec![u32::MAX; self.flags.len()];
+    fn owners(&self, near: &Tree, reuse: Vec<u32>) -> Vec<u32> {
+        let mut owner = refilled(reuse, self.flags.len(), u32::MAX);
         for &v in &near.order {
             let v = v as usize;
             owner[v] = if self.flags[v] & SKELETON != 0 {
