@@ -451,9 +451,9 @@ struct Ways<'a> {
     ds: &'a crate::grid::Field<f32>,
     closed: BoxBits,
     seen: BoxBits,
-    /// Box voxels to visit, nearest the goal first, and every voxel one search reached (to
-    /// clear `seen` after it).
+    /// Box voxels to visit, nearest the goal first (squared distance in tenths of a mm).
     todo: std::collections::BinaryHeap<std::cmp::Reverse<(u64, usize)>>,
+    /// Every voxel one search reached, to clear `seen` after it.
     reached: Vec<usize>,
 }
 

@@ -43,6 +43,19 @@ pub fn collect<T>(n: usize, iter: impl Iterator<Item = T>) -> Vec<T> {
     v
 }
 
+/// [`collect`] in the memory of `reuse` where it has room for `n` values (an array some search
+/// is done with).
+pub(crate) fn collect_in<T>(reuse: Vec<T>, n: usize, iter: impl Iterator<Item = T>) -> Vec<T> {
+    if reuse.capacity() >= n {
+        let mut v = reuse;
+        v.clear();
+        v.extend(iter);
+        v
+    } else {
+        collect(n, iter)
+    }
+}
+
 /// Asks the cache for the line holding `s[at]`, if there is one; nothing else happens.
 #[inline(always)]
 pub(crate) fn prefetch<T>(s: &[T], at: usize) {

@@ -514,14 +514,14 @@ fn prepare_stored(
 
     // Every Ds below is over this box: cutting contacts only takes lumen away, and a box
     // larger than the lumen's own changes no distance.
-    let mut traces = TraceMemory::new(BoxGrid::around(seg.extent, 1, seg.lumen.dims()));
+    let mut kept = TraceMemory::new(BoxGrid::around(seg.extent, 1, seg.lumen.dims()));
     // Where the segmentation placed the cecum by anatomy, the centerline ends there unless
     // the user gave the end.
     let mut cl_opts = opts.centerline.clone();
     if cl_opts.target_mm.is_none() {
         cl_opts.target_mm = seg.cecum_voxel.map(|v| centerline::mm_of(&seg.lumen, v));
     }
-    let mut traced = match trace(&mut seg, &mut traces, &cl_opts, opts, &mut laps) {
+    let mut traced = match trace(&mut seg, &mut kept, &cl_opts, opts, &mut laps) {
         Ok(t) => t,
         // Without them the colon came apart (cleansing took wall voxels out beside them):
         // traced with them.
@@ -529,7 +529,7 @@ fn prepare_stored(
             set_voxels(&mut seg.lumen, &beside, 1);
             seg.lumen_voxels += beside.len();
             beside.clear();
-            trace(&mut seg, &mut traces, &cl_opts, opts, &mut laps)?
+            trace(&mut seg, &mut kept, &cl_opts, opts, &mut laps)?
         }
         Err(e) => return Err(e),
     };
@@ -546,9 +546,9 @@ fn prepare_stored(
             // The trace's Ds (with the contacts cut) makes room: it is computed again after
             // the rounds when no trace replaces it, and two fields of fresh pages cost more.
             if let Some(d) = traced.ds_box.take() {
-                traces.give_back(d);
+                kept.give_back(d);
             }
-            let ds = traces.ds_of(&seg.lumen);
+            let ds = kept.ds_of(&seg.lumen);
             plugs = shortcut_plugs(
                 &seg.lumen,
                 &c.points_mm,
@@ -567,7 +567,7 @@ fn prepare_stored(
                     &mut necks,
                 );
             }
-            traces.give_back(ds);
+            kept.give_back(ds);
         }
         // With the further holes plugged too, unless they cut the colon itself: then the
         // holes of the trace alone.
@@ -580,10 +580,10 @@ fn prepare_stored(
         }
         if !tries.is_empty() {
             // The skeleton search's arrays serve the next one.
-            traces.skeleton = traced.sk.forget_route();
+            kept.skeleton = traced.sk.forget_route();
         }
         let retraced = tries.into_iter().find_map(|these: Vec<usize>| {
-            retrace_plugged(&mut seg, &mut traces, &cl_opts, opts, &mut laps, &these)
+            retrace_plugged(&mut seg, &mut kept, &cl_opts, opts, &mut laps, &these)
                 .map(|t| (t, these))
         });
         match retraced {
@@ -629,18 +629,18 @@ fn prepare_stored(
         let blocks = sk
             .blocks
             .as_ref()
-            .map(|_| crate::grid::Blocks::new(&seg.lumen, &traces.grid, 2))
+            .map(|_| crate::grid::Blocks::new(&seg.lumen, &kept.grid, 2))
             .transpose()?;
         taken.extend(cut_along(
             &mut seg.lumen,
-            &traces.grid,
+            &kept.grid,
             &sk,
             blocks.as_ref(),
             opts,
         )?);
         taken.sort_unstable();
         if let Some(d) = ds_box.take() {
-            traces.give_back(d);
+            kept.give_back(d);
         }
     }
     // Ds again where a round of plugging took the trace's, or the fluid came back.
@@ -648,11 +648,11 @@ fn prepare_stored(
         Some(d) => d,
         None => {
             laps.start(Stage::Ds);
-            traces.ds_of(&seg.lumen)
+            kept.ds_of(&seg.lumen)
         }
     };
     // Ds moves into bricks, and the Dt searches work in its box array.
-    let grid = traces.grid; // and its spare memory freed
+    let grid = kept.grid;
     let mut ds = Bricked::from_field(&ds_box, 0.0);
     let mut memory = SearchMemory::from(ds_box.data);
 
@@ -780,7 +780,7 @@ const MAX_PLUG_ROUNDS: usize = 16;
 /// the colon itself.
 fn retrace_plugged(
     seg: &mut Segmentation,
-    traces: &mut TraceMemory,
+    kept: &mut TraceMemory,
     cl_opts: &CenterlineOptions,
     opts: &PrepOptions,
     laps: &mut Laps<impl FnMut(Stage)>,
@@ -788,7 +788,7 @@ fn retrace_plugged(
 ) -> Option<Traced> {
     set_voxels(&mut seg.lumen, plugs, 0);
     seg.lumen_voxels -= plugs.len();
-    let traced = trace(seg, traces, cl_opts, opts, laps).ok();
+    let traced = trace(seg, kept, cl_opts, opts, laps).ok();
     if traced.is_none() {
         set_voxels(&mut seg.lumen, plugs, 1);
         seg.lumen_voxels += plugs.len();
@@ -849,7 +849,7 @@ fn set_voxels(mask: &mut Volume<u8>, voxels: &[usize], v: u8) {
 /// on a small lumen it needs Ds first.
 fn trace(
     seg: &mut Segmentation,
-    traces: &mut TraceMemory,
+    kept: &mut TraceMemory,
     cl_opts: &CenterlineOptions,
     opts: &PrepOptions,
     laps: &mut Laps<impl FnMut(Stage)>,
@@ -858,28 +858,28 @@ fn trace(
     let early_ds = if uses_blocks(&seg.lumen, seg.lumen_voxels, cl_opts) {
         None
     } else {
-        Some(traces.ds_of(&seg.lumen))
+        Some(kept.ds_of(&seg.lumen))
     };
     let sk = trace_skeleton(
         &seg.lumen,
-        &traces.grid,
+        &kept.grid,
         seg.lumen_voxels,
         seg.seed_voxel,
         early_ds.as_ref(),
         cl_opts,
-        std::mem::take(&mut traces.skeleton),
+        std::mem::take(&mut kept.skeleton),
     )?;
     laps.start(Stage::Contacts);
-    let mut taken = cut_along(&mut seg.lumen, &traces.grid, &sk, sk.blocks.as_ref(), opts)?;
+    let mut taken = cut_along(&mut seg.lumen, &kept.grid, &sk, sk.blocks.as_ref(), opts)?;
     taken.sort_unstable();
     laps.start(Stage::Ds);
     let ds_box = match early_ds {
         Some(d) if taken.is_empty() => d,
         early => {
             if let Some(d) = early {
-                traces.give_back(d);
+                kept.give_back(d);
             }
-            traces.ds_of(&seg.lumen)
+            kept.ds_of(&seg.lumen)
         }
     };
     laps.start(Stage::Centerline);

@@ -335,11 +335,14 @@ fn skeleton_path(
         (None, None) => return Err(Error::invalid("no colon path from the rectum")),
     };
     // The given source lies off the colon's path: the longest path from it (to the target,
-    // when given). Both were reached from the rectum above, so they reach each other.
+    // when given). Both were reached from the rectum above, so they reach each other. The
+    // arrays of the search from the rectum serve the graph's.
     let n = route.pad.inside.len();
     let start = TreeStart::new_in(&route.pad, &route.weight, memory.f32s(n + 1), memory.u8s(n));
-    route.tree = start.search(&route.pad, &[s], sp, &route.weight);
-    route.graph = SkeletonGraph::new(&route.pad, &route.tree, &route.ds_pad, sp, s, opts, memory);
+    let tree = start.search(&route.pad, &[s], sp, &route.weight);
+    memory.keep_search(std::mem::replace(&mut route.tree, tree));
+    let graph = SkeletonGraph::new(&route.pad, &route.tree, &route.ds_pad, sp, s, opts, memory);
+    std::mem::replace(&mut route.graph, graph).recycle(memory);
     route.from_rectum = false;
     let path = route
         .path(&[], opts)?
@@ -353,7 +356,8 @@ fn skeleton_path(
 pub(crate) struct Route {
     pad: Padded,
     ds_pad: Vec<f32>,
-    /// The search's cost weight, kept for its memory.
+    /// The search's cost weight (a search from a given source off the colon's path needs it
+    /// again), kept for its memory after.
     weight: Vec<f32>,
     sp: [f64; 3],
     tree: Tree,
@@ -370,8 +374,7 @@ impl Route {
         memory.keep_u8s(self.pad.inside);
         memory.keep_f32s(self.ds_pad);
         memory.keep_f32s(self.weight);
-        memory.keep_f32s(self.tree.dist);
-        memory.keep_u8s(self.tree.parent);
+        memory.keep_search(self.tree);
         self.graph.recycle(memory);
     }
 

@@ -79,10 +79,10 @@ fn take_room<T>(kept: &mut Vec<Vec<T>>, len: usize) -> Vec<T> {
         .map_or_else(Vec::new, |i| kept.swap_remove(i))
 }
 
-/// The arrays of a skeleton search that is done with, kept for the next search over the same
-/// box: prep traces the centerline again after each round of plugging holes, and on
-/// `ctc/prone-tagged` a search's fresh arrays cost it about a quarter of its time in page
-/// faults. Empty, the search takes fresh memory.
+/// The arrays of a skeleton search that is done with, kept for the next search (each is taken
+/// where it has room): prep traces the centerline again after each round of plugging holes,
+/// and on `ctc/prone-tagged` a search's fresh arrays cost it about a quarter of its time in
+/// page faults. Empty, the search takes fresh memory.
 #[derive(Default)]
 pub struct SkeletonMemory {
     f32s: Vec<Vec<f32>>,
@@ -100,6 +100,14 @@ impl SkeletonMemory {
     }
     fn u32s(&mut self, len: usize) -> Vec<u32> {
         take_room(&mut self.u32s, len)
+    }
+    fn keep_u32s(&mut self, v: Vec<u32>) {
+        self.u32s.push(v);
+    }
+    /// A finished search's distances and parents.
+    pub(crate) fn keep_search(&mut self, search: Search) {
+        self.keep_f32s(search.dist);
+        self.keep_u8s(search.parent);
     }
     pub(crate) fn keep_f32s(&mut self, v: Vec<f32>) {
         self.f32s.push(v);
@@ -176,10 +184,9 @@ impl SkeletonGraph {
 
     /// Its arrays, for the next search.
     pub(crate) fn recycle(self, memory: &mut SkeletonMemory) {
-        memory.keep_f32s(self.near.dist);
-        memory.keep_u8s(self.near.parent);
+        memory.keep_search(self.near);
         memory.keep_u8s(self.sk.flags);
-        memory.u32s.push(self.owner);
+        memory.keep_u32s(self.owner);
     }
 
     /// Step 4, the raw centerline (padded indices, source → target): the longest simple path

@@ -70,15 +70,7 @@ pub(crate) fn cost_weight_in(
             1.0 + k * power(((dmax - d) / dmax).max(0.0), p)
         }
     };
-    let weights = ds_pad.iter().map(|&d| weight(d));
-    if reuse.capacity() >= ds_pad.len() {
-        let mut v = reuse;
-        v.clear();
-        v.extend(weights);
-        v
-    } else {
-        crate::mem::collect(ds_pad.len(), weights)
-    }
+    crate::mem::collect_in(reuse, ds_pad.len(), ds_pad.iter().map(|&d| weight(d)))
 }
 
 /// `x` to the power `n` by squaring, as `f32::powi` computes it (the same products in the same

@@ -541,15 +541,7 @@ pub(crate) fn start_from_inside_in(pad: &Padded, reuse: Vec<f32>) -> Vec<f32> {
         .iter()
         .map(|&m| if m != 0 { f32::INFINITY } else { 0.0 })
         .chain([0.0]);
-    let n = pad.inside.len() + 1;
-    if reuse.capacity() >= n {
-        let mut v = reuse;
-        v.clear();
-        v.extend(values);
-        v
-    } else {
-        crate::mem::collect(n, values)
-    }
+    crate::mem::collect_in(reuse, pad.inside.len() + 1, values)
 }
 
 /// A search's final distance from its working value: settled voxels carry their distance

@@ -46,15 +46,7 @@ impl Padded {
         mut marks: Option<&mut BrickMarks>,
     ) -> Vec<T> {
         let n = self.dims[0] * self.dims[1] * self.dims[2] + spare;
-        let mut out = if reuse.capacity() >= n {
-            let mut v = reuse;
-            v.clear();
-            v.resize(n, wall);
-            v
-        } else {
-            drop(reuse);
-            crate::mem::filled(n, wall)
-        };
+        let mut out = crate::mem::collect_in(reuse, n, std::iter::repeat_n(wall, n));
         let (g, grid) = (mask.geometry(), &self.grid);
         for k in 0..grid.dims[2] {
             for j in 0..grid.dims[1] {
