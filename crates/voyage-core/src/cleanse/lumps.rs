@@ -2,7 +2,7 @@
 //! air pockets and skin, and cleansed with the pools' model.
 
 use super::{
-    marks::{LUMP, POOL, RowMarks, SOLID},
+    marks::{LUMP, POOL, SOLID},
     model::{AIR_HU, CleanseOptions, LEVEL_MARGIN_HU, fluid_value, mostly_air, unmix},
 };
 use crate::Geometry;
@@ -25,14 +25,13 @@ const SKIN_VOXELS: usize = 3;
 /// outside the lumen that is more air than tissue, within [`SKIN_VOXELS`] of the lump's box:
 /// the air pockets of mottled stool, and the outer skin the lumen's threshold left out. A
 /// lump whose air runs out of that box (a tube's air, the outside) is not stool. Returns
-/// each lump's voxels. `rows` holds the lumen's bit of the rows of `lo..=hi`.
+/// each lump's voxels.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn find_lumps(
     hu: &[i16],
     m: &mut [u8],
     g: &Geometry,
     bright: &[usize],
-    rows: &RowMarks,
     lo: [usize; 3],
     hi: [usize; 3],
     air_hu: i16,
@@ -67,27 +66,10 @@ pub(super) fn find_lumps(
             })
         })
     };
-    // Lumen air within reach along an axis lies in the voxel's row or in a row at most
-    // STOOL_REACH away along the second or third axis: where none of them holds lumen (bone,
-    // mostly: 6 M bright voxels on `ctc/prone-tagged`), there is none to look for. A row
-    // beyond `lo..=hi` may hold some.
-    let reach = STOOL_REACH as usize;
-    let lumen_row = |j: usize, k: usize| {
-        !(lo[1]..=hi[1]).contains(&j) || !(lo[2]..=hi[2]).contains(&k) || rows.any(j, k, 1)
-    };
-    let lumen_rows_near = |v: usize| {
-        let [_, j, k] = g.ijk(v);
-        (j.saturating_sub(reach)..=j + reach).any(|j| lumen_row(j, k))
-            || (k.saturating_sub(reach)..=k + reach).any(|k| lumen_row(j, k))
-    };
     let mostly_air = mostly_air(air_hu);
     let mut lumps = Vec::new();
     for &v in bright {
-        if !solid(v, m)
-            || m[v] & (SOLID | LUMP) != 0
-            || !lumen_rows_near(v)
-            || !near_air(v, m)
-        {
+        if !solid(v, m) || m[v] & (SOLID | LUMP) != 0 || !near_air(v, m) {
             continue;
         }
         // The lump: flood through tagged voxels (26 neighbours: a corner's partial

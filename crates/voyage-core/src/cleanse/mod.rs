@@ -224,7 +224,7 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
     // Every voxel at or above the fluid threshold, in or out of the lumen (ascending): where
     // lumps of stool are looked for, without a second pass over the box.
     let mut bright: Vec<usize> = Vec::new();
-    let rows = {
+    {
         let m = lumen.data_mut();
         for k in lo[2]..=hi[2] {
             for j in lo[1]..=hi[1] {
@@ -287,22 +287,11 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
                 }
             }
         }
-        pools
-    };
+    }
 
     // Lumps of tagged stool on the wall, outside the lumen (step 3 cleanses them; the pools'
     // model leaves them alone).
-    let lumps = find_lumps(
-        hu,
-        lumen.data_mut(),
-        &g,
-        &bright,
-        &rows,
-        lo,
-        hi,
-        air_hu,
-        fluid_hu,
-    );
+    let lumps = find_lumps(hu, lumen.data_mut(), &g, &bright, lo, hi, air_hu, fluid_hu);
 
     // 2. The model, voxel by voxel, over the marked ones (the marks reach 2 voxels past
     // the extent's tagged voxels, which lie inside lo..=hi).
