@@ -497,11 +497,10 @@ impl<'a> Ways<'a> {
             return false;
         };
         let d = grid.dims;
-        let vd = self.lumen.dims();
+        let g = self.lumen.geometry();
         let (lumen, ds) = (self.lumen.data(), &self.ds.data);
-        let to_volume = |l: [usize; 3]| {
-            (l[0] + grid.lo[0]) + vd[0] * ((l[1] + grid.lo[1]) + vd[1] * (l[2] + grid.lo[2]))
-        };
+        let to_volume =
+            |l: [usize; 3]| g.index(l[0] + grid.lo[0], l[1] + grid.lo[1], l[2] + grid.lo[2]);
         let closed = &self.closed;
         let open = |b: usize, l: [usize; 3]| {
             ds[b] as f64 >= wide && !closed.get(b) && lumen[to_volume(l)] != 0

@@ -287,7 +287,7 @@ fn skeleton_path(
     opts: &CenterlineOptions,
     memory: &mut SkeletonMemory,
 ) -> Result<(Vec<[usize; 3]>, Route)> {
-    let n = ds.grid.dims.iter().map(|d| d + 2).product();
+    let n = Padded::shape(&ds.grid).len();
     let pad = Padded::new_in(lumen, &ds.grid, memory.u8s(n));
     let sp = lumen.spacing();
     let ds_pad = pad.pad_in(&ds.data, 0.0, memory.f32s(n));

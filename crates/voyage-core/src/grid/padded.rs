@@ -45,7 +45,7 @@ impl Padded {
         reuse: Vec<T>,
         mut marks: Option<&mut BrickMarks>,
     ) -> Vec<T> {
-        let n = self.dims[0] * self.dims[1] * self.dims[2] + spare;
+        let n = self.len() + spare;
         let mut out = crate::mem::collect_in(reuse, n, std::iter::repeat_n(wall, n));
         let (g, grid) = (mask.geometry(), &self.grid);
         for k in 0..grid.dims[2] {
@@ -74,9 +74,14 @@ impl Padded {
         }
     }
 
+    /// Voxels of the padded box.
+    pub(crate) fn len(&self) -> usize {
+        self.dims[0] * self.dims[1] * self.dims[2]
+    }
+
     /// Length of a search's distances: the padded box and one spare wall.
     pub(crate) fn search_len(&self) -> usize {
-        self.dims[0] * self.dims[1] * self.dims[2] + 1
+        self.len() + 1
     }
 
     /// Box row (j, k) of a padded-layout field.
