@@ -100,3 +100,28 @@ mod tests {
         assert_eq!(w[257], 1);
     }
 }
+
+/// Hashes voxel indices for maps over a few million of them: one multiply, not SipHash (the
+/// keys are not chosen by an adversary, and no result depends on a map's order).
+pub type VoxelHash = std::hash::BuildHasherDefault<VoxelHasher>;
+
+#[derive(Default)]
+pub struct VoxelHasher(u64);
+
+impl std::hash::Hasher for VoxelHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(b as u64);
+        }
+    }
+    fn write_u64(&mut self, i: u64) {
+        // Fibonacci hashing: the high bits, which hashbrown uses, mix all of the key's.
+        self.0 = (self.0 ^ i).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    }
+    fn write_usize(&mut self, i: usize) {
+        self.write_u64(i as u64);
+    }
+}

@@ -401,20 +401,31 @@ pub const DOWN_COST: u32 = 8;
 /// lie within the reach does not depend on the order they were visited in.
 const DIST_UNIT_MM: f64 = 0.01;
 
-/// Grows `work` from `seeds` (voxel indices) through the voxels where `pass(i)`, each
-/// reached within `reach_mm` (along 6-neighbour steps, each as long as the spacing along its
-/// axis, and [`DOWN_COST`] times that along gravity, `down`: voxel axis and direction) set to
-/// `label` and pushed to `added`; a voxel where only `take(i)` is taken when
-/// reached, and not passed through (a pool's partial-volume skin, not the wall between it and
-/// a loop beside it). A step into a voxel where `free(i)` costs nothing (the core of a fluid
-/// body wider than any small-bowel loop: [`Cores`]). Only voxels still 0 in `work` are taken.
+/// What [`grow_bright`] does at a voxel it reaches.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub enum Step {
+    /// Left out.
+    Stop,
+    /// Taken, not passed through (a pool's partial-volume skin, not the wall between it and
+    /// a loop beside it).
+    Take,
+    /// Taken and passed through.
+    Pass,
+}
+
+/// Grows `work` from `seeds` (voxel indices) through the voxels where `step(i)` is
+/// [`Step::Pass`], each reached within `reach_mm` (along 6-neighbour steps, each as long as
+/// the spacing along its axis, and [`DOWN_COST`] times that along gravity, `down`: voxel axis
+/// and direction) set to `label` and pushed to `added`; a voxel where it is [`Step::Take`] is
+/// taken when reached, and not passed through. A seed is taken where it passes. A step into
+/// a voxel where `free(i)` costs nothing (the core of a fluid body wider than any small-bowel
+/// loop: [`Cores`]). Only voxels still 0 in `work` are taken.
 #[allow(clippy::too_many_arguments)]
 pub fn grow_bright(
     work: &mut crate::Volume<u8>,
     seeds: impl IntoIterator<Item = usize>,
     (reach_mm, down): (f64, Option<(usize, i32)>),
-    take: impl Fn(usize) -> bool,
-    pass: impl Fn(usize) -> bool,
+    step: impl Fn(usize) -> Step,
     free: impl Fn(usize) -> bool,
     label: u8,
     added: &mut Vec<usize>,
@@ -437,7 +448,7 @@ pub fn grow_bright(
         }
     });
     let reach = (reach_mm / DIST_UNIT_MM).round() as u32;
-    let mut dist: HashMap<usize, u32> = HashMap::new();
+    let mut dist: HashMap<usize, u32, crate::mem::VoxelHash> = HashMap::default();
     let mut heap = BinaryHeap::new();
     for i in seeds {
         if dist.insert(i, 0).is_none() {
@@ -449,7 +460,7 @@ pub fn grow_bright(
             continue;
         }
         // Every voxel queued past the seeds passed when it was queued.
-        if work.data()[i] == 0 && (d > 0 || pass(i)) {
+        if work.data()[i] == 0 && (d > 0 || step(i) == Step::Pass) {
             work.data_mut()[i] = label;
             added.push(i);
         }
@@ -470,15 +481,16 @@ pub fn grow_bright(
                 }
                 continue;
             }
-            if !take(q) {
-                continue;
-            }
-            if pass(q) {
-                dist.insert(q, dq);
-                heap.push(Reverse((dq, q)));
-            } else {
-                work.data_mut()[q] = label;
-                added.push(q);
+            match step(q) {
+                Step::Stop => {}
+                Step::Pass => {
+                    dist.insert(q, dq);
+                    heap.push(Reverse((dq, q)));
+                }
+                Step::Take => {
+                    work.data_mut()[q] = label;
+                    added.push(q);
+                }
             }
         }
     }
@@ -659,8 +671,7 @@ pub(super) fn fill_fluid(
         work,
         seeds,
         (reach_mm, None),
-        &bright,
-        &bright,
+        |i| if bright(i) { Step::Pass } else { Step::Stop },
         |_| false,
         BRIDGE,
         added,
@@ -683,23 +694,7 @@ pub(super) fn whole_pools(
     let g = lumen.geometry().clone();
     let bright = |i: usize| ct.data()[i] >= fluid_hu;
     // Only the lumen's bright voxels with a bright neighbour outside it start the growth.
-    let seeds: Vec<usize> = (b.lo[2]..=b.hi[2])
-        .into_par_iter()
-        .flat_map_iter(|k| {
-            let (lumen, g) = (&*lumen, &g);
-            (b.lo[1]..=b.hi[1]).flat_map(move |j| {
-                let row = g.index(b.lo[0], j, k);
-                (row..=row + b.hi[0] - b.lo[0]).filter(move |&i| {
-                    lumen.data()[i] == 1
-                        && bright(i)
-                        && face_neighbours(g.dims, i)
-                            .into_iter()
-                            .flatten()
-                            .any(|q| lumen.data()[q] == 0 && bright(q))
-                })
-            })
-        })
-        .collect();
+    let seeds = pool_seeds(lumen, ct, &b, fluid_hu);
     let down = PatientFrame::of(&g).nearest_axis(gravity_lps);
     // Fluid is not passed through where gas lies beside it: past the level (in the lumen
     // already) or in tagged stool mottled with gas, which cleansing's model of lumps takes.
@@ -715,8 +710,17 @@ pub(super) fn whole_pools(
     // fluid beside gas; not a tube's fluid.
     let half = |i: usize| above_half(ct.data(), i, g.dims, TISSUE_HU);
     let wide = |i: usize| wide_across(&g, i, down.0, &bright);
-    let take = |i: usize| bright(i) && (!half(i) || wide(i));
-    let pass = |i: usize| bright(i) && wide(i) && half(i) && !by_air(i);
+    // Taken where bright and not at least halfway (the skin), or wide; passed where also
+    // halfway and not by air.
+    let step = |i: usize| {
+        if !bright(i) || half(i) && !wide(i) {
+            Step::Stop
+        } else if !half(i) || by_air(i) {
+            Step::Take
+        } else {
+            Step::Pass
+        }
+    };
     // The growth passes only bright voxels: the box around those joined to the seeds holds it.
     let cores = match reach_of(&g, &seeds, bright) {
         Some(b) => Cores::find(ct, b, fluid_hu),
@@ -727,14 +731,56 @@ pub(super) fn whole_pools(
         lumen,
         seeds,
         (POOL_REACH_MM, Some(down)),
-        take,
-        pass,
+        step,
         |i| cores.holds(g.ijk(i)),
         1,
         &mut grown,
     );
     grown
 }
+
+/// The voxels of `lumen` (0/1, in `b`) at or above `fluid_hu` in `ct` with a bright neighbour
+/// outside the lumen, in storage order. The box is most of the abdomen and few of its voxels
+/// are bright lumen: runs of [`SEED_RUN`] are passed over unless one of theirs is.
+fn pool_seeds(lumen: &Volume<u8>, ct: &Volume<i16>, b: &Bbox, fluid_hu: i16) -> Vec<usize> {
+    let g = lumen.geometry();
+    let (lumen, hu) = (lumen.data(), ct.data());
+    let bright = |i: usize| hu[i] >= fluid_hu;
+    let seed = |i: usize| {
+        face_neighbours(g.dims, i)
+            .into_iter()
+            .flatten()
+            .any(|q| lumen[q] == 0 && bright(q))
+    };
+    let width = b.hi[0] - b.lo[0] + 1;
+    let (bright, seed) = (&bright, &seed);
+    (b.lo[2]..=b.hi[2])
+        .into_par_iter()
+        .flat_map_iter(|k| {
+            (b.lo[1]..=b.hi[1]).flat_map(move |j| {
+                let row = g.index(b.lo[0], j, k);
+                let runs = lumen[row..row + width]
+                    .chunks(SEED_RUN)
+                    .zip(hu[row..row + width].chunks(SEED_RUN));
+                runs.enumerate()
+                    // No early exit inside a run: the test compiles to vector compares.
+                    .filter(move |(_, (l, h))| {
+                        l.iter()
+                            .zip(*h)
+                            .fold(false, |any, (&l, &h)| any | ((l == 1) & (h >= fluid_hu)))
+                    })
+                    .flat_map(move |(r, (l, _))| {
+                        let start = row + r * SEED_RUN;
+                        start..start + l.len()
+                    })
+                    .filter(move |&i| lumen[i] == 1 && bright(i) && seed(i))
+            })
+        })
+        .collect()
+}
+
+/// Voxels tested together by [`pool_seeds`].
+const SEED_RUN: usize = 32;
 
 /// Fluid this far (mm) or further from anything but fluid is a wide body's core: a ball of
 /// fluid 28 mm across fits there. A lumen filled with tagged fluid from wall to wall holds
@@ -815,31 +861,44 @@ impl Cores {
     /// Per cell, whether all its voxels are fluid.
     fn fluid_cells(&self, hu: &Volume<i16>, fluid_hu: i16) -> Vec<u8> {
         let [cx, cy, cz] = self.cells;
-        let dims = hu.dims();
+        let (dims, g) = (hu.dims(), hu.geometry());
+        // The voxels' columns of cells along x, from the box's low x to its high.
+        let x0 = self.lo[0];
+        let x1 = (x0 + cx * self.cell[0]).min(dims[0]);
         let mut out = vec![0u8; cx * cy * cz];
-        out.par_chunks_mut(cx * cy)
-            .enumerate()
-            .for_each(|(z, slab)| {
+        out.par_chunks_mut(cx * cy).enumerate().for_each_init(
+            || (vec![0i16; x1 - x0], vec![0i16; x1 - x0]),
+            |(low, high), (z, slab)| {
                 for (y, row) in slab.chunks_mut(cx).enumerate() {
-                    for (x, c) in row.iter_mut().enumerate() {
-                        let at = [x, y, z];
-                        let start = [0, 1, 2].map(|a| self.lo[a] + at[a] * self.cell[a]);
-                        let end = [0, 1, 2].map(|a| (start[a] + self.cell[a]).min(dims[a]));
-                        let (mut min, mut max) = (i16::MAX, i16::MIN);
-                        for k in start[2]..end[2] {
-                            for j in start[1]..end[1] {
-                                let i0 = hu.geometry().index(start[0], j, k);
-                                for &v in &hu.data()[i0..i0 + end[0] - start[0]] {
-                                    min = min.min(v);
-                                    max = max.max(v);
-                                }
+                    let (j0, k0) = (self.lo[1] + y * self.cell[1], self.lo[2] + z * self.cell[2]);
+                    let (j1, k1) = (
+                        (j0 + self.cell[1]).min(dims[1]),
+                        (k0 + self.cell[2]).min(dims[2]),
+                    );
+                    // Each voxel column's minimum and maximum over the cells' rows first
+                    // (whole rows, vector code), then over each cell's columns.
+                    low.fill(i16::MAX);
+                    high.fill(i16::MIN);
+                    for k in k0..k1 {
+                        for j in j0..j1 {
+                            let i0 = g.index(x0, j, k);
+                            let voxels = &hu.data()[i0..i0 + x1 - x0];
+                            for ((l, h), &v) in low.iter_mut().zip(high.iter_mut()).zip(voxels) {
+                                *l = (*l).min(v);
+                                *h = (*h).max(v);
                             }
                         }
+                    }
+                    let cells = low.chunks(self.cell[0]).zip(high.chunks(self.cell[0]));
+                    for (c, (l, h)) in row.iter_mut().zip(cells) {
+                        let min = l.iter().copied().fold(i16::MAX, i16::min);
+                        let max = h.iter().copied().fold(i16::MIN, i16::max);
                         *c = (min >= fluid_hu && 2 * min as i32 >= max as i32 + TISSUE_HU as i32)
                             as u8;
                     }
                 }
-            });
+            },
+        );
         out
     }
 
@@ -1125,5 +1184,90 @@ mod tests {
             "{far} voxels of the loop taken beyond its first {} mm",
             POOL_REACH_MM + 6.0
         );
+    }
+
+    /// A random CT and lumen (widths not a multiple of a run, so runs end short).
+    fn random_ct_and_lumen(seed: u64) -> (Volume<i16>, Volume<u8>) {
+        let g = Geometry::new([45, 13, 9], [0.75, 0.75, 1.0], [0.0; 3]).unwrap();
+        let mut rng = crate::rng::Rng::new(seed, 0);
+        let n = g.len();
+        let hu = (0..n).map(|_| rng.range(-1000.0, 1200.0) as i16).collect();
+        let lumen = (0..n).map(|_| (rng.uniform() < 0.3) as u8).collect();
+        (
+            Volume::from_vec(g.clone(), hu).unwrap(),
+            Volume::from_vec(g, lumen).unwrap(),
+        )
+    }
+
+    #[test]
+    fn pool_seeds_are_every_voxel_of_their_definition() {
+        for seed in 0..4 {
+            let (ct, lumen) = random_ct_and_lumen(seed);
+            let g = ct.geometry();
+            let b = Bbox {
+                lo: [3, 1, 0],
+                hi: [41, 12, 8],
+            };
+            let bright = |i: usize| ct.data()[i] >= 200;
+            let want: Vec<usize> = (0..g.len())
+                .filter(|&i| {
+                    let [x, y, z] = g.ijk(i);
+                    (b.lo[0]..=b.hi[0]).contains(&x)
+                        && (b.lo[1]..=b.hi[1]).contains(&y)
+                        && (b.lo[2]..=b.hi[2]).contains(&z)
+                        && lumen.data()[i] == 1
+                        && bright(i)
+                        && face_neighbours(g.dims, i)
+                            .into_iter()
+                            .flatten()
+                            .any(|q| lumen.data()[q] == 0 && bright(q))
+                })
+                .collect();
+            assert!(!want.is_empty());
+            assert_eq!(pool_seeds(&lumen, &ct, &b, 200), want);
+        }
+    }
+
+    #[test]
+    fn fluid_cells_are_cells_all_fluid_and_halfway() {
+        for seed in 0..4 {
+            let (mut ct, _) = random_ct_and_lumen(seed);
+            // Bright stretches, so that some cells are all fluid.
+            for (i, v) in ct.data_mut().iter_mut().enumerate() {
+                if (i / 7) % 3 != 0 {
+                    *v = 600 + (*v).rem_euclid(300);
+                }
+            }
+            let b = Bbox {
+                lo: [1, 2, 1],
+                hi: [44, 12, 8],
+            };
+            let w = b.widths();
+            let cores = Cores {
+                body: Vec::new(),
+                lo: b.lo,
+                cell: [2, 2, 2],
+                cells: [0, 1, 2].map(|a| w[a].div_ceil(2)),
+            };
+            let got = cores.fluid_cells(&ct, 200);
+            let [cx, cy, _] = cores.cells;
+            let want: Vec<u8> = (0..got.len())
+                .map(|c| {
+                    let at = [c % cx, (c / cx) % cy, c / (cx * cy)];
+                    let lo = [0, 1, 2].map(|a| b.lo[a] + 2 * at[a]);
+                    let hi = [0, 1, 2].map(|a| (lo[a] + 2).min(ct.dims()[a]));
+                    let values: Vec<i16> = (lo[2]..hi[2])
+                        .flat_map(|k| {
+                            (lo[1]..hi[1]).flat_map(move |j| (lo[0]..hi[0]).map(move |i| [i, j, k]))
+                        })
+                        .map(|[i, j, k]| ct.get(i, j, k))
+                        .collect();
+                    let (min, max) = (values.iter().min().unwrap(), values.iter().max().unwrap());
+                    (*min >= 200 && 2 * *min as i32 >= *max as i32 + TISSUE_HU as i32) as u8
+                })
+                .collect();
+            assert!(want.contains(&1) && want.contains(&0));
+            assert_eq!(got, want);
+        }
     }
 }
