@@ -25,7 +25,9 @@ use glam::DVec3;
 
 use crate::{
     Volume,
+    distance::geodesic::start_from_inside_in,
     grid::{Blocks, BoxGrid, BoxIndex, PadIndex, Padded},
+    mem::refilled,
 };
 
 #[derive(Clone, Debug)]
@@ -47,10 +49,26 @@ impl Default for ContactOptions {
 
 const NO_LABEL: u16 = u16::MAX;
 
+/// The arrays of a contact cut that is done, kept for the next: prep cuts the contacts after
+/// every trace of the centerline (five times on `ctc/prone-tagged`, each over blocks of the
+/// same box), and fresh arrays cost each cut a fifth of its time in page faults. Empty, a
+/// cut takes fresh memory.
+#[derive(Default)]
+pub struct ContactMemory {
+    inside: Vec<u8>,
+    partial: Vec<u8>,
+    labels: Vec<u16>,
+    dist: Vec<f32>,
+    parent: Vec<u8>,
+    contact: Vec<bool>,
+}
+
 /// Takes the contact voxels out of the lumen mask (none within `keep_mm` of the points
 /// `keep`, volume-local mm); returns the volume indices taken, so that a caller can put them
 /// back. `path_mm` is the colon's path from source to target; `blocks`, when given, the
-/// blocks of `grid` to search on (else single voxels).
+/// blocks of `grid` to search on (else single voxels). The cut works in `memory`'s arrays where
+/// they have room, and leaves its own there.
+#[allow(clippy::too_many_arguments)]
 pub fn cut_contacts(
     lumen: &mut Volume<u8>,
     grid: &BoxGrid,
@@ -59,6 +77,7 @@ pub fn cut_contacts(
     keep: &[DVec3],
     keep_mm: f64,
     opts: &ContactOptions,
+    memory: &mut ContactMemory,
 ) -> crate::Result<Vec<usize>> {
     if !opts.enabled || path_mm.len() < 2 {
         return Ok(Vec::new());
@@ -77,9 +96,9 @@ pub fn cut_contacts(
         let arc = (arcs[a] - arcs[b]).abs();
         arc > opts.min_arc_mm && arc > opts.arc_ratio * points[a].distance(points[b])
     };
-    let pad = padded_blocks(blocks);
-    let labels = label_blocks(&pad, blocks, &points);
-    let contact = contact_blocks(&pad, &labels, &far);
+    let pad = padded_blocks(blocks, memory);
+    let labels = label_blocks(&pad, blocks, &points, memory);
+    let contact = contact_blocks(&pad, &labels, &far, std::mem::take(&mut memory.contact));
     let mut cut = Vec::new();
     let dims = lumen.dims();
     let g = lumen.geometry().clone();
@@ -117,6 +136,10 @@ pub fn cut_contacts(
     for &v in &cut {
         lumen.data_mut()[v] = 0;
     }
+    memory.contact = contact;
+    memory.labels = labels;
+    memory.partial = pad.partial;
+    memory.inside = pad.pad.inside;
     Ok(cut)
 }
 
@@ -132,7 +155,7 @@ fn label_points(path: &[DVec3]) -> (Vec<DVec3>, Vec<f64>) {
 }
 
 /// The full blocks with a layer of empty blocks around, for the search, and which blocks are
-/// partial, in the same layout.
+/// partial, in the same layout (in `memory`'s arrays).
 struct PaddedBlocks {
     pad: Padded,
     /// 1 for a partial block, 0 else; three spare 0s at the end for [`partial_around`]'s
@@ -147,12 +170,16 @@ impl std::ops::Deref for PaddedBlocks {
     }
 }
 
-fn padded_blocks(blocks: &Blocks) -> PaddedBlocks {
+fn padded_blocks(blocks: &Blocks, memory: &mut ContactMemory) -> PaddedBlocks {
     let dims = blocks.dims();
     let grid = BoxGrid { lo: [0; 3], dims };
-    let pad = Padded::new(&blocks.mask, &grid);
+    let pad = Padded::new_in(&blocks.mask, &grid, std::mem::take(&mut memory.inside));
     let full = (blocks.factor.pow(3)) as u8;
-    let mut partial = vec![0u8; pad.inside.len() + 3];
+    let mut partial = refilled(
+        std::mem::take(&mut memory.partial),
+        pad.inside.len() + 3,
+        0u8,
+    );
     for (b, &c) in blocks.count.iter().enumerate() {
         if c > 0 && c < full {
             let q = grid.global_of_index(BoxIndex(b));
@@ -167,8 +194,17 @@ fn padded_blocks(blocks: &Blocks) -> PaddedBlocks {
 /// Per padded block, the label of the geodesically nearest path point (through full blocks);
 /// partial blocks take the label of the nearest labelled block by steps (breadth first from
 /// all labelled blocks at once). NO_LABEL for empty blocks and blocks not reached.
-fn label_blocks(pad: &PaddedBlocks, blocks: &Blocks, points: &[DVec3]) -> Vec<u16> {
-    let mut labels = vec![NO_LABEL; pad.inside.len()];
+fn label_blocks(
+    pad: &PaddedBlocks,
+    blocks: &Blocks,
+    points: &[DVec3],
+    memory: &mut ContactMemory,
+) -> Vec<u16> {
+    let mut labels = refilled(
+        std::mem::take(&mut memory.labels),
+        pad.inside.len(),
+        NO_LABEL,
+    );
     let mut sources = Vec::with_capacity(points.len());
     for (l, p) in points.iter().enumerate() {
         if let Some(i) = blocks
@@ -182,7 +218,12 @@ fn label_blocks(pad: &PaddedBlocks, blocks: &Blocks, points: &[DVec3]) -> Vec<u1
         }
     }
     let spacing = blocks.mask.spacing();
-    let search = pad.search(spacing).tree().from(&sources);
+    let start = start_from_inside_in(pad, std::mem::take(&mut memory.dist));
+    let search = pad
+        .search(spacing)
+        .tree_reusing(std::mem::take(&mut memory.parent))
+        .start(start)
+        .from(&sources);
     for &u in &search.order {
         let u = u as usize;
         if let Some(p) = search.parent_of(u) {
@@ -214,6 +255,8 @@ fn label_blocks(pad: &PaddedBlocks, blocks: &Blocks, points: &[DVec3]) -> Vec<u1
         }
         frontier = next;
     }
+    memory.dist = search.dist;
+    memory.parent = search.parent;
     labels
 }
 
@@ -232,14 +275,20 @@ fn partial_around(partial: &[u8], u: usize, rows: &[isize; 9]) -> u32 {
 }
 
 /// Blocks with a 26-neighbour whose label is far along the path from theirs.
-fn contact_blocks(pad: &Padded, labels: &[u16], far: &dyn Fn(u16, u16) -> bool) -> Vec<bool> {
+/// In `reuse`'s memory where it has room.
+fn contact_blocks(
+    pad: &Padded,
+    labels: &[u16],
+    far: &dyn Fn(u16, u16) -> bool,
+    reuse: Vec<bool>,
+) -> Vec<bool> {
     let half: Vec<isize> = pad
         .neighbours([1.0; 3])
         .iter()
         .map(|n| n.0)
         .filter(|&o| o > 0)
         .collect();
-    let mut contact = vec![false; labels.len()];
+    let mut contact = refilled(reuse, labels.len(), false);
     for u in 0..labels.len() {
         let a = labels[u];
         if a == NO_LABEL {

@@ -14,7 +14,7 @@ use crate::{
         self, Centerline, CenterlineOptions, centre_skeleton, trace_skeleton, uses_blocks,
     },
     cleanse::{CleanseOptions, Cleansing, Scene, cleanse},
-    contacts::{ContactOptions, cut_contacts, may_have_shortcuts, shortcut_plugs},
+    contacts::{ContactMemory, ContactOptions, cut_contacts, may_have_shortcuts, shortcut_plugs},
     distance::{
         distance_to_wall_reusing,
         geodesic::{SearchMemory, geodesic_distance_like},
@@ -637,6 +637,7 @@ fn prepare_stored(
             &sk,
             blocks.as_ref(),
             opts,
+            &mut kept.contacts,
         )?);
         taken.sort_unstable();
         if let Some(d) = ds_box.take() {
@@ -737,11 +738,13 @@ fn prepare_stored(
 /// The lumen's box and the memory the traces reuse. Ds over the box is computed anew each
 /// time the lumen changes (each trace, each round of plugging): the memory of a field no
 /// longer needed is written over by the next one instead of fresh pages (on
-/// `ctc/prone-tagged`, 218 MB each time). So are the arrays of the last skeleton search.
+/// `ctc/prone-tagged`, 218 MB each time). So are the arrays of the last skeleton search and
+/// of the last contact cut.
 struct TraceMemory {
     grid: BoxGrid,
     spare_ds: Vec<f32>,
     skeleton: centerline::SkeletonMemory,
+    contacts: ContactMemory,
 }
 
 impl TraceMemory {
@@ -750,6 +753,7 @@ impl TraceMemory {
             grid,
             spare_ds: Vec::new(),
             skeleton: Default::default(),
+            contacts: Default::default(),
         }
     }
     fn ds_of(&mut self, lumen: &Volume<u8>) -> Field<f32> {
@@ -870,7 +874,14 @@ fn trace(
         std::mem::take(&mut kept.skeleton),
     )?;
     laps.start(Stage::Contacts);
-    let mut taken = cut_along(&mut seg.lumen, &kept.grid, &sk, sk.blocks.as_ref(), opts)?;
+    let mut taken = cut_along(
+        &mut seg.lumen,
+        &kept.grid,
+        &sk,
+        sk.blocks.as_ref(),
+        opts,
+        &mut kept.contacts,
+    )?;
     taken.sort_unstable();
     laps.start(Stage::Ds);
     let ds_box = match early_ds {
@@ -901,6 +912,7 @@ fn cut_along(
     sk: &centerline::Skeleton,
     blocks: Option<&crate::grid::Blocks>,
     opts: &PrepOptions,
+    memory: &mut ContactMemory,
 ) -> Result<Vec<usize>> {
     let keep = [
         sk.given_source
@@ -919,6 +931,7 @@ fn cut_along(
         &keep,
         keep_mm,
         &opts.contacts,
+        memory,
     )
 }
 

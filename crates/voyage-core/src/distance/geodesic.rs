@@ -314,6 +314,7 @@ impl<'a> SearchBuilder<'a> {
     }
 
     /// Record predecessors and the settling order.
+    #[cfg(test)]
     pub fn tree(self) -> Self {
         self.tree_reusing(Vec::new())
     }

@@ -23,6 +23,7 @@ pub struct Padded {
 pub struct PadIndex(pub usize);
 
 impl Padded {
+    #[cfg(test)]
     pub fn new(mask: &Volume<u8>, grid: &BoxGrid) -> Self {
         Self::new_in(mask, grid, Vec::new())
     }
