@@ -441,12 +441,14 @@ pub fn prepare(ct: Volume<i16>, opts: &PrepOptions, progress: impl FnMut(Stage))
     if storage.is_identity() {
         return prepare_stored(ct, opts, storage, start, progress);
     }
-    let ct = storage.to_study(&ct)?;
+    let study_ct = storage.to_study(&ct)?;
+    // The input's copy goes now, not after preprocessing (225 MB on `ctc/prone-tagged`).
+    drop(ct);
     let mut o = opts.clone();
     o.segment = opts.segment.in_storage(&storage);
     o.centerline.source_mm = opts.centerline.source_mm.map(|p| storage.mm_in(p));
     o.centerline.target_mm = opts.centerline.target_mm.map(|p| storage.mm_in(p));
-    prepare_stored(ct, &o, storage, start, progress)
+    prepare_stored(study_ct, &o, storage, start, progress)
 }
 
 /// A colon needs this much room each way (mm): the narrowest stretch is 20 mm across and the
