@@ -110,7 +110,10 @@ pub struct VoxelHasher(u64);
 
 impl std::hash::Hasher for VoxelHasher {
     fn finish(&self) -> u64 {
-        self.0
+        // The table picks buckets by the low bits, and a product's low bits depend only on
+        // the key's low bits (voxels a few 512×512 slices apart would share a bucket): the
+        // high bits, which mix all of the key's, are turned down to them.
+        self.0.rotate_left(26)
     }
     fn write(&mut self, bytes: &[u8]) {
         for &b in bytes {
@@ -118,7 +121,6 @@ impl std::hash::Hasher for VoxelHasher {
         }
     }
     fn write_u64(&mut self, i: u64) {
-        // Fibonacci hashing: the high bits, which hashbrown uses, mix all of the key's.
         self.0 = (self.0 ^ i).wrapping_mul(0x9E37_79B9_7F4A_7C15);
     }
     fn write_usize(&mut self, i: usize) {

@@ -646,6 +646,8 @@ fn prepare_stored(
             kept.give_back(d);
         }
     }
+    // The last cut is done: its arrays go before Dt, the surface and the cells.
+    kept.contacts = ContactMemory::default();
     // Ds again where a round of plugging took the trace's, or the fluid came back.
     let ds_box = match ds_box {
         Some(d) => d,

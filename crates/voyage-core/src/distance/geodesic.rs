@@ -319,13 +319,15 @@ impl<'a> SearchBuilder<'a> {
         self.tree_reusing(Vec::new())
     }
 
-    /// [`SearchBuilder::tree`] in the memory of `parent` where it is large enough.
+    /// Record predecessors and the settling order, in the memory of `parent` where it is
+    /// large enough.
     pub(crate) fn tree_reusing(self, parent: Vec<u8>) -> Self {
         let n = self.pad.inside.len();
         self.tree_in(crate::mem::refilled(parent, n, NO_PARENT))
     }
 
-    /// [`SearchBuilder::tree`] in `parent` (all [`NO_PARENT`], as long as the padded grid).
+    /// Record predecessors and the settling order in `parent` (all [`NO_PARENT`], as long as
+    /// the padded grid).
     pub(crate) fn tree_in(mut self, parent: Vec<u8>) -> Self {
         self.tree = Some(parent);
         self

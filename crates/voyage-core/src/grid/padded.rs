@@ -28,7 +28,8 @@ impl Padded {
         Self::new_in(mask, grid, Vec::new())
     }
 
-    /// [`Padded::new`] in the memory of `reuse` where it is large enough.
+    /// The lumen of `mask` over `grid`'s box with a wall around it, in the memory of `reuse`
+    /// where it is large enough.
     pub(crate) fn new_in(mask: &Volume<u8>, grid: &BoxGrid, reuse: Vec<u8>) -> Self {
         let mut pad = Padded::shape(grid);
         pad.inside = pad.lay_out_mask(mask, 0, 0u8, |m| (m != 0) as u8, reuse, None);

@@ -862,7 +862,8 @@ impl Cores {
     fn fluid_cells(&self, hu: &Volume<i16>, fluid_hu: i16) -> Vec<u8> {
         let [cx, cy, cz] = self.cells;
         let (dims, g) = (hu.dims(), hu.geometry());
-        // The voxels' columns of cells along x, from the box's low x to its high.
+        // The voxels' columns under the cells along x: from the box's low x to the last
+        // cell's end (past the box's high x, clipped to the volume).
         let x0 = self.lo[0];
         let x1 = (x0 + cx * self.cell[0]).min(dims[0]);
         let mut out = vec![0u8; cx * cy * cz];
@@ -1191,7 +1192,13 @@ mod tests {
         let g = Geometry::new([45, 13, 9], [0.75, 0.75, 1.0], [0.0; 3]).unwrap();
         let mut rng = crate::rng::Rng::new(seed, 0);
         let n = g.len();
-        let hu = (0..n).map(|_| rng.range(-1000.0, 1200.0) as i16).collect();
+        // Some voxels exactly at the threshold the tests use (200).
+        let hu = (0..n)
+            .map(|i| {
+                let v = rng.range(-1000.0, 1200.0) as i16;
+                if i % 17 == 0 { 200 } else { v }
+            })
+            .collect();
         let lumen = (0..n).map(|_| (rng.uniform() < 0.3) as u8).collect();
         (
             Volume::from_vec(g.clone(), hu).unwrap(),
@@ -1204,9 +1211,10 @@ mod tests {
         for seed in 0..4 {
             let (ct, lumen) = random_ct_and_lumen(seed);
             let g = ct.geometry();
+            // From the volume's first voxel along x to its last.
             let b = Bbox {
-                lo: [3, 1, 0],
-                hi: [41, 12, 8],
+                lo: [0, 1, 0],
+                hi: [44, 12, 8],
             };
             let bright = |i: usize| ct.data()[i] >= 200;
             let want: Vec<usize> = (0..g.len())
@@ -1238,8 +1246,9 @@ mod tests {
                     *v = 600 + (*v).rem_euclid(300);
                 }
             }
+            // Odd widths to the volume's far faces: the last cell along each axis is clipped.
             let b = Bbox {
-                lo: [1, 2, 1],
+                lo: [0, 2, 0],
                 hi: [44, 12, 8],
             };
             let w = b.widths();
