@@ -1,14 +1,14 @@
-//! Large fields in transparent huge pages. The distance fields span the lumen's box (32 M
-//! voxels, 130 MB per f32 field on a full colon) and the searches over them jump between
-//! z-slices hundreds of kilobytes apart: with 4 KiB pages nearly every such access misses the
-//! TLB, and filling a fresh field costs 32 000 page faults. Linux gives 2 MiB pages to memory
-//! that asks for them (`madvise`, the default policy on many distributions) before it is
-//! first touched; elsewhere, or when refused, this is an ordinary vector.
+//! Large fields and the memory they reuse. The distance fields span the lumen's box (55 M
+//! voxels, 218 MB per f32 field on `ctc/prone-tagged`), and a fresh field's first touch costs
+//! about as much as filling it: so the stages hand arrays they are done with to the next
+//! (`refilled`, `collect_in`), and a field is made with room for a later, larger user.
+//!
+//! No transparent huge pages are asked for: with the kernel's `defrag=madvise` it compacts
+//! memory inside the faulting call, and in a fresh process the first Ds took 640–720 ms in
+//! huge pages against 240–255 ms without; whole `prep` and `fly` runs were 4–6 % faster
+//! without (BENCHMARKS.md, fourteenth session).
 
-/// Below this, huge pages are not worth asking for.
-const MIN_BYTES: usize = 8 << 20;
-
-/// A vector of `n` copies of `fill`, in huge pages where the system gives them.
+/// A vector of `n` copies of `fill`.
 pub fn filled<T: Copy>(n: usize, fill: T) -> Vec<T> {
     filled_with_room(n, n, fill)
 }
@@ -17,7 +17,6 @@ pub fn filled<T: Copy>(n: usize, fill: T) -> Vec<T> {
 /// larger layout (a search's padded box after Ds's box) needs no fresh pages.
 pub fn filled_with_room<T: Copy>(n: usize, capacity: usize, fill: T) -> Vec<T> {
     let mut v: Vec<T> = Vec::with_capacity(n.max(capacity));
-    advise_huge(&v);
     v.resize(n, fill);
     v
 }
@@ -35,10 +34,9 @@ pub(crate) fn refilled<T: Copy>(reuse: Vec<T>, n: usize, fill: T) -> Vec<T> {
     }
 }
 
-/// A vector collected from `iter` of known length `n`, in huge pages where given.
+/// A vector collected from `iter` of known length `n`.
 pub fn collect<T>(n: usize, iter: impl Iterator<Item = T>) -> Vec<T> {
     let mut v: Vec<T> = Vec::with_capacity(n);
-    advise_huge(&v);
     v.extend(iter);
     v
 }
@@ -65,28 +63,6 @@ pub(crate) fn prefetch<T>(s: &[T], at: usize) {
 }
 
 pub(crate) use crate::simd::prefetch_address;
-
-#[cfg(target_os = "linux")]
-fn advise_huge<T>(v: &Vec<T>) {
-    const HUGE: usize = 2 << 20;
-    let bytes = v.capacity() * std::mem::size_of::<T>();
-    if bytes < MIN_BYTES {
-        return;
-    }
-    let start = v.as_ptr() as usize;
-    let lo = start.next_multiple_of(HUGE);
-    let hi = (start + bytes) / HUGE * HUGE;
-    if hi > lo {
-        // SAFETY: [lo, hi) lies inside the vector's own allocation, which is not yet touched;
-        // MADV_HUGEPAGE only changes how the kernel backs it. A refusal changes nothing.
-        unsafe {
-            libc::madvise(lo as *mut libc::c_void, hi - lo, libc::MADV_HUGEPAGE);
-        }
-    }
-}
-
-#[cfg(not(target_os = "linux"))]
-fn advise_huge<T>(_v: &Vec<T>) {}
 
 #[cfg(test)]
 mod tests {

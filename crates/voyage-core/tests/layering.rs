@@ -29,7 +29,7 @@ const ORDER: [&str; 17] = [
 ];
 
 /// The only crates voyage-core may depend on (not dev-dependencies).
-const ALLOWED_DEPENDENCIES: [&str; 5] = ["glam", "thiserror", "serde", "rayon", "libc"];
+const ALLOWED_DEPENDENCIES: [&str; 4] = ["glam", "thiserror", "serde", "rayon"];
 
 fn src() -> &'static Path {
     Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/src"))
