@@ -64,19 +64,6 @@ pub(crate) fn prefetch<T>(s: &[T], at: usize) {
 
 pub(crate) use crate::simd::prefetch_address;
 
-#[cfg(test)]
-mod tests {
-    #[test]
-    fn filled_and_collected_vectors_hold_their_values() {
-        let v = super::filled(3 << 20, 7u32);
-        assert_eq!(v.len(), 3 << 20);
-        assert!(v.iter().all(|&x| x == 7));
-        let w = super::collect(5 << 20, (0..5u32 << 20).map(|x| x as u8));
-        assert_eq!(w.len(), 5 << 20);
-        assert_eq!(w[257], 1);
-    }
-}
-
 /// Hashes voxel indices for maps over a few million of them: one multiply, not SipHash (the
 /// keys are not chosen by an adversary, and no result depends on a map's order).
 pub type VoxelHash = std::hash::BuildHasherDefault<VoxelHasher>;
@@ -101,5 +88,18 @@ impl std::hash::Hasher for VoxelHasher {
     }
     fn write_usize(&mut self, i: usize) {
         self.write_u64(i as u64);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn filled_and_collected_vectors_hold_their_values() {
+        let v = super::filled(3 << 20, 7u32);
+        assert_eq!(v.len(), 3 << 20);
+        assert!(v.iter().all(|&x| x == 7));
+        let w = super::collect(5 << 20, (0..5u32 << 20).map(|x| x as u8));
+        assert_eq!(w.len(), 5 << 20);
+        assert_eq!(w[257], 1);
     }
 }

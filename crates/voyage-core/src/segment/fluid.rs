@@ -710,12 +710,16 @@ pub(super) fn whole_pools(
     // fluid beside gas; not a tube's fluid.
     let half = |i: usize| above_half(ct.data(), i, g.dims, TISSUE_HU);
     let wide = |i: usize| wide_across(&g, i, down.0, &bright);
-    // Taken where bright and not at least halfway (the skin), or wide; passed where also
-    // halfway and not by air.
+    // Of the bright voxels: the skin (under halfway) is taken; fluid at least halfway is
+    // taken where wide, and passed through where also not by air. Each test at most once.
     let step = |i: usize| {
-        if !bright(i) || half(i) && !wide(i) {
+        if !bright(i) {
             Step::Stop
-        } else if !half(i) || by_air(i) {
+        } else if !half(i) {
+            Step::Take
+        } else if !wide(i) {
+            Step::Stop
+        } else if by_air(i) {
             Step::Take
         } else {
             Step::Pass
