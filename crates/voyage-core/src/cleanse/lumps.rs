@@ -17,9 +17,27 @@ const MIN_LUMP_VOXELS: usize = 8;
 /// How far (voxels) past a lump's tagged voxels its skin and pockets may reach.
 const SKIN_VOXELS: usize = 3;
 
-/// Finds the lumps of tagged stool: tagged voxels not in a pool (outside the lumen, or taken
-/// in by segmentation as fluid but joined to no pool's core) with lumen air within
-/// [`STOOL_REACH`] voxels along an axis, and the tagged voxels joined to them (26
+/// Whether lumen air (`m`'s bit 0, below `air_hu`) lies within [`STOOL_REACH`] voxels of
+/// `v` along an axis (`six`: the face neighbours' steps): where a lump of stool may start.
+pub(super) fn near_lumen_air(
+    v: usize,
+    hu: &[i16],
+    m: &[u8],
+    six: &[isize; 6],
+    air_hu: i16,
+) -> bool {
+    six.iter().any(|&d| {
+        (1..=STOOL_REACH).any(|s| {
+            let w = v as isize + d * s;
+            w >= 0 && (w as usize) < m.len() && m[w as usize] & 1 != 0 && hu[w as usize] < air_hu
+        })
+    })
+}
+
+/// Finds the lumps of tagged stool: `seeds` (ascending: tagged voxels with lumen air within
+/// [`STOOL_REACH`] voxels along an axis, [`near_lumen_air`]) not in a pool (outside the
+/// lumen, or taken in by segmentation as fluid but joined to no pool's core), and the tagged
+/// voxels joined to them (26
 /// neighbours), at most [`MAX_LUMP_ML`] a lump, marked `SOLID`. Then its skin, marked `LUMP`:
 /// every voxel touching it (26 neighbours) that is not lumen, and from there every voxel
 /// outside the lumen that is more air than tissue, within [`SKIN_VOXELS`] of the lump's box:
@@ -31,7 +49,7 @@ pub(super) fn find_lumps(
     hu: &[i16],
     m: &mut [u8],
     g: &Geometry,
-    bright: &[usize],
+    seeds: &[u32],
     lo: [usize; 3],
     hi: [usize; 3],
     air_hu: i16,
@@ -39,7 +57,6 @@ pub(super) fn find_lumps(
 ) -> Vec<Vec<usize>> {
     let [nx, ny, _] = g.dims;
     let strides = [1isize, nx as isize, (nx * ny) as isize];
-    let six = [1, -1, strides[1], -strides[1], strides[2], -strides[2]];
     let cube26: Vec<isize> = (-1..=1)
         .flat_map(|k| {
             (-1..=1).flat_map(move |j| (-1..=1).map(move |i| i + j * strides[1] + k * strides[2]))
@@ -55,21 +72,10 @@ pub(super) fn find_lumps(
     // Tagged and not a pool's: outside the lumen, or a few voxels of it that segmentation
     // took for fluid.
     let solid = |v: usize, m: &[u8]| m[v] & POOL == 0 && hu[v] >= fluid_hu;
-    let near_air = |v: usize, m: &[u8]| {
-        six.iter().any(|&d| {
-            (1..=STOOL_REACH).any(|s| {
-                let w = v as isize + d * s;
-                w >= 0
-                    && (w as usize) < m.len()
-                    && in_lumen(m[w as usize])
-                    && hu[w as usize] < air_hu
-            })
-        })
-    };
     let mostly_air = mostly_air(air_hu);
     let mut lumps = Vec::new();
-    for &v in bright {
-        if !solid(v, m) || m[v] & (SOLID | LUMP) != 0 || !near_air(v, m) {
+    for v in seeds.iter().map(|&v| v as usize) {
+        if !solid(v, m) || m[v] & (SOLID | LUMP) != 0 {
             continue;
         }
         // The lump: flood through tagged voxels (26 neighbours: a corner's partial
@@ -82,7 +88,8 @@ pub(super) fn find_lumps(
             next += 1;
             for &d in &cube26 {
                 let w = (u as isize + d) as usize;
-                if within(w, lo, hi) && solid(w, m) && m[w] & SOLID == 0 {
+                // The box test last: it divides, and most neighbours are taken already.
+                if solid(w, m) && m[w] & SOLID == 0 && within(w, lo, hi) {
                     m[w] |= SOLID;
                     lump.push(w);
                 }

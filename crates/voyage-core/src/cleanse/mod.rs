@@ -61,7 +61,7 @@ mod smooth;
 use crate::{Volume, anatomy::PatientFrame};
 use changes::{overwrite, slice_with};
 use floating::{Islands, peel_spurs};
-use lumps::{Lumps, find_lumps};
+use lumps::{Lumps, find_lumps, near_lumen_air};
 use marks::{CORE, LUMP, NEAR, POOL, RowMarks, SOLID};
 pub use model::{AIR_HU, CleanseOptions};
 use model::{LEVEL_MARGIN_HU, fluid_value, unmix};
@@ -221,16 +221,18 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
     // Then every voxel within two voxels of a pool is marked.
     let level_hu = fluid_hu.saturating_add(LEVEL_MARGIN_HU);
     let mut queue: Vec<usize> = Vec::new();
-    // Every voxel at or above the fluid threshold, in or out of the lumen (ascending): where
-    // lumps of stool are looked for, without a second pass over the box.
-    let mut bright: Vec<usize> = Vec::new();
+    // Every voxel at or above the fluid threshold, in or out of the lumen, with lumen air
+    // near (ascending): where lumps of stool are seeded, without a second pass over the box.
+    let mut seeds: Vec<u32> = Vec::new();
     {
         let m = lumen.data_mut();
         for k in lo[2]..=hi[2] {
             for j in lo[1]..=hi[1] {
                 let row = nx * (j + ny * k);
                 for v in bright_in(hu, row + lo[0]..=row + hi[0], fluid_hu) {
-                    bright.push(v);
+                    if near_lumen_air(v, hu, m, &six, air_hu) {
+                        seeds.push(v as u32);
+                    }
                     if !in_lumen(m[v]) {
                         continue;
                     }
@@ -251,10 +253,14 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
             }
         }
         // The pools: the tagged voxels joined to a core through tagged voxels (a pool's
-        // thin edges and its partial-volume skin, not the noise).
+        // thin edges and its partial-volume skin, not the noise). Every lumen voxel lies in
+        // the extent, so the flood can leave lo..=hi only where the margin clipped it.
+        let clipped = lo != extent[0] || hi != extent[1];
         let inside = |v: usize| {
-            let ijk = g.ijk(v);
-            (0..3).all(|a| ijk[a] >= lo[a] && ijk[a] <= hi[a])
+            !clipped || {
+                let ijk = g.ijk(v);
+                (0..3).all(|a| ijk[a] >= lo[a] && ijk[a] <= hi[a])
+            }
         };
         while let Some(v) = queue.pop() {
             for &d in &six {
@@ -291,7 +297,7 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
 
     // Lumps of tagged stool on the wall, outside the lumen (step 3 cleanses them; the pools'
     // model leaves them alone).
-    let lumps = find_lumps(hu, lumen.data_mut(), &g, &bright, lo, hi, air_hu, fluid_hu);
+    let lumps = find_lumps(hu, lumen.data_mut(), &g, &seeds, lo, hi, air_hu, fluid_hu);
 
     // 2. The model, voxel by voxel, over the marked ones (the marks reach 2 voxels past
     // the extent's tagged voxels, which lie inside lo..=hi).

@@ -46,25 +46,29 @@ pub(super) fn fluid_value(
     fluid_hu: i16,
     mark: u8,
 ) -> Option<f32> {
-    // The core voxels' values, read once (in the cube's order, which the sum keeps).
-    let mut cores = [0i16; 125];
-    assert!(cube.len() <= cores.len(), "a cube of at most 5³ offsets");
-    let mut n = 0;
-    for &d in cube {
+    // The core voxels' values, read once, and i16::MIN for the rest: below any threshold,
+    // so the max and the sum need no branch.
+    assert!(cube.len() <= 125, "a cube of at most 5³ offsets");
+    let mut values = [i16::MIN; 125];
+    for (x, &d) in values.iter_mut().zip(cube) {
         let w = (v as isize + d) as usize;
-        if m[w] & mark != 0 && hu[w] >= fluid_hu {
-            cores[n] = hu[w];
-            n += 1;
+        let h = hu[w];
+        if m[w] & mark != 0 && h >= fluid_hu {
+            *x = h;
         }
     }
-    let cores = &cores[..n];
-    let max = *cores.iter().max()?;
+    let max = values.iter().fold(i16::MIN, |a, &h| a.max(h));
+    if max < fluid_hu {
+        return None;
+    }
     let half = ((max as i32 + fluid_hu as i32) / 2) as i16;
-    let (sum, n) = cores
+    // Summed in integers: 125 values of at most 32 767 stay below 2²⁴, where f32 is exact,
+    // so this is the sum in f32 in any order, without a chain of dependent additions.
+    let (sum, n) = values
         .iter()
         .filter(|&&h| h >= half)
-        .fold((0f32, 0f32), |(s, n), &h| (s + h as f32, n + 1.0));
-    Some(sum / n)
+        .fold((0i32, 0i32), |(s, n), &h| (s + h as i32, n + 1));
+    Some(sum as f32 / n as f32)
 }
 
 /// A tissue–fluid mixture of value `h` (soft tissue `t`, fluid `c`) with its fluid made air.
@@ -79,6 +83,37 @@ pub(super) fn unmix(h: f32, t: f32, c: f32) -> i16 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Random cubes of marks and values against the definition: the mean, summed in f32 in
+    /// the cube's order, of the marked voxels' values at or above the midpoint of the fluid
+    /// threshold and their largest.
+    #[test]
+    fn fluid_value_is_the_brighter_cores_mean() {
+        let mut rng = crate::rng::Rng::new(35, 3);
+        let cube: Vec<isize> = (0..125).collect();
+        for _ in 0..2000 {
+            let hu: Vec<i16> = (0..125)
+                .map(|_| rng.range(-1000.0, 3000.0) as i16)
+                .collect();
+            let m: Vec<u8> = (0..125)
+                .map(|_| rng.next_u64().is_multiple_of(3) as u8 * 4)
+                .collect();
+            let cores: Vec<i16> = (0..125)
+                .filter(|&w| m[w] != 0 && hu[w] >= 200)
+                .map(|w| hu[w])
+                .collect();
+            let want = cores.iter().max().map(|&max| {
+                let half = ((max as i32 + 200) / 2) as i16;
+                let bright: Vec<f32> = cores
+                    .iter()
+                    .filter(|&&h| h >= half)
+                    .map(|&h| h as f32)
+                    .collect();
+                bright.iter().fold(0f32, |s, &h| s + h) / bright.len() as f32
+            });
+            assert_eq!(fluid_value(0, &hu, &m, &cube, 200, 4), want);
+        }
+    }
 
     #[test]
     fn unmixing_keeps_the_tissue_fraction() {

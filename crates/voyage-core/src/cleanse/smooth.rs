@@ -61,6 +61,9 @@ pub(super) fn smooth_the_model(
     overwrite(voxels, values, hu, &changes);
 }
 
+/// How many voxels' means [`Smoothing::means`] sums at once.
+const MEANS: usize = 8;
+
 /// What [`smooth_the_model`] reads: the CT, the change list, the kernel and the levels.
 struct Smoothing<'a> {
     hu: &'a [i16],
@@ -78,7 +81,6 @@ impl Smoothing<'_> {
         let [nx, ny, _] = self.g.dims;
         let plane = nx * ny;
         let mut ring = Ring::new(nx, ny);
-        let mut seen = vec![false; plane];
         let mut out = Vec::new();
         let (from, to) = (*ks.start(), *ks.end());
         for k in from - 2..=to + 2 {
@@ -89,65 +91,95 @@ impl Smoothing<'_> {
             // Slice kc = k − 2 has its two neighbours on each side loaded.
             let kc = k - 2;
             let around = ring.around(kc);
-            for c in self.beside_changes(kc, &mut seen) {
-                let v = c + plane * kc;
-                let now = ring.at(&around, c, (2, 0));
-                // Tagged voxels cleansing left (contrast in a small-bowel loop behind the
-                // wall) keep their value.
-                if (self.hu[v] >= self.fluid_hu && now == self.hu[v])
-                    || !ring.surface_near(&around, c, self.surface_hu)
-                    || !fluid_near(v, self.g, self.hu, self.fluid_hu)
-                {
-                    continue;
+            let smoothed: Vec<usize> = self
+                .beside_changes(kc)
+                .into_iter()
+                .filter(|&c| {
+                    let v = c + plane * kc;
+                    let now = ring.at(&around, c, (2, 0));
+                    // Tagged voxels cleansing left (contrast in a small-bowel loop behind
+                    // the wall) keep their value.
+                    !(self.hu[v] >= self.fluid_hu && now == self.hu[v])
+                        && ring.surface_near(&around, c, self.surface_hu)
+                        && fluid_near(v, self.g, self.hu, self.fluid_hu)
+                })
+                .collect();
+            for group in smoothed.chunks(MEANS) {
+                let means = self.means(&ring, &around, group);
+                for (&c, mean) in group.iter().zip(means) {
+                    out.push(((c + plane * kc) as u32, mean.round() as i16));
                 }
-                let mean: f64 = self
-                    .kernel
-                    .iter()
-                    .map(|&(d, w)| w * ring.at(&around, c, d) as f64)
-                    .sum();
-                out.push((v as u32, mean.round() as i16));
             }
         }
         out
     }
 
-    /// The voxels of slice `kc` (in-plane indices, ascending) within one voxel in plane of a
-    /// changed voxel of slices kc − 1..=kc + 1, two voxels inside the slice's edges. `seen`
-    /// (one flag per in-plane voxel, all false) is left as it was.
-    fn beside_changes(&self, kc: usize, seen: &mut [bool]) -> Vec<usize> {
-        let [nx, ny, _] = self.g.dims;
-        let plane = nx * ny;
-        let (lo, hi) = ((plane * (kc - 1)) as u32, (plane * (kc + 2)) as u32);
-        let from = self.voxels.partition_point(|&v| v < lo);
-        let to = self.voxels.partition_point(|&v| v < hi);
-        // The changed voxels' places in plane (several slices change at one place, as
-        // under a pool's level), then the places beside them.
-        let mut changed = Vec::new();
-        for &v in &self.voxels[from..to] {
-            let r = v as usize % plane;
-            if !seen[r] {
-                seen[r] = true;
-                changed.push(r);
+    /// The kernel's means at in-plane voxels `cs` (at most [`MEANS`]) of the middle slice of
+    /// `around`. Each voxel's sum runs over the kernel in order, as one voxel's alone would
+    /// (the same bits); the voxels' sums interleave, so that no addition waits for the one
+    /// before it (one voxel at a time, the chain of 117 dependent additions set the pace).
+    fn means(&self, ring: &Ring, around: &[usize; 5], cs: &[usize]) -> [f64; MEANS] {
+        let mut lanes = [cs[0]; MEANS];
+        lanes[..cs.len()].copy_from_slice(cs);
+        let mut sums = [-0.0f64; MEANS];
+        for &(d, w) in &self.kernel {
+            for (sum, &c) in sums.iter_mut().zip(&lanes) {
+                *sum += w * ring.at(around, c, d) as f64;
             }
         }
-        changed.iter().for_each(|&c| seen[c] = false);
-        let mut near = Vec::new();
-        for r in changed {
-            let (i, j) = (r % nx, r / nx);
-            for y in j.saturating_sub(1).max(2)..=(j + 1).min(ny - 3) {
-                for x in i.saturating_sub(1).max(2)..=(i + 1).min(nx - 3) {
-                    let c = x + nx * y;
-                    if !seen[c] {
-                        seen[c] = true;
-                        near.push(c);
-                    }
+        sums
+    }
+
+    /// The voxels of slice `kc` (in-plane indices, ascending) within one voxel in plane of a
+    /// changed voxel of slices kc − 1..=kc + 1, two voxels inside the slice's edges.
+    fn beside_changes(&self, kc: usize) -> Vec<usize> {
+        let [nx, ny, _] = self.g.dims;
+        let plane = nx * ny;
+        // The changed voxels' places in plane, each slice's ascending (several slices change
+        // at one place, as under a pool's level).
+        let slices = [kc - 1, kc, kc + 1].map(|k| {
+            let (lo, hi) = ((plane * k) as u32, (plane * (k + 1)) as u32);
+            let from = self.voxels.partition_point(|&v| v < lo);
+            let to = self.voxels.partition_point(|&v| v < hi);
+            self.voxels[from..to]
+                .iter()
+                .map(|&v| v as usize - plane * k)
+                .collect::<Vec<_>>()
+        });
+        let changed = union_ascending(slices.each_ref().map(|s| &s[..]), 0, |_| true);
+        // Then the places beside them: along the row, then across the rows.
+        let (xlo, xhi) = (2, nx - 3);
+        let mut along = Vec::with_capacity(3 * changed.len());
+        for &r in &changed {
+            let (i, row) = (r % nx, r - r % nx);
+            for x in i.saturating_sub(1).max(xlo)..=(i + 1).min(xhi) {
+                if along.last().is_none_or(|&l| row + x > l) {
+                    along.push(row + x);
                 }
             }
         }
-        near.iter().for_each(|&c| seen[c] = false);
-        near.sort_unstable();
-        near
+        union_ascending([&along[..]; 3], nx, |c| (2..=ny - 3).contains(&(c / nx)))
     }
+}
+
+/// The union of three ascending lists, list n shifted by (n − 1)·`step` (one step back,
+/// none, one on), of the values that `keep`: ascending, each once.
+fn union_ascending(lists: [&[usize]; 3], step: usize, keep: impl Fn(usize) -> bool) -> Vec<usize> {
+    let mut at = [0usize; 3];
+    let mut out = Vec::with_capacity(lists.iter().map(|l| l.len()).max().unwrap_or(0));
+    // Compared one step on (list n by n steps), so that nothing goes below 0.
+    let head = |n: usize, at: &[usize; 3]| lists[n].get(at[n]).map(|&x| x + n * step);
+    while let Some(next) = (0..3).filter_map(|n| head(n, &at)).min() {
+        for n in 0..3 {
+            if head(n, &at) == Some(next) {
+                at[n] += 1;
+            }
+        }
+        if next >= step && keep(next - step) {
+            out.push(next - step);
+        }
+    }
+    out
 }
 
 /// Whether tagged fluid (at or above `fluid_hu` in `hu`) lay within two voxels of `v`.
@@ -250,3 +282,53 @@ const CUBE: [[isize; 3]; 27] = {
     }
     out
 };
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::Rng;
+
+    /// Random changes in a small volume: the places beside them are, by definition, those
+    /// two voxels inside the slice within one voxel in plane of a change one slice away or
+    /// less.
+    #[test]
+    fn beside_changes_are_the_places_near_a_change() {
+        let g = Geometry::new([9, 8, 6], [1.0; 3], [0.0; 3]).unwrap();
+        let [nx, ny, nz] = g.dims;
+        let hu = vec![0i16; nx * ny * nz];
+        let mut rng = Rng::new(35, 2);
+        for share in [2, 10, 40] {
+            let voxels: Vec<u32> = (0..(nx * ny * nz) as u32)
+                .filter(|_| rng.next_u64().is_multiple_of(share))
+                .collect();
+            let values = vec![1i16; voxels.len()];
+            let smoothing = Smoothing {
+                hu: &hu,
+                g: &g,
+                voxels: &voxels,
+                values: &values,
+                kernel: Vec::new(),
+                surface_hu: 0,
+                fluid_hu: 0,
+            };
+            for kc in 1..nz - 1 {
+                let want: Vec<usize> = (0..nx * ny)
+                    .filter(|&c| {
+                        let (i, j) = (c % nx, c / nx);
+                        (2..nx - 2).contains(&i)
+                            && (2..ny - 2).contains(&j)
+                            && voxels.iter().any(|&v| {
+                                let [x, y, z] = g.ijk(v as usize);
+                                x.abs_diff(i) <= 1 && y.abs_diff(j) <= 1 && z.abs_diff(kc) <= 1
+                            })
+                    })
+                    .collect();
+                assert_eq!(
+                    smoothing.beside_changes(kc),
+                    want,
+                    "1 in {share}, slice {kc}"
+                );
+            }
+        }
+    }
+}
