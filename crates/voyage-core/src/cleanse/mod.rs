@@ -345,12 +345,15 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
                         )
                     }
                 } else {
-                    // The wall's first voxel: beside lumen that is not air.
-                    let by_fluid = ring.iter().any(|&d| {
-                        let w = at(d);
-                        in_lumen(m[w]) && hu[w] >= air_hu
-                    });
-                    if !by_fluid || h <= t_max {
+                    // The wall's first voxel (beside lumen that is not air) brighter than
+                    // soft tissue; its value asked first, as most of the wall is tissue.
+                    let by_fluid = || {
+                        ring.iter().any(|&d| {
+                            let w = at(d);
+                            in_lumen(m[w]) && hu[w] >= air_hu
+                        })
+                    };
+                    if h <= t_max || !by_fluid() {
                         continue;
                     }
                     match fluid_value(v, hu, m, &cube, fluid_hu, CORE) {
