@@ -64,7 +64,7 @@ use floating::{Islands, peel_spurs};
 use lumps::{Lumps, find_lumps, near_lumen_air};
 use marks::{CORE, LUMP, NEAR, POOL, RowMarks, SOLID};
 pub use model::{AIR_HU, CleanseOptions};
-use model::{LEVEL_MARGIN_HU, fluid_value, unmix};
+use model::{FluidWindow, LEVEL_MARGIN_HU, unmix};
 use smooth::smooth_the_model;
 
 /// What cleansing changed: per voxel (volume index, ascending), the value the CT does not
@@ -310,6 +310,7 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
     let m = lumen.data();
     // The marks reach two voxels past lo..=hi, which lies two inside the volume.
     let marked = RowMarks::of(m, [nx, ny], lo.map(|x| x - 2), hi.map(|x| x + 2));
+    let mut fluid = FluidWindow::new(hu, m, [nx, ny], fluid_hu, CORE);
     let (klo, khi) = (lo[2].saturating_sub(2).max(2), (hi[2] + 2).min(nz - 3));
     let (jlo, jhi) = (lo[1].saturating_sub(2).max(2), (hi[1] + 2).min(ny - 3));
     let (ilo, ihi) = (lo[0].saturating_sub(2).max(2), (hi[0] + 2).min(nx - 3));
@@ -338,11 +339,7 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
                         continue;
                     } else {
                         // No core near: the voxel is as bright as the fluid gets here.
-                        unmix(
-                            h as f32,
-                            t,
-                            fluid_value(v, hu, m, &cube, fluid_hu, CORE).unwrap_or(h as f32),
-                        )
+                        unmix(h as f32, t, fluid.at(v).unwrap_or(h as f32))
                     }
                 } else {
                     // The wall's first voxel (beside lumen that is not air) brighter than
@@ -356,7 +353,7 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
                     if h <= t_max || !by_fluid() {
                         continue;
                     }
-                    match fluid_value(v, hu, m, &cube, fluid_hu, CORE) {
+                    match fluid.at(v) {
                         Some(c) => unmix(h as f32, t, c),
                         None => continue,
                     }

@@ -35,9 +35,9 @@ pub(super) fn mostly_air(air_hu: i16) -> i16 {
 }
 
 /// The local tagged fluid's HU: the mean of the brighter half (by range, above the midpoint
-/// of the fluid threshold and the brightest) of the pools' core voxels in the 5³ cube
-/// around `v` (`cube`: its offsets, at most 125; a core voxel may be the pool's
-/// partial-volume skin); None when there is none.
+/// of the fluid threshold and the brightest) of the pools' core voxels (marked `mark`, at or
+/// above `fluid_hu`) in the 5³ cube around `v` (`cube`: its offsets, at most 125; a core
+/// voxel may be the pool's partial-volume skin); None when there is none.
 pub(super) fn fluid_value(
     v: usize,
     hu: &[i16],
@@ -46,17 +46,26 @@ pub(super) fn fluid_value(
     fluid_hu: i16,
     mark: u8,
 ) -> Option<f32> {
-    // The core voxels' values, read once, and i16::MIN for the rest: below any threshold,
-    // so the max and the sum need no branch.
     assert!(cube.len() <= 125, "a cube of at most 5³ offsets");
     let mut values = [i16::MIN; 125];
     for (x, &d) in values.iter_mut().zip(cube) {
-        let w = (v as isize + d) as usize;
-        let h = hu[w];
-        if m[w] & mark != 0 && h >= fluid_hu {
-            *x = h;
-        }
+        *x = core_value((v as isize + d) as usize, hu, m, fluid_hu, mark);
     }
+    brighter_mean(&values, fluid_hu)
+}
+
+/// A core voxel's value, or i16::MIN (below any threshold) for any other voxel.
+fn core_value(w: usize, hu: &[i16], m: &[u8], fluid_hu: i16, mark: u8) -> i16 {
+    if m[w] & mark != 0 && hu[w] >= fluid_hu {
+        hu[w]
+    } else {
+        i16::MIN
+    }
+}
+
+/// The mean of the brighter half of the core values among `values` (the others i16::MIN),
+/// as [`fluid_value`] takes it.
+fn brighter_mean(values: &[i16; 125], fluid_hu: i16) -> Option<f32> {
     let max = values.iter().fold(i16::MIN, |a, &h| a.max(h));
     if max < fluid_hu {
         return None;
@@ -69,6 +78,69 @@ pub(super) fn fluid_value(
         .filter(|&&h| h >= half)
         .fold((0i32, 0i32), |(s, n), &h| (s + h as i32, n + 1));
     Some(sum as f32 / n as f32)
+}
+
+/// [`fluid_value`] for voxels asked along rows: the cube of the voxel asked last is kept as
+/// five columns of 25 core values (one column per step along the row), so that the next
+/// voxel along the row reads one new column, not 125 voxels. On `ctc/prone-tagged` 70 % of
+/// the pools' model's 200 000 questions follow the one before along the row.
+pub(super) struct FluidWindow<'a> {
+    hu: &'a [i16],
+    m: &'a [u8],
+    fluid_hu: i16,
+    mark: u8,
+    /// The 25 rows' offsets across a column (±2 voxels along the second and third axes).
+    rows: [isize; 25],
+    /// Column c of the cube around `last` is the one at `last + c − 2` along the row, kept at
+    /// slot (`last` + c) mod 5.
+    values: [i16; 125],
+    last: Option<usize>,
+}
+
+impl<'a> FluidWindow<'a> {
+    /// Windows over `hu` and `m` (a volume `nx` × `ny` voxels in plane).
+    pub(super) fn new(
+        hu: &'a [i16],
+        m: &'a [u8],
+        [nx, ny]: [usize; 2],
+        fluid_hu: i16,
+        mark: u8,
+    ) -> Self {
+        let (sy, sz) = (nx as isize, (nx * ny) as isize);
+        FluidWindow {
+            hu,
+            m,
+            fluid_hu,
+            mark,
+            rows: std::array::from_fn(|r| (r as isize % 5 - 2) * sy + (r as isize / 5 - 2) * sz),
+            values: [i16::MIN; 125],
+            last: None,
+        }
+    }
+
+    /// [`fluid_value`] at `v`.
+    pub(super) fn at(&mut self, v: usize) -> Option<f32> {
+        let columns = if self.last == Some(v.wrapping_sub(1)) {
+            2..=2
+        } else {
+            -2..=2
+        };
+        for dx in columns {
+            let x = v as isize + dx;
+            let slot = (x as usize % 5) * 25;
+            for (value, &row) in self.values[slot..slot + 25].iter_mut().zip(&self.rows) {
+                *value = core_value(
+                    (x + row) as usize,
+                    self.hu,
+                    self.m,
+                    self.fluid_hu,
+                    self.mark,
+                );
+            }
+        }
+        self.last = Some(v);
+        brighter_mean(&self.values, self.fluid_hu)
+    }
 }
 
 /// A tissue–fluid mixture of value `h` (soft tissue `t`, fluid `c`) with its fluid made air.
@@ -113,6 +185,48 @@ mod tests {
             });
             assert_eq!(fluid_value(0, &hu, &m, &cube, 200, 4), want);
         }
+    }
+
+    /// A random volume asked along rows, with jumps between them: the window gives what
+    /// the cube gives.
+    #[test]
+    fn the_window_along_a_row_is_the_cube() {
+        let mut rng = crate::rng::Rng::new(35, 4);
+        let [nx, ny, nz] = [11usize, 9, 8];
+        let hu: Vec<i16> = (0..nx * ny * nz)
+            .map(|_| rng.range(0.0, 1500.0) as i16)
+            .collect();
+        let m: Vec<u8> = (0..nx * ny * nz)
+            .map(|_| rng.next_u64().is_multiple_of(2) as u8 * 4)
+            .collect();
+        let mut cube = Vec::new();
+        for dk in -2isize..=2 {
+            for dj in -2isize..=2 {
+                for di in -2isize..=2 {
+                    cube.push(di + dj * nx as isize + dk * (nx * ny) as isize);
+                }
+            }
+        }
+        let mut window = FluidWindow::new(&hu, &m, [nx, ny], 600, 4);
+        let mut asked = 0;
+        for k in 2..nz - 2 {
+            for j in 2..ny - 2 {
+                for i in 2..nx - 2 {
+                    // Every third voxel is skipped, so that the window reloads too.
+                    if (i + j + k) % 3 == 0 {
+                        continue;
+                    }
+                    let v = i + nx * (j + ny * k);
+                    assert_eq!(
+                        window.at(v),
+                        fluid_value(v, &hu, &m, &cube, 600, 4),
+                        "voxel {v}"
+                    );
+                    asked += 1;
+                }
+            }
+        }
+        assert!(asked > 50);
     }
 
     #[test]
