@@ -17,7 +17,7 @@ const MIN_LUMP_VOXELS: usize = 8;
 /// How far (voxels) past a lump's tagged voxels its skin and pockets may reach.
 const SKIN_VOXELS: usize = 3;
 
-/// Whether lumen air (`m`'s bit 0, below `air_hu`) lies within [`STOOL_REACH`] voxels of
+/// Whether lumen air (a voxel with `m`'s bit 0 set, below `air_hu`) lies within [`STOOL_REACH`] voxels of
 /// `v` along an axis (`six`: the face neighbours' steps): where a lump of stool may start.
 pub(super) fn near_lumen_air(
     v: usize,

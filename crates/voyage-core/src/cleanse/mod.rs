@@ -138,7 +138,8 @@ pub struct Scene<'a> {
     pub ct: &'a Volume<i16>,
     /// The colon's lumen (non-zero), fluid included; voxels that leave it are set to 0.
     pub lumen: &'a mut Volume<u8>,
-    /// The lumen's first and last voxel along each axis.
+    /// The lumen's first and last voxel along each axis: every lumen voxel lies within it
+    /// (the pools' flood leaves the box only where the volume's margin clips it).
     pub extent: [[usize; 3]; 2],
     /// Gravity, LPS unit vector.
     pub gravity_lps: glam::DVec3,

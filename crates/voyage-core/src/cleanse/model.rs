@@ -54,7 +54,8 @@ pub(super) fn fluid_value(
     brighter_mean(&values, fluid_hu)
 }
 
-/// A core voxel's value, or i16::MIN (below any threshold) for any other voxel.
+/// A core voxel's value, or i16::MIN for any other voxel: below any fluid threshold (which
+/// lies far above it; [`brighter_mean`] asserts it).
 fn core_value(w: usize, hu: &[i16], m: &[u8], fluid_hu: i16, mark: u8) -> i16 {
     if m[w] & mark != 0 && hu[w] >= fluid_hu {
         hu[w]
@@ -66,6 +67,10 @@ fn core_value(w: usize, hu: &[i16], m: &[u8], fluid_hu: i16, mark: u8) -> i16 {
 /// The mean of the brighter half of the core values among `values` (the others i16::MIN),
 /// as [`fluid_value`] takes it.
 fn brighter_mean(values: &[i16; 125], fluid_hu: i16) -> Option<f32> {
+    debug_assert!(
+        fluid_hu > i16::MIN,
+        "i16::MIN marks voxels that are no core"
+    );
     let max = values.iter().fold(i16::MIN, |a, &h| a.max(h));
     if max < fluid_hu {
         return None;
@@ -92,7 +97,7 @@ pub(super) struct FluidWindow<'a> {
     /// The 25 rows' offsets across a column (±2 voxels along the second and third axes).
     rows: [isize; 25],
     /// Column c of the cube around `last` is the one at `last + c − 2` along the row, kept at
-    /// slot (`last` + c) mod 5.
+    /// slot (`last` + c − 2) mod 5.
     values: [i16; 125],
     last: Option<usize>,
 }
