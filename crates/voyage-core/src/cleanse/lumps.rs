@@ -3,7 +3,7 @@
 
 use super::{
     marks::{LUMP, POOL, SOLID},
-    model::{AIR_HU, CleanseOptions, LEVEL_MARGIN_HU, fluid_value, mostly_air, unmix},
+    model::{AIR_HU, CleanseOptions, FluidWindow, LEVEL_MARGIN_HU, mostly_air, unmix},
 };
 use crate::Geometry;
 
@@ -201,12 +201,14 @@ impl Lumps<'_> {
     /// mixture of tissue and stool, unmixed with the local stool value as at a pool's floor
     /// (soft tissue at or below `tissue_max_hu` keeps its value); any other is stool, or
     /// stool and air: air. What ends below the air level joins the lumen.
-    pub(super) fn cleanse(&self, lumps: &[Vec<usize>], cube: &[isize]) -> LumpChanges {
+    pub(super) fn cleanse(&self, lumps: &[Vec<usize>]) -> LumpChanges {
         let mut out = LumpChanges::default();
         let mut changes: Vec<(usize, i16)> = Vec::new();
+        let [nx, ny, _] = self.g.dims;
+        let mut fluid = FluidWindow::new(self.hu, self.m, [nx, ny], self.fluid_hu, SOLID);
         for lump in lumps {
             for &v in lump {
-                let value = self.model(v, cube);
+                let value = self.model(v, &mut fluid);
                 let h = self.hu[v];
                 if value < self.air_hu {
                     if self.m[v] & 1 == 0 {
@@ -232,7 +234,7 @@ impl Lumps<'_> {
     }
 
     /// A lump's voxel's cleansed value.
-    fn model(&self, v: usize, cube: &[isize]) -> i16 {
+    fn model(&self, v: usize, fluid: &mut FluidWindow) -> i16 {
         let (hu, m, air) = (self.hu, self.m, mostly_air(self.air_hu));
         let h = hu[v];
         let wall = self.six().iter().any(|&d| {
@@ -248,7 +250,7 @@ impl Lumps<'_> {
         } else if h <= self.opts.tissue_max_hu {
             h
         } else {
-            match fluid_value(v, hu, m, cube, self.fluid_hu, SOLID) {
+            match fluid.at(v) {
                 Some(c) => Some(unmix(h as f32, self.opts.tissue_hu as f32, c))
                     .filter(|&u| u >= air)
                     .unwrap_or(AIR_HU),

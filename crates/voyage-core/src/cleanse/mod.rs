@@ -380,7 +380,7 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
         air_hu,
         fluid_hu,
     }
-    .cleanse(&lumps, &cube);
+    .cleanse(&lumps);
     let (stool_lumps, stool_voxels) = (lumps.len(), stool.tagged);
     let lump_changes: Vec<(u32, i16)> = stool
         .voxels

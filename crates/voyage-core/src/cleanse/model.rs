@@ -34,11 +34,10 @@ pub(super) fn mostly_air(air_hu: i16) -> i16 {
     ((air_hu as i32 + 40) / 2) as i16
 }
 
-/// The local tagged fluid's HU: the mean of the brighter half (by range, above the midpoint
-/// of the fluid threshold and the brightest) of the pools' core voxels (marked `mark`, at or
-/// above `fluid_hu`) in the 5³ cube around `v` (`cube`: its offsets, at most 125; a core
-/// voxel may be the pool's partial-volume skin); None when there is none.
-pub(super) fn fluid_value(
+/// [`FluidWindow::at`] by its definition, the cube around `v` (`cube`: its offsets, at most
+/// 125) read voxel by voxel: what the window is tested against.
+#[cfg(test)]
+fn fluid_value(
     v: usize,
     hu: &[i16],
     m: &[u8],
@@ -65,7 +64,7 @@ fn core_value(w: usize, hu: &[i16], m: &[u8], fluid_hu: i16, mark: u8) -> i16 {
 }
 
 /// The mean of the brighter half of the core values among `values` (the others i16::MIN),
-/// as [`fluid_value`] takes it.
+/// as [`FluidWindow::at`] takes it.
 fn brighter_mean(values: &[i16; 125], fluid_hu: i16) -> Option<f32> {
     debug_assert!(
         fluid_hu > i16::MIN,
@@ -85,7 +84,10 @@ fn brighter_mean(values: &[i16; 125], fluid_hu: i16) -> Option<f32> {
     Some(sum as f32 / n as f32)
 }
 
-/// [`fluid_value`] for voxels asked along rows: the cube of the voxel asked last is kept as
+/// The local tagged fluid's HU around voxels: the mean of the brighter half (by range, above
+/// the midpoint of the fluid threshold and the brightest) of the core voxels (marked `mark`,
+/// at or above `fluid_hu`; a pool's core voxel may be its partial-volume skin) in the 5³
+/// cube around a voxel; None when there is none. The cube of the voxel asked last is kept as
 /// five columns of 25 core values (one column per step along the row), so that the next
 /// voxel along the row reads one new column, not 125 voxels. On `ctc/prone-tagged` 70 % of
 /// the pools' model's 200 000 questions follow the one before along the row.
@@ -123,7 +125,7 @@ impl<'a> FluidWindow<'a> {
         }
     }
 
-    /// [`fluid_value`] at `v`.
+    /// The local fluid value around `v`.
     pub(super) fn at(&mut self, v: usize) -> Option<f32> {
         let columns = if self.last == Some(v.wrapping_sub(1)) {
             2..=2
