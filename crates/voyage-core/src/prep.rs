@@ -685,6 +685,10 @@ fn prepare_stored(
     }
     seg.lumen_voxels -= contact_voxels;
     let (source, target, cl) = (ends.source, ends.target, ends.centerline);
+    // The colon's last segment ends where the centerline does, unless the user placed the end.
+    if opts.centerline.target_mm.is_none() {
+        seg.name_last_segment(centerline::mm_of(&seg.lumen, target));
+    }
 
     let nav = match opts.nav_min_wall_mm {
         Some(wall) => {

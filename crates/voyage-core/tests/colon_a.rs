@@ -41,6 +41,21 @@ fn colon_a_centerline_runs_rectum_to_cecum() {
         "target {:?} is not on the patient's right",
         s.target
     );
+    // Its one segment is named by where the centerline ends, in the right colon (the chain's
+    // coarse end, farthest through the gas of touching loops, was in the transverse colon).
+    let colon: Vec<&str> = s
+        .segmentation
+        .segments
+        .iter()
+        .filter(|g| g.kept)
+        .map(|g| g.label.as_str())
+        .collect();
+    assert!(
+        colon.len() == 1
+            && colon[0].starts_with("rectum")
+            && (colon[0].ends_with("ascending") || colon[0].ends_with("cecum")),
+        "colon segments {colon:?}"
+    );
     // The whole colon, not a short cut: at least 1.1 m. The lumen holds about 3 m of tube
     // that no path passes twice (see the report on the topology branch), hence the upper bound.
     assert!(

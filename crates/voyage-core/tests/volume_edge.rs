@@ -85,7 +85,7 @@ fn a_colon_cut_by_the_side_of_the_scan_keeps_its_gas_and_is_said_to() {
             (keep as f64 - 1.0 - v.x) * sp
         });
         if ends.iter().any(|&mm| mm <= 5.0) {
-            assert!(g.at_edge, "{g:?}");
+            assert!(g.at_edge(), "{g:?}");
         }
     }
     assert!(
@@ -111,5 +111,5 @@ fn a_colon_inside_the_scan_is_not_said_to_reach_its_side() {
         "{:?}",
         s.warnings
     );
-    assert!(s.gaps.iter().all(|g| !g.at_edge));
+    assert!(s.gaps.iter().all(|g| !g.at_edge()));
 }

@@ -117,7 +117,7 @@ impl ColonRead {
         let mut leaves_the_scan = Vec::new();
         for (gap, name) in seg.gaps.iter().zip(study.gap_segments()) {
             let name = name.unwrap_or("colon").to_string();
-            if gap.at_edge {
+            if gap.at_edge() {
                 // Not bridged: the colon goes on outside the scan.
                 leaves_the_scan.push(name);
                 continue;

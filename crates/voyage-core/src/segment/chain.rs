@@ -56,7 +56,14 @@ pub struct Link {
 #[derive(Clone, Debug, PartialEq)]
 pub enum Left {
     TooSmall,
+    /// Its nearest block lies this far (mm) from the chain's end, beyond `max_gap_mm`.
     TooFar(f64),
+    /// Within reach (mm from the chain's end), but the chain had reached the cecum: gas
+    /// beyond it is the ileum's.
+    BeyondCecum(f64),
+    /// Within reach (mm from the chain's end), but none of its ends lies on along the colon's
+    /// course within reach with a way to it through the CT.
+    NotOnward(f64),
     BridgeTooDear {
         gap_mm: f64,
         cost: f64,
@@ -332,7 +339,14 @@ pub fn chain(
                 .iter()
                 .map(|&b| coarse.centre_mm(b).distance(end))
                 .fold(f64::INFINITY, f64::min);
-            ch.left.push((c, Left::TooFar(d)));
+            let why = if d > opts.max_gap_mm {
+                Left::TooFar(d)
+            } else if ch.cecum.is_some() {
+                Left::BeyondCecum(d)
+            } else {
+                Left::NotOnward(d)
+            };
+            ch.left.push((c, why));
         }
     }
     let links = ch.links.clone();
@@ -761,6 +775,28 @@ mod tests {
             |_, _, _, _| None,
         );
         assert_eq!(ch.links.len(), 1);
-        assert!(ch.left.iter().all(|(_, l)| matches!(l, Left::TooFar(_))));
+        assert!(
+            ch.left
+                .iter()
+                .all(|(_, l)| matches!(l, Left::TooFar(d) if *d > 10.0))
+        );
+        // Within reach but no way to them: left out, and not said to be too far.
+        let ch = chain(
+            &coarse,
+            &comps,
+            0,
+            &[Role::Minor; 3],
+            &plain_course(),
+            &ChainOptions::default(),
+            |_, _, _, _| None,
+        );
+        assert_eq!(ch.links.len(), 1);
+        assert!(
+            ch.left
+                .iter()
+                .all(|(_, l)| matches!(l, Left::NotOnward(d) if *d <= 100.0)),
+            "{:?}",
+            ch.left
+        );
     }
 }

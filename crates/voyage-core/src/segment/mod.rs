@@ -171,9 +171,10 @@ pub struct Gap {
     pub to_lps_mm: [f64; 3],
     /// Mean cost per mm of the path (1: soft tissue, i.e. collapsed bowel, all the way).
     pub mean_cost: f64,
-    /// An end lies at the side of the scanned volume: the colon leaves the scan there, and
-    /// the bridge joins its two ends inside (what lies beyond is not read).
-    pub at_edge: bool,
+    /// Where an end lies at the side of the scanned volume, that side of the patient ("left",
+    /// "head end", ...): the colon leaves the scan there, and the bridge joins its two ends
+    /// inside (what lies beyond is not read).
+    pub edge_side: Option<&'static str>,
     /// The lumen voxels (volume indices, sorted) the bridge added: its tube and the fluid
     /// filling the stretch it crosses.
     #[serde(skip)]
@@ -215,6 +216,8 @@ pub struct Segmentation {
     /// The voxels of tagged fluid the lumen took in beyond its pools' columns ([`fluid`]'s
     /// whole pools; volume indices, ascending).
     pub pools_grown: Vec<usize>,
+    /// What names the last colon segment again from the centerline's end.
+    pub(crate) last_segment: Option<report::LastSegment>,
 }
 
 /// Segments the colon lumen from a CT (or takes it from a mask).
@@ -266,6 +269,13 @@ impl SegmentOptions {
             exclude_mm: self.exclude_mm.iter().map(|&p| storage.mm_in(p)).collect(),
             ..self.clone()
         }
+    }
+}
+
+impl Gap {
+    /// The colon leaves the scan at this gap ([`Gap::edge_side`]).
+    pub fn at_edge(&self) -> bool {
+        self.edge_side.is_some()
     }
 }
 
@@ -366,6 +376,7 @@ fn segment_axial(
         bridge_radius_mm: lumen.bridge_radius_mm,
         cecum_voxel: chained.cecum_voxel,
         pools_grown: lumen.pools_grown,
+        last_segment: report.last_segment,
     })
 }
 
@@ -553,6 +564,42 @@ mod tests {
             ..Default::default()
         };
         assert!(segment(&v, &beyond).is_err());
+    }
+
+    /// The last segment takes its end's name from where the centerline ends, and the gap
+    /// warning before it says the new name.
+    #[test]
+    fn the_last_segment_is_named_where_the_centerline_ends() {
+        let seeded = SegmentOptions {
+            seeds_mm: vec![DVec3::new(40.0, 20.0, 15.0)],
+            ..Default::default()
+        };
+        let mut s = segment(&toy(), &seeded).unwrap();
+        let last = |s: &Segmentation| {
+            let g = s.segments.iter().max_by_key(|g| g.order).unwrap();
+            g.label.clone()
+        };
+        // The toy's LPS is its index frame at 1 × 1 × 1.5 mm: the patient's right is small i,
+        // the head end large k.
+        for (end, name) in [
+            (DVec3::new(0.0, 25.0, 0.0), "cecum"),
+            (DVec3::new(59.0, 25.0, 58.5), "splenic flexure"),
+        ] {
+            s.name_last_segment(end);
+            let label = last(&s);
+            assert!(label.ends_with(name), "{label}");
+            let saying = format!("and the {label} segment");
+            let bridged: Vec<&String> = s
+                .warnings
+                .iter()
+                .filter(|w| w.contains("bridged"))
+                .collect();
+            assert!(
+                bridged.len() == 1 && bridged[0].contains(&saying),
+                "{:?}",
+                s.warnings
+            );
+        }
     }
 
     #[test]

@@ -5,7 +5,7 @@
 use glam::DVec3;
 
 use super::{
-    Component, ComponentKind, EXCLUDED, Gap, SegmentOptions, SegmentReport,
+    Component, ComponentKind, EXCLUDED, Gap, SegmentOptions, SegmentReport, Segmentation,
     bridge::Path,
     chain::{self, Chained, Left},
     compartments::Compartment,
@@ -29,6 +29,54 @@ pub(super) struct Report {
     /// Gas components, largest first (those above `min_report_ml`), and how many smaller.
     pub(super) components: Vec<Component>,
     pub(super) small_components: usize,
+    pub(super) last_segment: Option<LastSegment>,
+}
+
+/// What names the colon's last segment again once the centerline's end is known: the
+/// colon's box and where the segment was entered, both in the patient frame (LPS mm), so
+/// any storage order names it alike.
+#[derive(Clone, Debug)]
+pub struct LastSegment {
+    colon_lps: [DVec3; 2],
+    entry_lps: DVec3,
+}
+
+impl Segmentation {
+    /// Names the colon's last segment again by where the centerline ends in it (`end_mm`,
+    /// volume-local), and says the new name in the warning of the gap before it. The chain
+    /// left that segment at the coarse block farthest through its gas from its entry; where
+    /// its loops touch, that block can be short of the end the centerline reaches (on
+    /// `masks/colon-a`, the transverse colon, where the centerline goes on to the right
+    /// colon).
+    pub(crate) fn name_last_segment(&mut self, end_mm: DVec3) {
+        let Some(last) = &self.last_segment else {
+            return;
+        };
+        let geom = self.lumen.geometry();
+        let named = Course::new(geom, last.colon_lps);
+        let name = segment_name(&named, geom.patient_to_local(last.entry_lps), end_mm);
+        let Some(i) = (0..self.segments.len()).max_by_key(|&i| self.segments[i].order) else {
+            return;
+        };
+        let Some(order) = self.segments[i].order else {
+            return;
+        };
+        let old = std::mem::replace(&mut self.segments[i].label, name);
+        let before = order.checked_sub(1).and_then(|o| {
+            let gap = self.gaps.iter().find(|g| g.between == [o, order])?;
+            let a = self.segments.iter().find(|s| s.order == Some(o))?;
+            Some((gap, &a.label))
+        });
+        if let Some((gap, a)) = before {
+            let was = gap_warning(gap, a, &old);
+            let now = gap_warning(gap, a, &self.segments[i].label);
+            for w in &mut self.warnings {
+                if *w == was {
+                    w.clone_from(&now);
+                }
+            }
+        }
+    }
 }
 
 /// The reports of the colon chained in `chained` from `parts` and of everything else `found`
@@ -46,6 +94,10 @@ pub(super) fn report(
     let colon_lps = colon_box(&parts.list, cand.rectum, in_colon, geom);
     let classes = classes(parts, in_colon, geom, &colon_lps);
     let mut segments = colon_segments(parts, chained, geom, colon_lps);
+    let last_segment = chained.chain.links.last().map(|l| LastSegment {
+        colon_lps,
+        entry_lps: geom.local_to_patient(chained.coarse.centre_mm(l.entry)),
+    });
     segments.extend(left_out(
         parts,
         &cand.crevice,
@@ -68,6 +120,7 @@ pub(super) fn report(
         warnings,
         components,
         small_components,
+        last_segment,
     }
 }
 
@@ -121,7 +174,7 @@ fn colon_segments(
 /// them and, between, the one halfway along the course (only if it lies between them in the
 /// colon's order: the ends are named by place, the middle by course). A segment from rectum
 /// to cecum is the whole colon, and a middle name would only suggest it stops there.
-fn segment_name(named: &Course, entry: DVec3, exit: DVec3) -> String {
+pub(super) fn segment_name(named: &Course, entry: DVec3, exit: DVec3) -> String {
     let ends = [named.name(entry), named.name(exit)];
     if ends == ["rectum", "cecum"] {
         return ends.join("–");
@@ -205,6 +258,12 @@ fn reason(why: Left, crevice: bool, gas_ml: f64, opts: &SegmentOptions) -> Strin
             opts.chain.max_gap_mm
         ),
         Left::TooFar(_) => "not reached from the colon's end".to_string(),
+        Left::BeyondCecum(d) => format!(
+            "it lies {d:.0} mm from the colon's end, which is the cecum already: gas beyond the cecum is small bowel"
+        ),
+        Left::NotOnward(d) => format!(
+            "it lies {d:.0} mm from the colon's end, but not on along the colon's course with a way to it through the CT"
+        ),
         Left::BridgeTooDear { gap_mm, cost } => format!(
             "the way to it ({gap_mm:.0} mm) crosses fat or bone, not collapsed bowel (cost {cost:.1} per mm)"
         ),
@@ -229,28 +288,37 @@ fn gaps(
     for (i, (p, voxels)) in paths.iter().zip(gap_voxels).enumerate() {
         let ends = (p.voxels[0], p.voxels[p.voxels.len() - 1]);
         let edge = side_near(ends.0, geom).or_else(|| side_near(ends.1, geom));
-        gaps.push(Gap {
+        let gap = Gap {
             between: [i, i + 1],
             length_mm: p.length_mm,
             from_lps_mm: lps(ends.0),
             to_lps_mm: lps(ends.1),
             mean_cost: p.mean_cost,
-            at_edge: edge.is_some(),
+            edge_side: edge,
             voxels,
-        });
-        let [x, y, z] = lps(ends.0);
-        let (a, b) = (&segments[i].label, &segments[i + 1].label);
-        let mm = p.length_mm;
-        warnings.push(match edge {
-            Some(side) => format!(
-                "the colon leaves the scanned volume at the patient's {side}: the {a} and the {b} segment are joined inside it by {mm:.0} mm from LPS ({x:.0}, {y:.0}, {z:.0}); what lies beyond the scan is not read"
-            ),
-            None => format!(
-                "collapsed or fluid-filled stretch bridged: {mm:.0} mm between the {a} and the {b} segment, from LPS ({x:.0}, {y:.0}, {z:.0})"
-            ),
-        });
+        };
+        warnings.push(gap_warning(
+            &gap,
+            &segments[i].label,
+            &segments[i + 1].label,
+        ));
+        gaps.push(gap);
     }
     (gaps, warnings)
+}
+
+/// The warning for `gap`, between the colon segments named `a` and `b`.
+pub(super) fn gap_warning(gap: &Gap, a: &str, b: &str) -> String {
+    let [x, y, z] = gap.from_lps_mm;
+    let mm = gap.length_mm;
+    match gap.edge_side {
+        Some(side) => format!(
+            "the colon leaves the scanned volume at the patient's {side}: the {a} and the {b} segment are joined inside it by {mm:.0} mm from LPS ({x:.0}, {y:.0}, {z:.0}); what lies beyond the scan is not read"
+        ),
+        None => format!(
+            "collapsed or fluid-filled stretch bridged: {mm:.0} mm between the {a} and the {b} segment, from LPS ({x:.0}, {y:.0}, {z:.0})"
+        ),
+    }
 }
 
 /// A colon compartment that reaches the side of the scanned volume: the colon goes on

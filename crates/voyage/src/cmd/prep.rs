@@ -240,7 +240,7 @@ fn gaps(s: &Study) -> Vec<serde_json::Value> {
                 "from_lps_mm": g.from_lps_mm,
                 "to_lps_mm": g.to_lps_mm,
                 "mean_cost": g.mean_cost,
-                "at_edge": g.at_edge,
+                "at_edge": g.at_edge(),
                 "centerline_arc_mm": span,
             })
         })

@@ -275,7 +275,7 @@ impl App {
             Color32::from_gray(220),
         );
         if let Some(gap) = s.collapsed_here() {
-            let text = if gap.at_edge {
+            let text = if gap.at_edge() {
                 format!(
                     "the colon leaves the scan here: {:.0} mm joined inside it, the flight keeps to the path",
                     gap.length_mm
