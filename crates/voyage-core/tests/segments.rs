@@ -383,3 +383,48 @@ fn a_neck_the_skeleton_blocks_part_is_traced_on_the_voxels() {
     assert!(found >= 0.97 * truth, "{found:.0} of {truth:.0} mm");
     assert_eq!(s.segmentation.gaps.len(), 1);
 }
+
+/// A gas-filled stomach under the left diaphragm (about 270 ml: more than a colon
+/// compartment needs to be taken as colon wherever it lies), with oral contrast under a
+/// level on its dependent side, is left out and named, and none of it is lumen.
+#[test]
+fn a_gas_filled_stomach_is_not_colon() {
+    let p = phantom::colon(&ColonOptions::default()).unwrap();
+    let mut ct = p.ct.clone();
+    // The free room high on the patient's left, behind the splenic flexure (the phantom's
+    // frame is LPS: +x left, +y posterior, +z head).
+    let (centre, radius, wall) = (DVec3::new(259.5, 267.0, 330.0), 40.0, 2.0);
+    let level_y = centre.y + 0.5 * radius;
+    let g = ct.geometry().clone();
+    let mut inside = Vec::new();
+    for idx in 0..g.len() {
+        let [i, j, k] = g.ijk(idx);
+        let q = g.index_to_local(DVec3::new(i as f64, j as f64, k as f64));
+        let r = q.distance(centre);
+        if r <= radius + wall + 3.0 {
+            let hu = ct.data()[idx];
+            assert!(
+                (-300..250).contains(&hu) && p.lumen.data()[idx] == 0,
+                "the stomach's room at {q:?} holds {hu} HU: the phantom changed"
+            );
+        }
+        if r <= radius {
+            ct.data_mut()[idx] = if q.y > level_y { 600 } else { -1000 };
+            inside.push(idx);
+        } else if r <= radius + wall {
+            ct.data_mut()[idx] = 40;
+        }
+    }
+    let s = segment(&ct, &SegmentOptions::default()).unwrap();
+    let taken = inside.iter().filter(|&&v| s.lumen.data()[v] != 0).count();
+    assert_eq!(taken, 0, "{taken} voxels of the stomach in the lumen");
+    let stomach = s
+        .segments
+        .iter()
+        .find(|r| r.label == "stomach")
+        .unwrap_or_else(|| panic!("no stomach among {:#?}", s.segments));
+    assert!(!stomach.kept && stomach.gas_ml > 200.0, "{stomach:?}");
+    let truth = p.lumen.data().iter().filter(|&&v| v != 0).count();
+    let found = s.lumen_voxels as f64 / truth as f64;
+    assert!((0.9..1.1).contains(&found), "lumen {found:.3} of the truth");
+}
