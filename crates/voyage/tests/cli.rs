@@ -1031,6 +1031,22 @@ fn coverage_reports_json_and_reads_with_glances_unless_told_not_to() {
             assert!(p["arc_mm"].as_f64().is_some_and(|a| a >= 0.0), "{p}");
             assert_eq!(p["pose"].as_array().map(|a| a.len()), Some(7), "{p}");
         }
+        // What the review left is listed where it lies, and is no more than it left unseen.
+        let left = j["left_after_review"].as_array().unwrap();
+        assert_eq!(
+            Some(left.len() as u64),
+            j["patches_left_after_review"].as_u64()
+        );
+        let unseen_mm2 = (100.0 - after) / 100.0 * pct(j, "surface_mm2");
+        let left_mm2: f64 = left.iter().map(|p| p["area_mm2"].as_f64().unwrap()).sum();
+        assert!(
+            left_mm2 <= unseen_mm2 + 1e-6,
+            "{left_mm2} of {unseen_mm2} mm²"
+        );
+        for p in left {
+            assert!(p["area_mm2"].as_f64().unwrap() >= 30.0, "{p}");
+            assert!(p["segment"].as_str().is_some(), "{p}");
+        }
     }
     // The glances are frames shown beside the same flight's: they only add to what it saw.
     let glances = |j: &serde_json::Value| -> Vec<u64> {

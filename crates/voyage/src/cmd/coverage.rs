@@ -11,7 +11,7 @@ use serde_json::{Value, json};
 use voyage_core::Study;
 use voyage_nav::{Camera, FlightOptions};
 use voyage_view::{
-    BothCoverage, CellMesh, CoverageOptions, Link, MucosaMap, READING_FOV_DEG, Reading,
+    BothCoverage, CellMesh, CoverageOptions, Link, MucosaMap, Patch, READING_FOV_DEG, Reading,
     ReadingProgress, Visit, both_readings, read_both_ways,
 };
 
@@ -201,19 +201,25 @@ fn read_position<'a>(
 fn position_json(r: &Read, options: CoverageOptions, a: &CoverageArgs) -> Value {
     let (study, reading) = (r.study, &r.reading);
     let geometry = study.ct.geometry();
-    let patch_json = |v: &Visit| {
+    let place_json = |p: &Patch| {
         json!({
-            "area_mm2": v.patch.area_mm2,
-            "across_mm": v.patch.across_mm,
-            "center_lps_mm": geometry.local_to_patient(v.patch.center_mm).to_array(),
-            "arc_mm": v.patch.arc_mm(study),
-            "pose": v.pose.map(|p| {
-                let mut a = p.to_array();
-                a[..3].copy_from_slice(&geometry.local_to_patient(p.position).to_array());
-                a
-            }),
+            "area_mm2": p.area_mm2,
+            "across_mm": p.across_mm,
+            "center_lps_mm": geometry.local_to_patient(p.center_mm).to_array(),
+            "arc_mm": p.arc_mm(study),
+            "segment": study.segment_at(p.center_mm),
         })
     };
+    let patch_json = |v: &Visit| {
+        let mut j = place_json(&v.patch);
+        j["pose"] = json!(v.pose.map(|p| {
+            let mut a = p.to_array();
+            a[..3].copy_from_slice(&geometry.local_to_patient(p.position).to_array());
+            a
+        }));
+        j
+    };
+    let left = reading.after_review.patches(&r.mesh);
     let [one_way, two_way, after_review] =
         [&reading.one_way, &reading.two_way, &reading.after_review].map(|c| c.percent());
     json!({
@@ -232,7 +238,8 @@ fn position_json(r: &Read, options: CoverageOptions, a: &CoverageArgs) -> Value 
         "unseen_patches": reading.patches.iter().map(patch_json).collect::<Vec<Value>>(),
         "glances": reading.glances,
         "review_visits": reading.visits,
-        "patches_left_after_review": reading.after_review.patches(&r.mesh).len(),
+        "patches_left_after_review": left.len(),
+        "left_after_review": left.iter().map(place_json).collect::<Vec<Value>>(),
     })
 }
 
