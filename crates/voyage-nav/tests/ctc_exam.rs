@@ -58,8 +58,8 @@ fn the_real_exam_is_flown_both_ways_inside_the_lumen() {
         // Issue 36: the view looks down the lumen, not at the wall. Down −∇V (the paper's
         // compass) the view was a median 29–31° off the centerline's way on, p95 62°. The
         // frames that see only wall are where the lumen closes: the 25 mm before the bridged
-        // collapsed stretch, and the last 12 mm before the cecal pole (forward 2.7%; the
-        // issue's 2% is not reached there).
+        // collapsed stretch, and the last 12 mm before the cecal pole (forward 1.5 %, 2.7 %
+        // when the glide through the collapsed stretch went at 10 mm/s).
         let l = looking(&study, dir, &f.poses);
         let a = l.view_angle_deg;
         eprintln!(
@@ -77,7 +77,7 @@ fn the_real_exam_is_flown_both_ways_inside_the_lumen() {
             a.p95
         );
         assert!(
-            l.all_wall_share <= 0.03,
+            l.all_wall_share <= 0.02,
             "the {} flight: {:.1}% of the frames see only wall",
             dir.name(),
             100.0 * l.all_wall_share

@@ -550,45 +550,52 @@ pub fn viewing_pose(
     lumen: &Lumen,
     options: &CoverageOptions,
 ) -> Option<Pose> {
-    patch
-        .anchors(mesh)
-        .find_map(|anchor| pose_showing(&anchor, mesh, lumen, options))
+    viewing_poses(patch, mesh, lumen, options).next()
 }
 
-/// A pose that shows `anchor` (see [`viewing_pose`]).
-fn pose_showing(
-    anchor: &Anchor,
-    mesh: &CellMesh,
-    lumen: &Lumen,
-    options: &CoverageOptions,
-) -> Option<Pose> {
+/// Every pose [`viewing_pose`] could give, in the order it tries them: the first is its
+/// pose, the rest serve where a frame from it shows nothing new (the pick meets the anchor,
+/// and yet none of its pixels lands on an unseen triangle the reading counts).
+pub fn viewing_poses<'a>(
+    patch: &'a Patch,
+    mesh: &'a CellMesh,
+    lumen: &'a Lumen,
+    options: &'a CoverageOptions,
+) -> impl Iterator<Item = Pose> + 'a {
+    patch
+        .anchors(mesh)
+        .flat_map(move |anchor| poses_showing(anchor, mesh, lumen, options))
+}
+
+/// The poses that show `anchor` (see [`viewing_pose`]), line of sight by line of sight.
+fn poses_showing<'a>(
+    anchor: Anchor,
+    mesh: &'a CellMesh,
+    lumen: &'a Lumen,
+    options: &'a CoverageOptions,
+) -> impl Iterator<Item = Pose> + 'a {
     let (c, n) = (anchor.point, anchor.normal);
     let (e1, e2) = n.any_orthonormal_pair();
     let max_t = options.reading_distance_mm * 0.8;
     let cos_max = options.max_angle_deg.to_radians().cos();
     let facing = smooth_normal(mesh, anchor.triangle);
-    for tilt in TILTS_DEG {
+    let lines = TILTS_DEG.into_iter().flat_map(|tilt| {
         let azimuths = if tilt == 0.0 { 1 } else { AZIMUTHS };
-        for k in 0..azimuths {
-            let phi = k as f64 * std::f64::consts::TAU / azimuths as f64;
-            let (st, ct) = tilt.to_radians().sin_cos();
-            let u = (n * ct + (e1 * phi.cos() + e2 * phi.sin()) * st).normalize();
-            let Some(eye) = viewpoint_along(c, u, max_t, lumen) else {
-                continue;
-            };
-            let to_patch = c - eye;
-            let to_eye = -to_patch;
-            if facing.dot(to_eye) < cos_max * facing.length() * to_eye.length() {
-                continue;
-            }
-            let sees = pick(mesh, None, eye, to_patch)
-                .is_some_and(|hit| hit.distance >= to_patch.length() - 1.0);
-            if sees {
-                return Some(Pose::looking(eye, to_patch, lumen.up));
-            }
+        (0..azimuths).map(move |k| (tilt, k as f64 * std::f64::consts::TAU / azimuths as f64))
+    });
+    lines.filter_map(move |(tilt, phi)| {
+        let (st, ct) = tilt.to_radians().sin_cos();
+        let u = (n * ct + (e1 * phi.cos() + e2 * phi.sin()) * st).normalize();
+        let eye = viewpoint_along(c, u, max_t, lumen)?;
+        let to_patch = c - eye;
+        let to_eye = -to_patch;
+        if facing.dot(to_eye) < cos_max * facing.length() * to_eye.length() {
+            return None;
         }
-    }
-    None
+        pick(mesh, None, eye, to_patch)
+            .is_some_and(|hit| hit.distance >= to_patch.length() - 1.0)
+            .then(|| Pose::looking(eye, to_patch, lumen.up))
+    })
 }
 
 /// Along the line from `c` in direction `u`, while it stays in the lumen, the point farthest

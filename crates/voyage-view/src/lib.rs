@@ -37,7 +37,7 @@ pub use closeup::{CloseupBox, MAX_HALF_SIZE_MM, TfPoint, TransferFunction, rende
 pub use coverage::{
     Coverage, CoverageOptions, GLANCE_EVERY_MM, GLANCE_MIN_MM2, GLANCE_TURN_DEG, GLANCE_WAYS,
     Glances, Lumen, Patch, READING_FOV_DEG, REVIEW_MIN_MM2, Reader, SegmentSeen, glance_turns,
-    viewing_pose,
+    viewing_pose, viewing_poses,
 };
 pub use findings::{
     Adequacy, C0_BELOW_COVERAGE_PCT, CRads, FindingKind, Findings, Hit, Marker, Measurement,
@@ -50,8 +50,8 @@ pub use raster::{
     Frame, NO_TRIANGLE, Pixel, Rasterizer, ScreenRect, Shading, View, render_rgba, shade,
 };
 pub use reading::{
-    READING_PX, REVIEW_ROUNDS, Reading, ReadingMove, ReadingProgress, ReadingRun, ReadingStep,
-    Scene, Visit, read_both_ways,
+    POSES_PER_VISIT, READING_PX, REVIEW_ROUNDS, Reading, ReadingMove, ReadingProgress, ReadingRun,
+    ReadingStep, Scene, Visit, read_both_ways,
 };
 pub use rgba::Rgba;
 pub use scout::{ScoutCanvas, ScoutMesh, ScoutOrbit, ScoutProjection, scout_image};

@@ -7,8 +7,9 @@ use voyage_nav::{Camera, Direction, Pose};
 use voyage_phantom::{self as phantom, ColonOptions};
 use voyage_view::{
     CellMesh, Coverage, CoverageOptions, GLANCE_EVERY_MM, GLANCE_MIN_MM2, GLANCE_TURN_DEG,
-    GLANCE_WAYS, Glances, READING_FOV_DEG, Reader, Reading, ReadingProgress, ReadingStep,
-    glance_turns, read_both_ways,
+    GLANCE_WAYS, Glances, Lumen, POSES_PER_VISIT, READING_FOV_DEG, Reader, Reading,
+    ReadingProgress, ReadingRun, ReadingStep, glance_turns, read_both_ways, viewing_pose,
+    viewing_poses,
 };
 
 fn camera() -> Camera {
@@ -128,6 +129,30 @@ fn check_reading(seed: u64) {
             pose.position.distance(v.patch.center_mm) <= 50.0,
             "seed {seed}: a pose beyond the reading distance"
         );
+    }
+    // The poses a visit tries in turn begin with the review's own, and each stands in the
+    // lumen clear of the wall, within the reading distance of a point of the patch that it
+    // looks at.
+    let options = CoverageOptions::default();
+    let lumen = Lumen::of(&study, ReadingRun::min_wall_mm(&study));
+    for v in r.patches.iter().take(5) {
+        let poses: Vec<Pose> = viewing_poses(&v.patch, &mesh, &lumen, &options)
+            .take(POSES_PER_VISIT)
+            .collect();
+        let first = viewing_pose(&v.patch, &mesh, &lumen, &options);
+        assert_eq!(poses.first().map(|p| p.position), first.map(|p| p.position));
+        for pose in poses {
+            assert!(study.ds.sample(pose.position) as f64 >= lumen.min_wall_mm);
+            let aimed = v.patch.triangles.iter().any(|&t| {
+                let to = centroid(&mesh, t) - pose.position;
+                to.length() <= options.reading_distance_mm
+                    && pose.z_body().dot(to.normalize()) > 0.999
+            });
+            assert!(
+                aimed,
+                "seed {seed}: a pose that looks at no point of its patch"
+            );
+        }
     }
     // Every truth polyp of 3 mm or more is seen, most of its head, by the two-way reading
     // or the review.
