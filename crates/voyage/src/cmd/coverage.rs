@@ -31,8 +31,8 @@ pub struct CoverageArgs {
     /// Unseen patches smaller than this are not listed (mm²).
     #[arg(long, default_value_t = CoverageOptions::default().min_patch_mm2)]
     pub min_patch: f64,
-    /// The review also visits unseen bits down to this area (mm²; default: a 3 mm polyp's
-    /// footprint).
+    /// The review also visits unseen bits down to this area (mm²; default: under a third of a
+    /// 3 mm polyp's footprint).
     #[arg(long, default_value_t = CoverageOptions::default().review_min_mm2)]
     pub review_min: f64,
     /// Side of the square frames the coverage is measured on (pixels).
