@@ -18,14 +18,19 @@ pub fn shared_data() -> Option<PathBuf> {
     }
 }
 
-/// The real colon mask `masks/colon-a.nii.gz` of the shared data, or None after [`skip`].
-pub fn colon_a_path() -> Option<PathBuf> {
-    let path = shared_data()?.join("masks/colon-a.nii.gz");
+/// The file `rel` of the shared data, or None after [`skip`].
+pub fn shared_file(rel: &str) -> Option<PathBuf> {
+    let path = shared_data()?.join(rel);
     if !path.exists() {
-        skip(&format!("colon-a: {} not found", path.display()));
+        skip(&format!("{} not found", path.display()));
         return None;
     }
     Some(path)
+}
+
+/// The real colon mask `masks/colon-a.nii.gz` of the shared data, or None after [`skip`].
+pub fn colon_a_path() -> Option<PathBuf> {
+    shared_file("masks/colon-a.nii.gz")
 }
 
 /// A test that cannot run here says why on stderr; where `VOYAGE_REQUIRE_ALL` is set it
