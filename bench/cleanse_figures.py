@@ -4,7 +4,8 @@
 usage: cleanse_figures.py CT.nii.gz COLON.nii.gz PREP_DIR [--top N]
 
 CT is the exam, COLON its given colon mask (same grid), PREP_DIR what `voyage prep CT --out
-PREP_DIR` wrote (cleansed.nii.gz, lumen.nii.gz, centerline.json). Prints:
+PREP_DIR` wrote (cleansed.nii.gz, written where the exam holds tagged fluid, and
+centerline.json). Prints:
 
 - tagged material left: voxels above 200 HU in the cleansed CT inside COLON dilated by 4
   voxels (6-connected steps), as a share of those above 200 HU there before;
@@ -60,7 +61,10 @@ def main():
     ct_path, mask_path, prep = args
     img = nib.load(ct_path)
     ct = np.asanyarray(img.dataobj).astype(np.int16)
-    cleansed = np.asanyarray(nib.load(prep + "/cleansed.nii.gz").dataobj).astype(np.int16)
+    try:
+        cleansed = np.asanyarray(nib.load(prep + "/cleansed.nii.gz").dataobj).astype(np.int16)
+    except FileNotFoundError:
+        sys.exit(prep + "/cleansed.nii.gz not found: prep cleanses only an exam with tagged fluid")
     mask = np.asanyarray(nib.load(mask_path).dataobj) > 0
     if not (ct.shape == cleansed.shape == mask.shape):
         sys.exit("the CT, the mask and the cleansed CT are not on one grid")

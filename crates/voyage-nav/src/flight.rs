@@ -43,9 +43,10 @@ pub struct FlightOptions {
     /// Stretches of the centerline (arc mm from the source) through bridged gaps, which the
     /// flight glides along at `glide_mm_s` (see [`Autopilot::glide`]).
     pub collapsed_spans: Vec<[f64; 2]>,
-    /// The glide's speed (mm/s), about half the free flight's: through a collapsed stretch
-    /// the view is wall all round, and at 10 mm/s the real exam's forward flight spent 2.7 %
-    /// of its frames there (1.5 % at 20 mm/s; BENCHMARKS.md, sixteenth session).
+    /// The glide's speed (mm/s), about half the free flight's: toward and through a
+    /// collapsed stretch the view is wall all round. At 10 mm/s 2.7 % of the real exam's
+    /// forward frames saw only wall, most of them there; at 20 mm/s 1.5 % (BENCHMARKS.md,
+    /// sixteenth session).
     pub glide_mm_s: f64,
     /// ρ of Eq. 2 is at most this many times the lumen's radius at the nearest centerline
     /// point (None: the potential's ρ everywhere). With ρ above the radius the wall's push

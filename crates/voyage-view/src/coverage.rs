@@ -44,9 +44,10 @@ pub struct CoverageOptions {
 /// The smallest unseen bit the review visits (mm²): under a third of a 3 mm polyp's footprint.
 /// Bits smaller than one polyp can still add up to one: where the flights glimpsed a fold's
 /// far side at a grazing angle, pixels landed on some of its triangles and left the rest as
-/// many small bits. A visit costs one frame, and shows the bits around it too: on
-/// `ctc/prone-tagged` visiting down to 2 mm² rather than the whole footprint (7.07 mm²)
-/// showed 99.59 % after review, not 99.40 %, in the same time (BENCHMARKS.md).
+/// many small bits. A visit costs one to [`crate::POSES_PER_VISIT`] frames, and shows the
+/// bits around it too: on `ctc/prone-tagged` visiting down to 2 mm² rather than the whole
+/// footprint (7.07 mm²) showed 99.59 % after review, not 99.40 %, in about 5 s more of a
+/// minute's reading (BENCHMARKS.md).
 pub const REVIEW_MIN_MM2: f64 = 2.0;
 
 /// The reading lens of [`read_both_ways`] and `voyage coverage` (vertical and horizontal

@@ -142,9 +142,10 @@ pub struct ReadingRun {
     visits: Vec<Visit>,
     /// Patches of the two-way reading that are listed (the review's first ones).
     listed: usize,
-    /// The centre triangles of patches a visit showed nothing of: later rounds leave them
-    /// (their poses are the same while the centre is).
-    fruitless: std::collections::HashSet<u32>,
+    /// Patches a visit showed nothing of, by centre triangle and size: later rounds leave
+    /// them while they are the same (a patch that lost triangles has other anchors, so other
+    /// poses).
+    fruitless: std::collections::HashSet<(u32, usize)>,
 }
 
 impl ReadingRun {
@@ -251,13 +252,14 @@ impl ReadingRun {
                     while next < queue.len() && shown_pose.is_none() {
                         let patch = queue[next].clone();
                         next += 1;
-                        if self.fruitless.contains(&patch.center_triangle) {
+                        let key = (patch.center_triangle, patch.triangles.len());
+                        if self.fruitless.contains(&key) {
                             continue;
                         }
                         let (pose, shown) =
                             self.visit(scene.mesh, &scene.study.cells, &patch, &lumen);
                         if shown == 0.0 {
-                            self.fruitless.insert(patch.center_triangle);
+                            self.fruitless.insert(key);
                         }
                         shown_mm2 += shown;
                         self.visits.push(Visit {

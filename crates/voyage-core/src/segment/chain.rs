@@ -58,11 +58,11 @@ pub enum Left {
     TooSmall,
     /// Its nearest block lies this far (mm) from the chain's end, beyond `max_gap_mm`.
     TooFar(f64),
-    /// Within reach (mm from the chain's end), but the chain had reached the cecum: gas
-    /// beyond it is the ileum's.
+    /// Within reach (mm from the chain's end), but the chain had reached the cecum.
     BeyondCecum(f64),
-    /// Within reach (mm from the chain's end), but none of its ends lies on along the colon's
-    /// course within reach with a way to it through the CT.
+    /// Within reach (mm from the chain's end: its nearest block), but the tail took no
+    /// bridge to it (its ends lie back along the course, or beyond reach, or no cheap way
+    /// through the CT leads there).
     NotOnward(f64),
     BridgeTooDear {
         gap_mm: f64,
@@ -331,7 +331,8 @@ pub fn chain(
             &mut bridge,
         );
     }
-    // Whatever stayed free: too far from the chain's end (or its bridge too dear).
+    // Whatever stayed free was not taken from the chain's end: too far from it, past the
+    // cecum, or not reached within reach.
     let end = coarse.centre_mm(ch.links[ch.links.len() - 1].exit);
     for &c in &free {
         if !ch.left.iter().any(|(x, _)| *x == c) {

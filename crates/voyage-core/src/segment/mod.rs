@@ -579,6 +579,16 @@ mod tests {
             let g = s.segments.iter().max_by_key(|g| g.order).unwrap();
             g.label.clone()
         };
+        // An end outside the last segment's gas leaves its name.
+        let named = last(&s);
+        s.name_last_segment(DVec3::new(0.0, 25.0, 0.0));
+        assert_eq!(last(&s), named);
+        // The last segment (the small pocket) made as large as the body, so that ends far
+        // apart in the colon's box name it differently.
+        let i = (0..s.segments.len())
+            .max_by_key(|&i| s.segments[i].order)
+            .unwrap();
+        s.segments[i].extent_lps_mm = [[-1e3; 3], [1e3; 3]];
         // The toy's LPS is its index frame at 1 × 1 × 1.5 mm: the patient's right is small i,
         // the head end large k.
         for (end, name) in [

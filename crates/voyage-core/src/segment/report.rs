@@ -47,7 +47,7 @@ impl Segmentation {
     /// left that segment at the coarse block farthest through its gas from its entry; where
     /// its loops touch, that block can be short of the end the centerline reaches (on
     /// `masks/colon-a`, the transverse colon, where the centerline goes on to the right
-    /// colon).
+    /// colon). An end outside the segment's box leaves it as it was.
     pub(crate) fn name_last_segment(&mut self, end_mm: DVec3) {
         let Some(last) = &self.last_segment else {
             return;
@@ -61,6 +61,13 @@ impl Segmentation {
         let Some(order) = self.segments[i].order else {
             return;
         };
+        // Only an end in that segment's gas names it (its box, a voxel's margin round it).
+        let [lo, hi] = self.segments[i].extent_lps_mm.map(DVec3::from_array);
+        let margin = DVec3::from_array(geom.spacing).max_element();
+        let end_lps = geom.local_to_patient(end_mm);
+        if end_lps.cmplt(lo - margin).any() || end_lps.cmpgt(hi + margin).any() {
+            return;
+        }
         let old = std::mem::replace(&mut self.segments[i].label, name);
         let before = order.checked_sub(1).and_then(|o| {
             let gap = self.gaps.iter().find(|g| g.between == [o, order])?;
@@ -259,10 +266,10 @@ fn reason(why: Left, crevice: bool, gas_ml: f64, opts: &SegmentOptions) -> Strin
         ),
         Left::TooFar(_) => "not reached from the colon's end".to_string(),
         Left::BeyondCecum(d) => format!(
-            "it lies {d:.0} mm from the colon's end, which is the cecum already: gas beyond the cecum is small bowel"
+            "it lies {d:.0} mm from the colon's end, but the colon already ends at the cecum there"
         ),
         Left::NotOnward(d) => format!(
-            "it lies {d:.0} mm from the colon's end, but not on along the colon's course with a way to it through the CT"
+            "it lies {d:.0} mm from the colon's end, but no bridge from there to it was taken"
         ),
         Left::BridgeTooDear { gap_mm, cost } => format!(
             "the way to it ({gap_mm:.0} mm) crosses fat or bone, not collapsed bowel (cost {cost:.1} per mm)"
