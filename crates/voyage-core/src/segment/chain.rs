@@ -683,24 +683,30 @@ mod tests {
                 }
             }
         }
+        // The three minor compartments chained from the first, with `opts` and `bridge`.
+        let chained =
+            |opts: &ChainOptions,
+             bridge: &mut dyn FnMut(usize, usize, u32, u32) -> Option<Path>| {
+                chain(
+                    &coarse,
+                    &comps,
+                    0,
+                    &[Role::Minor; 3],
+                    &plain_course(),
+                    opts,
+                    bridge,
+                )
+            };
         let mut asked = Vec::new();
-        let ch = chain(
-            &coarse,
-            &comps,
-            0,
-            &[Role::Minor; 3],
-            &plain_course(),
-            &ChainOptions::default(),
-            |from, to, a, b| {
-                asked.push((a, b));
-                let (p, q) = (coarse.centre_mm(from), coarse.centre_mm(to));
-                Some(Path {
-                    voxels: vec![],
-                    length_mm: p.distance(q),
-                    mean_cost: 1.0,
-                })
-            },
-        );
+        let ch = chained(&ChainOptions::default(), &mut |from, to, a, b| {
+            asked.push((a, b));
+            let (p, q) = (coarse.centre_mm(from), coarse.centre_mm(to));
+            Some(Path {
+                voxels: vec![],
+                length_mm: p.distance(q),
+                mean_cost: 1.0,
+            })
+        });
         assert_eq!(
             ch.links.iter().map(|l| l.comp).collect::<Vec<_>>(),
             vec![0, 1, 2]
@@ -719,42 +725,26 @@ mod tests {
             max_bridge_cost: 10.0,
             ..Default::default()
         };
-        let ch = chain(
-            &coarse,
-            &comps,
-            0,
-            &[Role::Minor; 3],
-            &plain_course(),
-            &lax,
-            |from, to, _, b| {
-                let (p, q) = (coarse.centre_mm(from), coarse.centre_mm(to));
-                Some(Path {
-                    voxels: vec![],
-                    length_mm: p.distance(q),
-                    mean_cost: if b == 1 { 6.0 } else { 1.0 },
-                })
-            },
-        );
+        let ch = chained(&lax, &mut |from, to, _, b| {
+            let (p, q) = (coarse.centre_mm(from), coarse.centre_mm(to));
+            Some(Path {
+                voxels: vec![],
+                length_mm: p.distance(q),
+                mean_cost: if b == 1 { 6.0 } else { 1.0 },
+            })
+        });
         assert_eq!(
             ch.links.iter().map(|l| l.comp).collect::<Vec<_>>(),
             vec![0, 2, 1]
         );
         // A bridge through fat leaves the segment out, and says why.
-        let ch = chain(
-            &coarse,
-            &comps,
-            0,
-            &[Role::Minor; 3],
-            &plain_course(),
-            &ChainOptions::default(),
-            |_, _, _, _| {
-                Some(Path {
-                    voxels: vec![],
-                    length_mm: 20.0,
-                    mean_cost: 6.0,
-                })
-            },
-        );
+        let ch = chained(&ChainOptions::default(), &mut |_, _, _, _| {
+            Some(Path {
+                voxels: vec![],
+                length_mm: 20.0,
+                mean_cost: 6.0,
+            })
+        });
         assert_eq!(ch.links.len(), 1);
         assert!(
             ch.left
@@ -766,15 +756,7 @@ mod tests {
             max_gap_mm: 10.0,
             ..Default::default()
         };
-        let ch = chain(
-            &coarse,
-            &comps,
-            0,
-            &[Role::Minor; 3],
-            &plain_course(),
-            &far,
-            |_, _, _, _| None,
-        );
+        let ch = chained(&far, &mut |_, _, _, _| None);
         assert_eq!(ch.links.len(), 1);
         assert!(
             ch.left
@@ -782,15 +764,7 @@ mod tests {
                 .all(|(_, l)| matches!(l, Left::TooFar(d) if *d > 10.0))
         );
         // Within reach but no way to them: left out, and not said to be too far.
-        let ch = chain(
-            &coarse,
-            &comps,
-            0,
-            &[Role::Minor; 3],
-            &plain_course(),
-            &ChainOptions::default(),
-            |_, _, _, _| None,
-        );
+        let ch = chained(&ChainOptions::default(), &mut |_, _, _, _| None);
         assert_eq!(ch.links.len(), 1);
         assert!(
             ch.left
