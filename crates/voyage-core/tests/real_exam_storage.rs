@@ -13,14 +13,7 @@ use voyage_core::{Geometry, PrepOptions, SegmentOptions, Study, Volume, prepare,
 use voyage_io::{LoadOptions, load};
 
 fn exam_path() -> Option<PathBuf> {
-    let path = voyage_phantom::fixtures::shared_data()?
-        .join("ctc")
-        .join("prone-tagged.nii.gz");
-    if !path.exists() {
-        voyage_phantom::fixtures::skip(&format!("{} not found", path.display()));
-        return None;
-    }
-    Some(path)
+    voyage_phantom::fixtures::shared_file("ctc/prone-tagged.nii.gz")
 }
 
 /// The (perm, flip) of [`Volume::reoriented`] that stores a volume of geometry `from` the way

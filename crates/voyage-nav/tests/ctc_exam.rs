@@ -10,11 +10,7 @@ use voyage_nav::{Direction, FlightOptions, STUCK_S, fly, looking, potential_fiel
 /// The shared data's file at `rel` (below `data/`) preprocessed with the default options, or
 /// None (skipped visibly).
 fn prepared(rel: &str) -> Option<Study> {
-    let path = voyage_phantom::fixtures::shared_data()?.join(rel);
-    if !path.exists() {
-        voyage_phantom::fixtures::skip(&format!("{} not found", path.display()));
-        return None;
-    }
+    let path = voyage_phantom::fixtures::shared_file(rel)?;
     let ct = voyage_io::load(&path, &Default::default()).unwrap().volume;
     Some(prepare(ct, &PrepOptions::default(), |_| {}).unwrap())
 }

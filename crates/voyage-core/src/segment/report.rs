@@ -53,8 +53,6 @@ impl Segmentation {
             return;
         };
         let geom = self.lumen.geometry();
-        let named = Course::new(geom, last.colon_lps);
-        let name = segment_name(&named, geom.patient_to_local(last.entry_lps), end_mm);
         let Some(i) = (0..self.segments.len()).max_by_key(|&i| self.segments[i].order) else {
             return;
         };
@@ -68,6 +66,8 @@ impl Segmentation {
         if end_lps.cmplt(lo - margin).any() || end_lps.cmpgt(hi + margin).any() {
             return;
         }
+        let named = Course::new(geom, last.colon_lps);
+        let name = segment_name(&named, geom.patient_to_local(last.entry_lps), end_mm);
         let old = std::mem::replace(&mut self.segments[i].label, name);
         let before = order.checked_sub(1).and_then(|o| {
             let gap = self.gaps.iter().find(|g| g.between == [o, order])?;
