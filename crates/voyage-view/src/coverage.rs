@@ -629,6 +629,8 @@ pub struct Reader {
     camera: Camera,
     visibility: Visibility,
     frame: Frame,
+    /// The view `frame` was last drawn from.
+    drawn: Option<View>,
 }
 
 impl Reader {
@@ -639,6 +641,7 @@ impl Reader {
             camera,
             visibility: Visibility::new(cells, Strategy::Ours),
             frame: Frame::new(width, height),
+            drawn: None,
         }
     }
 
@@ -647,6 +650,7 @@ impl Reader {
         self.camera = camera;
         if (self.frame.width, self.frame.height) != (width, height) {
             self.frame = Frame::new(width, height);
+            self.drawn = None;
         }
     }
 
@@ -676,6 +680,29 @@ impl Reader {
         coverage.gain(&self.frame, &view, mesh)
     }
 
+    /// The first of `poses` whose frame would newly show something of `coverage`, with that
+    /// area (mm²); its frame stays drawn, unmarked ([`Reader::mark_drawn`]).
+    pub fn first_showing(
+        &mut self,
+        mesh: &CellMesh,
+        cells: &Cells,
+        poses: impl IntoIterator<Item = Pose>,
+        coverage: &mut Coverage,
+    ) -> Option<(Pose, f64)> {
+        poses.into_iter().find_map(|pose| {
+            let shown = self.probe(mesh, cells, pose, coverage);
+            (shown > 0.0).then_some((pose, shown))
+        })
+    }
+
+    /// Marks what the frame last drawn shows; returns the area newly seen (mm²).
+    pub fn mark_drawn(&mut self, mesh: &CellMesh, coverage: &mut Coverage) -> f64 {
+        match self.drawn {
+            Some(view) => coverage.mark(&self.frame, &view, mesh),
+            None => 0.0,
+        }
+    }
+
     fn draw(&mut self, mesh: &CellMesh, cells: &Cells, pose: Pose) -> View {
         let camera = Camera {
             pose,
@@ -685,6 +712,7 @@ impl Reader {
         let raster = Rasterizer::ids_only(mesh, view);
         self.frame.clear();
         self.visibility.draw(&mut self.frame, &raster, cells);
+        self.drawn = Some(view);
         view
     }
 

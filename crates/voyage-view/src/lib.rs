@@ -51,7 +51,7 @@ pub use raster::{
 };
 pub use reading::{
     POSES_PER_VISIT, READING_PX, REVIEW_ROUNDS, Reading, ReadingMove, ReadingProgress, ReadingRun,
-    ReadingStep, Scene, Visit, read_both_ways,
+    ReadingStep, Scene, Visit, patch_pose, read_both_ways,
 };
 pub use rgba::Rgba;
 pub use scout::{ScoutCanvas, ScoutMesh, ScoutOrbit, ScoutProjection, scout_image};

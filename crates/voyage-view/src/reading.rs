@@ -326,11 +326,7 @@ impl ReadingRun {
         Ok(())
     }
 
-    /// A visit to `patch`: the first of its poses ([`viewing_poses`], at most
-    /// [`POSES_PER_VISIT`]) whose frame shows something new, marked; else the first pose,
-    /// showing nothing; None where no pose sees it. A pose whose pick meets the patch can
-    /// still show nothing the reading counts (on `ctc/prone-tagged` with faster glides, a
-    /// 5 500 mm² patch of the ascending colon was visited from the same pose in 23 rounds).
+    /// A visit to `patch` ([`patch_pose`]), what it shows marked.
     fn visit(
         &mut self,
         mesh: &CellMesh,
@@ -338,15 +334,11 @@ impl ReadingRun {
         patch: &Patch,
         lumen: &Lumen,
     ) -> (Option<Pose>, f64) {
-        let mut first = None;
-        for pose in viewing_poses(patch, mesh, lumen, &self.options).take(POSES_PER_VISIT) {
-            first.get_or_insert(pose);
-            let shown = self.reader.show(mesh, cells, pose, &mut self.seen);
-            if shown > 0.0 {
-                return (Some(pose), shown);
-            }
+        let (pose, shown) = patch_pose(&mut self.reader, mesh, cells, patch, lumen, &mut self.seen);
+        if shown > 0.0 {
+            self.reader.mark_drawn(mesh, &mut self.seen);
         }
-        (first, 0.0)
+        (pose, shown)
     }
 
     /// Round `round` of the review: the unseen patches now, largest first (the listed ones
@@ -465,6 +457,32 @@ impl ReadingRun {
             patches: self.visits.into_iter().take(self.listed).collect(),
             visits: total_visits,
         })
+    }
+}
+
+/// Where to look at `patch` from: the first of its poses ([`viewing_poses`], at most
+/// [`POSES_PER_VISIT`]) whose frame through `reader` would newly show something of `seen`,
+/// with that area (mm²), its frame left drawn and unmarked; else the first pose, showing
+/// nothing; None where no pose sees it. A pose whose pick meets the patch can still show
+/// nothing `seen` counts (on `ctc/prone-tagged` with faster glides, a 5 500 mm² patch of the
+/// ascending colon was visited from the same pose in 23 rounds). The review's visits and the
+/// window's "next unseen" both choose here.
+pub fn patch_pose(
+    reader: &mut Reader,
+    mesh: &CellMesh,
+    cells: &voyage_core::Cells,
+    patch: &Patch,
+    lumen: &Lumen,
+    seen: &mut Coverage,
+) -> (Option<Pose>, f64) {
+    let options = *seen.options();
+    let mut poses = viewing_poses(patch, mesh, lumen, &options)
+        .take(POSES_PER_VISIT)
+        .peekable();
+    let first = poses.peek().copied();
+    match reader.first_showing(mesh, cells, poses, seen) {
+        Some((pose, shown)) => (Some(pose), shown),
+        None => (first, 0.0),
     }
 }
 

@@ -8,7 +8,8 @@ use voyage_phantom::{self as phantom, ColonOptions};
 use voyage_view::{
     CellMesh, Coverage, CoverageOptions, GLANCE_EVERY_MM, GLANCE_MIN_MM2, GLANCE_TURN_DEG,
     GLANCE_WAYS, Glances, Lumen, POSES_PER_VISIT, READING_FOV_DEG, Reader, Reading,
-    ReadingProgress, ReadingRun, ReadingStep, glance_turns, read_both_ways, viewing_poses,
+    ReadingProgress, ReadingRun, ReadingStep, glance_turns, patch_pose, read_both_ways,
+    viewing_poses,
 };
 
 fn camera() -> Camera {
@@ -143,6 +144,36 @@ fn check_reading(seed: u64) {
             );
         }
     }
+    // The pose chosen for a patch (the review's visits, the window's "next unseen") shows
+    // what it says it shows, and only once: marked, that area is seen, and the same frame
+    // again shows nothing new.
+    let mut reader = Reader::new(&study.cells, Camera::lens(READING_FOV_DEG), 128, 128);
+    let mut seen = r.two_way.clone();
+    let mut showing = 0;
+    for patch in seen.patches(&mesh).iter().take(10) {
+        let (pose, shown) = patch_pose(&mut reader, &mesh, &study.cells, patch, &lumen, &mut seen);
+        let tried: Vec<Pose> = viewing_poses(patch, &mesh, &lumen, &options)
+            .take(POSES_PER_VISIT)
+            .collect();
+        assert_eq!(pose.is_some(), !tried.is_empty());
+        let Some(pose) = pose.filter(|_| shown > 0.0) else {
+            continue;
+        };
+        showing += 1;
+        assert!(
+            tried.contains(&pose),
+            "seed {seed}: a pose none of its patch's"
+        );
+        let before = seen.seen_mm2();
+        let marked = reader.mark_drawn(&mesh, &mut seen);
+        assert!(
+            (marked - shown).abs() < 1e-6,
+            "seed {seed}: {marked} against {shown} mm²"
+        );
+        assert!((seen.seen_mm2() - before - shown).abs() < 1e-6);
+        assert_eq!(reader.probe(&mesh, &study.cells, pose, &mut seen), 0.0);
+    }
+    assert!(showing > 0, "seed {seed}: no patch is shown by its pose");
     // Every truth polyp of 3 mm or more is seen, most of its head, by the two-way reading
     // or the review.
     for polyp in p.truth.polyps.iter().filter(|q| q.diameter_mm >= 3.0) {

@@ -17,7 +17,7 @@ use voyage_core::{Cells, Study};
 use voyage_nav::{BrickStore, Camera, Pose};
 use voyage_view::{
     CellMesh, Coverage, CoverageOptions, Lumen, Patch, READING_FOV_DEG, Reader, ReadingMove,
-    ReadingRun, ReadingStep, Scene, ScoutMesh, viewing_pose,
+    ReadingRun, ReadingStep, Scene, ScoutMesh, patch_pose,
 };
 
 use super::report::{CoverageReport, ReadingReport};
@@ -240,17 +240,35 @@ impl WindowCoverage {
         Ok(Some(step))
     }
 
-    /// The largest unseen patch of the session that a pose shows (of the [`NEXT_TRIES`]
-    /// largest), with that pose; else the largest, with None. None when nothing is left. Its
-    /// outline is kept for the view.
+    /// The largest unseen patch of the session (of the [`NEXT_TRIES`] largest) with a pose
+    /// whose frame shows some of it ([`patch_pose`], as the reading's review chooses), with
+    /// that pose; else the largest a pose sees, or the largest, with None. None when nothing
+    /// is left. Its outline is kept for the view.
     pub fn next_patch(&mut self, mesh: &CellMesh, study: &Study) -> Option<(Patch, Option<Pose>)> {
         let lumen = Lumen::of(study, self.min_wall_mm);
         let patches = self.session.patches(mesh);
-        let shown = patches.iter().take(NEXT_TRIES).find_map(|p| {
-            viewing_pose(p, mesh, &lumen, self.session.options())
-                .map(|pose| (p.clone(), Some(pose)))
-        });
-        let (patch, pose) = shown.or_else(|| patches.into_iter().next().map(|p| (p, None)))?;
+        let mut seen_from = None;
+        let mut showing = None;
+        for p in patches.iter().take(NEXT_TRIES) {
+            let (pose, shown) = patch_pose(
+                &mut self.reader,
+                mesh,
+                &study.cells,
+                p,
+                &lumen,
+                &mut self.session,
+            );
+            if shown > 0.0 {
+                showing = Some((p.clone(), pose));
+                break;
+            }
+            if seen_from.is_none() && pose.is_some() {
+                seen_from = Some((p.clone(), pose));
+            }
+        }
+        let (patch, pose) = showing
+            .or(seen_from)
+            .or_else(|| patches.into_iter().next().map(|p| (p, None)))?;
         self.outline = patch.outline(mesh);
         Some((patch, pose))
     }
