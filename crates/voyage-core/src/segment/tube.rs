@@ -14,6 +14,11 @@
 //! prone patient and the table, pinched off in one slice from the outside air of the next.
 //! A tube opens into the rectum, and the gas beyond its tip is a colon segment's at least
 //! (checked by the caller).
+//!
+//! Gas round a tube is not the tube: the anal canal's gas round the catheter reaches the
+//! skin too, and its cross-section is a ring round the catheter's plastic. Such gas is the
+//! colon's lowest (the flight starts at the anus, not above the canal), and where the gas of
+//! a followed tube closes round something, the tube lies in the colon's gas: its tip is there.
 
 use glam::DVec3;
 
@@ -25,6 +30,9 @@ use crate::Volume;
 const MAX_AREA_MM2: f64 = 160.0;
 /// A narrow stretch shorter than this (mm) is the bottom of a gas region, not a tube.
 const MIN_LENGTH_MM: f64 = 10.0;
+/// A section of gas that encloses at least this much non-gas (mm²) is gas round something (a
+/// catheter 2 mm across or more, with its wall), not a tube's own air.
+const MIN_CORE_MM2: f64 = 3.0;
 
 /// A rectal tube found in one gas component.
 #[derive(Clone, Debug)]
@@ -136,9 +144,13 @@ fn follow(
     from_edge: bool,
 ) -> Option<Tube> {
     let c = run_comp[start];
-    let max_voxels = (MAX_AREA_MM2 / (spacing[0] * spacing[1])).ceil() as usize;
+    let shape = SectionShape {
+        max_voxels: (MAX_AREA_MM2 / (spacing[0] * spacing[1])).ceil() as usize,
+        min_core_voxels: (MIN_CORE_MM2 / (spacing[0] * spacing[1])).ceil() as usize,
+    };
     let nz = nz as i64;
-    let Section::Narrow(mut blob) = in_slice(runs, run_comp, c, vec![start], max_voxels) else {
+    // Gas round something from the start (the anal canal's round a catheter) is no tube.
+    let Section::Narrow(mut blob) = in_slice(runs, run_comp, c, vec![start], &shape) else {
         return None;
     };
     let entry = centroid(runs, &blob);
@@ -165,9 +177,10 @@ fn follow(
                 })
             })
             .collect();
-        match in_slice(runs, run_comp, c, over, max_voxels) {
+        match in_slice(runs, run_comp, c, over, &shape) {
             Section::Narrow(b) => blob = b,
-            Section::Wide => break,
+            // The tube opens into the rectum, or lies in gas that closes round it.
+            Section::Wide | Section::Around => break,
             // The gas ends: a pocket pinched off the outside air, not a tube.
             Section::Gone => return None,
         }
@@ -190,21 +203,30 @@ fn follow(
 enum Section {
     /// As narrow as a tube: its runs.
     Narrow(Vec<usize>),
+    /// As narrow as a tube, but closed round non-gas: gas round a catheter.
+    Around,
     /// Wider than a tube.
     Wide,
     /// No gas.
     Gone,
 }
 
+/// What a tube's section may be, in voxels of a slice: at most `max_voxels` of gas, and
+/// closed round fewer than `min_core_voxels` of anything else.
+struct SectionShape {
+    max_voxels: usize,
+    min_core_voxels: usize,
+}
+
 /// The runs of component `c` joined to `seeds` within their slice (rows next to each other,
-/// overlapping); wide when they hold more than `max_voxels` (the rectum, or the gas the
-/// tube opens into).
+/// overlapping); wide when they hold more than the shape's voxels (the rectum, or the gas the
+/// tube opens into), round something when they enclose its core.
 fn in_slice(
     runs: &Runs,
     run_comp: &[u32],
     c: u32,
     mut stack: Vec<usize>,
-    max_voxels: usize,
+    shape: &SectionShape,
 ) -> Section {
     stack.sort_unstable();
     stack.dedup();
@@ -214,7 +236,7 @@ fn in_slice(
     while let Some(r) = stack.pop() {
         let run = runs.runs[r];
         voxels += (run.x1 - run.x0) as usize;
-        if voxels > max_voxels {
+        if voxels > shape.max_voxels {
             return Section::Wide;
         }
         out.push(r);
@@ -237,9 +259,42 @@ fn in_slice(
     }
     if out.is_empty() {
         Section::Gone
+    } else if enclosed(runs, &out) >= shape.min_core_voxels {
+        Section::Around
     } else {
         Section::Narrow(out)
     }
+}
+
+/// Voxels of the slice that runs `rs` (of one slice) close round: not in them, and not
+/// reached from outside their box without crossing them.
+fn enclosed(runs: &Runs, rs: &[usize]) -> usize {
+    let rows = || rs.iter().map(|&r| (row_of(runs, r).0, runs.runs[r]));
+    let (j0, j1) = rows().fold((usize::MAX, 0), |(a, b), (j, _)| (a.min(j), b.max(j)));
+    let (x0, x1) = rows().fold((u32::MAX, 0), |(a, b), (_, r)| (a.min(r.x0), b.max(r.x1)));
+    // The box with a free border, so that everything outside the runs joins up round them.
+    let (w, h) = ((x1 - x0) as usize + 2, j1 - j0 + 3);
+    let mut cell = vec![0u8; w * h]; // 0 free, 1 gas, 2 reached from outside
+    for (j, r) in rows() {
+        let row = (j - j0 + 1) * w;
+        cell[row + (r.x0 - x0) as usize + 1..row + (r.x1 - x0) as usize + 1].fill(1);
+    }
+    // The rest is joined 8-connected: the dual of gas joined 4-connected, so that a gap
+    // between two runs that only touch at a corner is no enclosure.
+    let mut stack = vec![(0usize, 0usize)];
+    cell[0] = 2;
+    while let Some((x, y)) = stack.pop() {
+        for ny in y.saturating_sub(1)..=(y + 1).min(h - 1) {
+            for nx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
+                let n = ny * w + nx;
+                if cell[n] == 0 {
+                    cell[n] = 2;
+                    stack.push((nx, ny));
+                }
+            }
+        }
+    }
+    cell.iter().filter(|&&v| v == 0).count()
 }
 
 /// Mean voxel position (volume indices) of some runs.
@@ -269,4 +324,155 @@ pub(super) fn inferior_slice(vol: &Volume<i16>) -> Option<usize> {
         return None;
     }
     Some(if along.z < 0.0 { nz - 1 } else { 0 })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::runs::Run;
+    use super::*;
+
+    const DIMS: [usize; 3] = [40, 40, 70];
+    const SPACING: [f64; 3] = [0.75, 0.75, 1.0];
+    /// Body from this slice up; below it, the air outside.
+    const SKIN_K: usize = 5;
+    /// The rectum's gas from this slice up.
+    const RECTUM_K: usize = 45;
+    /// The catheter's tip, in the rectum.
+    const TIP_K: usize = 55;
+
+    /// What a voxel is, by its distance (voxels) from the catheter's axis in its slice.
+    #[derive(Clone, Copy, PartialEq, Debug)]
+    enum Kind {
+        Outside,
+        Gas,
+        Tissue,
+    }
+
+    /// A catheter from the scan's inferior edge up into the rectum (its air channel 2.5
+    /// voxels in radius, its plastic to 4), through a canal of gas round it from the skin
+    /// to the rectum (to 7 voxels) unless `canal_gas` is off; the plastic open from the
+    /// canal's gas on one side over `open_k` when given.
+    fn kind(i: usize, j: usize, k: usize, canal_gas: bool, open_k: Option<[usize; 2]>) -> Kind {
+        let (dx, dy) = (i as f64 - 20.0, j as f64 - 20.0);
+        let r = dx.hypot(dy);
+        let catheter = k < TIP_K;
+        let open = open_k.is_some_and(|[a, b]| (a..b).contains(&k)) && dx > 0.0 && dy.abs() < 1.5;
+        if catheter && r <= 2.5 {
+            Kind::Gas
+        } else if catheter && r <= 4.0 && !open {
+            Kind::Tissue
+        } else if k < SKIN_K {
+            Kind::Outside
+        } else if k >= RECTUM_K && r <= 16.0 {
+            Kind::Gas
+        } else if canal_gas && r <= 7.0 {
+            Kind::Gas
+        } else {
+            Kind::Tissue
+        }
+    }
+
+    /// The runs of gas and outside air, whether each is inside the body, and each one's
+    /// component (all the body's gas is one; outside air is none).
+    fn scene(canal_gas: bool, open_k: Option<[usize; 2]>) -> (Runs, Vec<bool>, Vec<u32>) {
+        let [nx, ny, nz] = DIMS;
+        let mut runs = Runs {
+            runs: Vec::new(),
+            row_start: vec![0],
+            hu_sum: Vec::new(),
+            dark: Vec::new(),
+            ny,
+        };
+        let (mut inside, mut comp) = (Vec::new(), Vec::new());
+        for k in 0..nz {
+            for j in 0..ny {
+                let mut i = 0;
+                while i < nx {
+                    let what = kind(i, j, k, canal_gas, open_k);
+                    let x0 = i;
+                    while i < nx && kind(i, j, k, canal_gas, open_k) == what {
+                        i += 1;
+                    }
+                    if what == Kind::Tissue {
+                        continue;
+                    }
+                    runs.runs.push(Run {
+                        x0: x0 as u32,
+                        x1: i as u32,
+                    });
+                    runs.hu_sum.push(0);
+                    runs.dark.push(0);
+                    inside.push(what == Kind::Gas);
+                    comp.push(if what == Kind::Gas { 0 } else { u32::MAX });
+                }
+                runs.row_start.push(runs.runs.len() as u32);
+            }
+        }
+        (runs, inside, comp)
+    }
+
+    /// The largest distance (voxels) of the tube's runs from the catheter's axis, and its
+    /// tip's slice.
+    fn tube_of(canal_gas: bool, open_k: Option<[usize; 2]>) -> (f64, f64) {
+        let (runs, inside, comp) = scene(canal_gas, open_k);
+        let tubes = find(&runs, &inside, &comp, |c| c == 0, DIMS, SPACING, Some(0));
+        assert_eq!(tubes.len(), 1, "{tubes:?}");
+        let t = &tubes[0];
+        let reach = t
+            .runs
+            .iter()
+            .map(|&r| {
+                let (j, _) = row_of(&runs, r);
+                let run = runs.runs[r];
+                [run.x0 as f64, run.x1 as f64 - 1.0]
+                    .map(|x| (x - 20.0).hypot(j as f64 - 20.0))
+                    .into_iter()
+                    .fold(0.0, f64::max)
+            })
+            .fold(0.0, f64::max);
+        (reach, t.tip[2])
+    }
+
+    #[test]
+    fn the_catheter_is_the_tube_and_the_canal_gas_round_it_is_not() {
+        // Without gas round it, the catheter's air is followed up to where it opens.
+        let (reach, tip) = tube_of(false, None);
+        assert!(reach <= 2.5 && tip >= (TIP_K - 2) as f64, "{reach} {tip}");
+        // The canal's gas reaches the skin, and is found first: it closes round the
+        // catheter, so it is not followed as a tube; the catheter is.
+        let (reach, tip) = tube_of(true, None);
+        assert!(
+            reach <= 2.5,
+            "the tube takes gas {reach} voxels from its axis"
+        );
+        assert!(tip >= (TIP_K - 2) as f64, "the tube ends at slice {tip}");
+        // Where the plastic is open to the canal's gas, the catheter lies in the colon's gas:
+        // the tube ends there.
+        let (reach, tip) = tube_of(true, Some([20, 25]));
+        assert!(
+            reach <= 2.5,
+            "the tube takes gas {reach} voxels from its axis"
+        );
+        assert!((18.0..20.0).contains(&tip), "the tube ends at slice {tip}");
+    }
+
+    #[test]
+    fn a_section_encloses_what_it_closes_round() {
+        // A ring of gas round 3×3 voxels of something else, and a C open at a corner.
+        let (runs, _, _) = scene(true, None);
+        let section = |k: usize| -> Vec<usize> {
+            (0..DIMS[1])
+                .flat_map(|j| runs.row(j, k))
+                .filter(|&r| {
+                    let (j, _) = row_of(&runs, r);
+                    let x = runs.runs[r].x0 as f64;
+                    (x - 20.0).hypot(j as f64 - 20.0) > 3.0
+                })
+                .collect()
+        };
+        // The canal's ring closes round the catheter: its plastic and its air.
+        let ring = section(30);
+        let core = enclosed(&runs, &ring);
+        assert!((40..=60).contains(&core), "{core} voxels enclosed");
+    }
 }
