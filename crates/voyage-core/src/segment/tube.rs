@@ -363,9 +363,7 @@ mod tests {
             Kind::Tissue
         } else if k < SKIN_K {
             Kind::Outside
-        } else if k >= RECTUM_K && r <= 16.0 {
-            Kind::Gas
-        } else if canal_gas && r <= 7.0 {
+        } else if (k >= RECTUM_K && r <= 16.0) || (canal_gas && r <= 7.0) {
             Kind::Gas
         } else {
             Kind::Tissue
