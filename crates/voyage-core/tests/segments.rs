@@ -335,6 +335,68 @@ fn the_rectal_tube_is_not_colon_and_the_rectum_starts_at_its_tip() {
     }
 }
 
+/// A rectal catheter through an anal canal held open by gas round it, down to the anus: the
+/// catheter's air is the tube, the canal's gas round it is colon (the colon's lowest gas is at
+/// the anus), not a second tube nor part of the first. At full size only: in the coarse
+/// phantom (1.5 mm voxels) the catheter's 1.1 mm plastic leaves gaps all along, its air and
+/// the canal's are one, and the two are taken as the tube together, as before.
+#[test]
+fn gas_round_the_catheter_in_the_anal_canal_is_colon_and_the_catheter_is_the_tube() {
+    let p = phantom::colon(&ColonOptions {
+        rectal_tube: true,
+        anal_canal: true,
+        ..ColonOptions::default()
+    })
+    .unwrap();
+    let g = p.ct.geometry();
+    let s = segment(&p.ct, &SegmentOptions::default()).unwrap();
+    let tubes: Vec<_> = s
+        .segments
+        .iter()
+        .filter(|x| x.kind == voyage_core::ComponentKind::RectalTube)
+        .collect();
+    assert_eq!(tubes.len(), 1, "{:?}", s.segments);
+    assert!(!tubes[0].kept);
+    let skin = p.truth.body_floor_z_mm.expect("a floor with a tube");
+    let canal_top = skin + 0.8 * phantom::colon::CANAL_MM;
+    // The canal's gas (below the rectum) is in the lumen, and the catheter's air is not.
+    let (mut canal, mut canal_in, mut tube, mut tube_in) = (0, 0, 0, 0);
+    let [nx, ny, _] = p.ct.dims();
+    for (v, (&lab, &l)) in p.labels.data().iter().zip(s.lumen.data()).enumerate() {
+        if lab == phantom::label::RECTAL_TUBE {
+            tube += 1;
+            tube_in += usize::from(l != 0);
+        } else if lab == phantom::label::LUMEN_AIR {
+            let ijk = [v % nx, (v / nx) % ny, v / (nx * ny)].map(|x| x as f64);
+            if g.index_to_local(DVec3::from_array(ijk)).z < canal_top {
+                canal += 1;
+                canal_in += usize::from(l != 0);
+            }
+        }
+    }
+    assert!(canal > 1000, "{canal} canal voxels");
+    assert!(
+        canal_in as f64 >= 0.9 * canal as f64,
+        "{canal_in} of the canal's {canal} gas voxels in the lumen"
+    );
+    assert!(
+        tube_in as f64 <= 0.02 * tube as f64,
+        "{tube_in} of {tube} tube voxels in the lumen"
+    );
+    // The colon's lowest gas is at the anus, not above the canal.
+    let lowest = g.index_to_local(DVec3::from_array(s.seed_voxel.map(|x| x as f64)));
+    let anus = p
+        .truth
+        .rectal_tube
+        .as_ref()
+        .and_then(|t| t.anus_mm)
+        .unwrap();
+    assert!(
+        lowest.z < skin + 5.0,
+        "the colon's lowest gas at {lowest}, the anus at {anus:?}"
+    );
+}
+
 /// A collapsed descending colon at full size: the sigmoid's loop passes 15 mm under the
 /// transverse colon, nearer than the collapsed stretch is long, yet the chain joins the two
 /// stumps of the collapse, not the loop's middle to the transverse (which left 600 mm of the

@@ -27,15 +27,24 @@ pub(crate) struct Frame {
 
 impl Frame {
     pub(crate) fn new(small: bool) -> Result<Frame> {
+        Frame::reaching_below(small, 0.0)
+    }
+
+    /// The frame whose volume reaches `below_mm` (full size) further down than the usual
+    /// one's first slice: the anatomy lies as high above it.
+    pub(crate) fn reaching_below(small: bool, below_mm: f64) -> Result<Frame> {
         let (dims, spacing, scale) = if small {
             (SMALL_DIMS, SMALL_SPACING, SMALL_SCALE)
         } else {
             (FULL_DIMS, FULL_SPACING, 1.0)
         };
-        let geom = Geometry::new(dims, spacing, [0.0; 3])?;
+        let usual = Geometry::new(dims, spacing, [0.0; 3])?;
         let full = Geometry::new(FULL_DIMS, FULL_SPACING, [0.0; 3])?;
         let ext = |g: &Geometry| g.extent_mm() - g.spacing_vec();
-        let offset = (ext(&geom) - ext(&full) * scale) * 0.5;
+        let extra = (below_mm * scale / spacing[2]).round() as usize;
+        let geom = Geometry::new([dims[0], dims[1], dims[2] + extra], spacing, [0.0; 3])?;
+        let offset =
+            (ext(&usual) - ext(&full) * scale) * 0.5 + DVec3::Z * (extra as f64 * spacing[2]);
         Ok(Frame {
             geom,
             scale,

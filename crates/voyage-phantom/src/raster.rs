@@ -214,7 +214,7 @@ impl<B: Background> Scene<'_, B> {
         }
         let mut catheter = vec![false; nbricks];
         if let Some(c) = self.catheter {
-            let reach = c.outer_radius() + margin;
+            let reach = c.reach() + margin;
             for w in c.points.windows(2) {
                 let Some((a, b)) =
                     self.brick_range(w[0].min(w[1]) - reach, w[0].max(w[1]) + reach, nb)
@@ -482,6 +482,15 @@ impl<B: Background> Scene<'_, B> {
             };
         }
         if let Some(c) = self.catheter.filter(|_| b.catheter) {
+            // An anal canal's gas round it is the colon's lowest lumen.
+            let canal = c.canal_sdf(p);
+            if canal < 0.5 / inv_w {
+                let cg = ramp(canal, inv_w);
+                hu = cg * m.lumen_air + (1.0 - cg) * hu;
+                if canal < 0.0 {
+                    (lum, lab) = (1, label::LUMEN_AIR);
+                }
+            }
             // The catheter displaces whatever is there: colon content, wall, tissue, outside
             // air. Its air is not colon lumen.
             let (air, plastic) = c.sdfs(p);

@@ -222,6 +222,9 @@ pub struct RectalTubeTruth {
     pub outer_radius_mm: f64,
     /// HU of its plastic wall.
     pub wall_hu: f64,
+    /// Where the anal canal's gas round it opens in the skin (`anal_canal`): the anus.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub anus_mm: Option<[f64; 3]>,
 }
 
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]

@@ -527,11 +527,37 @@ pub struct Catheter {
     pub wall_mm: f64,
     /// HU of the plastic.
     pub hu: f64,
+    /// Gas round its lower part, if an anal canal is held open round it.
+    pub canal: Option<Canal>,
+}
+
+/// The gas of an anal canal held open round a catheter: within `radius` of its axis, from
+/// the skin (`floor`) up to the rectum (`top`), heights in mm.
+#[derive(Clone, Copy, Debug)]
+pub struct Canal {
+    pub radius: f64,
+    pub floor: f64,
+    pub top: f64,
 }
 
 impl Catheter {
     pub fn outer_radius(&self) -> f64 {
         self.inner_radius + self.wall_mm
+    }
+
+    /// How far from its axis it changes the scene: its plastic, or its canal's gas.
+    pub fn reach(&self) -> f64 {
+        self.canal
+            .map_or(self.outer_radius(), |c| c.radius.max(self.outer_radius()))
+    }
+
+    /// Signed distance (negative inside) to its canal's gas; infinite without one.
+    pub fn canal_sdf(&self, p: DVec3) -> f64 {
+        self.canal.map_or(f64::INFINITY, |c| {
+            (self.distance(p) - c.radius)
+                .max(p.z - c.top)
+                .max(c.floor - p.z)
+        })
     }
 
     /// Distance from `p` to the axis.

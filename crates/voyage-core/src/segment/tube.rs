@@ -149,7 +149,7 @@ fn follow(
         min_core_voxels: (MIN_CORE_MM2 / (spacing[0] * spacing[1])).ceil() as usize,
     };
     let nz = nz as i64;
-    // Gas round something from the start (the anal canal's round a catheter) is no tube.
+    // Gas round a catheter's air from the start (the anal canal's) is no tube.
     let Section::Narrow(mut blob) = in_slice(runs, run_comp, c, vec![start], &shape) else {
         return None;
     };
@@ -179,7 +179,7 @@ fn follow(
             .collect();
         match in_slice(runs, run_comp, c, over, &shape) {
             Section::Narrow(b) => blob = b,
-            // The tube opens into the rectum, or lies in gas that closes round it.
+            // The tube opens into the rectum (or nothing of it is left but gas round it).
             Section::Wide | Section::Around => break,
             // The gas ends: a pocket pinched off the outside air, not a tube.
             Section::Gone => return None,
@@ -203,7 +203,7 @@ fn follow(
 enum Section {
     /// As narrow as a tube: its runs.
     Narrow(Vec<usize>),
-    /// As narrow as a tube, but closed round non-gas: gas round a catheter.
+    /// As narrow as a tube, but all of it closes round other gas: gas round a catheter.
     Around,
     /// Wider than a tube.
     Wide,
@@ -211,8 +211,9 @@ enum Section {
     Gone,
 }
 
-/// What a tube's section may be, in voxels of a slice: at most `max_voxels` of gas, and
-/// closed round fewer than `min_core_voxels` of anything else.
+/// What a tube's section may be, in voxels of a slice: at most `max_voxels` of gas; a part
+/// that closes round at least `min_core_voxels`, gas of its component among them, is gas
+/// round a catheter, not the tube's own air.
 struct SectionShape {
     max_voxels: usize,
     min_core_voxels: usize,
@@ -220,81 +221,127 @@ struct SectionShape {
 
 /// The runs of component `c` joined to `seeds` within their slice (rows next to each other,
 /// overlapping); wide when they hold more than the shape's voxels (the rectum, or the gas the
-/// tube opens into), round something when they enclose its core.
+/// tube opens into). Of the parts the seeds reach, those that close round the component's
+/// other gas (the anal canal's gas round a catheter's air) are left out: round something
+/// when that leaves none.
 fn in_slice(
     runs: &Runs,
     run_comp: &[u32],
     c: u32,
-    mut stack: Vec<usize>,
+    mut seeds: Vec<usize>,
     shape: &SectionShape,
 ) -> Section {
-    stack.sort_unstable();
-    stack.dedup();
-    let mut seen = stack.clone();
+    seeds.sort_unstable();
+    seeds.dedup();
+    let mut seen: Vec<usize> = Vec::new();
     let mut voxels = 0usize;
-    let mut out = Vec::new();
-    while let Some(r) = stack.pop() {
-        let run = runs.runs[r];
-        voxels += (run.x1 - run.x0) as usize;
-        if voxels > shape.max_voxels {
-            return Section::Wide;
+    let mut parts: Vec<Vec<usize>> = Vec::new();
+    for seed in seeds {
+        if seen.contains(&seed) {
+            continue;
         }
-        out.push(r);
-        let (j, k) = row_of(runs, r);
-        for jj in [j.wrapping_sub(1), j + 1] {
-            if jj >= runs.ny {
-                continue;
+        seen.push(seed);
+        let mut stack = vec![seed];
+        let mut part = Vec::new();
+        while let Some(r) = stack.pop() {
+            let run = runs.runs[r];
+            voxels += (run.x1 - run.x0) as usize;
+            if voxels > shape.max_voxels {
+                return Section::Wide;
             }
-            for q in runs.row(jj, k) {
-                if run_comp[q] == c
-                    && runs.runs[q].x0 < run.x1
-                    && run.x0 < runs.runs[q].x1
-                    && !seen.contains(&q)
-                {
-                    seen.push(q);
-                    stack.push(q);
+            part.push(r);
+            let (j, k) = row_of(runs, r);
+            for jj in [j.wrapping_sub(1), j + 1] {
+                if jj >= runs.ny {
+                    continue;
+                }
+                for q in runs.row(jj, k) {
+                    if run_comp[q] == c
+                        && runs.runs[q].x0 < run.x1
+                        && run.x0 < runs.runs[q].x1
+                        && !seen.contains(&q)
+                    {
+                        seen.push(q);
+                        stack.push(q);
+                    }
                 }
             }
         }
+        parts.push(part);
     }
-    if out.is_empty() {
-        Section::Gone
-    } else if enclosed(runs, &out) >= shape.min_core_voxels {
+    if parts.is_empty() {
+        return Section::Gone;
+    }
+    let own: Vec<usize> = parts
+        .into_iter()
+        .filter(|p| !closes_round_gas(runs, run_comp, c, p, shape.min_core_voxels))
+        .flatten()
+        .collect();
+    if own.is_empty() {
         Section::Around
     } else {
-        Section::Narrow(out)
+        Section::Narrow(own)
     }
 }
 
-/// Voxels of the slice that runs `rs` (of one slice) close round: not in them, and not
-/// reached from outside their box without crossing them.
-fn enclosed(runs: &Runs, rs: &[usize]) -> usize {
-    let rows = || rs.iter().map(|&r| (row_of(runs, r).0, runs.runs[r]));
-    let (j0, j1) = rows().fold((usize::MAX, 0), |(a, b), (j, _)| (a.min(j), b.max(j)));
+/// Whether the runs `part` (of one slice, joined) close round at least `min_core` voxels of
+/// the slice, gas of component `c` among them: a ring of gas round a catheter and its air.
+fn closes_round_gas(
+    runs: &Runs,
+    run_comp: &[u32],
+    c: u32,
+    part: &[usize],
+    min_core: usize,
+) -> bool {
+    let rows = || part.iter().map(|&r| (row_of(runs, r), runs.runs[r]));
+    let (j0, j1) = rows().fold((usize::MAX, 0), |(a, b), ((j, _), _)| (a.min(j), b.max(j)));
     let (x0, x1) = rows().fold((u32::MAX, 0), |(a, b), (_, r)| (a.min(r.x0), b.max(r.x1)));
-    // The box with a free border, so that everything outside the runs joins up round them.
+    let k = row_of(runs, part[0]).1;
+    // The box with a free border, so that everything outside the part joins up round it.
     let (w, h) = ((x1 - x0) as usize + 2, j1 - j0 + 3);
-    let mut cell = vec![0u8; w * h]; // 0 free, 1 gas, 2 reached from outside
-    for (j, r) in rows() {
+    let mut cell = vec![FREE; w * h];
+    for ((j, _), r) in rows() {
         let row = (j - j0 + 1) * w;
-        cell[row + (r.x0 - x0) as usize + 1..row + (r.x1 - x0) as usize + 1].fill(1);
+        cell[row + (r.x0 - x0) as usize + 1..row + (r.x1 - x0) as usize + 1].fill(PART);
     }
-    // The rest is joined 8-connected: the dual of gas joined 4-connected, so that a gap
-    // between two runs that only touch at a corner is no enclosure.
+    reach_from_border(&mut cell, w, h);
+    if cell.iter().filter(|&&v| v == FREE).count() < min_core {
+        return false;
+    }
+    (j0..=j1).any(|j| {
+        let row = (j - j0 + 1) * w;
+        runs.row(j, k)
+            .filter(|&q| run_comp[q] == c && !part.contains(&q))
+            .any(|q| {
+                let r = runs.runs[q];
+                let (a, b) = (r.x0.max(x0), r.x1.min(x1));
+                (a..b).any(|x| cell[row + (x - x0) as usize + 1] == FREE)
+            })
+    })
+}
+
+/// Cells of [`closes_round_gas`]'s box: free, the part's gas, reached from the border.
+const FREE: u8 = 0;
+const PART: u8 = 1;
+const OUT: u8 = 2;
+
+/// Marks the free cells reached from the box's corner, 8-connected: the dual of gas joined
+/// 4-connected, so that a gap between two runs that only touch at a corner is no enclosure.
+/// What stays free is enclosed.
+fn reach_from_border(cell: &mut [u8], w: usize, h: usize) {
     let mut stack = vec![(0usize, 0usize)];
-    cell[0] = 2;
+    cell[0] = OUT;
     while let Some((x, y)) = stack.pop() {
         for ny in y.saturating_sub(1)..=(y + 1).min(h - 1) {
             for nx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
                 let n = ny * w + nx;
-                if cell[n] == 0 {
-                    cell[n] = 2;
+                if cell[n] == FREE {
+                    cell[n] = OUT;
                     stack.push((nx, ny));
                 }
             }
         }
     }
-    cell.iter().filter(|&&v| v == 0).count()
 }
 
 /// Mean voxel position (volume indices) of some runs.
@@ -409,19 +456,20 @@ mod tests {
         (runs, inside, comp)
     }
 
-    /// The largest distance (voxels) of the tube's runs from the catheter's axis, and its
-    /// tip's slice.
+    /// The largest distance (voxels) of the tube's runs from the catheter's axis, outside
+    /// the slices `open_k`, and its tip's slice.
     fn tube_of(canal_gas: bool, open_k: Option<[usize; 2]>) -> (f64, f64) {
         let (runs, inside, comp) = scene(canal_gas, open_k);
         let tubes = find(&runs, &inside, &comp, |c| c == 0, DIMS, SPACING, Some(0));
         assert_eq!(tubes.len(), 1, "{tubes:?}");
         let t = &tubes[0];
+        let open = |k: usize| open_k.is_some_and(|[a, b]| (a..b).contains(&k));
         let reach = t
             .runs
             .iter()
-            .map(|&r| {
-                let (j, _) = row_of(&runs, r);
-                let run = runs.runs[r];
+            .map(|&r| (row_of(&runs, r), runs.runs[r]))
+            .filter(|&((_, k), _)| !open(k))
+            .map(|((j, _), run)| {
                 [run.x0 as f64, run.x1 as f64 - 1.0]
                     .map(|x| (x - 20.0).hypot(j as f64 - 20.0))
                     .into_iter()
@@ -437,40 +485,52 @@ mod tests {
         let (reach, tip) = tube_of(false, None);
         assert!(reach <= 2.5 && tip >= (TIP_K - 2) as f64, "{reach} {tip}");
         // The canal's gas reaches the skin, and is found first: it closes round the
-        // catheter, so it is not followed as a tube; the catheter is.
+        // catheter's air, so it is not followed as a tube; the catheter is.
         let (reach, tip) = tube_of(true, None);
         assert!(
             reach <= 2.5,
             "the tube takes gas {reach} voxels from its axis"
         );
         assert!(tip >= (TIP_K - 2) as f64, "the tube ends at slice {tip}");
-        // Where the plastic is open to the canal's gas, the catheter lies in the colon's gas:
-        // the tube ends there.
+        // Where the plastic is open to the canal's gas, the two are one; above, the tube is
+        // the catheter's air again.
         let (reach, tip) = tube_of(true, Some([20, 25]));
         assert!(
             reach <= 2.5,
             "the tube takes gas {reach} voxels from its axis"
         );
-        assert!((18.0..20.0).contains(&tip), "the tube ends at slice {tip}");
+        assert!(tip >= (TIP_K - 2) as f64, "the tube ends at slice {tip}");
     }
 
     #[test]
-    fn a_section_encloses_what_it_closes_round() {
-        // A ring of gas round 3×3 voxels of something else, and a C open at a corner.
-        let (runs, _, _) = scene(true, None);
-        let section = |k: usize| -> Vec<usize> {
+    fn gas_round_the_catheters_air_is_told_from_its_air() {
+        let (runs, _, comp) = scene(true, None);
+        let part = |k: usize, round: bool| -> Vec<usize> {
             (0..DIMS[1])
                 .flat_map(|j| runs.row(j, k))
                 .filter(|&r| {
                     let (j, _) = row_of(&runs, r);
                     let x = runs.runs[r].x0 as f64;
-                    (x - 20.0).hypot(j as f64 - 20.0) > 3.0
+                    ((x - 20.0).hypot(j as f64 - 20.0) > 3.0) == round
                 })
                 .collect()
         };
-        // The canal's ring closes round the catheter: its plastic and its air.
-        let ring = section(30);
-        let core = enclosed(&runs, &ring);
-        assert!((40..=60).contains(&core), "{core} voxels enclosed");
+        let core = (MIN_CORE_MM2 / (SPACING[0] * SPACING[1])).ceil() as usize;
+        assert!(closes_round_gas(&runs, &comp, 0, &part(30, true), core));
+        assert!(!closes_round_gas(&runs, &comp, 0, &part(30, false), core));
+        // Round the catheter's plastic alone (its air not gas of the component), it is no
+        // ring round gas.
+        let no_air: Vec<u32> = (0..comp.len())
+            .map(|r| {
+                let (j, _) = row_of(&runs, r);
+                let x = runs.runs[r].x0 as f64;
+                if (x - 20.0).hypot(j as f64 - 20.0) <= 3.0 {
+                    u32::MAX
+                } else {
+                    comp[r]
+                }
+            })
+            .collect();
+        assert!(!closes_round_gas(&runs, &no_air, 0, &part(30, true), core));
     }
 }

@@ -5,7 +5,7 @@ use glam::DVec3;
 use crate::{
     axis::{Axis, Knot},
     frame::Frame,
-    tube::{Blob, Catheter, Tube},
+    tube::{Blob, Canal, Catheter, Tube},
 };
 use voyage_core::{Error, Result};
 
@@ -17,6 +17,11 @@ pub(super) const FLOOR_Z: f64 = 4.0;
 const CATHETER_TIP_ARC: f64 = 35.0;
 const CATHETER_OFFSET: f64 = 0.6;
 pub(super) const CATHETER_HU: f64 = 100.0;
+/// Length (full size, mm) of the anal canal the catheter leaves the rectum through when it is
+/// held open by gas (`ColonOptions::anal_canal`): the perineum then lies this much lower.
+pub const CANAL_MM: f64 = 35.0;
+/// Width (full size, mm) of the canal's gas round the catheter's plastic.
+const CANAL_GAS_MM: f64 = 2.5;
 
 /// The rectal catheter (full size: air channel 3 mm in radius, 1 mm plastic wall; kept ≥ a
 /// voxel in the small phantom). Its open tip lies `CATHETER_TIP_ARC` mm up the rectum,
@@ -24,12 +29,14 @@ pub(super) const CATHETER_HU: f64 = 100.0;
 /// lumen), on the side (posterior first, then left, right, anterior) that keeps clear of
 /// the polyps; it runs down beside the axis to the rectum's lower end, bends there and runs
 /// on inferiorly and a little posteriorly (like the anal canal) through the pelvic floor to
-/// its open end half a slice below the perineum's skin, in the outside air.
+/// its open end half a slice below the perineum's skin, in the outside air. With `canal`, gas
+/// round it below the rectum down to the skin holds its anal canal open.
 pub(super) fn make_catheter(
     frame: &Frame,
     tube: &Tube,
     polyps: &[Blob],
     floor: f64,
+    canal: bool,
 ) -> Result<Catheter> {
     let s = frame.scale;
     let ax = &tube.axis;
@@ -56,10 +63,15 @@ pub(super) fn make_catheter(
             inner_radius: inner,
             wall_mm: wall,
             hu: CATHETER_HU,
+            canal: canal.then(|| Canal {
+                radius: inner + wall + frame.thin(CANAL_GAS_MM, 1.5),
+                floor,
+                top: low.z,
+            }),
         };
         let clear = polyps
             .iter()
-            .all(|b| c.distance(b.center) - c.outer_radius() - b.reach() >= frame.max_spacing());
+            .all(|b| c.distance(b.center) - c.reach() - b.reach() >= frame.max_spacing());
         if clear {
             return Ok(c);
         }

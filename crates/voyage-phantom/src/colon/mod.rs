@@ -77,6 +77,7 @@ use super::{
 pub use anatomy::MIN_PART_GAP;
 pub(crate) use anatomy::pair_axes;
 use anatomy::{END_INSET, WALL, check_anatomy, make_axis, make_body, segments};
+pub use catheter::CANAL_MM;
 use catheter::{CATHETER_HU, FLOOR_Z, make_catheter};
 #[doc(hidden)]
 pub use dev::{anatomy_report, free_space_map, loop_room_report};
@@ -98,8 +99,12 @@ pub use super::frame::{FULL_DIMS, FULL_SPACING, SMALL_DIMS, SMALL_SCALE, SMALL_S
 /// Makes the colon phantom.
 pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
     check_options(opts)?;
-    let frame = Frame::new(opts.small)?;
-    let floor = opts.rectal_tube.then(|| frame.pos([0.0, 0.0, FLOOR_Z]).z);
+    // An anal canal takes the perineum down by its length, and the volume with it.
+    let below = if opts.anal_canal { CANAL_MM } else { 0.0 };
+    let frame = Frame::reaching_below(opts.small, below)?;
+    let floor = opts
+        .rectal_tube
+        .then(|| frame.pos([0.0, 0.0, FLOOR_Z - below]).z);
     let gravity = if opts.prone { DVec3::NEG_Y } else { DVec3::Y };
     let mut body = make_body(&frame, opts.lung_bases, floor);
     if opts.table {
@@ -154,7 +159,13 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
     let (mut blobs, polyps): (Vec<Blob>, Vec<PolypTruth>) =
         polyp_specs.iter().map(|sp| place(&tube, sp)).unzip();
     let catheter = if opts.rectal_tube {
-        Some(make_catheter(&frame, &tube, &blobs, floor.unwrap_or(0.0))?)
+        Some(make_catheter(
+            &frame,
+            &tube,
+            &blobs,
+            floor.unwrap_or(0.0),
+            opts.anal_canal,
+        )?)
     } else {
         None
     };
@@ -341,6 +352,10 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
             inner_radius_mm: c.inner_radius,
             outer_radius_mm: c.outer_radius(),
             wall_hu: c.hu,
+            anus_mm: c.canal.map(|k| {
+                let (a, b) = (c.points[c.points.len() - 2], c.points[c.points.len() - 1]);
+                arr(b + (a - b) * ((k.floor - b.z) / (a.z - b.z)))
+            }),
         }),
         body_floor_z_mm: floor,
         table: body.table.as_ref().map(|t| skin::table_truth(t, &body)),
@@ -449,7 +464,7 @@ mod tests {
             frame.thin(WALL, 1.0),
             Ends::Round,
         );
-        let cath = floor.map(|f| make_catheter(&frame, &tube, &[], f).expect("catheter"));
+        let cath = floor.map(|f| make_catheter(&frame, &tube, &[], f, false).expect("catheter"));
         let near = Obstacles {
             tube: &tube,
             blobs: &[],

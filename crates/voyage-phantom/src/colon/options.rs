@@ -37,6 +37,11 @@ pub struct ColonOptions {
     /// A rectal catheter from the lower rectum out of the body through a perineum (the body
     /// then ends 4 mm above the first slice): colon gas joins the air outside in 3D.
     pub rectal_tube: bool,
+    /// With `rectal_tube`: the catheter leaves the rectum through an anal canal
+    /// [`CANAL_MM`](super::CANAL_MM) long (full size) held open by gas round it, down to the
+    /// anus in the perineum's skin, as round a real retention catheter; the volume reaches
+    /// that much further down. The colon's gas then ends at the anus.
+    pub anal_canal: bool,
     /// Lumps of tagged stool (+500..+900 HU, 4–9 mm at full size) on the wall, two in each
     /// of the rectum, sigmoid, descending, transverse and ascending colon, one of each two
     /// mottled with air: colon content, labelled 11, in the truth's `stool`.
@@ -81,6 +86,7 @@ impl Default for ColonOptions {
             narrowed: Vec::new(),
             opacified_small_bowel: false,
             rectal_tube: false,
+            anal_canal: false,
             tagged_stool: false,
             table: false,
             skin_folds: false,
@@ -134,6 +140,11 @@ pub(super) fn check_options(opts: &ColonOptions) -> Result<()> {
         }
         Ok(())
     };
+    if opts.anal_canal && !opts.rectal_tube {
+        return Err(Error::invalid(
+            "an anal canal holds gas round a rectal catheter: ask for the rectal tube too",
+        ));
+    }
     names("collapsed", &opts.collapsed, COLLAPSIBLE)?;
     names("narrowed", &opts.narrowed, COLLAPSIBLE)?;
     names("fluid-filled", &opts.fluid_filled, FILLABLE)

@@ -72,6 +72,11 @@ pub struct PhantomArgs {
     /// (the body then ends in a perineum just above the first slice).
     #[arg(long)]
     pub rectal_tube: bool,
+    /// Colon only, with --rectal-tube: the catheter leaves the rectum through a 35 mm anal
+    /// canal held open by gas round it, down to the anus in the skin (the volume reaches 35 mm
+    /// further down).
+    #[arg(long, requires = "rectal_tube")]
+    pub anal_canal: bool,
     /// Colon only: a CT table under the patient on the dependent side (posterior, or anterior
     /// with --prone): a carbon-fibre shell round a foam core, the skin flat on it over a
     /// contact strip with a wedge of outside air beside it.
@@ -197,6 +202,7 @@ fn colon_options(a: &PhantomArgs) -> ColonOptions {
         narrowed: a.narrowed.clone(),
         opacified_small_bowel: a.opacified_small_bowel,
         rectal_tube: a.rectal_tube,
+        anal_canal: a.anal_canal,
         tagged_stool: a.tagged_stool,
         table: a.table,
         skin_folds: a.skin_folds,
