@@ -16,9 +16,11 @@
 //! (checked by the caller).
 //!
 //! Gas round a tube is not the tube: the anal canal's gas round the catheter reaches the
-//! skin too, and its cross-section is a ring round the catheter's plastic. Such gas is the
-//! colon's lowest (the flight starts at the anus, not above the canal), and where the gas of
-//! a followed tube closes round something, the tube lies in the colon's gas: its tip is there.
+//! skin too, and in a slice it is a ring round the catheter's plastic and air. A part of a
+//! section that closes round other gas of its component is such a ring: it is left out, so
+//! the canal's gas stays colon (the colon's lowest gas is at the anus) and the catheter's
+//! air is followed on inside it. Where the plastic is too thin to show (1.5 mm voxels), the
+//! two are one and are taken together.
 
 use glam::DVec3;
 
