@@ -24,7 +24,7 @@
 
 use glam::DVec3;
 
-use super::runs::{Runs, row_of};
+use super::runs::{Runs, row_of, run_voxels};
 use crate::Volume;
 
 /// A tube's cross-section in an axial slice is at most this (mm²): an inner radius of 6 mm
@@ -32,8 +32,9 @@ use crate::Volume;
 const MAX_AREA_MM2: f64 = 160.0;
 /// A narrow stretch shorter than this (mm) is the bottom of a gas region, not a tube.
 const MIN_LENGTH_MM: f64 = 10.0;
-/// A section of gas that encloses at least this much non-gas (mm²) is gas round something (a
-/// catheter 2 mm across or more, with its wall), not a tube's own air.
+/// A section of gas that closes round at least this much (mm², a catheter 2 mm across or
+/// more with its wall), other gas of its component among it, is gas round a catheter, not a
+/// tube's own air.
 const MIN_CORE_MM2: f64 = 3.0;
 
 /// A rectal tube found in one gas component.
@@ -151,7 +152,8 @@ fn follow(
         min_core_voxels: (MIN_CORE_MM2 / (spacing[0] * spacing[1])).ceil() as usize,
     };
     let nz = nz as i64;
-    // Gas round a catheter's air from the start (the anal canal's) is no tube.
+    // Gas round a catheter's air from the start (the anal canal's) is no tube: the
+    // catheter's own air reaches the skin or the scan's edge too, and is followed from there.
     let Section::Narrow(mut blob) = in_slice(runs, run_comp, c, vec![start], &shape) else {
         return None;
     };
@@ -181,8 +183,14 @@ fn follow(
             .collect();
         match in_slice(runs, run_comp, c, over, &shape) {
             Section::Narrow(b) => blob = b,
-            // The tube opens into the rectum (or nothing of it is left but gas round it).
-            Section::Wide | Section::Around => break,
+            // All the gas over the tube closes round other gas: where that is the tube's own
+            // air (the plastic was open below), the tube goes on in it; else what was
+            // followed was gas round a catheter (a crescent of the canal's at the anus,
+            // closing into a ring), no tube.
+            Section::Around(inner) if same_rows_overlap(runs, &inner, &blob) => blob = inner,
+            Section::Around(_) => return None,
+            // The tube opens into the rectum.
+            Section::Wide => break,
             // The gas ends: a pocket pinched off the outside air, not a tube.
             Section::Gone => return None,
         }
@@ -203,10 +211,10 @@ fn follow(
 
 /// A component's gas in one slice around some runs.
 enum Section {
-    /// As narrow as a tube: its runs.
+    /// As narrow as a tube: its runs (with the gas any ring left out closed round).
     Narrow(Vec<usize>),
-    /// As narrow as a tube, but all of it closes round other gas: gas round a catheter.
-    Around,
+    /// All of it closes round other gas of its component (gas round a catheter): that gas.
+    Around(Vec<usize>),
     /// Wider than a tube.
     Wide,
     /// No gas.
@@ -214,18 +222,22 @@ enum Section {
 }
 
 /// What a tube's section may be, in voxels of a slice: at most `max_voxels` of gas; a part
-/// that closes round at least `min_core_voxels`, gas of its component among them, is gas
-/// round a catheter, not the tube's own air.
+/// that closes round at least `min_core_voxels` (plastic, air, whatever lies inside), gas of
+/// its component among them, is gas round a catheter, not the tube's own air.
 struct SectionShape {
     max_voxels: usize,
     min_core_voxels: usize,
 }
 
+/// A ring round a catheter is left out of a section however wide, up to this many times a
+/// tube's section: beyond, the gas is the rectum's, and the tube opens into it.
+const RING_SPAN: usize = 4;
+
 /// The runs of component `c` joined to `seeds` within their slice (rows next to each other,
 /// overlapping); wide when they hold more than the shape's voxels (the rectum, or the gas the
 /// tube opens into). Of the parts the seeds reach, those that close round the component's
-/// other gas (the anal canal's gas round a catheter's air) are left out: round something
-/// when that leaves none.
+/// other gas (the anal canal's gas round a catheter's air) are left out for the gas they
+/// close round.
 fn in_slice(
     runs: &Runs,
     run_comp: &[u32],
@@ -236,7 +248,7 @@ fn in_slice(
     seeds.sort_unstable();
     seeds.dedup();
     let mut seen: Vec<usize> = Vec::new();
-    let mut voxels = 0usize;
+    let mut reached = 0usize;
     let mut parts: Vec<Vec<usize>> = Vec::new();
     for seed in seeds {
         if seen.contains(&seed) {
@@ -247,8 +259,8 @@ fn in_slice(
         let mut part = Vec::new();
         while let Some(r) = stack.pop() {
             let run = runs.runs[r];
-            voxels += (run.x1 - run.x0) as usize;
-            if voxels > shape.max_voxels {
+            reached += (run.x1 - run.x0) as usize;
+            if reached > RING_SPAN * shape.max_voxels {
                 return Section::Wide;
             }
             part.push(r);
@@ -274,27 +286,50 @@ fn in_slice(
     if parts.is_empty() {
         return Section::Gone;
     }
-    let own: Vec<usize> = parts
-        .into_iter()
-        .filter(|p| !closes_round_gas(runs, run_comp, c, p, shape.min_core_voxels))
-        .flatten()
-        .collect();
-    if own.is_empty() {
-        Section::Around
+    let (mut own, mut inner) = (Vec::new(), Vec::new());
+    for part in parts {
+        let closed = closed_round_gas(runs, run_comp, c, &part, shape.min_core_voxels);
+        if closed.is_empty() {
+            own.extend(part);
+        } else {
+            inner.extend(closed);
+        }
+    }
+    inner.retain(|r| !own.contains(r));
+    inner.sort_unstable();
+    inner.dedup();
+    if run_voxels(runs, &own) + run_voxels(runs, &inner) > shape.max_voxels {
+        Section::Wide
+    } else if own.is_empty() {
+        Section::Around(inner)
     } else {
+        own.extend(inner);
         Section::Narrow(own)
     }
 }
 
-/// Whether the runs `part` (of one slice, joined) close round at least `min_core` voxels of
-/// the slice, gas of component `c` among them: a ring of gas round a catheter and its air.
-fn closes_round_gas(
+/// Whether some run of `a` lies over (same row, overlapping) some run of `b`, in the next
+/// slice or the same.
+fn same_rows_overlap(runs: &Runs, a: &[usize], b: &[usize]) -> bool {
+    a.iter().any(|&p| {
+        let (jp, rp) = (row_of(runs, p).0, runs.runs[p]);
+        b.iter().any(|&q| {
+            let (jq, rq) = (row_of(runs, q).0, runs.runs[q]);
+            jp == jq && rp.x0 < rq.x1 && rq.x0 < rp.x1
+        })
+    })
+}
+
+/// The runs of component `c` (other than `part`'s) that the runs `part` (of one slice,
+/// joined) close round, when they close round at least `min_core` voxels of the slice: a
+/// ring of gas round a catheter and its air. Empty when they close round no such gas.
+fn closed_round_gas(
     runs: &Runs,
     run_comp: &[u32],
     c: u32,
     part: &[usize],
     min_core: usize,
-) -> bool {
+) -> Vec<usize> {
     let rows = || part.iter().map(|&r| (row_of(runs, r), runs.runs[r]));
     let (j0, j1) = rows().fold((usize::MAX, 0), |(a, b), ((j, _), _)| (a.min(j), b.max(j)));
     let (x0, x1) = rows().fold((u32::MAX, 0), |(a, b), (_, r)| (a.min(r.x0), b.max(r.x1)));
@@ -308,21 +343,22 @@ fn closes_round_gas(
     }
     reach_from_border(&mut cell, w, h);
     if cell.iter().filter(|&&v| v == FREE).count() < min_core {
-        return false;
+        return Vec::new();
     }
-    (j0..=j1).any(|j| {
-        let row = (j - j0 + 1) * w;
-        runs.row(j, k)
-            .filter(|&q| run_comp[q] == c && !part.contains(&q))
-            .any(|q| {
-                let r = runs.runs[q];
-                let (a, b) = (r.x0.max(x0), r.x1.min(x1));
-                (a..b).any(|x| cell[row + (x - x0) as usize + 1] == FREE)
-            })
-    })
+    (j0..=j1)
+        .flat_map(|j| runs.row(j, k).map(move |q| (j, q)))
+        .filter(|&(j, q)| {
+            let r = runs.runs[q];
+            let row = (j - j0 + 1) * w;
+            run_comp[q] == c
+                && !part.contains(&q)
+                && (r.x0.max(x0)..r.x1.min(x1)).any(|x| cell[row + (x - x0) as usize + 1] == FREE)
+        })
+        .map(|(_, q)| q)
+        .collect()
 }
 
-/// Cells of [`closes_round_gas`]'s box: free, the part's gas, reached from the border.
+/// Cells of [`closed_round_gas`]'s box: free, the part's gas, reached from the border.
 const FREE: u8 = 0;
 const PART: u8 = 1;
 const OUT: u8 = 2;
@@ -389,7 +425,20 @@ mod tests {
     /// The catheter's tip, in the rectum.
     const TIP_K: usize = 55;
 
-    /// What a voxel is, by its distance (voxels) from the catheter's axis in its slice.
+    /// A catheter up into the rectum (its air channel 2.5 voxels in radius, its plastic to
+    /// 4) from its open end at slice `from_k` (0: the scan's inferior edge; else in the air
+    /// outside), through a canal of gas round it from the skin to the rectum (to 7 voxels)
+    /// when `canal_gas`; the plastic open to the canal's gas on one side over `open_k`; the
+    /// canal's gas only on one side (a crescent) below `crescent_k`.
+    #[derive(Clone, Copy, Default)]
+    struct Catheter {
+        from_k: usize,
+        canal_gas: bool,
+        open_k: Option<[usize; 2]>,
+        crescent_k: Option<usize>,
+    }
+
+    /// What a voxel is.
     #[derive(Clone, Copy, PartialEq, Debug)]
     enum Kind {
         Outside,
@@ -397,116 +446,149 @@ mod tests {
         Tissue,
     }
 
-    /// A catheter from the scan's inferior edge up into the rectum (its air channel 2.5
-    /// voxels in radius, its plastic to 4), through a canal of gas round it from the skin
-    /// to the rectum (to 7 voxels) unless `canal_gas` is off; the plastic open from the
-    /// canal's gas on one side over `open_k` when given.
-    fn kind(i: usize, j: usize, k: usize, canal_gas: bool, open_k: Option<[usize; 2]>) -> Kind {
-        let (dx, dy) = (i as f64 - 20.0, j as f64 - 20.0);
-        let r = dx.hypot(dy);
-        let catheter = k < TIP_K;
-        let open = open_k.is_some_and(|[a, b]| (a..b).contains(&k)) && dx > 0.0 && dy.abs() < 1.5;
-        if catheter && r <= 2.5 {
-            Kind::Gas
-        } else if catheter && r <= 4.0 && !open {
-            Kind::Tissue
-        } else if k < SKIN_K {
-            Kind::Outside
-        } else if (k >= RECTUM_K && r <= 16.0) || (canal_gas && r <= 7.0) {
-            Kind::Gas
-        } else {
-            Kind::Tissue
-        }
-    }
-
-    /// The runs of gas and outside air, whether each is inside the body, and each one's
-    /// component (all the body's gas is one; outside air is none).
-    fn scene(canal_gas: bool, open_k: Option<[usize; 2]>) -> (Runs, Vec<bool>, Vec<u32>) {
-        let [nx, ny, nz] = DIMS;
-        let mut runs = Runs {
-            runs: Vec::new(),
-            row_start: vec![0],
-            hu_sum: Vec::new(),
-            dark: Vec::new(),
-            ny,
-        };
-        let (mut inside, mut comp) = (Vec::new(), Vec::new());
-        for k in 0..nz {
-            for j in 0..ny {
-                let mut i = 0;
-                while i < nx {
-                    let what = kind(i, j, k, canal_gas, open_k);
-                    let x0 = i;
-                    while i < nx && kind(i, j, k, canal_gas, open_k) == what {
-                        i += 1;
-                    }
-                    if what == Kind::Tissue {
-                        continue;
-                    }
-                    runs.runs.push(Run {
-                        x0: x0 as u32,
-                        x1: i as u32,
-                    });
-                    runs.hu_sum.push(0);
-                    runs.dark.push(0);
-                    inside.push(what == Kind::Gas);
-                    comp.push(if what == Kind::Gas { 0 } else { u32::MAX });
-                }
-                runs.row_start.push(runs.runs.len() as u32);
+    impl Catheter {
+        fn kind(&self, i: usize, j: usize, k: usize) -> Kind {
+            let (dx, dy) = (i as f64 - 20.0, j as f64 - 20.0);
+            let r = dx.hypot(dy);
+            let catheter = (self.from_k..TIP_K).contains(&k);
+            let open =
+                self.open_k.is_some_and(|[a, b]| (a..b).contains(&k)) && dx > 0.0 && dy.abs() < 1.5;
+            let canal =
+                self.canal_gas && r <= 7.0 && self.crescent_k.is_none_or(|c| k >= c || dx > 2.0);
+            if catheter && r <= 2.5 {
+                Kind::Gas
+            } else if catheter && r <= 4.0 && !open {
+                Kind::Tissue
+            } else if k < SKIN_K {
+                Kind::Outside
+            } else if (k >= RECTUM_K && r <= 16.0) || canal {
+                Kind::Gas
+            } else {
+                Kind::Tissue
             }
         }
-        (runs, inside, comp)
+
+        /// The runs of gas and outside air, whether each is inside the body, and each one's
+        /// component (all the body's gas is one; outside air is none).
+        fn scene(&self) -> (Runs, Vec<bool>, Vec<u32>) {
+            let [nx, ny, nz] = DIMS;
+            let mut runs = Runs {
+                runs: Vec::new(),
+                row_start: vec![0],
+                hu_sum: Vec::new(),
+                dark: Vec::new(),
+                ny,
+            };
+            let (mut inside, mut comp) = (Vec::new(), Vec::new());
+            for k in 0..nz {
+                for j in 0..ny {
+                    let mut i = 0;
+                    while i < nx {
+                        let what = self.kind(i, j, k);
+                        let x0 = i;
+                        while i < nx && self.kind(i, j, k) == what {
+                            i += 1;
+                        }
+                        if what == Kind::Tissue {
+                            continue;
+                        }
+                        runs.runs.push(Run {
+                            x0: x0 as u32,
+                            x1: i as u32,
+                        });
+                        runs.hu_sum.push(0);
+                        runs.dark.push(0);
+                        inside.push(what == Kind::Gas);
+                        comp.push(if what == Kind::Gas { 0 } else { u32::MAX });
+                    }
+                    runs.row_start.push(runs.runs.len() as u32);
+                }
+            }
+            (runs, inside, comp)
+        }
+
+        /// The tube found: the largest distance (voxels) of its runs from the catheter's axis
+        /// outside the slices `open_k`, its entry's and its tip's slice.
+        fn tube(&self) -> (f64, f64, f64) {
+            let (runs, inside, comp) = self.scene();
+            let edge = (self.from_k == 0).then_some(0);
+            let tubes = find(&runs, &inside, &comp, |c| c == 0, DIMS, SPACING, edge);
+            assert_eq!(tubes.len(), 1, "{tubes:?}");
+            let t = &tubes[0];
+            let open = |k: usize| self.open_k.is_some_and(|[a, b]| (a..b).contains(&k));
+            let reach = t
+                .runs
+                .iter()
+                .map(|&r| (row_of(&runs, r), runs.runs[r]))
+                .filter(|&((_, k), _)| !open(k))
+                .map(|((j, _), run)| {
+                    [run.x0 as f64, run.x1 as f64 - 1.0]
+                        .map(|x| (x - 20.0).hypot(j as f64 - 20.0))
+                        .into_iter()
+                        .fold(0.0, f64::max)
+                })
+                .fold(0.0, f64::max);
+            (reach, t.entry[2], t.tip[2])
+        }
     }
 
-    /// The largest distance (voxels) of the tube's runs from the catheter's axis, outside
-    /// the slices `open_k`, and its tip's slice.
-    fn tube_of(canal_gas: bool, open_k: Option<[usize; 2]>) -> (f64, f64) {
-        let (runs, inside, comp) = scene(canal_gas, open_k);
-        let tubes = find(&runs, &inside, &comp, |c| c == 0, DIMS, SPACING, Some(0));
-        assert_eq!(tubes.len(), 1, "{tubes:?}");
-        let t = &tubes[0];
-        let open = |k: usize| open_k.is_some_and(|[a, b]| (a..b).contains(&k));
-        let reach = t
-            .runs
-            .iter()
-            .map(|&r| (row_of(&runs, r), runs.runs[r]))
-            .filter(|&((_, k), _)| !open(k))
-            .map(|((j, _), run)| {
-                [run.x0 as f64, run.x1 as f64 - 1.0]
-                    .map(|x| (x - 20.0).hypot(j as f64 - 20.0))
-                    .into_iter()
-                    .fold(0.0, f64::max)
-            })
-            .fold(0.0, f64::max);
-        (reach, t.tip[2])
+    /// The tube is the catheter's air from where it enters to its tip, and nothing round it.
+    fn assert_catheter(c: Catheter, what: &str) {
+        let (reach, entry, tip) = c.tube();
+        assert!(
+            reach <= 2.5,
+            "{what}: the tube takes gas {reach} voxels from its axis"
+        );
+        assert!(
+            entry <= (c.from_k + 1) as f64,
+            "{what}: the tube enters at slice {entry}"
+        );
+        assert!(
+            tip >= (TIP_K - 2) as f64,
+            "{what}: the tube ends at slice {tip}"
+        );
     }
 
     #[test]
     fn the_catheter_is_the_tube_and_the_canal_gas_round_it_is_not() {
-        // Without gas round it, the catheter's air is followed up to where it opens.
-        let (reach, tip) = tube_of(false, None);
-        assert!(reach <= 2.5 && tip >= (TIP_K - 2) as f64, "{reach} {tip}");
-        // The canal's gas reaches the skin, and is found first: it closes round the
-        // catheter's air, so it is not followed as a tube; the catheter is.
-        let (reach, tip) = tube_of(true, None);
-        assert!(
-            reach <= 2.5,
-            "the tube takes gas {reach} voxels from its axis"
-        );
-        assert!(tip >= (TIP_K - 2) as f64, "the tube ends at slice {tip}");
-        // Where the plastic is open to the canal's gas, the two are one; above, the tube is
-        // the catheter's air again.
-        let (reach, tip) = tube_of(true, Some([20, 25]));
-        assert!(
-            reach <= 2.5,
-            "the tube takes gas {reach} voxels from its axis"
-        );
-        assert!(tip >= (TIP_K - 2) as f64, "the tube ends at slice {tip}");
+        for from_k in [0, 2] {
+            let c = Catheter {
+                from_k,
+                ..Default::default()
+            };
+            // Without gas round it, the catheter's air is followed up to where it opens.
+            assert_catheter(c, "no canal");
+            // The canal's gas reaches the skin: it closes round the catheter's air, so it is
+            // not followed as a tube; the catheter is.
+            let canal = Catheter {
+                canal_gas: true,
+                ..c
+            };
+            assert_catheter(canal, "canal");
+            // Where the plastic is open to the canal's gas, the two are one; above, the tube
+            // is the catheter's air again.
+            let open = Catheter {
+                open_k: Some([20, 25]),
+                ..canal
+            };
+            assert_catheter(open, "plastic open");
+            // A crescent of the canal's gas at the skin that closes round the catheter
+            // higher up is no tube either.
+            let crescent = Catheter {
+                crescent_k: Some(20),
+                ..canal
+            };
+            assert_catheter(crescent, "crescent");
+        }
     }
 
     #[test]
     fn gas_round_the_catheters_air_is_told_from_its_air() {
-        let (runs, _, comp) = scene(true, None);
+        let c = Catheter {
+            canal_gas: true,
+            ..Default::default()
+        };
+        let (runs, _, comp) = c.scene();
         let part = |k: usize, round: bool| -> Vec<usize> {
             (0..DIMS[1])
                 .flat_map(|j| runs.row(j, k))
@@ -518,8 +600,10 @@ mod tests {
                 .collect()
         };
         let core = (MIN_CORE_MM2 / (SPACING[0] * SPACING[1])).ceil() as usize;
-        assert!(closes_round_gas(&runs, &comp, 0, &part(30, true), core));
-        assert!(!closes_round_gas(&runs, &comp, 0, &part(30, false), core));
+        // The ring closes round the catheter's air, and only that.
+        let inner = closed_round_gas(&runs, &comp, 0, &part(30, true), core);
+        assert_eq!(inner, part(30, false));
+        assert!(closed_round_gas(&runs, &comp, 0, &part(30, false), core).is_empty());
         // Round the catheter's plastic alone (its air not gas of the component), it is no
         // ring round gas.
         let no_air: Vec<u32> = (0..comp.len())
@@ -533,6 +617,6 @@ mod tests {
                 }
             })
             .collect();
-        assert!(!closes_round_gas(&runs, &no_air, 0, &part(30, true), core));
+        assert!(closed_round_gas(&runs, &no_air, 0, &part(30, true), core).is_empty());
     }
 }

@@ -17,8 +17,9 @@ pub(super) const FLOOR_Z: f64 = 4.0;
 const CATHETER_TIP_ARC: f64 = 35.0;
 const CATHETER_OFFSET: f64 = 0.6;
 pub(super) const CATHETER_HU: f64 = 100.0;
-/// Length (full size, mm) of the anal canal the catheter leaves the rectum through when it is
-/// held open by gas (`ColonOptions::anal_canal`): the perineum then lies this much lower.
+/// How much lower (full size, mm) the perineum lies when the catheter's way out is an anal
+/// canal held open by gas (`ColonOptions::anal_canal`): the canal is this long, plus the few
+/// mm of pelvic floor the catheter crosses otherwise.
 pub const CANAL_MM: f64 = 35.0;
 /// Width (full size, mm) of the canal's gas round the catheter's plastic.
 const CANAL_GAS_MM: f64 = 2.5;

@@ -37,10 +37,10 @@ pub struct ColonOptions {
     /// A rectal catheter from the lower rectum out of the body through a perineum (the body
     /// then ends 4 mm above the first slice): colon gas joins the air outside in 3D.
     pub rectal_tube: bool,
-    /// With `rectal_tube`: the catheter leaves the rectum through an anal canal
-    /// [`CANAL_MM`](super::CANAL_MM) long (full size) held open by gas round it, down to the
-    /// anus in the perineum's skin, as round a real retention catheter; the volume reaches
-    /// that much further down. The colon's gas then ends at the anus.
+    /// With `rectal_tube`: the perineum lies [`CANAL_MM`](super::CANAL_MM) lower (full
+    /// size), and the catheter's way from the rectum to the anus in its skin (about 40 mm) is
+    /// held open by gas round it, as an anal canal round a real retention catheter; the volume
+    /// reaches that much further down. The colon's gas then ends at the anus.
     pub anal_canal: bool,
     /// Lumps of tagged stool (+500..+900 HU, 4–9 mm at full size) on the wall, two in each
     /// of the rectum, sigmoid, descending, transverse and ascending colon, one of each two

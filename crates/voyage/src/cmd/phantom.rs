@@ -72,9 +72,9 @@ pub struct PhantomArgs {
     /// (the body then ends in a perineum just above the first slice).
     #[arg(long)]
     pub rectal_tube: bool,
-    /// Colon only, with --rectal-tube: the catheter leaves the rectum through a 35 mm anal
-    /// canal held open by gas round it, down to the anus in the skin (the volume reaches 35 mm
-    /// further down).
+    /// Colon only, with --rectal-tube: the perineum lies 35 mm lower, and the catheter's way
+    /// from the rectum to the anus (about 40 mm) is an anal canal held open by gas round it
+    /// (the volume reaches 35 mm further down).
     #[arg(long, requires = "rectal_tube")]
     pub anal_canal: bool,
     /// Colon only: a CT table under the patient on the dependent side (posterior, or anterior

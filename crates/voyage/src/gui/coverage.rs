@@ -241,9 +241,11 @@ impl WindowCoverage {
     }
 
     /// The largest unseen patch of the session (of the [`NEXT_TRIES`] largest) with a pose
-    /// whose frame shows some of it ([`patch_pose`], as the reading's review chooses), with
-    /// that pose; else the largest a pose sees, or the largest, with None. None when nothing
-    /// is left. Its outline is kept for the view.
+    /// whose frame shows some of it ([`patch_pose`], as the reading's review chooses, through
+    /// the window's lens), with that pose; else the largest a pose sees, or the largest, with
+    /// None. None when nothing is left. Its outline is kept for the view. At most
+    /// [`NEXT_TRIES`] × [`voyage_view::POSES_PER_VISIT`] frames of [`MARK_HEIGHT`] rows
+    /// (about 2 ms each) are drawn for one click.
     pub fn next_patch(&mut self, mesh: &CellMesh, study: &Study) -> Option<(Patch, Option<Pose>)> {
         let lumen = Lumen::of(study, self.min_wall_mm);
         let patches = self.session.patches(mesh);
