@@ -482,8 +482,8 @@ impl<B: Background> Scene<'_, B> {
             };
         }
         if let Some(c) = self.catheter.filter(|_| b.catheter) {
+            let (air, plastic, canal) = c.sdfs(p);
             // An anal canal's gas round it is the colon's lowest lumen.
-            let canal = c.canal_sdf(p);
             if canal < 0.5 / inv_w {
                 let cg = ramp(canal, inv_w);
                 hu = cg * m.lumen_air + (1.0 - cg) * hu;
@@ -493,7 +493,6 @@ impl<B: Background> Scene<'_, B> {
             }
             // The catheter displaces whatever is there: colon content, wall, tissue, outside
             // air. Its air is not colon lumen.
-            let (air, plastic) = c.sdfs(p);
             let plastic_hu = c.hu;
             let ca = ramp(air, inv_w);
             let cp = ramp(plastic, inv_w).min(1.0 - ca);

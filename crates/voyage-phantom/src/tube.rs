@@ -551,15 +551,6 @@ impl Catheter {
             .map_or(self.outer_radius(), |c| c.radius.max(self.outer_radius()))
     }
 
-    /// Signed distance (negative inside) to its canal's gas; infinite without one.
-    pub fn canal_sdf(&self, p: DVec3) -> f64 {
-        self.canal.map_or(f64::INFINITY, |c| {
-            (self.distance(p) - c.radius)
-                .max(p.z - c.top)
-                .max(c.floor - p.z)
-        })
-    }
-
     /// Distance from `p` to the axis.
     pub fn distance(&self, p: DVec3) -> f64 {
         self.points
@@ -569,14 +560,18 @@ impl Catheter {
     }
 
     /// Signed distances (negative inside) to the air channel and to the plastic, both cut by
-    /// the planes across the axis at the two ends.
+    /// the planes across the axis at the two ends, and to its canal's gas (infinite without
+    /// one).
     #[inline]
-    pub fn sdfs(&self, p: DVec3) -> (f64, f64) {
+    pub fn sdfs(&self, p: DVec3) -> (f64, f64, f64) {
         let n = self.points.len();
         if n < 2 {
-            return (f64::INFINITY, f64::INFINITY);
+            return (f64::INFINITY, f64::INFINITY, f64::INFINITY);
         }
         let d = self.distance(p);
+        let canal = self.canal.map_or(f64::INFINITY, |c| {
+            (d - c.radius).max(p.z - c.top).max(c.floor - p.z)
+        });
         let u0 = (self.points[1] - self.points[0]).normalize_or_zero();
         let u1 = (self.points[n - 1] - self.points[n - 2]).normalize_or_zero();
         let cut = (self.points[0] - p)
@@ -586,6 +581,6 @@ impl Catheter {
         let plastic = (d - self.outer_radius())
             .max(self.inner_radius - d)
             .max(cut);
-        (air, plastic)
+        (air, plastic, canal)
     }
 }

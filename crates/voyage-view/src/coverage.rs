@@ -542,25 +542,15 @@ const MIN_VIEW_MM: f64 = 4.0;
 /// Step along a candidate line of sight (mm).
 const SIGHT_STEP_MM: f64 = 0.5;
 
-/// A pose that shows `patch`: a point in the lumen, at least `min_wall_mm` from the wall
-/// and within the reading distance of the patch's centre, that sees the centre unoccluded
-/// (a ray pick against the surface meets the patch, not a fold before it) and as the reading
-/// counts it (the centre's triangle faces the eye within the reading angle), looking at it.
-/// Lines of sight are tried from along the patch's normal outward in tilts up to 60°
-/// (inside the reading angle); along each, the viewpoint is the one farthest from the wall.
-/// Where no line of sight shows the centre, other points spread over the patch are tried.
-pub fn viewing_pose(
-    patch: &Patch,
-    mesh: &CellMesh,
-    lumen: &Lumen,
-    options: &CoverageOptions,
-) -> Option<Pose> {
-    viewing_poses(patch, mesh, lumen, options).next()
-}
-
-/// Every pose [`viewing_pose`] could give, in the order it tries them: the first is its
-/// pose, the rest serve where a frame from it shows nothing new (the pick meets the anchor,
-/// and yet none of its pixels lands on an unseen triangle the reading counts).
+/// The poses that show `patch`, in the order they are tried: each a point in the lumen, at
+/// least `min_wall_mm` from the wall and within the reading distance of a point of the
+/// patch, that sees that point unoccluded (a ray pick against the surface meets the patch,
+/// not a fold before it) and as the reading counts it (its triangle faces the eye within the
+/// reading angle), looking at it. Lines of sight are tried from along the patch's normal
+/// outward in tilts up to 60° (inside the reading angle); along each, the viewpoint is the
+/// one farthest from the wall. The patch's centre comes first, then other points spread over
+/// it. Later poses serve where a frame from the first shows nothing new (the pick meets the
+/// point, and yet none of its pixels lands on an unseen triangle the reading counts).
 pub fn viewing_poses<'a>(
     patch: &'a Patch,
     mesh: &'a CellMesh,
@@ -572,7 +562,7 @@ pub fn viewing_poses<'a>(
         .flat_map(move |anchor| poses_showing(anchor, mesh, lumen, options))
 }
 
-/// The poses that show `anchor` (see [`viewing_pose`]), line of sight by line of sight.
+/// The poses that show `anchor` (see [`viewing_poses`]), line of sight by line of sight.
 fn poses_showing<'a>(
     anchor: Anchor,
     mesh: &'a CellMesh,

@@ -37,7 +37,7 @@ pub use closeup::{CloseupBox, MAX_HALF_SIZE_MM, TfPoint, TransferFunction, rende
 pub use coverage::{
     Coverage, CoverageOptions, GLANCE_EVERY_MM, GLANCE_MIN_MM2, GLANCE_TURN_DEG, GLANCE_WAYS,
     Glances, Lumen, Patch, READING_FOV_DEG, REVIEW_MIN_MM2, Reader, SegmentSeen, glance_turns,
-    viewing_pose, viewing_poses,
+    viewing_poses,
 };
 pub use findings::{
     Adequacy, C0_BELOW_COVERAGE_PCT, CRads, FindingKind, Findings, Hit, Marker, Measurement,

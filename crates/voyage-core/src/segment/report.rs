@@ -181,7 +181,7 @@ fn colon_segments(
 /// them and, between, the one halfway along the course (only if it lies between them in the
 /// colon's order: the ends are named by place, the middle by course). A segment from rectum
 /// to cecum is the whole colon, and a middle name would only suggest it stops there.
-pub(super) fn segment_name(named: &Course, entry: DVec3, exit: DVec3) -> String {
+fn segment_name(named: &Course, entry: DVec3, exit: DVec3) -> String {
     let ends = [named.name(entry), named.name(exit)];
     if ends == ["rectum", "cecum"] {
         return ends.join("–");
@@ -315,7 +315,7 @@ fn gaps(
 }
 
 /// The warning for `gap`, between the colon segments named `a` and `b`.
-pub(super) fn gap_warning(gap: &Gap, a: &str, b: &str) -> String {
+fn gap_warning(gap: &Gap, a: &str, b: &str) -> String {
     let [x, y, z] = gap.from_lps_mm;
     let mm = gap.length_mm;
     match gap.edge_side {

@@ -37,6 +37,13 @@ pub(super) struct Run {
     pub(super) x1: u32,
 }
 
+impl Run {
+    /// It shares an x with `other`.
+    pub(super) fn overlaps(self, other: Run) -> bool {
+        self.x0 < other.x1 && other.x0 < self.x1
+    }
+}
+
 /// All runs, row by row: the runs of row r = j + ny*k are `runs[row_start[r]..row_start[r+1]]`.
 pub(super) struct Runs {
     pub(super) runs: Vec<Run>,
@@ -48,6 +55,17 @@ pub(super) struct Runs {
 }
 
 impl Runs {
+    /// No runs yet, for rows `ny` long in j.
+    pub(super) fn empty(ny: usize) -> Runs {
+        Runs {
+            runs: Vec::new(),
+            row_start: vec![0],
+            hu_sum: Vec::new(),
+            dark: Vec::new(),
+            ny,
+        }
+    }
+
     pub(super) fn row(&self, j: usize, k: usize) -> std::ops::Range<usize> {
         let r = j + self.ny * k;
         self.row_start[r] as usize..self.row_start[r + 1] as usize
@@ -55,14 +73,8 @@ impl Runs {
 
     /// The runs where `keep(run)`, in the same rows.
     pub(super) fn filtered(&self, keep: impl Fn(usize) -> bool) -> Runs {
-        let mut out = Runs {
-            runs: Vec::new(),
-            row_start: Vec::with_capacity(self.row_start.len()),
-            hu_sum: Vec::new(),
-            dark: Vec::new(),
-            ny: self.ny,
-        };
-        out.row_start.push(0);
+        let mut out = Runs::empty(self.ny);
+        out.row_start.reserve(self.row_start.len() - 1);
         for row in 0..self.row_start.len() - 1 {
             for r in self.row_start[row] as usize..self.row_start[row + 1] as usize {
                 if keep(r) {
@@ -156,13 +168,7 @@ impl SliceRuns {
 
 impl Runs {
     fn concat(slices: impl IntoIterator<Item = SliceRuns>, ny: usize) -> Runs {
-        let mut out = Runs {
-            runs: Vec::new(),
-            row_start: vec![0],
-            hu_sum: Vec::new(),
-            dark: Vec::new(),
-            ny,
-        };
+        let mut out = Runs::empty(ny);
         for s in slices {
             for c in s.counts {
                 let last = *out.row_start.last().unwrap_or(&0);
@@ -252,7 +258,7 @@ pub(super) fn for_overlaps(
     let (mut a, mut b) = (ra.start, rb.start);
     while a < ra.end && b < rb.end {
         let (p, q) = (runs.runs[a], runs.runs[b]);
-        if p.x0 < q.x1 && q.x0 < p.x1 {
+        if p.overlaps(q) {
             f(a, b);
         }
         if p.x1 < q.x1 {

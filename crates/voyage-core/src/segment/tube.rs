@@ -121,9 +121,9 @@ fn contacts(
                         continue;
                     }
                     let run = runs.runs[r];
-                    let touches = runs.row(j, kk as usize).any(|q| {
-                        !inside[q] && runs.runs[q].x0 < run.x1 && run.x0 < runs.runs[q].x1
-                    });
+                    let touches = runs
+                        .row(j, kk as usize)
+                        .any(|q| !inside[q] && runs.runs[q].overlaps(run));
                     if touches {
                         out.push((k, -step, r));
                     }
@@ -176,9 +176,8 @@ fn follow(
             .flat_map(|&r| {
                 let (j, _) = row_of(runs, r);
                 let run = runs.runs[r];
-                runs.row(j, k as usize).filter(move |&q| {
-                    run_comp[q] == c && runs.runs[q].x0 < run.x1 && run.x0 < runs.runs[q].x1
-                })
+                runs.row(j, k as usize)
+                    .filter(move |&q| run_comp[q] == c && runs.runs[q].overlaps(run))
             })
             .collect();
         match in_slice(runs, run_comp, c, over, &shape) {
@@ -270,11 +269,7 @@ fn in_slice(
                     continue;
                 }
                 for q in runs.row(jj, k) {
-                    if run_comp[q] == c
-                        && runs.runs[q].x0 < run.x1
-                        && run.x0 < runs.runs[q].x1
-                        && !seen.contains(&q)
-                    {
+                    if run_comp[q] == c && runs.runs[q].overlaps(run) && !seen.contains(&q) {
                         seen.push(q);
                         stack.push(q);
                     }
@@ -315,7 +310,7 @@ fn same_rows_overlap(runs: &Runs, a: &[usize], b: &[usize]) -> bool {
         let (jp, rp) = (row_of(runs, p).0, runs.runs[p]);
         b.iter().any(|&q| {
             let (jq, rq) = (row_of(runs, q).0, runs.runs[q]);
-            jp == jq && rp.x0 < rq.x1 && rq.x0 < rp.x1
+            jp == jq && rp.overlaps(rq)
         })
     })
 }
@@ -472,13 +467,7 @@ mod tests {
         /// component (all the body's gas is one; outside air is none).
         fn scene(&self) -> (Runs, Vec<bool>, Vec<u32>) {
             let [nx, ny, nz] = DIMS;
-            let mut runs = Runs {
-                runs: Vec::new(),
-                row_start: vec![0],
-                hu_sum: Vec::new(),
-                dark: Vec::new(),
-                ny,
-            };
+            let mut runs = Runs::empty(ny);
             let (mut inside, mut comp) = (Vec::new(), Vec::new());
             for k in 0..nz {
                 for j in 0..ny {
