@@ -623,6 +623,10 @@ pub struct Reader {
     drawn: Option<View>,
 }
 
+/// Slack on the reading distance for what a reader's frame draws (mm): a pixel's distance is
+/// computed from its depth in f32, never off by this much.
+const REACH_SLACK_MM: f64 = 1.0;
+
 impl Reader {
     /// Frames of `width` × `height` through `camera`'s lens (its pose is replaced per frame),
     /// of the surface cut into `cells`.
@@ -653,7 +657,7 @@ impl Reader {
         pose: Pose,
         coverage: &mut Coverage,
     ) -> f64 {
-        let view = self.draw(mesh, cells, pose);
+        let view = self.draw(mesh, cells, pose, coverage.options.reading_distance_mm);
         coverage.mark(&self.frame, &view, mesh)
     }
 
@@ -666,7 +670,7 @@ impl Reader {
         pose: Pose,
         coverage: &mut Coverage,
     ) -> f64 {
-        let view = self.draw(mesh, cells, pose);
+        let view = self.draw(mesh, cells, pose, coverage.options.reading_distance_mm);
         coverage.gain(&self.frame, &view, mesh)
     }
 
@@ -693,13 +697,14 @@ impl Reader {
         }
     }
 
-    fn draw(&mut self, mesh: &CellMesh, cells: &Cells, pose: Pose) -> View {
+    /// Draws what lies within `reach_mm` of the eye (coverage reads no pixel farther).
+    fn draw(&mut self, mesh: &CellMesh, cells: &Cells, pose: Pose, reach_mm: f64) -> View {
         let camera = Camera {
             pose,
             ..self.camera
         };
         let view = View::new(&camera, self.frame.width, self.frame.height);
-        let raster = Rasterizer::ids_only(mesh, view);
+        let raster = Rasterizer::ids_only(mesh, view).within_reach(reach_mm + REACH_SLACK_MM);
         self.frame.clear();
         self.visibility.draw(&mut self.frame, &raster, cells);
         self.drawn = Some(view);

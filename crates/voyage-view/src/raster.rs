@@ -289,6 +289,9 @@ pub struct Rasterizer<'a> {
     shading: Option<&'a Shading>,
     /// The current chunk's transformed vertices.
     scratch: RefCell<Vec<Vertex>>,
+    /// Chunks wholly farther from the eye than this (mm) are left out
+    /// ([`Rasterizer::within_reach`]).
+    reach_mm: Option<f32>,
 }
 
 impl<'a> Rasterizer<'a> {
@@ -300,6 +303,7 @@ impl<'a> Rasterizer<'a> {
             view,
             shading: Some(shading),
             scratch: RefCell::new(Vec::new()),
+            reach_mm: None,
         }
     }
 
@@ -312,7 +316,35 @@ impl<'a> Rasterizer<'a> {
             view,
             shading: None,
             scratch: RefCell::new(Vec::new()),
+            reach_mm: None,
         }
+    }
+
+    /// Leaves out the chunks that lie wholly farther than `mm` from the eye. What a pixel
+    /// nearer than `mm` shows is the same: a chunk left out could only win pixels farther
+    /// than that, and hides nothing nearer. Coverage reads no pixel beyond its reading
+    /// distance, and down a wide colon most of a frame's triangles lie beyond it.
+    pub fn within_reach(mut self, mm: f64) -> Self {
+        self.reach_mm = Some(mm as f32);
+        self
+    }
+
+    /// The reach given to [`Self::within_reach`].
+    pub fn reach_mm(&self) -> Option<f64> {
+        self.reach_mm.map(f64::from)
+    }
+
+    /// Whether chunk `k` may hold a point within the reach.
+    fn in_reach(&self, k: usize) -> bool {
+        let Some(reach) = self.reach_mm else {
+            return true;
+        };
+        let c = &self.mesh.chunks[k];
+        let eye = self.xf.eye;
+        let lo = Vec3::from_array(c.lo);
+        let hi = Vec3::from_array(c.hi);
+        let gap = (lo - eye).max(eye - hi).max(Vec3::ZERO);
+        gap.length_squared() <= reach * reach
     }
 
     pub fn view(&self) -> &View {
@@ -332,7 +364,10 @@ impl<'a> Rasterizer<'a> {
             return range.len();
         }
         let chunks = mesh.cell_chunks[cell as usize].clone();
-        chunks.map(|k| self.draw_chunk(frame, k as usize)).sum()
+        chunks
+            .filter(|&k| self.in_reach(k as usize))
+            .map(|k| self.draw_chunk(frame, k as usize))
+            .sum()
     }
 
     /// Draws the chunks of a cell that may cover a pixel centre in `rect` (see
@@ -347,7 +382,7 @@ impl<'a> Rasterizer<'a> {
         chunks
             .filter(|&k| {
                 let c = &mesh.chunks[k as usize];
-                self.view.box_may_show(c.lo, c.hi, rect)
+                self.in_reach(k as usize) && self.view.box_may_show(c.lo, c.hi, rect)
             })
             .map(|k| self.draw_chunk(frame, k as usize))
             .sum()

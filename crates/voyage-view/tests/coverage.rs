@@ -236,15 +236,6 @@ fn coverage_bookkeeping() {
     let first = reader.show(&mesh, cells, pose, &mut seen);
     assert!(first > 0.0 && (seen.seen_mm2() - first).abs() < 1e-9);
     assert_eq!(reader.show(&mesh, cells, pose, &mut seen), 0.0);
-    let near_wall = study.ds.sample(at) as f64;
-    let mut blind = Coverage::new(
-        &mesh,
-        CoverageOptions {
-            reading_distance_mm: 0.5 * near_wall,
-            ..options
-        },
-    );
-    assert_eq!(reader.show(&mesh, cells, pose, &mut blind), 0.0);
 
     // Every triangle marked covers a pixel of the frame and faces the eye within 75°: its
     // smoothed normal (the mean of its vertices', as shaded) does.
@@ -263,6 +254,15 @@ fn coverage_bookkeeping() {
             assert!(n.dot(to_eye) >= 75f64.to_radians().cos() - 1e-9);
         }
     }
+    let near_wall = study.ds.sample(at) as f64;
+    let mut blind = Coverage::new(
+        &mesh,
+        CoverageOptions {
+            reading_distance_mm: 0.5 * near_wall,
+            ..options
+        },
+    );
+    assert_eq!(reader.show(&mesh, cells, pose, &mut blind), 0.0);
     // The review's targets are the listed patches first, then smaller bits down to its floor.
     let listed = fresh.patches(&mesh);
     let targets = Coverage::new(

@@ -90,6 +90,51 @@ fn check_exact_and_reduced(study: &Study, what: &str, min_paper_ratio: f64) {
         "{what}: the depth test removed nothing"
     );
     check_select_is_exact(study, &mesh, &cameras, what);
+    check_reach_is_exact(study, &mesh, &cameras, what);
+}
+
+/// A frame drawn within a reach (what coverage draws) shows what the whole frame shows at
+/// every pixel nearer than the reach, and nothing nearer elsewhere; it draws fewer triangles.
+fn check_reach_is_exact(study: &Study, mesh: &CellMesh, cameras: &[Camera], what: &str) {
+    const REACH_MM: f64 = 20.0;
+    let mut mesh = mesh.clone();
+    mesh.index_cells();
+    let (mut whole_vis, mut near_vis) = (
+        Visibility::new(&study.cells, Strategy::Ours),
+        Visibility::new(&study.cells, Strategy::Ours),
+    );
+    let (mut whole_drawn, mut near_drawn, mut near_pixels) = (0, 0, 0);
+    for cam in cameras.iter().step_by(3) {
+        let view = View::new(cam, 256, 256);
+        let (mut whole, mut near) = (Frame::new(256, 256), Frame::new(256, 256));
+        let raster = Rasterizer::ids_only(&mesh, view);
+        whole_drawn += whole_vis.draw(&mut whole, &raster, &study.cells).triangles;
+        let raster = Rasterizer::ids_only(&mesh, view).within_reach(REACH_MM);
+        near_drawn += near_vis.draw(&mut near, &raster, &study.cells).triangles;
+        let distance = |f: &Frame, x: usize, y: usize| {
+            let p = &f.pixels[y * 256 + x];
+            let (sx, sy) = [x, y].map(|c| (c as f64 + 0.5 - 128.0) / view.focal).into();
+            (p.id != NO_TRIANGLE).then(|| (1.0 + sx * sx + sy * sy).sqrt() / p.inv_depth as f64)
+        };
+        for (y, x) in (0..256).flat_map(|y| (0..256).map(move |x| (y, x))) {
+            match distance(&whole, x, y) {
+                Some(d) if d <= REACH_MM => {
+                    near_pixels += 1;
+                    assert_eq!(
+                        whole.pixels[y * 256 + x].id,
+                        near.pixels[y * 256 + x].id,
+                        "{what}: the reach changed a pixel {d:.2} mm away"
+                    );
+                }
+                _ => assert!(
+                    distance(&near, x, y).is_none_or(|d| d > REACH_MM),
+                    "{what}: a pixel beyond the reach became nearer"
+                ),
+            }
+        }
+    }
+    eprintln!("{what}: within {REACH_MM} mm: {near_drawn} triangles of {whole_drawn}");
+    assert!(near_pixels > 0 && near_drawn < whole_drawn, "{what}");
 }
 
 /// `Visibility::select` (the GPU's cell list: portal outlines, no depth buffer) keeps every
