@@ -186,7 +186,6 @@ impl Coverage {
         let max = self.options.reading_distance_mm;
         let (w, h) = (frame.width as usize, frame.height as usize);
         for y in 0..h {
-            let sy = (0.5 * h as f64 - (y as f64 + 0.5)) / view.focal;
             for (x, p) in frame.pixels[y * w..(y + 1) * w].iter().enumerate() {
                 let t = p.id;
                 if t == NO_TRIANGLE
@@ -195,10 +194,7 @@ impl Coverage {
                 {
                     continue;
                 }
-                let sx = (x as f64 + 0.5 - 0.5 * w as f64) / view.focal;
-                // Depth along the view axis times the ray's length per unit depth.
-                let distance = (1.0 + sx * sx + sy * sy).sqrt() / p.inv_depth as f64;
-                if distance <= max {
+                if view.pixel_distance(x as u32, y as u32, p.inv_depth) <= max {
                     self.met_in[t as usize] = self.frame_no;
                     self.candidates.push(t);
                 }

@@ -150,6 +150,15 @@ impl View {
         let sy = (0.5 * self.height as f64 - (y as f64 + 0.5)) / self.focal;
         self.forward + sx * self.right + sy * self.up
     }
+
+    /// Distance from the eye (mm) of what pixel (x, y) shows at inverse depth `inv_depth`:
+    /// the depth along the view axis times the ray's length per unit depth.
+    #[inline]
+    pub fn pixel_distance(&self, x: u32, y: u32, inv_depth: f32) -> f64 {
+        let sx = (x as f64 + 0.5 - 0.5 * self.width as f64) / self.focal;
+        let sy = (0.5 * self.height as f64 - (y as f64 + 0.5)) / self.focal;
+        (1.0 + sx * sx + sy * sy).sqrt() / inv_depth as f64
+    }
 }
 
 /// Pixel centres a cell may show at: columns `x0..=x1` of rows `y0..=y1` (empty when either
@@ -327,11 +336,6 @@ impl<'a> Rasterizer<'a> {
     pub fn within_reach(mut self, mm: f64) -> Self {
         self.reach_mm = Some(mm as f32);
         self
-    }
-
-    /// The reach given to [`Self::within_reach`].
-    pub fn reach_mm(&self) -> Option<f64> {
-        self.reach_mm.map(f64::from)
     }
 
     /// Whether chunk `k` may hold a point within the reach.

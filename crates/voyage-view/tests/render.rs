@@ -113,8 +113,7 @@ fn check_reach_is_exact(study: &Study, mesh: &CellMesh, cameras: &[Camera], what
         near_drawn += near_vis.draw(&mut near, &raster, &study.cells).triangles;
         let distance = |f: &Frame, x: usize, y: usize| {
             let p = &f.pixels[y * 256 + x];
-            let (sx, sy) = [x, y].map(|c| (c as f64 + 0.5 - 128.0) / view.focal).into();
-            (p.id != NO_TRIANGLE).then(|| (1.0 + sx * sx + sy * sy).sqrt() / p.inv_depth as f64)
+            (p.id != NO_TRIANGLE).then(|| view.pixel_distance(x as u32, y as u32, p.inv_depth))
         };
         for (y, x) in (0..256).flat_map(|y| (0..256).map(move |x| (y, x))) {
             match distance(&whole, x, y) {
