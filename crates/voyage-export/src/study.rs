@@ -219,6 +219,9 @@ fn write_files(dir: &Path, study: &Study, extra: StudyExports) -> Result<Vec<&'s
         // Stretches (arc mm from the source, start and end) through bridged gaps: collapsed
         // or fluid-filled bowel, no air.
         "collapsed_arc_mm": study.collapsed_spans(),
+        // From the source, a canal too narrow to fly (the anal canal round a catheter): the
+        // flights start and end above it. 0 when none.
+        "canal_mm": cl.canal_mm,
     });
     write_json(&put("centerline.json"), &cl_json)?;
     let points: Vec<MarkupsPoint> = lps

@@ -138,7 +138,7 @@ pub struct Flight {
 pub struct Rescue {
     /// Simulated time (s).
     pub t: f64,
-    /// Arc length from the flight's start (mm) where the glide began.
+    /// Arc length along the centerline from the end the flight starts at (mm).where the glide began.
     pub arc_mm: f64,
     /// Where the submarine was (volume-local mm).
     pub position: [f64; 3],
@@ -148,15 +148,26 @@ pub struct Rescue {
 pub(crate) struct Guide {
     points: Vec<DVec3>,
     radius: Vec<f64>,
-    /// Arc length from the flight's start (mm).
+    /// Arc length along the centerline from the end the flight starts at (mm).
     arc: Vec<f64>,
 }
 
 impl Guide {
     pub(crate) fn new(cl: &Centerline, dir: Direction) -> Self {
-        let mut points: Vec<DVec3> = cl.points_mm.iter().map(|p| DVec3::from_array(*p)).collect();
-        let mut radius = cl.radius_mm.clone();
-        let mut arc: Vec<f64> = cl.arc_mm.clone();
+        // A canal too narrow to fly (the anal canal) is no part of a flight's way: it starts
+        // or ends above it.
+        let from = cl
+            .arc_mm
+            .iter()
+            .position(|&a| a >= cl.canal_mm)
+            .unwrap_or(0)
+            .min(cl.points_mm.len().saturating_sub(2));
+        let mut points: Vec<DVec3> = cl.points_mm[from..]
+            .iter()
+            .map(|p| DVec3::from_array(*p))
+            .collect();
+        let mut radius = cl.radius_mm[from..].to_vec();
+        let mut arc: Vec<f64> = cl.arc_mm[from..].to_vec();
         if dir == Direction::Backward {
             points.reverse();
             radius.reverse();
@@ -846,6 +857,7 @@ mod tests {
             arc_mm: (0..n).map(|i| i as f64).collect(),
             radius_mm: (0..n).map(r).collect(),
             length_mm: (n - 1) as f64,
+            canal_mm: 0.0,
         }
     }
 

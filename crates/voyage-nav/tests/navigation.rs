@@ -504,6 +504,53 @@ fn automatic_flights_reach_both_ends_of_colon_a() {
     }
 }
 
+/// Issue 34: a rectal catheter through an anal canal held open by about 1 mm of gas round it,
+/// as in a held-out prone exam whose centerline started 62 mm above the anus. The centerline
+/// runs down the canal to the anus (≤ 25 mm from it, the held-out figure); the flights, which
+/// cannot fit there, start and end above the canal and reach both ends with no stall, looking
+/// down the lumen, never nearer the wall than the safety distance.
+#[test]
+fn the_centerline_runs_down_the_anal_canal_and_the_flights_start_above_it() {
+    let p = phantom::colon(&ColonOptions {
+        rectal_tube: true,
+        anal_canal: true,
+        ..Default::default()
+    })
+    .unwrap();
+    let anus = DVec3::from_array(p.truth.rectal_tube.as_ref().unwrap().anus_mm.unwrap());
+    let study = prepare(p.ct, &PrepOptions::default(), |_| {}).unwrap();
+    let cl = &study.centerline;
+    let start = DVec3::from_array(cl.points_mm[0]);
+    let from_anus = start.distance(anus);
+    eprintln!(
+        "canal: the centerline starts {from_anus:.1} mm from the anus, canal {:.0} mm, length {:.0} mm",
+        cl.canal_mm, cl.length_mm
+    );
+    assert!(
+        from_anus <= 25.0,
+        "the centerline starts {from_anus:.1} mm from the anus"
+    );
+    assert!(
+        cl.canal_mm >= 20.0,
+        "the canal is {:.1} mm of the centerline",
+        cl.canal_mm
+    );
+    let opts = FlightOptions::for_study(&study);
+    for f in flights(&study, &opts, "canal") {
+        assert_eq!(f.stalls, 0, "{:?}: {} stalls", f.direction, f.stalls);
+        check_looking(&study, &f, "canal");
+        // Above the canal: the first and last poses are nearer the canal's top than the anus.
+        for pose in [f.poses[0], *f.poses.last().unwrap()] {
+            let near_anus = pose.position.distance(anus) < 0.7 * cl.canal_mm;
+            assert!(
+                !near_anus,
+                "{:?}: a pose in the canal at {}",
+                f.direction, pose.position
+            );
+        }
+    }
+}
+
 /// Angle (degrees) between y_body and −G within the plane across z_body: the best leveling
 /// can do when the view itself tilts.
 fn level_error(pose: &Pose, g: DVec3) -> Option<f64> {

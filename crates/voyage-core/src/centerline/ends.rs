@@ -41,6 +41,9 @@ pub struct Skeleton {
     pub path_mm: Vec<DVec3>,
     pub given_source: Option<[usize; 3]>,
     pub given_target: Option<[usize; 3]>,
+    /// The colon's lowest gas (volume voxel): the search's seed, where a canal too narrow for
+    /// the camera may lead on below the path's start ([`canal_lead_in`]).
+    pub seed: [usize; 3],
     /// The blocks the search ran on, if it did.
     pub blocks: Option<Blocks>,
     /// The search behind the path, kept for [`Skeleton::detour`] (None on a detour).
@@ -85,6 +88,7 @@ impl Skeleton {
             path_mm,
             given_source: self.given_source,
             given_target: self.given_target,
+            seed: self.seed,
             blocks: None,
             route: None,
         })
@@ -181,6 +185,7 @@ pub fn trace_skeleton(
         path_mm: voxels.iter().map(|v| mm_of(lumen, *v)).collect(),
         given_source,
         given_target,
+        seed,
         blocks: None,
         route: Some(route),
     })
@@ -213,6 +218,7 @@ fn skeleton_on_blocks(
         path_mm,
         given_source,
         given_target,
+        seed,
         blocks: Some(blocks),
         route: Some(route),
     })
@@ -226,7 +232,12 @@ pub fn centre_skeleton(
     sk: &Skeleton,
     opts: &CenterlineOptions,
 ) -> Result<Endpoints> {
-    let path_mm = &sk.path_mm;
+    let lead_in = match sk.given_source {
+        Some(_) => Vec::new(),
+        None => canal_lead_in(lumen, ds, sk.seed, sk.path_mm[0]),
+    };
+    let canal_top = (!lead_in.is_empty()).then_some(sk.path_mm[0]);
+    let path_mm = &[lead_in, sk.path_mm.clone()].concat();
     let source = match sk.given_source {
         Some(v) => v,
         None => snap(lumen, ds, path_mm[0])?,
@@ -242,12 +253,25 @@ pub fn centre_skeleton(
     pts[0] = mm_of(lumen, source);
     let last = pts.len() - 1;
     pts[last] = mm_of(lumen, target);
-    let centerline = refine_points(pts, ds, opts);
+    let mut centerline = refine_points(pts, ds, opts);
+    if let Some(top) = canal_top {
+        centerline.canal_mm = arc_nearest(&centerline, top);
+    }
     Ok(Endpoints {
         source,
         target,
         centerline,
     })
+}
+
+/// The arc length of the centerline's point nearest to `p`.
+fn arc_nearest(cl: &Centerline, p: DVec3) -> f64 {
+    cl.points_mm
+        .iter()
+        .zip(&cl.arc_mm)
+        .map(|(q, &a)| (DVec3::from_array(*q).distance_squared(p), a))
+        .min_by(|x, y| x.0.total_cmp(&y.0))
+        .map_or(0.0, |(_, a)| a)
 }
 
 #[cfg(test)]
@@ -270,6 +294,99 @@ pub fn find_endpoints(
         SkeletonMemory::default(),
     )?;
     centre_skeleton(lumen, ds, &sk, opts)
+}
+
+/// Where the colon's lowest gas lies at least this far (mm, straight) from the skeleton's
+/// start, a canal too narrow for the camera leads down to it: the anal canal held open by gas
+/// round a catheter is about 1 mm of gas and 30–40 mm long, and no voxel in it is wide enough
+/// to start from. A rectum's own floor lies within this of its first wide voxel.
+const CANAL_MM: f64 = 20.0;
+
+/// The way from the colon's lowest gas (`seed`) up to the skeleton path's start, seed first
+/// and the start left out, when the seed lies at least [`CANAL_MM`] from it: the centerline
+/// then runs on down the canal, as far as the colon goes, where the camera cannot fly (a
+/// flight starts at the first centerline point with room for it). Empty otherwise.
+///
+/// A* over the lumen's voxels (26 neighbours), each step's length weighted by 1 + 1/Ds so that
+/// the way keeps to the middle of the canal's gas; the straight distance is the heuristic.
+/// It searches within the straight distance plus [`CANAL_MM`] of the seed.
+pub(crate) fn canal_lead_in(
+    lumen: &Volume<u8>,
+    ds: &Field<f32>,
+    seed: [usize; 3],
+    start_mm: DVec3,
+) -> Vec<DVec3> {
+    use std::cmp::Reverse;
+    use std::collections::{BinaryHeap, HashMap};
+    let seed_mm = mm_of(lumen, seed);
+    let straight = seed_mm.distance(start_mm);
+    if straight < CANAL_MM || lumen.get(seed[0], seed[1], seed[2]) == 0 {
+        return Vec::new();
+    }
+    let Ok(goal) = snap(lumen, ds, start_mm) else {
+        return Vec::new();
+    };
+    let goal_mm = mm_of(lumen, goal);
+    let reach = straight + CANAL_MM;
+    let dims = lumen.dims();
+    let sp = lumen.spacing();
+    let geom = lumen.geometry();
+    let index = |v: [usize; 3]| geom.index(v[0], v[1], v[2]);
+    // Best cost so far and the voxel it came from, by volume index.
+    let mut best: HashMap<usize, (f64, usize)> = HashMap::new();
+    let mut open = BinaryHeap::new();
+    let key = |f: f64| Reverse(f.to_bits());
+    best.insert(index(seed), (0.0, usize::MAX));
+    open.push((key(straight), index(seed), 0.0f64.to_bits()));
+    while let Some((_, u, g_bits)) = open.pop() {
+        let v = geom.ijk(u);
+        if v == goal {
+            let mut way = Vec::new();
+            let mut at = best[&u].1;
+            while at != usize::MAX {
+                way.push(mm_of(lumen, geom.ijk(at)));
+                at = best[&at].1;
+            }
+            way.reverse();
+            return way;
+        }
+        let g = best[&u].0;
+        if g.to_bits() != g_bits {
+            continue; // queued before the voxel was reached more cheaply
+        }
+        for dk in -1i64..=1 {
+            for dj in -1i64..=1 {
+                for di in -1i64..=1 {
+                    let w = [v[0] as i64 + di, v[1] as i64 + dj, v[2] as i64 + dk];
+                    if (di, dj, dk) == (0, 0, 0)
+                        || w.iter().zip(dims).any(|(&x, n)| x < 0 || x >= n as i64)
+                    {
+                        continue;
+                    }
+                    let w = w.map(|x| x as usize);
+                    let d = ds.get_global(w, 0.0);
+                    if d <= 0.0 || lumen.get(w[0], w[1], w[2]) == 0 {
+                        continue;
+                    }
+                    let w_mm = mm_of(lumen, w);
+                    if w_mm.distance(seed_mm) > reach {
+                        continue;
+                    }
+                    let step = ((di as f64 * sp[0]).powi(2)
+                        + (dj as f64 * sp[1]).powi(2)
+                        + (dk as f64 * sp[2]).powi(2))
+                    .sqrt();
+                    let cost = g + step * (1.0 + 1.0 / d as f64);
+                    let wi = index(w);
+                    if best.get(&wi).is_none_or(|b| cost < b.0) {
+                        best.insert(wi, (cost, u));
+                        open.push((key(cost + w_mm.distance(goal_mm)), wi, cost.to_bits()));
+                    }
+                }
+            }
+        }
+    }
+    Vec::new()
 }
 
 /// The start is the nearest voxel to the seed at least this far from the wall (mm), or

@@ -19,6 +19,10 @@ pub struct Centerline {
     /// Ds at each point: the local lumen radius (mm).
     pub radius_mm: Vec<f64>,
     pub length_mm: f64,
+    /// Arc length (mm from the source) of a canal too narrow to fly that the centerline runs
+    /// down to the colon's lowest gas (the anal canal held open round a catheter): flights
+    /// start and end above it. 0 when there is none.
+    pub canal_mm: f64,
 }
 
 /// Centres, smooths and resamples a voxel path from source to target.
@@ -184,6 +188,7 @@ fn finish(pts: Vec<DVec3>, ds: &Field<f32>) -> Centerline {
         arc_mm: arc,
         radius_mm: radius,
         length_mm,
+        canal_mm: 0.0,
     }
 }
 

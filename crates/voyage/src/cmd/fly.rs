@@ -131,8 +131,16 @@ pub fn run(a: &FlyArgs) -> Result<()> {
             .with_context(|| format!("{}: {} flight", a.input.input.display(), dir.name()))?;
         flights.push(f);
     }
+    let canal_mm = study.centerline.canal_mm;
     for f in &flights {
-        if f.short_end_mm > 0.0 {
+        let into_canal = f.direction == Direction::Backward && canal_mm > 0.0;
+        if f.short_end_mm > 0.0 && into_canal {
+            eprintln!(
+                "note: {}: the backward flight ends {:.0} mm short of the centerline's start, above the {canal_mm:.0} mm of canal too narrow to fly",
+                a.input.input.display(),
+                f.short_end_mm,
+            );
+        } else if f.short_end_mm > 0.0 {
             eprintln!(
                 "warning: {}: the last {:.0} mm to the {} flight's goal are narrower than the camera fits ({} mm from the wall): the flight ends there",
                 a.input.input.display(),

@@ -317,8 +317,14 @@ fn print_text(s: &Study, g: &Geometry, load_ms: f64) {
         "target      {:.1?} mm LPS (cecum)",
         lps(s.target_mm()).to_array()
     );
+    let canal = match s.centerline.canal_mm {
+        c if c > 0.0 => {
+            format!("; its first {c:.0} mm, down to the colon's lowest gas, too narrow to fly")
+        }
+        _ => String::new(),
+    };
     println!(
-        "centerline  {:.0} mm, {} points",
+        "centerline  {:.0} mm, {} points{canal}",
         s.centerline.length_mm,
         s.centerline.points_mm.len()
     );
