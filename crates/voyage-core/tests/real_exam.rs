@@ -173,3 +173,42 @@ fn the_real_exam_gives_the_whole_colon_rectum_to_cecum() {
         );
     }
 }
+
+/// The real exam in 3 mm slices (each the mean of three): its air–fluid levels still say the
+/// patient lay prone. Counted in voxel lines, the levels seen across the thick slices' axis
+/// weighed three times what they cover, and the exam was taken as supine (assumed), its
+/// pools left out.
+#[test]
+fn thick_slices_of_the_real_exam_still_read_prone_from_the_levels() {
+    let Some(exam) = exam() else {
+        return;
+    };
+    let g = exam.ct.geometry();
+    let [nx, ny, nz] = g.dims;
+    let slab = nx * ny;
+    let thick_nz = nz / 3;
+    let mut data = vec![0i16; slab * thick_nz];
+    for (k, out) in data.chunks_mut(slab).enumerate() {
+        let slices = (0..3).map(|d| &exam.ct.data()[slab * (3 * k + d)..slab * (3 * k + d + 1)]);
+        let mut sum = vec![0i32; slab];
+        for s in slices {
+            sum.iter_mut().zip(s).for_each(|(a, &b)| *a += b as i32);
+        }
+        out.iter_mut()
+            .zip(&sum)
+            .for_each(|(o, &s)| *o = (s as f64 / 3.0).round() as i16);
+    }
+    let mut thick = g.clone();
+    thick.dims = [nx, ny, thick_nz];
+    thick.spacing[2] *= 3.0;
+    // The first thick slice's centre: the middle of the three it averages.
+    for (o, d) in thick.origin.iter_mut().zip(0..3) {
+        *o += g.direction[d][2] * g.spacing[2];
+    }
+    let ct = Volume::from_vec(thick, data).unwrap();
+    let s = voyage_core::segment(&ct, &Default::default()).unwrap();
+    let o = &s.orientation;
+    eprintln!("3 mm slices: {:?} from {:?}", o.position, o.source);
+    assert_eq!(o.position, voyage_core::PatientPosition::Hfp);
+    assert_eq!(o.source, voyage_core::PositionSource::AirFluidLevels);
+}
