@@ -113,3 +113,55 @@ fn a_colon_inside_the_scan_is_not_said_to_reach_its_side() {
     );
     assert!(s.gaps.iter().all(|g| !g.at_edge()));
 }
+
+/// Slices `from..to` of `ct`, where they sit in the patient.
+fn slices(ct: &Volume<i16>, from: usize, to: usize) -> Volume<i16> {
+    let [nx, ny, _] = ct.dims();
+    let g = ct.geometry();
+    let data = ct.data()[from * nx * ny..to * nx * ny].to_vec();
+    let mut origin = g.origin;
+    for (r, o) in origin.iter_mut().enumerate() {
+        *o += g.direction[r][2] * g.spacing[2] * from as f64;
+    }
+    let geom = Geometry {
+        dims: [nx, ny, to - from],
+        origin,
+        ..g.clone()
+    };
+    Volume::from_vec(geom, data).expect("the cut volume")
+}
+
+/// A scan that ends 10 mm into the colon's highest gas (a splenic flexure above the last
+/// slice), or 10 mm above the rectum's lowest gas: the colon is said to reach the head or the
+/// feet end of the scanned volume. Before, only the slices' border counted, and a colon cut
+/// by the first or last slice was read as if it ended there.
+#[test]
+fn a_colon_cut_by_the_first_or_last_slice_is_said_to_reach_that_end() {
+    let p = phantom::colon(&ColonOptions {
+        small: true,
+        ..Default::default()
+    })
+    .expect("colon phantom");
+    let [nx, ny, nz] = p.ct.dims();
+    let gas_k: Vec<usize> = (0..nx * ny * nz)
+        .filter(|&v| p.labels.data()[v] == label::LUMEN_AIR)
+        .map(|v| v / (nx * ny))
+        .collect();
+    let (lo, hi) = (*gas_k.iter().min().unwrap(), *gas_k.iter().max().unwrap());
+    let mm = (10.0 / p.ct.spacing()[2]).round() as usize;
+    // The phantom's k runs to the patient's head.
+    for (cut, end) in [
+        (slices(&p.ct, 0, hi + 1 - mm), "head end"),
+        (slices(&p.ct, lo + mm, nz), "feet end"),
+    ] {
+        let s = segment(&cut, &SegmentOptions::default()).expect("segmentation");
+        eprintln!("cut at the {end}: warnings {:#?}", s.warnings);
+        assert!(
+            s.warnings
+                .iter()
+                .any(|w| w.contains(&format!("scanned volume at the patient's {end}"))),
+            "{end}: {:?}",
+            s.warnings
+        );
+    }
+}

@@ -335,7 +335,10 @@ fn edge_warnings(parts: &Compartments, chained: &Chained, geom: &crate::Geometry
     for l in &chained.chain.links {
         let b = &parts.list[l.comp as usize].bbox;
         let mid = [0, 1, 2].map(|a| (b.lo[a] + b.hi[a]) / 2);
-        for (axis, at) in [(0, b.lo[0]), (0, b.hi[0]), (1, b.lo[1]), (1, b.hi[1])] {
+        let faces = [0, 1, 2]
+            .into_iter()
+            .flat_map(|a| [(a, b.lo[a]), (a, b.hi[a])]);
+        for (axis, at) in faces {
             let mut v = mid;
             v[axis] = at;
             if let Some(side) = side_at(v, geom, 0.0)
@@ -363,11 +366,12 @@ fn side_near(v: [usize; 3], geom: &crate::Geometry) -> Option<&'static str> {
     side_at(v, geom, EDGE_MM)
 }
 
-/// The side of the scanned volume (the slices' border, not their first or last) within
-/// `within_mm` of voxel `v`, named by the patient's direction it faces.
+/// The side of the scanned volume within `within_mm` of voxel `v`, named by the patient's
+/// direction it faces: the slices' border, or the first or last slice (a scan that ends in the
+/// splenic flexure or above the rectum's end).
 fn side_at(v: [usize; 3], geom: &crate::Geometry, within_mm: f64) -> Option<&'static str> {
     let sp = geom.spacing_vec();
-    for axis in 0..2 {
+    for axis in 0..3 {
         let n = geom.dims[axis];
         let near_lo = v[axis] as f64 * sp[axis] <= within_mm;
         let near_hi = (n - 1 - v[axis].min(n - 1)) as f64 * sp[axis] <= within_mm;
