@@ -18,7 +18,9 @@
 //! 3. Components: the remaining air, 6-connected in 3D (diagonal contact through a thin wall
 //!    does not join two loops of the colon).
 //! 4. Lungs: large components whose air is not dark enough to be gas (lung parenchyma lies
-//!    around −850 HU, bowel gas at −1000). A rectal tube (a thin tube of air from outside
+//!    around −850 HU, bowel gas at −1000); where thick slices join a lung base to bowel gas,
+//!    its parenchyma (air farther than 3 mm from any dark voxel, 100 ml of it or more) is
+//!    kept apart first. A rectal tube (a thin tube of air from outside
 //!    air into a component) is taken out of its component ([`tube`]): the rectum starts at
 //!    its tip.
 //! 5. Gravity: DICOM PatientPosition or `--position`; else from the air–fluid levels; else
@@ -490,6 +492,44 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("no colon lumen") && e.contains("5.6 ml"), "{e}");
+    }
+
+    /// Thick slices (3 mm) that average a diaphragm away: a lung base (−800 HU, 117 ml)
+    /// lies face to face on bowel gas (72 ml). Joined, the two passed for bowel (0.38 of it
+    /// dark) and the lung was taken into the colon; its parenchyma is kept apart and is lung.
+    #[test]
+    fn a_lung_base_on_the_gas_is_kept_apart() {
+        let g = Geometry::new([100, 100, 24], [1.0, 1.0, 3.0], [0.0; 3]).unwrap();
+        let mut v = Volume::filled(g, -1000i16).unwrap();
+        for k in 0..24 {
+            for j in 0..100 {
+                for i in 0..100 {
+                    let body = ((i as f64 - 50.0) / 48.0).powi(2)
+                        + ((j as f64 - 50.0) / 48.0).powi(2)
+                        < 1.0;
+                    if !body {
+                        continue;
+                    }
+                    let inner = (20..80).contains(&i) && (25..75).contains(&j);
+                    let hu = match k {
+                        2..10 if inner => -1000,
+                        10..23 if inner => -800,
+                        _ => 40,
+                    };
+                    v.set(i, j, k, hu);
+                }
+            }
+        }
+        let s = segment(&v, &toy_options()).unwrap();
+        assert_eq!(s.lumen.get(50, 50, 5), 1, "the bowel gas");
+        assert_eq!(s.lumen.get(50, 50, 16), 0, "the lung");
+        assert!(
+            s.components
+                .iter()
+                .any(|c| c.kind == ComponentKind::Lung && c.volume_ml >= 100.0),
+            "{:?}",
+            s.components
+        );
     }
 
     #[test]
