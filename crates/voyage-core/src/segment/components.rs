@@ -313,14 +313,21 @@ fn parenchyma_joined(
             && comps[run_comp[r] as usize].volume_ml > PARENCHYMA_APART_ML
     };
     let far = far_from_dark(runs, dims, vol.spacing(), &bowel);
+    let sp = vol.spacing();
+    let voxel_ml = sp[0] * sp[1] * sp[2] / 1000.0;
+    let far_voxels: u64 = (0..n)
+        .filter(|&r| far[r])
+        .map(|r| (runs.runs[r].x1 - runs.runs[r].x0) as u64)
+        .sum();
+    if (far_voxels as f64) * voxel_ml < PARENCHYMA_APART_ML {
+        return None;
+    }
     let mut blobs = UnionFind::new(n);
     connect_3d_where(runs, dims, &mut blobs, |a, b| far[a] && far[b]);
     let mut voxels = vec![0u64; n];
     for r in (0..n).filter(|&r| far[r]) {
         voxels[blobs.find(r)] += (runs.runs[r].x1 - runs.runs[r].x0) as u64;
     }
-    let sp = vol.spacing();
-    let voxel_ml = sp[0] * sp[1] * sp[2] / 1000.0;
     let apart: Vec<bool> = (0..n)
         .map(|r| far[r] && voxels[blobs.find(r)] as f64 * voxel_ml >= PARENCHYMA_APART_ML)
         .collect();
@@ -337,32 +344,34 @@ fn far_from_dark(
 ) -> Vec<bool> {
     let [_, ny, nz] = dims;
     let reach = sp.map(|s| (RIM_MM / s).ceil() as i64);
-    // Per row, the x-extents of its dark runs, in order.
-    let dark_rows: Vec<Vec<(u32, u32)>> = (0..ny * nz)
-        .map(|row| {
-            let (j, k) = (row % ny, row / ny);
-            runs.row(j, k)
-                .filter(|&r| of(r) && runs.dark[r] > 0)
-                .map(|r| (runs.runs[r].x0, runs.runs[r].x1))
-                .collect()
-        })
+    // The x-extents of the dark runs, row by row (those of row r at `dark[start[r]..start[r + 1]]`).
+    let mut dark = Vec::new();
+    let mut start = Vec::with_capacity(ny * nz + 1);
+    for k in 0..nz {
+        for j in 0..ny {
+            start.push(dark.len());
+            let extents = runs.row(j, k).filter(|&r| of(r) && runs.dark[r] > 0);
+            dark.extend(extents.map(|r| (runs.runs[r].x0, runs.runs[r].x1)));
+        }
+    }
+    start.push(dark.len());
+    // The rows around, nearest first: a rim run finds its dark neighbour at once.
+    let mut around: Vec<(i64, i64)> = (-reach[2]..=reach[2])
+        .flat_map(|dk| (-reach[1]..=reach[1]).map(move |dj| (dj, dk)))
         .collect();
+    around.sort_by_key(|&(dj, dk)| dj.abs().max(dk.abs()));
     let near = |x0: u32, x1: u32, j: usize, k: usize| {
         let (lo, hi) = (x0 as i64 - reach[0], x1 as i64 + reach[0]);
-        for dk in -reach[2]..=reach[2] {
-            for dj in -reach[1]..=reach[1] {
-                let (jj, kk) = (j as i64 + dj, k as i64 + dk);
-                if jj < 0 || kk < 0 || jj >= ny as i64 || kk >= nz as i64 {
-                    continue;
-                }
-                let row = &dark_rows[jj as usize + ny * kk as usize];
-                let at = row.partition_point(|&(_, e)| (e as i64) <= lo);
-                if at < row.len() && (row[at].0 as i64) < hi {
-                    return true;
-                }
+        around.iter().any(|&(dj, dk)| {
+            let (jj, kk) = (j as i64 + dj, k as i64 + dk);
+            if jj < 0 || kk < 0 || jj >= ny as i64 || kk >= nz as i64 {
+                return false;
             }
-        }
-        false
+            let r = jj as usize + ny * kk as usize;
+            let row = &dark[start[r]..start[r + 1]];
+            let at = row.partition_point(|&(_, e)| (e as i64) <= lo);
+            at < row.len() && (row[at].0 as i64) < hi
+        })
     };
     let mut far = vec![false; runs.runs.len()];
     for k in 0..nz {
