@@ -138,7 +138,8 @@ pub struct Flight {
 pub struct Rescue {
     /// Simulated time (s).
     pub t: f64,
-    /// Arc length along the centerline from the end the flight starts at (mm).where the glide began.
+    /// Arc length along the centerline, from the end the flight starts at, where the glide
+    /// began (mm).
     pub arc_mm: f64,
     /// Where the submarine was (volume-local mm).
     pub position: [f64; 3],

@@ -313,20 +313,17 @@ fn parenchyma_joined(
             && comps[run_comp[r] as usize].volume_ml > PARENCHYMA_APART_ML
     };
     let far = far_from_dark(runs, dims, vol.spacing(), &bowel);
+    let far_runs: Vec<usize> = (0..n).filter(|&r| far[r]).collect();
     let sp = vol.spacing();
     let voxel_ml = sp[0] * sp[1] * sp[2] / 1000.0;
-    let far_voxels: u64 = (0..n)
-        .filter(|&r| far[r])
-        .map(|r| (runs.runs[r].x1 - runs.runs[r].x0) as u64)
-        .sum();
-    if (far_voxels as f64) * voxel_ml < PARENCHYMA_APART_ML {
+    if run_voxels(runs, &far_runs) as f64 * voxel_ml < PARENCHYMA_APART_ML {
         return None;
     }
     let mut blobs = UnionFind::new(n);
     connect_3d_where(runs, dims, &mut blobs, |a, b| far[a] && far[b]);
-    let mut voxels = vec![0u64; n];
-    for r in (0..n).filter(|&r| far[r]) {
-        voxels[blobs.find(r)] += (runs.runs[r].x1 - runs.runs[r].x0) as u64;
+    let mut voxels = vec![0usize; n];
+    for &r in &far_runs {
+        voxels[blobs.find(r)] += run_voxels(runs, &[r]);
     }
     let apart: Vec<bool> = (0..n)
         .map(|r| far[r] && voxels[blobs.find(r)] as f64 * voxel_ml >= PARENCHYMA_APART_ML)
