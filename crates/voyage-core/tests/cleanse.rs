@@ -147,21 +147,25 @@ fn by_lumen(p: &Phantom, v: usize) -> bool {
     })
 }
 
-/// Within 1.5 ileum radii of the ileocecal valve's mouth, where the small bowel's contrast is
-/// one with the caecal pool (as in [`small_bowel_contrast_stays`]).
+/// At the ileocecal valve's mouth, where the small bowel's contrast is one with the caecal
+/// pool (within 1.5 ileum radii, as in [`small_bowel_contrast_stays`]), or in its shell:
+/// two voxels more, as [`by_lumen`] allows round the lumen (the caecal pool's floor, taken
+/// to the wall, meets the mouth, and the model unmixes and smooths the tissue beside it).
 fn at_valve_mouth(p: &Phantom, v: usize) -> bool {
+    let g = p.ct.geometry();
+    let voxel = g.spacing.iter().cloned().fold(0.0, f64::max);
     p.truth
         .valve_mouth()
-        .is_some_and(|(mouth, ileum)| p.ct.geometry().voxel_local(v).distance(mouth) <= 1.5 * ileum)
+        .is_some_and(|(mouth, ileum)| g.voxel_local(v).distance(mouth) <= 1.5 * ileum + 2.0 * voxel)
 }
 
 /// `min_kept`: the share of the true wall under the fluid that must lie within 1 mm of the
 /// cleansed surface (0.99 at full size; 0.98 on the half-size phantom, twice as coarse:
 /// prone, seed 2 reaches 98.8 %).
-/// `min_removed`: the share of the truth's colon fluid that must be made air. What stays is
-/// fluid that segmentation left out of the colon: the floor of a pool narrower than small
-/// bowel can be (27 mm) and deeper than 3 mm, which the half-size phantom's pools have
-/// (up to 7% prone, by the valve) and real anatomy's do not.
+/// `min_removed`: the share of the truth's colon fluid that must be made air (0.99 at full
+/// size, 0.98 on the half-size phantom: 0.994–1.000 over its seeds). The floor of a pool,
+/// narrower than small bowel can be (27 mm) and deeper than 3 mm, was left out until it was
+/// told from a tube by its shape: up to 7 % of the fluid prone, by the valve.
 fn check(name: &str, opts: ColonOptions, min_removed: f64, min_kept: f64) -> usize {
     let with = phantom::colon(&ColonOptions {
         tagged_fluid: true,
@@ -390,7 +394,7 @@ fn cleansed_fluid_leaves_the_true_wall_small_phantom() {
                 small: true,
                 ..Default::default()
             },
-            0.9,
+            0.98,
             0.98,
         );
         submerged += check(
@@ -402,7 +406,7 @@ fn cleansed_fluid_leaves_the_true_wall_small_phantom() {
                 opacified_small_bowel: true,
                 ..Default::default()
             },
-            0.9,
+            0.98,
             0.98,
         );
     }
@@ -416,7 +420,7 @@ fn cleansed_fluid_leaves_the_true_wall_small_phantom() {
 #[test]
 fn cleansed_fluid_leaves_the_true_wall_full_size() {
     assert!(
-        check("full size, supine", ColonOptions::default(), 0.95, 0.99) > 0,
+        check("full size, supine", ColonOptions::default(), 0.99, 0.99) > 0,
         "no submerged polyp checked"
     );
 }

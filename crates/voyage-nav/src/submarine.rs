@@ -380,7 +380,15 @@ impl Submarine {
             // off, or compass off), or looking at a point (which pitching would pull the view
             // off), only its roll about the view axis acts: a camera put looking down the
             // colon stays so.
-            let level = -r.y_axis.cross(self.dynamics.gravity);
+            let g = self.dynamics.gravity;
+            let mut level = -r.y_axis.cross(g);
+            // Upside down, −y × G shrinks as y_body nears G itself, an unstable rest: a view
+            // turned over while it looked along G (down a stretch running front to back)
+            // stayed over for 78 frames on the real exam. Past 90° it turns at full strength,
+            // the way it already turns (any way, exactly over).
+            if r.y_axis.dot(g) > 0.0 {
+                level = level.try_normalize().unwrap_or(r.z_axis) * g.length();
+            }
             let compass_holds =
                 self.modes.compass && grad_v != DVec3::ZERO && self.look_at.is_none();
             torque += if compass_holds {

@@ -585,6 +585,41 @@ fn leveling_keeps_the_up_vector_against_gravity() {
     }
 }
 
+/// A view turned over (up 179° from where leveling wants it) is most of the way back within
+/// a second: the paper's −y × G alone all but vanishes there, and on the real exam a view
+/// that turned over looking down a front-to-back stretch stayed so for 78 frames.
+#[test]
+fn leveling_rights_a_view_turned_over() {
+    let study = small_colon(4);
+    let nav = study.navigable(1.0).unwrap();
+    let f = field(&study, &nav);
+    let opts = FlightOptions::default();
+    let pose = start_pose(&f, &study.centerline, Direction::Forward, &opts).unwrap();
+    let over = Pose {
+        orientation: pose.orientation * glam::DQuat::from_rotation_z(179f64.to_radians()),
+        ..pose
+    };
+    let g = opts.dynamics.gravity;
+    let before = level_error(&over, g).expect("the start looks across gravity");
+    assert!(before > 170.0, "{before:.1}° at the start");
+    let mut sub = Submarine::new(&f, over, Safety::default()).unwrap();
+    sub.dynamics = opts.dynamics;
+    sub.modes = Modes {
+        still: true,
+        compass: false,
+        leveling: true,
+    };
+    for _ in 0..30 {
+        sub.step(&f, 1.0 / 30.0, &Input::default());
+    }
+    // (−y × G alone: 149° after a second, 7° after two.)
+    let after = level_error(&sub.pose(), g).unwrap();
+    assert!(
+        after <= 60.0,
+        "still {after:.1}° off after a second (from {before:.1}°)"
+    );
+}
+
 #[test]
 fn still_mode_turns_the_view_but_not_the_camera() {
     let study = small_colon(4);

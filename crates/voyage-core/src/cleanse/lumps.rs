@@ -16,6 +16,9 @@ const MAX_LUMP_ML: f64 = 20.0;
 const MIN_LUMP_VOXELS: usize = 8;
 /// How far (voxels) past a lump's tagged voxels its skin and pockets may reach.
 const SKIN_VOXELS: usize = 3;
+/// The lumen air beside a lump is one, when it is, within this far (mm) of the lump's box:
+/// round a fold, past a lump lying in the lumen.
+const ONE_AIR_MM: f64 = 10.0;
 
 /// Whether lumen air (a voxel with `m`'s bit 0 set, below `air_hu`) lies within [`STOOL_REACH`] voxels of
 /// `v` along an axis (`six`: the face neighbours' steps): where a lump of stool may start.
@@ -159,6 +162,11 @@ pub(super) fn find_lumps(
                 }
             }
             grow(&mut lump, 0, &|h| h < mostly_air);
+            // Tagged material in a thin wall's fold between two loops touches the air of
+            // both: cleansed as stool, with its skin, it would open a hole between them
+            // (a prone exam with its tagging half as bright: the centerline went from the
+            // hepatic flexure to the cecum through one, 300 mm of colon left out).
+            ok = ok && !between_loops(&lump, m, hu, g, air_hu);
         }
         if !ok {
             // Not stool: its voxels stay marked `LUMP` alone, so that no other seed
@@ -172,6 +180,113 @@ pub(super) fn find_lumps(
         lumps.push(lump);
     }
     lumps
+}
+
+/// Whether the lumen air touching `lump` (26 neighbours; `m`'s bit 0 is the lumen) lies in
+/// two parts or more that do not meet within [`ONE_AIR_MM`] of the lump's box, each
+/// reaching that far.
+fn between_loops(lump: &[usize], m: &[u8], hu: &[i16], g: &Geometry, air_hu: i16) -> bool {
+    let air = |w: usize| m[w] & 1 != 0 && hu[w] < air_hu;
+    let [nx, ny, nz] = g.dims;
+    let strides = [1isize, nx as isize, (nx * ny) as isize];
+    let touching: Vec<usize> = {
+        let mut t: Vec<usize> = lump
+            .iter()
+            .flat_map(|&u| {
+                let ijk = g.ijk(u);
+                (-1..=1isize).flat_map(move |dk| {
+                    (-1..=1isize).flat_map(move |dj| {
+                        (-1..=1isize).filter_map(move |di| {
+                            let q = [
+                                ijk[0] as isize + di,
+                                ijk[1] as isize + dj,
+                                ijk[2] as isize + dk,
+                            ];
+                            (q.iter()
+                                .zip(g.dims)
+                                .all(|(&x, n)| x >= 0 && (x as usize) < n))
+                            .then(|| q[0] + q[1] * strides[1] + q[2] * strides[2])
+                            .map(|w| w as usize)
+                        })
+                    })
+                })
+            })
+            .filter(|&w| air(w))
+            .collect();
+        t.sort_unstable();
+        t.dedup();
+        t
+    };
+    if touching.is_empty() {
+        return false;
+    }
+    // The box: the lump's, grown by the margin, inside the volume.
+    let (mut lo, mut hi) = ([usize::MAX; 3], [0usize; 3]);
+    for &u in lump {
+        let ijk = g.ijk(u);
+        for a in 0..3 {
+            (lo[a], hi[a]) = (lo[a].min(ijk[a]), hi[a].max(ijk[a]));
+        }
+    }
+    let reach = g.spacing.map(|s| (ONE_AIR_MM / s).ceil() as usize);
+    let lo = [0, 1, 2].map(|a| lo[a].saturating_sub(reach[a]));
+    let hi = [0, 1, 2].map(|a| (hi[a] + reach[a]).min([nx, ny, nz][a] - 1));
+    let w = [0, 1, 2].map(|a| hi[a] - lo[a] + 1);
+    let local = |v: usize| {
+        let ijk = g.ijk(v);
+        (ijk[0] - lo[0]) + w[0] * ((ijk[1] - lo[1]) + w[1] * (ijk[2] - lo[2]))
+    };
+    // Floods through the air in the box (six neighbours: the lumen's own connectivity),
+    // breadth first, from each touching voxel no flood has reached yet. Beside stool on one
+    // loop's wall the first reaches them all within a few voxels. A part that stays inside
+    // the box is an air pocket of mottled stool, not a loop.
+    let mut seen = vec![0u8; w[0] * w[1] * w[2]];
+    const SEEN: u8 = 1;
+    const TOUCHING: u8 = 2;
+    for &t in &touching {
+        seen[local(t)] = TOUCHING;
+    }
+    let mut left = touching.len();
+    let mut loops = 0;
+    for &start in &touching {
+        if seen[local(start)] & SEEN != 0 {
+            continue;
+        }
+        seen[local(start)] |= SEEN;
+        left -= 1;
+        let mut open = false;
+        let mut queue = std::collections::VecDeque::from([start]);
+        while let Some(u) = queue.pop_front() {
+            if left == 0 && loops == 0 {
+                return false;
+            }
+            let ijk = g.ijk(u);
+            for a in 0..3 {
+                for up in [false, true] {
+                    if (!up && ijk[a] == lo[a]) || (up && ijk[a] == hi[a]) {
+                        open = true;
+                        continue;
+                    }
+                    let q = if up {
+                        u as isize + strides[a]
+                    } else {
+                        u as isize - strides[a]
+                    } as usize;
+                    let s = &mut seen[local(q)];
+                    if *s & SEEN == 0 && air(q) {
+                        left -= (*s & TOUCHING != 0) as usize;
+                        *s |= SEEN;
+                        queue.push_back(q);
+                    }
+                }
+            }
+        }
+        loops += open as usize;
+        if loops >= 2 {
+            return true;
+        }
+    }
+    false
 }
 
 /// What cleansing the lumps changes: voxels (ascending), their cleansed values, the voxels
@@ -257,5 +372,49 @@ impl Lumps<'_> {
                 None => h,
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two loops' air (x ≤ 14 and x ≥ `far`) either side of a wall, and a bright lump of
+    /// 3 × 5 × 5 voxels in the wall at x = 15..=17 (with `pocket`, a voxel of lumen air in
+    /// it: mottled stool whose bubble segmentation took for gas): the lumps found.
+    fn lumps_in_a_wall(far: usize, pocket: bool) -> Vec<Vec<usize>> {
+        let g = Geometry::new([40, 30, 30], [1.0; 3], [0.0; 3]).unwrap();
+        let (mut hu, mut m) = (vec![40i16; g.len()], vec![0u8; g.len()]);
+        for k in 2..28 {
+            for j in 2..28 {
+                for i in (2..=14).chain(far..=37) {
+                    let v = g.index(i, j, k);
+                    (hu[v], m[v]) = (-1000, 1);
+                }
+                if (10..15).contains(&j) && (10..15).contains(&k) {
+                    for i in 15..=17 {
+                        hu[g.index(i, j, k)] = 500;
+                    }
+                }
+            }
+        }
+        if pocket {
+            let v = g.index(16, 12, 12);
+            (hu[v], m[v]) = (-1000, 1);
+        }
+        let seeds: Vec<u32> = (0..g.len())
+            .filter(|&v| hu[v] == 500)
+            .map(|v| v as u32)
+            .collect();
+        find_lumps(&hu, &mut m, &g, &seeds, [2; 3], [37, 27, 27], -500, 200)
+    }
+
+    #[test]
+    fn tagged_material_between_two_loops_is_not_stool() {
+        // On the wall of one loop, with wall behind it: stool, mottled or not.
+        assert_eq!(lumps_in_a_wall(21, false).len(), 1);
+        assert_eq!(lumps_in_a_wall(21, true).len(), 1);
+        // Touching the other loop's air too: cleansed, it would open a hole between them.
+        assert!(lumps_in_a_wall(18, false).is_empty());
     }
 }

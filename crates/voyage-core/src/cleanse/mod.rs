@@ -39,7 +39,9 @@
 //! gas, as fluid is) or partly in it. A lump is tagged voxels not in a pool with lumen air
 //! within two voxels (across its partial-volume skin; contrast in small bowel or bone lies
 //! farther, behind wall and fat), flooded through tagged voxels, with its air pockets and its
-//! skin; noise is told from stool by size and by one voxel well above the threshold. The
+//! skin; noise is told from stool by size and by one voxel well above the threshold, and
+//! tagged material that touches the air of two loops (in the thin wall between them) from
+//! stool by that: cleansed with its skin, it would open a hole between the loops. The
 //! same model cleanses it: beside the wall tissue and stool are unmixed, elsewhere (and at
 //! the corner of stool, air and wall) it is air, and it joins the lumen.
 //!

@@ -59,6 +59,9 @@ const MAX_LAYER_MM: f64 = 2.0;
 const NARROW_BELOW_MM: f64 = 4.0;
 const WIDE_MM: f64 = 27.0;
 const TUBE_MM: f64 = 3.0;
+/// A pool's floor narrower than [`WIDE_MM`] joins only where no gas lies within this (mm)
+/// below it: a wall, not a loop behind a thin one.
+const FLOOR_WALL_MM: f64 = 4.0;
 
 /// The layer's thickness in voxels along an axis of spacing `step`.
 fn max_gap(step: f64) -> i64 {
@@ -208,6 +211,7 @@ pub fn pools(
     bx: &Bbox,
     gravity_lps: DVec3,
     bright: impl Fn(usize) -> bool + Sync,
+    gas: impl Fn(usize) -> bool + Sync,
 ) -> Vec<Mark> {
     let (axis, sign) = PatientFrame::of(geom).nearest_axis(gravity_lps);
     let step = geom.spacing[axis];
@@ -223,7 +227,7 @@ pub fn pools(
         depth_max: (MAX_DEPTH_MM / step).round() as i64,
         narrow_below: (NARROW_BELOW_MM / step).round() as i64,
     };
-    let wide = |v: usize| wide(geom, v, (axis, sign), &bright);
+    let wide = |v: usize| wide(geom, v, (axis, sign), &bright, &gas);
     let w = bx.widths();
     let lines = if axis == 2 {
         w[0] * w[1]
@@ -257,16 +261,117 @@ pub fn pools(
 /// Whether bright voxel `v` lies where fluid is wide or ends soon below it (gravity along
 /// voxel axis `down.0`, direction `down.1`): see [`WIDE_MM`]. A pool spreads under its level,
 /// a loop leaving it is a tube.
+///
+/// Ends soon: less than [`TUBE_MM`] of fluid below, or a pool's floor. A floor's horizontal
+/// chords shrink as it curves up to the wall, and under a chord `c` it holds at most `c / 2`
+/// of fluid (a round floor: `h ≤ c / 2` at every height `h` above its lowest point). A tube
+/// leaving downward is as narrow and goes on down; a loop against the floor widens again
+/// below the neck where it meets it. (`ctc/prone-tagged`'s prone descending
+/// pool, round in section: its chords fall below [`WIDE_MM`] 6 mm above its floor, and those
+/// 6 mm, 13 ml in all, were left tagged under the cleansed level.)
 pub fn wide(
     geom: &Geometry,
     v: usize,
     down: (usize, i32),
     bright: &impl Fn(usize) -> bool,
+    gas: &impl Fn(usize) -> bool,
 ) -> bool {
     let (axis, sign) = down;
-    let tube_steps = (TUBE_MM / geom.spacing[axis]).ceil() as usize;
-    bright_run(geom, v, axis, sign, tube_steps, bright) < tube_steps
-        || wide_across(geom, v, axis, bright)
+    let step = geom.spacing[axis];
+    let tube_steps = (TUBE_MM / step).ceil() as usize;
+    if bright_run(geom, v, axis, sign, tube_steps, bright) < tube_steps {
+        return true;
+    }
+    let chord = widest_across(geom, v, axis, bright);
+    if chord >= WIDE_MM {
+        return true;
+    }
+    let floor_steps = ((chord / 2.0 / step).ceil() as usize).max(tube_steps);
+    let below = bright_run(geom, v, axis, sign, floor_steps, bright);
+    if below >= floor_steps {
+        return false;
+    }
+    // A floor narrows as it goes down, each level's fluid within the one above it (a voxel
+    // of slack each way for noise); a loop against the floor with no wall between reaches
+    // out beyond its neck (the ileum under the caecal pool, at the valve).
+    let stride = [
+        1isize,
+        geom.dims[0] as isize,
+        (geom.dims[0] * geom.dims[1]) as isize,
+    ][axis]
+        * sign as isize;
+    let mut outline = across(geom, v, axis, bright);
+    let nested = (1..=below as isize).all(|t| {
+        let w = across(geom, (v as isize + t * stride) as usize, axis, bright);
+        let within = (0..2).all(|h| (0..2).all(|e| w[h][e] <= outline[h][e] + 1));
+        for (o, w) in outline.iter_mut().flatten().zip(w.iter().flatten()) {
+            *o = (*o).min(*w);
+        }
+        within
+    });
+    // And where the line meets the wall, the fluid beside it ends soon below too: a line
+    // down the side of a tube leaving the floor (the ileum at the valve, grazed) ends at the
+    // tube's wall while the tube goes on down next to it.
+    let bottom = (v as isize + below as isize * stride) as usize;
+    // And it rests on a wall, not on another loop: no gas within [`FLOOR_WALL_MM`] below.
+    // Taken to a thin wall with a loop's gas behind it, a floor left the wall a voxel or two,
+    // and the centerline went through it (the real exam cut 60 mm at the top: at the
+    // splenic flexure, 160 mm of colon left out).
+    let at = geom.ijk(bottom)[axis] as isize;
+    let wall_steps = ((FLOOR_WALL_MM / step).ceil() as isize).min(if sign > 0 {
+        geom.dims[axis] as isize - 1 - at
+    } else {
+        at
+    });
+    nested
+        && beside_across(geom, bottom, axis)
+            .all(|n| !bright(n) || bright_run(geom, n, axis, sign, tube_steps, bright) < tube_steps)
+        && (1..=wall_steps).all(|t| !gas((bottom as isize + t * stride) as usize))
+}
+
+/// The eight voxels around `v` in its horizontal plane (gravity along voxel axis `down`),
+/// those inside the volume.
+fn beside_across(geom: &Geometry, v: usize, down: usize) -> impl Iterator<Item = usize> + '_ {
+    let [a, b] = [[1, 2], [0, 2], [0, 1]][down];
+    let ijk = geom.ijk(v).map(|x| x as i64);
+    (-1..=1i64)
+        .flat_map(move |da| (-1..=1i64).map(move |db| (da, db)))
+        .filter(|&d| d != (0, 0))
+        .filter_map(move |(da, db)| {
+            let mut q = ijk;
+            q[a] += da;
+            q[b] += db;
+            (0..3)
+                .all(|x| q[x] >= 0 && q[x] < geom.dims[x] as i64)
+                .then(|| geom.index(q[0] as usize, q[1] as usize, q[2] as usize))
+        })
+}
+
+/// The bright voxels beside bright voxel `v` along the two horizontal axes (gravity along
+/// voxel axis `down`): per axis, how many follow it backwards and forwards, each counted up
+/// to [`WIDE_MM`].
+fn across(
+    geom: &Geometry,
+    v: usize,
+    down: usize,
+    bright: &impl Fn(usize) -> bool,
+) -> [[usize; 2]; 2] {
+    let [a, b] = [[1, 2], [0, 2], [0, 1]][down];
+    [a, b].map(|a| {
+        let need = (WIDE_MM / geom.spacing[a]).ceil() as usize;
+        [-1, 1].map(|sign| bright_run(geom, v, a, sign, need, bright))
+    })
+}
+
+/// The longest horizontal chord through bright voxel `v` (gravity along voxel axis `down`),
+/// all bright, in mm, counted up to [`WIDE_MM`].
+fn widest_across(geom: &Geometry, v: usize, down: usize, bright: &impl Fn(usize) -> bool) -> f64 {
+    let [a, b] = [[1, 2], [0, 2], [0, 1]][down];
+    let [ra, rb] = across(geom, v, down, bright);
+    [(a, ra), (b, rb)]
+        .map(|(axis, [back, fwd])| ((1 + back + fwd) as f64 * geom.spacing[axis]).min(WIDE_MM))
+        .into_iter()
+        .fold(0.0, f64::max)
 }
 
 /// Whether a horizontal chord through bright voxel `v` (gravity along voxel axis `down`),
@@ -590,9 +695,14 @@ pub(super) fn pool(
         }
     }
     let threshold = fluid_hu.unwrap_or(i16::MAX);
-    let marks = pools(&rows, vol.geometry(), &cbox, orientation.gravity(), |v| {
-        vol.data()[v] >= threshold
-    });
+    let marks = pools(
+        &rows,
+        vol.geometry(),
+        &cbox,
+        orientation.gravity(),
+        |v| vol.data()[v] >= threshold,
+        |v| vol.data()[v] < opts.air_hu,
+    );
     let pooled = marks.len();
     let pool_rows = mark(&mut work, marks);
     Ok(Pooled {
@@ -1065,9 +1175,14 @@ mod tests {
 
     /// `pools` over all of `v` with gravity +y, its BRIGHT voxels tagged.
     fn supine_pools(v: &Volume<u8>) -> Vec<Mark> {
-        pools(&rows_of(v), v.geometry(), &all(v), DVec3::Y, |i| {
-            v.data()[i] == BRIGHT
-        })
+        pools(
+            &rows_of(v),
+            v.geometry(),
+            &all(v),
+            DVec3::Y,
+            |i| v.data()[i] == BRIGHT,
+            |i| v.data()[i] == GAS,
+        )
     }
 
     /// The mark `pools` gave voxel (i, j, k) of `v`, if any.
@@ -1123,7 +1238,68 @@ mod tests {
             (Some(POOL), None, None)
         );
         // Prone: gravity anterior, the fluid is above the gas: none joins.
-        assert!(pools(&rows_of(&v), v.geometry(), &all(&v), -DVec3::Y, bright).is_empty());
+        let gas = |i: usize| v.data()[i] == GAS;
+        assert!(pools(&rows_of(&v), v.geometry(), &all(&v), -DVec3::Y, bright, gas).is_empty());
+    }
+
+    /// A round pool (a ball of 16 mm radius, gas over its upper half, gravity +y) with a
+    /// tube of 9 mm leaving its floor downward. The floor's chords are under `WIDE_MM` for
+    /// its lowest 7 mm: it is taken all the same, as far as the wall; the tube is not.
+    #[test]
+    fn a_round_floor_is_taken_to_the_wall_and_a_tube_below_it_is_not() {
+        let g = Geometry::new([40, 60, 40], [1.0; 3], [0.0; 3]).unwrap();
+        let mut v = Volume::filled(g, 0u8).unwrap();
+        for k in 0..40 {
+            for j in 0..60 {
+                for i in 0..40 {
+                    let (x, y, z) = (i as f64 - 20.0, j as f64 - 20.0, k as f64 - 20.0);
+                    let ball = x * x + y * y + z * z <= 16.0 * 16.0;
+                    let tube = j >= 30 && x.abs() <= 4.0 && z.abs() <= 4.0;
+                    if ball && j < 20 {
+                        v.set(i, j, k, GAS);
+                    } else if ball || tube {
+                        v.set(i, j, k, BRIGHT);
+                    }
+                }
+            }
+        }
+        let marks = supine_pools(&v);
+        let at = |i, j, k| mark_at(&marks, &v, [i, j, k]);
+        // 10 mm below the level, where a chord is 25 mm, and the floor's lowest voxel there.
+        assert_eq!(at(14, 30, 20), Some(POOL));
+        assert_eq!(at(14, 34, 20), Some(POOL));
+        assert_eq!(at(20, 45, 20), None, "the tube below the floor");
+        // Beside the tube, the floor is taken wherever a line from the gas reaches it.
+        let floor = (0..40)
+            .flat_map(|k| (27..60).flat_map(move |j| (0..40).map(move |i| [i, j, k])))
+            .filter(|&[i, j, k]| {
+                let (x, y, z) = (i as f64 - 20.0, j as f64 - 20.0, k as f64 - 20.0);
+                x * x + y * y + z * z <= 16.0 * 16.0 && (x.abs() > 5.0 || z.abs() > 5.0)
+            })
+            .collect::<Vec<_>>();
+        let taken = floor
+            .iter()
+            .filter(|&&p| at(p[0], p[1], p[2]).is_some())
+            .count();
+        assert_eq!(taken, floor.len(), "of the floor beside the tube");
+        // Another loop's gas under the floor's left side, behind a wall 1.5 mm thin: the
+        // floor there stays out where it is narrow (it would leave the wall a voxel thin).
+        let mut w = v.clone();
+        for k in 0..40 {
+            for j in 28..60 {
+                for i in 0..16 {
+                    let (x, y, z) = (i as f64 - 20.0, j as f64 - 20.0, k as f64 - 20.0);
+                    let r = (x * x + y * y + z * z).sqrt();
+                    if r > 17.5 && r <= 20.0 {
+                        w.set(i, j, k, GAS);
+                    }
+                }
+            }
+        }
+        let marks = supine_pools(&w);
+        let at = |i, j, k| mark_at(&marks, &w, [i, j, k]);
+        assert_eq!(at(13, 30, 20), None, "a narrow floor over another loop");
+        assert_eq!(at(27, 30, 20), Some(POOL), "the floor away from it");
     }
 
     #[test]
