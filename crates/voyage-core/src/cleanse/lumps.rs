@@ -166,7 +166,7 @@ pub(super) fn find_lumps(
             // both: cleansed as stool, with its skin, it would open a hole between them
             // (a prone exam with its tagging half as bright: the centerline went from the
             // hepatic flexure to the cecum through one, 300 mm of colon left out).
-            ok = ok && !between_loops(&lump, m, hu, g, air_hu);
+            ok = ok && !between_loops(&lump, &cube26, m, hu, g, air_hu);
         }
         if !ok {
             // Not stool: its voxels stay marked `LUMP` alone, so that no other seed
@@ -182,41 +182,28 @@ pub(super) fn find_lumps(
     lumps
 }
 
-/// Whether the lumen air touching `lump` (26 neighbours; `m`'s bit 0 is the lumen) lies in
-/// two parts or more that do not meet within [`ONE_AIR_MM`] of the lump's box, each
-/// reaching that far.
-fn between_loops(lump: &[usize], m: &[u8], hu: &[i16], g: &Geometry, air_hu: i16) -> bool {
+/// Whether the lumen air touching `lump` (its 26 neighbours, steps `cube26`; `m`'s bit 0 is
+/// the lumen) lies in two parts or more that do not meet within [`ONE_AIR_MM`] of the lump's
+/// box, each reaching that far. A lump lies two voxels inside the volume, as
+/// [`find_lumps`] keeps it.
+fn between_loops(
+    lump: &[usize],
+    cube26: &[isize],
+    m: &[u8],
+    hu: &[i16],
+    g: &Geometry,
+    air_hu: i16,
+) -> bool {
     let air = |w: usize| m[w] & 1 != 0 && hu[w] < air_hu;
     let [nx, ny, nz] = g.dims;
     let strides = [1isize, nx as isize, (nx * ny) as isize];
-    let touching: Vec<usize> = {
-        let mut t: Vec<usize> = lump
-            .iter()
-            .flat_map(|&u| {
-                let ijk = g.ijk(u);
-                (-1..=1isize).flat_map(move |dk| {
-                    (-1..=1isize).flat_map(move |dj| {
-                        (-1..=1isize).filter_map(move |di| {
-                            let q = [
-                                ijk[0] as isize + di,
-                                ijk[1] as isize + dj,
-                                ijk[2] as isize + dk,
-                            ];
-                            (q.iter()
-                                .zip(g.dims)
-                                .all(|(&x, n)| x >= 0 && (x as usize) < n))
-                            .then(|| q[0] + q[1] * strides[1] + q[2] * strides[2])
-                            .map(|w| w as usize)
-                        })
-                    })
-                })
-            })
-            .filter(|&w| air(w))
-            .collect();
-        t.sort_unstable();
-        t.dedup();
-        t
-    };
+    let mut touching: Vec<usize> = lump
+        .iter()
+        .flat_map(|&u| cube26.iter().map(move |&d| (u as isize + d) as usize))
+        .filter(|&w| air(w))
+        .collect();
+    touching.sort_unstable();
+    touching.dedup();
     if touching.is_empty() {
         return false;
     }

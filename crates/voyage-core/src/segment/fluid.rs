@@ -215,12 +215,7 @@ pub fn pools(
 ) -> Vec<Mark> {
     let (axis, sign) = PatientFrame::of(geom).nearest_axis(gravity_lps);
     let step = geom.spacing[axis];
-    let stride = [
-        1isize,
-        geom.dims[0] as isize,
-        (geom.dims[0] * geom.dims[1]) as isize,
-    ][axis]
-        * sign as isize;
+    let stride = line_stride(geom, axis, sign);
     let limits = Walk {
         stride,
         gap_max: max_gap(step),
@@ -262,13 +257,7 @@ pub fn pools(
 /// voxel axis `down.0`, direction `down.1`): see [`WIDE_MM`]. A pool spreads under its level,
 /// a loop leaving it is a tube.
 ///
-/// Ends soon: less than [`TUBE_MM`] of fluid below, or a pool's floor. A floor's horizontal
-/// chords shrink as it curves up to the wall, and under a chord `c` it holds at most `c / 2`
-/// of fluid (a round floor: `h ≤ c / 2` at every height `h` above its lowest point). A tube
-/// leaving downward is as narrow and goes on down; a loop against the floor widens again
-/// below the neck where it meets it. (`ctc/prone-tagged`'s prone descending
-/// pool, round in section: its chords fall below [`WIDE_MM`] 6 mm above its floor, and those
-/// 6 mm, 13 ml in all, were left tagged under the cleansed level.)
+/// Ends soon: less than [`TUBE_MM`] of fluid below, or a pool's floor ([`floor`]).
 pub fn wide(
     geom: &Geometry,
     v: usize,
@@ -277,62 +266,91 @@ pub fn wide(
     gas: &impl Fn(usize) -> bool,
 ) -> bool {
     let (axis, sign) = down;
-    let step = geom.spacing[axis];
-    let tube_steps = (TUBE_MM / step).ceil() as usize;
+    let tube_steps = (TUBE_MM / geom.spacing[axis]).ceil() as usize;
     if bright_run(geom, v, axis, sign, tube_steps, bright) < tube_steps {
         return true;
     }
     let chord = widest_across(geom, v, axis, bright);
-    if chord >= WIDE_MM {
-        return true;
-    }
+    chord >= WIDE_MM || floor(geom, v, down, chord, bright, gas)
+}
+
+/// Whether bright voxel `v`, whose longest horizontal chord `chord` (mm) is under
+/// [`WIDE_MM`], lies on a pool's floor. A floor's chords shrink as it curves up to the wall,
+/// and under a chord `c` it holds at most `c / 2` of fluid (a round floor: `h ≤ c / 2` at
+/// every height `h` above its lowest point); a tube leaving downward is as narrow and goes
+/// on down. (`ctc/prone-tagged`'s prone sigmoid pool, round in section: its chords fall
+/// below [`WIDE_MM`] 6 mm above its floor, and those 6 mm, 13 ml in all, were left tagged
+/// under the cleansed level.) Below `v`, besides:
+/// - each level's fluid lies within the one above it (a voxel of slack each way for noise):
+///   a loop against the floor with no wall between reaches out beyond its neck (the ileum
+///   under the caecal pool, at the valve);
+/// - where the line meets the wall, the fluid beside it ends soon below too: a line down the
+///   side of a tube leaving the floor (the ileum, grazed) ends at the tube's wall while the
+///   tube goes on down next to it;
+/// - it rests on a wall, not on another loop: no gas within [`FLOOR_WALL_MM`] below. Taken
+///   to a thin wall with a loop's gas behind it, a floor left the wall a voxel or two, and
+///   the centerline went through it (the real exam cut 60 mm at the top: at the splenic
+///   flexure, 160 mm of colon left out).
+fn floor(
+    geom: &Geometry,
+    v: usize,
+    (axis, sign): (usize, i32),
+    chord: f64,
+    bright: &impl Fn(usize) -> bool,
+    gas: &impl Fn(usize) -> bool,
+) -> bool {
+    let step = geom.spacing[axis];
+    let tube_steps = (TUBE_MM / step).ceil() as usize;
     let floor_steps = ((chord / 2.0 / step).ceil() as usize).max(tube_steps);
     let below = bright_run(geom, v, axis, sign, floor_steps, bright);
     if below >= floor_steps {
         return false;
     }
-    // A floor narrows as it goes down, each level's fluid within the one above it (a voxel
-    // of slack each way for noise); a loop against the floor with no wall between reaches
-    // out beyond its neck (the ileum under the caecal pool, at the valve).
-    let stride = [
-        1isize,
-        geom.dims[0] as isize,
-        (geom.dims[0] * geom.dims[1]) as isize,
-    ][axis]
-        * sign as isize;
+    let stride = line_stride(geom, axis, sign);
+    let at = |t: usize| (v as isize + t as isize * stride) as usize;
     let mut outline = across(geom, v, axis, bright);
-    let nested = (1..=below as isize).all(|t| {
-        let w = across(geom, (v as isize + t * stride) as usize, axis, bright);
+    let nested = (1..=below).all(|t| {
+        let w = across(geom, at(t), axis, bright);
         let within = (0..2).all(|h| (0..2).all(|e| w[h][e] <= outline[h][e] + 1));
         for (o, w) in outline.iter_mut().flatten().zip(w.iter().flatten()) {
             *o = (*o).min(*w);
         }
         within
     });
-    // And where the line meets the wall, the fluid beside it ends soon below too: a line
-    // down the side of a tube leaving the floor (the ileum at the valve, grazed) ends at the
-    // tube's wall while the tube goes on down next to it.
-    let bottom = (v as isize + below as isize * stride) as usize;
-    // And it rests on a wall, not on another loop: no gas within [`FLOOR_WALL_MM`] below.
-    // Taken to a thin wall with a loop's gas behind it, a floor left the wall a voxel or two,
-    // and the centerline went through it (the real exam cut 60 mm at the top: at the
-    // splenic flexure, 160 mm of colon left out).
-    let at = geom.ijk(bottom)[axis] as isize;
-    let wall_steps = ((FLOOR_WALL_MM / step).ceil() as isize).min(if sign > 0 {
-        geom.dims[axis] as isize - 1 - at
-    } else {
-        at
-    });
-    nested
-        && beside_across(geom, bottom, axis)
+    let bottom = at(below);
+    let ends_beside = || {
+        beside_across(geom, bottom, axis)
             .all(|n| !bright(n) || bright_run(geom, n, axis, sign, tube_steps, bright) < tube_steps)
-        && (1..=wall_steps).all(|t| !gas((bottom as isize + t * stride) as usize))
+    };
+    let here = geom.ijk(bottom)[axis];
+    let room = if sign > 0 {
+        geom.dims[axis] - 1 - here
+    } else {
+        here
+    };
+    let wall_steps = ((FLOOR_WALL_MM / step).ceil() as usize).min(room);
+    nested && ends_beside() && (1..=wall_steps).all(|t| !gas(at(below + t)))
+}
+
+/// The step along voxel axis `axis` in direction `sign` (±1), in the volume's index.
+fn line_stride(geom: &Geometry, axis: usize, sign: i32) -> isize {
+    [
+        1isize,
+        geom.dims[0] as isize,
+        (geom.dims[0] * geom.dims[1]) as isize,
+    ][axis]
+        * sign as isize
+}
+
+/// The two voxel axes across gravity's `down`.
+fn horizontal(down: usize) -> [usize; 2] {
+    [[1, 2], [0, 2], [0, 1]][down]
 }
 
 /// The eight voxels around `v` in its horizontal plane (gravity along voxel axis `down`),
 /// those inside the volume.
 fn beside_across(geom: &Geometry, v: usize, down: usize) -> impl Iterator<Item = usize> + '_ {
-    let [a, b] = [[1, 2], [0, 2], [0, 1]][down];
+    let [a, b] = horizontal(down);
     let ijk = geom.ijk(v).map(|x| x as i64);
     (-1..=1i64)
         .flat_map(move |da| (-1..=1i64).map(move |db| (da, db)))
@@ -356,8 +374,7 @@ fn across(
     down: usize,
     bright: &impl Fn(usize) -> bool,
 ) -> [[usize; 2]; 2] {
-    let [a, b] = [[1, 2], [0, 2], [0, 1]][down];
-    [a, b].map(|a| {
+    horizontal(down).map(|a| {
         let need = (WIDE_MM / geom.spacing[a]).ceil() as usize;
         [-1, 1].map(|sign| bright_run(geom, v, a, sign, need, bright))
     })
@@ -366,11 +383,13 @@ fn across(
 /// The longest horizontal chord through bright voxel `v` (gravity along voxel axis `down`),
 /// all bright, in mm, counted up to [`WIDE_MM`].
 fn widest_across(geom: &Geometry, v: usize, down: usize, bright: &impl Fn(usize) -> bool) -> f64 {
-    let [a, b] = [[1, 2], [0, 2], [0, 1]][down];
-    let [ra, rb] = across(geom, v, down, bright);
-    [(a, ra), (b, rb)]
-        .map(|(axis, [back, fwd])| ((1 + back + fwd) as f64 * geom.spacing[axis]).min(WIDE_MM))
-        .into_iter()
+    let axes = horizontal(down);
+    let runs = across(geom, v, down, bright);
+    (0..2)
+        .map(|h| {
+            let [back, fwd] = runs[h];
+            ((1 + back + fwd) as f64 * geom.spacing[axes[h]]).min(WIDE_MM)
+        })
         .fold(0.0, f64::max)
 }
 
