@@ -117,27 +117,40 @@ fn the_real_exam_is_flown_both_ways_inside_the_lumen() {
     }
 }
 
-/// `ct/abdomen-3mm` (a colon 3–4 mm in radius, 3 mm slices): the rectum end of its centerline
-/// is narrower than the camera fits 1 mm from the wall. The backward flight used to stall
-/// there 23 mm short for good (16 rescue glides refused); it now ends at the last place the
-/// camera fits and says how far short that is, and the forward flight is unchanged.
+/// `ct/abdomen-3mm` (a colon 3–9 mm in radius, 3 mm slices, mostly collapsed): both flights
+/// reach their goals. Its rectum end was once narrower than the camera fits, through a hole
+/// 2 mm in radius that the centerline now goes round (a way 6 mm wide all along); what a
+/// flight does at such an end is tested on a phantom (`navigation.rs`).
 #[test]
-fn a_goal_too_narrow_for_the_camera_ends_the_flight_where_it_fits() {
+fn a_collapsed_colon_in_thick_slices_is_flown_both_ways() {
     let Some(study) = prepared("ct/abdomen-3mm.nii.gz") else {
         return;
     };
     let opts = FlightOptions::for_study(&study);
     let field = potential_field(&study, opts.safety.min_wall_mm).unwrap();
-    let back = fly(&field, &study.centerline, Direction::Backward, &opts).unwrap();
-    eprintln!(
-        "abdomen-3mm backward: reached {} with {:.0} mm of Dt left, the last {:.0} mm too narrow, {} rescues",
-        back.reached,
-        back.final_dt_mm,
-        back.short_end_mm,
-        back.rescues.len()
-    );
-    assert!(back.reached, "stopped {:.0} mm short", back.final_dt_mm);
-    assert!(back.short_end_mm > 10.0 && back.final_dt_mm <= back.short_end_mm + 5.0);
-    let forward = fly(&field, &study.centerline, Direction::Forward, &opts).unwrap();
-    assert!(forward.reached && forward.short_end_mm == 0.0);
+    for dir in [Direction::Forward, Direction::Backward] {
+        let f = fly(&field, &study.centerline, dir, &opts).unwrap();
+        eprintln!(
+            "abdomen-3mm {}: reached {} with {:.0} mm of Dt left, the last {:.0} mm too narrow, {} stalls, {} rescues",
+            dir.name(),
+            f.reached,
+            f.final_dt_mm,
+            f.short_end_mm,
+            f.stalls,
+            f.rescues.len()
+        );
+        assert!(
+            f.reached,
+            "{} stopped {:.0} mm short",
+            dir.name(),
+            f.final_dt_mm
+        );
+        for (i, p) in f.poses.iter().enumerate() {
+            assert!(
+                field.in_lumen_cube(p.position),
+                "{} frame {i} left the lumen",
+                dir.name()
+            );
+        }
+    }
 }

@@ -778,3 +778,41 @@ fn an_unsafe_start_is_refused() {
         .to_string();
     assert!(e.contains("not inside the lumen"), "{e}");
 }
+
+/// A colon whose rectum end is narrower than the camera fits 1 mm from the wall (as
+/// `ct/abdomen-3mm`'s once was): a tube 8 mm in radius ending in 30 mm of one 1 mm in radius.
+/// The backward flight used to stall there for good; it ends at the last place the camera
+/// fits and says how far short that is, and the forward flight (its goal roomy) is unchanged.
+#[test]
+fn a_goal_too_narrow_for_the_camera_ends_the_flight_where_it_fits() {
+    let g = voyage_core::Geometry::new([200, 40, 40], [1.0; 3], [0.0; 3]).unwrap();
+    let mut mask = voyage_core::Volume::filled(g, 0i16).unwrap();
+    for k in 0..40 {
+        for j in 0..40 {
+            for i in 0..200 {
+                let r = (j as f64 - 20.0).hypot(k as f64 - 20.0);
+                let x = i as f64;
+                let inside = ((40.0..=190.0).contains(&x) && r <= 8.0)
+                    || ((8.0..40.0).contains(&x) && r <= 1.0);
+                if inside {
+                    mask.data_mut()[i + 200 * (j + 40 * k)] = 1;
+                }
+            }
+        }
+    }
+    let mut opts = PrepOptions::default();
+    opts.centerline.source_mm = Some(DVec3::new(10.0, 20.0, 20.0));
+    opts.centerline.target_mm = Some(DVec3::new(185.0, 20.0, 20.0));
+    let study = prepare(mask, &opts, |_| {}).unwrap();
+    let fo = FlightOptions::for_study(&study);
+    let field = voyage_nav::potential_field(&study, fo.safety.min_wall_mm).unwrap();
+    let back = fly(&field, &study.centerline, Direction::Backward, &fo).unwrap();
+    eprintln!(
+        "narrow end backward: reached {} with {:.0} mm of Dt left, the last {:.0} mm too narrow, {} stalls",
+        back.reached, back.final_dt_mm, back.short_end_mm, back.stalls
+    );
+    assert!(back.reached, "stopped {:.0} mm short", back.final_dt_mm);
+    assert!(back.short_end_mm > 10.0 && back.final_dt_mm <= back.short_end_mm + 5.0);
+    let forward = fly(&field, &study.centerline, Direction::Forward, &fo).unwrap();
+    assert!(forward.reached && forward.short_end_mm == 0.0);
+}
