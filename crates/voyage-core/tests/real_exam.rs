@@ -210,6 +210,9 @@ fn thick_slices(v: &Volume<i16>, max: bool) -> Volume<i16> {
 ///   taken as supine (assumed), its pools left out;
 /// - the left lung base, which the thick slices join to the splenic flexure's gas through the
 ///   diaphragm, stays out of the colon: taken in, 14.6 % of the lumen lay outside the colon;
+///   kept out by whole runs along x, 3.2 % (its parenchyma within reach of the flexure's
+///   dome stayed); by voxels, 2.7 %, most of it the fluid-filled descending colon that the
+///   given colon leaves out;
 /// - the centerline goes round the splenic flexure's loop. Its two limbs touch through a
 ///   hole 4 mm in radius, a fifth of the colon's, which was not taken for one: 13.5 % of the
 ///   colon (600 ml of the flexure) lay more than 55 mm from the centerline.
@@ -243,7 +246,7 @@ fn thick_slices_of_the_real_exam_read_prone_keep_the_lung_out_and_are_flown_thro
     );
     assert_eq!(o.position, voyage_core::PatientPosition::Hfp);
     assert_eq!(o.source, voyage_core::PositionSource::AirFluidLevels);
-    assert!(share <= 0.05, "{:.1} % outside the colon", 100.0 * share);
+    assert!(share <= 0.03, "{:.1} % outside the colon", 100.0 * share);
     assert!(
         far <= 0.01,
         "{:.1}% of the colon > 55 mm from the centerline",

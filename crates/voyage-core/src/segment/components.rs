@@ -39,12 +39,12 @@ pub(super) fn find(
     from_mask: bool,
 ) -> Found {
     // Air, its statistics and the bright runs of tagged fluid, all in one pass over the values.
-    let (runs, bright) = if from_mask {
+    let (mut runs, bright) = if from_mask {
         extract_runs(vol, Test::NonZero, None)
     } else {
         extract_runs(vol, Test::Below(opts.air_hu), fluid_hu)
     };
-    let inside = if from_mask {
+    let mut inside = if from_mask {
         vec![true; runs.runs.len()]
     } else {
         let mut inside = inside_body(&runs, vol.dims());
@@ -55,8 +55,9 @@ pub(super) fn find(
     connect_3d(&runs, &inside, vol.dims(), &mut labels);
     let (mut comps, mut run_comp) = component_stats(&runs, &inside, vol, &mut labels, from_mask);
     classify_lungs(&mut comps, from_mask);
-    if let Some(apart) = parenchyma_joined(&runs, &inside, &comps, &run_comp, vol) {
+    if let Some((split, apart)) = parenchyma_joined(&runs, &inside, &comps, &run_comp, vol) {
         // Joined again with the parenchyma kept apart: it is a lung of its own.
+        (runs, inside) = (split.runs, split.inside);
         let mut labels = UnionFind::new(runs.runs.len());
         connect_3d_where(&runs, vol.dims(), &mut labels, |a, b| {
             inside[a] && inside[b] && apart[a] == apart[b]
@@ -284,27 +285,38 @@ fn connect_3d_where(
 
 /// Lung parenchyma that thick slices join to bowel gas in one component (ml).
 const PARENCHYMA_APART_ML: f64 = 100.0;
-/// Within this distance (mm) of bowel gas's dark middle lies its partial-volume rim.
+/// Within this distance (mm) of bowel gas's dark middle lies its partial-volume rim: along
+/// each axis the nearest whole number of voxels, at least one. A slice's rim is the slice
+/// next to it: rounded up, 2.5 mm slices reached two, 5 mm into the lung over the dome.
 const RIM_MM: f64 = 3.0;
 
-/// Per run, whether it is lung parenchyma joined to bowel gas, or None where there is none
+/// The air's runs with lung parenchyma cut out of them as runs of their own, and whether
+/// each is inside the body.
+struct Split {
+    runs: Runs,
+    inside: Vec<bool>,
+}
+
+/// Lung parenchyma joined to bowel gas: the runs with it cut out as runs of their own, and
+/// per run of those whether it is parenchyma; None where there is none
 /// ([`PARENCHYMA_APART_ML`]). Through thick slices the diaphragm under a lung base averages to
 /// air over the splenic flexure's gas, and the two become one component, gas enough to pass
 /// for bowel as a whole (`ctc/prone-tagged` in 2.5 or 3 mm slices: 3 940–3 970 ml, 0.66 of it
 /// dark, the left lung's 720 ml in it). Bowel gas is dark (below −950 HU) but for a
-/// partial-volume rim about a voxel thick; lung parenchyma is nowhere dark. So runs of a
+/// partial-volume rim about a voxel thick; lung parenchyma is nowhere dark. So the voxels of a
 /// non-lung component farther than [`RIM_MM`] from any run with a dark voxel, joined, are
 /// parenchyma where they hold this much (in real colon compartments of the 1 mm exam such
-/// runs make 0.2–8 ml).
+/// voxels make a few ml). Voxels, not whole runs: a run of parenchyma over the colon's dome
+/// reaches past it for centimetres, and counted whole it kept 30–63 ml of the lung base in
+/// the colon (the same exam in 3 and 2.5 mm slices).
 fn parenchyma_joined(
     runs: &Runs,
     inside: &[bool],
     comps: &[Component],
     run_comp: &[u32],
     vol: &Volume<i16>,
-) -> Option<Vec<bool>> {
+) -> Option<(Split, Vec<bool>)> {
     let dims = vol.dims();
-    let n = runs.runs.len();
     // Only a component larger than the parenchyma looked for can hold it.
     let bowel = |r: usize| {
         inside[r]
@@ -312,35 +324,100 @@ fn parenchyma_joined(
             && comps[run_comp[r] as usize].kind != ComponentKind::Lung
             && comps[run_comp[r] as usize].volume_ml > PARENCHYMA_APART_ML
     };
-    let far = far_from_dark(runs, dims, vol.spacing(), &bowel);
-    let far_runs: Vec<usize> = (0..n).filter(|&r| far[r]).collect();
+    let (far, run_of) = far_from_dark(runs, dims, vol.spacing(), &bowel);
     let sp = vol.spacing();
     let voxel_ml = sp[0] * sp[1] * sp[2] / 1000.0;
-    if run_voxels(runs, &far_runs) as f64 * voxel_ml < PARENCHYMA_APART_ML {
+    let all: Vec<usize> = (0..far.runs.len()).collect();
+    if run_voxels(&far, &all) as f64 * voxel_ml < PARENCHYMA_APART_ML {
         return None;
     }
-    let mut blobs = UnionFind::new(n);
-    connect_3d_where(runs, dims, &mut blobs, |a, b| far[a] && far[b]);
-    let mut voxels = vec![0usize; n];
-    for &r in &far_runs {
-        voxels[blobs.find(r)] += run_voxels(runs, &[r]);
+    let mut blobs = UnionFind::new(far.runs.len());
+    connect_3d_where(&far, dims, &mut blobs, |_, _| true);
+    let mut voxels = vec![0usize; far.runs.len()];
+    for p in 0..far.runs.len() {
+        voxels[blobs.find(p)] += run_voxels(&far, &[p]);
     }
-    let apart: Vec<bool> = (0..n)
-        .map(|r| far[r] && voxels[blobs.find(r)] as f64 * voxel_ml >= PARENCHYMA_APART_ML)
+    let apart: Vec<bool> = (0..far.runs.len())
+        .map(|p| voxels[blobs.find(p)] as f64 * voxel_ml >= PARENCHYMA_APART_ML)
         .collect();
-    apart.iter().any(|&a| a).then_some(apart)
+    if !apart.iter().any(|&a| a) {
+        return None;
+    }
+    let mut cut: Vec<Vec<(u32, u32)>> = vec![Vec::new(); runs.runs.len()];
+    for (p, &r) in run_of.iter().enumerate().filter(|&(p, _)| apart[p]) {
+        cut[r].push((far.runs[p].x0, far.runs[p].x1));
+    }
+    Some(cut_out(runs, inside, &cut, vol))
 }
 
-/// Per run: one of `of` with no dark voxel, and none in any run of `of` within [`RIM_MM`]
-/// (each axis's distance, whole runs).
+/// `runs` with the stretches `cut[r]` of each run r (in x order, inside it) made runs of their
+/// own; per new run, whether it is such a stretch. Their HU statistics are read again.
+fn cut_out(
+    runs: &Runs,
+    inside: &[bool],
+    cut: &[Vec<(u32, u32)>],
+    vol: &Volume<i16>,
+) -> (Split, Vec<bool>) {
+    let [nx, ny, nz] = vol.dims();
+    let mut out = Runs::empty(ny);
+    let (mut inside_out, mut apart) = (Vec::new(), Vec::new());
+    for k in 0..nz {
+        for j in 0..ny {
+            let values = &vol.data()[nx * (j + ny * k)..nx * (j + ny * k + 1)];
+            for r in runs.row(j, k) {
+                let run = runs.runs[r];
+                let mut push = |x0: u32, x1: u32, is_cut: bool, whole: bool| {
+                    if x0 >= x1 {
+                        return;
+                    }
+                    out.runs.push(super::runs::Run { x0, x1 });
+                    if whole {
+                        out.hu_sum.push(runs.hu_sum[r]);
+                        out.dark.push(runs.dark[r]);
+                    } else {
+                        let seg = &values[x0 as usize..x1 as usize];
+                        out.hu_sum.push(seg.iter().map(|&v| v as i64).sum());
+                        out.dark
+                            .push(seg.iter().filter(|&&v| v < -950).count() as u32);
+                    }
+                    inside_out.push(inside[r]);
+                    apart.push(is_cut);
+                };
+                if cut[r].is_empty() {
+                    push(run.x0, run.x1, false, true);
+                    continue;
+                }
+                let mut x = run.x0;
+                for &(c0, c1) in &cut[r] {
+                    push(x, c0, false, false);
+                    push(c0, c1, true, false);
+                    x = c1;
+                }
+                push(x, run.x1, false, false);
+            }
+            out.row_start.push(out.runs.len() as u32);
+        }
+    }
+    (
+        Split {
+            runs: out,
+            inside: inside_out,
+        },
+        apart,
+    )
+}
+
+/// The stretches of runs of `of` with no dark voxel that lie farther than [`RIM_MM`] from
+/// any run of `of` with one (each axis's distance), as runs of their own, and the run each
+/// is a stretch of.
 fn far_from_dark(
     runs: &Runs,
     dims: [usize; 3],
     sp: [f64; 3],
     of: &impl Fn(usize) -> bool,
-) -> Vec<bool> {
+) -> (Runs, Vec<usize>) {
     let [_, ny, nz] = dims;
-    let reach = sp.map(|s| (RIM_MM / s).ceil() as i64);
+    let reach = sp.map(|s| (RIM_MM / s).round().max(1.0) as i64);
     // The x-extents of the dark runs, row by row (those of row r at `dark[start[r]..start[r + 1]]`).
     let mut dark = Vec::new();
     let mut start = Vec::with_capacity(ny * nz + 1);
@@ -352,34 +429,61 @@ fn far_from_dark(
         }
     }
     start.push(dark.len());
-    // The rows around, nearest first: a rim run finds its dark neighbour at once.
-    let mut around: Vec<(i64, i64)> = (-reach[2]..=reach[2])
+    let around: Vec<(i64, i64)> = (-reach[2]..=reach[2])
         .flat_map(|dk| (-reach[1]..=reach[1]).map(move |dj| (dj, dk)))
         .collect();
-    around.sort_by_key(|&(dj, dk)| dj.abs().max(dk.abs()));
-    let near = |x0: u32, x1: u32, j: usize, k: usize| {
+    // The stretches of x0..x1 within reach of a dark run in the rows around (j, k).
+    let mut near: Vec<(i64, i64)> = Vec::new();
+    let nears = |x0: u32, x1: u32, j: usize, k: usize, near: &mut Vec<(i64, i64)>| {
+        near.clear();
         let (lo, hi) = (x0 as i64 - reach[0], x1 as i64 + reach[0]);
-        around.iter().any(|&(dj, dk)| {
+        for &(dj, dk) in &around {
             let (jj, kk) = (j as i64 + dj, k as i64 + dk);
             if jj < 0 || kk < 0 || jj >= ny as i64 || kk >= nz as i64 {
-                return false;
+                continue;
             }
             let r = jj as usize + ny * kk as usize;
             let row = &dark[start[r]..start[r + 1]];
             let at = row.partition_point(|&(_, e)| (e as i64) <= lo);
-            at < row.len() && (row[at].0 as i64) < hi
-        })
+            for &(e0, e1) in row[at..].iter().take_while(|&&(e0, _)| (e0 as i64) < hi) {
+                near.push((e0 as i64 - reach[0], e1 as i64 + reach[0]));
+            }
+        }
+        near.sort_unstable();
     };
-    let mut far = vec![false; runs.runs.len()];
+    let mut far = Runs::empty(ny);
+    let mut run_of = Vec::new();
     for k in 0..nz {
         for j in 0..ny {
             for r in runs.row(j, k) {
+                if !of(r) || runs.dark[r] > 0 {
+                    continue;
+                }
                 let run = runs.runs[r];
-                far[r] = of(r) && runs.dark[r] == 0 && !near(run.x0, run.x1, j, k);
+                nears(run.x0, run.x1, j, k, &mut near);
+                // What the near stretches leave of the run, in x order.
+                let mut x = run.x0 as i64;
+                let mut push = |a: i64, b: i64| {
+                    if a < b {
+                        far.runs.push(super::runs::Run {
+                            x0: a as u32,
+                            x1: b as u32,
+                        });
+                        far.hu_sum.push(0);
+                        far.dark.push(0);
+                        run_of.push(r);
+                    }
+                };
+                for &(a, b) in &near {
+                    push(x, a.min(run.x1 as i64));
+                    x = x.max(b);
+                }
+                push(x, run.x1 as i64);
             }
+            far.row_start.push(far.runs.len() as u32);
         }
     }
-    far
+    (far, run_of)
 }
 
 /// Per component statistics; returns the components and, per run, its component (or MAX).
