@@ -86,6 +86,21 @@ fn far_from(mask: &Volume<i16>, path: &[[f64; 3]], mm: f64) -> f64 {
     far as f64 / voxels.len().max(1) as f64
 }
 
+/// The centerline runs through all of the colon: no more than 1 % of it (`far`, the share
+/// [`far_from`] gives at 55 mm) lies far from it, and its length is a colon's.
+fn assert_through_all_of_the_colon(s: &Study, far: f64) {
+    assert!(
+        far <= 0.01,
+        "{:.1}% of the colon > 55 mm from the centerline",
+        far * 100.0
+    );
+    assert!(
+        (1300.0..=2200.0).contains(&s.centerline.length_mm),
+        "length {:.0} mm",
+        s.centerline.length_mm
+    );
+}
+
 fn lps(study: &Study, v: [usize; 3]) -> DVec3 {
     study
         .ct
@@ -247,16 +262,7 @@ fn thick_slices_of_the_real_exam_read_prone_keep_the_lung_out_and_are_flown_thro
     assert_eq!(o.position, voyage_core::PatientPosition::Hfp);
     assert_eq!(o.source, voyage_core::PositionSource::AirFluidLevels);
     assert!(share <= 0.03, "{:.1} % outside the colon", 100.0 * share);
-    assert!(
-        far <= 0.01,
-        "{:.1}% of the colon > 55 mm from the centerline",
-        far * 100.0
-    );
-    assert!(
-        (1300.0..=2200.0).contains(&s.centerline.length_mm),
-        "length {:.0} mm",
-        s.centerline.length_mm
-    );
+    assert_through_all_of_the_colon(&s, far);
 }
 
 /// The real exam with its tagging half as bright above 100 HU (its pools 300–500 HU), as a
@@ -285,15 +291,6 @@ fn weakly_tagged_the_real_exam_is_flown_through_all_of_its_colon() {
         target.distance(exam.cecum_lps),
         100.0 * far
     );
-    assert!(
-        far <= 0.01,
-        "{:.1}% of the colon > 55 mm from the centerline",
-        far * 100.0
-    );
-    assert!(
-        (1300.0..=2200.0).contains(&s.centerline.length_mm),
-        "length {:.0} mm",
-        s.centerline.length_mm
-    );
+    assert_through_all_of_the_colon(&s, far);
     assert!(target.distance(exam.cecum_lps) <= 30.0, "end at {target}");
 }
