@@ -5,7 +5,10 @@
 //! release mode (`cargo test --release -p voyage-nav --test ctc_exam`).
 
 use voyage_core::{PrepOptions, Study, prepare};
-use voyage_nav::{Direction, FlightOptions, STUCK_S, fly, looking, potential_field};
+use voyage_nav::{
+    BrickStore, Direction, Flight, FlightOptions, PotentialField, STUCK_S, fly, looking,
+    potential_field,
+};
 
 /// The shared data's file at `rel` (below `data/`) preprocessed with the default options, or
 /// None (skipped visibly).
@@ -23,34 +26,10 @@ fn the_real_exam_is_flown_both_ways_inside_the_lumen() {
     let opts = FlightOptions::for_study(&study);
     let field = potential_field(&study, opts.safety.min_wall_mm).unwrap();
     for dir in [Direction::Forward, Direction::Backward] {
-        let f = fly(&field, &study.centerline, dir, &opts).unwrap();
-        eprintln!(
-            "ctc/prone-tagged {}: reached {} in {:.0} s, {} stalls, {} rescues (no progress for {STUCK_S} s)",
-            dir.name(),
-            f.reached,
-            f.sim_seconds,
-            f.stalls,
-            f.rescues.len()
-        );
-        assert!(
-            f.reached,
-            "the {} flight stopped {:.0} mm short",
-            dir.name(),
-            f.final_dt_mm
-        );
+        let f = flown(&study, &field, dir, &opts, "ctc/prone-tagged");
         // Issue 34: no stall either way (with a hole between two loops plugged only 4 mm
         // round its narrowest point, the flight's Dt still went through it: two stalls).
         assert_eq!(f.stalls, 0, "the {} flight stalled", dir.name());
-        // The field keeps the camera in the safe set; a glide through a narrow keeps it on
-        // the centerline, inside the navigable core.
-        for (i, p) in f.poses.iter().enumerate() {
-            assert!(
-                field.in_lumen_cube(p.position),
-                "{} frame {i} at {:?} is not inside the lumen",
-                dir.name(),
-                p.position
-            );
-        }
         // Issue 36: the view looks down the lumen, not at the wall. Down −∇V (the paper's
         // compass) the view was a median 29–31° off the centerline's way on, p95 62°. The
         // frames that see only wall are where the lumen closes: the 25 mm before the bridged
@@ -129,28 +108,44 @@ fn a_collapsed_colon_in_thick_slices_is_flown_both_ways() {
     let opts = FlightOptions::for_study(&study);
     let field = potential_field(&study, opts.safety.min_wall_mm).unwrap();
     for dir in [Direction::Forward, Direction::Backward] {
-        let f = fly(&field, &study.centerline, dir, &opts).unwrap();
-        eprintln!(
-            "abdomen-3mm {}: reached {} with {:.0} mm of Dt left, the last {:.0} mm too narrow, {} stalls, {} rescues",
-            dir.name(),
-            f.reached,
-            f.final_dt_mm,
-            f.short_end_mm,
-            f.stalls,
-            f.rescues.len()
-        );
-        assert!(
-            f.reached,
-            "{} stopped {:.0} mm short",
-            dir.name(),
-            f.final_dt_mm
-        );
-        for (i, p) in f.poses.iter().enumerate() {
-            assert!(
-                field.in_lumen_cube(p.position),
-                "{} frame {i} left the lumen",
-                dir.name()
-            );
-        }
+        flown(&study, &field, dir, &opts, "abdomen-3mm");
     }
+}
+
+/// The automatic flight `dir` through `study`, which reaches its goal with the camera inside
+/// the lumen at every frame (the field keeps it in the safe set; a glide through a narrow
+/// keeps it on the centerline, inside the navigable core).
+fn flown(
+    study: &Study,
+    field: &PotentialField<BrickStore>,
+    dir: Direction,
+    opts: &FlightOptions,
+    name: &str,
+) -> Flight {
+    let f = fly(field, &study.centerline, dir, opts).unwrap();
+    eprintln!(
+        "{name} {}: reached {} in {:.0} s with {:.0} mm of Dt left (the last {:.0} mm too narrow), {} stalls, {} rescues (no progress for {STUCK_S} s)",
+        dir.name(),
+        f.reached,
+        f.sim_seconds,
+        f.final_dt_mm,
+        f.short_end_mm,
+        f.stalls,
+        f.rescues.len()
+    );
+    assert!(
+        f.reached,
+        "the {} flight stopped {:.0} mm short",
+        dir.name(),
+        f.final_dt_mm
+    );
+    for (i, p) in f.poses.iter().enumerate() {
+        assert!(
+            field.in_lumen_cube(p.position),
+            "{} frame {i} at {:?} is not inside the lumen",
+            dir.name(),
+            p.position
+        );
+    }
+    f
 }

@@ -8,7 +8,7 @@ use rayon::prelude::*;
 
 use super::{
     Component, ComponentKind, SegmentOptions,
-    runs::{Runs, extract_runs, for_overlaps, run_voxels},
+    runs::{Runs, extract_runs, for_overlaps, run_stats, run_voxels},
     tube::{self, Tube},
 };
 use crate::{Error, Result, Volume, simd::Test};
@@ -55,8 +55,9 @@ pub(super) fn find(
     connect_3d(&runs, &inside, vol.dims(), &mut labels);
     let (mut comps, mut run_comp) = component_stats(&runs, &inside, vol, &mut labels, from_mask);
     classify_lungs(&mut comps, from_mask);
-    if let Some((split, apart)) = parenchyma_joined(&runs, &inside, &comps, &run_comp, vol) {
+    if let Some(split) = parenchyma_joined(&runs, &inside, &comps, &run_comp, vol) {
         // Joined again with the parenchyma kept apart: it is a lung of its own.
+        let apart = split.apart;
         (runs, inside) = (split.runs, split.inside);
         let mut labels = UnionFind::new(runs.runs.len());
         connect_3d_where(&runs, vol.dims(), &mut labels, |a, b| {
@@ -290,15 +291,16 @@ const PARENCHYMA_APART_ML: f64 = 100.0;
 /// next to it: rounded up, 2.5 mm slices reached two, 5 mm into the lung over the dome.
 const RIM_MM: f64 = 3.0;
 
-/// The air's runs with lung parenchyma cut out of them as runs of their own, and whether
-/// each is inside the body.
+/// The air's runs with lung parenchyma cut out of them as runs of their own; per run, whether
+/// it is inside the body and whether it is parenchyma.
 struct Split {
     runs: Runs,
     inside: Vec<bool>,
+    apart: Vec<bool>,
 }
 
-/// Lung parenchyma joined to bowel gas: the runs with it cut out as runs of their own, and
-/// per run of those whether it is parenchyma; None where there is none
+/// Lung parenchyma joined to bowel gas: the runs with it cut out as runs of their own; None
+/// where there is none
 /// ([`PARENCHYMA_APART_ML`]). Through thick slices the diaphragm under a lung base averages to
 /// air over the splenic flexure's gas, and the two become one component, gas enough to pass
 /// for bowel as a whole (`ctc/prone-tagged` in 2.5 or 3 mm slices: 3 940–3 970 ml, 0.66 of it
@@ -315,7 +317,7 @@ fn parenchyma_joined(
     comps: &[Component],
     run_comp: &[u32],
     vol: &Volume<i16>,
-) -> Option<(Split, Vec<bool>)> {
+) -> Option<Split> {
     let dims = vol.dims();
     // Only a component larger than the parenchyma looked for can hold it.
     let bowel = |r: usize| {
@@ -351,13 +353,8 @@ fn parenchyma_joined(
 }
 
 /// `runs` with the stretches `cut[r]` of each run r (in x order, inside it) made runs of their
-/// own; per new run, whether it is such a stretch. Their HU statistics are read again.
-fn cut_out(
-    runs: &Runs,
-    inside: &[bool],
-    cut: &[Vec<(u32, u32)>],
-    vol: &Volume<i16>,
-) -> (Split, Vec<bool>) {
+/// own (`apart`). The pieces' HU statistics are read again.
+fn cut_out(runs: &Runs, inside: &[bool], cut: &[Vec<(u32, u32)>], vol: &Volume<i16>) -> Split {
     let [nx, ny, nz] = vol.dims();
     let mut out = Runs::empty(ny);
     let (mut inside_out, mut apart) = (Vec::new(), Vec::new());
@@ -371,15 +368,13 @@ fn cut_out(
                         return;
                     }
                     out.runs.push(super::runs::Run { x0, x1 });
-                    if whole {
-                        out.hu_sum.push(runs.hu_sum[r]);
-                        out.dark.push(runs.dark[r]);
+                    let (sum, dark) = if whole {
+                        (runs.hu_sum[r], runs.dark[r])
                     } else {
-                        let seg = &values[x0 as usize..x1 as usize];
-                        out.hu_sum.push(seg.iter().map(|&v| v as i64).sum());
-                        out.dark
-                            .push(seg.iter().filter(|&&v| v < -950).count() as u32);
-                    }
+                        run_stats(values, x0, x1).unwrap_or((0, 0))
+                    };
+                    out.hu_sum.push(sum);
+                    out.dark.push(dark);
                     inside_out.push(inside[r]);
                     apart.push(is_cut);
                 };
@@ -398,13 +393,11 @@ fn cut_out(
             out.row_start.push(out.runs.len() as u32);
         }
     }
-    (
-        Split {
-            runs: out,
-            inside: inside_out,
-        },
+    Split {
+        runs: out,
+        inside: inside_out,
         apart,
-    )
+    }
 }
 
 /// The stretches of runs of `of` with no dark voxel that lie farther than [`RIM_MM`] from

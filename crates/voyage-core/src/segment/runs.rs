@@ -185,7 +185,7 @@ impl Runs {
 /// HU sum and count of voxels darker than −950 HU of an air run, for telling bowel gas from
 /// lung. Runs reaching the row's ends lie outside the body (step 2 drops them) and the air
 /// outside is most of a scan's air: they get none.
-fn run_stats(row: &[i16], x0: u32, x1: u32) -> Option<(i64, u32)> {
+pub(super) fn run_stats(row: &[i16], x0: u32, x1: u32) -> Option<(i64, u32)> {
     if x0 == 0 || x1 as usize == row.len() {
         return None;
     }
