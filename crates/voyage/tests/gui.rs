@@ -6,7 +6,6 @@ use std::{
     io::{BufRead, BufReader},
     path::{Path, PathBuf},
     process::{Child, Command, Stdio},
-    sync::atomic::{AtomicU32, Ordering},
     time::{Duration, Instant},
 };
 
@@ -34,54 +33,47 @@ struct Display {
     name: String,
 }
 
-static NEXT_DISPLAY: AtomicU32 = AtomicU32::new(0);
-
 impl Display {
+    /// Xvfb picks a free display itself and writes its number to `-displayfd` only once it
+    /// accepts connections: choosing a number here and waiting for its socket raced with
+    /// other test processes and with the server's own start (a socket not yet listening).
     fn start() -> Option<Display> {
         if !have("Xvfb") {
             voyage_phantom::fixtures::skip("Xvfb not installed (bash scripts/deps.sh installs it)");
             return None;
         }
-        // Displays whose socket exists (a server, or one killed before it could clean up)
-        // are passed over without counting as a try.
-        let mut tries = 0;
-        while tries < 20 {
-            let n =
-                140 + (std::process::id() % 400) * 2 + NEXT_DISPLAY.fetch_add(1, Ordering::SeqCst);
-            if n > 60_000 {
-                break;
+        let mut server = Command::new("Xvfb")
+            .args([
+                "-displayfd",
+                "1",
+                "-screen",
+                "0",
+                "1280x800x24",
+                "-nolisten",
+                "tcp",
+            ])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("start Xvfb");
+        let stdout = server.stdout.take().expect("Xvfb's stdout");
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let mut line = String::new();
+            let _ = BufReader::new(stdout).read_line(&mut line);
+            let _ = tx.send(line);
+        });
+        match rx.recv_timeout(Duration::from_secs(20)) {
+            Ok(line) if line.trim().parse::<u32>().is_ok() => Some(Display {
+                server,
+                name: format!(":{}", line.trim()),
+            }),
+            other => {
+                let _ = server.kill();
+                let _ = server.wait();
+                panic!("Xvfb did not report a display within 20 s: {other:?}");
             }
-            let name = format!(":{n}");
-            if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists()
-                || Path::new(&format!("/tmp/.X{n}-lock")).exists()
-            {
-                continue;
-            }
-            tries += 1;
-            let mut server = Command::new("Xvfb")
-                .args([
-                    name.as_str(),
-                    "-screen",
-                    "0",
-                    "1280x800x24",
-                    "-nolisten",
-                    "tcp",
-                ])
-                .stdout(Stdio::null())
-                .stderr(Stdio::null())
-                .spawn()
-                .expect("start Xvfb");
-            let t = Instant::now();
-            while t.elapsed() < Duration::from_secs(10) {
-                if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() {
-                    return Some(Display { server, name });
-                }
-                std::thread::sleep(Duration::from_millis(50));
-            }
-            let _ = server.kill();
-            let _ = server.wait();
         }
-        panic!("no free X display");
     }
 }
 
