@@ -278,6 +278,9 @@ impl Guide {
 /// the flight plays, beside the user's own force.
 pub struct Autopilot {
     guide: Guide,
+    /// The field's Dt at each guide point (+∞ outside its safe set), read by
+    /// [`Autopilot::fit_reach`]; empty until then.
+    guide_dt: Vec<f64>,
     stall_window_s: f64,
     stall_progress_mm: f64,
     escape_s: f64,
@@ -382,6 +385,7 @@ impl Autopilot {
             up: -opts.dynamics.gravity,
             reach_mm,
             guide,
+            guide_dt: Vec::new(),
             stall_window_s: opts.stall_window_s,
             stall_progress_mm: opts.stall_progress_mm,
             escape_s: opts.escape_s,
@@ -424,17 +428,28 @@ impl Autopilot {
     /// point of it in `field`'s safe set for a camera kept `min_wall_mm` from the wall), the
     /// goal counts as reached once Dt is within [`GOAL_SLACK_MM`] of Dt at the last point
     /// that is: the camera cannot go farther, and would otherwise stall there for good.
-    /// Returns how far short of the goal that is (mm of Dt; 0 when the end is roomy).
+    /// Returns how far short of the goal that is (mm of Dt; 0 when the end is roomy). Keeps
+    /// the field's Dt along the centerline, where a rescue glide ends ([`Autopilot::glide`]).
     pub fn fit_reach<S: DistanceStore>(
         &mut self,
         field: &PotentialField<S>,
         dir: Direction,
         min_wall_mm: f64,
     ) -> f64 {
-        let last_safe = self.guide.points.iter().rev().find_map(|&p| {
-            let s = field.sample(p, dir);
-            (s.lumen_corners == 8 && s.ds >= min_wall_mm).then_some(s.dt)
-        });
+        let samples: Vec<_> = self
+            .guide
+            .points
+            .iter()
+            .map(|&p| field.sample(p, dir))
+            .collect();
+        self.guide_dt = samples
+            .iter()
+            .map(|s| s.dt.unwrap_or(f64::INFINITY))
+            .collect();
+        let last_safe = samples
+            .iter()
+            .rev()
+            .find_map(|s| (s.lumen_corners == 8 && s.ds >= min_wall_mm).then_some(s.dt));
         match last_safe.flatten() {
             Some(dt) if dt + GOAL_SLACK_MM > self.reach_mm => {
                 self.reach_mm = dt + GOAL_SLACK_MM;
@@ -516,7 +531,7 @@ impl Autopilot {
         let i = self.moved_to(x);
         self.note_progress(t, dt_now);
         if self.glide_arc.is_none() && self.stuck(t) {
-            self.rescue(t, x, i);
+            self.rescue(t, x, i, dt_now);
         }
         // While gliding, the glide's own arc or the nearest point's, whichever is farther on.
         let here = self
@@ -541,11 +556,13 @@ impl Autopilot {
         Some(Pose::looking(p, look, self.up))
     }
 
-    /// Starts a rescue glide from guide point `i`: [`RESCUE_MM`] (at least twice the local
-    /// radius) along the centerline.
-    fn rescue(&mut self, t: f64, x: DVec3, i: usize) {
+    /// Starts a rescue glide from guide point `i`, stuck where Dt is `dt_stuck`: at least
+    /// [`RESCUE_MM`] (and twice the local radius) along the centerline, and on to where the
+    /// field's Dt there is below `dt_stuck` ([`Autopilot::past_the_stall`]).
+    fn rescue(&mut self, t: f64, x: DVec3, i: usize, dt_stuck: f64) {
         let from = self.guide.arc[i];
-        let span = [from, from + RESCUE_MM.max(2.0 * self.guide.radius[i])];
+        let least = from + RESCUE_MM.max(2.0 * self.guide.radius[i]);
+        let span = [from, self.past_the_stall(least, dt_stuck)];
         self.rescues.push(Rescue {
             t,
             arc_mm: from,
@@ -557,6 +574,22 @@ impl Autopilot {
         self.glided = None;
         self.glide_arc = Some(from);
         self.progress.0 = t;
+    }
+
+    /// The first arc at or after `arc` where the field's Dt on the centerline is below
+    /// `dt_stuck` by a stall's progress: from there the field carries the camera on, not
+    /// back to where it stuck (`arc` itself where the field was not read). Where a hole
+    /// between two touching loops lies beside the way (Dt's shortest way runs through it,
+    /// the centerline round the loop), Dt along the centerline rises away from the hole and
+    /// falls below the stall's only on the far side: a glide of [`RESCUE_MM`] ended before
+    /// that, and the field pulled the camera back to the hole (`ctc/prone-tagged` with
+    /// σ 50 HU of noise added: 60 stalls each way at the splenic flexure).
+    fn past_the_stall(&self, arc: f64, dt_stuck: f64) -> f64 {
+        let g = &self.guide;
+        let from = g.arc.partition_point(|&a| a < arc);
+        (from..self.guide_dt.len())
+            .find(|&j| self.guide_dt[j] < dt_stuck - self.stall_progress_mm)
+            .map_or(arc, |j| g.arc[j].max(arc))
     }
 
     /// The first arc at or after `arc` where the centerline is roomy enough for the camera
@@ -884,6 +917,37 @@ mod tests {
         assert_eq!(
             merged(vec![[30.0, 40.0], [0.0, 10.0], [5.0, 20.0]]),
             vec![[0.0, 20.0], [30.0, 40.0]]
+        );
+    }
+
+    /// Stuck beside a hole between two loops: the camera's Dt (60 mm, by way of the hole) is
+    /// what the centerline reaches only 140 mm on, round the loop. The rescue glides that
+    /// far, not [`RESCUE_MM`], or the field would pull the camera back to the hole.
+    #[test]
+    fn a_rescue_glides_on_until_the_field_leads_onward() {
+        let cl = line(201, |_| 8.0);
+        let opts = FlightOptions::default();
+        let x = DVec3::new(50.0, 3.0, 0.0);
+        let mut pilot = Autopilot::new(&cl, Direction::Forward, &opts, x, 60.0);
+        pilot.guide_dt = (0..=200).map(|i| 200.0 - i as f64).collect();
+        let frame = 1.0 / 30.0;
+        let mut t = 0.0;
+        while t < STUCK_S - 0.1 {
+            assert!(pilot.glide(x, t, 60.0, frame).is_none(), "glided at {t} s");
+            t += frame;
+        }
+        t = STUCK_S + 0.01;
+        let mut last = pilot.glide(x, t, 60.0, frame).expect("a rescue").position;
+        assert_eq!(pilot.rescues.len(), 1);
+        while let Some(p) = pilot.glide(last, t, 60.0, frame) {
+            last = p.position;
+            t += frame;
+        }
+        let onward = 140.0 + opts.stall_progress_mm;
+        assert!(
+            last.x >= onward - 1.0,
+            "glided to {} of the {onward} mm where the field leads on",
+            last.x
         );
     }
 
