@@ -685,6 +685,16 @@ fn prepare_stored(
     }
     seg.lumen_voxels -= contact_voxels;
     let (source, target, cl) = (ends.source, ends.target, ends.centerline);
+    if let Some((i, dip)) = shortcut_beside(&cl, &dt_source.dist) {
+        let p = seg
+            .lumen
+            .geometry()
+            .local_to_patient(DVec3::from_array(cl.points_mm[i]));
+        seg.warnings.push(format!(
+            "the lumen holds a way {dip:.0} mm shorter than the centerline's to LPS ({:.0}, {:.0}, {:.0}), {:.0} mm along it: likely a hole between touching loops that the centerline goes round; the cells and the flight's pull may follow that way",
+            p.x, p.y, p.z, cl.arc_mm[i]
+        ));
+    }
     // The colon's last segment ends where the centerline does, unless the user placed the end.
     if opts.centerline.target_mm.is_none() {
         seg.name_last_segment(centerline::mm_of(&seg.lumen, target));
@@ -943,6 +953,40 @@ fn cut_along(
     )
 }
 
+/// Dt from the source falling along the centerline by more than this (mm), and by more
+/// than [`SHORTCUT_PER_RADIUS`] times the lumen's radius there, below its highest value so
+/// far marks a shortcut ([`shortcut_beside`]). Centring moves the centerline across a wide
+/// chamber, where Dt, hugging the inner side of the bends, runs ahead of it: on
+/// `ctc/prone-tagged`, its 2 and 3 mm variants, `masks/colon-a` and `ct/abdomen-3mm` Dt falls
+/// at most 41 mm along it (1.9 radii, in the 2 mm variant's splenic flexure).
+const SHORTCUT_DIP_MM: f64 = 50.0;
+const SHORTCUT_PER_RADIUS: f64 = 3.0;
+
+/// The centerline point where Dt from the source lies deepest below its highest value at
+/// the points before, when that marks a shortcut ([`SHORTCUT_DIP_MM`]): the lumen there is
+/// reached by a way shorter than the centerline's, through a hole between touching loops
+/// that the centerline goes round (no round of plugging looks there). Cells are bands of Dt
+/// and the flight is pulled down Dt: both would follow that way. Returns the point and how
+/// far Dt lies below (mm). (`ctc/prone-tagged` with a bridge costed on local means: 130 mm
+/// in the ascending colon, and its last cell held 240 mm of the centerline.)
+fn shortcut_beside(cl: &Centerline, dt: &Bricked<f32>) -> Option<(usize, f64)> {
+    let mut high = f64::NEG_INFINITY;
+    let mut deepest: Option<(usize, f64)> = None;
+    for (i, p) in cl.points_mm.iter().enumerate() {
+        let d = dt.sample(DVec3::from_array(*p)) as f64;
+        if !d.is_finite() {
+            continue;
+        }
+        high = high.max(d);
+        let dip = high - d;
+        let marks = dip > SHORTCUT_DIP_MM.max(SHORTCUT_PER_RADIUS * cl.radius_mm[i]);
+        if marks && deepest.is_none_or(|(_, b)| dip > b) {
+            deepest = Some((i, dip));
+        }
+    }
+    deepest
+}
+
 /// Each bridged gap's stretch of the centerline (in the order of the gaps): the points whose
 /// voxel the bridge added (its tube, or the fluid filling the stretch).
 fn gap_spans(cl: &Centerline, seg: &Segmentation) -> Vec<Option<[f64; 2]>> {
@@ -1004,7 +1048,42 @@ fn anatomical_checks(
 
 #[cfg(test)]
 mod tests {
-    use super::monotone_labels;
+    use super::{Bricked, Centerline, Field, monotone_labels, shortcut_beside};
+
+    /// Dt along a straight centerline 200 mm long: where the far half is reached by a way
+    /// 100 mm shorter (a hole beside it), the shortcut is found where Dt falls; a fall of
+    /// 40 mm (the centerline crossing a chamber) is not one.
+    #[test]
+    fn a_shortcut_beside_the_centerline_is_found_where_dt_falls() {
+        use crate::{Geometry, grid::BoxGrid};
+        let g = Geometry::new([201, 3, 3], [1.0; 3], [0.0; 3]).unwrap();
+        let cl = Centerline {
+            points_mm: (0..=200).map(|i| [i as f64, 1.0, 1.0]).collect(),
+            arc_mm: (0..=200).map(|i| i as f64).collect(),
+            radius_mm: vec![5.0; 201],
+            length_mm: 200.0,
+            canal_mm: 0.0,
+        };
+        let dt_of = |dt: &dyn Fn(f64) -> f64| {
+            let grid = BoxGrid::around([[0, 0, 0], [200, 2, 2]], 0, g.dims);
+            let mut f = Field::filled(grid, g.clone(), 0.0f32);
+            for (n, v) in f.data.iter_mut().enumerate() {
+                *v = dt((n % 201) as f64) as f32;
+            }
+            Bricked::from_field(&f, f32::INFINITY)
+        };
+        let hole = dt_of(&|x| if x <= 120.0 { x } else { x - 100.0 });
+        let (i, dip) = shortcut_beside(&cl, &hole).expect("a shortcut");
+        assert_eq!((i, dip.round()), (121, 99.0));
+        let chamber = dt_of(&|x| {
+            if (60.0..80.0).contains(&x) {
+                x - 40.0
+            } else {
+                x
+            }
+        });
+        assert_eq!(shortcut_beside(&cl, &chamber), None);
+    }
 
     #[test]
     fn monotone_labels_keep_the_order_and_disagree_least() {
