@@ -920,6 +920,42 @@ mod tests {
         );
     }
 
+    const FRAME: f64 = 1.0 / 30.0;
+
+    /// Holds the submarine at `x` with Dt `dt_now` until the autopilot's rescue: its first
+    /// glide pose and the time.
+    fn stuck_until_rescued(pilot: &mut Autopilot, x: DVec3, dt_now: f64) -> (Pose, f64) {
+        let mut t = 0.0;
+        while t < STUCK_S - 0.1 {
+            assert!(
+                pilot.glide(x, t, dt_now, FRAME).is_none(),
+                "glided at {t} s"
+            );
+            pilot.input(t, dt_now, x, 1.0);
+            t += FRAME;
+        }
+        t = STUCK_S + 0.01;
+        let pose = pilot.glide(x, t, dt_now, FRAME).expect("a rescue glide");
+        assert_eq!(pilot.rescues.len(), 1);
+        (pose, t)
+    }
+
+    /// Glides on from `from` at time `t` while the autopilot glides: where it ended, and when.
+    fn glide_to_the_end(
+        pilot: &mut Autopilot,
+        from: DVec3,
+        mut t: f64,
+        dt_now: f64,
+    ) -> (DVec3, f64) {
+        let mut last = from;
+        while let Some(p) = pilot.glide(last, t, dt_now, FRAME) {
+            assert!(p.position.x >= last.x);
+            last = p.position;
+            t += FRAME;
+        }
+        (last, t)
+    }
+
     /// Stuck beside a hole between two loops: the camera's Dt (60 mm, by way of the hole) is
     /// what the centerline reaches only 140 mm on, round the loop. The rescue glides that
     /// far, not [`RESCUE_MM`], or the field would pull the camera back to the hole.
@@ -930,19 +966,8 @@ mod tests {
         let x = DVec3::new(50.0, 3.0, 0.0);
         let mut pilot = Autopilot::new(&cl, Direction::Forward, &opts, x, 60.0);
         pilot.guide_dt = (0..=200).map(|i| 200.0 - i as f64).collect();
-        let frame = 1.0 / 30.0;
-        let mut t = 0.0;
-        while t < STUCK_S - 0.1 {
-            assert!(pilot.glide(x, t, 60.0, frame).is_none(), "glided at {t} s");
-            t += frame;
-        }
-        t = STUCK_S + 0.01;
-        let mut last = pilot.glide(x, t, 60.0, frame).expect("a rescue").position;
-        assert_eq!(pilot.rescues.len(), 1);
-        while let Some(p) = pilot.glide(last, t, 60.0, frame) {
-            last = p.position;
-            t += frame;
-        }
+        let (pose, t) = stuck_until_rescued(&mut pilot, x, 60.0);
+        let (last, _) = glide_to_the_end(&mut pilot, pose.position, t, 60.0);
         let onward = 140.0 + opts.stall_progress_mm;
         assert!(
             last.x >= onward - 1.0,
@@ -957,26 +982,12 @@ mod tests {
         let opts = FlightOptions::default();
         let x = DVec3::new(50.0, 3.0, 0.0);
         let mut pilot = Autopilot::new(&cl, Direction::Forward, &opts, x, 150.0);
-        let frame = 1.0 / 30.0;
-        let mut t = 0.0;
         // Stuck: Dt stays at 150 mm.
-        while t < STUCK_S - 0.1 {
-            assert!(pilot.glide(x, t, 150.0, frame).is_none(), "glided at {t} s");
-            pilot.input(t, 150.0, x, 1.0);
-            t += frame;
-        }
-        t = STUCK_S + 0.01;
-        let pose = pilot.glide(x, t, 150.0, frame).expect("a rescue glide");
-        assert_eq!(pilot.rescues.len(), 1);
+        let (pose, t) = stuck_until_rescued(&mut pilot, x, 150.0);
         assert_eq!(pilot.rescues[0].arc_mm, 50.0);
         assert!(pose.position.x > 50.0 && pose.position.y == 0.0);
         // It glides on, along the centerline, at least RESCUE_MM.
-        let mut last = pose.position;
-        while let Some(p) = pilot.glide(last, t, 150.0, frame) {
-            assert!(p.position.x >= last.x);
-            last = p.position;
-            t += frame;
-        }
+        let (last, t) = glide_to_the_end(&mut pilot, pose.position, t, 150.0);
         // (to within a guide point: the glide ends where the nearest point reaches its end)
         assert!(
             last.x >= 50.0 + RESCUE_MM - 1.0,
