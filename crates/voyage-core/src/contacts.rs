@@ -387,6 +387,88 @@ pub fn shortcut_plugs(
     plugs
 }
 
+/// The plug that closes a hole between touching loops that the centerline goes round, seen
+/// from the centerline point `from` whose Dt (`dt`, from the source) lies far below the
+/// centerline's arc there: the way Dt takes back to the source (steepest descent over the
+/// 26 neighbours) runs along one loop, then through the hole into a loop earlier on the
+/// centerline, where the arc of its nearest centerline point falls at once by at least
+/// `min_jump_mm`. That stretch of the way, centred on Ds, is narrowest at the hole, which is
+/// plugged as [`shortcut_plugs`] plugs one. Empty when no such fall is found. `lumen` and `ds`
+/// (its Ds over the lumen's box) are as for [`shortcut_plugs`]; the caller checks that the
+/// colon still holds. No round of plugging looks beside the centerline: on `ctc/prone-tagged`
+/// with a bridge costed on local means, fluid taken back in beside its pools after the trace
+/// opened a hole in the ascending colon that put Dt 132 mm below the centerline's arc.
+pub fn plug_beside(
+    lumen: &Volume<u8>,
+    ds: &crate::grid::Field<f32>,
+    dt: &crate::grid::Bricked<f32>,
+    cl: &crate::centerline::Centerline,
+    from: usize,
+    min_jump_mm: f64,
+    opts: &crate::centerline::CenterlineOptions,
+) -> Vec<usize> {
+    let way = descent(lumen, dt, cl.points_mm[from]);
+    let arcs: Vec<f64> = way
+        .iter()
+        .map(|&p| crate::centerline::arc_nearest(cl, p))
+        .collect();
+    let Some((t, jump)) = (1..way.len())
+        .map(|t| (t, arcs[t - 1] - arcs[t]))
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+    else {
+        return Vec::new();
+    };
+    if jump < min_jump_mm {
+        return Vec::new();
+    }
+    let crossing = way[t];
+    let within = |u: &usize| way[*u].distance(crossing) <= HOLE_REACH_MM;
+    let first = (0..t).rev().take_while(within).last().unwrap_or(t);
+    let last = (t..way.len()).take_while(within).last().unwrap_or(t);
+    let near = way[first..=last].to_vec();
+    if near.len() < 2 {
+        return Vec::new();
+    }
+    let centred = crate::centerline::refine_points(near, ds, opts);
+    let neck = (0..centred.points_mm.len())
+        .filter(|&i| DVec3::from_array(centred.points_mm[i]).distance(crossing) <= PLUG_MM)
+        .min_by(|&x, &y| centred.radius_mm[x].total_cmp(&centred.radius_mm[y]));
+    match neck {
+        Some(n) => plug(lumen, ds, centred.points_mm[n], centred.radius_mm[n]),
+        None => Vec::new(),
+    }
+}
+
+/// The way round a hole beside the centerline is looked for this far (mm) from where Dt's
+/// way crosses it ([`plug_beside`]): past the hole on both sides, within the two loops.
+const HOLE_REACH_MM: f64 = 20.0;
+
+/// Dt's way from `p` (volume-local mm) back to the source: voxel centres (volume-local mm),
+/// each the neighbour of the last with the least Dt, until none is less.
+fn descent(lumen: &Volume<u8>, dt: &crate::grid::Bricked<f32>, p: [f64; 3]) -> Vec<DVec3> {
+    let g = lumen.geometry();
+    let dims = lumen.dims();
+    let v = g.local_to_index(DVec3::from_array(p)).round();
+    if !g.contains_index(v) {
+        return Vec::new();
+    }
+    let mut at = [v.x as usize, v.y as usize, v.z as usize];
+    let mut way = vec![at];
+    let mut d = dt.get(at);
+    while d.is_finite() && d > 0.0 {
+        let next = neighbour_voxels(at, dims)
+            .map(|n| (n, dt.get(n)))
+            .filter(|&(n, dn)| dn < d && lumen.get(n[0], n[1], n[2]) != 0)
+            .min_by(|a, b| a.1.total_cmp(&b.1));
+        let Some((n, dn)) = next else { break };
+        (at, d) = (n, dn);
+        way.push(at);
+    }
+    way.iter()
+        .map(|v| g.index_to_local(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64)))
+        .collect()
+}
+
 /// Whether the centerline has a narrow stretch that may be a hole ([`shortcut_plugs`] has
 /// something to test), so that its Ds is worth computing.
 pub fn may_have_shortcuts(
@@ -798,6 +880,77 @@ mod tests {
                 let crossing = (y0..=y1).all(|j| plugged.get(30, j, zc) != 0);
                 assert!(!crossing, "the hole is still open ({} mm)", loops.hole_r);
             }
+        }
+    }
+
+    /// The colon round two loops (along the first tube, the bend, back along the second)
+    /// with a hole between them that the centerline goes round: Dt at the second tube's
+    /// point across the hole lies far below the centerline's arc, and Dt's way back from
+    /// there crosses the hole, which is plugged, the colon still whole; without a hole
+    /// nothing is.
+    #[test]
+    fn a_hole_beside_the_centerline_is_plugged_where_dt_shows_it() {
+        use crate::distance::geodesic_distance;
+        for hole_r in [1.5, -1.0] {
+            let loops = Loops {
+                tube_r: 10.0,
+                hole_r,
+            };
+            let m = loops.mask(true);
+            let d = m.dims();
+            let grid = BoxGrid::around([[0; 3], [d[0] - 1, d[1] - 1, d[2] - 1]], 0, d);
+            let ds = crate::distance::distance_to_wall_in(&m, grid.clone());
+            let (y0, y1, zc) = loops.axes();
+            let mut points: Vec<[f64; 3]> = (2..=100).map(|x| [x as f64, y0, zc]).collect();
+            points.extend((y0 as usize + 1..y1 as usize).map(|y| [100.0, y as f64, zc]));
+            points.extend((2..=100).rev().map(|x| [x as f64, y1, zc]));
+            let arc_mm = crate::centerline::arc_lengths(
+                &points
+                    .iter()
+                    .map(|p| DVec3::from_array(*p))
+                    .collect::<Vec<_>>(),
+            );
+            let cl = crate::centerline::Centerline {
+                radius_mm: vec![loops.tube_r; points.len()],
+                length_mm: *arc_mm.last().unwrap(),
+                canal_mm: 0.0,
+                points_mm: points,
+                arc_mm,
+            };
+            let source = [2, y0 as usize, zc as usize];
+            let dt = geodesic_distance(&m, &grid, source).unwrap();
+            let across = cl.points_mm.iter().rposition(|p| p[0] == 30.0).unwrap();
+            let at = [30, y1 as usize, zc as usize];
+            let want = cl.arc_mm[across];
+            if hole_r > 0.0 {
+                let before = dt.dist.get(at) as f64;
+                assert!(before < want - 100.0, "Dt {before:.0} mm, arc {want:.0}");
+            }
+            let opts = crate::centerline::CenterlineOptions::default();
+            let plugs = plug_beside(&m, &ds, &dt.dist, &cl, across, 50.0, &opts);
+            if hole_r < 0.0 {
+                assert!(plugs.is_empty(), "plugged without a hole");
+                continue;
+            }
+            assert!(!plugs.is_empty(), "the hole beside was not plugged");
+            let hole = DVec3::new(30.0, (y0 + y1) / 2.0, zc);
+            let g = m.geometry();
+            for &v in &plugs {
+                let p = g.index_to_local(DVec3::from_array(g.ijk(v).map(|x| x as f64)));
+                assert!(p.distance(hole) <= PLUG_MM + 3.0, "plugged at {p:?}");
+            }
+            let mut plugged = m.clone();
+            plugs.iter().for_each(|&v| plugged.data_mut()[v] = 0);
+            let dt = geodesic_distance(&plugged, &grid, source).unwrap();
+            let end = [2, y1 as usize, zc as usize];
+            assert!(dt.dist.get(end).is_finite(), "the plug parted the colon");
+            // Dt hugs the tubes' inner walls round the bend, where the centerline keeps to
+            // their middle: short by about 30 mm, as in a chamber.
+            let got = dt.dist.get(at) as f64;
+            assert!(
+                got > want - 50.0,
+                "Dt {got:.0} mm where the arc is {want:.0}"
+            );
         }
     }
 }

@@ -14,7 +14,10 @@ use crate::{
         self, Centerline, CenterlineOptions, centre_skeleton, trace_skeleton, uses_blocks,
     },
     cleanse::{CleanseOptions, Cleansing, Scene, cleanse},
-    contacts::{ContactMemory, ContactOptions, cut_contacts, may_have_shortcuts, shortcut_plugs},
+    contacts::{
+        ContactMemory, ContactOptions, cut_contacts, may_have_shortcuts, plug_beside,
+        shortcut_plugs,
+    },
     distance::{
         distance_to_wall_reusing,
         geodesic::{SearchMemory, geodesic_distance_like},
@@ -672,7 +675,7 @@ fn prepare_stored(
             seg.lumen.data_mut()[v] = 1;
         }
         contact_voxels = 0;
-        let ds_box = crate::distance::distance_to_wall_in(&seg.lumen, grid);
+        let ds_box = crate::distance::distance_to_wall_in(&seg.lumen, grid.clone());
         ends = centre_skeleton(&seg.lumen, &ds_box, &sk, &cl_opts)?;
         ds = Bricked::from_field(&ds_box, 0.0);
         memory = SearchMemory::from(ds_box.data);
@@ -685,6 +688,49 @@ fn prepare_stored(
     }
     seg.lumen_voxels -= contact_voxels;
     let (source, target, cl) = (ends.source, ends.target, ends.centerline);
+    // Holes beside the centerline, that no round of plugging looked at: plugged where Dt
+    // shows them, unless that parts the colon.
+    let mut plugged_beside = 0;
+    for _ in 0..MAX_BESIDE_ROUNDS {
+        let Some((i, _)) = shortcut_beside(&cl, &dt_source.dist) else {
+            break;
+        };
+        laps.start(Stage::Ds);
+        let ds_box = crate::distance::distance_to_wall_in(&seg.lumen, grid.clone());
+        let plugs = plug_beside(
+            &seg.lumen,
+            &ds_box,
+            &dt_source.dist,
+            &cl,
+            i,
+            SHORTCUT_DIP_MM,
+            &cl_opts,
+        );
+        drop(ds_box);
+        if plugs.is_empty() {
+            break;
+        }
+        set_voxels(&mut seg.lumen, &plugs, 0);
+        // The search's memory is Ds's box array: the old one goes first.
+        drop(std::mem::take(&mut memory));
+        let ds_box = crate::distance::distance_to_wall_in(&seg.lumen, grid.clone());
+        let plugged_ds = Bricked::from_field(&ds_box, 0.0);
+        memory = SearchMemory::from(ds_box.data);
+        laps.start(Stage::Dt);
+        let dt = geodesic_distance_like(&seg.lumen, &plugged_ds, source, &mut memory)?;
+        if !joined(&dt, target) {
+            set_voxels(&mut seg.lumen, &plugs, 1);
+            break;
+        }
+        (ds, dt_source) = (plugged_ds, dt);
+        seg.lumen_voxels -= plugs.len();
+        plugged_beside += plugs.len();
+    }
+    if plugged_beside > 0 {
+        seg.warnings.push(format!(
+            "the lumen held a way round the centerline through a hole between touching loops of the colon ({plugged_beside} voxels plugged): the cells and the flight's pull now follow the colon"
+        ));
+    }
     if let Some((i, dip)) = shortcut_beside(&cl, &dt_source.dist) {
         let p = seg
             .lumen
@@ -952,6 +998,9 @@ fn cut_along(
         memory,
     )
 }
+
+/// Holes beside the centerline plugged one after the other, at most.
+const MAX_BESIDE_ROUNDS: usize = 4;
 
 /// Dt from the source falling along the centerline by more than this (mm), and by more
 /// than [`SHORTCUT_PER_RADIUS`] times the lumen's radius there, below its highest value so

@@ -265,7 +265,7 @@ pub fn centre_skeleton(
 }
 
 /// The arc length of the centerline's point nearest to `p`.
-fn arc_nearest(cl: &Centerline, p: DVec3) -> f64 {
+pub(crate) fn arc_nearest(cl: &Centerline, p: DVec3) -> f64 {
     cl.points_mm
         .iter()
         .zip(&cl.arc_mm)

@@ -17,6 +17,7 @@ mod refine;
 
 use glam::DVec3;
 
+pub(crate) use ends::arc_nearest;
 #[cfg(test)]
 pub(crate) use ends::find_endpoints;
 pub use ends::{Endpoints, Skeleton, centre_skeleton, mm_of, trace_skeleton, uses_blocks};
@@ -25,6 +26,7 @@ pub use refine::Centerline;
 pub(crate) use refine::arc_lengths;
 #[cfg(test)]
 use refine::refine;
+pub(crate) use refine::refine_points;
 
 #[cfg(test)]
 use crate::{Result, Volume, grid::Field, grid::Padded};
