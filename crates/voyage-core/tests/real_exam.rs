@@ -294,3 +294,36 @@ fn weakly_tagged_the_real_exam_is_flown_through_all_of_its_colon() {
     assert_through_all_of_the_colon(&s, far);
     assert!(target.distance(exam.cecum_lps) <= 30.0, "end at {target}");
 }
+
+/// The real exam at a low dose: 50 HU of noise added (its own is about 20 HU), as screening
+/// exams often are. One voxel of fat in twelve then reads as soft tissue, and the bridge
+/// between the sigmoid–descending segment and the large compartment, searched on blocks
+/// costed by their cheapest voxel, cut 65 mm across the mesentery behind the descending
+/// colon's fluid-filled stretch: 3.2 % of the colon lay more than 55 mm from the centerline.
+/// Costed also on the mean of 2×2×2 voxels, it runs through the stretch.
+#[test]
+fn at_a_low_dose_the_real_exam_is_flown_through_all_of_its_colon() {
+    let Some(exam) = exam() else {
+        return;
+    };
+    let mut ct = exam.ct;
+    let mut noise = voyage_core::rng::Rng::new(7, 1);
+    for v in ct.data_mut() {
+        // Outside the scanner's field of view stays as it is.
+        if *v > -3000 {
+            *v = (*v as f64 + 50.0 * noise.gauss()).round() as i16;
+        }
+    }
+    let s = prepare(ct, &PrepOptions::default(), |_| {}).unwrap();
+    let colon = s.storage.to_study(&exam.colon).unwrap();
+    let far = far_from(&colon, &s.centerline.points_mm, 55.0);
+    let target = lps(&s, s.target);
+    eprintln!(
+        "σ 50 HU of noise: length {:.0} mm, end {:.1} mm from the cecum, {:.1} % of the colon > 55 mm from the centerline",
+        s.centerline.length_mm,
+        target.distance(exam.cecum_lps),
+        100.0 * far
+    );
+    assert_through_all_of_the_colon(&s, far);
+    assert!(target.distance(exam.cecum_lps) <= 30.0, "end at {target}");
+}
