@@ -86,6 +86,23 @@ fn far_from(mask: &Volume<i16>, path: &[[f64; 3]], mm: f64) -> f64 {
     far as f64 / voxels.len().max(1) as f64
 }
 
+/// `ct`, a variant of the real exam (`what`), prepared: its centerline runs through all of
+/// the colon (`colon`, the exam's given one) and ends within 30 mm of the cecal pole.
+fn flown_through_to_the_cecum(ct: Volume<i16>, colon: &Volume<i16>, cecum_lps: DVec3, what: &str) {
+    let s = prepare(ct, &PrepOptions::default(), |_| {}).unwrap();
+    let colon = s.storage.to_study(colon).unwrap();
+    let far = far_from(&colon, &s.centerline.points_mm, 55.0);
+    let target = lps(&s, s.target);
+    eprintln!(
+        "{what}: length {:.0} mm, end {:.1} mm from the cecum, {:.1} % of the colon > 55 mm from the centerline",
+        s.centerline.length_mm,
+        target.distance(cecum_lps),
+        100.0 * far
+    );
+    assert_through_all_of_the_colon(&s, far);
+    assert!(target.distance(cecum_lps) <= 30.0, "end at {target}");
+}
+
 /// The centerline runs through all of the colon: no more than 1 % of it (`far`, the share
 /// [`far_from`] gives at 55 mm) lies far from it, and its length is a colon's.
 fn assert_through_all_of_the_colon(s: &Study, far: f64) {
@@ -281,18 +298,7 @@ fn weakly_tagged_the_real_exam_is_flown_through_all_of_its_colon() {
             *v = 100 + (*v - 100) / 2;
         }
     }
-    let s = prepare(ct, &PrepOptions::default(), |_| {}).unwrap();
-    let colon = s.storage.to_study(&exam.colon).unwrap();
-    let far = far_from(&colon, &s.centerline.points_mm, 55.0);
-    let target = lps(&s, s.target);
-    eprintln!(
-        "tagging half as bright: length {:.0} mm, end {:.1} mm from the cecum, {:.1} % of the colon > 55 mm from the centerline",
-        s.centerline.length_mm,
-        target.distance(exam.cecum_lps),
-        100.0 * far
-    );
-    assert_through_all_of_the_colon(&s, far);
-    assert!(target.distance(exam.cecum_lps) <= 30.0, "end at {target}");
+    flown_through_to_the_cecum(ct, &exam.colon, exam.cecum_lps, "tagging half as bright");
 }
 
 /// The real exam at a low dose: 50 HU of noise added (its own is about 20 HU), as screening
@@ -314,16 +320,5 @@ fn at_a_low_dose_the_real_exam_is_flown_through_all_of_its_colon() {
             *v = (*v as f64 + 50.0 * noise.gauss()).round() as i16;
         }
     }
-    let s = prepare(ct, &PrepOptions::default(), |_| {}).unwrap();
-    let colon = s.storage.to_study(&exam.colon).unwrap();
-    let far = far_from(&colon, &s.centerline.points_mm, 55.0);
-    let target = lps(&s, s.target);
-    eprintln!(
-        "σ 50 HU of noise: length {:.0} mm, end {:.1} mm from the cecum, {:.1} % of the colon > 55 mm from the centerline",
-        s.centerline.length_mm,
-        target.distance(exam.cecum_lps),
-        100.0 * far
-    );
-    assert_through_all_of_the_colon(&s, far);
-    assert!(target.distance(exam.cecum_lps) <= 30.0, "end at {target}");
+    flown_through_to_the_cecum(ct, &exam.colon, exam.cecum_lps, "σ 50 HU of noise");
 }
