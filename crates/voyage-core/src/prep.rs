@@ -690,9 +690,8 @@ fn prepare_stored(
     let (source, target, cl) = (ends.source, ends.target, ends.centerline);
     // Holes beside the centerline, that no round of plugging looked at: plugged where Dt
     // shows them, unless that parts the colon.
-    let mut plugged_beside = 0;
     for _ in 0..MAX_BESIDE_ROUNDS {
-        let Some((i, _)) = shortcut_beside(&cl, &dt_source.dist) else {
+        let Some((i, dip)) = shortcut_beside(&cl, &dt_source.dist) else {
             break;
         };
         laps.start(Stage::Ds);
@@ -724,11 +723,20 @@ fn prepare_stored(
         }
         (ds, dt_source) = (plugged_ds, dt);
         seg.lumen_voxels -= plugs.len();
-        plugged_beside += plugs.len();
-    }
-    if plugged_beside > 0 {
+        let g = seg.lumen.geometry();
+        let at = plugs
+            .iter()
+            .map(|&v| DVec3::from_array(g.ijk(v).map(|x| x as f64)))
+            .sum::<DVec3>()
+            / plugs.len() as f64;
+        let p = g.index_to_patient(at);
         seg.warnings.push(format!(
-            "the lumen held a way round the centerline through a hole between touching loops of the colon ({plugged_beside} voxels plugged): the cells and the flight's pull now follow the colon"
+            "a hole between touching loops of the colon at LPS ({:.0}, {:.0}, {:.0}), beside the centerline, let the lumen reach {:.0} mm along it by a way {dip:.0} mm shorter: plugged ({} voxels), so that the cells and the flight's pull follow the colon",
+            p.x,
+            p.y,
+            p.z,
+            cl.arc_mm[i],
+            plugs.len()
         ));
     }
     if let Some((i, dip)) = shortcut_beside(&cl, &dt_source.dist) {
