@@ -375,7 +375,12 @@ pub fn shortcut_plugs(
     for s in stretches {
         let n = s.neck;
         if ways.joins(points_mm[s.ends.0], points_mm[s.ends.1], s.wide) {
-            let more = plug(lumen, ds, points_mm[n], radius_mm[n]);
+            let more = plug(
+                lumen,
+                |v| ds.get_global(v, f32::INFINITY),
+                points_mm[n],
+                radius_mm[n],
+            );
             ways.close(&more);
             plugs.extend(more);
         } else {
@@ -387,56 +392,154 @@ pub fn shortcut_plugs(
     plugs
 }
 
+/// A hole beside the centerline, found by [`plug_beside`]: the plug that closes it, its
+/// narrowest radius, and the arcs of the centerline it joins.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Hole {
+    pub plugs: Vec<usize>,
+    pub neck_mm: f64,
+    /// The arc (mm) of the nearest centerline point on the way's side before the hole, and
+    /// after it (nearer the source).
+    pub arcs_mm: [f64; 2],
+}
+
 /// The plug that closes a hole between touching loops that the centerline goes round, seen
-/// from the centerline point `from` whose Dt (`dt`, from the source) lies far below the
-/// centerline's arc there: the way Dt takes back to the source (steepest descent over the
-/// 26 neighbours) runs along one loop, then through the hole into a loop earlier on the
-/// centerline, where the arc of its nearest centerline point falls at once by at least
-/// `min_jump_mm`. That stretch of the way, centred on Ds, is narrowest at the hole, which is
-/// plugged as [`shortcut_plugs`] plugs one. Empty when no such fall is found. `lumen` and `ds`
-/// (its Ds over the lumen's box) are as for [`shortcut_plugs`]; the caller checks that the
-/// colon still holds. No round of plugging looks beside the centerline: on `ctc/prone-tagged`
-/// with a bridge costed on local means, fluid taken back in beside its pools after the trace
-/// opened a hole in the ascending colon that put Dt 132 mm below the centerline's arc.
+/// from the centerline point `from`: the way Dt (`dt`, from the source) takes back to the
+/// source (steepest descent over the 26 neighbours) runs along one loop, then through the
+/// hole into a loop earlier on the centerline, where the arc of its nearest centerline point
+/// falls at once by at least `min_jump_mm`. That stretch of the way, centred on Ds, is
+/// narrowest at the hole, which is plugged as [`shortcut_plugs`] plugs one. The way's falls
+/// are tried largest first; one is a hole where the way is narrow (under
+/// [`SHORTCUT_NARROW_MM`], or [`NECK_PER_SIDE`] of the centerline's radius on both sides):
+/// elsewhere it crossed open lumen between two stretches of the centerline (a wide
+/// flexure's dome). None when no fall is one. `ds` is
+/// the lumen's Ds; the caller checks that the colon still holds. No round of plugging looks
+/// beside the centerline: on `ctc/prone-tagged` with a bridge costed on local means, fluid
+/// taken back in beside its pools after the trace opened a hole in the ascending colon that
+/// put Dt 132 mm below the centerline's arc.
+#[allow(clippy::too_many_arguments)]
 pub fn plug_beside(
     lumen: &Volume<u8>,
-    ds: &crate::grid::Field<f32>,
+    ds: &crate::grid::Bricked<f32>,
     dt: &crate::grid::Bricked<f32>,
     cl: &crate::centerline::Centerline,
     from: usize,
     min_jump_mm: f64,
     opts: &crate::centerline::CenterlineOptions,
-) -> Vec<usize> {
+) -> Option<Hole> {
     let way = descent(lumen, dt, cl.points_mm[from]);
     let arcs: Vec<f64> = way
         .iter()
         .map(|&p| crate::centerline::arc_nearest(cl, p))
         .collect();
-    let Some((t, jump)) = (1..way.len())
-        .map(|t| (t, arcs[t - 1] - arcs[t]))
-        .max_by(|a, b| a.1.total_cmp(&b.1))
-    else {
-        return Vec::new();
+    let mut falls: Vec<usize> = (1..way.len())
+        .filter(|&t| arcs[t - 1] - arcs[t] >= min_jump_mm)
+        .collect();
+    falls.sort_by(|&x, &y| (arcs[y - 1] - arcs[y]).total_cmp(&(arcs[x - 1] - arcs[x])));
+    let radius_at = |a: f64| {
+        let i = cl.arc_mm.partition_point(|&x| x < a);
+        cl.radius_mm[i.min(cl.radius_mm.len() - 1)]
     };
-    if jump < min_jump_mm {
-        return Vec::new();
+    let mut tried: Vec<DVec3> = Vec::new();
+    for t in falls {
+        let crossing = way[t];
+        if tried.iter().any(|c| c.distance(crossing) <= PLUG_MM) {
+            continue;
+        }
+        tried.push(crossing);
+        let Some((at, neck_mm)) = neck_near(ds, &way, t, opts) else {
+            continue;
+        };
+        let side = radius_at(arcs[t - 1]).min(radius_at(arcs[t]));
+        if neck_mm > SHORTCUT_NARROW_MM.max(NECK_PER_SIDE * side) {
+            continue;
+        }
+        let plugs = plug(lumen, |v| ds.get(v), at, neck_mm);
+        if !plugs.is_empty() {
+            return Some(Hole {
+                plugs,
+                neck_mm,
+                arcs_mm: [arcs[t - 1], arcs[t]],
+            });
+        }
     }
+    None
+}
+
+/// The narrowest point of Dt's way `way` within [`PLUG_MM`] of its step `t`, the way centred
+/// on Ds within [`HOLE_REACH_MM`] of it: where, and its radius (mm).
+fn neck_near(
+    ds: &crate::grid::Bricked<f32>,
+    way: &[DVec3],
+    t: usize,
+    opts: &crate::centerline::CenterlineOptions,
+) -> Option<([f64; 3], f64)> {
     let crossing = way[t];
     let within = |u: &usize| way[*u].distance(crossing) <= HOLE_REACH_MM;
     let first = (0..t).rev().take_while(within).last().unwrap_or(t);
     let last = (t..way.len()).take_while(within).last().unwrap_or(t);
     let near = way[first..=last].to_vec();
     if near.len() < 2 {
-        return Vec::new();
+        return None;
     }
     let centred = crate::centerline::refine_points(near, ds, opts);
-    let neck = (0..centred.points_mm.len())
+    let n = (0..centred.points_mm.len())
         .filter(|&i| DVec3::from_array(centred.points_mm[i]).distance(crossing) <= PLUG_MM)
-        .min_by(|&x, &y| centred.radius_mm[x].total_cmp(&centred.radius_mm[y]));
-    match neck {
-        Some(n) => plug(lumen, ds, centred.points_mm[n], centred.radius_mm[n]),
-        None => Vec::new(),
+        .min_by(|&x, &y| centred.radius_mm[x].total_cmp(&centred.radius_mm[y]))?;
+    Some((centred.points_mm[n], centred.radius_mm[n]))
+}
+
+/// Centerline points, one every `every_mm` of arc, from which Dt's way back to the source
+/// ([`plug_beside`]'s descent) crosses from one loop into another: the arc of its nearest
+/// centerline point falls at once by at least `min_jump_mm`. The largest falls first, one
+/// point per crossing. A hole that saves Dt too little to dip along the centerline (a wide
+/// flexure's Dt rises little over its dome) still draws the flight's pull into it: in the
+/// real exam with noise added (σ 50 HU), a pool's floor opened into the transverse colon
+/// under the splenic flexure's dome, 260 mm of arc on, and the camera sat against it.
+/// The ways of later points end where they meet an earlier one's, which was looked at.
+pub fn holes_by_descent(
+    lumen: &Volume<u8>,
+    dt: &crate::grid::Bricked<f32>,
+    cl: &crate::centerline::Centerline,
+    min_jump_mm: f64,
+    every_mm: f64,
+) -> Vec<usize> {
+    let g = lumen.geometry();
+    let mut arc_of: std::collections::HashMap<usize, f64> = std::collections::HashMap::new();
+    let mut found: Vec<(f64, usize, DVec3)> = Vec::new();
+    let mut next = 0.0;
+    for (i, p) in cl.points_mm.iter().enumerate() {
+        if cl.arc_mm[i] < next {
+            continue;
+        }
+        next = cl.arc_mm[i] + every_mm;
+        let mut last: Option<f64> = None;
+        let mut best: Option<(f64, DVec3)> = None;
+        for v in descent_voxels(lumen, dt, *p) {
+            let at = g.index(v[0], v[1], v[2]);
+            let seen = arc_of.get(&at).copied();
+            let local = g.index_to_local(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64));
+            let arc = seen.unwrap_or_else(|| crate::centerline::arc_nearest(cl, local));
+            if let Some(a) = last
+                && a - arc >= min_jump_mm
+                && best.is_none_or(|(b, _)| a - arc > b)
+            {
+                best = Some((a - arc, local));
+            }
+            if seen.is_some() {
+                break;
+            }
+            arc_of.insert(at, arc);
+            last = Some(arc);
+        }
+        if let Some((jump, crossing)) = best
+            && !found.iter().any(|f| f.2.distance(crossing) <= PLUG_MM)
+        {
+            found.push((jump, i, crossing));
+        }
     }
+    found.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+    found.into_iter().map(|f| f.1).collect()
 }
 
 /// The way round a hole beside the centerline is looked for this far (mm) from where Dt's
@@ -447,26 +550,35 @@ const HOLE_REACH_MM: f64 = 20.0;
 /// each the neighbour of the last with the least Dt, until none is less.
 fn descent(lumen: &Volume<u8>, dt: &crate::grid::Bricked<f32>, p: [f64; 3]) -> Vec<DVec3> {
     let g = lumen.geometry();
-    let dims = lumen.dims();
-    let v = g.local_to_index(DVec3::from_array(p)).round();
-    if !g.contains_index(v) {
-        return Vec::new();
-    }
-    let mut at = [v.x as usize, v.y as usize, v.z as usize];
-    let mut way = vec![at];
-    let mut d = dt.get(at);
-    while d.is_finite() && d > 0.0 {
-        let next = neighbour_voxels(at, dims)
-            .map(|n| (n, dt.get(n)))
-            .filter(|&(n, dn)| dn < d && lumen.get(n[0], n[1], n[2]) != 0)
-            .min_by(|a, b| a.1.total_cmp(&b.1));
-        let Some((n, dn)) = next else { break };
-        (at, d) = (n, dn);
-        way.push(at);
-    }
-    way.iter()
+    descent_voxels(lumen, dt, p)
         .map(|v| g.index_to_local(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64)))
         .collect()
+}
+
+/// [`descent`] as voxels, step by step.
+fn descent_voxels<'a>(
+    lumen: &'a Volume<u8>,
+    dt: &'a crate::grid::Bricked<f32>,
+    p: [f64; 3],
+) -> impl Iterator<Item = [usize; 3]> + 'a {
+    let g = lumen.geometry();
+    let dims = lumen.dims();
+    let v = g.local_to_index(DVec3::from_array(p)).round();
+    let start = g
+        .contains_index(v)
+        .then_some([v.x as usize, v.y as usize, v.z as usize]);
+    let mut d = start.map_or(f32::NAN, |s| dt.get(s));
+    std::iter::successors(start, move |&at| {
+        if !(d.is_finite() && d > 0.0) {
+            return None;
+        }
+        let (n, dn) = neighbour_voxels(at, dims)
+            .map(|n| (n, dt.get(n)))
+            .filter(|&(n, dn)| dn < d && lumen.get(n[0], n[1], n[2]) != 0)
+            .min_by(|a, b| a.1.total_cmp(&b.1))?;
+        d = dn;
+        Some(n)
+    })
 }
 
 /// Whether the centerline has a narrow stretch that may be a hole ([`shortcut_plugs`] has
@@ -565,16 +677,12 @@ fn narrow_points(radius_mm: &[f64], arc_mm: &[f64]) -> Vec<bool> {
 
 /// The plug that closes a hole at `at` (volume-local mm) of radius `r` mm: the lumen within
 /// [`PLUG_MM`] (at least 2r) that is no wider than the hole (Ds at most r and a voxel), so
-/// that the loops on either side keep their lumen.
-fn plug(lumen: &Volume<u8>, ds: &crate::grid::Field<f32>, at: [f64; 3], r: f64) -> Vec<usize> {
+/// that the loops on either side keep their lumen. `ds(v)`: Ds at voxel v (+∞ where unknown).
+fn plug(lumen: &Volume<u8>, ds: impl Fn([usize; 3]) -> f32, at: [f64; 3], r: f64) -> Vec<usize> {
     let thin = r + lumen.spacing().iter().cloned().fold(0.0, f64::max);
     lumen_within(lumen, at, PLUG_MM.max(2.0 * r))
         .into_iter()
-        .filter(|&v| {
-            ds.grid
-                .index_of_global(lumen.geometry().ijk(v))
-                .is_some_and(|b| (ds.data[b.0] as f64) <= thin)
-        })
+        .filter(|&v| (ds(lumen.geometry().ijk(v)) as f64) <= thin)
         .collect()
 }
 
@@ -927,12 +1035,28 @@ mod tests {
                 assert!(before < want - 100.0, "Dt {before:.0} mm, arc {want:.0}");
             }
             let opts = crate::centerline::CenterlineOptions::default();
-            let plugs = plug_beside(&m, &ds, &dt.dist, &cl, across, 50.0, &opts);
+            let ds = crate::grid::Bricked::from_field(&ds, 0.0);
+            // The ways back from points past the hole cross it, 165 mm of arc at once.
+            let crossings = holes_by_descent(&m, &dt.dist, &cl, 150.0, 10.0);
+            let hole = plug_beside(&m, &ds, &dt.dist, &cl, across, 50.0, &opts);
             if hole_r < 0.0 {
-                assert!(plugs.is_empty(), "plugged without a hole");
+                assert!(hole.is_none(), "plugged without a hole");
+                assert!(crossings.is_empty(), "crossings without a hole");
                 continue;
             }
-            assert!(!plugs.is_empty(), "the hole beside was not plugged");
+            let hole = hole.expect("the hole beside was not plugged");
+            assert!((hole.neck_mm - hole_r).abs() <= 1.0, "{hole:?}");
+            assert_eq!(crossings.len(), 1, "{crossings:?}");
+            let by_descent = plug_beside(&m, &ds, &dt.dist, &cl, crossings[0], 150.0, &opts)
+                .expect("the hole was not plugged from the crossing");
+            assert!(
+                (by_descent.neck_mm - hole.neck_mm).abs() <= 0.5
+                    && (by_descent.arcs_mm[1] - hole.arcs_mm[1]).abs() <= 2.0,
+                "{:?} against {:?}",
+                (by_descent.neck_mm, by_descent.arcs_mm),
+                (hole.neck_mm, hole.arcs_mm)
+            );
+            let plugs = hole.plugs;
             let hole = DVec3::new(30.0, (y0 + y1) / 2.0, zc);
             let g = m.geometry();
             for &v in &plugs {

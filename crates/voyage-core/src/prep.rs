@@ -15,8 +15,8 @@ use crate::{
     },
     cleanse::{CleanseOptions, Cleansing, Scene, cleanse},
     contacts::{
-        ContactMemory, ContactOptions, cut_contacts, may_have_shortcuts, plug_beside,
-        shortcut_plugs,
+        ContactMemory, ContactOptions, Hole, cut_contacts, holes_by_descent, may_have_shortcuts,
+        plug_beside, shortcut_plugs,
     },
     distance::{
         distance_to_wall_reusing,
@@ -689,55 +689,50 @@ fn prepare_stored(
     seg.lumen_voxels -= contact_voxels;
     let (source, target, cl) = (ends.source, ends.target, ends.centerline);
     // Holes beside the centerline, that no round of plugging looked at: plugged where Dt
-    // shows them, unless that parts the colon.
-    for _ in 0..MAX_BESIDE_ROUNDS {
-        let Some((i, dip)) = shortcut_beside(&cl, &dt_source.dist) else {
+    // shows them (a dip along the centerline, or its way back crossing from one loop to
+    // another), unless that parts the colon.
+    let mut beside_plugged: Vec<Hole> = Vec::new();
+    for round in 0..=MAX_BESIDE_ROUNDS {
+        let holes = holes_beside(&seg.lumen, &ds, &dt_source.dist, &cl, &cl_opts);
+        if holes.is_empty() {
+            break;
+        }
+        if round == MAX_BESIDE_ROUNDS {
+            seg.warnings.push(format!(
+                "the colon may hold more holes between touching loops beside the centerline: {MAX_BESIDE_ROUNDS} rounds of plugging did not close them all; the cells and the flight's pull may follow them"
+            ));
+            break;
+        }
+        // All of this round's at once; where that parts the colon, the first alone.
+        let mut tries = vec![holes.clone()];
+        if holes.len() > 1 {
+            tries.push(holes[..1].to_vec());
+        }
+        let mut kept = None;
+        for these in tries {
+            let plugs: Vec<usize> = these.iter().flat_map(|h| h.plugs.iter().copied()).collect();
+            set_voxels(&mut seg.lumen, &plugs, 0);
+            laps.start(Stage::Dt);
+            // Plugs only take lumen away: Ds's bricks still hold every lumen voxel.
+            let dt = geodesic_distance_like(&seg.lumen, &ds, source, &mut memory)?;
+            if joined(&dt, target) {
+                kept = Some((dt, these, plugs));
+                break;
+            }
+            set_voxels(&mut seg.lumen, &plugs, 1);
+        }
+        let Some((dt, these, plugs)) = kept else {
             break;
         };
         laps.start(Stage::Ds);
-        let ds_box = crate::distance::distance_to_wall_in(&seg.lumen, grid.clone());
-        let plugs = plug_beside(
-            &seg.lumen,
-            &ds_box,
-            &dt_source.dist,
-            &cl,
-            i,
-            SHORTCUT_DIP_MM,
-            &cl_opts,
-        );
-        drop(ds_box);
-        if plugs.is_empty() {
-            break;
-        }
-        set_voxels(&mut seg.lumen, &plugs, 0);
-        // The search's memory is Ds's box array: the old one goes first.
-        drop(std::mem::take(&mut memory));
-        let ds_box = crate::distance::distance_to_wall_in(&seg.lumen, grid.clone());
-        let plugged_ds = Bricked::from_field(&ds_box, 0.0);
-        memory = SearchMemory::from(ds_box.data);
-        laps.start(Stage::Dt);
-        let dt = geodesic_distance_like(&seg.lumen, &plugged_ds, source, &mut memory)?;
-        if !joined(&dt, target) {
-            set_voxels(&mut seg.lumen, &plugs, 1);
-            break;
-        }
-        (ds, dt_source) = (plugged_ds, dt);
+        crate::distance::add_walls(&mut ds, &plugs);
+        dt_source = dt;
         seg.lumen_voxels -= plugs.len();
-        let g = seg.lumen.geometry();
-        let at = plugs
-            .iter()
-            .map(|&v| DVec3::from_array(g.ijk(v).map(|x| x as f64)))
-            .sum::<DVec3>()
-            / plugs.len() as f64;
-        let p = g.index_to_patient(at);
-        seg.warnings.push(format!(
-            "a hole between touching loops of the colon at LPS ({:.0}, {:.0}, {:.0}), beside the centerline, let the lumen reach {:.0} mm along it by a way {dip:.0} mm shorter: plugged ({} voxels), so that the cells and the flight's pull follow the colon",
-            p.x,
-            p.y,
-            p.z,
-            cl.arc_mm[i],
-            plugs.len()
-        ));
+        beside_plugged.extend(these);
+    }
+    if !beside_plugged.is_empty() {
+        seg.warnings
+            .push(holes_warning(seg.lumen.geometry(), &beside_plugged));
     }
     if let Some((i, dip)) = shortcut_beside(&cl, &dt_source.dist) {
         let p = seg
@@ -1008,7 +1003,73 @@ fn cut_along(
 }
 
 /// Holes beside the centerline plugged one after the other, at most.
-const MAX_BESIDE_ROUNDS: usize = 4;
+const MAX_BESIDE_ROUNDS: usize = 10;
+/// Dt's way back to the source is followed from a centerline point this often (mm of arc)
+/// in search of holes ([`holes_by_descent`]): the ways join soon, and a hole lies on those of
+/// every point beyond it.
+const DESCENT_EVERY_MM: f64 = 10.0;
+/// A way back that crosses at least this much of the centerline's arc at once crossed between
+/// loops of the colon ([`holes_by_descent`]), where a smaller jump may be a gap between folds
+/// in one wide chamber: the centerline meanders about 80 mm across the cecum of
+/// `ctc/prone-tagged`, 100 mm wide, where the way from its pole crosses a fold 2–4 mm in
+/// radius; the splenic flexure's limbs are 260 mm apart along it.
+const HOLE_JUMP_MM: f64 = 150.0;
+
+/// The holes beside the centerline that Dt shows (see [`plug_beside`]), none overlapping
+/// another: where Dt dips along the centerline ([`shortcut_beside`]), and where Dt's way back
+/// from a centerline point crosses between loops ([`holes_by_descent`]).
+fn holes_beside(
+    lumen: &Volume<u8>,
+    ds: &Bricked<f32>,
+    dt: &Bricked<f32>,
+    cl: &Centerline,
+    cl_opts: &CenterlineOptions,
+) -> Vec<Hole> {
+    let dip = shortcut_beside(cl, dt).map(|(i, _)| (i, SHORTCUT_DIP_MM));
+    let crossings = holes_by_descent(lumen, dt, cl, HOLE_JUMP_MM, DESCENT_EVERY_MM)
+        .into_iter()
+        .map(|i| (i, HOLE_JUMP_MM));
+    let mut holes: Vec<Hole> = Vec::new();
+    let mut taken = std::collections::HashSet::new();
+    for (i, jump) in dip.into_iter().chain(crossings) {
+        if let Some(h) = plug_beside(lumen, ds, dt, cl, i, jump, cl_opts)
+            && !h.plugs.iter().any(|v| taken.contains(v))
+        {
+            taken.extend(h.plugs.iter().copied());
+            holes.push(h);
+        }
+    }
+    holes
+}
+
+/// What the user is told of the holes plugged beside the centerline: how many, where, and
+/// which stretches of the colon they joined.
+fn holes_warning(g: &crate::Geometry, holes: &[Hole]) -> String {
+    let places: Vec<String> = holes
+        .iter()
+        .map(|h| {
+            let at = h
+                .plugs
+                .iter()
+                .map(|&v| DVec3::from_array(g.ijk(v).map(|x| x as f64)))
+                .sum::<DVec3>()
+                / h.plugs.len() as f64;
+            let p = g.index_to_patient(at);
+            let [from, to] = h.arcs_mm;
+            format!(
+                "LPS ({:.0}, {:.0}, {:.0}), {:.1} mm in radius, joining {to:.0} to {from:.0} mm",
+                p.x, p.y, p.z, h.neck_mm
+            )
+        })
+        .collect();
+    let voxels: usize = holes.iter().map(|h| h.plugs.len()).sum();
+    format!(
+        "{} hole{} between touching loops of the colon beside the centerline joined stretches far apart along it: plugged ({voxels} voxels), so that the cells and the flight's pull follow the colon: {}",
+        holes.len(),
+        if holes.len() == 1 { "" } else { "s" },
+        places.join("; ")
+    )
+}
 
 /// Dt from the source falling along the centerline by more than this (mm), and by more
 /// than [`SHORTCUT_PER_RADIUS`] times the lumen's radius there, below its highest value so

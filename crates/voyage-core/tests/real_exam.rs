@@ -7,6 +7,7 @@ use std::path::PathBuf;
 
 use glam::DVec3;
 use voyage_core::{ComponentKind, PrepOptions, Study, Volume, prepare};
+use voyage_phantom::fixtures::thick_slices;
 
 mod common;
 
@@ -206,36 +207,6 @@ fn the_real_exam_gives_the_whole_colon_rectum_to_cecum() {
     }
 }
 
-/// `v` in slabs of three slices: each value the mean (`max`: the largest) of three.
-fn thick_slices(v: &Volume<i16>, max: bool) -> Volume<i16> {
-    let g = v.geometry();
-    let [nx, ny, nz] = g.dims;
-    let slab = nx * ny;
-    let thick_nz = nz / 3;
-    let mut data = vec![0i16; slab * thick_nz];
-    for (k, out) in data.chunks_mut(slab).enumerate() {
-        let three: Vec<&[i16]> = (0..3)
-            .map(|d| &v.data()[slab * (3 * k + d)..slab * (3 * k + d + 1)])
-            .collect();
-        for (x, o) in out.iter_mut().enumerate() {
-            let vals = three.iter().map(|s| s[x] as i32);
-            *o = if max {
-                vals.max().unwrap() as i16
-            } else {
-                (vals.sum::<i32>() as f64 / 3.0).round() as i16
-            };
-        }
-    }
-    let mut thick = g.clone();
-    thick.dims = [nx, ny, thick_nz];
-    thick.spacing[2] *= 3.0;
-    // The first thick slice's centre: the middle of the three it averages.
-    for (o, d) in thick.origin.iter_mut().zip(0..3) {
-        *o += g.direction[d][2] * g.spacing[2];
-    }
-    Volume::from_vec(thick, data).unwrap()
-}
-
 /// The real exam in 3 mm slices (each the mean of three), as a held-out exam may come:
 /// - its air–fluid levels still say the patient lay prone. Counted in voxel lines, the levels
 ///   seen across the thick slices' axis weighed three times what they cover, and the exam was
@@ -253,8 +224,8 @@ fn thick_slices_of_the_real_exam_read_prone_keep_the_lung_out_and_are_flown_thro
     let Some(exam) = exam() else {
         return;
     };
-    let ct = thick_slices(&exam.ct, false);
-    let colon = thick_slices(&exam.colon, true);
+    let ct = thick_slices(&exam.ct, 3, false);
+    let colon = thick_slices(&exam.colon, 3, true);
     let s = prepare(ct, &PrepOptions::default(), |_| {}).unwrap();
     let o = &s.segmentation.orientation;
     let colon = s.storage.to_study(&colon).unwrap();

@@ -96,6 +96,33 @@ fn the_real_exam_is_flown_both_ways_inside_the_lumen() {
     }
 }
 
+/// The real exam in 2 mm slices (each the mean of two), as a held-out exam may come: both
+/// flights reach their goals with no stall and no rescue. Where the splenic flexure's limbs
+/// touch, the thick slices leave the wall between them open in ten places under 1 mm in
+/// radius, 170–220 mm apart along the centerline but saving Dt too little to dip along it;
+/// the flight's Dt, sampled across the thin wall, drew the camera up into the flexure's dome
+/// against it (2 stalls and 2 rescues forward, 3 and 2 backward, before they were plugged).
+#[test]
+fn the_real_exam_in_2_mm_slices_is_flown_both_ways_without_a_stall() {
+    let Some(path) = voyage_phantom::fixtures::shared_file("ctc/prone-tagged.nii.gz") else {
+        return;
+    };
+    let ct = voyage_io::load(&path, &Default::default()).unwrap().volume;
+    let ct = voyage_phantom::fixtures::thick_slices(&ct, 2, false);
+    let study = prepare(ct, &PrepOptions::default(), |_| {}).unwrap();
+    let opts = FlightOptions::for_study(&study);
+    let field = potential_field(&study, opts.safety.min_wall_mm).unwrap();
+    for dir in [Direction::Forward, Direction::Backward] {
+        let f = flown(&study, &field, dir, &opts, "2 mm slices");
+        assert_eq!(
+            (f.stalls, f.rescues.len()),
+            (0, 0),
+            "the {} flight stalled",
+            dir.name()
+        );
+    }
+}
+
 /// `ct/abdomen-3mm` (a colon 3–9 mm in radius, 3 mm slices, mostly collapsed): both flights
 /// reach their goals. Its rectum end was once narrower than the camera fits, through a hole
 /// 2 mm in radius that the centerline now goes round (a way 6 mm wide all along); what a

@@ -95,3 +95,34 @@ pub fn assert_same_volume(a: &Volume<i16>, b: &Volume<i16>, what: &str) {
     }
     assert!(a.data() == b.data(), "{what}: voxels differ");
 }
+
+/// `v` in slabs of `n` slices, as an exam with thicker slices would come: each value the mean
+/// of `n` (ties to even, as numpy rounds), or with `max` the largest (for a mask). The first
+/// thick slice's centre lies in the middle of the `n` it stands for.
+pub fn thick_slices(v: &Volume<i16>, n: usize, max: bool) -> Volume<i16> {
+    let g = v.geometry();
+    let [nx, ny, nz] = g.dims;
+    let slab = nx * ny;
+    let thick_nz = nz / n;
+    let mut data = vec![0i16; slab * thick_nz];
+    for (k, out) in data.chunks_mut(slab).enumerate() {
+        let slices: Vec<&[i16]> = (0..n)
+            .map(|d| &v.data()[slab * (n * k + d)..slab * (n * k + d + 1)])
+            .collect();
+        for (x, o) in out.iter_mut().enumerate() {
+            let vals = slices.iter().map(|s| s[x] as i32);
+            *o = if max {
+                vals.max().unwrap() as i16
+            } else {
+                (vals.sum::<i32>() as f64 / n as f64).round_ties_even() as i16
+            };
+        }
+    }
+    let mut thick = g.clone();
+    thick.dims = [nx, ny, thick_nz];
+    thick.spacing[2] *= n as f64;
+    for (o, d) in thick.origin.iter_mut().zip(0..3) {
+        *o += g.direction[d][2] * g.spacing[2] * (n - 1) as f64 / 2.0;
+    }
+    Volume::from_vec(thick, data).unwrap()
+}

@@ -8,7 +8,9 @@ use serde::Serialize;
 use super::CenterlineOptions;
 #[cfg(test)]
 use crate::Volume;
+#[cfg(test)]
 use crate::grid::Field;
+use crate::grid::Sampled;
 
 #[derive(Clone, Debug, Serialize)]
 pub struct Centerline {
@@ -42,7 +44,7 @@ pub fn refine(
 }
 
 /// [`refine`] of a path given in volume-local mm (each point at a lumen voxel's centre).
-pub fn refine_points(raw: Vec<DVec3>, ds: &Field<f32>, opts: &CenterlineOptions) -> Centerline {
+pub fn refine_points(raw: Vec<DVec3>, ds: &impl Sampled, opts: &CenterlineOptions) -> Centerline {
     let mut pts = resample(&raw, opts.step_mm);
     for _ in 0..opts.centre_iterations {
         pts = centre(&pts, ds);
@@ -125,24 +127,24 @@ fn resample(pts: &[DVec3], step: f64) -> Vec<DVec3> {
 
 /// Moves each inner point up the gradient of Ds, across the path only (along-path motion
 /// would bunch the points), by at most a millimetre.
-fn centre(pts: &[DVec3], ds: &Field<f32>) -> Vec<DVec3> {
+fn centre(pts: &[DVec3], ds: &impl Sampled) -> Vec<DVec3> {
     let h = 0.5;
     let mut out = pts.to_vec();
     for i in 1..pts.len().saturating_sub(1) {
         let t = (pts[i + 1] - pts[i - 1]).normalize_or_zero();
         let p = pts[i];
         let grad = DVec3::new(
-            ds.sample(p + DVec3::X * h, 0.0) as f64 - ds.sample(p - DVec3::X * h, 0.0) as f64,
-            ds.sample(p + DVec3::Y * h, 0.0) as f64 - ds.sample(p - DVec3::Y * h, 0.0) as f64,
-            ds.sample(p + DVec3::Z * h, 0.0) as f64 - ds.sample(p - DVec3::Z * h, 0.0) as f64,
+            ds.sample_mm(p + DVec3::X * h) as f64 - ds.sample_mm(p - DVec3::X * h) as f64,
+            ds.sample_mm(p + DVec3::Y * h) as f64 - ds.sample_mm(p - DVec3::Y * h) as f64,
+            ds.sample_mm(p + DVec3::Z * h) as f64 - ds.sample_mm(p - DVec3::Z * h) as f64,
         ) / (2.0 * h);
         let across = (grad - t * grad.dot(t)).normalize_or_zero();
         // Up to 1 mm across the path, halving until Ds grows (a line search on the ridge).
-        let here = ds.sample(p, 0.0);
+        let here = ds.sample_mm(p);
         let mut len = 1.0;
         while len > 0.1 {
             let q = p + across * len;
-            if ds.sample(q, 0.0) > here {
+            if ds.sample_mm(q) > here {
                 out[i] = q;
                 break;
             }
@@ -162,27 +164,27 @@ const SMOOTH_FROM_MM: f64 = 12.0;
 /// Moving average over ±`smooth_mm` (more in a wide lumen: [`SMOOTH_PER_RADIUS`]) of points
 /// `step_mm` apart, ends fixed; a point whose average would leave the lumen (Ds below half
 /// its own) keeps its place.
-fn smooth(pts: &[DVec3], smooth_mm: f64, step_mm: f64, ds: &Field<f32>) -> Vec<DVec3> {
+fn smooth(pts: &[DVec3], smooth_mm: f64, step_mm: f64, ds: &impl Sampled) -> Vec<DVec3> {
     let n = pts.len();
     let mut out = pts.to_vec();
     for i in 1..n.saturating_sub(1) {
-        let here = ds.sample(pts[i], 0.0);
+        let here = ds.sample_mm(pts[i]);
         let wide = SMOOTH_PER_RADIUS * (here as f64 - SMOOTH_FROM_MM).max(0.0);
         let half = ((smooth_mm + wide) / step_mm).round() as usize;
         let w = half.min(i).min(n - 1 - i);
         let sum: DVec3 = pts[i - w..=i + w].iter().copied().sum();
         let q = sum / (2 * w + 1) as f64;
-        if ds.sample(q, 0.0) >= 0.5 * here {
+        if ds.sample_mm(q) >= 0.5 * here {
             out[i] = q;
         }
     }
     out
 }
 
-fn finish(pts: Vec<DVec3>, ds: &Field<f32>) -> Centerline {
+fn finish(pts: Vec<DVec3>, ds: &impl Sampled) -> Centerline {
     let arc = arc_lengths(&pts);
     let length_mm = arc.last().copied().unwrap_or(0.0);
-    let radius = pts.iter().map(|&p| ds.sample(p, 0.0) as f64).collect();
+    let radius = pts.iter().map(|&p| ds.sample_mm(p) as f64).collect();
     Centerline {
         points_mm: pts.iter().map(|p| p.to_array()).collect(),
         arc_mm: arc,

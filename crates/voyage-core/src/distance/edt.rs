@@ -20,7 +20,7 @@ use rayon::prelude::*;
 
 use crate::{
     Error, Result, Volume,
-    grid::{BoxGrid, Field, bounding_box},
+    grid::{BoxGrid, Bricked, Field, bounding_box},
     volume::{next_run, runs_where},
 };
 
@@ -51,6 +51,64 @@ pub fn distance_to_wall_reusing(mask: &Volume<u8>, grid: BoxGrid, memory: Vec<f3
         grid,
         geometry: mask.geometry().clone(),
         data: f,
+    }
+}
+
+/// Ds after the lumen voxels `walls` (volume indices) became wall: 0 there, and elsewhere the
+/// nearer of the old distance and the distance to them, which is exact (the nearest wall is
+/// an old one or a new one). Only voxels nearer the new walls' box than the largest Ds can
+/// change: a plug of a few hundred voxels costs milliseconds, where the transform of the
+/// whole box costs a third of a second on `ctc/prone-tagged`.
+pub fn add_walls(ds: &mut Bricked<f32>, walls: &[usize]) {
+    let Some(&first) = walls.first() else {
+        return;
+    };
+    let g = ds.geometry.clone();
+    let sp = g.spacing.map(|s| s as f32);
+    let ijk: Vec<[usize; 3]> = walls.iter().map(|&v| g.ijk(v)).collect();
+    let (mut lo, mut hi) = (g.ijk(first), g.ijk(first));
+    for w in &ijk {
+        for a in 0..3 {
+            lo[a] = lo[a].min(w[a]);
+            hi[a] = hi[a].max(w[a]);
+        }
+    }
+    for w in &ijk {
+        ds.set(*w, 0.0);
+    }
+    let reach = ds.values().iter().fold(0.0f32, |m, &d| m.max(d));
+    let (box_lo, box_dims) = (ds.grid.lo, ds.grid.dims);
+    let steps = |a: usize| (reach / sp[a]).ceil() as usize;
+    let from = [0, 1, 2].map(|a| lo[a].saturating_sub(steps(a)).max(box_lo[a]));
+    let to = [0, 1, 2].map(|a| (hi[a] + steps(a)).min(box_lo[a] + box_dims[a] - 1));
+    // Squared distance in the transform's order: x, then y, then z, in f32.
+    let d2 = |v: [usize; 3], w: [usize; 3]| {
+        let d = [0, 1, 2].map(|a| (v[a] as f32 - w[a] as f32) * sp[a]);
+        d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+    };
+    for k in from[2]..=to[2] {
+        for j in from[1]..=to[1] {
+            for i in from[0]..=to[0] {
+                let v = [i, j, k];
+                let old = ds.get(v);
+                if old <= 0.0 {
+                    continue;
+                }
+                // Nearer the box than the old wall, or no new wall can be nearer.
+                let gap = [0, 1, 2].map(|a| {
+                    let below = lo[a].saturating_sub(v[a]);
+                    let above = v[a].saturating_sub(hi[a]);
+                    below.max(above) as f32 * sp[a]
+                });
+                if gap[0] * gap[0] + gap[1] * gap[1] + gap[2] * gap[2] >= old * old {
+                    continue;
+                }
+                let near = ijk.iter().fold(f32::INFINITY, |m, &w| m.min(d2(v, w)));
+                if near < old * old {
+                    ds.set(v, near.sqrt());
+                }
+            }
+        }
     }
 }
 
@@ -495,6 +553,40 @@ mod tests {
                     "seed {seed} voxel {idx}: {got} vs {w}"
                 );
             }
+        }
+    }
+
+    /// Walls added to a lumen (a plug): Ds updated in place equals Ds of the new lumen made
+    /// afresh, and only the voxels near the plug change.
+    #[test]
+    fn walls_added_give_the_ds_made_afresh() {
+        for (seed, fill) in [(5, 0.97), (6, 1.0)] {
+            let mut m = random_mask([30, 24, 20], [0.75, 0.75, 1.0], seed, fill);
+            let grid = BoxGrid::around([[0; 3], [29, 23, 19]], 0, m.dims());
+            let mut ds = Bricked::from_field(&distance_to_wall_in(&m, grid.clone()), 0.0);
+            let g = m.geometry().clone();
+            let plug: Vec<usize> = (0..g.len())
+                .filter(|&v| {
+                    let [i, j, k] = g.ijk(v);
+                    m.data()[v] != 0 && (12..15).contains(&i) && (8..16).contains(&j) && k == 9
+                })
+                .collect();
+            assert!(plug.len() > 10);
+            plug.iter().for_each(|&v| m.data_mut()[v] = 0);
+            let before = ds.clone();
+            add_walls(&mut ds, &plug);
+            let fresh = distance_to_wall_in(&m, grid);
+            let mut changed = 0;
+            for v in 0..g.len() {
+                let ijk = g.ijk(v);
+                let want = fresh.get_global(ijk, 0.0);
+                assert!(
+                    (ds.get(ijk) - want).abs() <= 1e-5,
+                    "seed {seed} voxel {ijk:?}"
+                );
+                changed += (ds.get(ijk) != before.get(ijk)) as usize;
+            }
+            assert!(changed >= plug.len(), "{changed} changed");
         }
     }
 

@@ -4,5 +4,5 @@
 pub mod edt;
 pub mod geodesic;
 
-pub use edt::{distance_to_wall, distance_to_wall_in, distance_to_wall_reusing};
+pub use edt::{add_walls, distance_to_wall, distance_to_wall_in, distance_to_wall_reusing};
 pub use geodesic::{Geodesic, geodesic_distance};

@@ -177,6 +177,27 @@ impl Field<f32> {
     }
 }
 
+/// A field of f32 read trilinearly at volume-local positions (mm), 0 where it does not
+/// reach: Ds as the centring reads it, in box layout or in bricks.
+pub trait Sampled {
+    fn sample_mm(&self, mm: glam::DVec3) -> f32;
+}
+
+impl Sampled for Field<f32> {
+    #[inline]
+    fn sample_mm(&self, mm: glam::DVec3) -> f32 {
+        self.sample(mm, 0.0)
+    }
+}
+
+/// Bricks whose `outside` is 0 (Ds's).
+impl Sampled for Bricked<f32> {
+    #[inline]
+    fn sample_mm(&self, mm: glam::DVec3) -> f32 {
+        self.sample(mm)
+    }
+}
+
 /// Side of a brick of [`Bricked`] (as a power of two).
 const BRICK_SHIFT: usize = 3;
 const BRICK: usize = 1 << BRICK_SHIFT;
@@ -462,6 +483,22 @@ impl<T: Copy + PartialEq> Bricked<T> {
     pub fn index_of_box(&self, l: [usize; 3]) -> Option<BrickIndex> {
         let slot = self.layout.slot_of(l);
         (slot != ABSENT).then(|| BrickIndex(slot as usize * BRICK_VOXELS + within_brick(l)))
+    }
+
+    /// Writes `v` at a volume voxel whose brick is stored; false (nothing written) elsewhere.
+    #[inline]
+    pub fn set(&mut self, g: [usize; 3], v: T) -> bool {
+        let l = [0, 1, 2].map(|a| g[a].wrapping_sub(self.grid.lo[a]));
+        if (0..3).any(|a| l[a] >= self.grid.dims[a]) {
+            return false;
+        }
+        match self.index_of_box(l) {
+            Some(at) => {
+                self.data[at.0] = v;
+                true
+            }
+            None => false,
+        }
     }
 
     /// The stored values, brick by brick (see [`Bricked::box_voxel`]); voxels of edge bricks

@@ -12,5 +12,5 @@ mod padded;
 
 pub use blocks::Blocks;
 pub(crate) use field::first_and_last;
-pub use field::{BoxGrid, BoxIndex, BrickIndex, BrickMarks, Bricked, Field, bounding_box};
+pub use field::{BoxGrid, BoxIndex, BrickIndex, BrickMarks, Bricked, Field, Sampled, bounding_box};
 pub use padded::{PadIndex, Padded};
