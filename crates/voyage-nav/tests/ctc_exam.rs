@@ -97,11 +97,12 @@ fn the_real_exam_is_flown_both_ways_inside_the_lumen() {
 }
 
 /// The real exam in 2 mm slices (each the mean of two), as a held-out exam may come: both
-/// flights reach their goals with no stall and no rescue. Where the splenic flexure's limbs
-/// touch, the thick slices leave the wall between them open in ten places under 1 mm in
-/// radius, 170–220 mm apart along the centerline but saving Dt too little to dip along it;
-/// the flight's Dt, sampled across the thin wall, drew the camera up into the flexure's dome
-/// against it (2 stalls and 2 rescues forward, 3 and 2 backward, before they were plugged).
+/// flights reach their goals with no stall and no rescue. Where loops touch, the thick slices
+/// leave the wall between them open in ten places under 1 mm in radius (nine between the
+/// splenic flexure's limbs, one in the ascending colon), 165–225 mm apart along the
+/// centerline but saving Dt too little to dip along it; the flight's Dt, sampled across the
+/// thin wall, drew the camera against it (2 stalls and 2 rescues forward, 3 and 2 backward,
+/// before they were plugged).
 #[test]
 fn the_real_exam_in_2_mm_slices_is_flown_both_ways_without_a_stall() {
     let Some(path) = voyage_phantom::fixtures::shared_file("ctc/prone-tagged.nii.gz") else {
