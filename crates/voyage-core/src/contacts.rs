@@ -412,11 +412,11 @@ pub struct Hole {
 /// are tried largest first; one is a hole where the way is narrow (under
 /// [`SHORTCUT_NARROW_MM`], or [`NECK_PER_SIDE`] of the centerline's radius on both sides):
 /// elsewhere it crossed open lumen between two stretches of the centerline (a wide
-/// flexure's dome). None when no fall is one. `ds` is
-/// the lumen's Ds; the caller checks that the colon still holds. No round of plugging looks
-/// beside the centerline: on `ctc/prone-tagged` with a bridge costed on local means, fluid
-/// taken back in beside its pools after the trace opened a hole in the ascending colon that
-/// put Dt 132 mm below the centerline's arc.
+/// flexure's dome). None when no fall is one. `ds` is the lumen's Ds; the caller checks
+/// that the colon still holds. The trace's rounds of plugging never look beside the
+/// centerline: on `ctc/prone-tagged` with a bridge costed on local means, fluid taken back in
+/// beside its pools after the trace opened a hole in the ascending colon that put Dt 132 mm
+/// below the centerline's arc.
 #[allow(clippy::too_many_arguments)]
 pub fn plug_beside(
     lumen: &Volume<u8>,
@@ -518,7 +518,7 @@ pub fn holes_by_descent(
         for v in descent_voxels(lumen, dt, *p) {
             let at = g.index(v[0], v[1], v[2]);
             let seen = arc_of.get(&at).copied();
-            let local = g.index_to_local(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64));
+            let local = g.voxel_local(at);
             let arc = seen.unwrap_or_else(|| crate::centerline::arc_nearest(cl, local));
             if let Some(a) = last
                 && a - arc >= min_jump_mm
