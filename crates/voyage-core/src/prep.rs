@@ -1010,11 +1010,19 @@ const MAX_BESIDE_ROUNDS: usize = 10;
 /// in search of holes ([`holes_by_descent`]): the ways join soon, and a hole lies on those of
 /// every point beyond it.
 const DESCENT_EVERY_MM: f64 = 10.0;
+/// A way back that crosses at least this much of the centerline's arc at once may have
+/// crossed between loops of the colon ([`holes_by_descent`]); it did where it is as narrow
+/// as a hole in a wall ([`crate::contacts::thin_hole_mm`]). On `ctc/prone-tagged` a hole of
+/// 0.1 mm between the hepatic flexure's limbs, 108 mm apart along the centerline, drew the
+/// flight's pull (in 3 mm slices the camera sat against it); one of 0.4 mm joins stretches 68
+/// mm apart.
+const HOLE_NEAR_JUMP_MM: f64 = 60.0;
 /// A way back that crosses at least this much of the centerline's arc at once crossed between
-/// loops of the colon ([`holes_by_descent`]), where a smaller jump may be a gap between folds
-/// in one wide chamber: the centerline meanders about 80 mm across the cecum of
-/// `ctc/prone-tagged`, 100 mm wide, where the way from its pole crosses a fold 2–4 mm in
-/// radius; the splenic flexure's limbs are 260 mm apart along it.
+/// loops of the colon where it is narrow, even as wide as a quarter of the colon's radius,
+/// where a smaller jump may be a gap between folds in one wide chamber: the centerline
+/// meanders about 80 mm across the cecum of `ctc/prone-tagged`, 100 mm wide, where the way
+/// from its pole crosses folds 2.4–3.9 mm in radius; the splenic flexure's limbs are 260 mm
+/// apart along it.
 const HOLE_JUMP_MM: f64 = 150.0;
 
 /// The holes beside the centerline that Dt shows (see [`plug_beside`]), none overlapping
@@ -1027,18 +1035,18 @@ fn holes_beside(
     cl: &Centerline,
     cl_opts: &CenterlineOptions,
 ) -> Vec<Hole> {
-    let dip = shortcut_beside(cl, dt).map(|(i, _)| (i, SHORTCUT_DIP_MM));
-    let crossings = holes_by_descent(lumen, dt, cl, HOLE_JUMP_MM, DESCENT_EVERY_MM)
+    let dip = shortcut_beside(cl, dt).map(|(i, _)| (i, [SHORTCUT_DIP_MM; 2]));
+    let crossings = holes_by_descent(lumen, dt, cl, HOLE_NEAR_JUMP_MM, DESCENT_EVERY_MM)
         .into_iter()
-        .map(|i| (i, HOLE_JUMP_MM));
+        .map(|i| (i, [HOLE_NEAR_JUMP_MM, HOLE_JUMP_MM]));
     let mut holes: Vec<Hole> = Vec::new();
     let mut taken = std::collections::HashSet::new();
-    for (i, jump) in dip.into_iter().chain(crossings) {
-        if let Some(h) = plug_beside(lumen, ds, dt, cl, i, jump, cl_opts)
-            && !h.plugs.iter().any(|v| taken.contains(v))
-        {
-            taken.extend(h.plugs.iter().copied());
-            holes.push(h);
+    for (i, jumps) in dip.into_iter().chain(crossings) {
+        for h in plug_beside(lumen, ds, dt, cl, i, jumps, cl_opts) {
+            if !h.plugs.iter().any(|v| taken.contains(v)) {
+                taken.extend(h.plugs.iter().copied());
+                holes.push(h);
+            }
         }
     }
     holes

@@ -10,7 +10,7 @@ use crate::Geometry;
 /// Stool is tagged material outside the lumen with lumen air within this many voxels along
 /// an axis: across its partial-volume skin. Contrast in small bowel or bone lies behind the
 /// colon's wall and fat, farther than that.
-const STOOL_REACH: isize = 2;
+pub(super) const STOOL_REACH: isize = 2;
 /// A lump larger than this (ml) is not stool; one of fewer tagged voxels than this is noise.
 const MAX_LUMP_ML: f64 = 20.0;
 const MIN_LUMP_VOXELS: usize = 8;

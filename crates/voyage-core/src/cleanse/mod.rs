@@ -64,7 +64,7 @@ use crate::{Volume, anatomy::PatientFrame};
 use changes::{overwrite, slice_with};
 use floating::{Islands, peel_spurs};
 use lumps::{Lumps, find_lumps, near_lumen_air};
-use marks::{CORE, LUMP, NEAR, POOL, RowMarks, SOLID};
+use marks::{CORE, LUMP, NEAR, POOL, RowMarks, RowSpans, SOLID};
 pub use model::{AIR_HU, CleanseOptions};
 use model::{FluidWindow, LEVEL_MARGIN_HU, unmix};
 use smooth::smooth_the_model;
@@ -172,6 +172,54 @@ fn bright_in(
         })
 }
 
+/// Where a voxel of the colon's box may have the lumen within [`lumps::STOOL_REACH`] voxels
+/// along an axis, row by row: every voxel [`near_lumen_air`] or the lumen holds lies there.
+struct NearLumen {
+    spans: RowSpans,
+    lo: [usize; 3],
+    hi: [usize; 3],
+}
+
+impl NearLumen {
+    /// The lumen (`m`'s bit 0) of the box `lo..=hi` grown by the reach, within the volume.
+    fn of(m: &[u8], g: &crate::Geometry, lo: [usize; 3], hi: [usize; 3]) -> Self {
+        let r = lumps::STOOL_REACH as usize;
+        let spans = RowSpans::of(
+            m,
+            [g.dims[0], g.dims[1]],
+            lo.map(|x| x.saturating_sub(r)),
+            [0, 1, 2].map(|a| (hi[a] + r).min(g.dims[a] - 1)),
+            1,
+        );
+        NearLumen { spans, lo, hi }
+    }
+
+    /// The voxels of row (j, k) within the box that may lie near the lumen, first and last.
+    fn row(&self, j: usize, k: usize) -> Option<(usize, usize)> {
+        let r = lumps::STOOL_REACH as usize;
+        let mut out = self
+            .spans
+            .get(j, k)
+            .map(|(a, b)| (a.saturating_sub(r), b + r));
+        for s in 1..=r {
+            let across = [
+                (j.checked_sub(s), Some(k)),
+                (Some(j + s), Some(k)),
+                (Some(j), k.checked_sub(s)),
+                (Some(j), Some(k + s)),
+            ];
+            for (y, z) in across {
+                if let Some(span) = y.zip(z).and_then(|(y, z)| self.spans.get(y, z)) {
+                    out = Some(out.map_or(span, |(a, b)| (a.min(span.0), b.max(span.1))));
+                }
+            }
+        }
+        let (a, b) = out?;
+        let (a, b) = (a.max(self.lo[0]), b.min(self.hi[0]));
+        (a <= b).then_some((a, b))
+    }
+}
+
 /// Cleanses `scene.ct` in the colon: the changes, to be [`Cleansing::swap`]ped in. Empty when
 /// the colon holds no tagged fluid.
 pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
@@ -229,10 +277,14 @@ pub fn cleanse(scene: Scene, opts: &CleanseOptions) -> Cleansing {
     let mut seeds: Vec<u32> = Vec::new();
     {
         let m = lumen.data_mut();
+        let near_lumen = NearLumen::of(m, &g, lo, hi);
         for k in lo[2]..=hi[2] {
             for j in lo[1]..=hi[1] {
+                let Some((a, b)) = near_lumen.row(j, k) else {
+                    continue;
+                };
                 let row = nx * (j + ny * k);
-                for v in bright_in(hu, row + lo[0]..=row + hi[0], fluid_hu) {
+                for v in bright_in(hu, row + a..=row + b, fluid_hu) {
                     if near_lumen_air(v, hu, m, &six, air_hu) {
                         seeds.push(v as u32);
                     }
