@@ -1013,9 +1013,9 @@ const DESCENT_EVERY_MM: f64 = 10.0;
 /// A way back that crosses at least this much of the centerline's arc at once may have
 /// crossed between loops of the colon ([`holes_by_descent`]); it did where it is as narrow
 /// as a hole in a wall ([`crate::contacts::thin_hole_mm`]). On `ctc/prone-tagged` a hole of
-/// 0.1 mm between the hepatic flexure's limbs, 108 mm apart along the centerline, drew the
-/// flight's pull (in 3 mm slices the camera sat against it); one of 0.4 mm joins stretches 68
-/// mm apart.
+/// 0.1 mm joins the hepatic flexure's limbs, 108 mm apart along the centerline (in 3 mm
+/// slices, 2.6 mm: the flight's pull drew the camera against it), and one of 0.4 mm joins
+/// stretches of the ascending colon 68 mm apart.
 const HOLE_NEAR_JUMP_MM: f64 = 60.0;
 /// A way back that crosses at least this much of the centerline's arc at once crossed between
 /// loops of the colon where it is narrow, even as wide as a quarter of the colon's radius,
