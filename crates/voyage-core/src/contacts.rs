@@ -410,14 +410,13 @@ pub struct Hole {
 /// falls at once by at least `min_jump_mm`. That stretch of the way, centred on Ds, is
 /// narrowest at the hole, which is plugged as [`shortcut_plugs`] plugs one. Every fall of the
 /// way that is a hole is plugged, largest first (past one hole the way may cross another,
-/// further on: each would otherwise take a search of Dt of its own); one is a hole where the
-/// way is narrow: a fall of `wide_jump_mm`
-/// or more may be as wide as [`SHORTCUT_NARROW_MM`] or [`NECK_PER_SIDE`] of the centerline's
-/// radius on both sides, a smaller one only as a hole in a wall ([`thin_hole_mm`]), since
-/// within one wide chamber the centerline meanders and the way may fall that far between
-/// folds a few millimetres apart. Elsewhere it crossed open lumen between two stretches of
-/// the centerline (a wide flexure's dome). Empty when no fall is one. `ds` is the lumen's Ds; the caller checks
-/// that the colon still holds. The trace's rounds of plugging never look beside the
+/// further on: each would otherwise take a search of Dt of its own). A fall is a hole where
+/// the way is narrow: one of `wide_jump_mm` or more may be as wide as [`SHORTCUT_NARROW_MM`]
+/// or [`NECK_PER_SIDE`] of the centerline's radius on both sides, a smaller one only as a
+/// hole in a wall ([`thin_hole_mm`]), since within one wide chamber the centerline meanders
+/// and the way may fall that far between folds a few millimetres apart. Elsewhere it crossed
+/// open lumen between two stretches of the centerline (a wide flexure's dome). Empty when no
+/// fall is one. `ds` is the lumen's Ds; the caller checks that the colon still holds. The trace's rounds of plugging never look beside the
 /// centerline: on `ctc/prone-tagged` with a bridge costed on local means, fluid taken back in
 /// beside its pools after the trace opened a hole in the ascending colon that put Dt 132 mm
 /// below the centerline's arc.
