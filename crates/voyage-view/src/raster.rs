@@ -94,6 +94,73 @@ impl Frame {
     pub fn covered(&self) -> usize {
         self.pixels.iter().filter(|p| p.id != NO_TRIANGLE).count()
     }
+
+    /// All its rows, to draw into.
+    pub fn rows(&mut self) -> Rows<'_> {
+        Rows {
+            width: self.width as usize,
+            first: 0,
+            last: self.height as i64 - 1,
+            pixels: &mut self.pixels,
+        }
+    }
+
+    /// Its rows cut into `n` bands (at most one per row), top first, as even as the rows
+    /// allow: the frame drawn band by band, each by a worker of its own.
+    pub fn bands(&mut self, n: usize) -> Vec<Rows<'_>> {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let n = n.clamp(1, h.max(1));
+        let mut rest: &mut [Pixel] = &mut self.pixels;
+        let mut bands = Vec::with_capacity(n);
+        let mut first = 0;
+        for b in 0..n {
+            let end = h * (b + 1) / n;
+            let (band, tail) = rest.split_at_mut((end - first) * w);
+            bands.push(Rows {
+                width: w,
+                first: first as i64,
+                last: end as i64 - 1,
+                pixels: band,
+            });
+            (rest, first) = (tail, end);
+        }
+        bands
+    }
+}
+
+/// Rows `first..=last` of a [`Frame`], full width: what a rasterizer draws into. A triangle
+/// drawn into a band writes exactly the pixels of those rows that it writes in the whole
+/// frame, so bands drawn apart make the frame drawn whole.
+pub struct Rows<'a> {
+    width: usize,
+    first: i64,
+    last: i64,
+    pixels: &'a mut [Pixel],
+}
+
+impl Rows<'_> {
+    pub fn first(&self) -> i64 {
+        self.first
+    }
+
+    pub fn last(&self) -> i64 {
+        self.last
+    }
+
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    /// The pixel at column x of row y (a row of this band).
+    #[inline]
+    pub fn pixel(&self, x: i64, y: i64) -> &Pixel {
+        &self.pixels[(y - self.first) as usize * self.width + x as usize]
+    }
+
+    #[inline]
+    fn pixel_mut(&mut self, x: i64, y: i64) -> &mut Pixel {
+        &mut self.pixels[(y - self.first) as usize * self.width + x as usize]
+    }
 }
 
 /// A camera as the rasterizer uses it: eye, view axes, focal length in pixels.
@@ -181,6 +248,33 @@ impl ScreenRect {
         }
     }
 
+    /// The whole width of `rows`.
+    pub fn of_rows(view: &View, rows: &Rows) -> Self {
+        ScreenRect {
+            y0: rows.first,
+            y1: rows.last,
+            ..ScreenRect::full(view)
+        }
+    }
+
+    /// The least rectangle holding all of `rects` (empty when they all are).
+    pub fn around(rects: &[ScreenRect]) -> Self {
+        rects.iter().filter(|r| !r.is_empty()).fold(
+            ScreenRect {
+                x0: i64::MAX,
+                x1: i64::MIN,
+                y0: i64::MAX,
+                y1: i64::MIN,
+            },
+            |a, r| ScreenRect {
+                x0: a.x0.min(r.x0),
+                x1: a.x1.max(r.x1),
+                y0: a.y0.min(r.y0),
+                y1: a.y1.max(r.y1),
+            },
+        )
+    }
+
     pub fn is_empty(&self) -> bool {
         self.x0 > self.x1 || self.y0 > self.y1
     }
@@ -249,6 +343,7 @@ impl View {
 }
 
 /// The eye transform in f32, relative to the eye, for the per-triangle work.
+#[derive(Clone, Copy)]
 struct EyeXf {
     eye: Vec3,
     right: Vec3,
@@ -303,6 +398,16 @@ pub struct Rasterizer<'a> {
     reach_mm: Option<f32>,
 }
 
+impl Clone for Rasterizer<'_> {
+    /// The same drawing, with scratch memory of its own.
+    fn clone(&self) -> Self {
+        Rasterizer {
+            scratch: RefCell::new(Vec::new()),
+            ..*self
+        }
+    }
+}
+
 impl<'a> Rasterizer<'a> {
     /// Draws `mesh` as `view` sees it, lit by `shading` (made once for many frames).
     pub fn new(mesh: &'a CellMesh, view: View, shading: &'a Shading) -> Self {
@@ -355,8 +460,28 @@ impl<'a> Rasterizer<'a> {
         &self.view
     }
 
+    /// The triangles of `cell` that [`Self::draw_cell_within`] draws within any of `rects`,
+    /// or with None that [`Self::draw_cell`] draws, each counted once.
+    pub fn triangles_in(&self, cell: u32, rects: Option<&[ScreenRect]>) -> usize {
+        let mesh = self.mesh;
+        if !mesh.is_indexed() {
+            return mesh.cell_ranges[cell as usize].len();
+        }
+        mesh.cell_chunks[cell as usize]
+            .clone()
+            .map(|k| k as usize)
+            .filter(|&k| {
+                let c = &mesh.chunks[k];
+                self.in_reach(k)
+                    && rects
+                        .is_none_or(|rs| rs.iter().any(|r| self.view.box_may_show(c.lo, c.hi, r)))
+            })
+            .map(|k| mesh.chunks[k].triangles.len())
+            .sum()
+    }
+
     /// Draws every triangle of a cell; returns how many triangles that was.
-    pub fn draw_cell(&self, frame: &mut Frame, cell: u32) -> usize {
+    pub fn draw_cell(&self, frame: &mut Rows, cell: u32) -> usize {
         let mesh = self.mesh;
         if !mesh.is_indexed() {
             let range = mesh.cell_ranges[cell as usize].clone();
@@ -377,7 +502,7 @@ impl<'a> Rasterizer<'a> {
     /// Draws the chunks of a cell that may cover a pixel centre in `rect` (see
     /// [`View::box_may_show`]): the image is the same as [`Self::draw_cell`]'s wherever the
     /// cell can only show within `rect`. Returns the triangles drawn.
-    pub fn draw_cell_within(&self, frame: &mut Frame, cell: u32, rect: &ScreenRect) -> usize {
+    pub fn draw_cell_within(&self, frame: &mut Rows, cell: u32, rect: &ScreenRect) -> usize {
         let mesh = self.mesh;
         if !mesh.is_indexed() {
             return self.draw_cell(frame, cell);
@@ -394,7 +519,7 @@ impl<'a> Rasterizer<'a> {
 
     /// Draws chunk `k`, each vertex transformed once (a vertex is shared by about six
     /// triangles).
-    fn draw_chunk(&self, frame: &mut Frame, k: usize) -> usize {
+    fn draw_chunk(&self, frame: &mut Rows, k: usize) -> usize {
         let mesh = self.mesh;
         let mut buf = self.scratch.borrow_mut();
         buf.clear();
@@ -418,7 +543,7 @@ impl<'a> Rasterizer<'a> {
         range.len()
     }
 
-    pub fn draw_cells(&self, frame: &mut Frame, cells: &[u32]) -> usize {
+    pub fn draw_cells(&self, frame: &mut Rows, cells: &[u32]) -> usize {
         cells.iter().map(|&c| self.draw_cell(frame, c)).sum()
     }
 
@@ -473,7 +598,7 @@ impl<'a> Rasterizer<'a> {
         c
     }
 
-    fn draw_triangle(&self, frame: &mut Frame, id: u32, a: &Vertex, b: &Vertex, c: &Vertex) {
+    fn draw_triangle(&self, frame: &mut Rows, id: u32, a: &Vertex, b: &Vertex, c: &Vertex) {
         // Back face (or edge-on): its normal does not point toward the eye.
         if (b.rel - a.rel).cross(c.rel - a.rel).dot(a.rel) >= 0.0 {
             return;
@@ -534,12 +659,12 @@ impl<'a> Rasterizer<'a> {
     /// to lie in the bounding box.
     fn fill(
         &self,
-        frame: &mut Frame,
+        frame: &mut Rows,
         id: u32,
         [v0, v1, v2]: [ScreenVertex; 3],
         colors: impl FnOnce() -> [Vec3; 3],
     ) {
-        let (w, h) = (frame.width as i64, frame.height as i64);
+        let w = frame.width as i64;
         let min_x = v0.x.min(v1.x).min(v2.x);
         let max_x = v0.x.max(v1.x).max(v2.x);
         let min_y = v0.y.min(v1.y).min(v2.y);
@@ -547,9 +672,9 @@ impl<'a> Rasterizer<'a> {
         // Pixel centres (i + 0.5) inside the bounding box.
         let x0 = ceil_clamped(min_x - 0.5, 0, w - 1);
         let x1 = floor_clamped(max_x - 0.5, 0, w - 1);
-        let y0 = ceil_clamped(min_y - 0.5, 0, h - 1);
-        let y1 = floor_clamped(max_y - 0.5, 0, h - 1);
-        if x0 > x1 || y0 > y1 || max_x < 0.0 || max_y < 0.0 {
+        let y0 = ceil_clamped(min_y - 0.5, frame.first, frame.last);
+        let y1 = floor_clamped(max_y - 0.5, frame.first, frame.last);
+        if x0 > x1 || y0 > y1 || max_x < 0.0 || max_y < frame.first as f64 {
             return;
         }
         let area = (v1.x - v0.x) * (v2.y - v0.y) - (v1.y - v0.y) * (v2.x - v0.x);
@@ -566,7 +691,6 @@ impl<'a> Rasterizer<'a> {
         for py in y0..=y1 {
             let cy = py as f64 + 0.5;
             let (r0, r1, r2) = (e0.row(cy), e1.row(cy), e2.row(cy));
-            let row = py as usize * frame.width as usize;
             // Where on this row all three edge functions can be ≥ 0, widened by a pixel so
             // rounding of the division never loses a centre: only those are tested exactly.
             let (mut lo, mut hi) = (x0 as f64 + 0.5, x1 as f64 + 0.5);
@@ -600,8 +724,7 @@ impl<'a> Rasterizer<'a> {
                 let (p0, p1, p2) = (d0 * v0.w, d1 * v1.w, d2 * v2.w);
                 let sum = p0 + p1 + p2;
                 let wz = (sum * inv_area) as f32;
-                let i = row + px as usize;
-                let px = &mut frame.pixels[i];
+                let px = frame.pixel_mut(px, py);
                 if wz > px.inv_depth || (wz == px.inv_depth && id < px.id) {
                     let rgb = if shaded {
                         let inv = 1.0 / sum;
@@ -787,7 +910,7 @@ pub fn render_rgba(
 ) -> Vec<u8> {
     let view = View::new(camera, width, height);
     let mut frame = Frame::new(width, height);
-    Rasterizer::new(mesh, view, &Shading::new(lighting)).draw_cells(&mut frame, cells);
+    Rasterizer::new(mesh, view, &Shading::new(lighting)).draw_cells(&mut frame.rows(), cells);
     shade(&frame)
 }
 
@@ -824,7 +947,7 @@ mod tests {
         let mesh = wall();
         let mut f = Frame::new(64, 64);
         let view = View::new(&camera(), 64, 64);
-        Rasterizer::new(&mesh, view, &Shading::default()).draw_cells(&mut f, &[0, 1]);
+        Rasterizer::new(&mesh, view, &Shading::default()).draw_cells(&mut f.rows(), &[0, 1]);
         // 90° fov: the 10 mm half-width at 10 mm covers half the half-screen → 32 pixels.
         assert_eq!(f.covered(), 32 * 32);
         // The back-facing triangle (id 2) is never drawn.
@@ -841,14 +964,24 @@ mod tests {
         // Drawing in the other order gives the same buffers, and so does the per-cell vertex
         // path.
         let mut g = Frame::new(64, 64);
-        Rasterizer::new(&mesh, view, &Shading::default()).draw_cells(&mut g, &[1, 0]);
+        Rasterizer::new(&mesh, view, &Shading::default()).draw_cells(&mut g.rows(), &[1, 0]);
         assert_eq!(f, g);
         let mut indexed = mesh.clone();
         indexed.index_cells();
         assert!(indexed.is_indexed() && !mesh.is_indexed());
         let mut h = Frame::new(64, 64);
-        Rasterizer::new(&indexed, view, &Shading::default()).draw_cells(&mut h, &[1, 0]);
+        Rasterizer::new(&indexed, view, &Shading::default()).draw_cells(&mut h.rows(), &[1, 0]);
         assert_eq!(f, h);
+        // Drawn band by band, each band on its own, the same buffers: the wall's edges cross
+        // the bands' borders at rows 16 and 48.
+        let mut b = Frame::new(64, 64);
+        let bands = b.bands(3);
+        let heights: Vec<i64> = bands.iter().map(|r| r.last() - r.first() + 1).collect();
+        assert_eq!(heights, [21, 21, 22]);
+        for mut rows in bands {
+            Rasterizer::new(&indexed, view, &Shading::default()).draw_cells(&mut rows, &[0, 1]);
+        }
+        assert_eq!(f, b);
     }
 
     #[test]
@@ -915,7 +1048,7 @@ mod tests {
         };
         let mut f = Frame::new(32, 32);
         Rasterizer::new(&mesh, View::new(&camera(), 32, 32), &Shading::default())
-            .draw_cells(&mut f, &[0]);
+            .draw_cells(&mut f.rows(), &[0]);
         let below = (16..32)
             .flat_map(|y| (0..32).map(move |x| (x, y)))
             .filter(|&(x, y)| f.id(y * 32 + x) != NO_TRIANGLE)

@@ -21,13 +21,20 @@
 //!   projected convex outlines (not their rectangles), trimmed at both ends of every row by
 //!   the depth test, with the depth bound taken per pixel where the ray meets the portal's
 //!   slab rather than once for the whole portal.
+//!
+//! A frame is drawn in horizontal bands, one per worker thread, each band an instance of the
+//! same problem over its own rows: on `ctc/prone-tagged` at 512², two bands on two cores
+//! take ours from 18 to 12 ms a frame (BENCHMARKS.md). A band's windows are narrower than
+//! the whole frame's, so it draws no more than its share.
 
 use std::{fmt, str::FromStr};
 
 use glam::DVec3;
 use serde::Serialize;
 
-use super::raster::{Frame, Rasterizer, SLACK_PX, ScreenRect, View, centres};
+use rayon::prelude::*;
+
+use super::raster::{Frame, Rasterizer, Rows, SLACK_PX, ScreenRect, View, centres};
 use voyage_core::{Cells, convex_hull};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
@@ -101,13 +108,20 @@ pub struct Visibility {
     /// The paper's temporal coherence (on by default for `paper`; ignored otherwise).
     pub coherence: bool,
     portals: Vec<PortalShape>,
-    /// Last frame's camera cell and the cells each sequence drew beyond it.
-    last: Option<(u32, [Vec<u32>; 2])>,
+    /// Per band of the frame ([`Visibility::draw`]), last frame's camera cell and the cells
+    /// each sequence drew beyond it.
+    last: Vec<Option<Last>>,
 }
+
+type Last = (u32, [Vec<u32>; 2]);
 
 /// Sequences: toward the target (cell + 1, portal = cell) and toward the source.
 const TOWARD_TARGET: usize = 0;
 const TOWARD_SOURCE: usize = 1;
+
+/// A band of a frame drawn in bands holds at least this many rows: a band costs a walk of
+/// the portals, and the triangles that reach into two bands are set up in both.
+const MIN_BAND_ROWS: u32 = 128;
 
 impl Visibility {
     pub fn new(cells: &Cells, strategy: Strategy) -> Self {
@@ -128,18 +142,55 @@ impl Visibility {
             strategy,
             coherence: strategy == Strategy::Paper,
             portals,
-            last: None,
+            last: Vec::new(),
         }
     }
 
     /// Forgets last frame (after a jump).
     pub fn reset(&mut self) {
-        self.last = None;
+        self.last.clear();
     }
 
     /// Draws what this strategy decides is potentially visible into `frame` (cleared first).
+    ///
+    /// The frame is drawn in horizontal bands, one per worker thread (one band under
+    /// 2 × [`MIN_BAND_ROWS`] rows), each band walking the portals over its own rows alone.
+    /// Whether and at what depth a triangle covers a pixel depends on that triangle alone,
+    /// so the bands make the frame drawn whole, pixel for pixel.
     pub fn draw(&mut self, frame: &mut Frame, raster: &Rasterizer, cells: &Cells) -> Drawn {
         frame.clear();
+        let n = rayon::current_num_threads()
+            .min((frame.height / MIN_BAND_ROWS) as usize)
+            .max(1);
+        self.last.resize(n, None);
+        let mut lasts = std::mem::take(&mut self.last);
+        let drawn = if n == 1 {
+            self.draw_band(&mut frame.rows(), raster, cells, &mut lasts[0])
+        } else {
+            // One rasterizer each: a rasterizer keeps its scratch memory to itself.
+            let rasters: Vec<Rasterizer> = (0..n).map(|_| raster.clone()).collect();
+            let this = &*self;
+            let bands: Vec<Drawn> = frame
+                .bands(n)
+                .into_par_iter()
+                .zip(rasters)
+                .zip(lasts.par_iter_mut())
+                .map(|((mut rows, raster), last)| this.draw_band(&mut rows, &raster, cells, last))
+                .collect();
+            merge_bands(bands, raster, self.strategy == Strategy::Ours)
+        };
+        self.last = lasts;
+        drawn
+    }
+
+    /// [`Self::draw`] over one band of rows; `last` is the band's own last frame.
+    fn draw_band(
+        &self,
+        frame: &mut Rows,
+        raster: &Rasterizer,
+        cells: &Cells,
+        last: &mut Option<Last>,
+    ) -> Drawn {
         let view = *raster.view();
         let ncells = cells.cells.len() as u32;
         let camera_cell = cells.cell_of_point(view.eye).map(|c| c as u32);
@@ -147,20 +198,20 @@ impl Visibility {
             camera_cell,
             ..Drawn::default()
         };
-        let whole = ScreenRect::full(&view);
+        let whole = ScreenRect::of_rows(&view, frame);
         let Some(home) = camera_cell.filter(|_| self.strategy != Strategy::All) else {
             let all: Vec<u32> = (0..ncells).collect();
             drawn.triangles = raster.draw_cells(frame, &all);
             drawn.rects = vec![whole; all.len()];
             drawn.cells = all;
-            self.last = None;
+            *last = None;
             return drawn;
         };
         let mut done = vec![false; ncells as usize];
         // Ours leaves out the chunks of a cell that lie wholly outside the window its
         // portals leave open (the whole view for the camera's cell): they cannot show there.
         let chunks = self.strategy == Strategy::Ours;
-        let mut draw = |c: u32, rect: &ScreenRect, drawn: &mut Drawn, frame: &mut Frame| {
+        let mut draw = |c: u32, rect: &ScreenRect, drawn: &mut Drawn, frame: &mut Rows| {
             if !done[c as usize] {
                 done[c as usize] = true;
                 drawn.triangles += if chunks {
@@ -174,7 +225,7 @@ impl Visibility {
         };
         draw(home, &whole, &mut drawn, frame);
         if self.coherence
-            && let Some((last_home, seqs)) = &self.last
+            && let Some((last_home, seqs)) = &*last
             && *last_home == home
         {
             for seq in seqs {
@@ -186,7 +237,7 @@ impl Visibility {
         }
         let mut seqs: [Vec<u32>; 2] = [Vec::new(), Vec::new()];
         for (dir, seq) in seqs.iter_mut().enumerate() {
-            let mut region = Region::full(&view);
+            let mut region = Region::over(frame);
             let mut cell = home;
             while let Some((portal, next)) = beyond(dir, cell, ncells) {
                 drawn.portals_tested += 1;
@@ -204,7 +255,7 @@ impl Visibility {
                 cell = next;
             }
         }
-        self.last = Some((home, seqs));
+        *last = Some((home, seqs));
         drawn
     }
 
@@ -257,7 +308,7 @@ impl Visibility {
         &self,
         region: &mut Region,
         portal: usize,
-        frame: &Frame,
+        frame: &Rows,
         view: &View,
         reads: &mut usize,
     ) -> bool {
@@ -278,6 +329,39 @@ impl Visibility {
             }
         }
     }
+}
+
+/// One frame's [`Drawn`] from its bands': the cells in the order the bands first drew them,
+/// each with the rectangle round its windows in all bands, and each triangle counted once
+/// (one that reaches into two bands is set up in both). `chunks`: the cells were drawn
+/// within their windows (ours), not whole.
+fn merge_bands(bands: Vec<Drawn>, raster: &Rasterizer, chunks: bool) -> Drawn {
+    let mut out = Drawn {
+        camera_cell: bands.first().and_then(|b| b.camera_cell),
+        ..Drawn::default()
+    };
+    let mut at = std::collections::HashMap::new();
+    let mut windows: Vec<Vec<ScreenRect>> = Vec::new();
+    for band in bands {
+        out.portals_tested += band.portals_tested;
+        out.depth_pixels_read += band.depth_pixels_read;
+        for (c, rect) in band.cells.into_iter().zip(band.rects) {
+            let k = *at.entry(c).or_insert_with(|| {
+                out.cells.push(c);
+                windows.push(Vec::new());
+                windows.len() - 1
+            });
+            windows[k].push(rect);
+        }
+    }
+    out.rects = windows.iter().map(|w| ScreenRect::around(w)).collect();
+    out.triangles = out
+        .cells
+        .iter()
+        .zip(&windows)
+        .map(|(&c, w)| raster.triangles_in(c, chunks.then_some(w.as_slice())))
+        .sum();
+    out
 }
 
 /// The portal from `cell` onward in sequence `dir`, and the cell beyond it (None at the
@@ -334,6 +418,16 @@ struct Region {
 }
 
 impl Region {
+    /// The whole view, over all the rows it has (a band's or the frame's).
+    fn over(frame: &Rows) -> Self {
+        Region {
+            y0: frame.first(),
+            y1: frame.last(),
+            rows: vec![(0, frame.width() as i64 - 1); frame.last() as usize + 1],
+        }
+    }
+
+    /// The whole view.
     fn full(view: &View) -> Self {
         Region {
             y0: 0,
@@ -414,14 +508,13 @@ impl Region {
 
     /// The paper's Z-buffer step: drops rows at the top and bottom whose pixels are all
     /// nearer than the portal's nearest point.
-    fn drop_covered_rows(&mut self, frame: &Frame, min_depth: f64, reads: &mut usize) -> bool {
+    fn drop_covered_rows(&mut self, frame: &Rows, min_depth: f64, reads: &mut usize) -> bool {
         // A hair nearer than the prism, so rounding can never hide a pixel that sees through.
         let w_portal = (1.0 / (min_depth * (1.0 - 1e-6))) as f32;
         let covered = |y: i64, row: (i64, i64), reads: &mut usize| {
-            let base = y as usize * frame.width as usize;
             for x in row.0..=row.1 {
                 *reads += 1;
-                if frame.pixels[base + x as usize].inv_depth <= w_portal {
+                if frame.pixel(x, y).inv_depth <= w_portal {
                     return false;
                 }
             }
@@ -440,7 +533,7 @@ impl Region {
     /// first meet the portal's slab.
     fn trim_covered(
         &mut self,
-        frame: &Frame,
+        frame: &Rows,
         portal: &PortalShape,
         min_depth: f64,
         view: &View,
@@ -449,11 +542,10 @@ impl Region {
         let bound = SlabBound::new(portal, view);
         let prism_bound = 1.0 / (min_depth * (1.0 - 1e-6));
         for y in self.y0.max(0)..=self.y1 {
-            let base = y as usize * frame.width as usize;
             let (mut lo, mut hi) = self.rows[y as usize];
             let hidden = |x: i64, reads: &mut usize| {
                 *reads += 1;
-                let w = frame.pixels[base + x as usize].inv_depth;
+                let w = frame.pixel(x, y).inv_depth;
                 w > 0.0 && (w as f64) > bound.max_inv_depth(view, x, y).min(prism_bound)
             };
             while lo <= hi && hidden(lo, reads) {

@@ -150,9 +150,9 @@ fn check_select_is_exact(study: &Study, mesh: &CellMesh, cameras: &[Camera], wha
             let view = View::new(cam, 256, 256);
             let raster = Rasterizer::new(mesh, view, &shading);
             let (mut reference, mut culled) = (Frame::new(256, 256), Frame::new(256, 256));
-            raster.draw_cells(&mut reference, &all);
+            raster.draw_cells(&mut reference.rows(), &all);
             let cells = vis.select(&study.cells, &view).cells;
-            raster.draw_cells(&mut culled, &cells);
+            raster.draw_cells(&mut culled.rows(), &cells);
             assert!(
                 reference.ids().eq(culled.ids()),
                 "{what}: select ({strategy}) changed the image"
@@ -224,8 +224,10 @@ fn the_pipe_shows_its_three_polyps() {
         let mut frame = Frame::new(512, 512);
         let cell = study.cells.cell_of_point(eye).unwrap() as u32;
         assert!(cell < mesh.cells() as u32);
-        Rasterizer::new(&mesh, view, &Shading::default())
-            .draw_cells(&mut frame, &(0..mesh.cells() as u32).collect::<Vec<_>>());
+        Rasterizer::new(&mesh, view, &Shading::default()).draw_cells(
+            &mut frame.rows(),
+            &(0..mesh.cells() as u32).collect::<Vec<_>>(),
+        );
         let seen = pixels_on(&frame, &mesh, c, polyp.diameter_mm / 2.0 + 0.5);
         // Its disc seen from ~35 mm covers ≈ π(256·r/35)² pixels; at least a fifth must show.
         let r = polyp.diameter_mm / 2.0;
@@ -239,5 +241,49 @@ fn the_pipe_shows_its_three_polyps() {
             "the {} mm polyp shows on {seen} pixels only",
             polyp.diameter_mm
         );
+    }
+}
+
+/// A frame drawn in bands, one per worker (`Visibility::draw` with three threads: bands of
+/// 170, 171 and 171 rows), is the frame drawn whole (one thread), pixel for pixel: ids,
+/// depths and colours, for every strategy, along both flights and looking around; and the
+/// bands' triangles, each counted once, are no more than the whole frame's.
+#[test]
+fn a_frame_drawn_in_bands_is_the_frame_drawn_whole() {
+    let p = phantom::colon(&ColonOptions::default()).unwrap();
+    let study = prepare(p.ct, &PrepOptions::default(), |_| {}).unwrap();
+    let mut mesh = CellMesh::new(&study.surface, &study.cells);
+    mesh.index_cells();
+    let cameras = flight_cameras(&study, 15, 15);
+    let shading = Shading::default();
+    let pool = |n| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .unwrap()
+    };
+    let (one, three) = (pool(1), pool(3));
+    for strategy in Strategy::ALL {
+        let (mut whole_vis, mut band_vis) = (
+            Visibility::new(&study.cells, strategy),
+            Visibility::new(&study.cells, strategy),
+        );
+        let (mut whole, mut banded) = (Frame::new(512, 512), Frame::new(512, 512));
+        let (mut whole_tris, mut band_tris) = (0, 0);
+        for cam in &cameras {
+            let view = View::new(cam, 512, 512);
+            // Made on the pool's thread: a rasterizer is not shared between threads.
+            let draw = |vis: &mut Visibility, frame: &mut Frame| {
+                vis.draw(frame, &Rasterizer::new(&mesh, view, &shading), &study.cells)
+            };
+            whole_tris += one.install(|| draw(&mut whole_vis, &mut whole)).triangles;
+            let drawn = three.install(|| draw(&mut band_vis, &mut banded));
+            band_tris += drawn.triangles;
+            assert!(whole.covered() > 0);
+            assert!(whole == banded, "{strategy}: the bands changed the frame");
+            assert_eq!(drawn.rects.len(), drawn.cells.len());
+        }
+        eprintln!("{strategy}: triangles whole {whole_tris}, in bands {band_tris}");
+        assert!(band_tris <= whole_tris && band_tris > 0, "{strategy}");
     }
 }
