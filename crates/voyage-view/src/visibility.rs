@@ -25,14 +25,12 @@
 //! A frame is drawn in horizontal bands, one per worker thread, each band an instance of the
 //! same problem over its own rows: on `ctc/prone-tagged` at 512², two bands on two cores
 //! take ours from 18 to 12 ms a frame (BENCHMARKS.md). A band's windows are narrower than
-//! the whole frame's, so it draws no more than its share.
+//! the whole frame's, so the bands together draw no more triangles than one band would.
 
 use std::{fmt, str::FromStr};
 
 use glam::DVec3;
 use serde::Serialize;
-
-use rayon::prelude::*;
 
 use super::raster::{Frame, Rasterizer, Rows, SLACK_PX, ScreenRect, View, centres};
 use voyage_core::{Cells, convex_hull};
@@ -153,8 +151,9 @@ impl Visibility {
 
     /// Draws what this strategy decides is potentially visible into `frame` (cleared first).
     ///
-    /// The frame is drawn in horizontal bands, one per worker thread (one band under
-    /// 2 × [`MIN_BAND_ROWS`] rows), each band walking the portals over its own rows alone.
+    /// The frame is drawn in horizontal bands, as many as the worker threads (one band
+    /// under 2 × [`MIN_BAND_ROWS`] rows), each band walking the portals over its own rows
+    /// alone, on a thread of its own.
     /// Whether and at what depth a triangle covers a pixel depends on that triangle alone,
     /// so the bands make the frame drawn whole, pixel for pixel.
     pub fn draw(&mut self, frame: &mut Frame, raster: &Rasterizer, cells: &Cells) -> Drawn {
@@ -167,16 +166,26 @@ impl Visibility {
         let drawn = if n == 1 {
             self.draw_band(&mut frame.rows(), raster, cells, &mut lasts[0])
         } else {
-            // One rasterizer each: a rasterizer keeps its scratch memory to itself.
-            let rasters: Vec<Rasterizer> = (0..n).map(|_| raster.clone()).collect();
             let this = &*self;
-            let bands: Vec<Drawn> = frame
-                .bands(n)
-                .into_par_iter()
-                .zip(rasters)
-                .zip(lasts.par_iter_mut())
-                .map(|((mut rows, raster), last)| this.draw_band(&mut rows, &raster, cells, last))
-                .collect();
+            // Threads of the frame's own, not the pool's: the window draws while a study
+            // opens in the background, and a band queued behind the pool's work would hold
+            // the frame up. Each gets a rasterizer of its own (scratch memory).
+            let bands: Vec<Drawn> = std::thread::scope(|scope| {
+                let mut work = frame.bands(n).into_iter().zip(lasts.iter_mut());
+                let (mut first, first_last) = work.next().expect("n ≥ 2 bands");
+                let others: Vec<_> = work
+                    .map(|(mut rows, last)| {
+                        let raster = raster.clone();
+                        scope.spawn(move || this.draw_band(&mut rows, &raster, cells, last))
+                    })
+                    .collect();
+                let mut bands = vec![this.draw_band(&mut first, raster, cells, first_last)];
+                bands.extend(others.into_iter().map(|h| {
+                    h.join()
+                        .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+                }));
+                bands
+            });
             merge_bands(bands, raster, self.strategy == Strategy::Ours)
         };
         self.last = lasts;
