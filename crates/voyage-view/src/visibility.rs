@@ -82,6 +82,8 @@ pub struct Drawn {
     /// open; the whole view for the camera's cell): a renderer may leave out what lies
     /// wholly outside ([`crate::View::box_may_show`]).
     pub rects: Vec<ScreenRect>,
+    /// Triangles drawn, each once: in a frame drawn in bands, one that reaches into two
+    /// bands is set up in both, and counted once.
     pub triangles: usize,
     /// The camera's cell (None: the camera is outside the lumen and everything was drawn).
     pub camera_cell: Option<u32>,
