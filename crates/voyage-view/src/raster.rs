@@ -467,17 +467,27 @@ impl<'a> Rasterizer<'a> {
         if !mesh.is_indexed() {
             return mesh.cell_ranges[cell as usize].len();
         }
-        mesh.cell_chunks[cell as usize]
+        self.chunks_to_draw(cell, rects)
+            .map(|k| mesh.chunks[k].triangles.len())
+            .sum()
+    }
+
+    /// The chunks of `cell` (indexed meshes) that may show a pixel centre within any of
+    /// `rects` (all of them with None), less those beyond the reach.
+    fn chunks_to_draw<'r>(
+        &'r self,
+        cell: u32,
+        rects: Option<&'r [ScreenRect]>,
+    ) -> impl Iterator<Item = usize> + 'r {
+        self.mesh.cell_chunks[cell as usize]
             .clone()
             .map(|k| k as usize)
-            .filter(|&k| {
-                let c = &mesh.chunks[k];
+            .filter(move |&k| {
+                let c = &self.mesh.chunks[k];
                 self.in_reach(k)
                     && rects
                         .is_none_or(|rs| rs.iter().any(|r| self.view.box_may_show(c.lo, c.hi, r)))
             })
-            .map(|k| mesh.chunks[k].triangles.len())
-            .sum()
     }
 
     /// Draws every triangle of a cell; returns how many triangles that was.
@@ -492,10 +502,8 @@ impl<'a> Rasterizer<'a> {
             }
             return range.len();
         }
-        let chunks = mesh.cell_chunks[cell as usize].clone();
-        chunks
-            .filter(|&k| self.in_reach(k as usize))
-            .map(|k| self.draw_chunk(frame, k as usize))
+        self.chunks_to_draw(cell, None)
+            .map(|k| self.draw_chunk(frame, k))
             .sum()
     }
 
@@ -503,17 +511,11 @@ impl<'a> Rasterizer<'a> {
     /// [`View::box_may_show`]): the image is the same as [`Self::draw_cell`]'s wherever the
     /// cell can only show within `rect`. Returns the triangles drawn.
     pub fn draw_cell_within(&self, frame: &mut Rows, cell: u32, rect: &ScreenRect) -> usize {
-        let mesh = self.mesh;
-        if !mesh.is_indexed() {
+        if !self.mesh.is_indexed() {
             return self.draw_cell(frame, cell);
         }
-        let chunks = mesh.cell_chunks[cell as usize].clone();
-        chunks
-            .filter(|&k| {
-                let c = &mesh.chunks[k as usize];
-                self.in_reach(k as usize) && self.view.box_may_show(c.lo, c.hi, rect)
-            })
-            .map(|k| self.draw_chunk(frame, k as usize))
+        self.chunks_to_draw(cell, Some(std::slice::from_ref(rect)))
+            .map(|k| self.draw_chunk(frame, k))
             .sum()
     }
 
@@ -972,8 +974,8 @@ mod tests {
         let mut h = Frame::new(64, 64);
         Rasterizer::new(&indexed, view, &Shading::default()).draw_cells(&mut h.rows(), &[1, 0]);
         assert_eq!(f, h);
-        // Drawn band by band, each band on its own, the same buffers: the wall's edges cross
-        // the bands' borders at rows 16 and 48.
+        // Drawn band by band, each band on its own, the same buffers: the wall (rows 16–47)
+        // crosses the bands' borders at rows 21 and 42.
         let mut b = Frame::new(64, 64);
         let bands = b.bands(3);
         let heights: Vec<i64> = bands.iter().map(|r| r.last() - r.first() + 1).collect();

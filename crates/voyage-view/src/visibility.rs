@@ -431,19 +431,20 @@ struct Region {
 impl Region {
     /// The whole view, over all the rows it has (a band's or the frame's).
     fn over(frame: &Rows) -> Self {
-        Region {
-            y0: frame.first(),
-            y1: frame.last(),
-            rows: vec![(0, frame.width() as i64 - 1); frame.last() as usize + 1],
-        }
+        Region::spanning(frame.first(), frame.last(), frame.width() as i64)
     }
 
     /// The whole view.
     fn full(view: &View) -> Self {
+        Region::spanning(0, view.height as i64 - 1, view.width as i64)
+    }
+
+    /// Every column of rows `y0..=y1`, `width` wide.
+    fn spanning(y0: i64, y1: i64, width: i64) -> Self {
         Region {
-            y0: 0,
-            y1: view.height as i64 - 1,
-            rows: vec![(0, view.width as i64 - 1); view.height as usize],
+            y0,
+            y1,
+            rows: vec![(0, width - 1); (y1 + 1).max(0) as usize],
         }
     }
 
