@@ -146,7 +146,15 @@ pub fn build_cells(
         .map(|&v| dt_source.get(lumen.geometry().ijk(v as usize)))
         .collect();
     let min_len = opts.min_length_mm.max(2.0 * diagonal(lumen.spacing()));
-    let levels = choose_levels(&cl_dt, &centerline.arc_mm, &tri_dt, opts, min_len);
+    let sections = Sections::of(dt_source);
+    let levels = choose_levels(
+        &cl_dt,
+        &centerline.arc_mm,
+        &tri_dt,
+        &sections,
+        opts,
+        min_len,
+    );
     let reach = diagonal(lumen.spacing()) * 1.01;
     let Labels {
         cells: voxel_cell,
@@ -207,11 +215,14 @@ fn centerline_levels(dt: &Bricked<f32>, cl: &Centerline) -> Vec<f64> {
 }
 
 /// Cut levels (in Dt): walk the centerline, cutting when the stretch since the last cut is
-/// long enough or holds enough triangles, keeping cuts `min_len` apart in Dt.
+/// long enough or holds enough triangles, keeping cuts `min_len` apart in Dt. Where a cut is
+/// due, it goes where the lumen is narrowest in the latter part of the stretch (`sections`):
+/// at a fold rather than across a haustrum, so that its portal is small.
 fn choose_levels(
     cl_dt: &[f64],
     arc: &[f64],
     tri_dt: &[f32],
+    sections: &Sections,
     opts: &CellOptions,
     min_len: f64,
 ) -> Vec<f64> {
@@ -227,12 +238,56 @@ fn choose_levels(
         let long = arc[i] - last_arc >= opts.max_length_mm;
         let full = tris_below(level) - tris_below(last_level) >= opts.max_triangles;
         if long || full {
-            levels.push(level);
-            last_level = level;
-            last_arc = arc[i];
+            let from = last_level + min_len.max(CUT_WINDOW * (level - last_level));
+            let j = (0..=i)
+                .rev()
+                .take_while(|&j| cl_dt[j] >= from)
+                .min_by_key(|&j| sections.around(cl_dt[j]))
+                .unwrap_or(i);
+            levels.push(cl_dt[j]);
+            last_level = cl_dt[j];
+            last_arc = arc[j];
         }
     }
     levels
+}
+
+/// A due cut may move back this share of its stretch toward the last one, to a narrower place.
+const CUT_WINDOW: f64 = 0.5;
+
+/// How much lumen lies at each level of Dt: lumen voxels per bin of [`SECTION_BIN_MM`], the
+/// area of a cut there times the bin's depth, side pockets at that level included (a portal's
+/// outline holds them too).
+struct Sections {
+    voxels: Vec<u32>,
+}
+
+/// Depth in Dt of one bin of [`Sections`] (mm).
+const SECTION_BIN_MM: f64 = 0.5;
+/// A cut is measured over this many bins on either side of its level: a level set of Dt on
+/// voxels is up to a voxel diagonal deep.
+const SECTION_REACH: usize = 2;
+
+impl Sections {
+    fn of(dt: &Bricked<f32>) -> Self {
+        let mut voxels: Vec<u32> = Vec::new();
+        for &d in dt.values().iter().filter(|d| d.is_finite()) {
+            let b = (d as f64 / SECTION_BIN_MM) as usize;
+            if b >= voxels.len() {
+                voxels.resize(b + 1, 0);
+            }
+            voxels[b] += 1;
+        }
+        Sections { voxels }
+    }
+
+    /// Lumen voxels within [`SECTION_REACH`] bins of `level`.
+    fn around(&self, level: f64) -> u64 {
+        let b = (level / SECTION_BIN_MM) as usize;
+        let lo = b.saturating_sub(SECTION_REACH).min(self.voxels.len());
+        let hi = (b + SECTION_REACH + 1).min(self.voxels.len());
+        self.voxels[lo..hi].iter().map(|&x| x as u64).sum()
+    }
 }
 
 /// The finite values of `d` (distances: ≥ 0) in increasing order. A radix sort of their bit
@@ -678,6 +733,64 @@ mod tests {
             })
             .collect();
         Volume::from_vec(g, data).unwrap()
+    }
+
+    /// A straight tube along x, radius 6 mm, narrowed to 3 mm by folds 2 mm thick at
+    /// `folds` (x, mm).
+    fn folded_tube(folds: &[f64]) -> Volume<u8> {
+        let g = Geometry::new([110, 20, 20], [1.0, 1.0, 1.0], [0.0; 3]).unwrap();
+        let data = (0..g.len())
+            .map(|idx| {
+                let [i, j, k] = g.ijk(idx);
+                let x = i as f64;
+                let r = if folds.iter().any(|f| (x - f).abs() <= 1.0) {
+                    3.0
+                } else {
+                    6.0
+                };
+                ((j as f64 - 10.0).hypot(k as f64 - 10.0) < r && (3.0..=105.0).contains(&x)) as u8
+            })
+            .collect();
+        Volume::from_vec(g, data).unwrap()
+    }
+
+    #[test]
+    fn a_due_cut_moves_back_to_a_fold() {
+        let folds = [16.0, 33.0, 47.0, 64.0, 81.0];
+        let m = folded_tube(&folds);
+        let grid = bounding_box(&m, 1, |v| v != 0).unwrap();
+        let ds = distance_to_wall(&m).unwrap();
+        let (src, dst) = ([4, 10, 10], [104, 10, 10]);
+        let dt = geodesic_distance(&m, &grid, src).unwrap();
+        let cl = centerline(&m, &ds, src, dst, &CenterlineOptions::default()).unwrap();
+        let surf = extract_surface(&m, None, &grid, 0.0).unwrap();
+        let cells = build_cells(&m, &dt.dist, &cl, &surf, &CellOptions::default()).unwrap();
+        // Every 20 mm the cuts would lie across the wide tube. Each moves back to just past
+        // a fold in the latter half of its stretch, where the level set of Dt is the small cap
+        // through the fold's opening.
+        let cuts: Vec<f64> = cells.portals.iter().map(|p| p.centre_mm[0]).collect();
+        let radii: Vec<f64> = cells
+            .portals
+            .iter()
+            .map(|p| {
+                let c = DVec3::from_array(p.centre_mm);
+                p.polygon_mm
+                    .iter()
+                    .map(|q| DVec3::from_array(*q).distance(c))
+                    .fold(0.0, f64::max)
+            })
+            .collect();
+        assert!(cuts.len() >= 4, "cuts at x = {cuts:?}");
+        for (cut, r) in cuts.iter().zip(&radii) {
+            let fold = folds
+                .iter()
+                .map(|f| cut - f)
+                .fold(f64::INFINITY, |a, d| if d >= 0.0 { a.min(d) } else { a });
+            assert!(
+                fold <= 3.0 && *r < 5.0,
+                "cuts at x = {cuts:?} with outline radii {radii:?}, folds at {folds:?}"
+            );
+        }
     }
 
     #[test]

@@ -14,9 +14,11 @@
 //! - `all`: every cell (the paper's MC column).
 //! - `lg`: Luebke & Georges: the aggregate cull rectangle (ACR) is the intersection of the
 //!   portals' screen rectangles; a sequence stops when it is empty.
-//! - `paper`: LG, plus after each cell the ACR's top and bottom rows are dropped while every
-//!   pixel in them is already nearer than the next portal; and temporal coherence: the first
-//!   80% of last frame's cells of each sequence are drawn before any test.
+//! - `paper`: LG, plus after each cell the ACR's top and bottom rows are dropped while they
+//!   are covered: every pixel in them where a ray could reach the next portal (inside its
+//!   projected outline) already holds something nearer than where that ray would first meet
+//!   the portal's slab; and temporal coherence: the first 80% of last frame's cells of each
+//!   sequence are drawn before any test.
 //! - `ours`: per row, an interval instead of one rectangle: the intersection of the portals'
 //!   projected convex outlines (not their rectangles), trimmed at both ends of every row by
 //!   the depth test, with the depth bound taken per pixel where the ray meets the portal's
@@ -332,7 +334,7 @@ impl Visibility {
             Strategy::Lg => region.clip_rect(&outline, view),
             Strategy::Paper => {
                 region.clip_rect(&outline, view)
-                    && region.drop_covered_rows(frame, outline.min_depth, reads)
+                    && region.drop_covered_rows(frame, (shape, &outline), view, reads)
             }
             Strategy::Ours => {
                 region.clip_hull(&outline, view)
@@ -519,18 +521,31 @@ impl Region {
     }
 
     /// The paper's Z-buffer step: drops rows at the top and bottom whose pixels are all
-    /// nearer than the portal's nearest point.
-    fn drop_covered_rows(&mut self, frame: &Rows, min_depth: f64, reads: &mut usize) -> bool {
+    /// covered. The paper counts a pixel covered once a nearer cell wrote it. That alone could
+    /// hide a triangle beyond the portal in front of what a concave cell drew, so here a pixel
+    /// is covered where its ray cannot meet the portal's prism (outside its outline), or meets
+    /// it only behind what is drawn there.
+    fn drop_covered_rows(
+        &mut self,
+        frame: &Rows,
+        portal: (&PortalShape, &Outline),
+        view: &View,
+        reads: &mut usize,
+    ) -> bool {
+        let (shape, outline) = portal;
+        let bound = SlabBound::new(shape, view);
         // A hair nearer than the prism, so rounding can never hide a pixel that sees through.
-        let w_portal = (1.0 / (min_depth * (1.0 - 1e-6))) as f32;
+        let prism_bound = 1.0 / (outline.min_depth * (1.0 - 1e-6));
         let covered = |y: i64, row: (i64, i64), reads: &mut usize| {
-            for x in row.0..=row.1 {
+            let Some((a, b)) = hull_span(&outline.hull, y as f64 + 0.5) else {
+                return true;
+            };
+            let (c0, c1) = centres(a, b, view.width);
+            (row.0.max(c0)..=row.1.min(c1)).all(|x| {
                 *reads += 1;
-                if frame.pixel(x, y).inv_depth <= w_portal {
-                    return false;
-                }
-            }
-            true
+                let w = frame.pixel(x, y).inv_depth;
+                w > 0.0 && (w as f64) > bound.max_inv_depth(view, x, y).min(prism_bound)
+            })
         };
         while self.y0 <= self.y1 && covered(self.y0, self.rows[self.y0 as usize], reads) {
             self.y0 += 1;
@@ -668,6 +683,67 @@ mod tests {
         assert!((a - 0.0).abs() < 1e-12 && (b - 5.0).abs() < 1e-12);
         assert_eq!(centres(0.2, 2.6, 100), (0, 2));
         assert_eq!(centres(-5.0, -1.0, 100), (1, 0));
+    }
+
+    /// A diamond portal 10 mm across, 50 mm ahead of an eye looking down +z, seen at 64²;
+    /// the frame holds a wall 20 mm ahead wherever `drawn` says.
+    fn diamond_ahead(drawn: impl Fn(i64, i64, (f64, f64)) -> bool) -> (Region, bool) {
+        let view = View {
+            eye: DVec3::ZERO,
+            right: DVec3::X,
+            up: DVec3::Y,
+            forward: DVec3::Z,
+            width: 64,
+            height: 64,
+            focal: 64.0,
+            near: 1.0,
+        };
+        let outline = [(5.0, 0.0), (0.0, 5.0), (-5.0, 0.0), (0.0, -5.0)];
+        let corners: Vec<DVec3> = outline
+            .iter()
+            .flat_map(|&(x, y)| [DVec3::new(x, y, 49.5), DVec3::new(x, y, 50.5)])
+            .collect();
+        let shape = PortalShape {
+            corners: corners.clone(),
+            normal: DVec3::Z,
+            offset: 50.0,
+            half_thickness: 0.5,
+        };
+        let projected = project_prism(&corners, &view).unwrap();
+        let mut frame = Frame::new(64, 64);
+        for y in 0..64 {
+            for x in 0..64 {
+                let inside = hull_span(&projected.hull, y as f64 + 0.5);
+                if drawn(x, y, inside.unwrap_or((1.0, 0.0))) {
+                    frame.pixels[(y * 64 + x) as usize].inv_depth = 1.0 / 20.0;
+                }
+            }
+        }
+        let mut region = Region::spanning(0, 63, 64);
+        let mut reads = 0;
+        let open = region.clip_rect(&projected, &view)
+            && region.drop_covered_rows(&frame.rows(), (&shape, &projected), &view, &mut reads);
+        (region, open)
+    }
+
+    #[test]
+    fn the_papers_covered_rows_are_judged_within_the_portals_outline() {
+        // Drawn nearer than the portal wherever the diamond shows, nothing round it: every
+        // row of the rectangle is covered where a ray could reach the portal.
+        let (_, open) = diamond_ahead(|x, _, (a, b)| {
+            (x as f64 + 0.5) >= a - 1.0 && (x as f64 + 0.5) <= b + 1.0
+        });
+        assert!(
+            !open,
+            "the portal is hidden where it shows: nothing beyond it can be seen"
+        );
+        // One pixel inside the diamond left open in its middle row: the rows above and below
+        // it are dropped, that one stays.
+        let (region, open) = diamond_ahead(|x, y, (a, b)| {
+            (x as f64 + 0.5) >= a - 1.0 && (x as f64 + 0.5) <= b + 1.0 && !(x == 32 && y == 32)
+        });
+        assert!(open);
+        assert_eq!((region.y0, region.y1), (32, 32));
     }
 
     #[test]
