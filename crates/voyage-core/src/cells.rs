@@ -735,6 +735,23 @@ mod tests {
         Volume::from_vec(g, data).unwrap()
     }
 
+    /// The cells of lumen `m` with its centerline from `src` to `dst` (voxels), that
+    /// centerline and the surface.
+    fn cells_between(
+        m: &Volume<u8>,
+        src: [usize; 3],
+        dst: [usize; 3],
+        opts: &CellOptions,
+    ) -> (Cells, Centerline, Surface) {
+        let grid = bounding_box(m, 1, |v| v != 0).unwrap();
+        let ds = distance_to_wall(m).unwrap();
+        let dt = geodesic_distance(m, &grid, src).unwrap();
+        let cl = centerline(m, &ds, src, dst, &CenterlineOptions::default()).unwrap();
+        let surf = extract_surface(m, None, &grid, 0.0).unwrap();
+        let cells = build_cells(m, &dt.dist, &cl, &surf, opts).unwrap();
+        (cells, cl, surf)
+    }
+
     /// A straight tube along x, radius 6 mm, narrowed to 3 mm by folds 2 mm thick at
     /// `folds` (x, mm).
     fn folded_tube(folds: &[f64]) -> Volume<u8> {
@@ -758,13 +775,7 @@ mod tests {
     fn a_due_cut_moves_back_to_a_fold() {
         let folds = [16.0, 33.0, 47.0, 64.0, 81.0];
         let m = folded_tube(&folds);
-        let grid = bounding_box(&m, 1, |v| v != 0).unwrap();
-        let ds = distance_to_wall(&m).unwrap();
-        let (src, dst) = ([4, 10, 10], [104, 10, 10]);
-        let dt = geodesic_distance(&m, &grid, src).unwrap();
-        let cl = centerline(&m, &ds, src, dst, &CenterlineOptions::default()).unwrap();
-        let surf = extract_surface(&m, None, &grid, 0.0).unwrap();
-        let cells = build_cells(&m, &dt.dist, &cl, &surf, &CellOptions::default()).unwrap();
+        let (cells, _, _) = cells_between(&m, [4, 10, 10], [104, 10, 10], &CellOptions::default());
         // Every 20 mm the cuts would lie across the wide tube. Each moves back to just past
         // a fold in the latter half of its stretch, where the level set of Dt is the small cap
         // through the fold's opening.
@@ -827,17 +838,11 @@ mod tests {
     #[test]
     fn cells_partition_the_lumen_and_touch_only_neighbours() {
         let m = u_tube();
-        let grid = bounding_box(&m, 1, |v| v != 0).unwrap();
-        let ds = distance_to_wall(&m).unwrap();
-        let (src, dst) = ([6, 10, 12], [6, 24, 12]);
-        let dt = geodesic_distance(&m, &grid, src).unwrap();
-        let cl = centerline(&m, &ds, src, dst, &CenterlineOptions::default()).unwrap();
-        let surf = extract_surface(&m, None, &grid, 0.0).unwrap();
         let opts = CellOptions {
             max_length_mm: 12.0,
             ..Default::default()
         };
-        let cells = build_cells(&m, &dt.dist, &cl, &surf, &opts).unwrap();
+        let (cells, cl, surf) = cells_between(&m, [6, 10, 12], [6, 24, 12], &opts);
         let n = cells.cells.len();
         assert!(n >= 6, "only {n} cells");
         assert_eq!(cells.portals.len(), n - 1);
