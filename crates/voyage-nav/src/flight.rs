@@ -132,12 +132,16 @@ pub struct Flight {
     pub poses: Vec<Pose>,
 }
 
-/// A place where the flight made no progress for [`STUCK_S`] seconds and the autopilot
-/// glided on along the centerline.
+/// A place where the flight made no progress for [`STUCK_S`] seconds (or did not move at all
+/// for [`WEDGED_S`]) and the autopilot glided on along the centerline.
 #[derive(Clone, Copy, Debug, Serialize)]
 pub struct Rescue {
     /// Simulated time (s).
     pub t: f64,
+    /// How long the flight had been without progress (s), or without moving at all when
+    /// `wedged`.
+    pub stuck_s: f64,
+    pub wedged: bool,
     /// Arc length along the centerline, from the end the flight starts at, where the glide
     /// began (mm).
     pub arc_mm: f64,
@@ -308,6 +312,9 @@ pub struct Autopilot {
     roomy_mm: f64,
     /// The last progress: (time, Dt then); no progress for [`STUCK_S`] s is a rescue.
     progress: (f64, f64),
+    /// The last move: (time, where the submarine was then); none for [`WEDGED_S`] s is a
+    /// rescue.
+    moved: (f64, DVec3),
     /// Where the autopilot glided on after [`STUCK_S`] s without progress.
     pub rescues: Vec<Rescue>,
     rho_per_radius: Option<f64>,
@@ -320,6 +327,14 @@ pub struct Autopilot {
 const RESCUE_MM: f64 = 20.0;
 /// Seconds without progress (Dt falling by `stall_progress_mm`) before a rescue glide.
 pub const STUCK_S: f64 = 5.0;
+/// Seconds without moving at all ([`WEDGED_MM`]) before a rescue glide: the submarine is
+/// wedged where every step would leave the safe set, and the escape pushes cannot free it.
+/// On `ct/abdomen-3mm` (not insufflated, a colon 3–5 mm in radius) the forward flight stood
+/// still for 5 s in a pocket 6 mm off the centerline and again in a narrow 190 mm on, more
+/// than half of its frames.
+pub const WEDGED_S: f64 = 1.0;
+/// A submarine that has moved less than this (mm) has not moved.
+const WEDGED_MM: f64 = 0.1;
 /// Centerline stretches whose radius is under the camera's distance from the wall plus this
 /// (mm) are glided through: the safe set is too thin there for the field to carry the camera.
 pub const NARROW_MARGIN_MM: f64 = 1.0;
@@ -376,6 +391,7 @@ impl Autopilot {
         Autopilot {
             roomy_mm,
             progress: (0.0, dt_now),
+            moved: (0.0, DVec3::NAN),
             rescues: Vec::new(),
             rho_per_radius: opts.rho_per_radius,
             glides,
@@ -513,9 +529,16 @@ impl Autopilot {
         }
     }
 
-    /// Whether the flight has made no progress for [`STUCK_S`] seconds at time `t`.
+    fn note_move(&mut self, t: f64, x: DVec3) {
+        if !(x.distance(self.moved.1) < WEDGED_MM) {
+            self.moved = (t, x);
+        }
+    }
+
+    /// Whether the flight has made no progress for [`STUCK_S`] seconds at time `t`, or has
+    /// not moved for [`WEDGED_S`].
     fn stuck(&self, t: f64) -> bool {
-        t - self.progress.0 >= STUCK_S
+        t - self.progress.0 >= STUCK_S || t - self.moved.0 >= WEDGED_S
     }
 
     /// The last rescue, if one happened in the `within_s` seconds before `t`.
@@ -530,6 +553,7 @@ impl Autopilot {
     pub fn glide(&mut self, x: DVec3, t: f64, dt_now: f64, dt: f64) -> Option<Pose> {
         let i = self.moved_to(x);
         self.note_progress(t, dt_now);
+        self.note_move(t, x);
         if self.glide_arc.is_none() && self.stuck(t) {
             self.rescue(t, x, i, dt_now);
         }
@@ -563,8 +587,15 @@ impl Autopilot {
         let from = self.guide.arc[i];
         let least = from + RESCUE_MM.max(2.0 * self.guide.radius[i]);
         let span = [from, self.past_the_stall(least, dt_stuck)];
+        let wedged = t - self.progress.0 < STUCK_S;
         self.rescues.push(Rescue {
             t,
+            stuck_s: t - if wedged {
+                self.moved.0
+            } else {
+                self.progress.0
+            },
+            wedged,
             arc_mm: from,
             position: x.to_array(),
         });
@@ -574,6 +605,7 @@ impl Autopilot {
         self.glided = None;
         self.glide_arc = Some(from);
         self.progress.0 = t;
+        self.moved.0 = t;
     }
 
     /// The first arc at or after `arc` where the field's Dt on the centerline is below
@@ -922,22 +954,51 @@ mod tests {
 
     const FRAME: f64 = 1.0 / 30.0;
 
-    /// Holds the submarine at `x` with Dt `dt_now` until the autopilot's rescue: its first
-    /// glide pose and the time.
+    /// Holds the submarine about `x` with Dt `dt_now`, rocking 1 mm to and fro as against a
+    /// wall, until the autopilot's rescue: its first glide pose and the time.
     fn stuck_until_rescued(pilot: &mut Autopilot, x: DVec3, dt_now: f64) -> (Pose, f64) {
         let mut t = 0.0;
+        let mut frame = 0;
+        let rocking = |frame: usize| x + DVec3::Y * (frame % 2) as f64;
         while t < STUCK_S - 0.1 {
             assert!(
-                pilot.glide(x, t, dt_now, FRAME).is_none(),
+                pilot.glide(rocking(frame), t, dt_now, FRAME).is_none(),
                 "glided at {t} s"
             );
-            pilot.input(t, dt_now, x, 1.0);
+            pilot.input(t, dt_now, rocking(frame), 1.0);
             t += FRAME;
+            frame += 1;
         }
         t = STUCK_S + 0.01;
-        let pose = pilot.glide(x, t, dt_now, FRAME).expect("a rescue glide");
+        let pose = pilot
+            .glide(rocking(frame), t, dt_now, FRAME)
+            .expect("a rescue glide");
         assert_eq!(pilot.rescues.len(), 1);
+        assert!(!pilot.rescues[0].wedged && pilot.rescues[0].stuck_s >= STUCK_S);
         (pose, t)
+    }
+
+    /// A submarine that does not move at all is wedged: the rescue comes after [`WEDGED_S`],
+    /// not [`STUCK_S`], and says so.
+    #[test]
+    fn a_wedged_submarine_is_rescued_sooner() {
+        let cl = line(201, |_| 8.0);
+        let opts = FlightOptions::default();
+        let x = DVec3::new(50.0, 3.0, 0.0);
+        let mut pilot = Autopilot::new(&cl, Direction::Forward, &opts, x, 150.0);
+        let mut t = 0.0;
+        while pilot.glide(x, t, 150.0, FRAME).is_none() {
+            pilot.input(t, 150.0, x, 1.0);
+            t += FRAME;
+            assert!(t < STUCK_S, "no rescue in {t} s");
+        }
+        assert!(
+            (WEDGED_S..WEDGED_S + 2.0 * FRAME).contains(&t),
+            "rescued at {t} s"
+        );
+        let r = pilot.rescues[0];
+        assert!(r.wedged && (r.stuck_s - WEDGED_S).abs() <= 2.0 * FRAME);
+        assert_eq!(r.arc_mm, 50.0);
     }
 
     /// Glides on from `from` at time `t` while the autopilot glides: where it ended, and when.

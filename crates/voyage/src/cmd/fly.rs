@@ -10,7 +10,7 @@ use serde_json::json;
 use voyage_core::Geometry;
 use voyage_export::trajectory::write_trajectory;
 use voyage_nav::{
-    Direction, Flight, FlightOptions, Looking, Rescue, STUCK_S, fly, looking, potential_field,
+    Direction, Flight, FlightOptions, Looking, Rescue, fly, looking, potential_field,
 };
 
 use super::prep::load_and_prepare;
@@ -221,13 +221,19 @@ pub fn run(a: &FlyArgs) -> Result<()> {
     Ok(())
 }
 
-/// What a rescue (no progress for STUCK_S s, then a glide on) says to the user.
+/// What a rescue (no progress for STUCK_S s, or no move for WEDGED_S s, then a glide on) says
+/// to the user.
 fn rescue_text(f: &Flight, r: &Rescue, g: &Geometry) -> String {
     let p = g.local_to_patient(DVec3::from_array(r.position));
     format!(
-        "the {} flight made no progress for {:.0} s at LPS ({:.0}, {:.0}, {:.0}), {:.0} mm along its way: the autopilot glided on along the centerline",
+        "the {} flight {} for {:.0} s at LPS ({:.0}, {:.0}, {:.0}), {:.0} mm along its way: the autopilot glided on along the centerline",
         f.direction.name(),
-        STUCK_S,
+        if r.wedged {
+            "could not move"
+        } else {
+            "made no progress"
+        },
+        r.stuck_s,
         p.x,
         p.y,
         p.z,
@@ -254,6 +260,8 @@ fn summary(f: &Flight, l: &Looking, g: &Geometry) -> serde_json::Value {
         .map(|r| {
             json!({
                 "t_s": r.t,
+                "stuck_s": r.stuck_s,
+                "wedged": r.wedged,
                 "arc_mm": r.arc_mm,
                 "lps_mm": g.local_to_patient(DVec3::from_array(r.position)).to_array(),
             })

@@ -111,8 +111,13 @@ impl App {
         if let Some(r) = s.pilot.recent_rescue(s.sub.state.t, RESCUE_NOTICE_S) {
             ui.label(
                 RichText::new(format!(
-                    "no progress for {:.0} s at {:.0} mm along the colon: gliding on along the centerline",
-                    voyage_nav::STUCK_S,
+                    "{} for {:.0} s at {:.0} mm along the colon: gliding on along the centerline",
+                    if r.wedged {
+                        "could not move"
+                    } else {
+                        "no progress"
+                    },
+                    r.stuck_s,
                     r.arc_mm
                 ))
                 .color(Color32::from_rgb(255, 190, 90)),
