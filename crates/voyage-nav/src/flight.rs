@@ -391,7 +391,7 @@ impl Autopilot {
         Autopilot {
             roomy_mm,
             progress: (0.0, dt_now),
-            moved: (0.0, DVec3::NAN),
+            moved: (0.0, x),
             rescues: Vec::new(),
             rho_per_radius: opts.rho_per_radius,
             glides,
@@ -479,6 +479,7 @@ impl Autopilot {
     /// next is not the field's doing.
     pub fn restart(&mut self, t: f64, dt_now: f64, x: DVec3) {
         self.watch_from(t, dt_now);
+        self.moved = (t, x);
         self.look_dir = None;
         self.near = self.guide.nearest(x);
         self.glide_arc = None;
@@ -493,6 +494,7 @@ impl Autopilot {
     /// Starts the stall watch afresh (a glide is progress, not a stall).
     pub fn watch_from(&mut self, t: f64, dt_now: f64) {
         self.progress = (t, dt_now);
+        self.moved.0 = t;
         self.window_start = (t, dt_now);
         self.escape_until = f64::NEG_INFINITY;
         self.in_a_row = 0;
@@ -530,7 +532,7 @@ impl Autopilot {
     }
 
     fn note_move(&mut self, t: f64, x: DVec3) {
-        if !(x.distance(self.moved.1) < WEDGED_MM) {
+        if x.distance(self.moved.1) >= WEDGED_MM {
             self.moved = (t, x);
         }
     }
