@@ -6,8 +6,10 @@
 //! than `stall_progress_mm`. The escape pulls the submarine toward a centerline point ahead
 //! (out of the pocket, toward the goal) with a force of `escape_factor`·Ct for `escape_s`
 //! seconds — the user's click of §3.3, made by the autopilot — 1.5 times harder for each
-//! stall in a row. A flight that stalls `max_stalls` times, or runs past
-//! `max_sim_s`, ends unreached (a permanent stall).
+//! stall in a row. Where that does not free it ([`STUCK_S`] seconds without progress, or
+//! [`WEDGED_S`] without moving at all), the autopilot glides on along the centerline (a
+//! rescue). A flight that stalls `max_stalls` times, or runs past `max_sim_s`, ends
+//! unreached (a permanent stall).
 
 use std::time::Instant;
 
