@@ -14,7 +14,8 @@ mod submarine;
 
 pub use camera::{Camera, Pose};
 pub use flight::{
-    Autopilot, Flight, FlightOptions, FlightRun, LOOK_AHEAD_MM, Rescue, STUCK_S, fly, start_pose,
+    Autopilot, Flight, FlightOptions, FlightRun, LOOK_AHEAD_MM, Rescue, STUCK_S, WEDGED_S, fly,
+    start_pose,
 };
 #[cfg(feature = "layouts")]
 pub use layouts::{BoxStore, SortedStore};

@@ -206,7 +206,9 @@ impl Session {
             if dt_now <= self.pilot.reach_mm {
                 self.playing = false;
                 self.reached = true;
-            } else if steering {
+            } else if steering || self.sub.modes.still {
+                // Still mode holds the camera where it is: the autopilot does not take it
+                // for stuck and glide it on.
                 self.pilot
                     .restart(self.sub.state.t, dt_now, self.sub.state.x);
             } else if let Some(pose) =
@@ -568,6 +570,34 @@ mod tests {
             after[after.len() - 1] <= 15.0,
             "a second after the drag the view is still {:.0}° off the way",
             after[after.len() - 1]
+        );
+    }
+
+    /// Still mode holds the camera while the flight plays: the autopilot does not take the
+    /// camera that stands still for wedged and glide it on.
+    #[test]
+    fn still_mode_holds_the_flying_camera_for_good() {
+        let p = voyage_phantom::pipe(1).unwrap();
+        let study = prepare(p.ct, &PrepOptions::default(), |_| {}).unwrap();
+        let mut s = Session::new(pipe_exam(), study).unwrap();
+        let frame = 1.0 / 30.0;
+        s.set_playing(true);
+        for _ in 0..30 {
+            s.step(frame, &Input::default());
+        }
+        s.sub.modes.still = true;
+        let held = s.sub.state.x;
+        for _ in 0..(3.0 * voyage_nav::WEDGED_S / frame) as usize {
+            s.step(frame, &Input::default());
+        }
+        assert!(
+            s.playing && s.pilot.rescues.is_empty(),
+            "rescued while still"
+        );
+        assert!(
+            s.sub.state.x.distance(held) < 1e-9,
+            "moved {:.1} mm while still",
+            s.sub.state.x.distance(held)
         );
     }
 
