@@ -151,6 +151,18 @@ pub struct Rescue {
     pub position: [f64; 3],
 }
 
+impl Rescue {
+    /// What held the flight, for the user: "could not move" or "made no progress" (for
+    /// `stuck_s` seconds).
+    pub fn cause(&self) -> &'static str {
+        if self.wedged {
+            "could not move"
+        } else {
+            "made no progress"
+        }
+    }
+}
+
 /// The centerline as the flight sees it: points from the flight's start to its goal.
 pub(crate) struct Guide {
     points: Vec<DVec3>,

@@ -533,9 +533,7 @@ impl Region {
         reads: &mut usize,
     ) -> bool {
         let (shape, outline) = portal;
-        let bound = SlabBound::new(shape, view);
-        // A hair nearer than the prism, so rounding can never hide a pixel that sees through.
-        let prism_bound = 1.0 / (outline.min_depth * (1.0 - 1e-6));
+        let bound = SlabBound::new(shape, outline.min_depth, view);
         let covered = |y: i64, row: (i64, i64), reads: &mut usize| {
             let Some((a, b)) = hull_span(&outline.hull, y as f64 + 0.5) else {
                 return true;
@@ -543,8 +541,7 @@ impl Region {
             let (c0, c1) = centres(a, b, view.width);
             (row.0.max(c0)..=row.1.min(c1)).all(|x| {
                 *reads += 1;
-                let w = frame.pixel(x, y).inv_depth;
-                w > 0.0 && (w as f64) > bound.max_inv_depth(view, x, y).min(prism_bound)
+                bound.hides(frame, view, x, y)
             })
         };
         while self.y0 <= self.y1 && covered(self.y0, self.rows[self.y0 as usize], reads) {
@@ -566,14 +563,12 @@ impl Region {
         view: &View,
         reads: &mut usize,
     ) -> bool {
-        let bound = SlabBound::new(portal, view);
-        let prism_bound = 1.0 / (min_depth * (1.0 - 1e-6));
+        let bound = SlabBound::new(portal, min_depth, view);
         for y in self.y0.max(0)..=self.y1 {
             let (mut lo, mut hi) = self.rows[y as usize];
             let hidden = |x: i64, reads: &mut usize| {
                 *reads += 1;
-                let w = frame.pixel(x, y).inv_depth;
-                w > 0.0 && (w as f64) > bound.max_inv_depth(view, x, y).min(prism_bound)
+                bound.hides(frame, view, x, y)
             };
             while lo <= hi && hidden(lo, reads) {
                 lo += 1;
@@ -588,16 +583,21 @@ impl Region {
 }
 
 /// Where, at the earliest, a pixel's ray can enter a portal's slab: a per-pixel bound that
-/// is tighter than the prism's least depth when the portal is seen at a slant.
+/// is tighter than the prism's least depth when the portal is seen at a slant (the paper's
+/// covered rows and ours's trimmed rows both judge a pixel by it).
 struct SlabBound {
     /// Slab plane facing the eye: n·x = c; the eye is on the side n·x < c. None when the
     /// eye is inside the slab (then nothing is bounded).
     plane: Option<(DVec3, f64)>,
     eye_side: f64,
+    /// The inverse of the prism's least depth, a hair nearer, so that rounding can never hide
+    /// a pixel that sees through.
+    prism: f64,
 }
 
 impl SlabBound {
-    fn new(p: &PortalShape, view: &View) -> Self {
+    fn new(p: &PortalShape, min_depth: f64, view: &View) -> Self {
+        let prism = 1.0 / (min_depth * (1.0 - 1e-6));
         let s = p.normal.dot(view.eye) - p.offset;
         let (n, c) = if s < -p.half_thickness {
             (p.normal, p.offset - p.half_thickness)
@@ -607,12 +607,22 @@ impl SlabBound {
             return SlabBound {
                 plane: None,
                 eye_side: 0.0,
+                prism,
             };
         };
         SlabBound {
             plane: Some((n, c)),
             eye_side: n.dot(view.eye),
+            prism,
         }
+    }
+
+    /// Whether what `frame` holds at pixel (x, y) is nearer than where that pixel's ray could
+    /// first meet the portal (its slab, and no nearer than the prism): nothing beyond the
+    /// portal can show there.
+    fn hides(&self, frame: &Rows, view: &View, x: i64, y: i64) -> bool {
+        let w = frame.pixel(x, y).inv_depth;
+        w > 0.0 && (w as f64) > self.max_inv_depth(view, x, y).min(self.prism)
     }
 
     /// The largest inverse depth (nearest point) at which the ray through pixel (x, y) can

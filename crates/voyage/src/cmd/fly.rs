@@ -228,11 +228,7 @@ fn rescue_text(f: &Flight, r: &Rescue, g: &Geometry) -> String {
     format!(
         "the {} flight {} for {:.0} s at LPS ({:.0}, {:.0}, {:.0}), {:.0} mm along its way: the autopilot glided on along the centerline",
         f.direction.name(),
-        if r.wedged {
-            "could not move"
-        } else {
-            "made no progress"
-        },
+        r.cause(),
         r.stuck_s,
         p.x,
         p.y,

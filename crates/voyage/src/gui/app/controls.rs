@@ -112,11 +112,7 @@ impl App {
             ui.label(
                 RichText::new(format!(
                     "{} for {:.0} s at {:.0} mm along the colon: gliding on along the centerline",
-                    if r.wedged {
-                        "could not move"
-                    } else {
-                        "no progress"
-                    },
+                    r.cause(),
                     r.stuck_s,
                     r.arc_mm
                 ))
