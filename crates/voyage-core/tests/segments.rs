@@ -491,3 +491,78 @@ fn a_gas_filled_stomach_is_not_colon() {
     let found = s.lumen_voxels as f64 / truth as f64;
     assert!((0.9..1.1).contains(&found), "lumen {found:.3} of the truth");
 }
+
+/// A collapsed descending colon and a fluid-filled transverse colon: each gap has one
+/// length, the centerline's arc across it, in its warning, `Gap::length_mm` and the span the
+/// view and the flight use; that span covers the true stretch, and the gap says what filled
+/// it. On `ctc/prone-tagged` the warning said 172 mm (the bridge's own path, wandering
+/// through the fluid), the span 103 mm, and the view "collapsed segment: no air here" over the
+/// cleansed, open lumen.
+#[test]
+fn each_gap_has_one_length_and_says_what_filled_it() {
+    let p = phantom::colon(&ColonOptions {
+        tagged_fluid: true,
+        collapsed: vec!["descending".to_string()],
+        fluid_filled: vec!["transverse".to_string()],
+        ..Default::default()
+    })
+    .unwrap();
+    let t = &p.truth;
+    let study = prepare(p.ct.clone(), &PrepOptions::default(), |_| {}).unwrap();
+    let gaps = &study.segmentation.gaps;
+    let truth = |kind: &str| {
+        t.gas_gaps
+            .iter()
+            .find(|g| g.kind == kind)
+            .unwrap_or_else(|| panic!("no {kind} stretch in {:?}", t.gas_gaps))
+    };
+    let mut seen = [false; 2];
+    for (gap, span) in gaps.iter().zip(&study.gap_spans) {
+        let span = span.unwrap_or_else(|| panic!("gap {gap:?} is not on the centerline"));
+        assert!(
+            (gap.length_mm - (span[1] - span[0])).abs() < 1e-9,
+            "{gap:?} {span:?}"
+        );
+        let said = format!("stretch bridged: {:.0} mm", gap.length_mm);
+        assert!(
+            study
+                .segmentation
+                .warnings
+                .iter()
+                .any(|w| w.contains(&said)),
+            "no warning says {said}: {:?}",
+            study.segmentation.warnings
+        );
+        // The centerline's arcs start at the source, the truth's at the tube's end: compared
+        // by where the span's ends lie along the truth's axis.
+        let arc_of = |arc: f64| {
+            let i = study.centerline.arc_mm.partition_point(|&a| a < arc);
+            let q = DVec3::from_array(
+                study.centerline.points_mm[i.min(study.centerline.points_mm.len() - 1)],
+            );
+            let (k, _) = t
+                .centerline_mm
+                .iter()
+                .map(|c| DVec3::from_array(*c).distance(q))
+                .enumerate()
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .unwrap();
+            t.centerline_arc_mm[k]
+        };
+        let (a, b) = (arc_of(span[0]), arc_of(span[1]));
+        let kind = if gap.fluid_filled {
+            "fluid_filled"
+        } else {
+            "collapsed"
+        };
+        let want = truth(kind);
+        seen[gap.fluid_filled as usize] = true;
+        assert!(
+            a <= want.start_arc_mm + 10.0 && b >= want.end_arc_mm - 10.0,
+            "{kind} stretch {:.0}–{:.0} mm, the span covers {a:.0}–{b:.0}",
+            want.start_arc_mm,
+            want.end_arc_mm
+        );
+    }
+    assert_eq!(seen, [true, true], "{gaps:?}");
+}

@@ -348,10 +348,14 @@ pub fn prepare_volume(
     choices.points.apply(ct.geometry(), &meta, &mut opts);
     opts.segment.mask = choices.mask.then_some(true);
     opts.nav_min_wall_mm = choices.nav_min_wall_mm;
+    // Stages come round again (the centerline is traced anew after holes are plugged): the
+    // step stays at the furthest reached, so that a bar never runs backwards.
+    let mut reached = 0;
     let mut study = prepare(ct, &opts, |stage| {
         let i = Stage::ALL.iter().position(|s| *s == stage).unwrap_or(0);
+        reached = reached.max(1 + i);
         progress(Opening {
-            step: 1 + i,
+            step: reached,
             what: stage.name(),
         })
     })

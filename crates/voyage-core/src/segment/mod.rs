@@ -127,6 +127,20 @@ pub enum ComponentKind {
     Other,
 }
 
+impl ComponentKind {
+    /// In words, as a reader would say it.
+    pub fn name(self) -> &'static str {
+        match self {
+            ComponentKind::Colon => "colon",
+            ComponentKind::Lung => "lung",
+            ComponentKind::SmallBowel => "small bowel",
+            ComponentKind::Stomach => "stomach",
+            ComponentKind::RectalTube => "rectal tube",
+            ComponentKind::Other => "other",
+        }
+    }
+}
+
 #[derive(Clone, Debug, Serialize)]
 pub struct Component {
     pub voxels: usize,
@@ -173,6 +187,9 @@ pub struct Gap {
     pub to_lps_mm: [f64; 3],
     /// Mean cost per mm of the path (1: soft tissue, i.e. collapsed bowel, all the way).
     pub mean_cost: f64,
+    /// Filled with tagged fluid, not collapsed: most of what the bridge added was fluid
+    /// (cleansing makes it air, so the stretch is open lumen in the view).
+    pub fluid_filled: bool,
     /// Where an end lies at the side of the scanned volume, that side of the patient ("left",
     /// "head end", ...): the colon leaves the scan there, and the bridge joins its two ends
     /// inside (what lies beyond is not read).

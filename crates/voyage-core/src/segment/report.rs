@@ -84,6 +84,35 @@ impl Segmentation {
             }
         }
     }
+
+    /// Each gap measured along the centerline once it is traced: its length becomes the
+    /// centerline's arc across it (`spans`, per gap; the bridge's own path wanders through a
+    /// fluid-filled stretch: on `ctc/prone-tagged` 172 mm where the centerline crosses it in
+    /// 103), and `fluid_filled` says what filled it. Its warning says the same.
+    pub(crate) fn measure_gaps_along(&mut self, spans: &[Option<[f64; 2]>], fluid_filled: &[bool]) {
+        for (g, (span, &fluid)) in spans.iter().zip(fluid_filled).enumerate() {
+            let label = |o: usize| {
+                self.segments
+                    .iter()
+                    .find(|s| s.order == Some(o))
+                    .map_or(String::new(), |s| s.label.clone())
+            };
+            let gap = &self.gaps[g];
+            let (a, b) = (label(gap.between[0]), label(gap.between[1]));
+            let was = gap_warning(gap, &a, &b);
+            let gap = &mut self.gaps[g];
+            if let Some([from, to]) = *span {
+                gap.length_mm = to - from;
+            }
+            gap.fluid_filled = fluid;
+            let now = gap_warning(gap, &a, &b);
+            for w in &mut self.warnings {
+                if *w == was {
+                    w.clone_from(&now);
+                }
+            }
+        }
+    }
 }
 
 /// The reports of the colon chained in `chained` from `parts` and of everything else `found`
@@ -301,6 +330,7 @@ fn gaps(
             from_lps_mm: lps(ends.0),
             to_lps_mm: lps(ends.1),
             mean_cost: p.mean_cost,
+            fluid_filled: false,
             edge_side: edge,
             voxels,
         };
@@ -323,7 +353,12 @@ fn gap_warning(gap: &Gap, a: &str, b: &str) -> String {
             "the colon leaves the scanned volume at the patient's {side}: the {a} and the {b} segment are joined inside it by {mm:.0} mm from LPS ({x:.0}, {y:.0}, {z:.0}); what lies beyond the scan is not read"
         ),
         None => format!(
-            "collapsed or fluid-filled stretch bridged: {mm:.0} mm between the {a} and the {b} segment, from LPS ({x:.0}, {y:.0}, {z:.0})"
+            "{} stretch bridged: {mm:.0} mm between the {a} and the {b} segment, from LPS ({x:.0}, {y:.0}, {z:.0})",
+            if gap.fluid_filled {
+                "fluid-filled"
+            } else {
+                "collapsed or fluid-filled"
+            }
         ),
     }
 }

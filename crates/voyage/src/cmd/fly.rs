@@ -97,6 +97,12 @@ impl PhysicsArgs {
         o.fps = self.fps;
         o.modes.compass = !self.no_compass;
         o.modes.leveling = !self.no_leveling;
+        if let Some(s) = self.max_seconds {
+            anyhow::ensure!(
+                s.is_finite() && s > 0.0,
+                "--max-seconds must be a number of seconds > 0, not {s}"
+            );
+        }
         o.max_sim_s = self.max_seconds;
         Ok(o)
     }

@@ -9,7 +9,7 @@ use clap::Args;
 use glam::DVec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
-use voyage_core::{ComponentKind, Geometry, Stage, Study};
+use voyage_core::{Geometry, Stage, Study};
 use voyage_export::study::{StudyExports, check_out_dir, write_study};
 use voyage_io::write_atomic;
 use voyage_view::Link;
@@ -240,6 +240,7 @@ fn gaps(s: &Study) -> Vec<serde_json::Value> {
                 "from_lps_mm": g.from_lps_mm,
                 "to_lps_mm": g.to_lps_mm,
                 "mean_cost": g.mean_cost,
+                "fluid_filled": g.fluid_filled,
                 "at_edge": g.at_edge(),
                 "centerline_arc_mm": span,
             })
@@ -249,11 +250,13 @@ fn gaps(s: &Study) -> Vec<serde_json::Value> {
 
 fn print_text(s: &Study, g: &Geometry, load_ms: f64) {
     let seg = &s.segmentation;
-    let colon_ml = seg
-        .components
+    // The colon's gas, every segment kept, as the report counts it.
+    let colon_ml: f64 = seg
+        .segments
         .iter()
-        .find(|c| c.kind == ComponentKind::Colon)
-        .map_or(0.0, |c| c.volume_ml);
+        .filter(|s| s.kept)
+        .map(|s| s.gas_ml)
+        .sum();
     println!(
         "lumen       {} voxels ({colon_ml:.0} ml of gas{}){}",
         seg.lumen_voxels,
@@ -266,8 +269,10 @@ fn print_text(s: &Study, g: &Geometry, load_ms: f64) {
     );
     for c in &seg.components {
         println!(
-            "  gas       {:>9} voxels {:>8.1} ml  {:?}",
-            c.voxels, c.volume_ml, c.kind
+            "  gas       {:>9} voxels {:>8.1} ml  {}",
+            c.voxels,
+            c.volume_ml,
+            c.kind.name()
         );
     }
     if seg.small_components > 0 {

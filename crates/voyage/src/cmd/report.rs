@@ -47,7 +47,14 @@ const SNAPSHOT_PX: u32 = 512;
 
 pub fn run(a: &ReportArgs) -> Result<()> {
     voyage_export::study::check_out_dir(&a.out)?;
-    // Before any work: an exam of two positions reads its findings from a folder.
+    // Before any work: the findings are there, and an exam of two positions reads them from
+    // a folder.
+    if !a.findings.exists() {
+        anyhow::bail!(
+            "{}: no such file or folder: give --findings the findings.json the window's Export wrote",
+            a.findings.display()
+        );
+    }
     if a.findings.is_file() && crate::open::exam_positions(&a.input)?.len() >= 2 {
         let folder = a
             .findings
@@ -71,11 +78,12 @@ pub fn run(a: &ReportArgs) -> Result<()> {
     let files = export_reading(&a.out, &findings, &study, &exam, read.coverage, |_, m| {
         Ok(snapshot(a, &study, &read.mesh, m))
     })?;
+    let n = findings.markers.len();
     println!(
-        "wrote {} files to {} (report.html: {} findings)",
+        "wrote {} files to {} (report.html: {n} finding{})",
         files.len(),
         a.out.display(),
-        findings.markers.len()
+        if n == 1 { "" } else { "s" }
     );
     Ok(())
 }

@@ -280,6 +280,16 @@ impl App {
                     "the colon leaves the scan here: {:.0} mm joined inside it, the flight keeps to the path",
                     gap.length_mm
                 )
+            } else if gap.fluid_filled {
+                format!(
+                    "fluid-filled stretch, {:.0} mm: {}, the flight keeps to the path",
+                    gap.length_mm,
+                    if s.study.cleansing.is_empty() {
+                        "tagged fluid fills it"
+                    } else {
+                        "its tagged fluid is cleansed away"
+                    }
+                )
             } else {
                 format!(
                     "collapsed segment, {:.0} mm: no air here, the flight keeps to the path",
