@@ -51,7 +51,7 @@ pub fn run(a: &ReportArgs) -> Result<()> {
     // a folder.
     if !a.findings.exists() {
         anyhow::bail!(
-            "{}: no such file or folder: give --findings the findings.json the window's Export wrote",
+            "{}: no such file or folder: give --findings the findings.json the window's Export wrote (for an exam of two positions, the folder it exported into, which holds supine/findings.json and prone/findings.json)",
             a.findings.display()
         );
     }
