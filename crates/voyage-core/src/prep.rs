@@ -1132,17 +1132,6 @@ fn gap_spans(cl: &Centerline, seg: &Segmentation) -> Vec<Option<[f64; 2]>> {
             .then(|| g.index(v.x as usize, v.y as usize, v.z as usize))
     };
     let voxels: Vec<Option<usize>> = cl.points_mm.iter().map(voxel_of).collect();
-    // The arc of the centerline point nearest a gap's end, where the centerline passes it.
-    let end_arc = |lps: &[f64; 3]| {
-        let p = g.patient_to_local(DVec3::from_array(*lps));
-        let (i, d) = cl
-            .points_mm
-            .iter()
-            .map(|q| DVec3::from_array(*q).distance(p))
-            .enumerate()
-            .min_by(|a, b| a.1.total_cmp(&b.1))?;
-        (d <= GAP_END_MM).then(|| [cl.arc_mm[i]; 2])
-    };
     seg.gaps
         .iter()
         .map(|gap| {
@@ -1151,16 +1140,10 @@ fn gap_spans(cl: &Centerline, seg: &Segmentation) -> Vec<Option<[f64; 2]>> {
                 .zip(&cl.arc_mm)
                 .filter(|(v, _)| v.is_some_and(|v| gap.voxels.binary_search(&v).is_ok()))
                 .map(|(_, &arc)| [arc, arc])
-                .chain(end_arc(&gap.from_lps_mm))
-                .chain(end_arc(&gap.to_lps_mm))
                 .reduce(|a, b| [a[0].min(b[0]), a[1].max(b[1])])
         })
         .collect()
 }
-
-/// A gap's end lies on the centerline's stretch across it when the centerline passes this
-/// near (mm): it runs through the bridge, whose ends are the gap's.
-const GAP_END_MM: f64 = 5.0;
 
 /// Whether most of what `gap`'s bridge added to the lumen is tagged fluid (at or above
 /// `fluid_hu` in `ct`): a fluid-filled stretch, not a collapsed one.
