@@ -68,20 +68,12 @@ impl Segmentation {
         }
         let named = Course::new(geom, last.colon_lps);
         let name = segment_name(&named, geom.patient_to_local(last.entry_lps), end_mm);
-        let old = std::mem::replace(&mut self.segments[i].label, name);
-        let before = order.checked_sub(1).and_then(|o| {
-            let gap = self.gaps.iter().find(|g| g.between == [o, order])?;
-            let a = self.segments.iter().find(|s| s.order == Some(o))?;
-            Some((gap, &a.label))
-        });
-        if let Some((gap, a)) = before {
-            let was = gap_warning(gap, a, &old);
-            let now = gap_warning(gap, a, &self.segments[i].label);
-            for w in &mut self.warnings {
-                if *w == was {
-                    w.clone_from(&now);
-                }
-            }
+        let before = order
+            .checked_sub(1)
+            .and_then(|o| self.gaps.iter().position(|g| g.between == [o, order]));
+        match before {
+            Some(g) => self.rewarn_gap(g, |s| s.segments[i].label = name),
+            None => self.segments[i].label = name,
         }
     }
 
@@ -91,27 +83,39 @@ impl Segmentation {
     /// 103), and `fluid_filled` says what filled it. Its warning says the same.
     pub(crate) fn measure_gaps_along(&mut self, spans: &[Option<[f64; 2]>], fluid_filled: &[bool]) {
         for (g, (span, &fluid)) in spans.iter().zip(fluid_filled).enumerate() {
-            let label = |o: usize| {
-                self.segments
-                    .iter()
-                    .find(|s| s.order == Some(o))
-                    .map_or(String::new(), |s| s.label.clone())
-            };
-            let gap = &self.gaps[g];
-            let (a, b) = (label(gap.between[0]), label(gap.between[1]));
-            let was = gap_warning(gap, &a, &b);
-            let gap = &mut self.gaps[g];
-            if let Some([from, to]) = *span {
-                gap.length_mm = to - from;
-            }
-            gap.fluid_filled = fluid;
-            let now = gap_warning(gap, &a, &b);
-            for w in &mut self.warnings {
-                if *w == was {
-                    w.clone_from(&now);
+            self.rewarn_gap(g, |s| {
+                let gap = &mut s.gaps[g];
+                if let Some([from, to]) = *span {
+                    gap.length_mm = to - from;
                 }
+                gap.fluid_filled = fluid;
+            });
+        }
+    }
+
+    /// Gap `g` changed by `change` (its length, what filled it, a segment's name), and its
+    /// warning said again as it now reads.
+    fn rewarn_gap(&mut self, g: usize, change: impl FnOnce(&mut Self)) {
+        let was = self.gap_warning_now(g);
+        change(self);
+        let now = self.gap_warning_now(g);
+        for w in &mut self.warnings {
+            if *w == was {
+                w.clone_from(&now);
             }
         }
+    }
+
+    /// The warning of gap `g` with the segments' labels as they are.
+    fn gap_warning_now(&self, g: usize) -> String {
+        let gap = &self.gaps[g];
+        let label = |o: usize| {
+            self.segments
+                .iter()
+                .find(|s| s.order == Some(o))
+                .map_or("", |s| s.label.as_str())
+        };
+        gap_warning(gap, label(gap.between[0]), label(gap.between[1]))
     }
 }
 
