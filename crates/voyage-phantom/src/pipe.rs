@@ -199,6 +199,7 @@ pub fn pipe(seed: u64) -> Result<Phantom> {
         body_floor_z_mm: None,
         table: None,
         skin_folds: Vec::new(),
+        diverticula: Vec::new(),
         noise_roi: Some(water_roi(&geom, center)),
         materials_hu: [
             ("air", AIR),

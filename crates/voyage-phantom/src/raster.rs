@@ -369,6 +369,8 @@ impl<B: Background> Scene<'_, B> {
         let (mut sb, mut sb_outer, mut sb_hu) = (f64::INFINITY, f64::INFINITY, 0.0);
         // Tagged stool: the nearest lump, its HU and whether it is mottled with air.
         let (mut stool, mut stool_hu, mut mottled) = (f64::INFINITY, 0.0, false);
+        // Diverticula: the colon's gas outside its wall, in their own wall.
+        let mut pouch = f64::INFINITY;
         for &bl in &b.blobs {
             let blob = &self.blobs[bl as usize];
             match blob.kind {
@@ -391,9 +393,14 @@ impl<B: Background> Scene<'_, B> {
                         (stool, stool_hu, mottled) = (d, blob.content_hu, m);
                     }
                 }
+                BlobKind::Diverticulum => {
+                    let d = blob.sdf(p);
+                    pouch = pouch.min(d);
+                    outer = outer.min(d - blob.wall_mm);
+                }
             }
         }
-        let lumen = hit.lumen.max(-polyp);
+        let lumen = hit.lumen.min(pouch).max(-polyp);
         let m = &self.materials;
         let a = ramp(lumen, inv_w);
         let q = ramp(pocket, inv_w);

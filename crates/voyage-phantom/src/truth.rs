@@ -100,6 +100,9 @@ pub struct Truth {
     /// Skin folds: crevices of outside air (label 1) cut into the body.
     #[serde(default)]
     pub skin_folds: Vec<SkinFoldTruth>,
+    /// Diverticula: pouches of the colon's gas outside its wall (colon lumen, label 2).
+    #[serde(default)]
+    pub diverticula: Vec<DiverticulumTruth>,
     /// A box of homogeneous tissue (inclusive voxel ranges) for measuring noise.
     pub noise_roi: Option<RoiTruth>,
     /// Noise-free HU of the materials.
@@ -183,6 +186,21 @@ pub struct GapTruth {
     pub segment: String,
     pub start_arc_mm: f64,
     pub end_arc_mm: f64,
+}
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct DiverticulumTruth {
+    pub segment: String,
+    /// Where along the colon's axis its neck leaves the lumen.
+    pub arc_mm: f64,
+    /// The pouch: a sphere of gas outside the colon's wall (volume-local mm), in a wall of its
+    /// own as thick as the colon's.
+    pub center_mm: [f64; 3],
+    pub radius_mm: f64,
+    /// The neck: gas this wide in radius through the wall, from `mouth_mm` (on the lumen's
+    /// nominal surface) to the pouch's centre.
+    pub neck_radius_mm: f64,
+    pub mouth_mm: [f64; 3],
 }
 
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]

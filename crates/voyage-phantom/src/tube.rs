@@ -466,6 +466,9 @@ pub enum BlobKind {
     /// A lump of tagged stool (`content_hu`) on the wall, inside the lumen: colon content,
     /// like fluid; `mottled` ones hold pockets of air.
     Stool { mottled: bool },
+    /// A pouch of the colon's gas outside its wall (the head, with its own `wall_mm`), joined
+    /// to the lumen by a neck through the wall (the stalk): colon lumen.
+    Diverticulum,
 }
 
 /// A sphere, optionally on a stalk (a capsule from `stalk.0` to `stalk.1`, radius

@@ -1,6 +1,7 @@
 //! The colon phantom's options that reproduce real CT colonography exams: a prone patient,
 //! several collapsed stretches, stretches filled with fluid, opacified small bowel joined to a
-//! caecal pool, a rectal catheter, a CT table and skin folds, quantised grey levels. Each
+//! caecal pool, a rectal catheter, a CT table and skin folds, diverticula, quantised grey
+//! levels. Each
 //! test fails without its feature; one checks that the phantom without them is bit for bit
 //! what it was.
 //!
@@ -959,6 +960,65 @@ fn tagged_stool_lies_on_the_wall_as_bright_lumen() {
     }
 }
 
+/// Each diverticulum is a pouch of the colon's gas (lumen, air) outside the colon's wall,
+/// beyond the tube the truth's centerline and radius draw, joined through the wall to the
+/// colon's lumen: a flood of the lumen from the pouch's centre, kept to the pouch and a few
+/// mm round it, reaches the colon's own lumen.
+#[test]
+fn diverticula_are_pouches_of_gas_joined_through_the_wall() {
+    for (small_size, prone) in [(true, false), (false, false), (false, true)] {
+        let p = phantom::colon(&ColonOptions {
+            small: small_size,
+            prone,
+            diverticula: true,
+            tagged_fluid: true,
+            ..Default::default()
+        })
+        .unwrap();
+        check_basics(&p);
+        let t = &p.truth;
+        assert_eq!(t.diverticula.len(), 10);
+        let dims = p.labels.dims();
+        // How far a point lies beyond the colon's nominal lumen (negative: inside it).
+        let beyond = |x: [f64; 3]| {
+            t.centerline_mm
+                .iter()
+                .zip(&t.centerline_radius_mm)
+                .map(|(c, r)| dist(*c, x) - r)
+                .fold(f64::INFINITY, f64::min)
+        };
+        for d in &t.diverticula {
+            let v = voxel(&p.labels, d.center_mm);
+            assert_eq!(
+                (p.labels.data()[v], p.lumen.data()[v]),
+                (label::LUMEN_AIR, 1),
+                "diverticulum in the {} at its centre",
+                d.segment
+            );
+            assert!(p.ct.data()[v] < -800, "{} HU", p.ct.data()[v]);
+            assert!(
+                beyond(d.center_mm) > t.wall_thickness_mm,
+                "the diverticulum in the {} at {:.0} mm lies inside the wall",
+                d.segment,
+                d.arc_mm
+            );
+            let near = |i: usize| dist(local(&p.lumen, i), d.center_mm) <= 2.0 * d.radius_mm + 3.0;
+            let reached = flood6(dims, [v], |i| p.lumen.data()[i] == 1 && near(i));
+            let joined =
+                (0..reached.len()).any(|i| reached[i] && beyond(local(&p.lumen, i)) < -1.0);
+            assert!(
+                joined,
+                "the diverticulum in the {} at {:.0} mm is not joined to the lumen",
+                d.segment, d.arc_mm
+            );
+        }
+        assert_eq!(
+            Truth::from_json(&t.to_json()).unwrap().diverticula,
+            t.diverticula
+        );
+    }
+}
+
 #[test]
 fn quantised_ct_takes_multiples_of_the_step() {
     let p = small(ColonOptions {
@@ -1010,6 +1070,7 @@ fn every_option(seed: u64) -> ColonOptions {
         rectal_tube: true,
         table: true,
         skin_folds: true,
+        diverticula: true,
         quantize_hu: Some(8.0),
         ..ColonOptions::default()
     }
@@ -1042,6 +1103,7 @@ fn every_option_is_deterministic_whatever_the_threads() {
         rectal_tube: true,
         table: true,
         skin_folds: true,
+        diverticula: true,
         quantize_hu: Some(4.0),
         ..ColonOptions::default()
     };

@@ -41,11 +41,14 @@
 //! - skin folds: 4–8 thin crevices of outside air cut into the skin, on the dependent side
 //!   and low in the scan (perineal beside the catheter, or gluteal), some closed over by skin
 //!   in part of their length (see [`super::skin`]).
+//! - diverticula: 10 pouches of gas through the wall on narrow necks, in the sigmoid and
+//!   descending colon, on the side away from gravity.
 //! - quantise: the CT rounded to multiples of a step after the noise.
 
 mod anatomy;
 mod catheter;
 mod dev;
+mod diverticula;
 mod folds;
 mod options;
 mod pockets;
@@ -81,6 +84,7 @@ pub use catheter::CANAL_MM;
 use catheter::{CATHETER_HU, FLOOR_Z, make_catheter};
 #[doc(hidden)]
 pub use dev::{anatomy_report, free_space_map, loop_room_report};
+use diverticula::make_diverticula;
 use folds::{fold_truth, make_folds};
 use options::check_options;
 pub use options::{COLLAPSIBLE, ColonOptions, FILLABLE};
@@ -211,6 +215,19 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
     if let Some(c) = &catheter {
         obstacles.extend(c.points.windows(2).map(|w| (w[0], w[1], c.outer_radius())));
     }
+    let diverticula = if opts.diverticula {
+        make_diverticula(
+            &frame, &tube, &segments, &polyps, gravity, &obstacles, opts.seed,
+        )?
+    } else {
+        Vec::new()
+    };
+    obstacles.extend(
+        diverticula
+            .iter()
+            .map(|(b, _)| (b.center, b.center, b.radius + b.wall_mm)),
+    );
+    blobs.extend(diverticula.iter().map(|(b, _)| b.clone()));
     let mut distractors = Vec::new();
     if opts.small_bowel_gas {
         let pockets = make_pockets(&frame, &tube, &body, &obstacles, opts.seed);
@@ -360,6 +377,7 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
         body_floor_z_mm: floor,
         table: body.table.as_ref().map(|t| skin::table_truth(t, &body)),
         skin_folds: skin_folds.into_iter().map(|(_, t)| t).collect(),
+        diverticula: diverticula.into_iter().map(|(_, t)| t).collect(),
         noise_roi,
         materials_hu: materials(opts),
         labels: label::legend(),

