@@ -781,6 +781,7 @@ fn prepare_stored(
     if opts.centerline.source_mm.is_none() || opts.centerline.target_mm.is_none() {
         let w = anatomical_checks(
             &seg,
+            &cl,
             source,
             target,
             opts.centerline.source_mm.is_none(),
@@ -1160,6 +1161,7 @@ fn fluid_filled(gap: &crate::Gap, ct: &Volume<i16>, fluid_hu: Option<i16>) -> bo
 /// flight starts at the lowest segment's lower end), the cecum on the patient's right and low.
 fn anatomical_checks(
     seg: &Segmentation,
+    cl: &Centerline,
     source: [usize; 3],
     target: [usize; 3],
     check_source: bool,
@@ -1169,9 +1171,9 @@ fn anatomical_checks(
     let [a, b] = g.patient_box(seg.extent[0], seg.extent[1]);
     let span = (b - a).max(DVec3::splat(1.0));
     // u: 0 at the patient's right of the colon's box, 1 at its left; v: 0 lowest, 1 highest.
+    let place_mm = |p: DVec3| ((p.x - a.x) / span.x, (p.z - a.z) / span.z, p);
     let place = |v: [usize; 3]| {
-        let p = g.index_to_patient(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64));
-        ((p.x - a.x) / span.x, (p.z - a.z) / span.z, p)
+        place_mm(g.index_to_patient(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64)))
     };
     let mut out = Vec::new();
     let (u, v, p) = place(source);
@@ -1188,7 +1190,75 @@ fn anatomical_checks(
             p.x, p.y, p.z
         ));
     }
+    if let Some(tail) = narrow_tail(cl).filter(|_| check_target) {
+        let (u, v, p) = place_mm(g.local_to_patient(DVec3::from_array(cl.points_mm[tail.from])));
+        if u <= 0.5 && v <= 0.6 {
+            out.push(format!(
+                "the colon's far end may lie in small bowel: the centerline's last {:.0} mm, from LPS ({:.0}, {:.0}, {:.0}) where it leaves a chamber {:.0} mm wide low on the right (the cecum), are a tube at most {:.0} mm wide, as the ileum is beyond the ileocaecal valve with gas through it; the flight would end there. Give --target at the cecum's pole",
+                tail.length_mm,
+                p.x,
+                p.y,
+                p.z,
+                2.0 * tail.chamber_mm,
+                2.0 * tail.tube_mm
+            ));
+        }
+    }
     out
+}
+
+/// A centerline's last stretch narrower than the lumen before it: see [`narrow_tail`].
+#[derive(Debug, PartialEq)]
+struct NarrowTail {
+    /// The centerline point where it starts.
+    from: usize,
+    length_mm: f64,
+    /// Its widest radius, and the widest within [`CHAMBER_MM`] before it.
+    tube_mm: f64,
+    chamber_mm: f64,
+}
+
+/// A narrow tail is at least this long (mm): a small-bowel loop, not the end of a segment.
+const TAIL_MM: f64 = 150.0;
+/// ... and nowhere wider than this share of the chamber before it: the ileum (10–12 mm in
+/// radius with gas) beyond the cecum (25–45 mm); the colon widens towards its end.
+const TAIL_SHARE: f64 = 0.5;
+/// How far before the tail the chamber it leaves is looked for (mm of arc).
+const CHAMBER_MM: f64 = 100.0;
+/// The centerline's last mm, where its radius falls to the wall of the end: left out.
+const END_CAP_MM: f64 = 10.0;
+
+/// The longest last stretch of the centerline, at least [`TAIL_MM`] long, whose radius stays
+/// within [`TAIL_SHARE`] of the widest radius in the [`CHAMBER_MM`] before it. Where the
+/// terminal ileum holds gas joined to the cecum's through the valve, the colon's farthest
+/// point lies at the far end of the small bowel, and the centerline runs on into it.
+fn narrow_tail(cl: &Centerline) -> Option<NarrowTail> {
+    let (arc, radius) = (&cl.arc_mm, &cl.radius_mm);
+    let length = *arc.last()?;
+    let last = arc
+        .partition_point(|&a| a <= length - END_CAP_MM)
+        .checked_sub(1)?;
+    let mut tube = 0.0f64;
+    let mut found = None;
+    for i in (0..=last).rev() {
+        tube = tube.max(radius[i]);
+        if length - arc[i] < TAIL_MM {
+            continue;
+        }
+        let before = arc.partition_point(|&a| a < arc[i] - CHAMBER_MM);
+        let chamber = radius[before..i].iter().cloned().fold(0.0, f64::max);
+        if tube <= TAIL_SHARE * chamber {
+            found = Some(NarrowTail {
+                from: i,
+                length_mm: length - arc[i],
+                tube_mm: tube,
+                chamber_mm: chamber,
+            });
+        } else if found.is_some() {
+            break;
+        }
+    }
+    found
 }
 
 #[cfg(test)]

@@ -195,6 +195,14 @@ fn the_real_exam_gives_the_whole_colon_rectum_to_cecum() {
         "{fluid:.2}° where fluid lay, {air:.2}° in air"
     );
     common::assert_markers_read_back(&s, "ctc/prone-tagged");
+    // Its cecum is the colon's widest end, not a chamber with small bowel beyond it.
+    assert!(
+        !seg.warnings
+            .iter()
+            .any(|w| w.contains("may lie in small bowel")),
+        "{:#?}",
+        seg.warnings
+    );
     // No large gas left out.
     for x in seg.segments.iter().filter(|x| !x.kept) {
         assert!(

@@ -477,7 +477,15 @@ impl<B: Background> Scene<'_, B> {
                     },
                 )
             } else if sb < 0.0 {
-                (0, label::SMALL_BOWEL_FLUID)
+                // Loops of gas (below the air level) or of contrast.
+                (
+                    0,
+                    if sb_hu < -500.0 {
+                        label::SMALL_BOWEL_GAS
+                    } else {
+                        label::SMALL_BOWEL_FLUID
+                    },
+                )
             } else if pocket < 0.0 {
                 (0, label::SMALL_BOWEL_GAS)
             } else if polyp < 0.0 {

@@ -249,6 +249,19 @@ pub(super) fn make(
     })
 }
 
+impl SmallBowel {
+    /// The same loops full of gas instead of contrast (their truth's `hu` says so).
+    pub fn filled_with_gas(mut self) -> SmallBowel {
+        for b in &mut self.blobs {
+            b.content_hu = super::body::AIR;
+        }
+        for l in &mut self.loops {
+            l.hu = super::body::AIR;
+        }
+        self
+    }
+}
+
 /// Which tube knot `i` belongs to.
 fn tube_of(i: usize, starts: [usize; 2]) -> usize {
     if i < starts[0] {

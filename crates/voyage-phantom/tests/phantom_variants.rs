@@ -630,6 +630,36 @@ fn opacified_small_bowel_is_one_bright_region_with_the_caecal_pool() {
     assert!(q.truth.ileocecal_valve_mm.is_none());
 }
 
+/// The same loops full of gas: small-bowel gas (label 6, air, not colon lumen), one loop
+/// against the descending colon, and the terminal ileum's gas one with the caecum's: a flood
+/// through gas from the loops' far end reaches the colon's lumen.
+#[test]
+fn gas_filled_small_bowel_opens_into_the_caecum() {
+    for (small_size, prone) in [(true, false), (true, true), (false, false)] {
+        let p = phantom::colon(&ColonOptions {
+            small: small_size,
+            prone,
+            gas_filled_small_bowel: true,
+            ..ColonOptions::default()
+        })
+        .unwrap();
+        check_basics(&p);
+        let t = &p.truth;
+        assert_eq!(t.small_bowel_loops.len(), 3);
+        assert!(t.small_bowel_loops.iter().all(|l| l.hu < -900.0));
+        assert!(t.small_bowel_loops[1].touches_colon && t.small_bowel_loops[2].enters_cecum);
+        assert!(!p.labels.data().contains(&label::SMALL_BOWEL_FLUID));
+        let far_end = voxel(&p.labels, t.small_bowel_loops[0].axis_mm[0]);
+        assert_eq!(p.labels.data()[far_end], label::SMALL_BOWEL_GAS);
+        assert_eq!(p.lumen.data()[far_end], 0);
+        let gas = flood6(p.labels.dims(), [far_end], |i| p.ct.data()[i] < -500);
+        assert!(
+            (0..gas.len()).any(|i| gas[i] && p.lumen.data()[i] == 1),
+            "small {small_size}, prone {prone}: the loops' gas does not reach the colon's"
+        );
+    }
+}
+
 // ---------------------------------------------------------------------------------------
 // Rectal tube.
 
@@ -1196,6 +1226,14 @@ fn unknown_or_repeated_segments_are_refused() {
             ..ColonOptions::default()
         })
         .contains("fluid-filled segment 'appendix'")
+    );
+    assert!(
+        e(ColonOptions {
+            opacified_small_bowel: true,
+            gas_filled_small_bowel: true,
+            ..ColonOptions::default()
+        })
+        .contains("contrast or gas, not both")
     );
 }
 

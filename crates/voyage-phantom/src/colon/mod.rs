@@ -173,7 +173,7 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
     } else {
         None
     };
-    let bowel = if opts.opacified_small_bowel {
+    let bowel = if opts.opacified_small_bowel || opts.gas_filled_small_bowel {
         Some(small_bowel::make(
             &frame,
             &tube,
@@ -187,12 +187,23 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
     } else {
         None
     };
+    let bowel = bowel.map(|b| {
+        if opts.gas_filled_small_bowel {
+            b.filled_with_gas()
+        } else {
+            b
+        }
+    });
     let pools = make_pools(
         &tube,
         &segments,
         opts,
         gravity,
-        bowel.as_ref().map(|b| &b.valve),
+        // Gas in the ileum does not lie under the caecal pool.
+        bowel
+            .as_ref()
+            .filter(|_| opts.opacified_small_bowel)
+            .map(|b| &b.valve),
     );
     let stool = if opts.tagged_stool {
         let dependent = opts.pair_member.then_some(gravity);
@@ -251,7 +262,12 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
                 },
             );
             DistractorTruth {
-                kind: "opacified_small_bowel".into(),
+                kind: if opts.gas_filled_small_bowel {
+                    "small_bowel_gas_loop"
+                } else {
+                    "opacified_small_bowel"
+                }
+                .into(),
                 center_mm: [0, 1, 2].map(|a| 0.5 * (lo[a] + hi[a])),
                 semi_axes_mm: [0, 1, 2].map(|a| 0.5 * (hi[a] - lo[a]) + l.radius_mm + l.wall_mm),
                 hu: l.hu,

@@ -34,6 +34,12 @@ pub struct ColonOptions {
     /// colon, the terminal ileum opening into the caecum under the level of a caecal pool
     /// (made even without `tagged_fluid`): one bright region with the caecal fluid.
     pub opacified_small_bowel: bool,
+    /// The same loops of small bowel full of gas instead: one down the descending colon's
+    /// medial wall, wall to wall, and the terminal ileum opening into the caecum, its gas one
+    /// with the caecum's (gas refluxed through the ileocaecal valve, as insufflation often
+    /// leaves it). Not colon: a held-out exam's small-bowel gas loops beside the colon were
+    /// chained into it.
+    pub gas_filled_small_bowel: bool,
     /// A rectal catheter from the lower rectum out of the body through a perineum (the body
     /// then ends 4 mm above the first slice): colon gas joins the air outside in 3D.
     pub rectal_tube: bool,
@@ -90,6 +96,7 @@ impl Default for ColonOptions {
             fluid_filled: Vec::new(),
             narrowed: Vec::new(),
             opacified_small_bowel: false,
+            gas_filled_small_bowel: false,
             rectal_tube: false,
             anal_canal: false,
             tagged_stool: false,
@@ -146,6 +153,11 @@ pub(super) fn check_options(opts: &ColonOptions) -> Result<()> {
         }
         Ok(())
     };
+    if opts.opacified_small_bowel && opts.gas_filled_small_bowel {
+        return Err(Error::invalid(
+            "the small-bowel loops hold contrast or gas, not both: ask for one",
+        ));
+    }
     if opts.anal_canal && !opts.rectal_tube {
         return Err(Error::invalid(
             "an anal canal holds gas round a rectal catheter: ask for the rectal tube too",

@@ -68,6 +68,11 @@ pub struct PhantomArgs {
     /// into a caecal pool of tagged fluid: one bright region with it.
     #[arg(long)]
     pub opacified_small_bowel: bool,
+    /// Colon only: the same small-bowel loops full of gas instead (one against the descending
+    /// colon, wall to wall; the terminal ileum's gas one with the caecum's through the
+    /// ileocaecal valve). Not colon.
+    #[arg(long, conflicts_with = "opacified_small_bowel")]
+    pub gas_filled_small_bowel: bool,
     /// Colon only: a rectal catheter that joins the colon's gas to the air outside the body
     /// (the body then ends in a perineum just above the first slice).
     #[arg(long)]
@@ -206,6 +211,7 @@ fn colon_options(a: &PhantomArgs) -> ColonOptions {
         fluid_filled: a.fluid_filled.clone(),
         narrowed: a.narrowed.clone(),
         opacified_small_bowel: a.opacified_small_bowel,
+        gas_filled_small_bowel: a.gas_filled_small_bowel,
         rectal_tube: a.rectal_tube,
         anal_canal: a.anal_canal,
         tagged_stool: a.tagged_stool,
