@@ -614,6 +614,39 @@ fn prepare_stored(
             plugged.len()
         ));
     }
+    // Gas through the ileocaecal valve: the centerline ran on from the cecum into the ileum,
+    // the colon's farthest gas. The ileum is cut off at the valve and left out, and the
+    // centerline traced again to the cecum (unless the user placed the end).
+    if cl_opts.target_mm.is_none()
+        && let Some((tail, ileum)) = small_bowel_beyond(&seg, &traced)
+    {
+        set_voxels(&mut seg.lumen, &traced.taken, 1);
+        if let Some(d) = traced.ds_box.take() {
+            kept.give_back(d);
+        }
+        kept.skeleton = traced.sk.forget_route();
+        match retrace_plugged(&mut seg, &mut kept, &cl_opts, opts, &mut laps, &ileum) {
+            Some(t) => {
+                let g = seg.lumen.geometry();
+                let at = g.local_to_patient(DVec3::from_array(
+                    traced.ends.centerline.points_mm[tail.from],
+                ));
+                seg.warnings.push(format!(
+                    "gas in the small bowel beyond the ileocaecal valve was left out ({:.0} ml): the colon's farthest gas lay {:.0} mm along a tube at most {:.0} mm wide that leaves the cecum at LPS ({:.0}, {:.0}, {:.0}); the centerline now ends in the cecum. Give --target to end elsewhere",
+                    ileum.len() as f64 * g.spacing.iter().product::<f64>() / 1000.0,
+                    tail.length_mm,
+                    2.0 * tail.tube_mm,
+                    at.x,
+                    at.y,
+                    at.z
+                ));
+                plugged.extend(ileum);
+                traced = t;
+            }
+            None => {}
+        }
+        set_voxels(&mut seg.lumen, &traced.taken, 0);
+    }
     let Traced {
         mut sk,
         mut ends,
@@ -1216,6 +1249,80 @@ struct NarrowTail {
     /// Its widest radius, and the widest within [`CHAMBER_MM`] before it.
     tube_mm: f64,
     chamber_mm: f64,
+}
+
+/// Where the centerline `traced` ran on from the cecum into small bowel ([`narrow_tail`],
+/// leaving a chamber low on the right): the tail, and the lumen voxels beyond its valve
+/// (ascending). A ball across the tube, [`VALVE_CUT`] tube radii wide, two radii past where
+/// the tail begins, cuts the lumen; what the source no longer reaches, with the ball, is
+/// the small bowel. None where the cut would take more than half of the lumen.
+fn small_bowel_beyond(seg: &Segmentation, traced: &Traced) -> Option<(NarrowTail, Vec<usize>)> {
+    let cl = &traced.ends.centerline;
+    let tail = narrow_tail(cl)?;
+    let g = seg.lumen.geometry();
+    let at = g.local_to_patient(DVec3::from_array(cl.points_mm[tail.from]));
+    if !right_lower(seg, at) {
+        return None;
+    }
+    let past = cl.arc_mm[tail.from] + 2.0 * tail.tube_mm;
+    let k = cl
+        .arc_mm
+        .partition_point(|&a| a < past)
+        .min(cl.arc_mm.len() - 1);
+    let centre = DVec3::from_array(cl.points_mm[k]);
+    let radius = VALVE_CUT * tail.tube_mm;
+    let lumen = seg.lumen.data();
+    // The flood works in the lumen's box: every lumen voxel lies in it.
+    let [lo, hi] = seg.extent;
+    let w = [0, 1, 2].map(|a| hi[a] - lo[a] + 1);
+    let volume = |b: usize| {
+        g.index(
+            lo[0] + b % w[0],
+            lo[1] + (b / w[0]) % w[1],
+            lo[2] + b / (w[0] * w[1]),
+        )
+    };
+    let open = |b: usize| {
+        let v = volume(b);
+        lumen[v] != 0 && centerline::mm_of(&seg.lumen, g.ijk(v)).distance(centre) > radius
+    };
+    // A flood of the lumen from the source, round the ball.
+    let s = traced.ends.source;
+    let first = (s[0] - lo[0]) + w[0] * ((s[1] - lo[1]) + w[1] * (s[2] - lo[2]));
+    let mut reached = vec![false; w[0] * w[1] * w[2]];
+    reached[first] = true;
+    let mut queue = vec![first];
+    while let Some(b) = queue.pop() {
+        for n in crate::volume::face_neighbours(w, b).into_iter().flatten() {
+            if !reached[n] && open(n) {
+                reached[n] = true;
+                queue.push(n);
+            }
+        }
+    }
+    let (mut beyond, mut kept) = (Vec::new(), 0usize);
+    for (b, &r) in reached.iter().enumerate() {
+        let v = volume(b);
+        if r {
+            kept += 1;
+        } else if lumen[v] != 0 {
+            beyond.push(v);
+        }
+    }
+    beyond.sort_unstable();
+    (kept > beyond.len() && !beyond.is_empty()).then_some((tail, beyond))
+}
+
+/// How wide (tube radii) the ball that cuts the small bowel off at its valve is.
+const VALVE_CUT: f64 = 1.5;
+
+/// Whether patient point `p` lies on the patient's right and low in the colon's box, where
+/// the cecum lies.
+fn right_lower(seg: &Segmentation, p: DVec3) -> bool {
+    let g = seg.lumen.geometry();
+    let [a, b] = g.patient_box(seg.extent[0], seg.extent[1]);
+    let span = (b - a).max(DVec3::splat(1.0));
+    (p.x - a.x) / span.x <= 0.5 && (p.z - a.z) / span.z <= 0.6
 }
 
 /// A narrow tail is at least this long (mm): a small-bowel loop, not the end of a segment.
