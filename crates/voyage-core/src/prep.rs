@@ -538,6 +538,37 @@ fn prepare_stored(
         }
         Err(e) => return Err(e),
     };
+    let mut small_bowel: Vec<usize> = Vec::new();
+    // Gas through the ileocaecal valve: the centerline ran on from the cecum into the ileum,
+    // the colon's farthest gas. The ileum is cut off at the valve and left out, and the
+    // centerline traced again to the cecum (unless the user placed the end).
+    if cl_opts.target_mm.is_none()
+        && let Some((tail, ileum)) = small_bowel_beyond(&seg, &traced)
+    {
+        set_voxels(&mut seg.lumen, &traced.taken, 1);
+        if let Some(d) = traced.ds_box.take() {
+            kept.give_back(d);
+        }
+        kept.skeleton = traced.sk.forget_route();
+        if let Some(t) = retrace_plugged(&mut seg, &mut kept, &cl_opts, opts, &mut laps, &ileum) {
+            let g = seg.lumen.geometry();
+            let at = g.local_to_patient(DVec3::from_array(
+                traced.ends.centerline.points_mm[tail.from],
+            ));
+            seg.warnings.push(format!(
+                "gas in the small bowel beyond the ileocaecal valve was left out ({:.0} ml): the colon's farthest gas lay {:.0} mm along a tube at most {:.0} mm wide that leaves the cecum at LPS ({:.0}, {:.0}, {:.0}); the centerline now ends in the cecum. Give --target to end elsewhere",
+                ileum.len() as f64 * g.spacing.iter().product::<f64>() / 1000.0,
+                tail.length_mm,
+                2.0 * tail.tube_mm,
+                at.x,
+                at.y,
+                at.z
+            ));
+            small_bowel = ileum;
+            traced = t;
+        }
+        set_voxels(&mut seg.lumen, &traced.taken, 0);
+    }
     // Holes between touching loops that the centerline went through: plugged, traced again
     // (a hole plugged can show the next).
     let mut plugged: Vec<usize> = Vec::new();
@@ -614,39 +645,6 @@ fn prepare_stored(
             plugged.len()
         ));
     }
-    // Gas through the ileocaecal valve: the centerline ran on from the cecum into the ileum,
-    // the colon's farthest gas. The ileum is cut off at the valve and left out, and the
-    // centerline traced again to the cecum (unless the user placed the end).
-    if cl_opts.target_mm.is_none()
-        && let Some((tail, ileum)) = small_bowel_beyond(&seg, &traced)
-    {
-        set_voxels(&mut seg.lumen, &traced.taken, 1);
-        if let Some(d) = traced.ds_box.take() {
-            kept.give_back(d);
-        }
-        kept.skeleton = traced.sk.forget_route();
-        match retrace_plugged(&mut seg, &mut kept, &cl_opts, opts, &mut laps, &ileum) {
-            Some(t) => {
-                let g = seg.lumen.geometry();
-                let at = g.local_to_patient(DVec3::from_array(
-                    traced.ends.centerline.points_mm[tail.from],
-                ));
-                seg.warnings.push(format!(
-                    "gas in the small bowel beyond the ileocaecal valve was left out ({:.0} ml): the colon's farthest gas lay {:.0} mm along a tube at most {:.0} mm wide that leaves the cecum at LPS ({:.0}, {:.0}, {:.0}); the centerline now ends in the cecum. Give --target to end elsewhere",
-                    ileum.len() as f64 * g.spacing.iter().product::<f64>() / 1000.0,
-                    tail.length_mm,
-                    2.0 * tail.tube_mm,
-                    at.x,
-                    at.y,
-                    at.z
-                ));
-                plugged.extend(ileum);
-                traced = t;
-            }
-            None => {}
-        }
-        set_voxels(&mut seg.lumen, &traced.taken, 0);
-    }
     let Traced {
         mut sk,
         mut ends,
@@ -657,7 +655,11 @@ fn prepare_stored(
     // The fluid beside the columns is lumen again, but for the holes plugged and the
     // contacts cut in it.
     plugged.sort_unstable();
-    beside.retain(|v| plugged.binary_search(v).is_err() && taken.binary_search(v).is_err());
+    beside.retain(|v| {
+        plugged.binary_search(v).is_err()
+            && taken.binary_search(v).is_err()
+            && small_bowel.binary_search(v).is_err()
+    });
     if !beside.is_empty() {
         set_voxels(&mut seg.lumen, &beside, 1);
         seg.lumen_voxels += beside.len();
