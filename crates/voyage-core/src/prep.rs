@@ -542,7 +542,9 @@ fn prepare_stored(
     // Gas through the ileocaecal valve: the centerline ran on from the cecum into the ileum,
     // the colon's farthest gas. The ileum is cut off at the valve and left out, and the
     // centerline traced again to the cecum (unless the user placed the end).
-    if cl_opts.target_mm.is_none()
+    // The segmentation's cecum may be the ileum's gas too, where it was chained in as a
+    // compartment of its own: the end is then the centerline's farthest point.
+    if opts.centerline.target_mm.is_none()
         && let Some((tail, ileum)) = small_bowel_beyond(&seg, &traced)
     {
         set_voxels(&mut seg.lumen, &traced.taken, 1);
@@ -550,6 +552,7 @@ fn prepare_stored(
             kept.give_back(d);
         }
         kept.skeleton = traced.sk.forget_route();
+        let cecum = cl_opts.target_mm.take();
         if let Some(t) = retrace_plugged(&mut seg, &mut kept, &cl_opts, opts, &mut laps, &ileum) {
             let g = seg.lumen.geometry();
             let at = g.local_to_patient(DVec3::from_array(
@@ -564,8 +567,12 @@ fn prepare_stored(
                 at.y,
                 at.z
             ));
+            seg.leave_out_segments_in(&ileum, "small bowel beyond the ileocaecal valve");
+            seg.cecum_voxel = None;
             small_bowel = ileum;
             traced = t;
+        } else {
+            cl_opts.target_mm = cecum;
         }
         set_voxels(&mut seg.lumen, &traced.taken, 0);
     }

@@ -260,6 +260,35 @@ impl SmallBowel {
         }
         self
     }
+
+    /// The terminal ileum stopped short of the caecum: its lumen and wall end `margin` mm
+    /// outside the colon's wall (`colon_wall` mm thick) at the valve, so that its content is
+    /// apart from the caecum's (a competent valve).
+    pub fn closed_at_the_valve(mut self, colon_wall: f64, margin: f64) -> SmallBowel {
+        let v = self.valve.point;
+        let ileum = self.loops.last().expect("the terminal ileum");
+        let keep_out = ileum.radius_mm + ileum.wall_mm + colon_wall + margin;
+        self.blobs.retain(|b| {
+            b.kind != BlobKind::Loop
+                || b.stalk
+                    .is_none_or(|(a, c, _)| super::tube::segment_distance(v, a, c) >= keep_out)
+        });
+        let ileum = self.loops.last_mut().expect("the terminal ileum");
+        while ileum
+            .axis_mm
+            .last()
+            .is_some_and(|&p| DVec3::from_array(p).distance(v) < keep_out)
+        {
+            ileum.axis_mm.pop();
+        }
+        ileum.length_mm = ileum
+            .axis_mm
+            .windows(2)
+            .map(|w| DVec3::from_array(w[0]).distance(DVec3::from_array(w[1])))
+            .sum();
+        ileum.enters_cecum = false;
+        self
+    }
 }
 
 /// Which tube knot `i` belongs to.

@@ -658,6 +658,21 @@ fn gas_filled_small_bowel_opens_into_the_caecum() {
             "small {small_size}, prone {prone}: the loops' gas does not reach the colon's"
         );
     }
+    // With the valve closed, the ileum ends short of the caecum: its gas is apart.
+    let p = small(ColonOptions {
+        gas_filled_small_bowel: true,
+        closed_ileocaecal_valve: true,
+        ..ColonOptions::default()
+    });
+    check_basics(&p);
+    let t = &p.truth;
+    assert!(!t.small_bowel_loops[2].enters_cecum);
+    let far_end = voxel(&p.labels, t.small_bowel_loops[0].axis_mm[0]);
+    let gas = flood6(p.labels.dims(), [far_end], |i| p.ct.data()[i] < -500);
+    assert!(
+        (0..gas.len()).all(|i| !gas[i] || p.lumen.data()[i] == 0),
+        "the loops' gas reaches the colon's through a closed valve"
+    );
 }
 
 // ---------------------------------------------------------------------------------------

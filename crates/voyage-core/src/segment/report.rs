@@ -93,6 +93,51 @@ impl Segmentation {
         }
     }
 
+    /// The colon segments whose gas lies in `voxels` (volume indices, ascending: taken out of
+    /// the lumen after segmentation, as small bowel beyond the ileocaecal valve) are left out
+    /// with `why`; the gaps bridged to them go, with their warnings. Returns how many.
+    /// (A gap's warning names its segments: it is matched before they are renamed.)
+    pub(crate) fn leave_out_segments_in(&mut self, voxels: &[usize], why: &str) -> usize {
+        let geom = self.lumen.geometry().clone();
+        let inside = |s: &SegmentReport| {
+            let ijk = geom
+                .patient_to_index(DVec3::from_array(s.anchor_lps_mm))
+                .round();
+            (0..3).all(|a| ijk[a] >= 0.0 && (ijk[a] as usize) < geom.dims[a])
+                && voxels
+                    .binary_search(&geom.index(ijk.x as usize, ijk.y as usize, ijk.z as usize))
+                    .is_ok()
+        };
+        let gone: Vec<usize> = self
+            .segments
+            .iter()
+            .filter(|s| s.kept && inside(s))
+            .filter_map(|s| s.order)
+            .collect();
+        let to_gone: Vec<usize> = (0..self.gaps.len())
+            .filter(|&g| self.gaps[g].between.iter().any(|o| gone.contains(o)))
+            .collect();
+        let said: Vec<String> = to_gone.iter().map(|&g| self.gap_warning_now(g)).collect();
+        self.warnings.retain(|w| !said.contains(w));
+        for &g in to_gone.iter().rev() {
+            self.gaps.remove(g);
+        }
+        for s in &mut self.segments {
+            if s.order.is_some_and(|o| gone.contains(&o)) {
+                s.kept = false;
+                s.kind = ComponentKind::SmallBowel;
+                s.label = ComponentKind::SmallBowel.name().into();
+                s.order = None;
+                s.reason = Some(why.into());
+            }
+        }
+        // The last segment is another now, entered elsewhere: it keeps the name it has.
+        if !gone.is_empty() {
+            self.last_segment = None;
+        }
+        gone.len()
+    }
+
     /// Gap `g` changed by `change` (its length, what filled it, a segment's name), and its
     /// warning said again as it now reads.
     fn rewarn_gap(&mut self, g: usize, change: impl FnOnce(&mut Self)) {

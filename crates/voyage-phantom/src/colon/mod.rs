@@ -188,10 +188,13 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
         None
     };
     let bowel = bowel.map(|b| {
-        if opts.gas_filled_small_bowel {
-            b.filled_with_gas()
-        } else {
+        if !opts.gas_filled_small_bowel {
             b
+        } else if opts.closed_ileocaecal_valve {
+            b.filled_with_gas()
+                .closed_at_the_valve(tube.wall_mm, 2.0 * frame.max_spacing())
+        } else {
+            b.filled_with_gas()
         }
     });
     let pools = make_pools(

@@ -73,6 +73,10 @@ pub struct PhantomArgs {
     /// ileocaecal valve). Not colon.
     #[arg(long, conflicts_with = "opacified_small_bowel")]
     pub gas_filled_small_bowel: bool,
+    /// Colon only, with --gas-filled-small-bowel: the terminal ileum ends short of the
+    /// caecum, its gas apart from the colon's (loops of gas beside the colon).
+    #[arg(long, requires = "gas_filled_small_bowel")]
+    pub closed_ileocaecal_valve: bool,
     /// Colon only: a rectal catheter that joins the colon's gas to the air outside the body
     /// (the body then ends in a perineum just above the first slice).
     #[arg(long)]
@@ -212,6 +216,7 @@ fn colon_options(a: &PhantomArgs) -> ColonOptions {
         narrowed: a.narrowed.clone(),
         opacified_small_bowel: a.opacified_small_bowel,
         gas_filled_small_bowel: a.gas_filled_small_bowel,
+        closed_ileocaecal_valve: a.closed_ileocaecal_valve,
         rectal_tube: a.rectal_tube,
         anal_canal: a.anal_canal,
         tagged_stool: a.tagged_stool,
