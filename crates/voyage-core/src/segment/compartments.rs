@@ -40,6 +40,11 @@ pub enum Role {
     Major,
     /// Big enough for a segment; colon where it lies on the colon's way.
     Minor,
+    /// Large gas where the stomach lies (high on the left): the stomach, or a splenic flexure
+    /// cut off by collapses of the descending and transverse colon. A minor that is colon
+    /// also where it joins two of the colon's compartments through collapsed bowel on both
+    /// sides ([`chain`](super::chain)): a stomach does not.
+    Upper,
     /// Too small, or excluded.
     Out,
 }
@@ -397,11 +402,12 @@ fn roles(
         .map(|c| {
             if !candidate(c) && c != rectum {
                 Role::Out
-            } else if big(c)
-                && !stomach_like(&comps[c as usize], geom, &all)
-                && !flat(&comps[c as usize], geom)
-            {
-                Role::Major
+            } else if big(c) && !flat(&comps[c as usize], geom) {
+                if stomach_like(&comps[c as usize], geom, &all) {
+                    Role::Upper
+                } else {
+                    Role::Major
+                }
             } else {
                 Role::Minor
             }
