@@ -555,19 +555,28 @@ fn prepare_stored(
         let cecum = cl_opts.target_mm.take();
         if let Some(t) = retrace_plugged(&mut seg, &mut kept, &cl_opts, opts, &mut laps, &ileum) {
             let g = seg.lumen.geometry();
+            let ml = ileum.len() as f64 * g.spacing.iter().product::<f64>() / 1000.0;
             let at = g.local_to_patient(DVec3::from_array(
                 traced.ends.centerline.points_mm[tail.from],
             ));
             seg.warnings.push(format!(
                 "gas in the small bowel beyond the ileocaecal valve was left out ({:.0} ml): the colon's farthest gas lay {:.0} mm along a tube at most {:.0} mm wide that leaves the cecum at LPS ({:.0}, {:.0}, {:.0}); the centerline now ends in the cecum. Give --target to end elsewhere",
-                ileum.len() as f64 * g.spacing.iter().product::<f64>() / 1000.0,
+                ml,
                 tail.length_mm,
                 2.0 * tail.tube_mm,
                 at.x,
                 at.y,
                 at.z
             ));
-            seg.leave_out_segments_in(&ileum, "small bowel beyond the ileocaecal valve");
+            let chamber = traced.ends.centerline.points_mm[tail.chamber_at];
+            seg.leave_out_beyond_the_cecum(
+                &ileum,
+                ml,
+                seg.lumen
+                    .geometry()
+                    .local_to_patient(DVec3::from_array(chamber)),
+                "small bowel beyond the ileocaecal valve",
+            );
             seg.cecum_voxel = None;
             small_bowel = ileum;
             traced = t;
@@ -1255,9 +1264,11 @@ struct NarrowTail {
     /// The centerline point where it starts.
     from: usize,
     length_mm: f64,
-    /// Its widest radius, and the widest within [`CHAMBER_MM`] before it.
+    /// Its widest radius, and the widest within [`CHAMBER_MM`] before it, at point
+    /// `chamber_at`.
     tube_mm: f64,
     chamber_mm: f64,
+    chamber_at: usize,
 }
 
 /// Where the centerline `traced` ran on from the cecum into small bowel ([`narrow_tail`],
@@ -1362,13 +1373,19 @@ fn narrow_tail(cl: &Centerline) -> Option<NarrowTail> {
             continue;
         }
         let before = arc.partition_point(|&a| a < arc[i] - CHAMBER_MM);
-        let chamber = radius[before..i].iter().cloned().fold(0.0, f64::max);
+        let Some((chamber_at, chamber)) = (before..i)
+            .map(|n| (n, radius[n]))
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+        else {
+            continue;
+        };
         if tube <= TAIL_SHARE * chamber {
             found = Some(NarrowTail {
                 from: i,
                 length_mm: length - arc[i],
                 tube_mm: tube,
                 chamber_mm: chamber,
+                chamber_at,
             });
         } else if found.is_some() {
             break;

@@ -613,6 +613,20 @@ fn gas_in_the_small_bowel_beyond_the_cecum_is_left_out() {
             small_bowel * 100 <= ours,
             "{name}: {small_bowel} voxels of small-bowel gas in a lumen of {ours}"
         );
+        // The colon's gas is counted without the ileum's.
+        let voxel_ml = p.ct.geometry().spacing.iter().product::<f64>() / 1000.0;
+        let colon_ml: f64 = s
+            .segmentation
+            .segments
+            .iter()
+            .filter(|x| x.kept)
+            .map(|x| x.gas_ml)
+            .sum();
+        let truth_ml = t.lumen_voxels as f64 * voxel_ml;
+        assert!(
+            colon_ml <= 1.05 * truth_ml,
+            "{name}: {colon_ml:.0} ml of colon gas, {truth_ml:.0} ml of lumen in truth"
+        );
         assert!(
             s.segmentation
                 .warnings

@@ -93,49 +93,61 @@ impl Segmentation {
         }
     }
 
-    /// The colon segments whose gas lies in `voxels` (volume indices, ascending: taken out of
-    /// the lumen after segmentation, as small bowel beyond the ileocaecal valve) are left out
-    /// with `why`; the gaps bridged to them go, with their warnings. Returns how many.
-    /// (A gap's warning names its segments: it is matched before they are renamed.)
-    pub(crate) fn leave_out_segments_in(&mut self, voxels: &[usize], why: &str) -> usize {
+    /// Small bowel beyond the ileocaecal valve was taken out of the lumen after segmentation:
+    /// `voxels` (volume indices, ascending), `ml` of it, out of the colon's last segment.
+    /// Where that segment is the small bowel's own (its lowest gas among the voxels, and
+    /// little more gas than they hold), it is left out with `why`, and the gap bridged to it
+    /// goes with its warning (matched before the names change). Otherwise the segment keeps
+    /// the rest of its gas, and its point for `--seed` moves to `cecum_lps` where it lay in
+    /// the small bowel.
+    pub(crate) fn leave_out_beyond_the_cecum(
+        &mut self,
+        voxels: &[usize],
+        ml: f64,
+        cecum_lps: DVec3,
+        why: &str,
+    ) {
         let geom = self.lumen.geometry().clone();
-        let inside = |s: &SegmentReport| {
-            let ijk = geom
-                .patient_to_index(DVec3::from_array(s.anchor_lps_mm))
-                .round();
-            (0..3).all(|a| ijk[a] >= 0.0 && (ijk[a] as usize) < geom.dims[a])
-                && voxels
-                    .binary_search(&geom.index(ijk.x as usize, ijk.y as usize, ijk.z as usize))
-                    .is_ok()
+        let Some(last) = (0..self.segments.len())
+            .filter(|&i| self.segments[i].kept)
+            .max_by_key(|&i| self.segments[i].order)
+        else {
+            return;
         };
-        let gone: Vec<usize> = self
-            .segments
-            .iter()
-            .filter(|s| s.kept && inside(s))
-            .filter_map(|s| s.order)
-            .collect();
+        let Some(order) = self.segments[last].order else {
+            return;
+        };
+        let ijk = geom
+            .patient_to_index(DVec3::from_array(self.segments[last].anchor_lps_mm))
+            .round();
+        let anchored_there = (0..3).all(|a| ijk[a] >= 0.0 && (ijk[a] as usize) < geom.dims[a])
+            && voxels
+                .binary_search(&geom.index(ijk.x as usize, ijk.y as usize, ijk.z as usize))
+                .is_ok();
+        if !anchored_there || self.segments[last].gas_ml > OWN_SHARE * ml {
+            let s = &mut self.segments[last];
+            s.gas_ml = (s.gas_ml - ml).max(0.0);
+            if anchored_there {
+                s.anchor_lps_mm = cecum_lps.to_array();
+            }
+            return;
+        }
         let to_gone: Vec<usize> = (0..self.gaps.len())
-            .filter(|&g| self.gaps[g].between.iter().any(|o| gone.contains(o)))
+            .filter(|&g| self.gaps[g].between.contains(&order))
             .collect();
         let said: Vec<String> = to_gone.iter().map(|&g| self.gap_warning_now(g)).collect();
         self.warnings.retain(|w| !said.contains(w));
         for &g in to_gone.iter().rev() {
             self.gaps.remove(g);
         }
-        for s in &mut self.segments {
-            if s.order.is_some_and(|o| gone.contains(&o)) {
-                s.kept = false;
-                s.kind = ComponentKind::SmallBowel;
-                s.label = ComponentKind::SmallBowel.name().into();
-                s.order = None;
-                s.reason = Some(why.into());
-            }
-        }
+        let s = &mut self.segments[last];
+        s.kept = false;
+        s.kind = ComponentKind::SmallBowel;
+        s.label = ComponentKind::SmallBowel.name().into();
+        s.order = None;
+        s.reason = Some(why.into());
         // The last segment is another now, entered elsewhere: it keeps the name it has.
-        if !gone.is_empty() {
-            self.last_segment = None;
-        }
-        gone.len()
+        self.last_segment = None;
     }
 
     /// Gap `g` changed by `change` (its length, what filled it, a segment's name), and its
@@ -163,6 +175,10 @@ impl Segmentation {
         gap_warning(gap, label(gap.between[0]), label(gap.between[1]))
     }
 }
+
+/// A last segment with at most this many times the gas taken out beyond the cecum is the
+/// small bowel's own compartment.
+const OWN_SHARE: f64 = 1.25;
 
 /// The reports of the colon chained in `chained` from `parts` and of everything else `found`
 /// holds; `gap_voxels`: per gap, the lumen voxels its bridge added.
