@@ -152,6 +152,13 @@ pub struct Path {
     pub mean_cost: f64,
 }
 
+impl Path {
+    /// Its whole cost: its length at its mean cost per mm.
+    pub fn cost(&self) -> f64 {
+        self.length_mm * self.mean_cost
+    }
+}
+
 /// Where the cheapest path is looked for: around both ends, and a pool's depth further
 /// along gravity.
 ///

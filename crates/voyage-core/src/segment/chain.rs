@@ -157,6 +157,22 @@ pub(super) fn colon(
     }
 }
 
+impl Chain {
+    /// Compartment `comp`, entered and left at `ends`, taken into gap `g` in place of its
+    /// bridge: `bridges` lead to it and on from it.
+    fn take_into_gap(&mut self, g: usize, bridges: [Path; 2], comp: u32, ends: [usize; 2]) {
+        self.gaps.splice(g..=g, bridges);
+        self.links.insert(
+            g + 1,
+            Link {
+                comp,
+                entry: ends[0],
+                exit: ends[1],
+            },
+        );
+    }
+}
+
 impl Chained {
     /// The gas of the chained compartments (ml).
     pub(super) fn gas_ml(&self, parts: &Compartments) -> f64 {
@@ -507,7 +523,7 @@ fn take_in_on_the_way(
             .filter(|&(d, _)| d <= straight + (DETOUR * straight).max(DETOUR_MIN_MM))
             .collect();
         near.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
-        let direct = ch.gaps[g].length_mm * ch.gaps[g].mean_cost;
+        let direct = ch.gaps[g].cost();
         let mut taken = false;
         for &(_, m) in near.iter().take(CANDIDATES) {
             let of_m = &blocks[m as usize];
@@ -521,17 +537,8 @@ fn take_in_on_the_way(
             ) else {
                 continue;
             };
-            let via = p1.length_mm * p1.mean_cost + p2.length_mm * p2.mean_cost;
-            if via <= DETOUR_COST * direct {
-                ch.gaps.splice(g..=g, [p1, p2]);
-                ch.links.insert(
-                    g + 1,
-                    Link {
-                        comp: m,
-                        entry: m_in,
-                        exit: m_out,
-                    },
-                );
+            if p1.cost() + p2.cost() <= DETOUR_COST * direct {
+                ch.take_into_gap(g, [p1, p2], m, [m_in, m_out]);
                 free.retain(|&x| x != m);
                 taken = true;
                 break;
@@ -569,7 +576,7 @@ fn take_in_between(
         if direct.mean_cost <= COLLAPSED_COST {
             continue;
         }
-        let direct = direct.length_mm * direct.mean_cost;
+        let direct = direct.cost();
         let (a, b) = (ch.links[g].clone(), ch.links[g + 1].clone());
         let Some((a_exit, m_in)) = facing_ends(coarse, blocks, &a, m) else {
             continue;
@@ -589,22 +596,13 @@ fn take_in_between(
             continue;
         };
         let cheap = |p: &Path| p.mean_cost <= COLLAPSED_COST;
-        let via = p1.length_mm * p1.mean_cost + p2.length_mm * p2.mean_cost;
-        if (cheap(&p1) || cheap(&p2)) && via < direct {
+        if (cheap(&p1) || cheap(&p2)) && p1.cost() + p2.cost() < direct {
             ch.links[g].exit = a_exit;
             if ch.links[g + 1].exit == ch.links[g + 1].entry {
                 ch.links[g + 1].exit = b_in;
             }
             ch.links[g + 1].entry = b_in;
-            ch.gaps.splice(g..=g, [p1, p2]);
-            ch.links.insert(
-                g + 1,
-                Link {
-                    comp: m,
-                    entry: m_in,
-                    exit: m_out,
-                },
-            );
+            ch.take_into_gap(g, [p1, p2], m, [m_in, m_out]);
             return true;
         }
     }
@@ -661,7 +659,7 @@ fn extend_tail(
             tried.push(c);
             match bridge(exit, e, at_comp, c) {
                 Some(p) if p.mean_cost <= opts.max_bridge_cost => {
-                    let cost = p.length_mm * p.mean_cost;
+                    let cost = p.cost();
                     if best.as_ref().is_none_or(|b| cost < b.0) {
                         best = Some((cost, c, e, p));
                     }
