@@ -1222,9 +1222,9 @@ fn anatomical_checks(
     let [a, b] = g.patient_box(seg.extent[0], seg.extent[1]);
     let span = (b - a).max(DVec3::splat(1.0));
     // u: 0 at the patient's right of the colon's box, 1 at its left; v: 0 lowest, 1 highest.
-    let place_mm = |p: DVec3| ((p.x - a.x) / span.x, (p.z - a.z) / span.z, p);
     let place = |v: [usize; 3]| {
-        place_mm(g.index_to_patient(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64)))
+        let p = g.index_to_patient(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64));
+        ((p.x - a.x) / span.x, (p.z - a.z) / span.z, p)
     };
     let mut out = Vec::new();
     let (u, v, p) = place(source);
@@ -1234,16 +1234,20 @@ fn anatomical_checks(
             p.x, p.y, p.z
         ));
     }
-    let (u, v, p) = place(target);
-    if check_target && (u > 0.5 || v > 0.6) {
+    let p = g.index_to_patient(DVec3::new(
+        target[0] as f64,
+        target[1] as f64,
+        target[2] as f64,
+    ));
+    if check_target && !right_lower(seg, p) {
         out.push(format!(
             "the colon's far end (LPS {:.0}, {:.0}, {:.0}) is not in the right lower quadrant, where the cecum lies: part of the colon may be missing; give --target to end elsewhere",
             p.x, p.y, p.z
         ));
     }
     if let Some(tail) = narrow_tail(cl).filter(|_| check_target) {
-        let (u, v, p) = place_mm(g.local_to_patient(DVec3::from_array(cl.points_mm[tail.from])));
-        if u <= 0.5 && v <= 0.6 {
+        let p = g.local_to_patient(DVec3::from_array(cl.points_mm[tail.from]));
+        if right_lower(seg, p) {
             out.push(format!(
                 "the colon's far end may lie in small bowel: the centerline's last {:.0} mm, from LPS ({:.0}, {:.0}, {:.0}) where it leaves a chamber {:.0} mm wide low on the right (the cecum), are a tube at most {:.0} mm wide, as the ileum is beyond the ileocaecal valve with gas through it; the flight would end there. Give --target at the cecum's pole",
                 tail.length_mm,
@@ -1259,7 +1263,7 @@ fn anatomical_checks(
 }
 
 /// A centerline's last stretch narrower than the lumen before it: see [`narrow_tail`].
-#[derive(Debug, PartialEq)]
+#[derive(Debug)]
 struct NarrowTail {
     /// The centerline point where it starts.
     from: usize,
@@ -1337,7 +1341,7 @@ fn small_bowel_beyond(seg: &Segmentation, traced: &Traced) -> Option<(NarrowTail
 const VALVE_CUT: f64 = 1.5;
 
 /// Whether patient point `p` lies on the patient's right and low in the colon's box, where
-/// the cecum lies.
+/// the cecum lies (the automatic end, and where small bowel leaves it, are checked by it).
 fn right_lower(seg: &Segmentation, p: DVec3) -> bool {
     let g = seg.lumen.geometry();
     let [a, b] = g.patient_box(seg.extent[0], seg.extent[1]);

@@ -200,6 +200,23 @@ impl TubeHit {
 }
 
 impl Tube {
+    /// Whether the stretch of arc within `margin` mm of `s` misses every collapse (with its
+    /// tapers): where something placed on the wall keeps clear of them.
+    pub fn clear_of_collapses(&self, s: f64, margin: f64) -> bool {
+        self.collapse
+            .iter()
+            .all(|c| s + margin < c.start - c.taper || s - margin > c.end + c.taper)
+    }
+
+    /// ... and every stretch filled with fluid.
+    pub fn clear_of_stretches(&self, s: f64, margin: f64) -> bool {
+        self.clear_of_collapses(s, margin)
+            && self
+                .filled
+                .iter()
+                .all(|f| s + margin < f.start || s - margin > f.end)
+    }
+
     pub fn new(axis: Axis, wall_mm: f64, ends: Ends) -> Tube {
         let nseg = axis.len().saturating_sub(1);
         let seg_a: Vec<DVec3> = axis.points[..nseg].to_vec();

@@ -42,8 +42,9 @@ pub enum Role {
     Minor,
     /// Large gas where the stomach lies (high on the left): the stomach, or a splenic flexure
     /// cut off by collapses of the descending and transverse colon. A minor that is colon
-    /// also where it joins two of the colon's compartments through collapsed bowel on both
-    /// sides ([`chain`](super::chain)): a stomach does not.
+    /// also where it joins the two compartments of a gap the chain jumped across fat, through
+    /// collapsed bowel on one side at least ([`chain`](super::chain)): a stomach does not lie
+    /// between two of the colon's stumps.
     Upper,
     /// Too small, or excluded.
     Out,

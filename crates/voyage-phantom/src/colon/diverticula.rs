@@ -73,14 +73,7 @@ pub(super) fn make_diverticula(
                 let clear = other_loops
                     && polyps.iter().all(|p| along(p.arc_mm, FROM_POLYP_MM))
                     && out.iter().all(|(_, t)| along(t.arc_mm, APART_MM))
-                    && tube
-                        .collapse
-                        .iter()
-                        .all(|c| arc + reach < c.start - c.taper || arc - reach > c.end + c.taper)
-                    && tube
-                        .filled
-                        .iter()
-                        .all(|f| arc + reach < f.start || arc - reach > f.end)
+                    && tube.clear_of_stretches(arc, reach)
                     && obstacles.iter().all(|&(a, b, r)| {
                         segment_distance(center, a, b) - r - reach >= CLEAR_MM * s
                     });

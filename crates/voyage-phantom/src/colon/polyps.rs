@@ -66,10 +66,7 @@ pub(super) fn make_polyps(
                 at = 0.5 * (a + b);
             }
             let d = fit_diameter(wanted, stalk, tube.axis.radius_at(at));
-            let clear_collapse = tube
-                .collapse
-                .iter()
-                .all(|c| at + d < c.start - c.taper || at - d > c.end + c.taper);
+            let clear_collapse = tube.clear_of_collapses(at, d);
             let clear_polyps = specs.iter().all(|o| (o.arc - at).abs() > 20.0 * s);
             if clear_collapse && clear_polyps && at > seg.start_arc_mm && at < seg.end_arc_mm {
                 spec = Some(PolypSpec {

@@ -51,14 +51,7 @@ pub(super) fn make_stool(
                     .max(2.0 * frame.max_spacing());
                 let clear = polyps.iter().all(|p| (p.arc_mm - at).abs() > 15.0 * s)
                     && out.iter().all(|(_, t)| (t.arc_mm - at).abs() > 10.0 * s)
-                    && tube
-                        .collapse
-                        .iter()
-                        .all(|c| at + d < c.start - c.taper || at - d > c.end + c.taper)
-                    && tube
-                        .filled
-                        .iter()
-                        .all(|f| at + d < f.start || at - d > f.end);
+                    && tube.clear_of_stretches(at, d);
                 if clear && at > seg.start_arc_mm && at < seg.end_arc_mm {
                     spec = Some(PolypSpec {
                         arc: at,
