@@ -551,6 +551,65 @@ fn the_centerline_runs_down_the_anal_canal_and_the_flights_start_above_it() {
     }
 }
 
+/// Issue 34: the same catheter with its retention balloon inflated in the lowest rectum,
+/// wall to wall, as in the held-out prone exam with a balloon catheter: the gas of the anal
+/// canal, the balloon's air and the rectum's gas above it are three compartments. The chain
+/// joins them along the catheter, and says so (not "collapsed"); the centerline still runs
+/// down to the anus (≤ 25 mm), ends at the cecum (≤ 40 mm) at 0.8–1.2× the true length, and
+/// both flights reach their ends with no stall.
+#[test]
+fn a_retention_balloon_is_passed_and_the_centerline_starts_at_the_anus() {
+    let p = phantom::colon(&ColonOptions {
+        rectal_tube: true,
+        anal_canal: true,
+        rectal_balloon: true,
+        ..Default::default()
+    })
+    .unwrap();
+    let t = &p.truth;
+    let anus = DVec3::from_array(t.rectal_tube.as_ref().unwrap().anus_mm.unwrap());
+    let cecum = DVec3::from_array(*t.centerline_mm.last().unwrap());
+    let study = prepare(p.ct, &PrepOptions::default(), |_| {}).unwrap();
+    let seg = &study.segmentation;
+    let cl = &study.centerline;
+    let from_anus = DVec3::from_array(cl.points_mm[0]).distance(anus);
+    let from_cecum = DVec3::from_array(*cl.points_mm.last().unwrap()).distance(cecum);
+    let ratio = cl.length_mm / t.centerline_length_mm;
+    eprintln!(
+        "balloon: start {from_anus:.1} mm from the anus, end {from_cecum:.1} mm from the cecum, {ratio:.2}× the length; gaps {:?}; warnings {:?}",
+        seg.gaps
+            .iter()
+            .map(|g| (g.length_mm, g.at_catheter))
+            .collect::<Vec<_>>(),
+        seg.warnings
+    );
+    assert!(
+        from_anus <= 25.0,
+        "the centerline starts {from_anus:.1} mm from the anus"
+    );
+    assert!(
+        from_cecum <= 40.0,
+        "it ends {from_cecum:.1} mm from the cecum"
+    );
+    assert!((0.8..=1.2).contains(&ratio), "{ratio:.2}× the true length");
+    assert!(!seg.gaps.is_empty(), "the balloon kept no gas apart");
+    // The canal's gas below the rectum does not stretch the colon's frame: the gas under
+    // the balloon is the rectum's.
+    assert_eq!(seg.segments[0].label, "rectum");
+    assert!(
+        seg.gaps.iter().all(|g| g.at_catheter),
+        "a gap not at the catheter"
+    );
+    assert!(
+        seg.warnings.iter().all(|w| !w.contains("collapsed")),
+        "a collapse said where the balloon is"
+    );
+    let opts = FlightOptions::for_study(&study);
+    for f in flights(&study, &opts, "balloon") {
+        assert_eq!(f.stalls, 0, "{:?}: {} stalls", f.direction, f.stalls);
+    }
+}
+
 /// Angle (degrees) between y_body and −G within the plane across z_body: the best leveling
 /// can do when the view itself tilts.
 fn level_error(pose: &Pose, g: DVec3) -> Option<f64> {

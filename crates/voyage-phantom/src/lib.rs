@@ -76,6 +76,9 @@ pub mod label {
     pub const RECTAL_TUBE: u8 = 10;
     /// Tagged stool on the colon's wall (its air pockets included): lumen, to be cleansed.
     pub const STOOL: u8 = 11;
+    /// Air inside the rectal catheter's retention balloon: the rectum's space it holds open,
+    /// lumen.
+    pub const RECTAL_BALLOON: u8 = 12;
 
     /// (value, name) of every label, for the truth JSON.
     pub fn legend() -> Vec<(u8, String)> {
@@ -92,6 +95,7 @@ pub mod label {
             (SMALL_BOWEL_FLUID, "small_bowel_fluid"),
             (RECTAL_TUBE, "rectal_tube"),
             (STOOL, "tagged_stool"),
+            (RECTAL_BALLOON, "rectal_balloon"),
         ]
         .into_iter()
         .map(|(v, n)| (v, n.to_string()))

@@ -506,6 +506,21 @@ impl<B: Background> Scene<'_, B> {
                     (lum, lab) = (1, label::LUMEN_AIR);
                 }
             }
+            // Its balloon fills the rectum wall to wall: its air holds the rectum open (lumen),
+            // its skin keeps that air apart from the colon's above and below.
+            if let Some(bl) = c.balloon {
+                let (air, skin) = bl.sdfs(p);
+                if air.min(skin) < 0.5 / inv_w {
+                    let ba = ramp(air, inv_w);
+                    let bs = ramp(skin, inv_w).min(1.0 - ba);
+                    hu = ba * m.pocket_air + bs * c.hu + (1.0 - ba - bs) * hu;
+                    if air < 0.0 {
+                        (lum, lab) = (1, label::RECTAL_BALLOON);
+                    } else if skin < 0.0 {
+                        (lum, lab) = (0, label::WALL);
+                    }
+                }
+            }
             // The catheter displaces whatever is there: colon content, wall, tissue, outside
             // air. Its air is not colon lumen.
             let plastic_hu = c.hu;

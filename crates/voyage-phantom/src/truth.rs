@@ -243,6 +243,20 @@ pub struct RectalTubeTruth {
     /// Where the anal canal's gas round it opens in the skin (`anal_canal`): the anus.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub anus_mm: Option<[f64; 3]>,
+    /// Its retention balloon, if inflated (its air is label 12, lumen).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub balloon: Option<BalloonTruth>,
+}
+
+/// A rectal catheter's retention balloon: an ellipsoid of air round the rectum's axis.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct BalloonTruth {
+    pub center_mm: [f64; 3],
+    /// Across the rectum, and half its length along it.
+    pub radius_mm: f64,
+    pub half_length_mm: f64,
+    /// Its plastic skin, outside the radius.
+    pub wall_mm: f64,
 }
 
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]

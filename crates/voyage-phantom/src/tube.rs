@@ -549,6 +549,46 @@ pub struct Catheter {
     pub hu: f64,
     /// Gas round its lower part, if an anal canal is held open round it.
     pub canal: Option<Canal>,
+    /// Its retention balloon, if inflated.
+    pub balloon: Option<Balloon>,
+}
+
+/// A catheter's retention balloon: air in a plastic skin, an ellipsoid round the rectum's
+/// axis through `center` (`axis` a unit vector along it), `radius` across and `half_length`
+/// along, its skin `wall_mm` thick outside that.
+#[derive(Clone, Copy, Debug)]
+pub struct Balloon {
+    pub center: DVec3,
+    pub axis: DVec3,
+    pub radius: f64,
+    pub half_length: f64,
+    pub wall_mm: f64,
+}
+
+impl Balloon {
+    /// How far from its centre it reaches, skin included.
+    pub fn reach(&self) -> f64 {
+        self.radius.max(self.half_length) + self.wall_mm
+    }
+
+    /// Signed distances (negative inside) to its air and to its skin. The ellipsoid's is
+    /// the usual bound k0 (k0 − 1) / k1 of the scaled sphere: exact on the surface, which is
+    /// all the ramps need.
+    #[inline]
+    pub fn sdfs(&self, p: DVec3) -> (f64, f64) {
+        let d = p - self.center;
+        let along = d.dot(self.axis);
+        let across = (d - self.axis * along).length();
+        let (h, r) = (self.half_length, self.radius);
+        let k0 = ((along / h).powi(2) + (across / r).powi(2)).sqrt();
+        let k1 = ((along / (h * h)).powi(2) + (across / (r * r)).powi(2)).sqrt();
+        let air = if k1 > 0.0 {
+            k0 * (k0 - 1.0) / k1
+        } else {
+            -r.min(h)
+        };
+        (air, (air - self.wall_mm).max(-air))
+    }
 }
 
 /// The gas of an anal canal held open round a catheter: within `radius` of its axis, from
@@ -567,8 +607,22 @@ impl Catheter {
 
     /// How far from its axis it changes the scene: its plastic, or its canal's gas.
     pub fn reach(&self) -> f64 {
+        self.balloon.map_or(self.tube_reach(), |b| {
+            self.tube_reach().max(self.distance(b.center) + b.reach())
+        })
+    }
+
+    /// How far from its axis the tube itself changes the scene (its balloon aside).
+    pub fn tube_reach(&self) -> f64 {
         self.canal
             .map_or(self.outer_radius(), |c| c.radius.max(self.outer_radius()))
+    }
+
+    /// How far `p` lies from everything it changes (negative inside).
+    pub fn clearance(&self, p: DVec3) -> f64 {
+        let tube = self.distance(p) - self.tube_reach();
+        self.balloon
+            .map_or(tube, |b| tube.min(b.sdfs(p).0 - b.wall_mm))
     }
 
     /// Distance from `p` to the axis.

@@ -175,7 +175,10 @@ fn check_basics(p: &Phantom) {
     for (&l, &m) in p.labels.data().iter().zip(p.lumen.data()) {
         assert_eq!(
             m == 1,
-            l == label::LUMEN_AIR || l == label::LUMEN_FLUID || l == label::STOOL,
+            l == label::LUMEN_AIR
+                || l == label::LUMEN_FLUID
+                || l == label::STOOL
+                || l == label::RECTAL_BALLOON,
             "label {l} vs lumen {m}"
         );
     }
@@ -188,8 +191,19 @@ fn check_basics(p: &Phantom) {
             .iter()
             .any(|c| a > c.start_arc_mm - c.taper_mm && a < c.end_arc_mm + c.taper_mm)
     };
+    // A retention balloon's skin crosses the rectum, and the true centerline with it.
+    let balloon_skin = |pt: &[f64; 3]| {
+        t.rectal_tube
+            .as_ref()
+            .and_then(|c| c.balloon.as_ref())
+            .is_some_and(|b| {
+                let reach = b.radius_mm.max(b.half_length_mm) + b.wall_mm;
+                dist(*pt, b.center_mm) <= reach + 1.0
+                    && p.labels.data()[voxel(&p.lumen, *pt)] == label::WALL
+            })
+    };
     for (pt, &a) in t.centerline_mm.iter().zip(&t.centerline_arc_mm) {
-        if !collapsed(a) {
+        if !collapsed(a) && !balloon_skin(pt) {
             assert_eq!(
                 p.lumen.data()[voxel(&p.lumen, *pt)],
                 1,
@@ -757,6 +771,66 @@ fn rectal_tube_joins_colon_gas_to_the_air_outside() {
     );
 }
 
+/// A retention balloon fills the lowest rectum wall to wall, as in a held-out prone exam with
+/// a balloon catheter whose centerline started 62 mm from the anus. Its air is lumen (label
+/// 12), 15–40 ml at full size; through air alone (CT < −500, the catheter's own air aside)
+/// the gas below it (the anal canal's) reaches neither its air nor the rectum's gas above it,
+/// and its air does not reach the rectum's gas.
+#[test]
+fn a_retention_balloon_keeps_the_rectums_gas_apart() {
+    let p = phantom::colon(&ColonOptions {
+        rectal_tube: true,
+        anal_canal: true,
+        rectal_balloon: true,
+        ..ColonOptions::default()
+    })
+    .expect("colon phantom with a balloon catheter");
+    check_basics(&p);
+    let t = &p.truth;
+    let b = t
+        .rectal_tube
+        .as_ref()
+        .and_then(|c| c.balloon.as_ref())
+        .expect("the balloon in the truth");
+    let (ct, lab, dims) = (p.ct.data(), p.labels.data(), p.ct.dims());
+    let ml = p.ct.spacing().iter().product::<f64>() / 1000.0;
+    let balloon: Vec<usize> = (0..lab.len())
+        .filter(|&i| lab[i] == label::RECTAL_BALLOON)
+        .collect();
+    let volume = balloon.len() as f64 * ml;
+    assert!((15.0..=40.0).contains(&volume), "balloon {volume:.1} ml");
+    assert!(balloon.iter().all(|&i| p.lumen.data()[i] == 1));
+    let gas = |i: usize| ct[i] < -500 && lab[i] != label::RECTAL_TUBE;
+    let bottom = b.center_mm[2] - b.half_length_mm - b.wall_mm;
+    let below: Vec<usize> = (0..lab.len())
+        .filter(|&i| lab[i] == label::LUMEN_AIR && local(&p.lumen, i)[2] < bottom - 2.0)
+        .collect();
+    assert!(
+        below.len() > 100,
+        "{} voxels of gas below the balloon",
+        below.len()
+    );
+    let above = voxel(
+        &p.lumen,
+        t.centerline_mm[t.centerline_arc_mm.partition_point(|&a| a < 100.0)],
+    );
+    assert_eq!(lab[above], label::LUMEN_AIR);
+    let from_below = flood6(dims, below.iter().copied(), gas);
+    assert!(
+        !from_below[above],
+        "the canal's gas reaches the rectum's above the balloon"
+    );
+    assert!(
+        balloon.iter().all(|&i| !from_below[i]),
+        "the canal's gas reaches the balloon's"
+    );
+    let from_balloon = flood6(dims, balloon.iter().copied(), gas);
+    assert!(
+        !from_balloon[above],
+        "the balloon's air reaches the rectum's gas"
+    );
+}
+
 // ---------------------------------------------------------------------------------------
 // Table and skin folds.
 
@@ -1113,6 +1187,7 @@ fn every_option(seed: u64) -> ColonOptions {
         collapsed: names(&["sigmoid", "descending"]),
         fluid_filled: names(&["transverse"]),
         rectal_tube: true,
+        rectal_balloon: true,
         table: true,
         skin_folds: true,
         diverticula: true,
@@ -1146,6 +1221,7 @@ fn every_option_is_deterministic_whatever_the_threads() {
         collapsed: names(&["transverse"]),
         fluid_filled: names(&["descending"]),
         rectal_tube: true,
+        rectal_balloon: true,
         table: true,
         skin_folds: true,
         diverticula: true,

@@ -120,7 +120,7 @@ pub(super) fn colon(
     let course = Course::new(
         geom,
         colon_box(
-            &parts.list,
+            parts,
             cand.rectum,
             |c| cand.roles[c as usize] == Role::Major,
             geom,

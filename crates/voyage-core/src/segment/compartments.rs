@@ -60,7 +60,14 @@ pub(super) struct Compartments {
     /// Every gas component's compartment.
     pub(super) of_gas: Vec<Option<u32>>,
     pub(super) voxel_ml: f64,
+    /// A rectal catheter was found: the gas round it may hold an anal canal open below the
+    /// rectum.
+    pub(super) catheter: bool,
 }
+
+/// An axial section of bowel holds at least this much gas (mm², a disc 10 mm in radius); an
+/// anal canal held open round a catheter holds under 100.
+const BOWEL_SECTION_MM2: f64 = 300.0;
 
 impl Compartments {
     /// Gas with its pools and layers. Without pools they are the gas components, from their
@@ -93,6 +100,7 @@ impl Compartments {
             list,
             of_gas: Vec::new(),
             voxel_ml: super::voxel_ml(vol),
+            catheter: !found.tubes.is_empty(),
         };
         parts.of_gas = parts.gas_compartments(found);
         parts
@@ -190,13 +198,7 @@ impl Candidates {
             .collect();
         let rectum =
             lowest(&parts.list, &candidate).ok_or_else(|| found.no_colon(opts, from_mask))?;
-        let roles = roles(
-            &parts.list,
-            rectum,
-            |c| candidate[c as usize],
-            vol.geometry(),
-            parts.voxel_ml,
-        );
+        let roles = roles(parts, rectum, |c| candidate[c as usize], vol.geometry());
         Ok(Candidates {
             seeded,
             excluded,
@@ -389,16 +391,18 @@ const MAJOR_ML: f64 = 200.0;
 /// Each compartment's role in the chain: major (colon, [`MAJOR_ML`] of gas or more, unless
 /// it lies where the stomach does), minor (a candidate segment) or out.
 fn roles(
-    comps: &[Compartment],
+    parts: &Compartments,
     rectum: u32,
     candidate: impl Fn(u32) -> bool,
     geom: &crate::Geometry,
-    voxel_ml: f64,
 ) -> Vec<Role> {
+    let comps = &parts.list;
     let big = |c: u32| {
-        c != rectum && candidate(c) && comps[c as usize].gas_voxels as f64 * voxel_ml >= MAJOR_ML
+        c != rectum
+            && candidate(c)
+            && comps[c as usize].gas_voxels as f64 * parts.voxel_ml >= MAJOR_ML
     };
-    let all = colon_box(comps, rectum, big, geom);
+    let all = colon_box(parts, rectum, big, geom);
     (0..comps.len() as u32)
         .map(|c| {
             if !candidate(c) && c != rectum {
@@ -436,19 +440,54 @@ fn flat(comp: &Compartment, geom: &crate::Geometry) -> bool {
 /// A colon compartment's box is at least this wide along every axis (mm).
 const MIN_BOX_MM: f64 = 15.0;
 
-/// The LPS box of the rectum's compartment and those where `with(c)`.
+/// The LPS box of the rectum's compartment and those where `with(c)`: the colon's. It
+/// begins at the rectum: where a catheter holds an anal canal open below it, the canal's gas
+/// does not stretch the box down ([`Compartments::bowel_from_z`]).
 pub(super) fn colon_box(
-    comps: &[Compartment],
+    parts: &Compartments,
     rectum: u32,
     with: impl Fn(u32) -> bool,
     geom: &crate::Geometry,
 ) -> [DVec3; 2] {
+    let comps = &parts.list;
     let b = (0..comps.len() as u32)
         .filter(|&c| with(c))
         .fold(comps[rectum as usize].bbox, |a, c| {
             a.union(&comps[c as usize].bbox)
         });
-    lps_box(geom, &b)
+    let [mut lo, hi] = lps_box(geom, &b);
+    let rectum_from = parts
+        .catheter
+        .then(|| parts.bowel_from_z(rectum, geom))
+        .flatten();
+    if let Some(z) = rectum_from {
+        lo.z = lo.z.max(z);
+    }
+    [lo, hi]
+}
+
+impl Compartments {
+    /// Height (LPS z, mm) of the lowest axial slice in which compartment `c` is as wide as a
+    /// bowel ([`BOWEL_SECTION_MM2`]); None if it is nowhere.
+    pub(super) fn bowel_from_z(&self, c: u32, geom: &crate::Geometry) -> Option<f64> {
+        let b = &self.list[c as usize].bbox;
+        let voxel_mm2 = geom.spacing[0] * geom.spacing[1];
+        let mid = [0, 1].map(|a| (b.lo[a] + b.hi[a]) as f64 / 2.0);
+        (b.lo[2]..=b.hi[2])
+            .filter(|&k| {
+                let voxels: u32 = (b.lo[1]..=b.hi[1])
+                    .flat_map(|j| self.runs.row(j, k))
+                    .filter(|&r| self.run_comp[r] == c)
+                    .map(|r| self.runs.runs[r].x1 - self.runs.runs[r].x0)
+                    .sum();
+                voxels as f64 * voxel_mm2 >= BOWEL_SECTION_MM2
+            })
+            .map(|k| {
+                geom.index_to_patient(DVec3::new(mid[0], mid[1], k as f64))
+                    .z
+            })
+            .reduce(f64::min)
+    }
 }
 
 /// Gas of a compartment (up to [`CREVICE_MAX_ML`]) whose widest inscribed ball is narrower

@@ -194,6 +194,9 @@ pub struct Gap {
     /// "head end", ...): the colon leaves the scan there, and the bridge joins its two ends
     /// inside (what lies beyond is not read).
     pub edge_side: Option<&'static str>,
+    /// It lies along a rectal catheter inside the body: what kept the gas apart is the
+    /// catheter's retention balloon or the anal canal closed round it, not collapsed bowel.
+    pub at_catheter: bool,
     /// The lumen voxels (volume indices, sorted) the bridge added: its tube and the fluid
     /// filling the stretch it crosses.
     #[serde(skip)]

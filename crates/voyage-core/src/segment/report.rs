@@ -192,7 +192,7 @@ pub(super) fn report(
     opts: &SegmentOptions,
 ) -> Report {
     let in_colon = |c: u32| chained.chain.links.iter().any(|l| l.comp == c);
-    let colon_lps = colon_box(&parts.list, cand.rectum, in_colon, geom);
+    let colon_lps = colon_box(parts, cand.rectum, in_colon, geom);
     let classes = classes(parts, in_colon, geom, &colon_lps);
     let mut segments = colon_segments(parts, chained, geom, colon_lps);
     let last_segment = chained.chain.links.last().map(|l| LastSegment {
@@ -210,7 +210,12 @@ pub(super) fn report(
     for t in &found.tubes {
         segments.push(tube_report(t, &found.runs, geom, parts.voxel_ml));
     }
-    let (gaps, mut warnings) = gaps(&chained.chain.gaps, gap_voxels, &segments, geom);
+    let catheters: Vec<[DVec3; 2]> = found
+        .tubes
+        .iter()
+        .map(|t| [t.entry, t.tip].map(|v| geom.index_to_patient(DVec3::from(v))))
+        .collect();
+    let (gaps, mut warnings) = gaps(&chained.chain.gaps, gap_voxels, &segments, &catheters, geom);
     warnings.extend(edge_warnings(parts, chained, geom));
     warnings.extend(left_out_warnings(&segments));
     let comps = labelled(found.comps, &parts.of_gas, &classes);
@@ -373,17 +378,16 @@ fn reason(why: Left, crevice: bool, gas_ml: f64, opts: &SegmentOptions) -> Strin
 }
 
 /// The gaps bridged between consecutive colon segments (`paths`, with the voxels each added,
-/// `gap_voxels`), and a warning for each.
+/// `gap_voxels`), and a warning for each; `catheters`: each rectal tube's entry and tip (LPS).
 fn gaps(
     paths: &[Path],
     gap_voxels: Vec<Vec<usize>>,
     segments: &[SegmentReport],
+    catheters: &[[DVec3; 2]],
     geom: &crate::Geometry,
 ) -> (Vec<Gap>, Vec<String>) {
-    let lps = |v: [usize; 3]| {
-        geom.index_to_patient(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64))
-            .to_array()
-    };
+    let lps =
+        |v: [usize; 3]| geom.index_to_patient(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64));
     let mut gaps = Vec::new();
     let mut warnings = Vec::new();
     for (i, (p, voxels)) in paths.iter().zip(gap_voxels).enumerate() {
@@ -392,11 +396,14 @@ fn gaps(
         let gap = Gap {
             between: [i, i + 1],
             length_mm: p.length_mm,
-            from_lps_mm: lps(ends.0),
-            to_lps_mm: lps(ends.1),
+            from_lps_mm: lps(ends.0).to_array(),
+            to_lps_mm: lps(ends.1).to_array(),
             mean_cost: p.mean_cost,
             fluid_filled: false,
             edge_side: edge,
+            at_catheter: catheters
+                .iter()
+                .any(|&c| along_catheter(c, (lps(ends.0) + lps(ends.1)) * 0.5)),
             voxels,
         };
         warnings.push(gap_warning(
@@ -409,10 +416,31 @@ fn gaps(
     (gaps, warnings)
 }
 
+/// A retention balloon's radius and the rectum's wall (mm): how far from a rectal catheter,
+/// across the body's long axis, the gas it keeps apart lies.
+const CATHETER_REACH_MM: f64 = 40.0;
+
+/// Whether `p` (LPS) lies along rectal catheter `c` (its entry and tip, LPS) inside the body:
+/// between their heights, within [`CATHETER_REACH_MM`] of the line between them across.
+fn along_catheter(c: [DVec3; 2], p: DVec3) -> bool {
+    let [entry, tip] = c;
+    let (lo, hi) = (entry.z.min(tip.z), entry.z.max(tip.z));
+    if !(lo..=hi).contains(&p.z) || hi - lo < 1.0 {
+        return false;
+    }
+    let on = entry + (tip - entry) * ((p.z - entry.z) / (tip.z - entry.z));
+    (p - on).truncate().length() <= CATHETER_REACH_MM
+}
+
 /// The warning for `gap`, between the colon segments named `a` and `b`.
 fn gap_warning(gap: &Gap, a: &str, b: &str) -> String {
     let [x, y, z] = gap.from_lps_mm;
     let mm = gap.length_mm;
+    if gap.at_catheter && gap.edge_side.is_none() {
+        return format!(
+            "the rectum's gas is kept apart along the rectal catheter (its retention balloon, or the anal canal closed round it): joined through {mm:.0} mm between the {a} and the {b} segment, from LPS ({x:.0}, {y:.0}, {z:.0})"
+        );
+    }
     match gap.edge_side {
         Some(side) => format!(
             "the colon leaves the scanned volume at the patient's {side}: the {a} and the {b} segment are joined inside it by {mm:.0} mm from LPS ({x:.0}, {y:.0}, {z:.0}); what lies beyond the scan is not read"

@@ -5,7 +5,7 @@ use glam::DVec3;
 use crate::{
     axis::{Axis, Knot},
     frame::Frame,
-    tube::{Blob, Canal, Catheter, Tube},
+    tube::{Balloon, Blob, Canal, Catheter, Tube},
 };
 use voyage_core::{Error, Result};
 
@@ -23,6 +23,15 @@ pub(super) const CATHETER_HU: f64 = 100.0;
 pub const CANAL_MM: f64 = 35.0;
 /// Width (full size, mm) of the canal's gas round the catheter's plastic.
 const CANAL_GAS_MM: f64 = 2.5;
+/// A retention balloon (full size, mm): from this far up the rectum, this long along it,
+/// this much wider than the lumen (it presses into the wall, so no gas passes it), its skin
+/// this thick. About 23 ml of air, as a balloon inflated with 20–40 ml. The catheter's tip
+/// then lies higher, above it.
+const BALLOON_FROM_ARC: f64 = 8.0;
+const BALLOON_LENGTH: f64 = 24.0;
+const BALLOON_PRESS_MM: f64 = 1.0;
+const BALLOON_SKIN_MM: f64 = 1.0;
+const BALLOON_TIP_ARC: f64 = 39.0;
 
 /// The rectal catheter (full size: air channel 3 mm in radius, 1 mm plastic wall; kept ≥ a
 /// voxel in the small phantom). Its open tip lies `CATHETER_TIP_ARC` mm up the rectum,
@@ -31,19 +40,27 @@ const CANAL_GAS_MM: f64 = 2.5;
 /// the polyps; it runs down beside the axis to the rectum's lower end, bends there and runs
 /// on inferiorly and a little posteriorly (like the anal canal) through the pelvic floor to
 /// its open end half a slice below the perineum's skin, in the outside air. With `canal`, gas
-/// round it below the rectum down to the skin holds its anal canal open.
+/// round it below the rectum down to the skin holds its anal canal open; with `balloon`, a
+/// retention balloon round it fills the rectum's lowest stretch wall to wall.
 pub(super) fn make_catheter(
     frame: &Frame,
     tube: &Tube,
     polyps: &[Blob],
     floor: f64,
     canal: bool,
+    balloon: bool,
 ) -> Result<Catheter> {
     let s = frame.scale;
     let ax = &tube.axis;
     let inner = frame.thin(3.0, 1.1);
     let wall = frame.thin(1.0, 0.75);
-    let (tip_arc, low_arc) = (CATHETER_TIP_ARC * s, 5.0 * s);
+    let tip_arc = if balloon {
+        BALLOON_TIP_ARC
+    } else {
+        CATHETER_TIP_ARC
+    } * s;
+    let low_arc = 5.0 * s;
+    let balloon = balloon.then(|| make_balloon(frame, ax));
     let end_z = floor - 0.5 * frame.geom.spacing[2];
     let sides = [DVec3::Y, DVec3::X, DVec3::NEG_X, DVec3::NEG_Y];
     for side in sides {
@@ -69,10 +86,11 @@ pub(super) fn make_catheter(
                 floor,
                 top: low.z,
             }),
+            balloon,
         };
         let clear = polyps
             .iter()
-            .all(|b| c.distance(b.center) - c.reach() - b.reach() >= frame.max_spacing());
+            .all(|b| c.clearance(b.center) - b.reach() >= frame.max_spacing());
         if clear {
             return Ok(c);
         }
@@ -80,4 +98,18 @@ pub(super) fn make_catheter(
     Err(Error::invalid(
         "colon phantom: no room for the rectal catheter beside the rectal polyp",
     ))
+}
+
+/// The retention balloon: round the rectum's axis from [`BALLOON_FROM_ARC`] up, pressing
+/// into the wall all round its middle.
+fn make_balloon(frame: &Frame, ax: &Axis) -> Balloon {
+    let s = frame.scale;
+    let mid = (BALLOON_FROM_ARC + 0.5 * BALLOON_LENGTH) * s;
+    Balloon {
+        center: ax.point_at(mid),
+        axis: ax.tangent[ax.vertex_at(mid)],
+        radius: ax.radius_at(mid) + frame.thin(BALLOON_PRESS_MM, 0.75),
+        half_length: 0.5 * BALLOON_LENGTH * s,
+        wall_mm: frame.thin(BALLOON_SKIN_MM, 0.75),
+    }
 }

@@ -72,8 +72,8 @@ use super::{
     skin::{self, Obstacles},
     small_bowel,
     truth::{
-        COORDINATES_NOTE, CollapsedTruth, DistractorTruth, FilledTruth, GapTruth, PolypTruth,
-        RectalTubeTruth, RoiTruth, Truth,
+        BalloonTruth, COORDINATES_NOTE, CollapsedTruth, DistractorTruth, FilledTruth, GapTruth,
+        PolypTruth, RectalTubeTruth, RoiTruth, Truth,
     },
     tube::{Blob, Catheter, Ends, Tube},
 };
@@ -169,6 +169,7 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
             &blobs,
             floor.unwrap_or(0.0),
             opts.anal_canal,
+            opts.rectal_balloon,
         )?)
     } else {
         None
@@ -369,7 +370,8 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
         polyps,
         lumen_voxels: counts[label::LUMEN_AIR as usize]
             + counts[label::LUMEN_FLUID as usize]
-            + counts[label::STOOL as usize],
+            + counts[label::STOOL as usize]
+            + counts[label::RECTAL_BALLOON as usize],
         folds: tube.folds.len(),
         fold_list: fold_truth(&tube, &segments),
         segments: segments.clone(),
@@ -391,6 +393,12 @@ pub fn colon(opts: &ColonOptions) -> Result<Phantom> {
             anus_mm: c.canal.map(|k| {
                 let (a, b) = (c.points[c.points.len() - 2], c.points[c.points.len() - 1]);
                 arr(b + (a - b) * ((k.floor - b.z) / (a.z - b.z)))
+            }),
+            balloon: c.balloon.map(|b| BalloonTruth {
+                center_mm: arr(b.center),
+                radius_mm: b.radius,
+                half_length_mm: b.half_length,
+                wall_mm: b.wall_mm,
             }),
         }),
         body_floor_z_mm: floor,
@@ -501,7 +509,8 @@ mod tests {
             frame.thin(WALL, 1.0),
             Ends::Round,
         );
-        let cath = floor.map(|f| make_catheter(&frame, &tube, &[], f, false).expect("catheter"));
+        let cath =
+            floor.map(|f| make_catheter(&frame, &tube, &[], f, false, false).expect("catheter"));
         let near = Obstacles {
             tube: &tube,
             blobs: &[],

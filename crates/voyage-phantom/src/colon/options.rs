@@ -52,6 +52,11 @@ pub struct ColonOptions {
     /// held open by gas round it, as an anal canal round a real retention catheter; the volume
     /// reaches that much further down. The colon's gas then ends at the anus.
     pub anal_canal: bool,
+    /// With `rectal_tube`: its retention balloon inflated with about 23 ml of air in the
+    /// rectum's lowest stretch, wall to wall, its 1 mm plastic skin keeping the rectum's gas
+    /// above it apart from the gas below it (and the anal canal's): a held-out prone exam
+    /// with a balloon catheter started 62 mm from the anus. Its air is lumen, labelled 12.
+    pub rectal_balloon: bool,
     /// Lumps of tagged stool (+500..+900 HU, 4–9 mm at full size) on the wall, two in each
     /// of the rectum, sigmoid, descending, transverse and ascending colon, one of each two
     /// mottled with air: colon content, labelled 11, in the truth's `stool`.
@@ -104,6 +109,7 @@ impl Default for ColonOptions {
             closed_ileocaecal_valve: false,
             rectal_tube: false,
             anal_canal: false,
+            rectal_balloon: false,
             tagged_stool: false,
             table: false,
             skin_folds: false,
@@ -171,6 +177,11 @@ pub(super) fn check_options(opts: &ColonOptions) -> Result<()> {
     if opts.anal_canal && !opts.rectal_tube {
         return Err(Error::invalid(
             "an anal canal holds gas round a rectal catheter: ask for the rectal tube too",
+        ));
+    }
+    if opts.rectal_balloon && !opts.rectal_tube {
+        return Err(Error::invalid(
+            "a retention balloon is the rectal catheter's: ask for the rectal tube too",
         ));
     }
     names("collapsed", &opts.collapsed, COLLAPSIBLE)?;

@@ -86,6 +86,11 @@ pub struct PhantomArgs {
     /// (the volume reaches 35 mm further down).
     #[arg(long, requires = "rectal_tube")]
     pub anal_canal: bool,
+    /// Colon only, with --rectal-tube: its retention balloon inflated in the lowest rectum
+    /// (about 23 ml of air in a 1 mm plastic skin, wall to wall), keeping the rectum's gas
+    /// apart from the gas below it and round the catheter.
+    #[arg(long, requires = "rectal_tube")]
+    pub rectal_balloon: bool,
     /// Colon only: a CT table under the patient on the dependent side (posterior, or anterior
     /// with --prone): a carbon-fibre shell round a foam core, the skin flat on it over a
     /// contact strip with a wedge of outside air beside it.
@@ -219,6 +224,7 @@ fn colon_options(a: &PhantomArgs) -> ColonOptions {
         closed_ileocaecal_valve: a.closed_ileocaecal_valve,
         rectal_tube: a.rectal_tube,
         anal_canal: a.anal_canal,
+        rectal_balloon: a.rectal_balloon,
         tagged_stool: a.tagged_stool,
         table: a.table,
         skin_folds: a.skin_folds,

@@ -280,6 +280,11 @@ impl App {
                     "the colon leaves the scan here: {:.0} mm joined inside it, the flight keeps to the path",
                     gap.length_mm
                 )
+            } else if gap.at_catheter {
+                format!(
+                    "beside the rectal catheter (its balloon, or the canal round it), {:.0} mm joined: the flight keeps to the path",
+                    gap.length_mm
+                )
             } else if gap.fluid_filled {
                 format!(
                     "fluid-filled stretch, {:.0} mm: {}, the flight keeps to the path",
