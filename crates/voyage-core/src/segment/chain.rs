@@ -129,6 +129,7 @@ pub(super) fn colon(
     let mut ch = chain(
         &coarse,
         &parts.list,
+        parts.voxel_ml,
         cand.rectum,
         &cand.roles,
         &course,
@@ -259,16 +260,19 @@ fn join_seeds(
 ///    face each other ([`facing_ends`]), however far apart: the stretch between them is
 ///    collapsed or filled with fluid.
 /// 2. Minor compartments on the way: one that lies between two spine neighbours, and costs
-///    little more to pass through than the bridge that skips it, is taken in.
+///    little more to pass through than the bridge that skips it, is taken in; where a
+///    bridge crosses fat, a compartment that joins its two ends through collapsed bowel is
+///    taken in ([`take_in_between`]).
 /// 3. The tail: from the last compartment, the nearest free end further along the course,
 ///    while one lies within `max_gap_mm` and its bridge is cheap (what the chain did before
 ///    there were majors, and still does when there are none).
 ///
 /// `bridge(from_block, to_block, a, b)` is the cheapest path between two blocks of
-/// compartments a and b.
+/// compartments a and b; `voxel_ml` the volume of a voxel.
 pub fn chain(
     coarse: &Coarse,
     comps: &[Compartment],
+    voxel_ml: f64,
     rectum: u32,
     roles: &[Role],
     course: &Course,
@@ -294,7 +298,7 @@ pub fn chain(
     majors.sort_by(|&a, &b| along(a).total_cmp(&along(b)));
     for &b in &majors {
         let a = ch.links[ch.links.len() - 1].clone();
-        let Some((exit, entry)) = facing_ends(coarse, &blocks, &a, b) else {
+        let Some((exit, entry)) = facing_ends(coarse, &blocks, &a, b, EARLY_EXIT_MM) else {
             continue;
         };
         match bridge(exit, entry, a.comp, b) {
@@ -335,13 +339,18 @@ pub fn chain(
         .collect();
     if !majors.is_empty() {
         take_in_on_the_way(coarse, &blocks, &mut ch, &mut free, &mut bridge);
-        let upper: Vec<u32> = free
+        let between: Vec<u32> = free
             .iter()
             .copied()
-            .filter(|&c| roles[c as usize] == Role::Upper)
+            .filter(|&c| match roles[c as usize] {
+                Role::Upper => true,
+                Role::Minor => comps[c as usize].gas_voxels as f64 * voxel_ml >= BETWEEN_MIN_ML,
+                _ => false,
+            })
             .collect();
-        for c in upper {
-            if take_in_between(coarse, &blocks, &mut ch, c, &mut bridge) {
+        for c in between {
+            let upper = roles[c as usize] == Role::Upper;
+            if take_in_between(coarse, &blocks, &mut ch, c, upper, &mut bridge) {
                 free.retain(|&x| x != c);
             }
         }
@@ -432,7 +441,13 @@ const OFF_END: f64 = 0.5;
 /// chosen again, each the cheapest for the other, a pair costing its distance plus [`OFF_END`]
 /// times how far each block lies from its compartment's end (`a`'s end farthest from its
 /// entry, `b`'s nearer end).
-fn facing_ends(coarse: &Coarse, blocks: &[Vec<usize>], a: &Link, b: u32) -> Option<(usize, usize)> {
+fn facing_ends(
+    coarse: &Coarse,
+    blocks: &[Vec<usize>],
+    a: &Link,
+    b: u32,
+    early_exit_mm: f64,
+) -> Option<(usize, usize)> {
     let (dist, (far_end, far)) = coarse.distances(a.comp, a.entry);
     let far_half: Vec<usize> = blocks[a.comp as usize]
         .iter()
@@ -449,7 +464,7 @@ fn facing_ends(coarse: &Coarse, blocks: &[Vec<usize>], a: &Link, b: u32) -> Opti
         entry = coarse.nearest(of_b, coarse.centre_mm(exit))?;
     }
     let off_a = |x: usize| far - dist[x];
-    if off_a(exit) <= EARLY_EXIT_MM {
+    if off_a(exit) <= early_exit_mm {
         return Some((exit, entry));
     }
     let off_b = off_ends(coarse, b, of_b)?;
@@ -551,6 +566,12 @@ fn take_in_on_the_way(
     }
 }
 
+/// A minor compartment taken into a gap of the chain by [`take_in_between`] holds at least
+/// this much gas (ml): a stretch of colon between two collapses, not a pocket of small-bowel
+/// gas (`ctc/prone-tagged` holds one of 10 ml high on the left, 120 and 99 mm of soft tissue
+/// from the sigmoid's two pieces).
+const BETWEEN_MIN_ML: f64 = 50.0;
+
 /// A gap whose bridge crosses fat (mean cost above this per mm) is no collapsed stretch:
 /// the chain jumped there; a bridge at most this dear runs through collapsed bowel.
 const COLLAPSED_COST: f64 = 2.0;
@@ -563,14 +584,22 @@ const COLLAPSED_COST: f64 = 2.0;
 /// from the sigmoid's loop under the transverse colon across the mesentery (on the colon
 /// phantom with all three collapsed, 996 mm of a 1562 mm colon; the bridge through the
 /// phantom's collapsed transverse colon costs 4.3 per mm, its thin cord in fat). A stomach
-/// does not lie on the colon's way between two of its stumps. Returns whether it was taken.
+/// does not lie on the colon's way between two of its stumps. A smaller compartment
+/// (`upper` false) is taken in only through collapsed bowel on both sides, whatever the
+/// bridges cost: a sigmoid–descending stretch between two collapses, which the chain had
+/// skipped from a sigmoid loop across the fat to the cecum beside it (prone with the
+/// sigmoid and descending collapsed: 0.21× the colon's length). Returns whether it was taken.
 fn take_in_between(
     coarse: &Coarse,
     blocks: &[Vec<usize>],
     ch: &mut Chain,
     m: u32,
+    upper: bool,
     bridge: &mut impl FnMut(usize, usize, u32, u32) -> Option<Path>,
 ) -> bool {
+    // A smaller compartment is joined end to end, stump to stump: its loops may pass nearer
+    // the gap's compartments elsewhere.
+    let early = if upper { EARLY_EXIT_MM } else { 0.0 };
     for g in 0..ch.gaps.len() {
         let direct = &ch.gaps[g];
         if direct.mean_cost <= COLLAPSED_COST {
@@ -578,7 +607,7 @@ fn take_in_between(
         }
         let direct = direct.cost();
         let (a, b) = (ch.links[g].clone(), ch.links[g + 1].clone());
-        let Some((a_exit, m_in)) = facing_ends(coarse, blocks, &a, m) else {
+        let Some((a_exit, m_in)) = facing_ends(coarse, blocks, &a, m, early) else {
             continue;
         };
         let at_m = Link {
@@ -586,7 +615,7 @@ fn take_in_between(
             entry: m_in,
             exit: m_in,
         };
-        let Some((m_out, b_in)) = facing_ends(coarse, blocks, &at_m, b.comp) else {
+        let Some((m_out, b_in)) = facing_ends(coarse, blocks, &at_m, b.comp, early) else {
             continue;
         };
         let (Some(p1), Some(p2)) = (
@@ -596,7 +625,12 @@ fn take_in_between(
             continue;
         };
         let cheap = |p: &Path| p.mean_cost <= COLLAPSED_COST;
-        if (cheap(&p1) || cheap(&p2)) && p1.cost() + p2.cost() < direct {
+        let take = if upper {
+            (cheap(&p1) || cheap(&p2)) && p1.cost() + p2.cost() < direct
+        } else {
+            cheap(&p1) && cheap(&p2)
+        };
+        if take {
             ch.links[g].exit = a_exit;
             if ch.links[g + 1].exit == ch.links[g + 1].entry {
                 ch.links[g + 1].exit = b_in;
@@ -765,6 +799,7 @@ mod tests {
                 chain(
                     &coarse,
                     &comps,
+                    1.0,
                     0,
                     &[Role::Minor; 3],
                     &plain_course(),
