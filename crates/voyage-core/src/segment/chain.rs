@@ -269,6 +269,7 @@ fn join_seeds(
 ///
 /// `bridge(from_block, to_block, a, b)` is the cheapest path between two blocks of
 /// compartments a and b; `voxel_ml` the volume of a voxel.
+#[allow(clippy::too_many_arguments)]
 pub fn chain(
     coarse: &Coarse,
     comps: &[Compartment],
