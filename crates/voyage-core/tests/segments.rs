@@ -728,6 +728,29 @@ fn a_stretch_between_two_collapses_is_taken_in_stump_to_stump() {
     }
 }
 
+/// The sigmoid and the transverse colon collapsed: the chain joined the sigmoid's piece to
+/// the next one 37 mm across fat from a loop of the sigmoid, not from the collapse, and the
+/// centerline passed the sigmoid collapse's middle at 28 mm (supine; prone with fluid, a
+/// catheter, the table and skin folds, 27 mm). That bridge is made again stump to stump.
+#[test]
+fn a_bridge_across_fat_from_a_loop_is_made_stump_to_stump() {
+    for prone in [false, true] {
+        let p = phantom::colon(&ColonOptions {
+            collapsed: ["sigmoid", "transverse"].map(String::from).to_vec(),
+            prone,
+            tagged_fluid: prone,
+            rectal_tube: prone,
+            table: prone,
+            skin_folds: prone,
+            ..ColonOptions::default()
+        })
+        .unwrap();
+        let s = prepare(p.ct.clone(), &PrepOptions::default(), |_| {}).unwrap();
+        assert_eq!(s.segmentation.gaps.len(), 2, "{:#?}", s.segmentation.gaps);
+        check_collapses_passed(if prone { "prone" } else { "supine" }, &p, &s);
+    }
+}
+
 /// The centerline of `s` is as long as the phantom's true one and passes each collapse's
 /// middle within 12 mm (the held-out exams' bound).
 fn check_collapses_passed(name: &str, p: &Phantom, s: &voyage_core::Study) {
