@@ -714,18 +714,7 @@ fn a_splenic_flexure_between_collapses_is_colon_not_stomach() {
 /// both stumps through collapsed bowel: it is taken in, stump to stump.
 #[test]
 fn a_stretch_between_two_collapses_is_taken_in_stump_to_stump() {
-    for prone in [false, true] {
-        let p = phantom::colon(&ColonOptions {
-            collapsed: ["sigmoid", "descending"].map(String::from).to_vec(),
-            prone,
-            tagged_fluid: prone,
-            ..ColonOptions::default()
-        })
-        .unwrap();
-        let s = prepare(p.ct.clone(), &PrepOptions::default(), |_| {}).unwrap();
-        assert_eq!(s.segmentation.gaps.len(), 2, "{:#?}", s.segmentation.gaps);
-        check_collapses_passed(if prone { "prone" } else { "supine" }, &p, &s);
-    }
+    check_two_collapses(["sigmoid", "descending"], |o| o);
 }
 
 /// The sigmoid and the transverse colon collapsed: the chain joined the sigmoid's piece to
@@ -734,17 +723,32 @@ fn a_stretch_between_two_collapses_is_taken_in_stump_to_stump() {
 /// catheter, the table and skin folds, 27 mm). That bridge is made again stump to stump.
 #[test]
 fn a_bridge_across_fat_from_a_loop_is_made_stump_to_stump() {
+    check_two_collapses(["sigmoid", "transverse"], |o| ColonOptions {
+        rectal_tube: true,
+        table: true,
+        skin_folds: true,
+        ..o
+    });
+}
+
+/// The phantom with `collapsed`, supine and prone with tagged fluid (and what `prone_also`
+/// adds): two gaps, each collapse's middle passed ([`check_collapses_passed`]).
+fn check_two_collapses(collapsed: [&str; 2], prone_also: impl Fn(ColonOptions) -> ColonOptions) {
     for prone in [false, true] {
-        let p = phantom::colon(&ColonOptions {
-            collapsed: ["sigmoid", "transverse"].map(String::from).to_vec(),
-            prone,
-            tagged_fluid: prone,
-            rectal_tube: prone,
-            table: prone,
-            skin_folds: prone,
+        let supine = ColonOptions {
+            collapsed: collapsed.map(String::from).to_vec(),
             ..ColonOptions::default()
-        })
-        .unwrap();
+        };
+        let opts = if prone {
+            prone_also(ColonOptions {
+                prone: true,
+                tagged_fluid: true,
+                ..supine
+            })
+        } else {
+            supine
+        };
+        let p = phantom::colon(&opts).unwrap();
         let s = prepare(p.ct.clone(), &PrepOptions::default(), |_| {}).unwrap();
         assert_eq!(s.segmentation.gaps.len(), 2, "{:#?}", s.segmentation.gaps);
         check_collapses_passed(if prone { "prone" } else { "supine" }, &p, &s);
