@@ -172,6 +172,17 @@ impl Chain {
             },
         );
     }
+
+    /// Gap `g` now leaves its first compartment at block `exit` and enters the next at
+    /// `entry` (a compartment entered and left at one block is left where it is entered).
+    fn move_gap_ends(&mut self, g: usize, exit: usize, entry: usize) {
+        self.links[g].exit = exit;
+        let next = &mut self.links[g + 1];
+        if next.exit == next.entry {
+            next.exit = entry;
+        }
+        next.entry = entry;
+    }
 }
 
 impl Chained {
@@ -583,7 +594,7 @@ fn join_stumps(
 ) {
     for g in 0..ch.gaps.len() {
         let jump = &ch.gaps[g];
-        if jump.mean_cost <= COLLAPSED_COST || jump.length_mm < JUMP_MM {
+        if through_bowel(jump) || jump.length_mm < JUMP_MM {
             continue;
         }
         let (a, b) = (ch.links[g].clone(), ch.links[g + 1].clone());
@@ -593,15 +604,11 @@ fn join_stumps(
         let Some(p) = bridge(a_exit, b_in, a.comp, b.comp) else {
             continue;
         };
-        if p.mean_cost > COLLAPSED_COST {
+        if !through_bowel(&p) {
             continue;
         }
         ch.gaps[g] = p;
-        ch.links[g].exit = a_exit;
-        if ch.links[g + 1].exit == ch.links[g + 1].entry {
-            ch.links[g + 1].exit = b_in;
-        }
-        ch.links[g + 1].entry = b_in;
+        ch.move_gap_ends(g, a_exit, b_in);
     }
 }
 
@@ -618,6 +625,11 @@ const BETWEEN_MIN_ML: f64 = 50.0;
 /// A gap whose bridge crosses fat (mean cost above this per mm) is no collapsed stretch:
 /// the chain jumped there; a bridge at most this dear runs through collapsed bowel.
 const COLLAPSED_COST: f64 = 2.0;
+
+/// Whether bridge `p` runs through collapsed bowel, not across fat ([`COLLAPSED_COST`]).
+fn through_bowel(p: &Path) -> bool {
+    p.mean_cost <= COLLAPSED_COST
+}
 
 /// Step 2b of [`chain`]: large gas where the stomach lies ([`Role::Upper`], compartment `m`)
 /// is taken into a gap of the chain whose bridge crosses fat, where it joins the gap's two
@@ -644,11 +656,10 @@ fn take_in_between(
     // the gap's compartments elsewhere.
     let early = if upper { EARLY_EXIT_MM } else { 0.0 };
     for g in 0..ch.gaps.len() {
-        let direct = &ch.gaps[g];
-        if direct.mean_cost <= COLLAPSED_COST {
+        if through_bowel(&ch.gaps[g]) {
             continue;
         }
-        let direct = direct.cost();
+        let direct = ch.gaps[g].cost();
         let (a, b) = (ch.links[g].clone(), ch.links[g + 1].clone());
         let Some((a_exit, m_in)) = facing_ends(coarse, blocks, &a, m, early) else {
             continue;
@@ -667,18 +678,13 @@ fn take_in_between(
         ) else {
             continue;
         };
-        let cheap = |p: &Path| p.mean_cost <= COLLAPSED_COST;
         let take = if upper {
-            (cheap(&p1) || cheap(&p2)) && p1.cost() + p2.cost() < direct
+            (through_bowel(&p1) || through_bowel(&p2)) && p1.cost() + p2.cost() < direct
         } else {
-            cheap(&p1) && cheap(&p2)
+            through_bowel(&p1) && through_bowel(&p2)
         };
         if take {
-            ch.links[g].exit = a_exit;
-            if ch.links[g + 1].exit == ch.links[g + 1].entry {
-                ch.links[g + 1].exit = b_in;
-            }
-            ch.links[g + 1].entry = b_in;
+            ch.move_gap_ends(g, a_exit, b_in);
             ch.take_into_gap(g, [p1, p2], m, [m_in, m_out]);
             return true;
         }

@@ -393,17 +393,18 @@ fn gaps(
     for (i, (p, voxels)) in paths.iter().zip(gap_voxels).enumerate() {
         let ends = (p.voxels[0], p.voxels[p.voxels.len() - 1]);
         let edge = side_near(ends.0, geom).or_else(|| side_near(ends.1, geom));
+        let (from, to) = (lps(ends.0), lps(ends.1));
         let gap = Gap {
             between: [i, i + 1],
             length_mm: p.length_mm,
-            from_lps_mm: lps(ends.0).to_array(),
-            to_lps_mm: lps(ends.1).to_array(),
+            from_lps_mm: from.to_array(),
+            to_lps_mm: to.to_array(),
             mean_cost: p.mean_cost,
             fluid_filled: false,
             edge_side: edge,
             at_catheter: catheters
                 .iter()
-                .any(|&c| along_catheter(c, (lps(ends.0) + lps(ends.1)) * 0.5)),
+                .any(|&c| along_catheter(c, (from + to) * 0.5)),
             voxels,
         };
         warnings.push(gap_warning(
