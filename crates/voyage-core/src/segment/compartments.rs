@@ -159,6 +159,9 @@ pub(super) struct Candidates {
     pub(super) rectum: u32,
     /// Per compartment: its role in the chain ([`roles`]).
     pub(super) roles: Vec<Role>,
+    /// Per compartment: large gas no wider than small bowel's ([`small_bowel_wide`]), made
+    /// minor.
+    pub(super) narrow: Vec<bool>,
 }
 
 impl Candidates {
@@ -198,7 +201,7 @@ impl Candidates {
             .collect();
         let rectum =
             lowest(&parts.list, &candidate).ok_or_else(|| found.no_colon(opts, from_mask))?;
-        let roles = roles(parts, rectum, |c| candidate[c as usize], vol.geometry());
+        let (roles, narrow) = roles(parts, rectum, |c| candidate[c as usize], vol.geometry());
         Ok(Candidates {
             seeded,
             excluded,
@@ -206,6 +209,7 @@ impl Candidates {
             candidate,
             rectum,
             roles,
+            narrow,
         })
     }
 }
@@ -389,13 +393,14 @@ fn lowest_middle(
 const MAJOR_ML: f64 = 200.0;
 
 /// Each compartment's role in the chain: major (colon, [`MAJOR_ML`] of gas or more, unless
-/// it lies where the stomach does), minor (a candidate segment) or out.
+/// it lies where the stomach does or is no wider than small bowel), minor (a candidate
+/// segment) or out; and whether it was made minor for being no wider than small bowel.
 fn roles(
     parts: &Compartments,
     rectum: u32,
     candidate: impl Fn(u32) -> bool,
     geom: &crate::Geometry,
-) -> Vec<Role> {
+) -> (Vec<Role>, Vec<bool>) {
     let comps = &parts.list;
     let big = |c: u32| {
         c != rectum
@@ -406,18 +411,38 @@ fn roles(
     (0..comps.len() as u32)
         .map(|c| {
             if !candidate(c) && c != rectum {
-                Role::Out
+                (Role::Out, false)
             } else if big(c) && !flat(&comps[c as usize], geom) {
                 if stomach_like(&comps[c as usize], geom, &all) {
-                    Role::Upper
+                    (Role::Upper, false)
+                } else if small_bowel_wide(parts, c, geom.spacing) {
+                    (Role::Minor, true)
                 } else {
-                    Role::Major
+                    (Role::Major, false)
                 }
             } else {
-                Role::Minor
+                (Role::Minor, false)
             }
         })
-        .collect()
+        .unzip()
+}
+
+/// Gas-filled small bowel is at most this wide (mm; wider is dilated): an insufflated colon
+/// holding [`MAJOR_ML`] of gas is wider somewhere (on `ctc/prone-tagged` its two large
+/// compartments hold balls 37 and 54 mm across; the full-size phantom's small-bowel loops,
+/// 249 ml of gas behind a closed ileocecal valve, 21 mm).
+pub(super) const SMALL_BOWEL_MAX_MM: f64 = 25.0;
+
+/// No ball wider than [`SMALL_BOWEL_MAX_MM`] fits in compartment `c`: its large gas is
+/// small bowel's, a loop or a chain of loops, not colon. It is then a minor compartment,
+/// colon only where it lies on the colon's way: chained as a major, loops lying between two
+/// collapsed stretches of the colon stood in for the stretch between them.
+fn small_bowel_wide(parts: &Compartments, c: u32, spacing: [f64; 3]) -> bool {
+    let (comp, r) = (&parts.list[c as usize], SMALL_BOWEL_MAX_MM / 2.0);
+    // The exact ball needs a distance map over the whole box (a third of a second for
+    // `ctc/prone-tagged`'s 3.2 l): a colon's wide gas shows on coarse cells first.
+    coarse_radius_at_least_mm(&parts.runs, &parts.run_comp, c, &comp.bbox, spacing) < r
+        && inscribed_radius_mm(&parts.runs, &parts.run_comp, c, &comp.bbox, spacing) < r
 }
 
 /// All of its gas in the top 40 % of the large gas's box, its middle on the patient's left:
@@ -496,6 +521,62 @@ impl Compartments {
 pub(super) const CREVICE_MM: f64 = 2.5;
 
 const CREVICE_MAX_ML: f64 = 50.0;
+
+/// Cells of about this size (mm) for [`coarse_radius_at_least_mm`].
+const COARSE_CELL_MM: f64 = 3.0;
+
+/// A radius (mm) that the widest ball inside compartment `c` reaches at least: the distance
+/// from a cell (of about [`COARSE_CELL_MM`]) that it fills whole to the nearest cell that it
+/// does not, less half a cell's diagonal. (Every point of the ball that this leaves lies
+/// nearer the middle of a whole cell than of any other, so in it.)
+fn coarse_radius_at_least_mm(
+    runs: &Runs,
+    run_comp: &[u32],
+    c: u32,
+    bbox: &Bbox,
+    spacing: [f64; 3],
+) -> f64 {
+    let f = spacing.map(|s| ((COARSE_CELL_MM / s).round() as usize).max(1));
+    // One cell of margin: the wall all round.
+    let cells = [0, 1, 2].map(|a| bbox.widths()[a].div_ceil(f[a]) + 2);
+    let cell_mm = [0, 1, 2].map(|a| f[a] as f64 * spacing[a]);
+    let mut count = vec![0u32; cells.iter().product()];
+    let at = |x: usize, j: usize, k: usize| {
+        let [cx, cy, cz] = [
+            (x - bbox.lo[0]) / f[0] + 1,
+            (j - bbox.lo[1]) / f[1] + 1,
+            (k - bbox.lo[2]) / f[2] + 1,
+        ];
+        cx + cells[0] * (cy + cells[1] * cz)
+    };
+    for k in bbox.lo[2]..=bbox.hi[2] {
+        for j in bbox.lo[1]..=bbox.hi[1] {
+            for r in runs.row(j, k).filter(|&r| run_comp[r] == c) {
+                let Run { x0, x1 } = runs.runs[r];
+                let (x0, x1) = (x0 as usize, x1 as usize);
+                // The run's voxels cell by cell along the row.
+                let mut x = x0;
+                while x < x1 {
+                    let end = (bbox.lo[0] + ((x - bbox.lo[0]) / f[0] + 1) * f[0]).min(x1);
+                    count[at(x, j, k)] += (end - x) as u32;
+                    x = end;
+                }
+            }
+        }
+    }
+    let full = (f[0] * f[1] * f[2]) as u32;
+    let mask: Vec<u8> = count.iter().map(|&n| (n == full) as u8).collect();
+    let Some(max) = crate::Geometry::new(cells, cell_mm, [0.0; 3])
+        .ok()
+        .and_then(|g| Volume::from_vec(g, mask).ok())
+        .and_then(|v| crate::distance::distance_to_wall(&v).ok())
+        .map(|d| d.data.iter().cloned().fold(0.0f32, f32::max) as f64)
+    else {
+        return 0.0;
+    };
+    let half_diagonal = cell_mm.iter().map(|m| m * m).sum::<f64>().sqrt() / 2.0;
+    max - half_diagonal
+}
 
 /// The radius (mm) of the widest ball inside compartment `c` (its runs in `runs`, within
 /// `bbox`).

@@ -9,7 +9,7 @@ use super::{
     bridge::Path,
     chain::{self, Chained, Left},
     compartments::Compartment,
-    compartments::{CREVICE_MM, Candidates, Compartments, colon_box},
+    compartments::{CREVICE_MM, Candidates, Compartments, SMALL_BOWEL_MAX_MM, colon_box},
     components::{Found, report as list_components},
     course::Course,
     runs::{Runs, row_of, run_voxels},
@@ -193,7 +193,7 @@ pub(super) fn report(
 ) -> Report {
     let in_colon = |c: u32| chained.chain.links.iter().any(|l| l.comp == c);
     let colon_lps = colon_box(parts, cand.rectum, in_colon, geom);
-    let classes = classes(parts, in_colon, geom, &colon_lps);
+    let classes = classes(parts, in_colon, &cand.narrow, geom, &colon_lps);
     let mut segments = colon_segments(parts, chained, geom, colon_lps);
     let last_segment = chained.chain.links.last().map(|l| LastSegment {
         colon_lps,
@@ -201,7 +201,7 @@ pub(super) fn report(
     });
     segments.extend(left_out(
         parts,
-        &cand.crevice,
+        [&cand.crevice, &cand.narrow],
         &chained.chain.left,
         &classes,
         geom,
@@ -230,11 +230,12 @@ pub(super) fn report(
     }
 }
 
-/// Each compartment's class: colon where `in_colon`, else [`classify`]'s within the colon's
-/// LPS box `colon_lps`.
+/// Each compartment's class: colon where `in_colon`, small bowel where `narrow`, else
+/// [`classify`]'s within the colon's LPS box `colon_lps`.
 fn classes(
     parts: &Compartments,
     in_colon: impl Fn(u32) -> bool,
+    narrow: &[bool],
     geom: &crate::Geometry,
     colon_lps: &[DVec3; 2],
 ) -> Vec<ComponentKind> {
@@ -242,6 +243,8 @@ fn classes(
         .map(|c| {
             if in_colon(c) {
                 ComponentKind::Colon
+            } else if narrow[c as usize] {
+                ComponentKind::SmallBowel
             } else {
                 classify(&parts.list[c as usize], geom, colon_lps, parts.voxel_ml)
             }
@@ -299,10 +302,11 @@ fn segment_name(named: &Course, entry: DVec3, exit: DVec3) -> String {
 }
 
 /// The gas left out of the colon (`left`), most gas first, from `min_report_ml` on: each
-/// with its class and why it was left out.
+/// with its class and why it was left out (`crevice`, `narrow`: per compartment, whether
+/// its gas lies in a crevice, whether it is large gas no wider than small bowel's).
 fn left_out(
     parts: &Compartments,
-    crevice: &[bool],
+    [crevice, narrow]: [&[bool]; 2],
     left: &[(u32, Left)],
     classes: &[ComponentKind],
     geom: &crate::Geometry,
@@ -323,12 +327,16 @@ fn left_out(
             continue;
         }
         let kind = classes[c as usize];
-        let reason = reason(
-            why,
-            crevice[c as usize],
-            comp.gas_voxels as f64 * voxel_ml,
-            opts,
-        );
+        let reason = if narrow[c as usize] && why != Left::Excluded {
+            format!("no ball wider than {SMALL_BOWEL_MAX_MM:.0} mm fits in its gas: small bowel")
+        } else {
+            reason(
+                why,
+                crevice[c as usize],
+                comp.gas_voxels as f64 * voxel_ml,
+                opts,
+            )
+        };
         let label = match kind {
             ComponentKind::SmallBowel => "small bowel",
             ComponentKind::Stomach => "stomach",
