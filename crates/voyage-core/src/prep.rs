@@ -1349,8 +1349,11 @@ fn right_lower(seg: &Segmentation, p: DVec3) -> bool {
     (p.x - a.x) / span.x <= 0.5 && (p.z - a.z) / span.z <= 0.6
 }
 
-/// A narrow tail is at least this long (mm): a small-bowel loop, not the end of a segment.
-const TAIL_MM: f64 = 150.0;
+/// A narrow tail is at least this long (mm): longer than a cecum (about 60 mm), so a
+/// small-bowel loop, not the colon's narrowing end. (Prone with tagged fluid, the cecum's
+/// pool meets the ileum's gas at the valve, and the centerline ran about 100 mm on into the
+/// loops; at 150 mm that tail was kept.)
+const TAIL_MM: f64 = 80.0;
 /// ... and nowhere wider than this share of the chamber before it: the ileum (10–12 mm in
 /// radius with gas) beyond the cecum (25–45 mm); the colon widens towards its end.
 const TAIL_SHARE: f64 = 0.5;
