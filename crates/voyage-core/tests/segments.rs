@@ -603,13 +603,7 @@ fn gas_in_the_small_bowel_beyond_the_cecum_is_left_out() {
             to_cecum <= end_mm,
             "{name}: ends {to_cecum:.1} mm from the cecal pole"
         );
-        let lumen = s.segmentation.lumen.data();
-        let ours = lumen.iter().filter(|&&v| v != 0).count();
-        let small_bowel = lumen
-            .iter()
-            .zip(p.labels.data())
-            .filter(|&(&v, &l)| v != 0 && l == phantom::label::SMALL_BOWEL_GAS)
-            .count();
+        let (small_bowel, ours) = small_bowel_in_lumen(p, &s);
         assert!(
             small_bowel * 100 <= ours,
             "{name}: {small_bowel} voxels of small-bowel gas in a lumen of {ours}"
@@ -762,13 +756,7 @@ fn small_bowel_loops_between_two_collapses_are_not_colon() {
             s.segmentation.gaps
         );
         check_collapses_passed(name, &p, &s);
-        let lumen = s.segmentation.lumen.data();
-        let ours = lumen.iter().filter(|&&v| v != 0).count();
-        let small_bowel = lumen
-            .iter()
-            .zip(p.labels.data())
-            .filter(|&(&v, &l)| v != 0 && l == phantom::label::SMALL_BOWEL_GAS)
-            .count();
+        let (small_bowel, ours) = small_bowel_in_lumen(&p, &s);
         assert!(
             small_bowel * 50 <= ours,
             "{name}: {small_bowel} voxels of small-bowel gas in a lumen of {ours}"
@@ -781,6 +769,18 @@ fn small_bowel_loops_between_two_collapses_are_not_colon() {
             end.distance(pole)
         );
     }
+}
+
+/// Voxels of the lumen of `s` that are the phantom's small-bowel gas, and of the lumen.
+fn small_bowel_in_lumen(p: &Phantom, s: &voyage_core::Study) -> (usize, usize) {
+    let lumen = s.segmentation.lumen.data();
+    let ours = lumen.iter().filter(|&&v| v != 0).count();
+    let small_bowel = lumen
+        .iter()
+        .zip(p.labels.data())
+        .filter(|&(&v, &l)| v != 0 && l == phantom::label::SMALL_BOWEL_GAS)
+        .count();
+    (small_bowel, ours)
 }
 
 /// The phantom with `collapsed`, supine and prone with tagged fluid (and what `prone_also`

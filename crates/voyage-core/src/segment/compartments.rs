@@ -522,6 +522,22 @@ pub(super) const CREVICE_MM: f64 = 2.5;
 
 const CREVICE_MAX_ML: f64 = 50.0;
 
+/// The runs of compartment `c` (in `runs`, within `bbox`), each with its row (j, k).
+fn runs_of<'a>(
+    runs: &'a Runs,
+    run_comp: &'a [u32],
+    c: u32,
+    bbox: &'a Bbox,
+) -> impl Iterator<Item = (usize, usize, Run)> + 'a {
+    (bbox.lo[2]..=bbox.hi[2]).flat_map(move |k| {
+        (bbox.lo[1]..=bbox.hi[1]).flat_map(move |j| {
+            runs.row(j, k)
+                .filter(move |&r| run_comp[r] == c)
+                .map(move |r| (j, k, runs.runs[r]))
+        })
+    })
+}
+
 /// Cells of about this size (mm) for [`coarse_radius_at_least_mm`].
 const COARSE_CELL_MM: f64 = 3.0;
 
@@ -549,19 +565,14 @@ fn coarse_radius_at_least_mm(
         ];
         cx + cells[0] * (cy + cells[1] * cz)
     };
-    for k in bbox.lo[2]..=bbox.hi[2] {
-        for j in bbox.lo[1]..=bbox.hi[1] {
-            for r in runs.row(j, k).filter(|&r| run_comp[r] == c) {
-                let Run { x0, x1 } = runs.runs[r];
-                let (x0, x1) = (x0 as usize, x1 as usize);
-                // The run's voxels cell by cell along the row.
-                let mut x = x0;
-                while x < x1 {
-                    let end = (bbox.lo[0] + ((x - bbox.lo[0]) / f[0] + 1) * f[0]).min(x1);
-                    count[at(x, j, k)] += (end - x) as u32;
-                    x = end;
-                }
-            }
+    for (j, k, Run { x0, x1 }) in runs_of(runs, run_comp, c, bbox) {
+        let (x0, x1) = (x0 as usize, x1 as usize);
+        // The run's voxels cell by cell along the row.
+        let mut x = x0;
+        while x < x1 {
+            let end = (bbox.lo[0] + ((x - bbox.lo[0]) / f[0] + 1) * f[0]).min(x1);
+            count[at(x, j, k)] += (end - x) as u32;
+            x = end;
         }
     }
     let full = (f[0] * f[1] * f[2]) as u32;
@@ -595,17 +606,12 @@ fn inscribed_radius_mm(
     let Ok(mut mask) = Volume::filled(g, 0u8) else {
         return f64::INFINITY;
     };
-    for k in bbox.lo[2]..=bbox.hi[2] {
-        for j in bbox.lo[1]..=bbox.hi[1] {
-            for r in runs.row(j, k).filter(|&r| run_comp[r] == c) {
-                let Run { x0, x1 } = runs.runs[r];
-                let row = mask
-                    .geometry()
-                    .index(0, j - bbox.lo[1] + 1, k - bbox.lo[2] + 1);
-                let from = row + x0 as usize - bbox.lo[0] + 1;
-                mask.data_mut()[from..from + (x1 - x0) as usize].fill(1);
-            }
-        }
+    for (j, k, Run { x0, x1 }) in runs_of(runs, run_comp, c, bbox) {
+        let row = mask
+            .geometry()
+            .index(0, j - bbox.lo[1] + 1, k - bbox.lo[2] + 1);
+        let from = row + x0 as usize - bbox.lo[0] + 1;
+        mask.data_mut()[from..from + (x1 - x0) as usize].fill(1);
     }
     let grid = crate::grid::BoxGrid::around([[0; 3], dims.map(|d| d - 1)], 0, dims);
     let ds = crate::distance::distance_to_wall_in(&mask, grid);
