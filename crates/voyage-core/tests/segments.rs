@@ -771,6 +771,23 @@ fn small_bowel_loops_between_two_collapses_are_not_colon() {
     }
 }
 
+/// The small phantom with the sigmoid and the descending colon collapsed: the piece between
+/// the collapses enters where a sigmoid loop hangs high in the middle, as near the ascending
+/// colon's landmark as the sigmoid's, and was named "ascending–descending", after
+/// "rectum–sigmoid". The ends of all segments are placed on the course together, in the
+/// colon's order: "sigmoid–descending".
+#[test]
+fn segments_between_collapses_are_named_in_the_colons_order() {
+    let p = small(ColonOptions {
+        collapsed: ["sigmoid", "descending"].map(String::from).to_vec(),
+        ..ColonOptions::default()
+    });
+    let s = prepare(p.ct.clone(), &PrepOptions::default(), |_| {}).unwrap();
+    assert_eq!(s.segmentation.gaps.len(), 2, "{:#?}", s.segmentation.gaps);
+    common::assert_labelled_in_anatomical_order(&s.segmentation);
+    check_collapses_passed("small", &p, &s);
+}
+
 /// Voxels of the lumen of `s` that are the phantom's small-bowel gas, and of the lumen.
 fn small_bowel_in_lumen(p: &Phantom, s: &voyage_core::Study) -> (usize, usize) {
     let lumen = s.segmentation.lumen.data();

@@ -95,12 +95,44 @@ impl Course {
         self.geom.local_to_patient(local).z
     }
 
-    /// The landmark nearest a volume-local point, as a segment's name.
-    pub fn name(&self, local: DVec3) -> &'static str {
-        let p = self.place(local);
-        (0..8)
-            .min_by(|&a, &b| p.distance(landmark(a)).total_cmp(&p.distance(landmark(b))))
-            .map_or("colon", |i| LANDMARKS[i].0)
+    /// Landmarks for volume-local points that come in this order along the colon, none
+    /// before the `from`th (0 the rectum, 7 the cecum): each point's place, in the colon's
+    /// order, nearest in all (the least sum of distances). Named one by one, a sigmoid loop
+    /// hanging high in the middle lies as near the ascending colon's landmark as the
+    /// sigmoid's, and the segments after it would then be named out of order.
+    pub fn places_in_order(&self, points: &[DVec3], from: usize) -> Vec<usize> {
+        let from = from.min(7);
+        // cost[i][l]: the least sum for points 0..=i with point i at landmark l.
+        let mut cost: Vec<[f64; 8]> = Vec::with_capacity(points.len());
+        for (i, &q) in points.iter().enumerate() {
+            let p = self.place(q);
+            let mut row = [f64::INFINITY; 8];
+            let mut best_before = f64::INFINITY;
+            for l in from..8 {
+                if i > 0 {
+                    best_before = best_before.min(cost[i - 1][l]);
+                }
+                let before = if i == 0 { 0.0 } else { best_before };
+                row[l] = before + p.distance(landmark(l));
+            }
+            cost.push(row);
+        }
+        // Back from the last point: each takes the best landmark no later than the next's.
+        let mut out = vec![7; points.len()];
+        let mut upto = 7;
+        for i in (0..points.len()).rev() {
+            let l = (from..=upto)
+                .min_by(|&a, &b| cost[i][a].total_cmp(&cost[i][b]))
+                .unwrap_or(upto);
+            out[i] = l;
+            upto = l;
+        }
+        out
+    }
+
+    /// The name of landmark `l` (0 the rectum, 7 the cecum).
+    pub fn landmark_name(l: usize) -> &'static str {
+        LANDMARKS[l.min(7)].0
     }
 
     /// Where landmark `name` comes along the colon (0 the rectum, 7 the cecum).
@@ -145,7 +177,10 @@ mod tests {
                 let local = g.patient_to_local(lps_at(u, v));
                 let t = c.along(local);
                 assert!(t > last, "{name} at {t} after {last}");
-                assert_eq!(c.name(local), name);
+                assert_eq!(
+                    Course::landmark_name(c.places_in_order(&[local], 0)[0]),
+                    name
+                );
                 last = t;
             }
             assert_eq!(c.name_along(0.0), "rectum");

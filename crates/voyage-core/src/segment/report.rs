@@ -39,6 +39,9 @@ pub(super) struct Report {
 pub struct LastSegment {
     colon_lps: [DVec3; 2],
     entry_lps: DVec3,
+    /// The landmark (its place along the colon) that the segment before it ends at: the
+    /// last segment is named from there on.
+    after: usize,
 }
 
 impl Segmentation {
@@ -67,7 +70,9 @@ impl Segmentation {
             return;
         }
         let named = Course::new(geom, last.colon_lps);
-        let name = segment_name(&named, geom.patient_to_local(last.entry_lps), end_mm);
+        let ends = [geom.patient_to_local(last.entry_lps), end_mm];
+        let at = named.places_in_order(&ends, last.after);
+        let name = segment_name(&named, ends, [at[0], at[1]]);
         let before = order
             .checked_sub(1)
             .and_then(|o| self.gaps.iter().position(|g| g.between == [o, order]));
@@ -194,10 +199,11 @@ pub(super) fn report(
     let in_colon = |c: u32| chained.chain.links.iter().any(|l| l.comp == c);
     let colon_lps = colon_box(parts, cand.rectum, in_colon, geom);
     let classes = classes(parts, in_colon, &cand.narrow, geom, &colon_lps);
-    let mut segments = colon_segments(parts, chained, geom, colon_lps);
+    let (mut segments, after) = colon_segments(parts, chained, geom, colon_lps);
     let last_segment = chained.chain.links.last().map(|l| LastSegment {
         colon_lps,
         entry_lps: geom.local_to_patient(chained.coarse.centre_mm(l.entry)),
+        after,
     });
     segments.extend(left_out(
         parts,
@@ -253,38 +259,55 @@ fn classes(
 }
 
 /// The colon's segments in order, each named by the landmarks nearest its entry and exit
-/// and the one halfway along the course between them (`colon_lps`: the whole colon's box).
+/// and the one halfway along the course between them (`colon_lps`: the whole colon's box),
+/// in the colon's order; and the place of the landmark the last but one ends at.
 fn colon_segments(
     parts: &Compartments,
     chained: &Chained,
     geom: &crate::Geometry,
     colon_lps: [DVec3; 2],
-) -> Vec<SegmentReport> {
+) -> (Vec<SegmentReport>, usize) {
     let named = Course::new(geom, colon_lps);
     let coarse = &chained.coarse;
-    let mut segments = Vec::new();
-    for (i, l) in chained.chain.links.iter().enumerate() {
-        let comp = &parts.list[l.comp as usize];
-        let (entry, exit) = (coarse.centre_mm(l.entry), coarse.centre_mm(l.exit));
-        segments.push(segment_report(
-            comp,
-            geom,
-            segment_name(&named, entry, exit),
-            ComponentKind::Colon,
-            Some(i),
-            None,
-            parts.voxel_ml,
-        ));
-    }
-    segments
+    let links = &chained.chain.links;
+    let ends: Vec<DVec3> = links
+        .iter()
+        .flat_map(|l| [coarse.centre_mm(l.entry), coarse.centre_mm(l.exit)])
+        .collect();
+    let at = named.places_in_order(&ends, 0);
+    let segments = links
+        .iter()
+        .enumerate()
+        .map(|(i, l)| {
+            let name = segment_name(
+                &named,
+                [ends[2 * i], ends[2 * i + 1]],
+                [at[2 * i], at[2 * i + 1]],
+            );
+            let comp = &parts.list[l.comp as usize];
+            segment_report(
+                comp,
+                geom,
+                name,
+                ComponentKind::Colon,
+                Some(i),
+                None,
+                parts.voxel_ml,
+            )
+        })
+        .collect();
+    // The last segment is named again from where the one before it ends.
+    let before_last = (links.len() >= 2).then(|| at[2 * links.len() - 3]);
+    (segments, before_last.unwrap_or(0))
 }
 
-/// A colon segment's name from its entry and exit (volume-local mm): the landmarks nearest
-/// them and, between, the one halfway along the course (only if it lies between them in the
-/// colon's order: the ends are named by place, the middle by course). A segment from rectum
-/// to cecum is the whole colon, and a middle name would only suggest it stops there.
-fn segment_name(named: &Course, entry: DVec3, exit: DVec3) -> String {
-    let ends = [named.name(entry), named.name(exit)];
+/// A colon segment's name from its entry and exit (volume-local mm), placed at landmarks
+/// `at` ([`Course::places_in_order`]), and, between, the landmark halfway along the course
+/// (only if it lies between them in the colon's order: the ends are named by place, the
+/// middle by course). A segment from rectum to cecum is the whole colon, and a middle name
+/// would only suggest it stops there.
+fn segment_name(named: &Course, [entry, exit]: [DVec3; 2], at: [usize; 2]) -> String {
+    let ends = at.map(Course::landmark_name);
     if ends == ["rectum", "cecum"] {
         return ends.join("–");
     }
