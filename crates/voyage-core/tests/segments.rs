@@ -577,9 +577,8 @@ fn each_gap_has_one_length_and_says_what_filled_it() {
 /// of gas were chained in as the colon's last compartment, the "cecum" (13 % of the lumen
 /// outside the colon, ending 65 mm from the cecum): no ball wider than small bowel fits in
 /// them, so they are never chained as colon, and are listed as small bowel. With `--target`
-/// at the cecum's pole the user
-/// decides, and nothing is cut. The colon phantom without the loops, and with diverticula,
-/// is left alone.
+/// at the cecum's pole the user decides, and nothing is cut. The colon phantom without the
+/// loops, and with diverticula, is left alone.
 #[test]
 fn gas_in_the_small_bowel_beyond_the_cecum_is_left_out() {
     let said = |s: &voyage_core::Study| {
